@@ -1,0 +1,154 @@
+"""The DuckDB store: the only place with SQL (CONVENTIONS.md, Store).
+
+`Store` owns the connection, the schema and the transaction discipline: each stage writes inside one
+`store.transaction()`, so an interrupted run leaves the file as it was. Bulk rows go in as Arrow tables
+(`insert`), and reads come back as numpy arrays. Domain modules (`grasps`, `placements`, `robots`,
+`fingers`, `plans`) hold the SQL of each stage and take a `Store`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator
+
+import duckdb
+import numpy as np
+import pyarrow as pa
+
+from ..errors import StoreError
+from .schema import ALL_TABLES
+
+
+class Store:
+    """An open DuckDB store file (created with the full schema when new)."""
+
+    def __init__(self, path: str | Path, read_only: bool = False):
+        self.path = Path(path)
+        if read_only and not self.path.exists():
+            raise StoreError(f"store {self.path} does not exist; build it first (workbench build / grasps)")
+        if self.path.exists() and self.path.is_dir():
+            raise StoreError(f"store path {self.path} is a folder; give a file path such as {self.path / 'regrasp.duckdb'}")
+        if not read_only:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        try:
+            self.con = duckdb.connect(str(self.path), read_only=read_only)
+        except duckdb.IOException as exc:
+            msg = str(exc)
+            if "lock" in msg.lower():
+                raise StoreError(f"store {self.path} is locked by another process; close it (or its notebook kernel) and retry") from None
+            if "not a valid DuckDB" in msg:
+                raise StoreError(f"store {self.path} is not a DuckDB database (damaged or another format); move it aside and rebuild") from None
+            raise StoreError(f"store {self.path} could not be opened: {msg.splitlines()[0]}") from None
+        except duckdb.Error as exc:
+            raise StoreError(f"store {self.path} could not be opened: {str(exc).splitlines()[0]}") from None
+        self.read_only = read_only
+        if not read_only:
+            try:
+                with self.transaction():
+                    for ddl in ALL_TABLES:
+                        self.con.execute(ddl)
+            except duckdb.Error as exc:
+                self.con.close()
+                raise StoreError(f"store {self.path} has an incompatible schema ({str(exc).splitlines()[0]}); use a new file") from None
+
+    def close(self) -> None:
+        self.con.close()
+
+    def __enter__(self) -> "Store":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    @contextmanager
+    def transaction(self) -> Iterator[duckdb.DuckDBPyConnection]:
+        """One stage's writes: committed together or not at all."""
+        self.con.execute("BEGIN TRANSACTION")
+        try:
+            yield self.con
+        except BaseException:
+            self.con.execute("ROLLBACK")
+            raise
+        else:
+            self.con.execute("COMMIT")
+
+    def next_id(self, table: str, column: str) -> int:
+        """The next free id of `table` (inside a transaction, so concurrent writers cannot collide)."""
+        _check_name(table)
+        _check_name(column)
+        return int(self.con.execute(f"SELECT coalesce(max({column}), 0) + 1 FROM {table}").fetchone()[0])
+
+    def insert(self, table: str, columns: dict[str, Any]) -> int:
+        """Bulk-insert columns (numpy arrays; (N, k) float arrays become DOUBLE[k]) through Arrow; returns the row count."""
+        _check_name(table)
+        arrow = pa.table({name: to_arrow(v) for name, v in columns.items()})
+        if arrow.num_rows == 0:
+            return 0
+        names = ", ".join(_check_name(c) for c in arrow.column_names)
+        self.con.register("_wb_rows", arrow)
+        try:
+            self.con.execute(f"INSERT INTO {table} ({names}) SELECT {names} FROM _wb_rows")
+        finally:
+            self.con.unregister("_wb_rows")
+        return arrow.num_rows
+
+    def query_arrays(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> dict[str, np.ndarray]:
+        """Run a SELECT and return each column as a numpy array; fixed-size list columns become (N, k) arrays."""
+        table = self.con.execute(sql, list(params)).to_arrow_table()
+        return {name: from_arrow(table.column(name)) for name in table.column_names}
+
+    def paramset(self, stage: str, params: dict[str, Any], idobject: int | None) -> tuple[int, bool]:
+        """The id of the parameter set of `stage` (created if new) and whether it already existed.
+
+        Call inside the stage's transaction; the digest covers the stage, the object and the parameters.
+        """
+        text = json.dumps(params, sort_keys=True, default=_json_default)
+        digest = hashlib.sha256(f"{stage}|{idobject}|{text}".encode()).hexdigest()[:24]
+        row = self.con.execute("SELECT idparamset FROM paramset WHERE digest = ?", [digest]).fetchone()
+        if row is not None:
+            return int(row[0]), True
+        pid = self.next_id("paramset", "idparamset")
+        self.con.execute("INSERT INTO paramset (idparamset, stage, digest, params, idobject) VALUES (?, ?, ?, ?, ?)",
+                         [pid, stage, digest, text, idobject])
+        return pid, False
+
+
+def _check_name(name: str) -> str:
+    if not name.replace("_", "").isalnum():
+        raise StoreError(f"invalid SQL identifier {name!r}")
+    return name
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"cannot store parameter of type {type(value).__name__}")
+
+
+def to_arrow(value: Any) -> pa.Array:
+    """numpy to Arrow: (N,) plain, (N, k) fixed-size lists, (N, a, b) fixed-size lists of a*b (row-major poses)."""
+    if isinstance(value, (pa.Array, pa.ChunkedArray)):
+        return value
+    arr = np.asarray(value)
+    if arr.ndim == 1 or arr.dtype == object:
+        return pa.array(arr if arr.dtype != object else list(arr))
+    flat = np.ascontiguousarray(arr.reshape(len(arr), -1))
+    return pa.FixedSizeListArray.from_arrays(pa.array(flat.ravel()), flat.shape[1])
+
+
+def from_arrow(column: pa.ChunkedArray) -> np.ndarray:
+    """Arrow to numpy: fixed-size lists to (N, k); variable lists of equal length to (N, k); else an object array."""
+    arr = column.combine_chunks() if isinstance(column, pa.ChunkedArray) else column
+    if pa.types.is_fixed_size_list(arr.type) and arr.null_count == 0:
+        k = arr.type.list_size
+        return arr.flatten().to_numpy(zero_copy_only=False).reshape(len(arr), k)
+    if pa.types.is_list(arr.type) or pa.types.is_fixed_size_list(arr.type):
+        return np.array([None if v is None else np.asarray(v) for v in arr.to_pylist()], dtype=object)
+    return arr.to_numpy(zero_copy_only=False)

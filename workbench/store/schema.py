@@ -1,0 +1,161 @@
+"""The store's schema (CONVENTIONS.md, Store; Wan & Harada Section IV, Fig. 4 and Fig. 5).
+
+The ten tables of the paper keep their names and columns (lowercase). Poses are DOUBLE[16] row-major
+4x4 transforms, points and normals DOUBLE[3], distances in metres, angles in radians.
+
+Paper tables
+- object(idobject, name, ...): one row per object; extra columns keep the scaled mesh (vertices, faces),
+  its digest, scale, source path, centre of mass and how it was computed (volume or area).
+- robot(idrobot, name, ...): what rebuilds the kinematic chain without the library: urdf text, tcp_frame,
+  tip_frame, mount (tip to TCP), base (base pose in the world), joint_names (order of stored joint vectors).
+- freeairgrip: grasps in the object frame; rotmat is the TCP pose in the object frame.
+  Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y).
+- freetabletopplacement: rotmat is the object in the table frame, centre of mass above the origin, lowest
+  point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, DOUBLE[3][]).
+- freetabletopgrip: free-air grasps kept at a free placement; rotmat is the TCP in the table frame.
+- angle(idangle, value): rotations about world z in radians.
+- tabletopplacements: rotmat is the object in the world; tabletopposition the (x, y, z) of the placement.
+- tabletopgrips: rotmat is the TCP in the world.
+- ikret(idikret, handx, worldz): retraction distances in metres.
+- ik: feasibility per (robot, tabletop grip, retraction set); extra columns hold the joint vectors
+  (jnt_grasp, jnt_handx, jnt_handxworldz, in robot.joint_names order; NULL where infeasible) and idscene.
+
+Extra tables
+- paramset(idparamset, stage, digest, params, idobject, created): every stage run's parameters (JSON) and
+  the inputs they apply to; a stage's rows reference it, and a re-run with the same digest reuses them.
+- gripper(idgripper, name, urdf, jaw_min, jaw_max, digest).
+- scene(idscene, name, table_pose, table_size, ...): where the table sits in the world for IK.
+"""
+
+from __future__ import annotations
+
+CORE_TABLES: tuple[str, ...] = (
+    """CREATE TABLE IF NOT EXISTS object (
+        idobject BIGINT PRIMARY KEY,
+        name VARCHAR NOT NULL UNIQUE,
+        digest VARCHAR NOT NULL,
+        source VARCHAR,
+        scale DOUBLE NOT NULL,
+        com DOUBLE[3] NOT NULL,
+        com_method VARCHAR NOT NULL,
+        ntriangles BIGINT NOT NULL,
+        vertices DOUBLE[3][] NOT NULL,
+        faces INTEGER[3][] NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS robot (
+        idrobot BIGINT PRIMARY KEY,
+        name VARCHAR NOT NULL UNIQUE,
+        urdf VARCHAR NOT NULL,
+        tcp_frame VARCHAR NOT NULL,
+        tip_frame VARCHAR NOT NULL,
+        mount DOUBLE[16] NOT NULL,
+        base DOUBLE[16] NOT NULL,
+        joint_names VARCHAR[] NOT NULL,
+        digest VARCHAR NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS gripper (
+        idgripper BIGINT PRIMARY KEY,
+        name VARCHAR NOT NULL,
+        urdf VARCHAR,
+        jaw_min DOUBLE NOT NULL,
+        jaw_max DOUBLE NOT NULL,
+        digest VARCHAR NOT NULL UNIQUE
+    )""",
+    """CREATE TABLE IF NOT EXISTS paramset (
+        idparamset BIGINT PRIMARY KEY,
+        stage VARCHAR NOT NULL,
+        digest VARCHAR NOT NULL UNIQUE,
+        params VARCHAR NOT NULL,
+        idobject BIGINT REFERENCES object(idobject),
+        created TIMESTAMP DEFAULT current_timestamp
+    )""",
+    """CREATE TABLE IF NOT EXISTS freeairgrip (
+        idfreeairgrip BIGINT PRIMARY KEY,
+        idobject BIGINT NOT NULL REFERENCES object(idobject),
+        idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
+        idgripper BIGINT NOT NULL REFERENCES gripper(idgripper),
+        contactpoint0 DOUBLE[3] NOT NULL,
+        contactpoint1 DOUBLE[3] NOT NULL,
+        contactnormal0 DOUBLE[3] NOT NULL,
+        contactnormal1 DOUBLE[3] NOT NULL,
+        rotmat DOUBLE[16] NOT NULL,
+        jawwidth DOUBLE NOT NULL,
+        idfacet0 BIGINT,
+        idfacet1 BIGINT,
+        idcontactpair BIGINT,
+        rotation DOUBLE
+    )""",
+    """CREATE TABLE IF NOT EXISTS freetabletopplacement (
+        idfreetabletopplacement BIGINT PRIMARY KEY,
+        idobject BIGINT NOT NULL REFERENCES object(idobject),
+        idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
+        rotmat DOUBLE[16] NOT NULL,
+        stability DOUBLE NOT NULL,
+        support DOUBLE[3][]
+    )""",
+    """CREATE TABLE IF NOT EXISTS freetabletopgrip (
+        idfreetabletopgrip BIGINT PRIMARY KEY,
+        idfreetabletopplacement BIGINT NOT NULL REFERENCES freetabletopplacement(idfreetabletopplacement),
+        idfreeairgrip BIGINT NOT NULL REFERENCES freeairgrip(idfreeairgrip),
+        contactpoint0 DOUBLE[3] NOT NULL,
+        contactpoint1 DOUBLE[3] NOT NULL,
+        contactnormal0 DOUBLE[3] NOT NULL,
+        contactnormal1 DOUBLE[3] NOT NULL,
+        rotmat DOUBLE[16] NOT NULL,
+        jawwidth DOUBLE NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS angle (
+        idangle BIGINT PRIMARY KEY,
+        value DOUBLE NOT NULL UNIQUE
+    )""",
+    """CREATE TABLE IF NOT EXISTS tabletopplacements (
+        idtabletopplacements BIGINT PRIMARY KEY,
+        idfreetabletopplacement BIGINT NOT NULL REFERENCES freetabletopplacement(idfreetabletopplacement),
+        idangle BIGINT NOT NULL REFERENCES angle(idangle),
+        idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
+        tabletopposition DOUBLE[3] NOT NULL,
+        rotmat DOUBLE[16] NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS tabletopgrips (
+        idtabletopgrips BIGINT PRIMARY KEY,
+        idtabletopplacements BIGINT NOT NULL REFERENCES tabletopplacements(idtabletopplacements),
+        idfreeairgrip BIGINT NOT NULL REFERENCES freeairgrip(idfreeairgrip),
+        idfreetabletopgrip BIGINT REFERENCES freetabletopgrip(idfreetabletopgrip),
+        contactpoint0 DOUBLE[3] NOT NULL,
+        contactpoint1 DOUBLE[3] NOT NULL,
+        contactnormal0 DOUBLE[3] NOT NULL,
+        contactnormal1 DOUBLE[3] NOT NULL,
+        rotmat DOUBLE[16] NOT NULL,
+        jawwidth DOUBLE NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS ikret (
+        idikret BIGINT PRIMARY KEY,
+        handx DOUBLE NOT NULL,
+        worldz DOUBLE NOT NULL,
+        UNIQUE (handx, worldz)
+    )""",
+    """CREATE TABLE IF NOT EXISTS scene (
+        idscene BIGINT PRIMARY KEY,
+        digest VARCHAR NOT NULL UNIQUE,
+        params VARCHAR NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS ik (
+        idik BIGINT PRIMARY KEY,
+        idrobot BIGINT NOT NULL REFERENCES robot(idrobot),
+        idtabletopgrips BIGINT NOT NULL REFERENCES tabletopgrips(idtabletopgrips),
+        idikret BIGINT NOT NULL REFERENCES ikret(idikret),
+        idscene BIGINT NOT NULL REFERENCES scene(idscene),
+        feasibility BOOLEAN NOT NULL,
+        feasibility_handx BOOLEAN NOT NULL,
+        feasibility_handxworldz BOOLEAN NOT NULL,
+        jnt_grasp DOUBLE[],
+        jnt_handx DOUBLE[],
+        jnt_handxworldz DOUBLE[],
+        UNIQUE (idrobot, idtabletopgrips, idikret, idscene)
+    )""",
+)
+
+# Tables of other stages (five-finger contact clustering, regrasp plans) are defined in their own sections
+# below and joined into ALL_TABLES; every statement is idempotent (CREATE ... IF NOT EXISTS).
+
+ALL_TABLES: tuple[str, ...] = CORE_TABLES
