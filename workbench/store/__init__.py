@@ -3,7 +3,8 @@
 `Store` owns the connection, the schema and the transaction discipline: each stage writes inside one
 `store.transaction()`, so an interrupted run leaves the file as it was. Bulk rows go in as Arrow tables
 (`insert`), and reads come back as numpy arrays. Domain modules (`grasps`, `placements`, `robots`,
-`fingers`, `plans`) hold the SQL of each stage and take a `Store`.
+`fingers`, `plans`) hold the SQL of each stage and take a `Store`. Use `store.run` / `store.one` rather than
+`con.execute(...).fetchone()`: DuckDB refuses new work while a result is unfinished.
 """
 
 from __future__ import annotations
@@ -49,7 +50,7 @@ class Store:
             try:
                 with self.transaction():
                     for ddl in ALL_TABLES:
-                        self.con.execute(ddl)
+                        self.run(ddl)
             except duckdb.Error as exc:
                 self.con.close()
                 raise StoreError(f"store {self.path} has an incompatible schema ({str(exc).splitlines()[0]}); use a new file") from None
@@ -66,20 +67,29 @@ class Store:
     @contextmanager
     def transaction(self) -> Iterator[duckdb.DuckDBPyConnection]:
         """One stage's writes: committed together or not at all."""
-        self.con.execute("BEGIN TRANSACTION")
+        self.run("BEGIN TRANSACTION")
         try:
             yield self.con
         except BaseException:
-            self.con.execute("ROLLBACK")
+            self.run("ROLLBACK")
             raise
         else:
-            self.con.execute("COMMIT")
+            self.run("COMMIT")
+
+    def run(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> list[tuple]:
+        """Execute one statement with bound parameters and return all its rows (DuckDB needs results finished)."""
+        return self.con.execute(sql, list(params)).fetchall()
+
+    def one(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> tuple | None:
+        """The first row of a query, or None (the result is always fully consumed)."""
+        rows = self.run(sql, params)
+        return rows[0] if rows else None
 
     def next_id(self, table: str, column: str) -> int:
         """The next free id of `table` (inside a transaction, so concurrent writers cannot collide)."""
         _check_name(table)
         _check_name(column)
-        return int(self.con.execute(f"SELECT coalesce(max({column}), 0) + 1 FROM {table}").fetchone()[0])
+        return int(self.one(f"SELECT coalesce(max({column}), 0) + 1 FROM {table}")[0])
 
     def insert(self, table: str, columns: dict[str, Any]) -> int:
         """Bulk-insert columns (numpy arrays; (N, k) float arrays become DOUBLE[k]) through Arrow; returns the row count."""
@@ -90,14 +100,14 @@ class Store:
         names = ", ".join(_check_name(c) for c in arrow.column_names)
         self.con.register("_wb_rows", arrow)
         try:
-            self.con.execute(f"INSERT INTO {table} ({names}) SELECT {names} FROM _wb_rows")
+            self.run(f"INSERT INTO {table} ({names}) SELECT {names} FROM _wb_rows")
         finally:
             self.con.unregister("_wb_rows")
         return arrow.num_rows
 
     def query_arrays(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> dict[str, np.ndarray]:
         """Run a SELECT and return each column as a numpy array; fixed-size list columns become (N, k) arrays."""
-        table = self.con.execute(sql, list(params)).to_arrow_table()
+        table = self.con.sql(sql, params=list(params)).to_arrow_table()
         return {name: from_arrow(table.column(name)) for name in table.column_names}
 
     def paramset(self, stage: str, params: dict[str, Any], idobject: int | None) -> tuple[int, bool]:
@@ -105,15 +115,25 @@ class Store:
 
         Call inside the stage's transaction; the digest covers the stage, the object and the parameters.
         """
+        found = self.find_paramset(stage, params, idobject)
+        if found is not None:
+            return found, True
         text = json.dumps(params, sort_keys=True, default=_json_default)
-        digest = hashlib.sha256(f"{stage}|{idobject}|{text}".encode()).hexdigest()[:24]
-        row = self.con.execute("SELECT idparamset FROM paramset WHERE digest = ?", [digest]).fetchone()
-        if row is not None:
-            return int(row[0]), True
+        digest = _digest(stage, params, idobject)
         pid = self.next_id("paramset", "idparamset")
-        self.con.execute("INSERT INTO paramset (idparamset, stage, digest, params, idobject) VALUES (?, ?, ?, ?, ?)",
+        self.run("INSERT INTO paramset (idparamset, stage, digest, params, idobject) VALUES (?, ?, ?, ?, ?)",
                          [pid, stage, digest, text, idobject])
         return pid, False
+
+    def find_paramset(self, stage: str, params: dict[str, Any], idobject: int | None) -> int | None:
+        """The id of a stored parameter set of `stage` for these parameters and object, or None."""
+        row = self.one("SELECT idparamset FROM paramset WHERE digest = ?", [_digest(stage, params, idobject)])
+        return None if row is None else int(row[0])
+
+
+def _digest(stage: str, params: dict[str, Any], idobject: int | None) -> str:
+    text = json.dumps(params, sort_keys=True, default=_json_default)
+    return hashlib.sha256(f"{stage}|{idobject}|{text}".encode()).hexdigest()[:24]
 
 
 def _check_name(name: str) -> str:

@@ -14,7 +14,7 @@ from . import Store
 
 def put_object(store: Store, obj: ObjectModel) -> int:
     """Store an object (mesh, centre of mass) and return its id; the same name and geometry reuse the row."""
-    row = store.con.execute("SELECT idobject, digest FROM object WHERE name = ?", [obj.name]).fetchone()
+    row = store.one("SELECT idobject, digest FROM object WHERE name = ?", [obj.name])
     if row is not None:
         if row[1] != obj.digest:
             raise StoreError(f"store {store.path} already has an object named {obj.name!r} with other geometry; "
@@ -22,7 +22,7 @@ def put_object(store: Store, obj: ObjectModel) -> int:
         return int(row[0])
     with store.transaction():
         oid = store.next_id("object", "idobject")
-        store.con.execute(
+        store.run(
             "INSERT INTO object (idobject, name, digest, source, scale, com, com_method, ntriangles, vertices, faces) "
             "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
             [oid, obj.name, obj.digest, obj.source, obj.scale, obj.com.tolist(), obj.com_method, obj.n_triangles,
@@ -32,9 +32,9 @@ def put_object(store: Store, obj: ObjectModel) -> int:
 
 def object_id(store: Store, name: str) -> int:
     """The id of the object called `name`, or a StoreError naming the objects the store has."""
-    row = store.con.execute("SELECT idobject FROM object WHERE name = ?", [name]).fetchone()
+    row = store.one("SELECT idobject FROM object WHERE name = ?", [name])
     if row is None:
-        names = [r[0] for r in store.con.execute("SELECT name FROM object ORDER BY name").fetchall()]
+        names = [r[0] for r in store.run("SELECT name FROM object ORDER BY name")]
         raise StoreError(f"store {store.path} has no object {name!r} (it has: {', '.join(names) or 'none'}); "
                          f"run `workbench grasps MESH --db {store.path}` first")
     return int(row[0])
@@ -43,8 +43,8 @@ def object_id(store: Store, name: str) -> int:
 def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
     """The stored object `name` rebuilt as an ObjectModel (mesh in metres, stored centre of mass)."""
     oid = object_id(store, name)
-    src, scale, com, method, verts, faces = store.con.execute(
-        "SELECT source, scale, com, com_method, vertices, faces FROM object WHERE idobject = ?", [oid]).fetchone()
+    src, scale, com, method, verts, faces = store.one(
+        "SELECT source, scale, com, com_method, vertices, faces FROM object WHERE idobject = ?", [oid])
     obj = from_arrays(np.asarray(verts, dtype=np.float64), np.asarray(faces, dtype=np.int64), scale=1.0, name=name, source=src)
     return oid, ObjectModel(name=name, mesh=obj.mesh, com=np.asarray(com, dtype=np.float64), com_method=method,
                             scale=scale, source=src, digest=obj.digest)
@@ -63,10 +63,10 @@ def gripper_digest(gripper: Gripper) -> str:
 def put_gripper(store: Store, gripper: Gripper) -> int:
     """Store a gripper (reused when its geometry is already stored); call inside the stage's transaction."""
     digest = gripper_digest(gripper)
-    row = store.con.execute("SELECT idgripper FROM gripper WHERE digest = ?", [digest]).fetchone()
+    row = store.one("SELECT idgripper FROM gripper WHERE digest = ?", [digest])
     if row is not None:
         return int(row[0])
     gid = store.next_id("gripper", "idgripper")
-    store.con.execute("INSERT INTO gripper (idgripper, name, urdf, jaw_min, jaw_max, digest) VALUES (?, ?, ?, ?, ?, ?)",
+    store.run("INSERT INTO gripper (idgripper, name, urdf, jaw_min, jaw_max, digest) VALUES (?, ?, ?, ?, ?, ?)",
                       [gid, gripper.name, gripper.urdf, gripper.jaw_min, gripper.jaw_max, digest])
     return gid

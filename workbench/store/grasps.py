@@ -1,0 +1,64 @@
+"""SQL of the `freeairgrip` table (Wan & Harada, Section IV)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import StoreError
+from ..gripper import Gripper
+from ..grasps import GraspParams, GraspSet
+from . import Store
+from .objects import gripper_digest, put_gripper
+
+STAGE = "grasps"
+
+
+def grasp_param_dict(params: GraspParams, gripper: Gripper) -> dict:
+    return {**params.as_dict(), "gripper": gripper_digest(gripper)}
+
+
+def find_grasps(store: Store, idobject: int, gripper: Gripper, params: GraspParams) -> int | None:
+    """The parameter set id of stored grasps for this object, gripper and parameters, if any."""
+    return store.find_paramset(STAGE, grasp_param_dict(params, gripper), idobject)
+
+
+def save_grasps(store: Store, idobject: int, gripper: Gripper, params: GraspParams, grasps: GraspSet) -> tuple[int, bool]:
+    """Store the free-air grasps in one transaction; returns (idparamset, reused) and reuses an identical run."""
+    with store.transaction():
+        pid, existed = store.paramset(STAGE, grasp_param_dict(params, gripper), idobject)
+        if existed:
+            return pid, True
+        gid = put_gripper(store, gripper)
+        first = store.next_id("freeairgrip", "idfreeairgrip")
+        n = len(grasps)
+        store.insert("freeairgrip", {
+            "idfreeairgrip": np.arange(first, first + n, dtype=np.int64),
+            "idobject": np.full(n, idobject, dtype=np.int64),
+            "idparamset": np.full(n, pid, dtype=np.int64),
+            "idgripper": np.full(n, gid, dtype=np.int64),
+            "contactpoint0": grasps.contact0, "contactpoint1": grasps.contact1,
+            "contactnormal0": grasps.normal0, "contactnormal1": grasps.normal1,
+            "rotmat": grasps.poses, "jawwidth": grasps.jawwidth,
+            "idfacet0": grasps.facet0.astype(np.int64), "idfacet1": grasps.facet1.astype(np.int64),
+            "idcontactpair": grasps.pair.astype(np.int64), "rotation": grasps.rotation,
+        })
+    return pid, False
+
+
+def latest_grasp_paramset(store: Store, idobject: int) -> int:
+    """The most recent grasp parameter set of an object."""
+    row = store.one("SELECT max(idparamset) FROM paramset WHERE stage = ? AND idobject = ?", [STAGE, idobject])
+    if row is None or row[0] is None:
+        raise StoreError(f"store {store.path} has no grasps for object id {idobject}; run `workbench grasps` first")
+    return int(row[0])
+
+
+def load_grasps(store: Store, idobject: int, idparamset: int | None = None) -> dict[str, np.ndarray]:
+    """Free-air grasps as arrays: idfreeairgrip, contactpoint0/1, contactnormal0/1 (N, 3), rotmat (N, 4, 4), jawwidth."""
+    pid = latest_grasp_paramset(store, idobject) if idparamset is None else idparamset
+    out = store.query_arrays(
+        "SELECT idfreeairgrip, contactpoint0, contactpoint1, contactnormal0, contactnormal1, rotmat, jawwidth, idgripper "
+        "FROM freeairgrip WHERE idobject = ? AND idparamset = ? ORDER BY idfreeairgrip", [idobject, pid])
+    out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
+    out["idparamset"] = pid
+    return out
