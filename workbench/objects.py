@@ -75,6 +75,8 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
         if not geoms:
             raise MeshError(f"object file {path} holds no triangle mesh")
         loaded = trimesh.util.concatenate(geoms)
+    if isinstance(loaded, trimesh.PointCloud):
+        raise MeshError(f"object file {path} has {len(loaded.vertices)} vertices but no triangle faces")
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError(f"object file {path} is not a triangle mesh (got {type(loaded).__name__})")
     return from_arrays(loaded.vertices, loaded.faces, scale=resolve_scale(scale, units),
@@ -115,16 +117,18 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         hint = _scale_hint(extent)
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
                         f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {hint}")
-    if mesh.is_watertight and mesh.volume > 0:
+    if mesh.is_watertight and not mesh.is_winding_consistent:
+        # a closed mesh with some faces flipped: its signed volume and centre of mass would be wrong
+        warnings.warn(f"{label}: faces were not consistently oriented; re-oriented them", MeshWarning, stacklevel=3)
+        trimesh.repair.fix_normals(mesh)
+    if mesh.is_watertight and mesh.volume < 0:
+        mesh.invert()
+    if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0:
         com, method = np.asarray(mesh.center_mass, dtype=np.float64), "volume"
     else:
-        if mesh.is_watertight and mesh.volume < 0:
-            mesh.invert()
-            com, method = np.asarray(mesh.center_mass, dtype=np.float64), "volume"
-        else:
-            warnings.warn(f"{label} is not watertight: centre of mass weighted by area", MeshWarning, stacklevel=3)
-            com = (mesh.triangles_center * mesh.area_faces[:, None]).sum(0) / mesh.area
-            method = "area"
+        warnings.warn(f"{label} is not watertight: centre of mass weighted by area", MeshWarning, stacklevel=3)
+        com = (mesh.triangles_center * mesh.area_faces[:, None]).sum(0) / mesh.area
+        method = "area"
     digest = hashlib.sha256(np.ascontiguousarray(mesh.vertices).tobytes() + np.ascontiguousarray(mesh.faces).tobytes()).hexdigest()[:16]
     return ObjectModel(name=name, mesh=mesh, com=com, com_method=method, scale=scale, source=source, digest=digest)
 

@@ -1,0 +1,244 @@
+"""IK feasibility time per robot (t-tpgik) beside Table I's t-tpgikn / t-tpgikh (Wan & Harada Section VI).
+
+The tabletop grips are those of a box (0.04 x 0.06 x 0.12 m) resting on its three distinct faces at the
+default 91 grid positions and 8 angles, grasped across its two narrow widths from 8 approach directions at
+3 offsets: about 40,000 grips, like the paper's larger objects. `synthetic_grips` builds them in numpy in
+the placements contract's format; `synthetic_store` writes them into a DuckDB store through the library
+(object, gripper, parameter set, and bulk Arrow inserts), so the IK stage, the notebook and the tests run on
+a real store before any grasp planning.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import trimesh
+
+from . import print_table
+
+PAPER = {"grips": "168 to 39,816", "t-tpgikn": "1,746.67 (TU) ... 4,025.69 (PB) s", "t-tpgikh": "1,692.74 ... 4,069.84 s"}
+PAPER_ROWS = [  # obj, #-tpg, t-tpgikn (Nextage), t-tpgikh (HRP5P)
+    ("TU", 18648, 1746.67, 1692.74), ("PB", 168, 4025.69, 4069.84), ("PW", 27048, 2200.94, 2346.49),
+    ("PS", 29568, 16.46, 16.09), ("PT", 37296, 2680.36, 2679.52), ("ED", 39816, 3186.77, 2891.07)]
+
+GRID_X = np.round(np.arange(0.35, 0.65 + 1e-9, 0.05), 4)
+GRID_Y = np.round(np.arange(-0.30, 0.30 + 1e-9, 0.05), 4)
+BOX = (0.04, 0.06, 0.12)
+
+
+def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
+    from scipy.spatial.transform import Rotation
+
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_rotvec(np.asarray(axis, dtype=float) * angle).as_matrix()
+    return out
+
+
+def box_grasps(extents: tuple[float, float, float] = BOX, approaches: int = 8, offsets: int = 3,
+               jaw_max: float = 0.08) -> tuple[np.ndarray, np.ndarray]:
+    """Antipodal grasps of a box centred at its origin: TCP poses (G, 4, 4) in the object frame and jaw widths (G,).
+
+    The fingers close along an axis whose width fits the jaw; the approach turns about that axis in `approaches`
+    steps; the TCP slides along the longest remaining axis at `offsets` positions."""
+    ext = np.asarray(extents, dtype=float)
+    poses, widths = [], []
+    for a in range(3):
+        if ext[a] > jaw_max:
+            continue
+        y = np.eye(3)[a]
+        others = [i for i in range(3) if i != a]
+        z0 = np.eye(3)[others[0]]
+        x0 = np.cross(y, z0)
+        base = np.eye(4)
+        base[:3, :3] = np.stack([x0, y, z0], axis=1)
+        for k in range(approaches):
+            rot = _rot(y, 2 * np.pi * k / approaches) @ base
+            x, z = rot[:3, 0], rot[:3, 2]
+            hx, hz = 0.5 * np.abs(x) @ ext, 0.5 * np.abs(z) @ ext
+            for s in np.linspace(-0.5, 0.5, offsets) if offsets > 1 else [0.0]:
+                p = rot.copy()
+                # pads 2 cm deep from the face the hand approaches, slid along the TCP's x
+                p[:3, 3] = -z * max(hz - 0.02, 0.0) + x * s * hx
+                poses.append(p)
+                widths.append(ext[a])
+    return np.array(poses), np.array(widths)
+
+
+def box_placements(extents: tuple[float, float, float] = BOX) -> np.ndarray:
+    """The box resting on its three distinct faces: object poses (3, 4, 4) in the table frame, lowest point on z = 0."""
+    ext = np.asarray(extents, dtype=float)
+    out = []
+    for rot in (np.eye(4), _rot([1, 0, 0], np.pi / 2), _rot([0, 1, 0], np.pi / 2)):
+        p = rot.copy()
+        half = np.abs(rot[:3, :3]) @ (ext / 2)
+        p[2, 3] = half[2]
+        out.append(p)
+    return np.array(out)
+
+
+def synthetic_grips(extents: tuple[float, float, float] = BOX, xs: np.ndarray = GRID_X, ys: np.ndarray = GRID_Y,
+                    angles: int = 8, approaches: int = 8, offsets: int = 3, clearance: float = 0.002
+                    ) -> tuple[dict[str, np.ndarray], trimesh.Trimesh, dict[str, np.ndarray]]:
+    """Tabletop grips of a box in the placements contract's format, the box mesh, and the free tables
+    (grasps, placements, free tabletop grips) for `synthetic_store`."""
+    from ..gripper import franka_hand
+
+    mesh = trimesh.creation.box(extents=extents)
+    grasps, widths = box_grasps(extents, approaches, offsets)
+    places = box_placements(extents)
+    hand = franka_hand().collision_mesh().vertices
+    free = []  # (placement index, grasp index)
+    for pi, pl in enumerate(places):
+        tcp = pl @ grasps
+        low = np.einsum("gij,vj->gvi", tcp[:, :3, :3], hand)[..., 2].min(1) + tcp[:, 2, 3]
+        for gi in np.nonzero(low >= clearance)[0]:
+            free.append((pi, gi))
+    free = np.array(free)
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    positions = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1)
+    angle_values = 2 * np.pi * np.arange(angles) / angles
+    # tabletop placements: (placement, angle, position)
+    tp_place, tp_angle, tp_pos = np.meshgrid(np.arange(len(places)), np.arange(angles), np.arange(len(positions)), indexing="ij")
+    tp_place, tp_angle, tp_pos = tp_place.ravel(), tp_angle.ravel(), tp_pos.ravel()
+    yaw = np.array([_rot([0, 0, 1], a) for a in angle_values])
+    tp_rot = yaw[tp_angle] @ places[tp_place]
+    tp_rot[:, :3, 3] += positions[tp_pos]
+    # tabletop grips: every free grip of the placement at each of its tabletop placements
+    rows_tp, rows_fg = [], []
+    for k in range(len(places)):
+        tps = np.nonzero(tp_place == k)[0]
+        fgs = np.nonzero(free[:, 0] == k)[0]
+        a, b = np.meshgrid(tps, fgs, indexing="ij")
+        rows_tp.append(a.ravel())
+        rows_fg.append(b.ravel())
+    rows_tp, rows_fg = np.concatenate(rows_tp), np.concatenate(rows_fg)
+    gi = free[rows_fg, 1]
+    grips = {
+        "idtabletopgrips": np.arange(1, len(rows_tp) + 1, dtype=np.int64),
+        "idtabletopplacements": rows_tp.astype(np.int64) + 1,
+        "idfreeairgrip": gi.astype(np.int64) + 1,
+        "rotmat": tp_rot[rows_tp] @ grasps[gi],
+        "jawwidth": widths[gi],
+        "placement_rotmat": tp_rot[rows_tp],
+        "idangle": tp_angle[rows_tp].astype(np.int64) + 1,
+        "tabletopposition": positions[tp_pos[rows_tp]],
+    }
+    tables = {"grasps": grasps, "widths": widths, "places": places, "free": free, "angles": angle_values,
+              "tp_place": tp_place, "tp_angle": tp_angle, "tp_pos": positions[tp_pos], "tp_rot": tp_rot,
+              "rows_fg": rows_fg}
+    return grips, mesh, tables
+
+
+def synthetic_store(db, name: str = "box", **kwargs) -> tuple[int, int]:
+    """Write the synthetic box, its grasps, placements and tabletop grips into the store `db` (a path or Store);
+    returns (idobject, idparamset of the tabletop placements). Reuses what is stored under `name`."""
+    from ..gripper import franka_hand
+    from ..objects import from_trimesh
+    from ..store import Store
+    from ..store.objects import put_gripper, put_object
+
+    store = db if isinstance(db, Store) else Store(db)
+    try:
+        grips, mesh, t = synthetic_grips(**kwargs)
+        obj = from_trimesh(mesh, name)
+        oid = put_object(store, obj)
+        with store.transaction():
+            pid, existed = store.paramset("synthetic-tabletop", {"kwargs": {k: np.asarray(v).tolist() if not isinstance(v, (int, float)) else v
+                                                                          for k, v in kwargs.items()}}, oid)
+            if existed:
+                return oid, pid
+            gid = put_gripper(store, franka_hand())
+            fa0 = store.next_id("freeairgrip", "idfreeairgrip")
+            g = t["grasps"]
+            w = t["widths"]
+            half = w / 2
+            cp0 = g[:, :3, 3] + g[:, :3, 1] * half[:, None]
+            cp1 = g[:, :3, 3] - g[:, :3, 1] * half[:, None]
+            store.insert("freeairgrip", {
+                "idfreeairgrip": fa0 + np.arange(len(g)), "idobject": np.full(len(g), oid), "idparamset": np.full(len(g), pid),
+                "idgripper": np.full(len(g), gid), "contactpoint0": cp0, "contactpoint1": cp1,
+                "contactnormal0": g[:, :3, 1], "contactnormal1": -g[:, :3, 1], "rotmat": g.reshape(len(g), 16), "jawwidth": w})
+            ftp0 = store.next_id("freetabletopplacement", "idfreetabletopplacement")
+            pl = t["places"]
+            store.insert("freetabletopplacement", {
+                "idfreetabletopplacement": ftp0 + np.arange(len(pl)), "idobject": np.full(len(pl), oid),
+                "idparamset": np.full(len(pl), pid), "rotmat": pl.reshape(len(pl), 16), "stability": np.ones(len(pl))})
+            existing = store.query_arrays("SELECT idangle, value FROM angle")
+            ang_ids = []
+            nxt = store.next_id("angle", "idangle")
+            new_ids, new_vals = [], []
+            for a in t["angles"]:
+                hit = np.nonzero(np.abs(existing["value"] - a) < 1e-12)[0] if len(existing["value"]) else []
+                if len(hit):
+                    ang_ids.append(int(existing["idangle"][hit[0]]))
+                else:
+                    ang_ids.append(nxt)
+                    new_ids.append(nxt)
+                    new_vals.append(a)
+                    nxt += 1
+            store.insert("angle", {"idangle": np.array(new_ids, dtype=np.int64), "value": np.array(new_vals, dtype=float)})
+            ang_ids = np.array(ang_ids)
+            tp0 = store.next_id("tabletopplacements", "idtabletopplacements")
+            ntp = len(t["tp_rot"])
+            store.insert("tabletopplacements", {
+                "idtabletopplacements": tp0 + np.arange(ntp), "idfreetabletopplacement": ftp0 + t["tp_place"],
+                "idangle": ang_ids[t["tp_angle"]], "idparamset": np.full(ntp, pid), "tabletopposition": t["tp_pos"],
+                "rotmat": t["tp_rot"].reshape(ntp, 16)})
+            tg0 = store.next_id("tabletopgrips", "idtabletopgrips")
+            n = len(grips["rotmat"])
+            rot = grips["rotmat"]
+            hw = grips["jawwidth"][:, None] / 2
+            store.insert("tabletopgrips", {
+                "idtabletopgrips": tg0 + np.arange(n), "idtabletopplacements": tp0 + grips["idtabletopplacements"] - 1,
+                "idfreeairgrip": fa0 + grips["idfreeairgrip"] - 1,
+                "contactpoint0": rot[:, :3, 3] + rot[:, :3, 1] * hw, "contactpoint1": rot[:, :3, 3] - rot[:, :3, 1] * hw,
+                "contactnormal0": rot[:, :3, 1], "contactnormal1": -rot[:, :3, 1], "rotmat": rot.reshape(n, 16),
+                "jawwidth": grips["jawwidth"]})
+        return oid, pid
+    finally:
+        if store is not db:
+            store.close()
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--robots", default="panda,ur5,talos", help="comma-separated robots (default: panda,ur5,talos)")
+    parser.add_argument("--repeats", type=int, default=3, help="runs per robot; the median is printed (default 3)")
+    parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    parser.add_argument("--handx", type=float, default=0.05)
+    parser.add_argument("--worldz", type=float, default=0.10)
+    parser.add_argument("--positions", type=int, default=None, help="use only the first N grid positions (quick runs)")
+
+
+def run(args: argparse.Namespace) -> int:
+    import statistics
+
+    from ..kinematics import IKOptions, default_scene, ik_feasibility
+    from ..robots import get_robot
+
+    xs, ys = GRID_X, GRID_Y
+    grips, mesh, _ = synthetic_grips(xs=xs, ys=ys)
+    if args.positions:
+        keep = np.isin(np.round(grips["tabletopposition"][:, 0] * 1000 + grips["tabletopposition"][:, 1] * 10, 3),
+                       np.unique(np.round(grips["tabletopposition"][:, 0] * 1000 + grips["tabletopposition"][:, 1] * 10, 3))[:args.positions])
+        grips = {k: v[keep] for k, v in grips.items()}
+    n = len(grips["rotmat"])
+    rows = []
+    for name in args.robots.split(","):
+        robot = get_robot(name.strip())
+        scene = default_scene(robot.name)
+        times, res = [], None
+        for _ in range(max(1, args.repeats)):
+            t0 = time.perf_counter()
+            res = ik_feasibility(robot, grips, scene, args.handx, args.worldz, mesh, IKOptions(), workers=args.workers, progress=False)
+            times.append(time.perf_counter() - t0)
+        f = res.feasible
+        rows.append((robot.name, n, statistics.median(times), int(f[:, 0].sum()), int(f.all(1).sum()),
+                     f"{n / statistics.median(times):,.0f}"))
+    print_table(["robot", "#-tpg", "t-tpgik (s)", "#feasible grasp", "#feasible +handx+worldz", "grips/s"], rows,
+                title=f"IK feasibility of {n:,} tabletop grips of a box (median of {args.repeats}, handx {args.handx} m, worldz {args.worldz} m)")
+    print()
+    print_table(["obj", "#-tpg", "t-tpgikn (Nextage)", "t-tpgikh (HRP5P)"], PAPER_ROWS,
+                title="Wan & Harada Table I (Xeon 2.8 GHz)")
+    return 0

@@ -1,0 +1,161 @@
+"""SQL of `freetabletopplacement`, `freetabletopgrip`, `angle`, `tabletopplacements` and `tabletopgrips`
+(Wan & Harada, Section IV, Fig. 5)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import StoreError
+from ..placements import PlacementParams, Placements
+from ..tabletop import Tabletop, TabletopParams
+from . import Store
+
+PLACEMENT_STAGE = "placements"
+TABLETOP_STAGE = "tabletop"
+
+
+def _ids(store: Store, table: str, n: int) -> np.ndarray:
+    first = store.next_id(table, f"id{table}")
+    return np.arange(first, first + n, dtype=np.int64)
+
+
+def _apply(poses: np.ndarray, points: np.ndarray) -> np.ndarray:
+    return np.einsum("nij,nj->ni", poses[:, :3, :3], points) + poses[:, :3, 3]
+
+
+def _rotate(poses: np.ndarray, vectors: np.ndarray) -> np.ndarray:
+    return np.einsum("nij,nj->ni", poses[:, :3, :3], vectors)
+
+
+def find_placements(store: Store, idobject: int, grasp_pid: int, params: PlacementParams) -> int | None:
+    return store.find_paramset(PLACEMENT_STAGE, {**params.as_dict(), "grasps": grasp_pid}, idobject)
+
+
+def save_placements(store: Store, idobject: int, grasp_pid: int, params: PlacementParams, placements: Placements,
+                    grasps: dict[str, np.ndarray], ftg: tuple[np.ndarray, np.ndarray, np.ndarray]) -> int:
+    """Store free placements and free tabletop grips in one transaction; returns the parameter set id.
+
+    grasps: the stored free-air grasps (load_grasps); ftg: (placement index, grasp index, TCP pose in the table frame).
+    """
+    with store.transaction():
+        pid, existed = store.paramset(PLACEMENT_STAGE, {**params.as_dict(), "grasps": grasp_pid}, idobject)
+        if existed:
+            return pid
+        n = len(placements)
+        fp_ids = _ids(store, "freetabletopplacement", n)
+        store.insert("freetabletopplacement", {
+            "idfreetabletopplacement": fp_ids, "idobject": np.full(n, idobject, dtype=np.int64),
+            "idparamset": np.full(n, pid, dtype=np.int64), "rotmat": placements.poses, "stability": placements.stability,
+            "support": np.array([s.tolist() for s in placements.supports] + [None], dtype=object)[:n],
+        })
+        p_idx, g_idx, poses = ftg
+        place = placements.poses[p_idx]
+        store.insert("freetabletopgrip", {
+            "idfreetabletopgrip": _ids(store, "freetabletopgrip", len(p_idx)),
+            "idfreetabletopplacement": fp_ids[p_idx], "idfreeairgrip": grasps["idfreeairgrip"][g_idx],
+            "contactpoint0": _apply(place, grasps["contactpoint0"][g_idx]),
+            "contactpoint1": _apply(place, grasps["contactpoint1"][g_idx]),
+            "contactnormal0": _rotate(place, grasps["contactnormal0"][g_idx]),
+            "contactnormal1": _rotate(place, grasps["contactnormal1"][g_idx]),
+            "rotmat": poses, "jawwidth": grasps["jawwidth"][g_idx],
+        })
+    return pid
+
+
+def load_placements(store: Store, idplacements: int) -> dict[str, np.ndarray]:
+    """Free placements of a parameter set: idfreetabletopplacement, rotmat (P, 4, 4), stability, support (objects)."""
+    out = store.query_arrays("SELECT idfreetabletopplacement, rotmat, stability, support FROM freetabletopplacement "
+                             "WHERE idparamset = ? ORDER BY idfreetabletopplacement", [idplacements])
+    out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
+    return out
+
+
+def load_free_tabletop_grips(store: Store, idplacements: int) -> dict[str, np.ndarray]:
+    """Free tabletop grips of a placement parameter set, with their placement and free-air grasp ids."""
+    out = store.query_arrays(
+        "SELECT g.idfreetabletopgrip, g.idfreetabletopplacement, g.idfreeairgrip, g.rotmat, g.jawwidth, "
+        "g.contactpoint0, g.contactpoint1, g.contactnormal0, g.contactnormal1 "
+        "FROM freetabletopgrip g JOIN freetabletopplacement p USING (idfreetabletopplacement) "
+        "WHERE p.idparamset = ? ORDER BY g.idfreetabletopgrip", [idplacements])
+    out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
+    return out
+
+
+def find_tabletop(store: Store, idobject: int, idplacements: int, params: TabletopParams) -> int | None:
+    return store.find_paramset(TABLETOP_STAGE, {**params.as_dict(), "placements": idplacements}, idobject)
+
+
+def angle_ids(store: Store, values: np.ndarray) -> np.ndarray:
+    """Ids of the `angle` rows of these values (radians), created when missing; call inside a transaction."""
+    out = np.zeros(len(values), dtype=np.int64)
+    for k, v in enumerate(np.round(values, 12)):
+        row = store.one("SELECT idangle FROM angle WHERE abs(value - ?) < 1e-9", [float(v)])
+        if row is None:
+            aid = store.next_id("angle", "idangle")
+            store.run("INSERT INTO angle (idangle, value) VALUES (?, ?)", [aid, float(v)])
+            row = (aid,)
+        out[k] = row[0]
+    return out
+
+
+def save_tabletop(store: Store, idobject: int, idplacements: int, params: TabletopParams, tt: Tabletop,
+                  ftg: dict[str, np.ndarray], fp_ids: np.ndarray) -> int:
+    """Store tabletop placements and grips in one transaction; returns the parameter set id.
+
+    ftg: the stored free tabletop grips (load_free_tabletop_grips); fp_ids: free placement ids by index.
+    """
+    with store.transaction():
+        pid, existed = store.paramset(TABLETOP_STAGE, {**params.as_dict(), "placements": idplacements}, idobject)
+        if existed:
+            return pid
+        aids = angle_ids(store, params.angle_values())
+        tp_ids = _ids(store, "tabletopplacements", len(tt.placement))
+        store.insert("tabletopplacements", {
+            "idtabletopplacements": tp_ids, "idfreetabletopplacement": fp_ids[tt.placement], "idangle": aids[tt.angle],
+            "idparamset": np.full(len(tp_ids), pid, dtype=np.int64), "tabletopposition": tt.position, "rotmat": tt.poses,
+        })
+        # contacts in the world: the free tabletop grip's (table-frame) contacts moved with the placement
+        m = tt.moves[tt.grip_tp]
+        g = tt.grip_ftg
+        store.insert("tabletopgrips", {
+            "idtabletopgrips": _ids(store, "tabletopgrips", len(g)), "idtabletopplacements": tp_ids[tt.grip_tp],
+            "idfreeairgrip": ftg["idfreeairgrip"][g], "idfreetabletopgrip": ftg["idfreetabletopgrip"][g],
+            "contactpoint0": _apply(m, ftg["contactpoint0"][g]), "contactpoint1": _apply(m, ftg["contactpoint1"][g]),
+            "contactnormal0": _rotate(m, ftg["contactnormal0"][g]), "contactnormal1": _rotate(m, ftg["contactnormal1"][g]),
+            "rotmat": tt.grip_poses, "jawwidth": ftg["jawwidth"][g],
+        })
+    return pid
+
+
+def latest_tabletop_paramset(store: Store, idobject: int) -> int:
+    """The most recent tabletop parameter set of an object."""
+    row = store.one("SELECT max(idparamset) FROM paramset WHERE stage = ? AND idobject = ?", [TABLETOP_STAGE, idobject])
+    if row is None or row[0] is None:
+        raise StoreError(f"store {store.path} has no tabletop placements for object id {idobject}; run `workbench placements` first")
+    return int(row[0])
+
+
+def load_tabletop_grips(store: Store, idobject: int, idparamset: int | None = None) -> dict[str, np.ndarray]:
+    """Tabletop grips of a tabletop parameter set as arrays (Fig. 5): idtabletopgrips, idtabletopplacements,
+    idfreeairgrip, rotmat (N, 4, 4) TCP in the world, jawwidth, placement_rotmat (N, 4, 4) object in the world,
+    idangle, idfreetabletopplacement, tabletopposition (N, 3)."""
+    pid = latest_tabletop_paramset(store, idobject) if idparamset is None else idparamset
+    out = store.query_arrays(
+        "SELECT g.idtabletopgrips, g.idtabletopplacements, g.idfreeairgrip, g.rotmat, g.jawwidth, "
+        "p.rotmat AS placement_rotmat, p.idangle, p.idfreetabletopplacement, p.tabletopposition "
+        "FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) "
+        "WHERE p.idparamset = ? ORDER BY g.idtabletopgrips", [pid])
+    out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
+    out["placement_rotmat"] = out["placement_rotmat"].reshape(-1, 4, 4)
+    out["idparamset"] = pid
+    return out
+
+
+def load_tabletop_placements(store: Store, idparamset: int) -> dict[str, np.ndarray]:
+    """Tabletop placements of a parameter set: ids, free placement, angle id and value, position, rotmat (T, 4, 4)."""
+    out = store.query_arrays(
+        "SELECT p.idtabletopplacements, p.idfreetabletopplacement, p.idangle, a.value AS angle, p.tabletopposition, p.rotmat "
+        "FROM tabletopplacements p JOIN angle a USING (idangle) WHERE p.idparamset = ? ORDER BY p.idtabletopplacements",
+        [idparamset])
+    out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
+    return out
