@@ -88,28 +88,31 @@ def primitive_wrenches(points: np.ndarray, normals: np.ndarray, mu: float, sides
 def _pair_candidates(vectors: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Directions u orthogonal to two vectors of a pair of contacts with u.v <= 0 for all the pair's vectors.
 
-    vectors (K, m, 3); pairs (P, 2). Returns (P, C, 3) directions and (P, C) validity (padded entries False).
-    Pairs whose vectors are all parallel (or zero) also get the directions orthogonal to their line.
+    vectors (K, m, 3); pairs (P, 2). Returns the pair index (C,) and unit directions (C, 3) of the distinct
+    valid candidates, grouped by pair. Two edges of one contact only matter when adjacent (a plane through
+    non-adjacent edges of a convex pyramid cuts it); pairs whose vectors are all parallel (or zero) also get the
+    directions orthogonal to their line.
     """
     m = vectors.shape[1]
     x = np.concatenate([vectors[pairs[:, 0]], vectors[pairs[:, 1]]], axis=1)          # (P, 2m, 3)
-    ia, ib = np.triu_indices(2 * m, 1)
+    cross_a, cross_b = np.meshgrid(np.arange(m), np.arange(m, 2 * m), indexing="ij")
+    adj = np.arange(m)
+    ia = np.concatenate([cross_a.ravel(), adj, adj + m])
+    ib = np.concatenate([cross_b.ravel(), (adj + 1) % m, (adj + 1) % m + m])
     u = np.cross(x[:, ia], x[:, ib])                                                    # (P, C0, 3)
-    # the directions orthogonal to the pair's longest vector cover the all-parallel case
     longest = x[np.arange(len(x)), np.argmax(np.linalg.norm(x, axis=2), axis=1)]
     e1, e2 = tangent_frames(np.where(np.linalg.norm(longest, axis=1, keepdims=True) > 0, longest, [0.0, 0.0, 1.0]))
     u = np.concatenate([u, -u, e1[:, None], -e1[:, None], e2[:, None], -e2[:, None]], axis=1)
     norm = np.linalg.norm(u, axis=2)
     ok = norm > 1e-9
     u = u / np.where(ok, norm, 1.0)[..., None]
-    ok &= (np.einsum("pck,pvk->pcv", u, x) <= SPAN_TOL).all(axis=2)
-    # compact: keep valid directions first, pad to the largest count
-    count = ok.sum(1)
-    width = max(int(count.max(initial=0)), 1)
-    order = np.argsort(~ok, axis=1, kind="stable")[:, :width]
-    u = np.take_along_axis(u, order[..., None], axis=1)
-    ok = np.take_along_axis(ok, order, axis=1)
-    return u, ok
+    ok &= (np.matmul(u, x.transpose(0, 2, 1)) <= SPAN_TOL).all(axis=2)
+    pair, cand = np.nonzero(ok)
+    u = u[pair, cand]
+    key = np.column_stack([pair, np.round(u * 1e9).astype(np.int64)])
+    _, first = np.unique(key, axis=0, return_index=True)
+    first = np.sort(first)
+    return pair[first], u[first]
 
 
 class SpanTable:
@@ -117,7 +120,7 @@ class SpanTable:
 
     `sets` are e.g. the force edges and the torque edges of the K contacts; `may_span(g)` is False for a
     4-subset g (local indices) when the vectors of one set do not positively span R^3, which rules out force
-    closure. Building costs O(K^3 m); a query costs six table look-ups per grasp.
+    closure. Building costs O(K^3 m); a query costs six table look-ups per grasp and set.
     """
 
     def __init__(self, *sets: np.ndarray):
@@ -132,18 +135,16 @@ class SpanTable:
 
     def _masks(self, vectors: np.ndarray) -> np.ndarray:
         """(P, K, words) uint64: bit c of (p, k) says candidate c of pair p is valid for contact k's vectors."""
-        u, ok = _pair_candidates(vectors, self.pairs)
-        p, c = u.shape[:2]
-        valid = np.empty((p, c, self.k), dtype=bool)
-        for s in range(0, p, 4096):  # chunked to bound memory: (chunk, C, K, m)
-            dots = np.einsum("pck,jmk->pcjm", u[s:s + 4096], vectors)
-            valid[s:s + 4096] = (dots <= SPAN_TOL).all(axis=3)
-        valid &= ok[:, :, None]
-        words = (c + 63) // 64
-        padded = np.zeros((p, words * 64, self.k), dtype=bool)
-        padded[:, :c] = valid
-        packed = np.packbits(padded.transpose(0, 2, 1), axis=2, bitorder="little")      # (P, K, words*8) uint8
-        return np.ascontiguousarray(packed).view(np.uint64)                               # (P, K, words)
+        pair, u = _pair_candidates(vectors, self.pairs)
+        npairs, k = len(self.pairs), self.k
+        start = np.searchsorted(pair, np.arange(npairs))
+        rank = np.arange(len(pair)) - start[pair]
+        words = max(1, (int(rank.max(initial=0)) + 64) // 64)
+        valid = (u @ vectors.reshape(-1, 3).T <= SPAN_TOL).reshape(len(u), k, -1).all(axis=2)   # (C, K)
+        dense = np.zeros((npairs, words * 64, k), dtype=bool)
+        dense[pair, rank] = valid
+        packed = np.packbits(dense, axis=1, bitorder="little")                               # (P, words*8, K)
+        return np.ascontiguousarray(packed.transpose(0, 2, 1)).view(np.uint64)                # (P, K, words)
 
     def may_span(self, grasps: np.ndarray) -> np.ndarray:
         """(G,) bool: True where every vector set of the 4-subset positively spans R^3 (force closure possible)."""
@@ -161,17 +162,31 @@ class SpanTable:
 # Exact test: origin strictly inside the convex hull of the primitive wrenches ([4], as a linear program)
 
 
-def strictly_inside(w: np.ndarray, max_iter: int = 60, chunk: int = 8192) -> np.ndarray:
+def strictly_inside(w: np.ndarray, max_iter: int = 60, chunk: int = 2048, threads: int = 2) -> np.ndarray:
     """(B,) bool: the origin is strictly inside the convex hull of each batch item's points w (B, n, d).
 
-    Equivalent: rank(W) = d and W lambda = 0 for some lambda >= 1; phase-1 simplex, batched.
+    Equivalent: rank(W) = d and W lambda = 0 for some lambda >= 1. Items are first screened by an exact
+    separation certificate (all w.y >= 0 for y the mean direction in the metric of W^T W); the rest go through
+    a phase-1 simplex run on a chunk of items at once, chunks spread over `threads` threads (numpy releases
+    the GIL in its array operations).
     """
     w = np.asarray(w, dtype=np.float64)
     if w.ndim != 3:
         raise ForceClosureError(f"wrench batch must have shape (B, n, d), got {w.shape}")
     out = np.zeros(len(w), dtype=bool)
-    for s in range(0, len(w), chunk):
+    starts = range(0, len(w), chunk)
+
+    def work(s: int) -> None:
         out[s:s + chunk] = _strictly_inside(w[s:s + chunk], max_iter)
+
+    if threads > 1 and len(w) > chunk:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(threads) as pool:
+            list(pool.map(work, starts))
+    else:
+        for s in starts:
+            work(s)
     return out
 
 
@@ -182,51 +197,68 @@ def _strictly_inside(w: np.ndarray, max_iter: int) -> np.ndarray:
         return result
     gram = np.einsum("bni,bnj->bij", w, w)
     ev = np.linalg.eigvalsh(gram)
-    full = ev[:, 0] > 1e-10 * np.maximum(ev[:, -1], 1e-300)
-    idx = np.flatnonzero(full)
+    undecided = ev[:, 0] > 1e-10 * np.maximum(ev[:, -1], 1e-300)        # rank d, else not force closure
+    idx = np.flatnonzero(undecided)
     if len(idx) == 0:
         return result
-    a = w[idx].transpose(0, 2, 1)                           # (B, d, n): columns are the points
-    b = -a.sum(axis=2)                                      # lambda = 1 + mu, mu >= 0: A mu = -A 1
+    # separation certificate: every point on the positive side of y (a closed half-space holds them all)
+    y = np.linalg.solve(gram[idx], w[idx].sum(axis=1)[..., None])[..., 0]
+    side = np.einsum("bni,bi->bn", w[idx], y)
+    separated = side.min(axis=1) > 1e-12 * np.linalg.norm(y, axis=1)
+    idx = idx[~separated]
+    if len(idx) == 0:
+        return result
+    result[idx] = _phase1(w[idx], max_iter)
+    return result
+
+
+def _phase1(w: np.ndarray, max_iter: int) -> np.ndarray:
+    """Feasibility of A mu = -A 1, mu >= 0 (A = w^T) by the phase-1 simplex with Dantzig's rule, batched."""
+    bsz, n, d = w.shape
+    a = w.transpose(0, 2, 1)
+    b = -a.sum(axis=2)
     sign = np.where(b < 0, -1.0, 1.0)
-    a = a * sign[:, :, None]
-    b = b * sign
-    t = np.zeros((len(idx), d + 1, n + d + 1))
-    t[:, :d, :n] = a
+    t = np.zeros((bsz, d + 1, n + d + 1))
+    t[:, :d, :n] = a * sign[:, :, None]
     t[:, :d, n:n + d] = np.eye(d)
-    t[:, :d, -1] = b
-    t[:, d, :n] = -a.sum(axis=1)
-    t[:, d, -1] = -b.sum(axis=1)
+    t[:, :d, -1] = b * sign
+    t[:, d, :n] = -t[:, :d, :n].sum(axis=1)      # reduced costs of the artificial objective
+    t[:, d, -1] = -t[:, :d, -1].sum(axis=1)      # minus the sum of artificials
     scale = 1.0 + np.abs(b).sum(axis=1)
-    active = np.arange(len(idx))
-    feasible = np.zeros(len(idx), dtype=bool)
+    feasible = np.zeros(bsz, dtype=bool)
+    pending = np.ones(bsz, dtype=bool)
+    active = np.arange(bsz)
     for _ in range(max_iter):
-        if len(active) == 0:
-            break
         cost = t[:, d, :-1]
-        e = np.argmin(cost, axis=1)
+        e = cost.argmin(axis=1)
         rows = np.arange(len(t))
         optimal = cost[rows, e] > -1e-11 * scale[active]
         if optimal.any():
-            feasible[active[optimal]] = -t[optimal, d, -1] <= 1e-9 * scale[active[optimal]]
-            keep = ~optimal
-            t, e, active = t[keep], e[keep], active[keep]
-            rows = np.arange(len(t))
-            if len(active) == 0:
-                break
-        col = t[rows, :d, e]                                # (B, d)
-        rhs = t[:, :d, -1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.where(col > 1e-12, rhs / col, np.inf)
-        leave = np.argmin(ratio, axis=1)
-        prow = t[rows, leave, :] / col[rows, leave][:, None]
-        colfull = t[rows, :, e]                             # (B, d+1)
+            done = active[optimal]
+            feasible[done] = -t[optimal, d, -1] <= 1e-9 * scale[done]
+            pending[done] = False
+            if optimal.all():
+                return feasible
+            if optimal.mean() > 0.25:        # compact only when worth the copy
+                keep = ~optimal
+                t, e, active = t[keep], e[keep], active[keep]
+                rows = np.arange(len(t))
+                optimal = np.zeros(len(t), dtype=bool)
+        colfull = np.take_along_axis(t, e[:, None, None], axis=2)[:, :, 0]   # (B, d+1)
+        col = colfull[:, :d]
+        positive = col > 1e-12
+        ratio = np.where(positive, t[:, :d, -1] / np.where(positive, col, 1.0), np.inf)
+        leave = ratio.argmin(axis=1)
+        leave_ok = positive[rows, leave] & ~optimal          # settled items are left as they are
+        colfull[~leave_ok] = 0.0
+        piv = np.where(leave_ok, col[rows, leave], 1.0)
+        prow = np.take_along_axis(t, leave[:, None, None], axis=1)[:, 0, :] / piv[:, None]
         t -= colfull[:, :, None] * prow[:, None, :]
-        t[rows, leave, :] = prow
-    if len(active):  # degenerate cycling or slow instances: solve them exactly one by one
-        feasible[active] = [_lp_feasible(w[idx[i]]) for i in active]
-    result[idx] = feasible
-    return result
+        t[rows[leave_ok], leave[leave_ok], :] = prow[leave_ok]
+    rest = np.flatnonzero(pending)
+    # degenerate cycling or slow instances: solve them exactly one by one
+    feasible[rest] = [_lp_feasible(w[i]) for i in rest]
+    return feasible
 
 
 def _lp_feasible(w: np.ndarray) -> bool:

@@ -267,18 +267,14 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
         return out
     y, z0, x0 = contact_frames(point0, point1)
     width = np.linalg.norm(point0 - point1, axis=1)
+    radius, y_near, y_far = gripper.pad_sweep(width)
     mid = 0.5 * (point0 + point1)
+    req = fcl.CollisionRequest()
     for side in (1.0, -1.0):
-        poses = np.zeros((len(y), 4, 4))
-        poses[:, 3, 3] = 1.0
-        # cylinder axis (its local z) along side * y
-        poses[:, :3, 0], poses[:, :3, 1], poses[:, :3, 2] = x0, side * z0, side * y
-        for k in range(len(y)):
-            radius, y0, y1 = gripper.pad_sweep(float(width[k]))
-            poses[k, :3, 3] = mid[k] + side * y[k] * (0.5 * (y0 + y1))
-            if out[k]:
-                continue
-            cyl = fcl.CollisionObject(fcl.Cylinder(radius, y1 - y0))
-            cyl.setTransform(fcl.Transform(poses[k, :3, :3], poses[k, :3, 3]))
-            out[k] = fcl.collide(cyl, target, fcl.CollisionRequest(), fcl.CollisionResult()) > 0
+        # the cylinder's axis (its local z) along side * y, centred between its two ends
+        rot = np.stack([x0, side * z0, side * y], axis=2)
+        centre = mid + side * y * (0.5 * (y_near + y_far))[:, None]
+        for k in np.flatnonzero(~out):
+            cyl = fcl.CollisionObject(fcl.Cylinder(radius, y_far[k] - y_near[k]), fcl.Transform(rot[k], centre[k]))
+            out[k] = fcl.collide(cyl, target, req, fcl.CollisionResult()) > 0
     return out

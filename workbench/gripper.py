@@ -81,16 +81,15 @@ class Gripper:
             parts.append(trimesh.creation.box(extents=ext, transform=pose))
         return trimesh.util.concatenate(parts)
 
-    def pad_sweep(self, width: float) -> tuple[float, float, float]:
-        """Level-1 swept volume of the left pad for a grasp of `width`: (radius, y_start, y_end) along the TCP's y.
+    def pad_sweep(self, width: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """Level-1 swept volume of the left pad for grasps of `width`: (radius, y_start, y_end) along the TCP's y.
 
         The cylinder runs from just outside the contact (y = width/2 + 0.5 mm) to the pad's outer face at full
         opening; the right pad's cylinder is its mirror image.
         """
-        ext = self.pad_extents
-        y0 = width / 2 + 5e-4
-        y1 = self.jaw_max / 2 + ext[1]
-        return self.pad_radius, y0, max(y1, y0 + 1e-4)
+        y0 = np.asarray(width, dtype=np.float64) / 2 + 5e-4
+        y1 = np.maximum(self.jaw_max / 2 + self.pad_extents[1], y0 + 1e-4)
+        return self.pad_radius, y0, y1
 
 
 def _to_h(placement) -> np.ndarray:

@@ -32,6 +32,8 @@ from .errors import RobotError
 from .robots import Robot, RobotSpec, robot_from_spec
 
 KINDS = ("grasp", "handx", "handxworldz")
+STALL_WINDOW = 6  # LM iterations between progress checks
+STALL_RATIO = 0.8  # a row whose error did not drop below this fraction over the window is given up
 
 
 @dataclass(frozen=True)
@@ -83,8 +85,8 @@ class IKOptions:
     tol_rot: float = 1e-3
     iters_warm: int = 30
     iters_seed: int = 60
-    seeds: int = 3
-    library: int = 4096
+    seeds: int = 5
+    library: int = 32768
     chunk: int = 4096
     lane: int = 16
     seed: int = 0
@@ -188,11 +190,14 @@ def _pose_error(target: np.ndarray, tcp_r: np.ndarray, tcp_t: np.ndarray) -> np.
     return np.concatenate([ep, er], axis=1)
 
 
+_STATS = {'rowiters': 0, 'iters': 0}  # DEVSTATS
+
+
 def solve_ik(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, tol_pos: float = 1e-4,
              tol_rot: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """Batched Levenberg-Marquardt IK (Sugihara's damping E + 1e-3) with joint-limit clamping.
 
-    Converged rows leave the active set; rows whose error stalls for 8 iterations are given up. Returns the
+    Converged rows leave the active set; rows whose error stalls for STALL_WINDOW iterations are given up. Returns the
     joint vectors (M, n) and which converged (M,)."""
     q = np.clip(np.array(q0, dtype=np.float64), robot.lower, robot.upper)
     m, n = q.shape
@@ -204,6 +209,7 @@ def solve_ik(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, tol_
         if len(active) == 0:
             break
         qa = q[active]
+        _STATS["rowiters"] += len(active); _STATS["iters"] += 1  # DEVSTATS
         rot, pos, tcp_r, tcp_t = forward(robot, qa)
         e = _pose_error(targets[active], tcp_r, tcp_t)
         ep = np.linalg.norm(e[:, :3], axis=1)
@@ -212,8 +218,8 @@ def solve_ik(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, tol_
         ok[active[conv]] = True
         keep = ~conv
         err = ep + 0.2 * er
-        if it % 8 == 0 and it > 0:
-            stalled = err > 0.9 * last[active]
+        if it % STALL_WINDOW == 0 and it > 0:
+            stalled = err > STALL_RATIO * last[active]
             keep &= ~stalled
             last[active] = err
         elif it == 0:
@@ -237,27 +243,25 @@ def solve_ik(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, tol_
 
 
 class SeedLibrary:
-    """Deterministic sampled configurations and their TCP poses; `nearest` picks seeds close to targets."""
+    """Deterministic sampled configurations and their TCP poses; `nearest` picks the seeds whose TCP pose is
+    closest to each target (k-d tree over position and `rho`-weighted rotation matrix entries)."""
 
-    def __init__(self, robot: Robot, size: int, seed: int):
+    def __init__(self, robot: Robot, size: int, seed: int, rho: float = 0.1):
+        from scipy.spatial import cKDTree
+
         rng = np.random.default_rng(seed)
         self.q = rng.uniform(robot.lower, robot.upper, size=(size, robot.nq))
         self.q[0] = robot.neutral()
         _, _, r, t = forward(robot, self.q)
-        self.rot = r.reshape(size, 9)
-        self.pos = t
+        self.rho = rho
+        self.tree = cKDTree(np.concatenate([t, rho * r.reshape(size, 9)], axis=1))
 
-    def nearest(self, targets: np.ndarray, k: int, rho: float = 0.15) -> np.ndarray:
-        """(M, k) library indices ranked by |dp| + rho * rotation angle."""
-        tp = targets[:, :3, 3]
-        d2 = (tp ** 2).sum(1)[:, None] - 2 * tp @ self.pos.T + (self.pos ** 2).sum(1)[None]
-        tr = targets[:, :3, :3].reshape(len(targets), 9) @ self.rot.T
-        ang = np.arccos(np.clip((tr - 1) / 2, -1, 1))
-        score = np.sqrt(np.maximum(d2, 0)) + rho * ang
-        k = min(k, score.shape[1])
-        part = np.argpartition(score, k - 1, axis=1)[:, :k]
-        order = np.take_along_axis(score, part, 1).argsort(1)
-        return np.take_along_axis(part, order, 1)
+    def nearest(self, targets: np.ndarray, k: int) -> np.ndarray:
+        """(M, k) library indices, nearest first."""
+        k = max(1, min(k, len(self.q)))
+        emb = np.concatenate([targets[:, :3, 3], self.rho * targets[:, :3, :3].reshape(len(targets), 9)], axis=1)
+        _, ix = self.tree.query(emb, k=k)
+        return np.asarray(ix, dtype=np.int64).reshape(len(targets), k)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -478,68 +482,65 @@ class _Solver:
         inside = np.linalg.norm(p - self.centre, axis=-1) <= self.radius
         return inside & (p >= self.wmin).all(-1) & (p <= self.wmax).all(-1)
 
-    def solve(self, targets: np.ndarray, warm: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Feasible joint vectors (M, n) (NaN rows where none) for targets (M, 4, 4): warm start first (rows of
-        `warm` that are not NaN), then library seeds nearest to the target."""
-        o, robot = self.opts, self.robot
-        m = len(targets)
-        out = np.full((m, robot.nq), np.nan)
-        done = np.zeros(m, dtype=bool)
-        if m == 0:
-            return out, done
-
-        def attempt(rows: np.ndarray, q0: np.ndarray, iters: int) -> None:
-            q, ok = solve_ik(robot, targets[rows], q0, iters, o.tol_pos, o.tol_rot)
-            rows, q = rows[ok], q[ok]
-            if self.collider is not None and len(rows):
-                hit = self.collider.collides_q(q, placements[rows])
-                rows, q = rows[~hit], q[~hit]
-            out[rows] = q
-            done[rows] = True
-
-        has_warm = ~np.isnan(warm).any(axis=1)
-        if has_warm.any():
-            rows = np.nonzero(has_warm)[0]
-            attempt(rows, warm[rows], o.iters_warm)
-        rest = np.nonzero(~done)[0]
-        if len(rest) and o.seeds > 0:
-            near = self.library.nearest(targets[rest], o.seeds)
-            for k in range(near.shape[1]):
-                sel = ~done[rest]
-                if not sel.any():
-                    break
-                rows = rest[sel]
-                attempt(rows, self.library.q[near[sel, k]], o.iters_seed)
-        return out, done
+    def _feasible(self, rows: np.ndarray, q: np.ndarray, ok: np.ndarray, placements: np.ndarray) -> np.ndarray:
+        """Converged rows whose configuration is collision-free."""
+        good = ok.copy()
+        if self.collider is not None and ok.any():
+            sel = np.nonzero(ok)[0]
+            good[sel] = ~self.collider.collides_q(q[sel], placements[rows[sel]])
+        return good
 
     def chunk(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """One chunk of sorted grips: targets (C, 3, 4, 4) -> feasible (C, 3), joints (C, 3, n)."""
-        c = len(targets)
-        n = self.robot.nq
-        feas = np.zeros((c, 3), dtype=bool)
-        joints = np.full((c, 3, n), np.nan)
-        pre = self.prefilter(targets)
-        lane = max(1, self.opts.lane)
+        """One chunk of sorted grips: targets (C, 3, 4, 4) -> feasible (C, 3), joints (C, 3, n).
+
+        Pass 1 walks the lanes in lock-step: every (lane, kind) starts from its previous feasible solution, or from
+        the library seed nearest to the target; pass 2 retries the failures from `seeds` library seeds at once."""
+        o, robot = self.opts, self.robot
+        c, n = len(targets), robot.nq
+        flat = targets.transpose(1, 0, 2, 3).reshape(3 * c, 4, 4)  # row = kind * c + grip
+        place = np.tile(placements, (3, 1, 1))
+        pre = self.prefilter(flat)
+        q_out = np.full((3 * c, n), np.nan)
+        good = np.zeros(3 * c, dtype=bool)
+        lane = max(1, o.lane)
         nl = -(-c // lane)
         starts = np.arange(nl) * lane
-        prev = np.full((3, nl, n), np.nan)
+        prev = np.full((3 * nl, n), np.nan)
+        tried = np.zeros(3 * c, dtype=bool)
         for step in range(lane):
             idx = starts + step
             live = idx < c
-            lanes, idx = np.nonzero(live)[0], idx[live]
-            for kind in range(3):
-                ok_pre = pre[idx, kind]
-                rows, ls = idx[ok_pre], lanes[ok_pre]
-                if len(rows) == 0:
-                    continue
-                warm = prev[kind, ls]
-                if kind > 0:
-                    better = feas[rows, kind - 1]
-                    warm = np.where(better[:, None], joints[rows, kind - 1], warm)
-                q, ok = self.solve(targets[rows, kind], warm, placements[rows])
-                feas[rows, kind] = ok
-                joints[rows[ok], kind] = q[ok]
-                prev[kind, ls[ok]] = q[ok]
+            lanes = np.concatenate([np.nonzero(live)[0] + k * nl for k in range(3)])
+            rows = np.concatenate([idx[live] + k * c for k in range(3)])
+            keep = pre[rows]
+            rows, lanes = rows[keep], lanes[keep]
+            if len(rows) == 0:
+                continue
+            q0 = prev[lanes].copy()
+            cold = np.isnan(q0).any(axis=1)
+            if cold.any():
+                q0[cold] = self.library.q[self.library.nearest(flat[rows[cold]], 1)[:, 0]]
+            q, ok = solve_ik(robot, flat[rows], q0, o.iters_warm, o.tol_pos, o.tol_rot)
+            ok = self._feasible(rows, q, ok, place)
+            tried[rows] = True
+            q_out[rows[ok]] = q[ok]
+            good[rows[ok]] = True
+            prev[lanes[ok]] = q[ok]
+        pool = np.nonzero(pre & ~good)[0]
+        if len(pool) and o.seeds > 0:
+            near = self.library.nearest(flat[pool], o.seeds)
+            k = near.shape[1]
+            rows = np.repeat(pool, k)
+            q, ok = solve_ik(robot, flat[rows], self.library.q[near.ravel()], o.iters_seed, o.tol_pos, o.tol_rot)
+            ok = self._feasible(rows, q, ok, place)
+            okm = ok.reshape(len(pool), k)
+            has = okm.any(axis=1)
+            first = okm.argmax(axis=1)
+            pick = np.arange(len(pool)) * k + first
+            q_out[pool[has]] = q[pick[has]]
+            good[pool[has]] = True
+        feas = good.reshape(3, c).T.copy()
+        joints = q_out.reshape(3, c, n).transpose(1, 0, 2).copy()
         return feas, joints
 
 

@@ -71,9 +71,7 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     normals = np.asarray(mesh.face_normals)
     areas = np.asarray(mesh.area_faces)
     n_tri = len(normals)
-    # neighbour table (T, 3) over shared edges, -1 padded; non-manifold edges keep every pair
-    adj = np.asarray(mesh.face_adjacency)
-    nbr_ptr, nbr_idx = _csr_adjacency(adj, n_tri)
+    nbr = _neighbour_table(np.asarray(mesh.face_adjacency), n_tri)
     order = np.lexsort((np.arange(n_tri), -np.round(areas, 12)))
     cos_tau, cos_merge = np.cos(tau), np.cos(merge)
     assigned = np.zeros(n_tri, dtype=bool)
@@ -81,7 +79,11 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     covered_cos = np.full(n_tri, -2.0)
     facet_tris: list[np.ndarray] = []
     seeds: list[int] = []
-    visited = np.zeros(n_tri, dtype=bool)
+    visited = np.zeros(n_tri + 1, dtype=bool)
+    visited[n_tri] = True
+    stamp = np.zeros(n_tri + 1, dtype=np.int64)
+    normals = np.vstack([normals, np.zeros(3)])
+    assigned = np.append(assigned, True)
     for seed in order:
         if method == "conventional":
             if assigned[seed]:
@@ -93,15 +95,19 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
         visited[seed] = True
         frontier = np.array([seed])
         while len(frontier):
-            cand = _neighbours(nbr_ptr, nbr_idx, frontier)
-            cand = cand[~visited[cand]]
+            cand = nbr[frontier].ravel()
+            cand = cand[~visited[cand]]  # the padding index n_tri is always "visited"
             if method == "conventional":
                 cand = cand[~assigned[cand]]
-            cand = np.unique(cand[normals[cand] @ ns >= cos_tau])
+            cand = cand[normals[cand] @ ns >= cos_tau]
+            # drop repeats without sorting: keep the last occurrence of each triangle
+            order = np.arange(len(cand))
+            stamp[cand] = order
+            cand = cand[stamp[cand] == order]
             visited[cand] = True
             region.append(cand)
             frontier = cand
-        tris = np.sort(np.concatenate(region))
+        tris = np.unique(np.concatenate(region))
         visited[tris] = False
         if method == "conventional":
             assigned[tris] = True
@@ -112,19 +118,17 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     return _build(mesh, method, tau, facet_tris, np.array(seeds, dtype=np.int64))
 
 
-def _csr_adjacency(adj: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+def _neighbour_table(adj: np.ndarray, n: int) -> np.ndarray:
+    """(n, k) neighbours across shared edges, padded with the index n (k = 3 on a manifold mesh)."""
     src = np.concatenate([adj[:, 0], adj[:, 1]])
     dst = np.concatenate([adj[:, 1], adj[:, 0]])
     order = np.argsort(src, kind="stable")
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    np.add.at(ptr, src + 1, 1)
-    return np.cumsum(ptr), dst[order]
-
-
-def _neighbours(ptr: np.ndarray, idx: np.ndarray, nodes: np.ndarray) -> np.ndarray:
-    counts = ptr[nodes + 1] - ptr[nodes]
-    starts = np.repeat(ptr[nodes] - np.cumsum(counts) + counts, counts)
-    return idx[starts + np.arange(counts.sum())]
+    src, dst = src[order], dst[order]
+    counts = np.bincount(src, minlength=n)
+    table = np.full((n, max(int(counts.max(initial=0)), 1)), n, dtype=np.int64)
+    slot = np.arange(len(src)) - np.repeat(np.cumsum(counts) - counts, counts)
+    table[src, slot] = dst
+    return table
 
 
 def _build(mesh: trimesh.Trimesh, method: str, tau: float, facet_tris: list[np.ndarray], seeds: np.ndarray) -> Facets:

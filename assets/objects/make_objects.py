@@ -17,7 +17,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from manifold3d import CrossSection, JoinType, Manifold
+from manifold3d import CrossSection, JoinType, Manifold, OpType
 
 OUT = Path(__file__).resolve().parent
 MM = 0.001
@@ -68,7 +68,7 @@ def cyl_y(length: float, r: float, seg: int) -> Manifold:
 
 def union(parts: list[Manifold]) -> Manifold:
     """Boolean union of several solids."""
-    return Manifold.batch_boolean(parts, __import__("manifold3d").OpType.Add)
+    return Manifold.batch_boolean(parts, OpType.Add)
 
 
 def centred(m: Manifold) -> Manifold:
@@ -126,7 +126,7 @@ def planebody() -> Manifold:
     bulkheads = [Manifold.cube((3.0, 90.0, 45.0), center=True).translate((x, 0.0, 22.5)) for x in (-10.0, 35.0)]
     body = body + (union(bulkheads) ^ outer).trim_by_plane(tuple(n), float(n @ np.array([-20.0, 0.0, 45.0])))
     bosses, bores = [], []
-    for x, y in ((-55.0, 0.0), (10.0, -22.0), (10.0, 22.0), (60.0, 0.0)):
+    for x, y in ((-50.0, 0.0), (10.0, -22.0), (10.0, 22.0), (84.0, 0.0)):
         bosses.append(Manifold.cylinder(14.0, 5.0, 5.0, 32).translate((x, y, 0.0)))
         bores.append(Manifold.cylinder(20.0, 2.0, 2.0, 24).translate((x, y, 1.5)))
     cockpit = Manifold.extrude(rounded_rect(40.0, 44.0, 10.0, 32), 8.0).translate((58.0, 0.0, -1.0))
@@ -166,7 +166,7 @@ def bracket() -> Manifold:
 
 def fin(chord_root: float, chord_tip: float, thickness: float, span: float, sweep: float,
         n_pts: int, n_div: int, symmetric: bool = False) -> Manifold:
-    """A tapered, swept airfoil fin along +z (or +/-z about 0 when `symmetric`), elliptic-ish tip."""
+    """A swept airfoil fin along +z (or +/-z about 0 when `symmetric`), its chord tapering faster toward the tip."""
     length = 2 * span if symmetric else span
     m = Manifold.extrude(airfoil(chord_root, thickness, n_pts), length, n_div)
     if symmetric:
@@ -194,8 +194,8 @@ def tail() -> Manifold:
 
 
 def drill() -> Manifold:
-    """ED analogue: a cordless drill, 235 mm long: housing, chuck, fluted bit, pistol grip, battery, trigger guard."""
-    seg = 96
+    """ED analogue: a cordless drill, 227 mm long: housing, chuck, fluted bit, pistol grip, battery, trigger guard."""
+    seg = 192
     # motor housing revolved about x: domed back, cylindrical middle, tapering nose (profile in r, axial)
     a = np.linspace(0.0, np.pi / 2, 24)
     back = np.column_stack([30.0 * np.sin(a), -60.0 - 25.0 * np.cos(a)])  # r, x
@@ -205,22 +205,21 @@ def drill() -> Manifold:
     vents = union([Manifold.cube((3.0, 80.0, 16.0), center=True).translate((-70.0 + 7.0 * i, 0.0, 8.0)) for i in range(5)])
     housing = housing - (vents - Manifold.cube((60.0, 44.0, 40.0), center=True).translate((-60.0, 0.0, 0.0)))
     # knurled chuck: sinusoidal ridges, tapering toward the front, then a nose cone
-    th = np.linspace(0.0, 2 * np.pi, 192, endpoint=False)
+    th = np.linspace(0.0, 2 * np.pi, 288, endpoint=False)
     r = 17.0 + 0.8 * np.cos(24 * th)
     chuck2d = CrossSection([np.column_stack([r * np.cos(th), r * np.sin(th)])])
-    chuck = Manifold.extrude(chuck2d, 30.0, 0, 0.0, (0.85, 0.85)).rotate((0.0, 90.0, 0.0)).translate((48.0, 0.0, 0.0))
+    chuck = Manifold.extrude(chuck2d, 30.0, 9, 15.0, (0.85, 0.85)).rotate((0.0, 90.0, 0.0)).translate((48.0, 0.0, 0.0))
     chuck_nose = Manifold.cylinder(8.0, 13.0, 7.0, 64).rotate((0.0, 90.0, 0.0)).translate((78.0, 0.0, 0.0))
     # twist drill bit: two flutes, 2 turns, pointed tip
     bit2d = CrossSection.circle(4.0, 48) - CrossSection.circle(2.2, 32).translate((3.6, 0.0)) \
         - CrossSection.circle(2.2, 32).translate((-3.6, 0.0))
-    bit = Manifold.extrude(bit2d, 60.0, 59, 720.0)
-    tip = Manifold.cylinder(60.0, 4.0, 4.0, 48) ^ (Manifold.cylinder(54.0, 4.0, 4.0, 48)
-                                                   + Manifold.cylinder(4.0, 4.0, 0.4, 48).translate((0.0, 0.0, 54.0)))
+    bit = Manifold.extrude(bit2d, 60.0, 79, 720.0)
+    tip = Manifold.cylinder(53.0, 6.0, 6.0, 48) + Manifold.cylinder(6.0, 6.0, 0.3, 48).translate((0.0, 0.0, 53.0))
     bit = (bit ^ tip).rotate((0.0, 90.0, 0.0)).translate((82.0, 0.0, 0.0))
     shank = cyl_x(8.0, 4.0, 48, 78.0)
     # pistol grip: elliptic section 44 x 32 mm, raked back, slightly waisted
     grip_h = 115.0
-    grip = Manifold.extrude(ellipse(22.0, 16.0, 64), grip_h, 23)
+    grip = Manifold.extrude(ellipse(22.0, 16.0, 96), grip_h, 35)
 
     def rake(v: np.ndarray) -> np.ndarray:
         t = v[:, 2] / grip_h
@@ -236,8 +235,8 @@ def drill() -> Manifold:
     battery = battery + Manifold.extrude(rounded_rect(70.0, 48.0, 8.0, 32), 6.0).translate((-44.0, 0.0, -96.0))
     # trigger guard: a bent rod from the housing's underside to the front of the grip
     guard_pts = [(30.0, 0.0, -18.0), (30.0, 0.0, -45.0), (18.0, 0.0, -68.0), (0.0, 0.0, -75.0), (-12.0, 0.0, -72.0)]
-    guard = union([capsule(p, q, 4.5, 32) for p, q in zip(guard_pts[:-1], guard_pts[1:])])
-    trigger = capsule((6.0, 0.0, -32.0), (4.0, 0.0, -48.0), 5.0, 32)
+    guard = union([capsule(p, q, 4.5, 48) for p, q in zip(guard_pts[:-1], guard_pts[1:])])
+    trigger = capsule((6.0, 0.0, -32.0), (4.0, 0.0, -48.0), 5.0, 48)
     switch = cyl_y(40.0, 4.0, 32).translate((-8.0, 0.0, -14.0))
     return union([housing, chuck, chuck_nose, shank, bit, grip, battery, guard, trigger, switch])
 
