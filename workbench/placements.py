@@ -41,7 +41,7 @@ class PlacementParams:
 class Placements:
     """Stable placements: object poses in the table frame (P, 4, 4) with the centre of mass above the origin and
     the lowest point on z = 0; stability values; support polygons (in the table frame, z = 0); the outward normal
-    of the supporting hull face in the object frame. `rejected_*` keep the unstable candidates for inspection."""
+    of the supporting hull face in the object frame. `rejected_stability` keeps every unstable candidate's value and `rejected_poses` the first 64 poses."""
 
     poses: np.ndarray
     stability: np.ndarray
@@ -75,36 +75,56 @@ def rest_pose(normal: np.ndarray, com: np.ndarray, vertices: np.ndarray) -> np.n
 
 
 def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParams()) -> Placements:
-    """Stable placements of `obj` on its convex-hull faces (Section IV, freetabletopplacement)."""
+    """Stable placements of `obj` on its convex-hull faces (Section IV, freetabletopplacement).
+
+    Every candidate is first scored against its own (merged) face polygon, all at once; the candidates that can
+    reach the threshold are then settled exactly: the object rests with that face's area-weighted normal down, the
+    support polygon is the hull of all vertices touching the table, and stability = margin / height.
+    """
     hull = obj.mesh.convex_hull
     verts = np.asarray(hull.vertices)
-    tol = 1e-6 + 1e-4 * float(obj.mesh.scale)
-    # merged coplanar faces: trimesh's facets plus lone triangles
+    faces = np.asarray(hull.faces)
+    in_facet = np.zeros(len(faces), dtype=bool)
     groups = [np.asarray(f) for f in hull.facets]
-    in_facet = np.zeros(len(hull.faces), dtype=bool)
     for f in groups:
         in_facet[f] = True
-    groups += [np.array([i]) for i in np.flatnonzero(~in_facet)]
-    poses, stab, supports, normals = [], [], [], []
-    for faces in groups:
-        a = hull.area_faces[faces]
-        n = (hull.face_normals[faces] * a[:, None]).sum(0)
-        n /= np.linalg.norm(n)
-        pose = rest_pose(n, obj.com, verts)
+    lone = np.flatnonzero(~in_facet)
+    groups += [np.array([f]) for f in lone]
+    group_of = np.concatenate(groups)
+    owner_face = np.repeat(np.arange(len(groups)), [len(g) for g in groups])
+    normals = np.zeros((len(groups), 3))
+    np.add.at(normals, owner_face, hull.face_normals[group_of] * hull.area_faces[group_of, None])
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    # quick score of every candidate: the centre of mass's projection against the face's own boundary edges
+    edges = [np.asarray(b) for b in hull.facets_boundary] + [faces[f][[[0, 1], [1, 2], [2, 0]]] for f in lone]
+    owner = np.repeat(np.arange(len(edges)), [len(e) for e in edges])
+    e = np.vstack(edges)
+    a, b = verts[e[:, 0]], verts[e[:, 1]]
+    inward = np.cross(normals[owner], b - a)
+    inward /= np.linalg.norm(inward, axis=1, keepdims=True).clip(1e-300)
+    centre = np.array([verts[x].reshape(-1, 3).mean(axis=0) for x in edges])
+    inward *= np.sign(np.einsum("ij,ij->i", centre[owner] - a, inward))[:, None]
+    margin = np.minimum.reduceat(np.einsum("ij,ij->i", obj.com - a, inward),
+                                 np.concatenate([[0], np.cumsum([len(x) for x in edges])[:-1]]))
+    height = np.einsum("ij,ij->i", centre - obj.com, normals)
+    quick = np.where(height > 0, margin / np.maximum(height, 1e-300), 0.0)
+    threshold = max(params.min_stability, 1e-9)
+    stability = quick.copy()
+    tol = 1e-6 + 1e-4 * float(obj.mesh.scale)
+    poses, supports = {}, {}
+    for i in np.flatnonzero(quick >= 0.8 * threshold):
+        pose = rest_pose(normals[i], obj.com, verts)
         placed = verts @ pose[:3, :3].T + pose[:3, 3]
         contact = placed[placed[:, 2] <= tol][:, :2]
-        height = float((pose[:3, :3] @ obj.com + pose[:3, 3])[2])
-        margin = _inside_margin(contact)
-        poses.append(pose)
-        stab.append(margin / height if height > 0 else 0.0)
-        supports.append(_polygon(contact))
-        normals.append(n)
-    poses, stab = np.array(poses), np.array(stab)
-    ok = stab >= max(params.min_stability, 1e-9)
-    order = np.argsort(-stab[ok], kind="stable")
-    idx = np.flatnonzero(ok)[order]
-    return Placements(poses=poses[idx], stability=stab[idx], supports=[supports[i] for i in idx],
-                      normals=np.array(normals)[idx].reshape(-1, 3), rejected_poses=poses[~ok], rejected_stability=stab[~ok])
+        poses[i], supports[i] = pose, _polygon(contact)
+        stability[i] = _inside_margin(contact) / float((pose[:3, :3] @ obj.com + pose[:3, 3])[2])
+    ok = (stability >= threshold) & np.isin(np.arange(len(groups)), list(poses))
+    idx = np.flatnonzero(ok)[np.argsort(-stability[ok], kind="stable")]
+    rejected = np.flatnonzero(~ok)
+    rejected_poses = np.array([rest_pose(normals[i], obj.com, verts) for i in rejected[:64]]).reshape(-1, 4, 4)
+    return Placements(poses=np.array([poses[i] for i in idx]).reshape(-1, 4, 4), stability=stability[idx],
+                      supports=[supports[i] for i in idx], normals=normals[idx].reshape(-1, 3),
+                      rejected_poses=rejected_poses, rejected_stability=stability[rejected])
 
 
 def _polygon(points2d: np.ndarray) -> np.ndarray:
@@ -121,15 +141,14 @@ def _polygon(points2d: np.ndarray) -> np.ndarray:
 
 def _inside_margin(points2d: np.ndarray) -> float:
     """Distance from the origin (the centre of mass's projection) to the boundary of the contacts' convex hull;
-    negative or zero when the origin is outside or the support has no area."""
+    negative when the origin is outside, zero when the support has no area."""
     if len(points2d) < 3:
         return 0.0
     try:
         h = ConvexHull(points2d)
-    except Exception:
+    except Exception:  # collinear contacts
         return 0.0
-    # equations: n.x + d <= 0 inside, n unit; margin = min(-d) over facets
-    return float(np.min(-h.equations[:, 2]))
+    return float(np.min(-h.equations[:, 2]))  # equations: unit n.x + d <= 0 inside
 
 
 def grips_above_table(placement_poses: np.ndarray, grasp_poses: np.ndarray, gripper: Gripper,
