@@ -162,102 +162,145 @@ class SpanTable:
 # Exact test: origin strictly inside the convex hull of the primitive wrenches ([4], as a linear program)
 
 
-def strictly_inside(w: np.ndarray, max_iter: int = 60, chunk: int = 2048, threads: int = 2) -> np.ndarray:
+def strictly_inside(w: np.ndarray, max_iter: int = 60, threads: int = 2) -> np.ndarray:
     """(B,) bool: the origin is strictly inside the convex hull of each batch item's points w (B, n, d).
 
-    Equivalent: rank(W) = d and W lambda = 0 for some lambda >= 1. Items are first screened by an exact
-    separation certificate (all w.y >= 0 for y the mean direction in the metric of W^T W); the rest go through
-    a phase-1 simplex run on a chunk of items at once, chunks spread over `threads` threads (numpy releases
+    Equivalent: rank(W) = d and W lambda = 0 for some lambda >= 1. Items are first screened by two exact
+    certificates computed for all at once (a separating direction y with all w.y >= 0, and a strictly positive
+    null vector), the rest go through the phase-1 simplex, split over `threads` threads (numpy releases
     the GIL in its array operations).
     """
     w = np.asarray(w, dtype=np.float64)
     if w.ndim != 3:
         raise ForceClosureError(f"wrench batch must have shape (B, n, d), got {w.shape}")
     out = np.zeros(len(w), dtype=bool)
-    starts = range(0, len(w), chunk)
-
-    def work(s: int) -> None:
-        out[s:s + chunk] = _strictly_inside(w[s:s + chunk], max_iter)
-
-    if threads > 1 and len(w) > chunk:
+    lp: list[np.ndarray] = []
+    step = 16384
+    for s in range(0, len(w), step):
+        decided, inside = _screen(w[s:s + step])
+        out[s:s + step] = inside
+        lp.append(s + np.flatnonzero(~decided))
+    rest = np.concatenate(lp) if lp else np.zeros(0, dtype=np.int64)
+    if len(rest) == 0:
+        return out
+    parts = np.array_split(rest, threads) if threads > 1 and len(rest) > 4096 else [rest]
+    if len(parts) > 1:
         from concurrent.futures import ThreadPoolExecutor
 
-        with ThreadPoolExecutor(threads) as pool:
-            list(pool.map(work, starts))
+        with ThreadPoolExecutor(len(parts)) as pool:
+            results = list(pool.map(lambda p: _phase1(w[p], max_iter), parts))
     else:
-        for s in starts:
-            work(s)
+        results = [_phase1(w[rest], max_iter)]
+    for p, r in zip(parts, results):
+        out[p] = r
     return out
 
 
-def _strictly_inside(w: np.ndarray, max_iter: int) -> np.ndarray:
+def _screen(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Items decided without the simplex: (decided, inside) from rank and the two certificates."""
     bsz, n, d = w.shape
-    result = np.zeros(bsz, dtype=bool)
+    decided = np.ones(bsz, dtype=bool)
+    inside = np.zeros(bsz, dtype=bool)
     if bsz == 0:
-        return result
-    gram = np.einsum("bni,bnj->bij", w, w)
-    ev = np.linalg.eigvalsh(gram)
-    undecided = ev[:, 0] > 1e-10 * np.maximum(ev[:, -1], 1e-300)        # rank d, else not force closure
-    idx = np.flatnonzero(undecided)
+        return decided, inside
+    wt = w.transpose(0, 2, 1)
+    gram = wt @ w                                                          # (B, d, d)
+    # rank d, else not force closure; the determinant settles clear cases, eigenvalues the rest
+    scale = np.trace(gram, axis1=1, axis2=2) / d
+    full = np.linalg.det(gram) > 1e-6 * scale ** d
+    unsure = np.flatnonzero(~full)
+    if len(unsure):
+        ev = np.linalg.eigvalsh(gram[unsure])
+        full[unsure] = ev[:, 0] > 1e-10 * np.maximum(ev[:, -1], 1e-300)
+    idx = np.flatnonzero(full)
     if len(idx) == 0:
-        return result
-    # separation certificate: every point on the positive side of y (a closed half-space holds them all)
-    y = np.linalg.solve(gram[idx], w[idx].sum(axis=1)[..., None])[..., 0]
-    side = np.einsum("bni,bi->bn", w[idx], y)
-    separated = side.min(axis=1) > 1e-12 * np.linalg.norm(y, axis=1)
-    idx = idx[~separated]
-    if len(idx) == 0:
-        return result
-    result[idx] = _phase1(w[idx], max_iter)
-    return result
+        return decided, inside
+    # y = (W^T W)^-1 W^T 1: if all w.y > 0 a closed half-space holds every point (outside); else
+    # lambda = 1 - W y is the projection of 1 onto the null space of W^T, and lambda > 0 proves inside
+    y = np.linalg.solve(gram[idx], wt[idx].sum(axis=2)[..., None])          # (B, d, 1)
+    side = (w[idx] @ y)[..., 0]
+    separated = side.min(axis=1) > 1e-12 * np.linalg.norm(y[..., 0], axis=1)
+    positive = (1.0 - side).min(axis=1) > 1e-9
+    inside[idx[positive]] = True
+    decided[idx[~separated & ~positive]] = False
+    return decided, inside
 
 
-def _phase1(w: np.ndarray, max_iter: int) -> np.ndarray:
-    """Feasibility of A mu = -A 1, mu >= 0 (A = w^T) by the phase-1 simplex with Dantzig's rule, batched."""
+def _tableau(w: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Phase-1 tableaux of A mu = -A 1 (A = w^T, rows signed so the right side is >= 0), and tolerances.
+
+    No artificial columns are kept (an artificial that leaves the basis never needs to re-enter): rows
+    0..d-1 the constraints, row d the reduced costs of the sum of artificials, last column the values.
+    """
     bsz, n, d = w.shape
     a = w.transpose(0, 2, 1)
     b = -a.sum(axis=2)
     sign = np.where(b < 0, -1.0, 1.0)
-    t = np.zeros((bsz, d + 1, n + d + 1))
+    t = np.empty((bsz, d + 1, n + 1))
     t[:, :d, :n] = a * sign[:, :, None]
-    t[:, :d, n:n + d] = np.eye(d)
-    t[:, :d, -1] = b * sign
-    t[:, d, :n] = -t[:, :d, :n].sum(axis=1)      # reduced costs of the artificial objective
-    t[:, d, -1] = -t[:, :d, -1].sum(axis=1)      # minus the sum of artificials
-    scale = 1.0 + np.abs(b).sum(axis=1)
-    feasible = np.zeros(bsz, dtype=bool)
-    pending = np.ones(bsz, dtype=bool)
-    active = np.arange(bsz)
-    for _ in range(max_iter):
-        cost = t[:, d, :-1]
+    t[:, :d, n] = b * sign
+    t[:, d, :] = -t[:, :d, :].sum(axis=1)
+    size = 1.0 + np.abs(b).sum(axis=1)
+    return t, 1e-11 * size, 1e-9 * size
+
+
+def _phase1(w: np.ndarray, max_iter: int, pool: int = 1024) -> np.ndarray:
+    """Feasibility of A mu = -A 1, mu >= 0 (A = w^T) by the phase-1 simplex with Dantzig's rule.
+
+    A pool of tableaux pivots together; a slot whose item has settled takes the next item, so the cost is
+    the sum of the items' pivot counts rather than a batch's maximum.
+    """
+    total, n, d = w.shape
+    feasible = np.zeros(total, dtype=bool)
+    fallback: list[int] = []
+    size = min(pool, total)
+    t, tol_cost, tol_feas = _tableau(w[:size])
+    item = np.arange(size)
+    steps = np.zeros(size, dtype=np.int64)
+    queued = size
+    while len(item):
+        rows = np.arange(len(item))
+        cost = t[:, d, :n]
         e = cost.argmin(axis=1)
-        rows = np.arange(len(t))
-        optimal = cost[rows, e] > -1e-11 * scale[active]
-        if optimal.any():
-            done = active[optimal]
-            feasible[done] = -t[optimal, d, -1] <= 1e-9 * scale[done]
-            pending[done] = False
-            if optimal.all():
-                return feasible
-            if optimal.mean() > 0.25:        # compact only when worth the copy
-                keep = ~optimal
-                t, e, active = t[keep], e[keep], active[keep]
-                rows = np.arange(len(t))
-                optimal = np.zeros(len(t), dtype=bool)
-        colfull = np.take_along_axis(t, e[:, None, None], axis=2)[:, :, 0]   # (B, d+1)
+        settled = cost[rows, e] > -tol_cost
+        stuck = ~settled & (steps >= max_iter)
+        if settled.any() or stuck.any():
+            feasible[item[settled]] = -t[settled, d, n] <= tol_feas[settled]
+            fallback.extend(item[stuck].tolist())
+            free = np.flatnonzero(settled | stuck)
+            take = min(len(free), total - queued)
+            if take:
+                slots = free[:take]
+                t[slots], tol_cost[slots], tol_feas[slots] = _tableau(w[queued:queued + take])
+                item[slots] = np.arange(queued, queued + take)
+                steps[slots] = 0
+                e[slots] = t[slots, d, :n].argmin(axis=1)
+                queued += take
+            gone = free[take:]
+            if len(gone):
+                keep = np.ones(len(item), dtype=bool)
+                keep[gone] = False
+                t, tol_cost, tol_feas, item, steps, e = t[keep], tol_cost[keep], tol_feas[keep], item[keep], steps[keep], e[keep]
+                rows = np.arange(len(item))
+                if not len(item):
+                    break
+        colfull = t[rows, :, e]                                       # (B, d+1)
         col = colfull[:, :d]
         positive = col > 1e-12
-        ratio = np.where(positive, t[:, :d, -1] / np.where(positive, col, 1.0), np.inf)
+        ratio = np.where(positive, t[:, :d, n] / np.where(positive, col, 1.0), np.inf)
         leave = ratio.argmin(axis=1)
-        leave_ok = positive[rows, leave] & ~optimal          # settled items are left as they are
-        colfull[~leave_ok] = 0.0
-        piv = np.where(leave_ok, col[rows, leave], 1.0)
-        prow = np.take_along_axis(t, leave[:, None, None], axis=1)[:, 0, :] / piv[:, None]
+        ok = positive[rows, leave]
+        if not ok.all():                  # no positive entry: numerically degenerate, left to the fallback
+            steps[~ok] = max_iter
+            colfull[~ok] = 0.0
+        prow = t[rows, leave, :]
+        prow /= np.where(ok, col[rows, leave], 1.0)[:, None]
         t -= colfull[:, :, None] * prow[:, None, :]
-        t[rows[leave_ok], leave[leave_ok], :] = prow[leave_ok]
-    rest = np.flatnonzero(pending)
+        t[rows[ok], leave[ok], :] = prow[ok]
+        steps += 1
     # degenerate cycling or slow instances: solve them exactly one by one
-    feasible[rest] = [_lp_feasible(w[i]) for i in rest]
+    for i in fallback:
+        feasible[i] = _lp_feasible(w[i])
     return feasible
 
 

@@ -28,7 +28,7 @@ class GraspExplorer:
     """Tune segmentation, sampling, filters and rotations; see facets, samples, pairs and hands (Section III)."""
 
     def __init__(self, obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspParams(), vis=None,
-                 max_hands: int = 150):
+                 max_hands: int = 40):
         self.obj, self.gripper, self.max_hands = obj, gripper, max_hands
         self.vis = vis if vis is not None else viz.new_scene()
         self.plan: GraspPlan | None = None
@@ -44,7 +44,7 @@ class GraspExplorer:
         self.facet = W.IntSlider(value=0, min=0, max=0, description="facet")
         self.layers = {name: W.Checkbox(value=on, description=name, indent=False) for name, on in (
             ("facets", True), ("all samples", False), ("after neighbour filter", False), ("after distance filter", True),
-            ("contact pairs", True), ("collided hands", True), ("free hands", True))}
+            ("contact pairs", True), ("collided hands", False), ("free hands", True))}
         self.button = W.Button(description="plan grasps", button_style="primary")
         self.counts = W.HTML()
         self.button.on_click(lambda _: self.run())
@@ -101,6 +101,7 @@ class GraspExplorer:
             g = plan.grasps
             viz.show_grippers(vis, "grasps/hands/free", self.gripper, g.poses, g.jawwidth, viz.GREEN, 0.3, self.max_hands)
         self.draw_facet()
+        viz.frame_camera(vis, mesh.bounds.mean(axis=0), float(mesh.scale) + 0.1)
 
     def draw_facet(self) -> None:
         """One facet in orange with its samples: kept by the distance filter (green) or removed (white)."""
@@ -128,7 +129,7 @@ class PlacementExplorer:
     """Tune the stability threshold and the table grid; inspect placements, their grips and the roadmap (Section IV)."""
 
     def __init__(self, obj: ObjectModel, gripper: Gripper, grasp_poses: np.ndarray, grasp_widths: np.ndarray, vis=None,
-                 max_hands: int = 120):
+                 max_hands: int = 30):
         self.obj, self.gripper, self.max_hands = obj, gripper, max_hands
         self.grasp_poses, self.grasp_widths = grasp_poses, grasp_widths
         self.vis = vis if vis is not None else viz.new_scene()
@@ -190,6 +191,7 @@ class PlacementExplorer:
                 parts = [hull.copy().apply_transform(m @ pl.poses[p]) for m in moves.reshape(-1, 4, 4)]
                 viz.show_mesh(vis, f"placements/roadmap/{p}", trimesh.util.concatenate(parts), color=int(colors[p]),
                               opacity=1.0 if p == k else 0.15)
+        viz.frame_camera(vis, np.array([(grid.x_min + grid.x_max) / 2 - 0.1, 0.0, 0.0]), 0.3)
         counts["selected stability"] = f"{pl.stability[k]:.3f}"
         counts["selected grips kept / collided"] = f"{int(self.ok[k].sum())} / {int((~self.ok[k]).sum())}"
         self.info.value = counts_table(counts, "placements and the tabletop roadmap")

@@ -159,3 +159,48 @@ CORE_TABLES: tuple[str, ...] = (
 # below and joined into ALL_TABLES; every statement is idempotent (CREATE ... IF NOT EXISTS).
 
 ALL_TABLES: tuple[str, ...] = CORE_TABLES
+
+# Regrasp plans (Section V): a plan is one answer of `workbench plan` (start and goal as placement, x, y, yaw;
+# its rank among the alternatives; regrasp and transfer counts; time to connect and search), its steps in order
+# (kind pick / transfer / regrasp / place, the grasp, the object pose and the TCP pose in the world, the roadmap
+# rows when the step is on the grid, joint vectors for approach (handx), grasp and retract (handx + worldz)).
+PLAN_TABLES: tuple[str, ...] = (
+    """CREATE TABLE IF NOT EXISTS plan (
+        idplan BIGINT PRIMARY KEY,
+        idobject BIGINT NOT NULL REFERENCES object(idobject),
+        idrobot BIGINT NOT NULL REFERENCES robot(idrobot),
+        idscene BIGINT NOT NULL REFERENCES scene(idscene),
+        idikret BIGINT NOT NULL REFERENCES ikret(idikret),
+        idtabletop BIGINT NOT NULL REFERENCES paramset(idparamset),
+        start_placement BIGINT NOT NULL REFERENCES freetabletopplacement(idfreetabletopplacement),
+        start_xyyaw DOUBLE[3] NOT NULL,
+        goal_placement BIGINT NOT NULL REFERENCES freetabletopplacement(idfreetabletopplacement),
+        goal_xyyaw DOUBLE[3] NOT NULL,
+        rank INTEGER NOT NULL,
+        regrasps INTEGER NOT NULL,
+        transfers INTEGER NOT NULL,
+        t_connect DOUBLE,
+        t_search DOUBLE,
+        created TIMESTAMP DEFAULT current_timestamp
+    )""",
+    """CREATE TABLE IF NOT EXISTS planstep (
+        idplanstep BIGINT PRIMARY KEY,
+        idplan BIGINT NOT NULL REFERENCES plan(idplan),
+        seq INTEGER NOT NULL,
+        kind VARCHAR NOT NULL,
+        idfreeairgrip BIGINT NOT NULL REFERENCES freeairgrip(idfreeairgrip),
+        idfreetabletopplacement BIGINT NOT NULL REFERENCES freetabletopplacement(idfreetabletopplacement),
+        idtabletopgrips BIGINT REFERENCES tabletopgrips(idtabletopgrips),
+        position DOUBLE[3] NOT NULL,
+        yaw DOUBLE NOT NULL,
+        object DOUBLE[16] NOT NULL,
+        tcp DOUBLE[16] NOT NULL,
+        jawwidth DOUBLE NOT NULL,
+        jnt_approach DOUBLE[] NOT NULL,
+        jnt_grasp DOUBLE[] NOT NULL,
+        jnt_retract DOUBLE[] NOT NULL,
+        UNIQUE (idplan, seq)
+    )""",
+)
+
+ALL_TABLES = ALL_TABLES + PLAN_TABLES

@@ -142,6 +142,14 @@ def show_frame(vis: meshcat.Visualizer, path: str, pose: np.ndarray, length: flo
     vis[path].set_transform(np.asarray(pose, dtype=np.float64))
 
 
+def frame_camera(vis: meshcat.Visualizer, center: np.ndarray, radius: float) -> None:
+    """Aim the default camera at `center` from about 3 radii away (meshcat's camera frame is y-up)."""
+    c = np.asarray(center, dtype=np.float64)
+    vis["/Cameras/default"].set_transform(tf.translation_matrix(c))
+    d = 3.0 * max(float(radius), 0.01)
+    vis["/Cameras/default/rotated/<object>"].set_property("position", [0.8 * d, 0.6 * d, 0.8 * d])
+
+
 def static_html(vis: meshcat.Visualizer, out: str | Path) -> Path:
     """Write the scene (with any animation) as one HTML file that opens without a server."""
     out = Path(out)

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..gripper import Gripper
 from ..objects import ObjectModel
-from . import GREEN, GREY, new_scene, show_grippers, show_mesh, show_points, static_html
+from . import GREEN, GREY, frame_camera, new_scene, show_grippers, show_mesh, show_points, static_html
 
 
 def grasp_scene(obj: ObjectModel, gripper: Gripper, poses: np.ndarray, widths: np.ndarray, out: str | Path,
@@ -18,4 +18,5 @@ def grasp_scene(obj: ObjectModel, gripper: Gripper, poses: np.ndarray, widths: n
     show_mesh(vis, "object", obj.mesh, color=GREY)
     show_points(vis, "com", obj.com[None], color=0xFF0000, size=0.006)
     show_grippers(vis, "grasps", gripper, poses, widths, colors=GREEN, opacity=0.25, limit=limit)
+    frame_camera(vis, obj.mesh.bounds.mean(axis=0), float(obj.mesh.scale) + 0.1)
     return static_html(vis, out)

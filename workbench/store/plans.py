@@ -1,0 +1,172 @@
+"""SQL of the regrasp roadmap's inputs and of the `plan` and `planstep` tables (Wan & Harada, Section V).
+
+Reads: the tabletop grips of a tabletop parameter set joined with their `ik` rows for one robot, scene and
+retraction set (the roadmap's nodes and joint vectors), the IK runs available for an object and robot, and the
+rows the validator needs (robot, scene). Writes: plans and their steps, each plan in one transaction.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from ..errors import StoreError
+from . import Store
+
+
+def list_column(table: pa.Table, name: str, width: int) -> np.ndarray:
+    """A DOUBLE[] column as an (N, width) float array, NaN rows for NULL (no per-row Python)."""
+    col = table.column(name).combine_chunks()
+    n = len(col)
+    out = np.full((n, width), np.nan)
+    if n == 0 or width == 0:
+        return out
+    if pa.types.is_fixed_size_list(col.type) or pa.types.is_list(col.type) or pa.types.is_large_list(col.type):
+        valid = ~np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)
+        if valid.any():
+            sub = col.filter(pa.array(valid))
+            flat = np.asarray(sub.flatten().to_numpy(zero_copy_only=False), dtype=np.float64)
+            if len(flat) != len(sub) * width:
+                raise StoreError(f"joint vectors in column {name} do not all have {width} entries; rebuild the ik stage")
+            out[valid] = flat.reshape(-1, width)
+    return out
+
+
+def robot_row(store: Store, name: str) -> dict[str, Any]:
+    """The `robot` row called `name` (urdf, frames, mount, base, joint names), or a StoreError naming the robots."""
+    rows = store.run("SELECT idrobot, name, urdf, tcp_frame, tip_frame, mount, base, joint_names, digest FROM robot WHERE name = ?", [name])
+    if not rows:
+        names = [r[0] for r in store.run("SELECT name FROM robot ORDER BY name")]
+        raise StoreError(f"store {store.path} has no robot {name!r} (it has: {', '.join(names) or 'none'}); "
+                         f"run `workbench ik --robot {name}` or `workbench build --robot {name}` first")
+    r = rows[0]
+    return {"idrobot": int(r[0]), "name": r[1], "urdf": r[2], "tcp_frame": r[3], "tip_frame": r[4],
+            "mount": np.asarray(r[5], dtype=np.float64).reshape(4, 4), "base": np.asarray(r[6], dtype=np.float64).reshape(4, 4),
+            "joint_names": list(r[7]), "digest": r[8]}
+
+
+def scene_params(store: Store, idscene: int) -> dict[str, Any]:
+    """The stored parameters (JSON) of a scene."""
+    row = store.one("SELECT params FROM scene WHERE idscene = ?", [idscene])
+    if row is None:
+        raise StoreError(f"store {store.path} has no scene {idscene}; rebuild the ik stage")
+    return json.loads(row[0])
+
+
+def ikret_row(store: Store, idikret: int) -> tuple[float, float]:
+    """(handx, worldz) of a retraction set, metres."""
+    row = store.one("SELECT handx, worldz FROM ikret WHERE idikret = ?", [idikret])
+    if row is None:
+        raise StoreError(f"store {store.path} has no ikret {idikret}; rebuild the ik stage")
+    return float(row[0]), float(row[1])
+
+
+def ik_runs(store: Store, idtabletop: int, idrobot: int) -> list[tuple[int, int, int, int]]:
+    """(idscene, idikret, rows, feasible rows) of the IK runs stored for a tabletop parameter set and a robot, the
+    run with the most rows (then the newest) first."""
+    rows = store.run(
+        "SELECT k.idscene, k.idikret, count(*) AS n, count(*) FILTER (WHERE k.feasibility AND k.feasibility_handx "
+        "AND k.feasibility_handxworldz) AS f, max(k.idik) AS last "
+        "FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements p USING (idtabletopplacements) "
+        "WHERE p.idparamset = ? AND k.idrobot = ? GROUP BY k.idscene, k.idikret ORDER BY n DESC, last DESC", [idtabletop, idrobot])
+    return [(int(a), int(b), int(c), int(d)) for a, b, c, d, _ in rows]
+
+
+def count_grips(store: Store, idtabletop: int) -> int:
+    row = store.one("SELECT count(*) FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) "
+                    "WHERE p.idparamset = ?", [idtabletop])
+    return int(row[0])
+
+
+def ik_fingerprint(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int) -> tuple[int, int]:
+    """(rows, max idik) of one IK run: changes whenever its rows change (cache key of the roadmap)."""
+    row = store.one(
+        "SELECT count(*), coalesce(max(k.idik), 0) FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) "
+        "JOIN tabletopplacements p USING (idtabletopplacements) "
+        "WHERE p.idparamset = ? AND k.idrobot = ? AND k.idscene = ? AND k.idikret = ?", [idtabletop, idrobot, idscene, idikret])
+    return int(row[0]), int(row[1])
+
+
+def roadmap_rows(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int, nq: int) -> dict[str, np.ndarray]:
+    """Every tabletop grip of a tabletop parameter set with its placement, angle and IK row (Section V's inputs):
+    idtabletopgrips, idtabletopplacements, idfreeairgrip, rotmat (N, 4, 4), jawwidth, placement_rotmat (N, 4, 4),
+    idfreetabletopplacement, tabletopposition (N, 3), angle (rad), feasible (N, 3) (False where no IK row) and
+    joints (N, 3, nq) for grasp, handx, handxworldz (NaN where infeasible)."""
+    table = store.con.sql(
+        "SELECT g.idtabletopgrips, g.idtabletopplacements, g.idfreeairgrip, g.rotmat, g.jawwidth, "
+        "p.rotmat AS placement_rotmat, p.idfreetabletopplacement, p.tabletopposition, a.value AS angle, "
+        "coalesce(k.feasibility, false) AS f0, coalesce(k.feasibility_handx, false) AS f1, "
+        "coalesce(k.feasibility_handxworldz, false) AS f2, k.jnt_grasp, k.jnt_handx, k.jnt_handxworldz "
+        "FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) JOIN angle a USING (idangle) "
+        "LEFT JOIN ik k ON k.idtabletopgrips = g.idtabletopgrips AND k.idrobot = $robot AND k.idscene = $scene AND k.idikret = $ikret "
+        "WHERE p.idparamset = $tabletop ORDER BY g.idtabletopgrips",
+        params={"robot": idrobot, "scene": idscene, "ikret": idikret, "tabletop": idtabletop}).to_arrow_table()
+    from . import from_arrow
+
+    out = {name: from_arrow(table.column(name)) for name in
+           ("idtabletopgrips", "idtabletopplacements", "idfreeairgrip", "rotmat", "jawwidth", "placement_rotmat",
+            "idfreetabletopplacement", "tabletopposition", "angle")}
+    n = len(out["idtabletopgrips"])
+    out["rotmat"] = np.asarray(out["rotmat"], dtype=np.float64).reshape(n, 4, 4)
+    out["placement_rotmat"] = np.asarray(out["placement_rotmat"], dtype=np.float64).reshape(n, 4, 4)
+    out["tabletopposition"] = np.asarray(out["tabletopposition"], dtype=np.float64).reshape(n, 3)
+    out["feasible"] = np.stack([np.asarray(from_arrow(table.column(c)), dtype=bool) for c in ("f0", "f1", "f2")], axis=1).reshape(n, 3)
+    out["joints"] = np.stack([list_column(table, c, nq) for c in ("jnt_grasp", "jnt_handx", "jnt_handxworldz")], axis=1)
+    return out
+
+
+def placements_of_tabletop(store: Store, idtabletop: int) -> int:
+    """The placement parameter set a tabletop parameter set was built from."""
+    row = store.one("SELECT params FROM paramset WHERE idparamset = ? AND stage = 'tabletop'", [idtabletop])
+    if row is not None:
+        params = json.loads(row[0])
+        if "placements" in params:
+            return int(params["placements"])
+    row = store.one("SELECT max(f.idparamset) FROM tabletopplacements p JOIN freetabletopplacement f USING (idfreetabletopplacement) "
+                    "WHERE p.idparamset = ?", [idtabletop])
+    if row is None or row[0] is None:
+        raise StoreError(f"store {store.path}: tabletop parameter set {idtabletop} has no placements; run `workbench placements`")
+    return int(row[0])
+
+
+def free_placement_pose(store: Store, idfreetabletopplacement: int) -> np.ndarray | None:
+    """`freetabletopplacement.rotmat` of one stable placement (object in the table frame), or None."""
+    row = store.one("SELECT rotmat FROM freetabletopplacement WHERE idfreetabletopplacement = ?", [idfreetabletopplacement])
+    return None if row is None else np.asarray(row[0], dtype=np.float64).reshape(4, 4)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Plans.
+
+
+def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray]) -> int:
+    """Store one plan (columns of `plan`) and its steps (columns of `planstep`, arrays) in one transaction; returns idplan."""
+    with store.transaction():
+        pid = store.next_id("plan", "idplan")
+        cols = ["idplan", *plan.keys()]
+        store.run(f"INSERT INTO plan ({', '.join(cols)}) VALUES ({', '.join('?' for _ in cols)})", [pid, *plan.values()])
+        n = len(steps["seq"])
+        first = store.next_id("planstep", "idplanstep")
+        store.insert("planstep", {"idplanstep": np.arange(first, first + n, dtype=np.int64),
+                                  "idplan": np.full(n, pid, dtype=np.int64), **steps})
+    return pid
+
+
+def load_plan_rows(store: Store, idplan: int) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """A stored plan row (as a dict) and its steps (arrays, in order)."""
+    table = store.con.sql("SELECT * FROM plan WHERE idplan = ?", params=[idplan]).to_arrow_table()
+    if table.num_rows == 0:
+        raise StoreError(f"store {store.path} has no plan {idplan}")
+    plan = {k: v[0] for k, v in table.to_pydict().items()}
+    steps = store.con.sql("SELECT * FROM planstep WHERE idplan = ? ORDER BY seq", params=[idplan]).to_arrow_table()
+    return plan, steps
+
+
+def plan_ids(store: Store, idobject: int | None = None) -> list[int]:
+    """Ids of stored plans (of one object), oldest first."""
+    if idobject is None:
+        return [int(r[0]) for r in store.run("SELECT idplan FROM plan ORDER BY idplan")]
+    return [int(r[0]) for r in store.run("SELECT idplan FROM plan WHERE idobject = ? ORDER BY idplan", [idobject])]
