@@ -194,11 +194,15 @@ def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: 
         zb = np.zeros(0, dtype=bool)
         return ContactPairs(empty, empty, empty, z3, z3, z3, z3, np.zeros(0), zb, zb, zb)
     eps = 1e-6 * max(1.0, float(mesh.scale))
-    locs, ray, tri = mesh.ray.intersects_location(p - eps * na, -na, multiple_hits=True)
-    # exits only (the ray leaves material there), beyond the origin
+    origin = p - eps * na
+    # Embree (embreex) when installed, else trimesh's rtree caster; hits are recomputed in float64 on their triangle
+    _, ray, tri = mesh.ray.intersects_location(origin, -na, multiple_hits=True)
+    tn = mesh.face_normals[tri]
+    t = np.einsum("ij,ij->i", mesh.triangles[tri, 0] - origin[ray], tn) / np.einsum("ij,ij->i", -na[ray], tn)
+    locs = origin[ray] - t[:, None] * na[ray]
     depth = np.einsum("ij,ij->i", locs - p[ray], -na[ray])
-    exits = (mesh.face_normals[tri] @ np.eye(3)).__mul__(1)  # (H, 3)
-    leaving = (np.einsum("ij,ij->i", exits, na[ray]) < 0) & (depth > 10 * eps)
+    # exits only (the ray leaves material there), beyond the origin
+    leaving = (np.einsum("ij,ij->i", tn, na[ray]) < 0) & (depth > 10 * eps)
     locs, ray, tri, depth = locs[leaving], ray[leaving], tri[leaving], depth[leaving]
     # every facet containing the hit triangle is a candidate opposite facet
     fid, tid = facets.membership()
@@ -265,14 +269,15 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     out = np.zeros(len(point0), dtype=bool)
     if len(point0) == 0:
         return out
-    y, z0, x0 = contact_frames(point0, point1)
+    y, z0, _ = contact_frames(point0, point1)
     width = np.linalg.norm(point0 - point1, axis=1)
     radius, y_near, y_far = gripper.pad_sweep(width)
     mid = 0.5 * (point0 + point1)
     req = fcl.CollisionRequest()
     for side in (1.0, -1.0):
         # the cylinder's axis (its local z) along side * y, centred between its two ends
-        rot = np.stack([x0, side * z0, side * y], axis=2)
+        axis = side * y
+        rot = np.stack([z0, np.cross(axis, z0), axis], axis=2)  # right-handed: fcl needs a proper rotation
         centre = mid + side * y * (0.5 * (y_near + y_far))[:, None]
         for k in np.flatnonzero(~out):
             cyl = fcl.CollisionObject(fcl.Cylinder(radius, y_far[k] - y_near[k]), fcl.Transform(rot[k], centre[k]))

@@ -56,9 +56,10 @@ class Gripper:
 
     @property
     def pad_radius(self) -> float:
-        """Radius of the pad's swept cylinder: half the diagonal of its contact face (rotation invariant)."""
-        ext = self.pad_extents
-        return 0.5 * float(np.hypot(ext[0], ext[2]))
+        """Radius of the pad's swept cylinder about the TCP's y axis: it covers the pad's contact face wherever the
+        hand rotates (half the diagonal, plus the face's offset from the axis)."""
+        ext, c = self.pad_extents, self.pad_center
+        return float(np.hypot(ext[0] / 2 + abs(c[0]), ext[2] / 2 + abs(c[2])))
 
     def finger_poses(self, width: float) -> list[tuple[np.ndarray, np.ndarray]]:
         """(extents, pose) of every finger box of both fingers with the pads `width` apart."""
