@@ -86,14 +86,18 @@ def _independent_collision_free(obj, hand, grasps, samples_per_box: int = 60) ->
         pose = grasps.poses[k]
         pts = hand_pts @ pose[:3, :3].T + pose[:3, 3]
         assert not inside(pts).any(), f"grasp {k}: hand inside object"
-        # pad sweeps: boxes between the contact (+0.5 mm) and the fully open pad, in the TCP frame
+        # pad sweeps: boxes from the fully open pad down to its contact, in the TCP frame; the sweep stops 0.5 mm
+        # short, plus the rise of a facet tilted against the jaw axis across the pad's face (CONVENTIONS: the pad
+        # meets the object only at its contact)
         w = grasps.jawwidth[k]
-        lo, hi = w / 2 + 5e-4, hand.jaw_max / 2 + ext[1]
-        u = rng.random((samples_per_box, 3))
-        local = np.column_stack([(u[:, 0] - 0.5) * ext[0], lo + u[:, 1] * (hi - lo), hand.pad_center[2] + (u[:, 2] - 0.5) * ext[2]])
-        for side in (1, -1):
-            sweep = local * np.array([1, side, 1])
-            assert not inside(sweep @ pose[:3, :3].T + pose[:3, 3]).any(), f"grasp {k}: pad sweep hits object"
+        reach = np.hypot(ext[0] / 2, ext[2] / 2 + abs(hand.pad_center[2]))
+        for side, normal in ((1, grasps.normal0[k]), (-1, grasps.normal1[k])):
+            cos = float(normal @ (side * pose[:3, 1]))
+            lo, hi = w / 2 + 5e-4 + reach * np.tan(np.arccos(min(cos, 1.0))), hand.jaw_max / 2 + ext[1]
+            u = rng.random((samples_per_box, 3))
+            local = np.column_stack([(u[:, 0] - 0.5) * ext[0], side * (lo + u[:, 1] * (hi - lo)),
+                                     hand.pad_center[2] + (u[:, 2] - 0.5) * ext[2]])
+            assert not inside(local @ pose[:3, :3].T + pose[:3, 3]).any(), f"grasp {k}: pad sweep hits object"
     # object vertices never inside any open-finger box
     inv = np.linalg.inv(grasps.poses)
     v = obj.mesh.vertices
@@ -108,7 +112,7 @@ def test_box_grasps_are_collision_free_by_independent_check(box, hand, box_plan)
     _independent_collision_free(box, hand, box_plan.grasps)
 
 
-@pytest.mark.parametrize("name", ["tube", "wheel", "drill"])
+@pytest.mark.parametrize("name", ["tube", "wheel", "tail", "drill"])
 def test_bundled_grasps_are_collision_free_by_independent_check(bundled, hand, name):
     obj = bundled[name]
     plan = plan_grasps(obj, hand, GraspParams())

@@ -145,7 +145,8 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
     ok = pairs.width_ok & pairs.com_ok
     level1 = np.zeros(len(pairs), dtype=bool)
     idx = np.flatnonzero(ok)
-    level1[idx] = ~swept_pads_collide(gripper, pairs.point0[idx], pairs.point1[idx], target)
+    level1[idx] = ~swept_pads_collide(gripper, pairs.point0[idx], pairs.point1[idx], target, pairs.normal0[idx],
+                                      pairs.normal1[idx])
     pairs = ContactPairs(**{**pairs.__dict__, "level1_ok": level1})
     timings["level1"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -262,8 +263,14 @@ def grasp_poses(point0: np.ndarray, point1: np.ndarray, angles: np.ndarray) -> n
     return poses.reshape(-1, 4, 4)
 
 
-def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray, target) -> np.ndarray:
-    """Level 1: does either pad's swept cylinder (from full opening to just outside its contact) hit the object?"""
+def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray, target,
+                       normal0: np.ndarray | None = None, normal1: np.ndarray | None = None) -> np.ndarray:
+    """Level 1: does either pad's swept cylinder (from full opening down to its contact) hit the object?
+
+    Each cylinder stops 0.5 mm short of its contact plus r * tan(tilt), where tilt is the angle between that
+    side's facet normal and the jaw axis: a flat pad closing on a facet tilted within the antiparallel tolerance
+    first touches it at the pad's rim, and that touch is the contact, not a collision.
+    """
     import fcl
 
     out = np.zeros(len(point0), dtype=bool)
@@ -274,12 +281,16 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     radius, y_near, y_far = gripper.pad_sweep(width)
     mid = 0.5 * (point0 + point1)
     req = fcl.CollisionRequest()
-    for side in (1.0, -1.0):
-        # the cylinder's axis (its local z) along side * y, centred between its two ends
+    for side, normal in ((1.0, normal0), (-1.0, normal1)):
         axis = side * y
+        near = y_near.copy()
+        if normal is not None:
+            cos = np.clip(np.einsum("ij,ij->i", normal, axis), 1e-3, 1.0)
+            near += radius * np.sqrt(1 - cos**2) / cos
+        near = np.minimum(near, y_far - 1e-4)
         rot = np.stack([z0, np.cross(axis, z0), axis], axis=2)  # right-handed: fcl needs a proper rotation
-        centre = mid + side * y * (0.5 * (y_near + y_far))[:, None]
+        centre = mid + axis * (0.5 * (near + y_far))[:, None]
         for k in np.flatnonzero(~out):
-            cyl = fcl.CollisionObject(fcl.Cylinder(radius, y_far[k] - y_near[k]), fcl.Transform(rot[k], centre[k]))
+            cyl = fcl.CollisionObject(fcl.Cylinder(radius, y_far[k] - near[k]), fcl.Transform(rot[k], centre[k]))
             out[k] = fcl.collide(cyl, target, req, fcl.CollisionResult()) > 0
     return out
