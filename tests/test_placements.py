@@ -197,3 +197,20 @@ def test_bad_grid_is_refused(bad):
 def test_bad_stability_threshold_is_refused():
     with pytest.raises(WorkbenchError):
         PlacementParams(min_stability=-1)
+
+
+def test_grasp_cap_keeps_every_placement_in_the_roadmap():
+    from workbench.tabletop import select_grasps
+
+    rng = np.random.default_rng(0)
+    poses = np.tile(np.eye(4), (300, 1, 1))
+    poses[:, :3, 3] = rng.random((300, 3))
+    usable = np.zeros((3, 300), dtype=bool)
+    usable[0, :250] = True  # a placement most grasps serve
+    usable[1, 100:290] = True
+    usable[2, [295, 296, 297, 298, 299]] = True  # a placement only five grasps serve
+    chosen = select_grasps(poses, usable, 20)
+    assert len(np.unique(chosen)) == len(chosen) and 20 <= len(chosen) <= 24
+    assert usable[2, chosen].sum() >= 4 and usable[:, chosen].any(axis=0).all()
+    assert np.array_equal(chosen, select_grasps(poses, usable, 20))  # deterministic
+    assert len(select_grasps(poses, usable, None)) == 295  # every usable grasp when uncapped

@@ -22,8 +22,10 @@ inside their convex hull. Two tests:
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from itertools import combinations
+from typing import Callable, TypeVar
 
 import numpy as np
 
@@ -34,6 +36,26 @@ SPAN_TOL = 1e-12
 _PAIRS6 = np.array([(0, 1, 2, 3), (0, 2, 1, 3), (0, 3, 1, 2), (1, 2, 0, 3), (1, 3, 0, 2), (2, 3, 0, 1)])
 
 
+F = TypeVar("F", bound=Callable)
+
+
+def single_blas(fn: F) -> F:
+    """Run `fn` with BLAS/OpenMP pools limited to one thread.
+
+    The arrays here are small; on a 2-core machine shared with other work, library thread pools only contend
+    and spin (a 500 x 500 eigensolve was seen taking seconds instead of milliseconds). The batched simplex
+    uses its own two threads.
+    """
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(1):
+            return fn(*args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
 class ForceClosureError(WorkbenchError):
     """Bad friction parameters or grasps that index missing contacts."""
 
@@ -42,7 +64,7 @@ class ForceClosureError(WorkbenchError):
 class FrictionParams:
     """Coulomb friction coefficient `mu`, pyramid sides `sides` (the paper's m)."""
 
-    mu: float = 0.5
+    mu: float = 0.3
     sides: int = 8
 
     def validate(self) -> "FrictionParams":
@@ -85,11 +107,20 @@ def primitive_wrenches(points: np.ndarray, normals: np.ndarray, mu: float, sides
 # Prefilter: positive span of force and of torque components ([5])
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Cross product over the last axis (faster than np.cross for small batches)."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
 def _pair_candidates(vectors: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Directions u orthogonal to two vectors of a pair of contacts with u.v <= 0 for all the pair's vectors.
 
-    vectors (K, m, 3); pairs (P, 2). Returns the pair index (C,) and unit directions (C, 3) of the distinct
-    valid candidates, grouped by pair. Two edges of one contact only matter when adjacent (a plane through
+    vectors (K, m, 3); pairs (P, 2). Returns the pair index (C,) and unit directions (C, 3) of the valid
+    candidates, grouped by pair. Two edges of one contact only matter when adjacent (a plane through
     non-adjacent edges of a convex pyramid cuts it); pairs whose vectors are all parallel (or zero) also get the
     directions orthogonal to their line.
     """
@@ -99,20 +130,16 @@ def _pair_candidates(vectors: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray
     adj = np.arange(m)
     ia = np.concatenate([cross_a.ravel(), adj, adj + m])
     ib = np.concatenate([cross_b.ravel(), (adj + 1) % m, (adj + 1) % m + m])
-    u = np.cross(x[:, ia], x[:, ib])                                                    # (P, C0, 3)
-    longest = x[np.arange(len(x)), np.argmax(np.linalg.norm(x, axis=2), axis=1)]
-    e1, e2 = tangent_frames(np.where(np.linalg.norm(longest, axis=1, keepdims=True) > 0, longest, [0.0, 0.0, 1.0]))
+    u = _cross(x[:, ia], x[:, ib])                                                      # (P, C0, 3)
+    longest = x[np.arange(len(x)), np.argmax((x * x).sum(axis=2), axis=1)]
+    e1, e2 = tangent_frames(np.where((longest * longest).sum(axis=1, keepdims=True) > 0, longest, [0.0, 0.0, 1.0]))
     u = np.concatenate([u, -u, e1[:, None], -e1[:, None], e2[:, None], -e2[:, None]], axis=1)
-    norm = np.linalg.norm(u, axis=2)
+    norm = np.sqrt((u * u).sum(axis=2))
     ok = norm > 1e-9
-    u = u / np.where(ok, norm, 1.0)[..., None]
-    ok &= (np.matmul(u, x.transpose(0, 2, 1)) <= SPAN_TOL).all(axis=2)
+    u /= np.where(ok, norm, 1.0)[..., None]
+    ok &= np.matmul(x, u.transpose(0, 2, 1)).max(axis=1) <= SPAN_TOL      # max over the middle axis is fast
     pair, cand = np.nonzero(ok)
-    u = u[pair, cand]
-    key = np.column_stack([pair, np.round(u * 1e9).astype(np.int64)])
-    _, first = np.unique(key, axis=0, return_index=True)
-    first = np.sort(first)
-    return pair[first], u[first]
+    return pair, u[pair, cand]
 
 
 class SpanTable:
@@ -140,11 +167,20 @@ class SpanTable:
         start = np.searchsorted(pair, np.arange(npairs))
         rank = np.arange(len(pair)) - start[pair]
         words = max(1, (int(rank.max(initial=0)) + 64) // 64)
-        valid = (u @ vectors.reshape(-1, 3).T <= SPAN_TOL).reshape(len(u), k, -1).all(axis=2)   # (C, K)
-        dense = np.zeros((npairs, words * 64, k), dtype=bool)
-        dense[pair, rank] = valid
-        packed = np.packbits(dense, axis=1, bitorder="little")                               # (P, words*8, K)
-        return np.ascontiguousarray(packed.transpose(0, 2, 1)).view(np.uint64)                # (P, K, words)
+        masks = np.zeros((npairs, k, words), dtype=np.uint64)
+        if len(pair) == 0:
+            return masks
+        m = vectors.shape[1]
+        valid = (u @ vectors.transpose(1, 0, 2).reshape(-1, 3).T).reshape(len(u), m, k).max(axis=1) <= SPAN_TOL
+        # candidate bits within a (pair, word) are distinct powers of two, so their OR is their sum
+        bits = np.left_shift(np.uint64(1), (rank % 64).astype(np.uint64))
+        vals = valid * bits[:, None]
+        group = pair * words + rank // 64
+        first = np.flatnonzero(np.r_[True, np.diff(group) != 0])
+        summed = np.add.reduceat(vals, first, axis=0)
+        flat = masks.transpose(0, 2, 1).reshape(npairs * words, k).copy()
+        flat[group[first]] = summed
+        return np.ascontiguousarray(flat.reshape(npairs, words, k).transpose(0, 2, 1))
 
     def may_span(self, grasps: np.ndarray) -> np.ndarray:
         """(G,) bool: True where every vector set of the 4-subset positively spans R^3 (force closure possible)."""
@@ -162,22 +198,25 @@ class SpanTable:
 # Exact test: origin strictly inside the convex hull of the primitive wrenches ([4], as a linear program)
 
 
-def strictly_inside(w: np.ndarray, max_iter: int = 60, threads: int = 2) -> np.ndarray:
+def strictly_inside(w: np.ndarray, max_iter: int = 60, threads: int = 2, gram: np.ndarray | None = None,
+                    total: np.ndarray | None = None) -> np.ndarray:
     """(B,) bool: the origin is strictly inside the convex hull of each batch item's points w (B, n, d).
 
     Equivalent: rank(W) = d and W lambda = 0 for some lambda >= 1. Items are first screened by two exact
-    certificates computed for all at once (a separating direction y with all w.y >= 0, and a strictly positive
+    certificates computed for all at once (a separating direction y with all w.y > 0, and a strictly positive
     null vector), the rest go through the phase-1 simplex, split over `threads` threads (numpy releases
-    the GIL in its array operations).
+    the GIL in its array operations). `gram` (B, d, d) = W^T W and `total` (B, d) = W^T 1 may be given when
+    they are cheaper to assemble by the caller.
     """
     w = np.asarray(w, dtype=np.float64)
     if w.ndim != 3:
         raise ForceClosureError(f"wrench batch must have shape (B, n, d), got {w.shape}")
     out = np.zeros(len(w), dtype=bool)
     lp: list[np.ndarray] = []
-    step = 16384
+    step = 4096
     for s in range(0, len(w), step):
-        decided, inside = _screen(w[s:s + step])
+        decided, inside = _screen(w[s:s + step], None if gram is None else gram[s:s + step],
+                                  None if total is None else total[s:s + step])
         out[s:s + step] = inside
         lp.append(s + np.flatnonzero(~decided))
     rest = np.concatenate(lp) if lp else np.zeros(0, dtype=np.int64)
@@ -196,18 +235,23 @@ def strictly_inside(w: np.ndarray, max_iter: int = 60, threads: int = 2) -> np.n
     return out
 
 
-def _screen(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _screen(w: np.ndarray, gram: np.ndarray | None = None, total: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Items decided without the simplex: (decided, inside) from rank and the two certificates."""
     bsz, n, d = w.shape
     decided = np.ones(bsz, dtype=bool)
     inside = np.zeros(bsz, dtype=bool)
     if bsz == 0:
         return decided, inside
-    wt = w.transpose(0, 2, 1)
-    gram = wt @ w                                                          # (B, d, d)
-    # rank d, else not force closure; the determinant settles clear cases, eigenvalues the rest
+    if gram is None:
+        gram = w.transpose(0, 2, 1) @ w                                    # (B, d, d)
+    if total is None:
+        total = np.einsum("bnk->bk", w)
+    # rank d, else not force closure: the determinant (from a Cholesky factor) settles clear cases,
+    # eigenvalues the rest
     scale = np.trace(gram, axis1=1, axis2=2) / d
-    full = np.linalg.det(gram) > 1e-6 * scale ** d
+    chol = np.linalg.cholesky(gram + (1e-12 * scale)[:, None, None] * np.eye(d))
+    diag = np.einsum("bii->bi", chol)
+    full = np.prod((diag * diag) / scale[:, None], axis=1) > 1e-6
     unsure = np.flatnonzero(~full)
     if len(unsure):
         ev = np.linalg.eigvalsh(gram[unsure])
@@ -217,9 +261,9 @@ def _screen(w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return decided, inside
     # y = (W^T W)^-1 W^T 1: if all w.y > 0 a closed half-space holds every point (outside); else
     # lambda = 1 - W y is the projection of 1 onto the null space of W^T, and lambda > 0 proves inside
-    y = np.linalg.solve(gram[idx], wt[idx].sum(axis=2)[..., None])          # (B, d, 1)
+    y = np.linalg.solve(gram[idx], total[idx][..., None])                   # (B, d, 1)
     side = (w[idx] @ y)[..., 0]
-    separated = side.min(axis=1) > 1e-12 * np.linalg.norm(y[..., 0], axis=1)
+    separated = side.min(axis=1) > 1e-12 * np.sqrt((y * y).sum(axis=(1, 2)))
     positive = (1.0 - side).min(axis=1) > 1e-9
     inside[idx[positive]] = True
     decided[idx[~separated & ~positive]] = False
@@ -335,6 +379,19 @@ class ForceClosure:
         self.length = float(length)
         self.wrenches = primitive_wrenches(self.points, self.normals, params.mu, params.sides, self.ref, self.length)
         self.n = len(self.points)
+        self._gram = np.einsum("nki,nkj->nij", self.wrenches, self.wrenches)    # per contact: sum of w w^T
+        self._total = self.wrenches.sum(axis=1)                                 # per contact: sum of w
+
+    def _inside(self, g: np.ndarray) -> np.ndarray:
+        """The exact test on grasps g (G, 4), assembling W^T W and W^T 1 from per-contact sums."""
+        out = np.zeros(len(g), dtype=bool)
+        step = 32768
+        for s in range(0, len(g), step):
+            c = g[s:s + step]
+            gram = self._gram[c[:, 0]] + self._gram[c[:, 1]] + self._gram[c[:, 2]] + self._gram[c[:, 3]]
+            total = self._total[c[:, 0]] + self._total[c[:, 1]] + self._total[c[:, 2]] + self._total[c[:, 3]]
+            out[s:s + step] = strictly_inside(self.wrenches[c].reshape(len(c), -1, 6), gram=gram, total=total)
+        return out
 
     def _check(self, grasps: np.ndarray) -> np.ndarray:
         g = np.asarray(grasps, dtype=np.int64)
@@ -352,7 +409,7 @@ class ForceClosure:
     def exact(self, grasps: np.ndarray) -> np.ndarray:
         """(G,) bool: the exact test (origin strictly inside the hull of the 4m primitive wrenches)."""
         g = self._check(grasps)
-        return strictly_inside(self.wrenches[g].reshape(len(g), -1, 6))
+        return self._inside(g)
 
     def prefilter(self, grasps: np.ndarray) -> np.ndarray:
         """(G,) bool: the necessary condition of [5]; False rules force closure out."""
@@ -379,7 +436,7 @@ class ForceClosure:
             local = np.searchsorted(ids, g)
         ok = tab.may_span(local)
         sel = np.flatnonzero(ok)
-        ok[sel] = strictly_inside(self.wrenches[g[sel]].reshape(len(sel), -1, 6))
+        ok[sel] = self._inside(g[sel])
         return ok
 
     def subsets(self, ids: np.ndarray, progress: bool = False) -> np.ndarray:
@@ -389,17 +446,16 @@ class ForceClosure:
             return np.zeros((0, 4), dtype=np.int64)
         table = self.span_table(ids)
         local = combinations_array(len(ids), 4)
-        ok = table.may_span(local)
-        cand = local[ok]
+        cand = ids[local[table.may_span(local)]]
         out = np.zeros(len(cand), dtype=bool)
-        step = 16384
+        step = 32768
         it = range(0, len(cand), step)
         if progress:
             from tqdm import tqdm
             it = tqdm(it, desc="force closure", unit="batch", leave=False)
         for s in it:
-            out[s:s + step] = strictly_inside(self.wrenches[ids[cand[s:s + step]]].reshape(-1, 4 * self.params.sides, 6))
-        return ids[cand[out]]
+            out[s:s + step] = self._inside(cand[s:s + step])
+        return cand[out]
 
 
 def combinations_array(n: int, r: int) -> np.ndarray:

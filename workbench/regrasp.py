@@ -15,8 +15,13 @@ at the grasp and both retractions without arm-table or arm-object collision, as 
 Start grips join roadmap nodes with the same grasp by transfer edges, goal grips likewise, and a start grip
 joins a goal grip directly when one grasp serves both. The search is a breadth-first search on the layered graph
 (layer = number of regrasps) over pairs of start and goal grasps, cost (regrasps, transfers) lexicographic.
-IK at the query poses is the expensive part, so it is evaluated lazily: only the grips of the cheapest pairs
-whose feasibility is unknown, in rounds, until the best plans are proven (`lazy=False` evaluates all grips).
+IK at the query poses is the expensive part, so it is evaluated lazily: in rounds, only the grips of the cheapest
+pairs whose feasibility is unsettled, most promising first (the grasp's IK feasibility at the nearest grid
+placements), first from the nearest stored solution and only when needed from the precomputation's fall-back
+seeds, until the best plans are proven (`lazy=False` evaluates every grip first; the optimum is the same).
+
+Cache: `load_planner` keeps the roadmap (and its IK adapter) per store file, object, robot, scene, retractions,
+tabletop parameter set and a fingerprint of the IK rows, so repeated queries only connect and search.
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Callable, Union
 
 import numpy as np
 import scipy.sparse as sp
@@ -31,8 +38,27 @@ from scipy.sparse.csgraph import connected_components, shortest_path
 
 from .errors import PlanningError
 
+if TYPE_CHECKING:  # pragma: no cover
+    import trimesh
+
+    from .kinematics import IKOptions, Scene
+    from .objects import ObjectModel
+    from .plans import Plan
+    from .robots import Robot
+    from .store import Store
+
+Query = Union["PoseQuery", np.ndarray, str]
+"""A start or goal: a PoseQuery, a `PLACEMENT,X,Y,YAW` string, or a 4x4 object pose on a stable placement."""
+
 UNREACHED = np.iinfo(np.int32).max
 """Distance of two grasps that no sequence of regrasps joins."""
+
+
+def _failure(reason: str, message: str) -> PlanningError:
+    """A PlanningError tagged with why the query fails (`reason`: input, unstable, nogrip, unreachable, unconnected)."""
+    err = PlanningError(message)
+    err.reason = reason
+    return err
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -284,7 +310,7 @@ def match_pose(pose: np.ndarray, free_ids: np.ndarray, free_poses: np.ndarray, l
         raise PlanningError(f"{label}: the object has no stable placements; run `workbench placements` first")
     _, k, tilt, dz = best
     if tilt > tol_rot or dz > tol_pos:
-        raise PlanningError(f"{label} is not on a stable placement: the nearest (id {int(free_ids[k])}) is {np.degrees(tilt):.1f} deg "
+        raise _failure("unstable", f"{label} is not on a stable placement: the nearest (id {int(free_ids[k])}) is {np.degrees(tilt):.1f} deg "
                             f"tilted and {dz * 1000:.1f} mm off in height; give a pose resting on one of the placements "
                             f"{', '.join(str(int(i)) for i in free_ids)}")
     f = free_poses[k]
@@ -301,13 +327,16 @@ def match_pose(pose: np.ndarray, free_ids: np.ndarray, free_poses: np.ndarray, l
 class GripIK:
     """IK with retractions (grasp, handx, handxworldz) for grips at start and goal poses (Section IV's ik columns).
 
-    Each of the three TCP poses is solved by the kinematics module's batched Levenberg-Marquardt from the stored
-    roadmap solution whose TCP pose is nearest (k-d tree over position and weighted rotation), then from its
-    sampled seed library like the precomputation; converged configurations are checked for arm-table, gripper-table
-    and arm-object collision with the object at its pose. A grip is feasible when all three poses are."""
+    Each of the three TCP poses is solved by the kinematics module's batched Levenberg-Marquardt: tier 1 from the
+    stored roadmap solution whose TCP pose is nearest (k-d tree over position and weighted rotation), capped at
+    `tier1_iters` iterations (most poses converge in a few; the rest are left to tier 2); tier 2 with the
+    precomputation's own settings (its seed library, iteration limits, reachability pre-filter). Converged
+    configurations are checked for arm-table, gripper-table and arm-object collision with the object at its pose,
+    with the precomputation's collider. A grip is feasible when all three poses are."""
 
-    def __init__(self, robot, scene, obj_mesh, handx: float, worldz: float, seed_q: np.ndarray, seed_tcp: np.ndarray,
-                 opts=None, rho: float = 0.1):
+    def __init__(self, robot: Robot, scene: Scene, obj_mesh: trimesh.Trimesh | None, handx: float, worldz: float,
+                 seed_q: np.ndarray, seed_tcp: np.ndarray, opts: IKOptions | None = None, rho: float = 0.1,
+                 tier1_iters: int = 15):
         from scipy.spatial import cKDTree
 
         from .kinematics import Collider, IKOptions
@@ -315,6 +344,7 @@ class GripIK:
         self.robot, self.scene = robot, scene
         self.handx, self.worldz = float(handx), float(worldz)
         self.opts = opts or IKOptions()
+        self.tier1_iters = min(int(tier1_iters), self.opts.iters_warm)
         self.collider = Collider(robot, scene, obj_mesh)
         self.rho = rho
         seed_q = np.asarray(seed_q, dtype=np.float64).reshape(-1, robot.nq)
@@ -322,21 +352,42 @@ class GripIK:
         ok = np.isfinite(seed_q).all(axis=1)
         self.seed_q = seed_q[ok]
         self.tree = cKDTree(self._embed(seed_tcp[ok])) if ok.any() else None
-        self.centre, self.radius = robot.reach()
-        self.wmin = np.asarray(scene.workspace_min, dtype=np.float64)
-        self.wmax = np.asarray(scene.workspace_max, dtype=np.float64)
+        from . import kinematics
+
+        reach = getattr(kinematics, "ReachFilter", None)  # the precomputation's reachability pre-filter
+        self.prefilter = reach(robot, scene) if reach is not None else self._reach_sphere(robot, scene)
         self._library = None
+
+    @staticmethod
+    def _reach_sphere(robot, scene):
+        centre, radius = robot.reach()
+        wmin, wmax = np.asarray(scene.workspace_min, dtype=np.float64), np.asarray(scene.workspace_max, dtype=np.float64)
+
+        def inside(poses: np.ndarray) -> np.ndarray:
+            p = poses[..., :3, 3]
+            return (np.linalg.norm(p - centre, axis=-1) <= radius) & (p >= wmin).all(-1) & (p <= wmax).all(-1)
+        return inside
 
     def _embed(self, poses: np.ndarray) -> np.ndarray:
         return np.concatenate([poses[:, :3, 3], self.rho * poses[:, :3, :3].reshape(len(poses), 9)], axis=1)
 
     @property
-    def library(self):
+    def library(self):  # -> kinematics.SeedLibrary
         if self._library is None:
+            import inspect
+
             from .kinematics import SeedLibrary
 
-            self._library = SeedLibrary(self.robot, self.opts.library, self.opts.seed)
+            kw = {"collider": self.collider} if "collider" in inspect.signature(SeedLibrary).parameters else {}
+            self._library = SeedLibrary(self.robot, self.opts.library, self.opts.seed, **kw)
         return self._library
+
+    def _nearest_seeds(self, targets: np.ndarray) -> np.ndarray:
+        """The library seeds the precomputation's fall-back tries for these targets."""
+        o = self.opts
+        if hasattr(o, "seed_pool"):
+            return self.library.nearest(targets, o.seeds, pool=o.seed_pool, spread=o.seed_spread)
+        return self.library.nearest(targets, o.seeds)
 
     def targets(self, tcp: np.ndarray) -> np.ndarray:
         """(n, 3, 4, 4) grasp, handx and handxworldz TCP poses."""
@@ -344,66 +395,72 @@ class GripIK:
 
         return retract(np.asarray(tcp, dtype=np.float64).reshape(-1, 4, 4), self.handx, self.worldz)
 
-    def solve(self, tcp: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Feasible (n,) and joints (n, 3, nq) (NaN where infeasible) for TCP poses (n, 4, 4) of grips of the object at
-        `placements` (n, 4, 4)."""
+    def solve(self, tcp: np.ndarray, placements: np.ndarray, known: np.ndarray | None = None, warm: bool = True,
+              fallback: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Feasible (n,) and joints (n, 3, nq) for TCP poses (n, 4, 4) of grips of the object at `placements` (n, 4, 4).
+
+        Tier 1 (`warm`): every pose from its nearest stored solution, one batched solve. Tier 2 (`fallback`): the
+        poses still unsolved from all their other seeds at once (second-nearest stored solution, the grasp's own
+        solution for the retractions, the library's nearest seeds, as the precomputation does), keeping the first
+        collision-free solution. `known` (n, 3, nq) holds poses already solved (NaN elsewhere), e.g. by tier 1.
+        Joints are returned for every solved pose, also of infeasible grips (NaN where unsolved)."""
         from .kinematics import solve_ik
 
         o, robot = self.opts, self.robot
         n = len(tcp)
         q_out = np.full((n * 3, robot.nq), np.nan)
-        good = np.zeros(n * 3, dtype=bool)
+        if known is not None:
+            q_out[:] = np.asarray(known, dtype=np.float64).reshape(n * 3, robot.nq)
+        good = np.isfinite(q_out).all(axis=1)
         if n == 0:
             return np.zeros(0, dtype=bool), q_out.reshape(0, 3, robot.nq)
         flat = self.targets(tcp).reshape(n * 3, 4, 4)  # row = grip * 3 + kind
         place = np.repeat(np.asarray(placements, dtype=np.float64).reshape(-1, 4, 4), 3, axis=0)
-        p = flat[:, :3, 3]
-        pre = (np.linalg.norm(p - self.centre, axis=1) <= self.radius) & (p >= self.wmin).all(1) & (p <= self.wmax).all(1)
-        alive = pre.reshape(n, 3).all(axis=1)  # a grip needs all three poses
+        pre = np.asarray(self.prefilter(flat), dtype=bool)
+        alive = np.repeat(pre.reshape(n, 3).all(axis=1), 3)  # a grip needs all three poses
 
-        def attempt(rows: np.ndarray, q0: np.ndarray, iters: int) -> None:
-            if len(rows) == 0:
-                return
+        def attempt(rows: np.ndarray, q0: np.ndarray, iters: int) -> tuple[np.ndarray, np.ndarray]:
+            """Solve rows (repeats allowed) from q0: (joint vectors, converged and collision-free)."""
             q, ok = solve_ik(robot, flat[rows], q0, iters, o.tol_pos, o.tol_rot)
             if ok.any():
                 sel = np.flatnonzero(ok)
-                hit = self.collider.collides_q(q[sel], place[rows[sel]])
-                ok[sel[hit]] = False
-            q_out[rows[ok]] = q[ok]
-            good[rows[ok]] = True
+                ok[sel[self.collider.collides_q(q[sel], place[rows[sel]])]] = False
+            return q, ok
 
-        def pending() -> np.ndarray:
-            g = good.reshape(n, 3)
-            live = alive & ~(g.all(axis=1))
-            return np.flatnonzero((np.repeat(live, 3)) & ~good)
-
-        rows = pending()
+        near = None
+        rows = np.flatnonzero(alive & ~good)
         if self.tree is not None and len(rows):
             k = min(2, len(self.seed_q))
             _, near = self.tree.query(self._embed(flat[rows]), k=k)
             near = np.asarray(near).reshape(len(rows), k)
-            attempt(rows, self.seed_q[near[:, 0]], o.iters_warm)
-            # the retracted poses from the grasp's solution, then the second-nearest stored solution
-            rows = pending()
-            kind = rows % 3
-            warm = rows[(kind > 0) & good[rows - kind]]
-            attempt(warm, q_out[warm - warm % 3], o.iters_warm)
-            if k > 1:
-                rows = pending()
-                _, near = self.tree.query(self._embed(flat[rows]), k=k)
-                attempt(rows, self.seed_q[np.asarray(near).reshape(len(rows), k)[:, 1]], o.iters_warm)
-        rows = pending()
-        if len(rows) and o.seeds > 0:  # the precomputation's fall-back: nearest seeds of the sampled library
-            near = self.library.nearest(flat[rows], o.seeds)
-            for j in range(near.shape[1]):
-                left = ~good[rows]
-                if not left.any():
-                    break
-                attempt(rows[left], self.library.q[near[left, j]], o.iters_seed)
-        feas = good.reshape(n, 3).all(axis=1)
-        joints = q_out.reshape(n, 3, robot.nq)
-        joints[~feas] = np.nan
-        return feas, joints
+            if warm:
+                q, ok = attempt(rows, self.seed_q[near[:, 0]], self.tier1_iters)
+                q_out[rows[ok]], good[rows[ok]] = q[ok], True
+        if fallback:
+            left = ~good[rows]
+            rows2, near2 = rows[left], (near[left] if near is not None else None)
+            if len(rows2):
+                seeds, owner = [], []
+                if near2 is not None and near2.shape[1] > 1:  # the nearest stored solution was tier 1's seed
+                    seeds.append(self.seed_q[near2[:, 1]])
+                    owner.append(np.arange(len(rows2)))
+                kind = rows2 % 3
+                own = (kind > 0) & good[rows2 - kind]
+                if own.any():
+                    seeds.append(q_out[rows2[own] - kind[own]])
+                    owner.append(np.flatnonzero(own))
+                if o.seeds > 0:
+                    lib = self._nearest_seeds(flat[rows2])
+                    seeds.append(self.library.q[lib.ravel()])
+                    owner.append(np.repeat(np.arange(len(rows2)), lib.shape[1]))
+                if seeds:
+                    owner = np.concatenate(owner)
+                    q, ok = attempt(rows2[owner], np.concatenate(seeds), o.iters_seed)
+                    hit = np.flatnonzero(ok)
+                    win = hit[np.unique(owner[hit], return_index=True)[1]]
+                    q_out[rows2[owner[win]]], good[rows2[owner[win]]] = q[win], True
+        feas = good.reshape(n, 3).all(axis=1) & alive.reshape(n, 3)[:, 0]
+        return feas, q_out.reshape(n, 3, robot.nq)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -413,7 +470,9 @@ class GripIK:
 @dataclass
 class Side:
     """The grips of a start or goal pose: free-air grasp ids, TCP poses in the world, jaw widths, roadmap grasp index
-    (-1 when the grasp has no roadmap node), IK state (0 unknown, 1 feasible, -1 infeasible) and joints."""
+    (-1 when the grasp has no roadmap node), IK state (0 unknown, 1 feasible, -1 infeasible, -2 not solved from the
+    nearest stored solution, the fall-back seeds still untried), joints (NaN where unsolved), and `prior`:
+    the share of the nearest grid placements where the same grasp is IK-feasible (evaluation order only)."""
 
     label: str
     query: PoseQuery
@@ -424,6 +483,7 @@ class Side:
     rindex: np.ndarray
     state: np.ndarray
     joints: np.ndarray
+    prior: np.ndarray | None = None
 
     @property
     def n_feasible(self) -> int:
@@ -477,46 +537,81 @@ def pair_costs(roadmap: Roadmap, start: Side, goal: Side) -> np.ndarray:
     return c
 
 
-def search(roadmap: Roadmap, start: Side, goal: Side, evaluate, alternatives: int = 2, lazy: bool = True) -> SearchResult:
+def _first_unique(a: np.ndarray) -> np.ndarray:
+    """The distinct values of `a` in order of first appearance."""
+    _, first = np.unique(a, return_index=True)
+    return a[np.sort(first)]
+
+
+def search(roadmap: Roadmap, start: Side, goal: Side, evaluate: Callable[[list[tuple[Side, np.ndarray]], bool], None],
+           alternatives: int = 2, lazy: bool = True,
+           chunk: int = 8) -> SearchResult:
     """Fewest regrasps, then fewest transfers, between a start and a goal side (Section V, "Searching the graph").
 
-    `evaluate(side, indices)` sets the IK state and joints of those grips. With `lazy`, rounds evaluate only the
-    grips of the cheapest pairs still unknown, until `1 + alternatives` confirmed pairs are at least as cheap as
-    every unconfirmed one; otherwise all grips first. Routes come best first: cost, then the pair's order."""
+    Breadth-first on the layered graph: a pair (start grip, goal grip) costs the regrasps of `pair_costs`, and a
+    route exists when both grips are IK-feasible. `evaluate([(side, indices), ...], fallback)` sets the IK state and
+    joints of grips of both sides in one call: tier 1 (nearest stored solution) for unknown grips, tier 2 (the
+    fall-back seeds) for grips that failed tier 1 when `fallback`. With `lazy`, phase A takes the cheapest
+    cost level that still has pairs of unsettled grips and evaluates up to `chunk` grips per side (doubling every
+    round) from its pairs, most promising first (`prior`): unknown grips first, tier 2 only when the level has no
+    unknown grip left; it ends when a confirmed pair costs no more than any unsettled one, so the best cost is the
+    same as evaluating every grip first (`lazy=False`). Phase B gathers alternatives (at most one regrasp above the
+    best) from tier 1 only, until `1 + alternatives` pairs are confirmed. Routes come best first: cost, then the
+    pair's order."""
     timings = {"connect": 0.0, "search": 0.0}
     want = 1 + max(0, int(alternatives))
     t0 = time.perf_counter()
     cost = pair_costs(roadmap, start, goal)
     finite = cost < UNREACHED
+    prior_s = start.prior if start.prior is not None else np.full(len(start.grasp), 0.5)
+    prior_g = goal.prior if goal.prior is not None else np.full(len(goal.grasp), 0.5)
     timings["search"] += time.perf_counter() - t0
 
-    def run(side: Side, idx: np.ndarray) -> None:
-        if len(idx):
+    def run(new_s: np.ndarray, new_g: np.ndarray, fallback: bool) -> None:
+        if len(new_s) or len(new_g):
             t = time.perf_counter()
-            evaluate(side, idx)
+            evaluate([(start, new_s), (goal, new_g)], fallback)
             timings["connect"] += time.perf_counter() - t
 
     if not lazy:
-        run(start, np.flatnonzero(start.state == 0))
-        run(goal, np.flatnonzero(goal.state == 0))
+        run(np.flatnonzero(start.state == 0), np.flatnonzero(goal.state == 0), True)
+        run(np.flatnonzero(start.state == -2), np.flatnonzero(goal.state == -2), True)
     rounds = 0
     while True:
         t = time.perf_counter()
-        possible = finite & (start.state >= 0)[:, None] & (goal.state >= 0)[None, :]
-        confirmed = possible & (start.state > 0)[:, None] & (goal.state > 0)[None, :]
+        possible = finite & (start.state != -1)[:, None] & (goal.state != -1)[None, :]
+        confirmed = possible & (start.state == 1)[:, None] & (goal.state == 1)[None, :]
         open_ = possible & ~confirmed
         vmin = int(cost[open_].min()) if open_.any() else UNREACHED
-        enough = int((confirmed & (cost <= vmin)).sum()) >= want
+        best = int(cost[confirmed].min()) if confirmed.any() else UNREACHED
+        if best > vmin:  # phase A: the optimum is not proven yet; settle the cheapest open level
+            level = open_ & (cost == vmin)
+        else:  # phase B: alternatives up to one regrasp above the best, from tier 1 only
+            unknown = open_ & ((start.state == 0)[:, None] | (goal.state == 0)[None, :]) & (cost <= best + 1)
+            if int((confirmed & (cost <= best + 1)).sum()) >= want or not unknown.any():
+                timings["search"] += time.perf_counter() - t
+                break
+            level = unknown & (cost == int(cost[unknown].min()))
+        ps, pg = np.nonzero(level)
+        score = np.where(start.state[ps] == 1, 1.0, prior_s[ps]) * np.where(goal.state[pg] == 1, 1.0, prior_g[pg])
+        order = np.lexsort((pg, ps, -np.round(score, 6)))
+        ps, pg = ps[order], pg[order]
+        m = chunk << min(rounds, 20)
+        new_s = _first_unique(ps[start.state[ps] == 0])[:m]
+        new_g = _first_unique(pg[goal.state[pg] == 0])[:m]
+        fallback = not len(new_s) and not len(new_g)
+        if fallback:  # every open pair of this level waits on grips that failed tier 1
+            new_s = _first_unique(ps[start.state[ps] == -2])[:m]
+            new_g = _first_unique(pg[goal.state[pg] == -2])[:m]
         timings["search"] += time.perf_counter() - t
-        if enough or not open_.any():
-            break
         rounds += 1
-        level = open_ & (cost == vmin)
-        run(start, np.flatnonzero(level.any(axis=1) & (start.state == 0)))
-        run(goal, np.flatnonzero(level.any(axis=0) & (goal.state == 0)))
+        run(new_s, new_g, fallback)
     t = time.perf_counter()
-    confirmed = finite & (start.state > 0)[:, None] & (goal.state > 0)[None, :]
+    confirmed = finite & (start.state == 1)[:, None] & (goal.state == 1)[None, :]
     si, gi = np.nonzero(confirmed)
+    if len(si):  # alternatives: at most one regrasp more than the best
+        near = cost[si, gi] <= cost[si, gi].min() + 1
+        si, gi = si[near], gi[near]
     order = np.lexsort((gi, si, cost[si, gi]))[:want]
     routes = [route(roadmap, start, goal, int(si[k]), int(gi[k])) for k in order]
     timings["search"] += time.perf_counter() - t
@@ -559,9 +654,12 @@ class Planner:
     placements and their free tabletop grips, the object, the robot, its scene (table) and the retractions
     (Section V). Build it with `load_planner`; `plan` answers a start/goal query."""
 
-    def __init__(self, roadmap: Roadmap, free: dict[str, np.ndarray], ftg: dict[str, np.ndarray], obj, robot, scene,
-                 handx: float, worldz: float, ids: dict[str, int], ik_opts=None):
+    def __init__(self, roadmap: Roadmap, free: dict[str, np.ndarray], ftg: dict[str, np.ndarray], obj: ObjectModel,
+                 robot: Robot, scene: Scene, handx: float, worldz: float, ids: dict[str, int], ik_opts: IKOptions | None = None,
+                 grid: dict[str, np.ndarray] | None = None):
         self.roadmap, self.free, self.ftg = roadmap, free, ftg
+        self.grid = grid
+        self.rows: dict = {}
         self.object, self.robot, self.scene = obj, robot, scene
         self.handx, self.worldz = float(handx), float(worldz)
         self.ids = dict(ids)
@@ -592,7 +690,7 @@ class Planner:
         ids = self.free["idfreetabletopplacement"]
         hit = np.flatnonzero(ids == query.idfreetabletopplacement)
         if len(hit) == 0:
-            raise PlanningError(f"{label} placement {query.idfreetabletopplacement} is not a stable placement of {self.object.name} "
+            raise _failure("unstable", f"{label} placement {query.idfreetabletopplacement} is not a stable placement of {self.object.name} "
                                 f"(its placements: {', '.join(str(int(i)) for i in ids)}); give one of those ids")
         lo, hi = self.scene.table_min, self.scene.table_max
         if not (lo[0] <= query.x <= hi[0] and lo[1] <= query.y <= hi[1]):
@@ -600,7 +698,7 @@ class Planner:
                                 f"y {lo[1]:g}..{hi[1]:g} m); give a position on it")
         return query.move() @ self.free["rotmat"][hit[0]]
 
-    def side(self, query: PoseQuery | np.ndarray | str, label: str = "start") -> Side:
+    def side(self, query: Query, label: str = "start") -> Side:
         """The grips of a start or goal pose (Section V, Fig. 8): the placement's free tabletop grips moved with it.
         `query` is a PoseQuery, a `PLACEMENT,X,Y,YAW` string, or a 4x4 object pose matched to a stable placement."""
         if isinstance(query, str):
@@ -612,7 +710,7 @@ class Planner:
         hi = np.searchsorted(self._ftg_keys, query.idfreetabletopplacement, side="right")
         rows = self._ftg_order[lo:hi]
         if len(rows) == 0:
-            raise PlanningError(f"{label} placement {query.idfreetabletopplacement} of {self.object.name} has no grasp that clears "
+            raise _failure("nogrip", f"{label} placement {query.idfreetabletopplacement} of {self.object.name} has no grasp that clears "
                                 f"the table; choose another placement ({', '.join(map(str, self.placement_ids()))})")
         grasp = np.asarray(self.ftg["idfreeairgrip"])[rows].astype(np.int64)
         order = np.argsort(grasp, kind="stable")
@@ -621,16 +719,48 @@ class Planner:
         n = len(rows)
         return Side(label=label, query=query, pose=pose, grasp=grasp, tcp=tcp, jawwidth=np.asarray(self.ftg["jawwidth"])[rows],
                     rindex=self.roadmap.grasp_index(grasp), state=np.zeros(n, dtype=np.int8),
-                    joints=np.full((n, 3, self.robot.nq), np.nan))
+                    joints=np.full((n, 3, self.robot.nq), np.nan), prior=self.prior(query, grasp))
 
-    def evaluate(self, side: Side, idx: np.ndarray) -> None:
-        """IK with retractions for grips `idx` of a side (sets their state and joints)."""
-        idx = np.asarray(idx, dtype=np.int64)
-        feas, joints = self.ik.solve(side.tcp[idx], np.repeat(side.pose[None], len(idx), axis=0))
-        side.state[idx] = np.where(feas, 1, -1)
-        side.joints[idx] = joints
+    def prior(self, query: PoseQuery, grasp: np.ndarray, k: int = 4) -> np.ndarray:
+        """For each grasp at a query pose, the share of the `k` nearest grid placements of the same stable placement
+        (position, and yaw at 0.1 m per rad) where the same grasp is IK-feasible; 0.5 where the grid has no row."""
+        g = self.grid
+        out = np.full(len(grasp), 0.5)
+        if g is None or len(g["tp_free"]) == 0:
+            return out
+        cand = np.flatnonzero(g["tp_free"] == query.idfreetabletopplacement)
+        if len(cand) == 0:
+            return out
+        dyaw = np.abs((g["tp_angle"][cand] - query.yaw + np.pi) % (2 * np.pi) - np.pi)
+        d = np.hypot(g["tp_pos"][cand, 0] - query.x, g["tp_pos"][cand, 1] - query.y) + 0.1 * dyaw
+        near = cand[np.lexsort((cand, d))[:k]]
+        keys = near[None, :].astype(np.int64) * g["stride"] + np.asarray(grasp, dtype=np.int64)[:, None]
+        pos = np.clip(np.searchsorted(g["keys"], keys), 0, len(g["keys"]) - 1)
+        found = g["keys"][pos] == keys
+        vals = np.where(found, g["feasible"][pos], np.nan)
+        has = found.any(axis=1)
+        out[has] = np.nanmean(vals[has], axis=1)
+        return out
 
-    def search(self, start, goal, alternatives: int = 2, lazy: bool = True) -> SearchResult:
+    def evaluate(self, requests: list[tuple[Side, np.ndarray]], fallback: bool = True) -> None:
+        """IK with retractions for grips of one or more sides in one batch (sets their state and joints): tier 1 for
+        unknown grips (state 0), then tier 2 when `fallback` for grips that failed tier 1 (state -2)."""
+        requests = [(side, np.asarray(idx, dtype=np.int64)) for side, idx in requests if len(idx)]
+        if not requests:
+            return
+        tcp = np.concatenate([side.tcp[idx] for side, idx in requests])
+        place = np.concatenate([np.repeat(side.pose[None], len(idx), axis=0) for side, idx in requests])
+        known = np.concatenate([side.joints[idx] for side, idx in requests])
+        unknown = np.concatenate([side.state[idx] == 0 for side, idx in requests])
+        feas, joints = self.ik.solve(tcp, place, known, warm=bool(unknown.any()), fallback=fallback)
+        k = 0
+        for side, idx in requests:
+            f = feas[k:k + len(idx)]
+            side.state[idx] = np.where(f, 1, -1 if fallback else -2)
+            side.joints[idx] = joints[k:k + len(idx)]
+            k += len(idx)
+
+    def search(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True) -> SearchResult:
         """Connect start and goal and search (Section V); PlanningError names an unreachable or unconnected pose."""
         t0 = time.perf_counter()
         s, g = self.side(start, "start"), self.side(goal, "goal")
@@ -644,19 +774,17 @@ class Planner:
     def explain(self, result: SearchResult) -> None:
         """Raise the PlanningError that says why no route exists (evaluates the remaining grips to tell)."""
         s, g = result.start, result.goal
-        for side in (s, g):
-            rest = np.flatnonzero(side.state == 0)
-            if len(rest):
-                self.evaluate(side, rest)
+        self.evaluate([(side, np.flatnonzero(side.state == 0)) for side in (s, g)], fallback=True)
+        self.evaluate([(side, np.flatnonzero(side.state == -2)) for side in (s, g)], fallback=True)
         for side in (s, g):
             if side.n_feasible == 0:
-                raise PlanningError(
-                    f"{side.label} pose ({side.query.text()}) is not reachable by {self.robot.name}: none of its {len(side.grasp)} grasps "
+                raise _failure(
+                    "unreachable", f"{side.label} pose ({side.query.text()}) is not reachable by {self.robot.name}: none of its {len(side.grasp)} grasps "
                     f"has IK at the grasp and both retractions (handx {self.handx:g} m, worldz {self.worldz:g} m) without collision; "
                     f"move it closer to the robot or choose another placement")
         a, b = self.attach(s), self.attach(g)
-        raise PlanningError(
-            f"start ({s.query.text()}) and goal ({g.query.text()}) are not connected in the regrasp graph of {self.object.name} for "
+        raise _failure(
+            "unconnected", f"start ({s.query.text()}) and goal ({g.query.text()}) are not connected in the regrasp graph of {self.object.name} for "
             f"{self.robot.name}: no feasible grasp serves both, and the start's {s.n_feasible} feasible grasps reach roadmap components "
             f"{sorted(a['components']) or 'none'} while the goal's {g.n_feasible} reach {sorted(b['components']) or 'none'}; "
             f"add grid positions, angles or grasps (workbench placements --x/--y/--angles/--max-grasps) and rebuild")
@@ -671,7 +799,7 @@ class Planner:
         comps = np.unique(self.roadmap.component[nodes]) if len(nodes) else np.zeros(0, dtype=np.int64)
         return {"grasps": side.grasp[feas], "nodes": nodes, "components": [int(c) for c in comps]}
 
-    def plan(self, start, goal, alternatives: int = 2, lazy: bool = True, validate: bool = True) -> list:
+    def plan(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True, validate: bool = True) -> list[Plan]:
         """The best plan and up to `alternatives` next best (Section V), each checked by `workbench.validate` when
         `validate` (a plan that fails is dropped; PlanningError when none passes)."""
         from .plans import make_plan
@@ -681,6 +809,9 @@ class Planner:
         if validate:
             from .validate import validator_for
 
+            if not self.rows:
+                raise PlanningError("this planner has no store rows to validate its plans against; build it with "
+                                    "load_planner, or pass validate=False")
             checker = validator_for(self)
             reports = [checker.check(p) for p in plans]
             good = [p for p, rep in zip(plans, reports) if rep.ok]
@@ -697,7 +828,7 @@ class Planner:
 _PLANNERS: dict[tuple, Planner] = {}
 
 
-def _scene_from(params: dict):
+def _scene_from(params: dict) -> tuple[Scene, IKOptions]:
     from dataclasses import fields
 
     from .kinematics import IKOptions, Scene
@@ -713,24 +844,28 @@ def _scene_from(params: dict):
     return scene, opts
 
 
-def load_planner(db, object_name: str, robot_name: str, handx: float | None = None, worldz: float | None = None,
-                 idtabletop: int | None = None) -> Planner:
-    """The regrasp graph of `object_name` for `robot_name` from a store (path or Store), built from the latest tabletop
-    parameter set and the IK run with the most rows (or the one with these retractions); cached per store file,
-    object, robot, scene, retractions and parameter set, so repeated queries only connect and search."""
+def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int, handx: float | None = None, worldz: float | None = None,
+                 idtabletop: int | None = None, idscene: int | None = None) -> Planner:
+    """The regrasp graph of `object_name` for `robot_name` (a stored robot name or idrobot) from a store (path or
+    Store), built from the latest tabletop parameter set and the IK run with the most rows (or the one with these
+    retractions or this scene); cached per store file, object, robot, scene, retractions and parameter set, so
+    repeated queries only connect and search."""
     from .store import Store
     from .store.objects import get_object
     from .store.placements import latest_tabletop_paramset, load_free_tabletop_grips, load_placements
     from .store import plans as sql
+    from .store.robots import ikret_row, robot_row, scene_row
 
     store = db if isinstance(db, Store) else Store(db)
     try:
         oid, obj = get_object(store, object_name)
         tt = latest_tabletop_paramset(store, oid) if idtabletop is None else int(idtabletop)
-        rrow = sql.robot_row(store, robot_name)
+        rrow = robot_row(store, robot_name)
         runs = sql.ik_runs(store, tt, rrow["idrobot"])
         if handx is not None or worldz is not None:
-            runs = [r for r in runs if _ret_match(sql.ikret_row(store, r[1]), handx, worldz)]
+            runs = [r for r in runs if _ret_match(ikret_row(store, r[1]), handx, worldz)]
+        if idscene is not None:
+            runs = [r for r in runs if r[0] == int(idscene)]
         if not runs:
             raise PlanningError(f"store {store.path} has no IK of {object_name}'s tabletop grips for robot {robot_name}"
                                 f"{'' if handx is None and worldz is None else f' with handx {handx}, worldz {worldz}'}; "
@@ -749,11 +884,14 @@ def load_planner(db, object_name: str, robot_name: str, handx: float | None = No
         pl = sql.placements_of_tabletop(store, tt)
         free = load_placements(store, pl)
         ftg = load_free_tabletop_grips(store, pl)
-        scene, opts = _scene_from(sql.scene_params(store, idscene))
-        hx, wz = sql.ikret_row(store, idikret)
+        sparams = scene_row(store, idscene)
+        scene, opts = _scene_from(sparams)
+        hx, wz = ikret_row(store, idikret)
         ids = {"idobject": oid, "idrobot": rrow["idrobot"], "idscene": idscene, "idikret": idikret, "idtabletop": tt, "idplacements": pl}
-        planner = Planner(roadmap, free, ftg, obj, robot, scene, hx, wz, ids, opts)
+        planner = Planner(roadmap, free, ftg, obj, robot, scene, hx, wz, ids, opts, grid=grid_index(rows))
         roadmap.key = key
+        planner.rows = {"robot": rrow, "scene": sparams}  # raw store rows, for the independent validator
+        planner.ik.library  # build the IK adapter and its seed library now, not during the first query
         if len(_PLANNERS) >= 8:
             _PLANNERS.pop(next(iter(_PLANNERS)))
         _PLANNERS[key] = planner
@@ -763,20 +901,41 @@ def load_planner(db, object_name: str, robot_name: str, handx: float | None = No
             store.close()
 
 
+def grid_index(rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Every tabletop grip's IK feasibility (all three flags) keyed by (tabletop placement index, free-air grasp id),
+    with each tabletop placement's stable placement, position and yaw (for `Planner.prior`)."""
+    tp, first, inv = np.unique(np.asarray(rows["idtabletopplacements"]), return_index=True, return_inverse=True)
+    grasp = np.asarray(rows["idfreeairgrip"], dtype=np.int64)
+    stride = int(grasp.max()) + 1 if len(grasp) else 1
+    keys = inv.ravel().astype(np.int64) * stride + grasp
+    order = np.argsort(keys, kind="stable")
+    feas = np.asarray(rows["feasible"]).reshape(len(grasp), -1).all(axis=1)
+    return {"tp_free": np.asarray(rows["idfreetabletopplacement"])[first], "tp_pos": np.asarray(rows["tabletopposition"])[first],
+            "tp_angle": np.asarray(rows["angle"], dtype=np.float64)[first], "keys": keys[order], "feasible": feas[order].astype(np.float64),
+            "stride": np.int64(stride)}
+
+
 def _ret_match(ret: tuple[float, float], handx: float | None, worldz: float | None) -> bool:
     return (handx is None or abs(ret[0] - handx) < 1e-9) and (worldz is None or abs(ret[1] - worldz) < 1e-9)
 
 
-def _robot_from_row(row: dict):
-    """The library robot of a stored `robot` row: the built-in of that name at the stored base, or the stored URDF."""
+def _robot_from_row(row: dict) -> Robot:
+    """The library robot of a stored `robot` row: the built-in of that name at the stored base (it must have the
+    stored kinematics digest), or the stored URDF."""
     from .robots import ROBOTS, Robot, RobotSpec, builtin_robot
 
-    if row["name"] in ROBOTS:
-        robot = builtin_robot(row["name"], base=row["base"])
+    name = row["name"]
+    builtin = name if name in ROBOTS else name.rsplit("-", 1)[0]  # "panda-<digest>": a panda at another base
+    if builtin in ROBOTS:
+        robot = builtin_robot(builtin, base=row["base"])
+        if row.get("digest") and robot.spec.digest != row["digest"]:
+            raise PlanningError(f"robot {row['name']!r} in the store was computed with other kinematics (URDF, frames, base or "
+                                f"locked joints) than the library's; rebuild its IK stage (workbench build / ik) in a new store")
     else:
         robot = Robot(RobotSpec(name=row["name"], urdf=row["urdf"], urdf_path="", tip_frame=row["tip_frame"],
                                 tcp_frame=row["tcp_frame"], mount=row["mount"], base=row["base"],
-                                joints=tuple(row["joint_names"])))
+                                joints=tuple(row["joint_names"]),
+                                locked=tuple((str(k), float(v)) for k, v in dict(row.get("locked") or {}).items())))
     if list(robot.joint_names) != list(row["joint_names"]):
         raise PlanningError(f"robot {row['name']!r}: the stored joint order {row['joint_names']} differs from the library's "
                             f"{list(robot.joint_names)}; rebuild the ik stage")

@@ -19,8 +19,8 @@ Built-in robots (all from example-robot-data, all carrying the Franka hand as pl
   flange's z), at the world origin on the table.
 - `talos`: Talos's left arm with its two torso joints (9 DoF, like the paper's 8-DoF HRP5P arm that
   includes the waist), the Franka hand on the wrist tool flange `wrist_left_ft_tool_link`; the robot
-  stands in front of the table (its pelvis 0.25 m above the table top), the legs, right arm, head and its
-  own gripper locked.
+  stands in front of the table (pelvis at x = 0.05 m, 0.25 m above the table top, the table's edge at x = 0.2 m),
+  its legs, head and own gripper locked, the right arm locked tucked away (`TALOS_RIGHT_ARM_TUCKED`).
 """
 
 from __future__ import annotations
@@ -81,7 +81,8 @@ class RobotSpec:
     """Everything that defines a robot for IK (picklable; rebuilt in worker processes).
 
     `drop_geometry` lists link-name prefixes whose collision geometry is replaced by the planning gripper
-    (a robot's own hand or tool); `joints` restricts the arm to these joints of the chain (None: all).
+    (a robot's own hand or tool); `joints` restricts the arm to these joints of the chain (None: all);
+    `locked` gives values of locked joints other than 0 (a humanoid's other arm tucked away).
     """
 
     name: str
@@ -94,13 +95,15 @@ class RobotSpec:
     joints: tuple[str, ...] | None = None
     drop_geometry: tuple[str, ...] = ()
     package_dirs: tuple[str, ...] = ()
+    locked: tuple[tuple[str, float], ...] = ()
 
     @cached_property
     def digest(self) -> str:
         """Identifies the kinematics: URDF text, frames, mount, base, joints, dropped geometry."""
         h = hashlib.sha256()
         h.update(self.urdf.encode())
-        h.update(json.dumps([self.tip_frame, self.tcp_frame, list(self.joints or ()), list(self.drop_geometry)]).encode())
+        h.update(json.dumps([self.tip_frame, self.tcp_frame, list(self.joints or ()), list(self.drop_geometry),
+                             [[k, float(v)] for k, v in self.locked]]).encode())
         h.update(np.round(np.asarray(self.mount, dtype=np.float64), 12).tobytes())
         h.update(np.round(np.asarray(self.base, dtype=np.float64), 12).tobytes())
         return h.hexdigest()[:24]
@@ -154,8 +157,14 @@ class Robot:
                                  f"only revolute and prismatic joints with limits are supported")
         lock = [j for j in range(1, full.njoints) if j not in chain]
         q_ref = pin.neutral(full)
+        for jname, value in spec.locked:
+            if not full.existJointName(jname) or full.getJointId(jname) in chain:
+                raise RobotError(f"locked joint {jname!r} of robot {spec.name!r} is not a joint of the URDF outside the arm")
+            jid = full.getJointId(jname)
+            q_ref[full.joints[jid].idx_q] = float(value)
         model, rgeom = pin.buildReducedModel(full, geom, lock, q_ref)
         self.model, self.geom = model, rgeom
+        self._lock, self._q_ref, self._dirs, self._visual = lock, q_ref, dirs, None
         self.joint_names = tuple(model.names[j] for j in range(1, model.njoints))
         self.lower = np.asarray(model.lowerPositionLimit, dtype=np.float64).copy()
         self.upper = np.asarray(model.upperPositionLimit, dtype=np.float64).copy()
@@ -212,6 +221,21 @@ class Robot:
         pin.framesForwardKinematics(self.model, data, np.asarray(q, dtype=np.float64))
         return self.base @ np.asarray(data.oMf[self.tcp_id].homogeneous)
 
+    def visual_model(self):
+        """The reduced pinocchio VISUAL geometry model (meshes of the URDF, same locked joints as the arm)."""
+        import pinocchio as pin
+
+        if self._visual is None:
+            full = pin.buildModelFromXML(self.spec.urdf)
+            vis = pin.buildGeomFromUrdfString(full, self.spec.urdf, pin.VISUAL, package_dirs=self._dirs)
+            _, self._visual = pin.buildReducedModel(full, vis, self._lock, self._q_ref)
+        return self._visual
+
+    def dropped(self, go) -> bool:
+        """Whether a geometry object belongs to the links replaced by the planning gripper."""
+        link = self.model.frames[go.parentFrame].name
+        return any(link.startswith(p) for p in self.spec.drop_geometry)
+
     def fixed_geometry(self) -> list[int]:
         """Indices of collision objects that do not move with the arm (base, locked legs...)."""
         return [k for k, go in enumerate(self.geom.geometryObjects) if go.parentJoint == 0]
@@ -220,10 +244,7 @@ class Robot:
         """Indices of collision objects moved by the arm, without the robot's own hand (`drop_geometry`)."""
         out = []
         for k, go in enumerate(self.geom.geometryObjects):
-            if go.parentJoint == 0:
-                continue
-            link = self.model.frames[go.parentFrame].name
-            if any(link.startswith(p) for p in self.spec.drop_geometry):
+            if go.parentJoint == 0 or self.dropped(go):
                 continue
             out.append(k)
         return out
@@ -264,14 +285,15 @@ class Robot:
         return (self.base @ np.append(centre, 1.0))[:3], length
 
     def neutral(self) -> np.ndarray:
-        """A mid-range configuration (joint limits' midpoint, zero where zero is inside the limits)."""
+        """The zero configuration clipped into the joint limits."""
         q = np.clip(np.zeros(self.nq), self.lower, self.upper)
         return q
 
 
 def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = None, mount: np.ndarray | None = None,
                     tcp_frame: str | None = None, name: str | None = None, joints: tuple[str, ...] | None = None,
-                    drop_geometry: tuple[str, ...] = (), package_dirs: tuple[str, ...] = ()) -> Robot:
+                    drop_geometry: tuple[str, ...] = (), package_dirs: tuple[str, ...] = (),
+                    locked: tuple[tuple[str, float], ...] = ()) -> Robot:
     """Any robot: a URDF path, its base pose in the world, the arm's tip frame, and the gripper mount (tip to TCP)."""
     path = Path(urdf)
     if not path.is_file():
@@ -287,14 +309,18 @@ def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = 
     spec = RobotSpec(name=name or path.stem, urdf=text, urdf_path=str(path), tip_frame=tip_frame, tcp_frame=tcp_frame,
                      mount=np.eye(4) if mount is None else np.asarray(mount, dtype=np.float64),
                      base=np.eye(4) if base is None else np.asarray(base, dtype=np.float64),
-                     joints=joints, drop_geometry=tuple(drop_geometry), package_dirs=tuple(package_dirs))
+                     joints=joints, drop_geometry=tuple(drop_geometry), package_dirs=tuple(package_dirs),
+                     locked=tuple((str(k), float(v)) for k, v in locked))
     return Robot(spec)
 
+
+# Talos's right arm bent with its forearm pointing outwards, clear of the table (radians).
+TALOS_RIGHT_ARM_TUCKED = (("arm_right_2_joint", -0.3), ("arm_right_3_joint", -1.5), ("arm_right_4_joint", -2.0))
 
 DEFAULT_BASES = {
     "panda": pose_xyz_yaw(0.0, 0.0, 0.0, 0.0),
     "ur5": pose_xyz_yaw(0.0, 0.0, 0.0, 0.0),
-    "talos": pose_xyz_yaw(0.0, 0.0, 0.25, 0.0),
+    "talos": pose_xyz_yaw(0.05, 0.0, 0.25, 0.0),
 }
 
 
@@ -314,7 +340,8 @@ def builtin_robot(name: str, base: np.ndarray | None = None, tip_frame: str | No
     if name == "talos":
         return robot_from_urdf(root / "talos_data" / "robots" / "talos_reduced.urdf", tip_frame or "wrist_left_ft_tool_link",
                                base=base, mount=(_rot_x(np.pi) @ _trans(0, 0, TCP_OFFSET)) if mount is None else mount,
-                               tcp_frame="franka_hand_tcp", name="talos", drop_geometry=("gripper_left_",))
+                               tcp_frame="franka_hand_tcp", name="talos", drop_geometry=("gripper_left_",),
+                               locked=TALOS_RIGHT_ARM_TUCKED)
     raise RobotError(f"unknown robot {name!r}: use one of {', '.join(ROBOTS)} or the path of a URDF")
 
 

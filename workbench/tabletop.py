@@ -4,8 +4,8 @@ Each free placement is displaced to every grid position and rotated about world 
 `angle` table; every free tabletop grip of that placement follows it into the world. The world frame is the
 table frame here (table top z = 0). Table I uses 21 positions and 8 rotations (168 tabletop placements per free
 placement); Fig. 7 shows 91 positions. `max_grasps` caps the free-air grasps carried into the roadmap, picked
-spread out over the object (farthest-point order, preferring grasps usable in more placements), so a dense
-grasp set still gives a roadmap of tens of thousands of grips that IK can process.
+spread out over the object (farthest-point order, preferring grasps usable in more placements, and keeping a few
+for every placement), so a dense grasp set still gives a roadmap of tens of thousands of grips that IK can process.
 """
 
 from __future__ import annotations
@@ -56,9 +56,10 @@ def paper_grid() -> TabletopParams:
     return TabletopParams(x_min=0.35, x_max=0.65, nx=7, y_min=-0.30, y_max=0.30, ny=13, angles=8, max_grasps=None)
 
 
-def select_grasps(grasp_poses: np.ndarray, usable: np.ndarray, count: int | None) -> np.ndarray:
-    """Indices of at most `count` grasps spread over contact centres and approach directions (farthest-point order),
-    starting from and favouring grasps usable in more placements. `usable` is the (P, G) placement mask."""
+def select_grasps(grasp_poses: np.ndarray, usable: np.ndarray, count: int | None, per_placement: int = 4) -> np.ndarray:
+    """Indices of about `count` grasps spread over contact centres and approach directions (farthest-point order),
+    starting from and favouring grasps usable in more placements. Every placement keeps at least `per_placement`
+    of its usable grasps (or all it has), so no placement drops out of the roadmap. `usable` is the (P, G) mask."""
     uses = usable.sum(axis=0)
     cand = np.flatnonzero(uses > 0)
     if count is None or len(cand) <= count:
@@ -67,13 +68,21 @@ def select_grasps(grasp_poses: np.ndarray, usable: np.ndarray, count: int | None
     scale = max(float(np.ptp(pos, axis=0).max()), 1e-9)
     feat = np.column_stack([pos / scale, 0.5 * grasp_poses[cand, :3, 2]])
     weight = 0.5 + uses[cand] / uses[cand].max()
-    chosen = [int(np.argmax(uses[cand]))]
-    dist = np.linalg.norm(feat - feat[chosen[0]], axis=1)
+    chosen = np.zeros(len(cand), dtype=bool)
+    dist = np.full(len(cand), np.inf)
+
+    def take(k: int) -> None:
+        chosen[k] = True
+        np.minimum(dist, np.linalg.norm(feat - feat[k], axis=1), out=dist)
+
+    take(int(np.argmax(uses[cand])))
     for _ in range(count - 1):
-        k = int(np.argmax(dist * weight))
-        chosen.append(k)
-        dist = np.minimum(dist, np.linalg.norm(feat - feat[k], axis=1))
-    return np.sort(cand[chosen])
+        take(int(np.argmax(np.where(chosen, -1.0, dist * weight))))
+    for row in usable[:, cand]:
+        need = min(per_placement, int(row.sum())) - int((row & chosen).sum())
+        for _ in range(max(need, 0)):
+            take(int(np.argmax(np.where(row & ~chosen, dist, -1.0))))
+    return cand[chosen]
 
 
 def yaw(theta: float | np.ndarray) -> np.ndarray:

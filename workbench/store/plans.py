@@ -1,8 +1,8 @@
 """SQL of the regrasp roadmap's inputs and of the `plan` and `planstep` tables (Wan & Harada, Section V).
 
 Reads: the tabletop grips of a tabletop parameter set joined with their `ik` rows for one robot, scene and
-retraction set (the roadmap's nodes and joint vectors), the IK runs available for an object and robot, and the
-rows the validator needs (robot, scene). Writes: plans and their steps, each plan in one transaction.
+retraction set (the roadmap's nodes and joint vectors) and the IK runs available for an object and robot; the
+robot, scene and ikret rows come from `store.robots`. Writes: plans and their steps, each plan in one transaction.
 """
 
 from __future__ import annotations
@@ -33,35 +33,6 @@ def list_column(table: pa.Table, name: str, width: int) -> np.ndarray:
                 raise StoreError(f"joint vectors in column {name} do not all have {width} entries; rebuild the ik stage")
             out[valid] = flat.reshape(-1, width)
     return out
-
-
-def robot_row(store: Store, name: str) -> dict[str, Any]:
-    """The `robot` row called `name` (urdf, frames, mount, base, joint names), or a StoreError naming the robots."""
-    rows = store.run("SELECT idrobot, name, urdf, tcp_frame, tip_frame, mount, base, joint_names, digest FROM robot WHERE name = ?", [name])
-    if not rows:
-        names = [r[0] for r in store.run("SELECT name FROM robot ORDER BY name")]
-        raise StoreError(f"store {store.path} has no robot {name!r} (it has: {', '.join(names) or 'none'}); "
-                         f"run `workbench ik --robot {name}` or `workbench build --robot {name}` first")
-    r = rows[0]
-    return {"idrobot": int(r[0]), "name": r[1], "urdf": r[2], "tcp_frame": r[3], "tip_frame": r[4],
-            "mount": np.asarray(r[5], dtype=np.float64).reshape(4, 4), "base": np.asarray(r[6], dtype=np.float64).reshape(4, 4),
-            "joint_names": list(r[7]), "digest": r[8]}
-
-
-def scene_params(store: Store, idscene: int) -> dict[str, Any]:
-    """The stored parameters (JSON) of a scene."""
-    row = store.one("SELECT params FROM scene WHERE idscene = ?", [idscene])
-    if row is None:
-        raise StoreError(f"store {store.path} has no scene {idscene}; rebuild the ik stage")
-    return json.loads(row[0])
-
-
-def ikret_row(store: Store, idikret: int) -> tuple[float, float]:
-    """(handx, worldz) of a retraction set, metres."""
-    row = store.one("SELECT handx, worldz FROM ikret WHERE idikret = ?", [idikret])
-    if row is None:
-        raise StoreError(f"store {store.path} has no ikret {idikret}; rebuild the ik stage")
-    return float(row[0]), float(row[1])
 
 
 def ik_runs(store: Store, idtabletop: int, idrobot: int) -> list[tuple[int, int, int, int]]:

@@ -7,7 +7,9 @@ Paper tables
 - object(idobject, name, ...): one row per object; extra columns keep the scaled mesh (vertices, faces),
   its digest, scale, source path, centre of mass and how it was computed (volume or area).
 - robot(idrobot, name, ...): what rebuilds the kinematic chain without the library: urdf text, tcp_frame,
-  tip_frame, mount (tip to TCP), base (base pose in the world), joint_names (order of stored joint vectors).
+  tip_frame, mount (tip to TCP), base (base pose in the world), joint_names (order of stored joint vectors),
+  locked (JSON {joint: value} for URDF joints outside joint_names that are not at 0, e.g. a humanoid's other arm
+  tucked away) and drop_geometry (link-name prefixes whose collision geometry is replaced by the planning gripper).
 - freeairgrip: grasps in the object frame; rotmat is the TCP pose in the object frame.
   Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y).
 - freetabletopplacement: rotmat is the object in the table frame, centre of mass above the origin, lowest
@@ -51,6 +53,8 @@ CORE_TABLES: tuple[str, ...] = (
         mount DOUBLE[16] NOT NULL,
         base DOUBLE[16] NOT NULL,
         joint_names VARCHAR[] NOT NULL,
+        locked VARCHAR NOT NULL DEFAULT '{}',
+        drop_geometry VARCHAR[] NOT NULL DEFAULT [],
         digest VARCHAR NOT NULL
     )""",
     """CREATE TABLE IF NOT EXISTS gripper (
@@ -204,3 +208,116 @@ PLAN_TABLES: tuple[str, ...] = (
 )
 
 ALL_TABLES = ALL_TABLES + PLAN_TABLES
+
+# Five-finger regrasp by contact-point clustering (Phoka & Sudsang; workbench.store.fingers).
+# Each stage's rows reference the paramset of its run (stage name in paramset.stage):
+# - fingers.contacts (params: faces): fingermesh, the decimated mesh whose face centroids are the contact
+#   points; fingercontact, T_O: one row per face, idx its index in T_O (and face in the mesh), position (m),
+#   normal (inward unit).
+# - fingers.roadmap (params: contacts paramset, k, mu, sides, seed, n_init): fingerroadmap, one summary row
+#   (sigma of the affinity, #vertex, #edge, #CC, seconds of clustering and roadmap construction);
+#   fingercluster, one row per cluster with its representative (T_R), k-means centre in U space and size;
+#   fingermember, T_O's cluster of every contact with its row of U (embedding) and of E (distances to every
+#   centre, by cluster label); fingergrasp, the vertices of R (four contacts, ascending idx) with their
+#   connected component; fingeredge, the edges of R: grasp 0 becomes grasp 1 by lifting `idlifted` and
+#   placing `idplaced`.
+# - fingers.queries (params: roadmap paramset, samples, picks, queries, seed): fingerlocalstats, the
+#   numbers of Table II; fingerquery, one row per query of Table III: start and goal grasps and the sequence
+#   (a list of grasps, each four idfingercontact), how each end linked to R (alg1, alg2, alg3) and seconds.
+FINGER_TABLES: tuple[str, ...] = (
+    """CREATE TABLE IF NOT EXISTS fingermesh (
+        idfingermesh BIGINT PRIMARY KEY,
+        idobject BIGINT NOT NULL REFERENCES object(idobject),
+        idparamset BIGINT NOT NULL UNIQUE REFERENCES paramset(idparamset),
+        ntriangles BIGINT NOT NULL,
+        vertices DOUBLE[3][] NOT NULL,
+        faces INTEGER[3][] NOT NULL,
+        com DOUBLE[3] NOT NULL,
+        radius DOUBLE NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingercontact (
+        idfingercontact BIGINT PRIMARY KEY,
+        idfingermesh BIGINT NOT NULL REFERENCES fingermesh(idfingermesh),
+        idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
+        idx INTEGER NOT NULL,
+        position DOUBLE[3] NOT NULL,
+        normal DOUBLE[3] NOT NULL,
+        UNIQUE (idparamset, idx)
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingerroadmap (
+        idfingerroadmap BIGINT PRIMARY KEY,
+        idparamset BIGINT NOT NULL UNIQUE REFERENCES paramset(idparamset),
+        idobject BIGINT NOT NULL REFERENCES object(idobject),
+        idcontacts BIGINT NOT NULL REFERENCES paramset(idparamset),
+        sigma DOUBLE NOT NULL,
+        nvertex BIGINT NOT NULL,
+        nedge BIGINT NOT NULL,
+        ncomponent BIGINT NOT NULL,
+        seconds_clustering DOUBLE NOT NULL,
+        seconds_roadmap DOUBLE NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingercluster (
+        idfingercluster BIGINT PRIMARY KEY,
+        idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
+        label INTEGER NOT NULL,
+        idrepresentative BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        center DOUBLE[] NOT NULL,
+        size INTEGER NOT NULL,
+        UNIQUE (idparamset, label)
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingermember (
+        idfingermember BIGINT PRIMARY KEY,
+        idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
+        idfingercontact BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idfingercluster BIGINT NOT NULL REFERENCES fingercluster(idfingercluster),
+        embedding DOUBLE[] NOT NULL,
+        distances DOUBLE[] NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingergrasp (
+        idfingergrasp BIGINT PRIMARY KEY,
+        idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
+        idcontact0 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idcontact1 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idcontact2 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idcontact3 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        component INTEGER NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingeredge (
+        idfingeredge BIGINT PRIMARY KEY,
+        idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
+        idfingergrasp0 BIGINT NOT NULL REFERENCES fingergrasp(idfingergrasp),
+        idfingergrasp1 BIGINT NOT NULL REFERENCES fingergrasp(idfingergrasp),
+        idlifted BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idplaced BIGINT NOT NULL REFERENCES fingercontact(idfingercontact)
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingerlocalstats (
+        idfingerlocalstats BIGINT PRIMARY KEY,
+        idparamset BIGINT NOT NULL UNIQUE REFERENCES paramset(idparamset),
+        idroadmap BIGINT NOT NULL REFERENCES paramset(idparamset),
+        samples BIGINT NOT NULL,
+        alg1_run DOUBLE NOT NULL,
+        alg1_connect INTEGER NOT NULL,
+        alg1_picked INTEGER NOT NULL,
+        alg2_run DOUBLE NOT NULL,
+        alg2_connect INTEGER NOT NULL,
+        alg2_picked INTEGER NOT NULL,
+        alg3_connect INTEGER NOT NULL,
+        alg3_picked INTEGER NOT NULL
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingerquery (
+        idfingerquery BIGINT PRIMARY KEY,
+        idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
+        idroadmap BIGINT NOT NULL REFERENCES paramset(idparamset),
+        seq INTEGER NOT NULL,
+        start BIGINT[] NOT NULL,
+        goal BIGINT[] NOT NULL,
+        connected BOOLEAN NOT NULL,
+        start_method VARCHAR NOT NULL,
+        goal_method VARCHAR NOT NULL,
+        seconds DOUBLE NOT NULL,
+        sequence BIGINT[][],
+        UNIQUE (idparamset, seq)
+    )""",
+)
+
+ALL_TABLES = ALL_TABLES + FINGER_TABLES
