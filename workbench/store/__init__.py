@@ -20,7 +20,7 @@ import numpy as np
 import pyarrow as pa
 
 from ..errors import StoreError
-from .schema import ALL_TABLES
+from .schema import ALL_TABLES, MIGRATIONS
 
 
 class Store:
@@ -49,7 +49,7 @@ class Store:
         if not read_only:
             try:
                 with self.transaction():
-                    for ddl in ALL_TABLES:
+                    for ddl in ALL_TABLES + MIGRATIONS:
                         self.run(ddl)
             except duckdb.Error as exc:
                 self.con.close()

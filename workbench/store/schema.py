@@ -321,3 +321,9 @@ FINGER_TABLES: tuple[str, ...] = (
 )
 
 ALL_TABLES = ALL_TABLES + FINGER_TABLES
+
+# Columns added after a store format was first released; run after the CREATE statements so older files gain them.
+MIGRATIONS: tuple[str, ...] = (
+    "ALTER TABLE robot ADD COLUMN IF NOT EXISTS locked VARCHAR DEFAULT '{}'",
+    "ALTER TABLE robot ADD COLUMN IF NOT EXISTS drop_geometry VARCHAR[] DEFAULT []",
+)
