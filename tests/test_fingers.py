@@ -330,6 +330,10 @@ def test_store_round_trip_reuse_and_json(tmp_path):
     assert np.allclose(r.planner.clustering.E, fresh.clustering.E)
     assert np.array_equal(r.planner.roadmap.grasps, fresh.roadmap.grasps)
     assert {tuple(e) for e in r.planner.roadmap.edges.tolist()} == {tuple(e) for e in fresh.roadmap.edges.tolist()}
+    # stored ids map back to contact indices; an unknown id is refused
+    assert np.array_equal(r.ids.to_index(r.ids.to_ids([5, 0, 17])), [5, 0, 17])
+    with pytest.raises(WorkbenchError, match="not a stored contact"):
+        r.ids.to_index([int(r.ids.ids.max()) + 1])
 
 
 @pytest.mark.parametrize("extra, match", [(["--friction", "0"], "friction"), (["--pyramid", "2"], "pyramid"),

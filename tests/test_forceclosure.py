@@ -125,9 +125,12 @@ def test_simplex_fallback_gives_the_same_answers(monkeypatch):
     fc = ForceClosure(pts, nrm, FrictionParams(0.5, 4), ref=np.zeros(3), length=1.0)
     grasps = combinations_array(20, 4)[::7]
     full = fc.exact(grasps)
-    original = fcm.strictly_inside
-    monkeypatch.setattr(fcm, "strictly_inside", lambda w, **kw: original(w, max_iter=1, **kw))
+    calls = []
+    original = fcm._lp_feasible
+    monkeypatch.setattr(fcm, "MAX_PIVOTS", 1)
+    monkeypatch.setattr(fcm, "_lp_feasible", lambda w: calls.append(1) or original(w))
     assert (fc.exact(grasps) == full).all()
+    assert len(calls) > 10
 
 
 def test_subsets_are_all_force_closure_four_subsets():

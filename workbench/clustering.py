@@ -24,6 +24,9 @@ from .errors import WorkbenchError
 from .forceclosure import FrictionParams, friction_pyramid, single_blas
 
 
+MAX_CONTACTS = 4000
+
+
 class ClusteringError(WorkbenchError):
     """Clustering parameters that do not fit the contact set."""
 
@@ -49,6 +52,9 @@ class ClusterParams:
         if self.k > n_contacts:
             raise ClusteringError(f"{self.k} clusters is more than the {n_contacts} contact points; "
                                   f"lower --clusters or keep more triangles (--faces)")
+        if n_contacts > MAX_CONTACTS:
+            raise ClusteringError(f"{n_contacts} contact points are too many to cluster (the distance matrix grows as N^2 m^2); "
+                                  f"decimate the mesh to about 500 triangles (--faces 500)")
         if self.k < 4:
             raise ClusteringError(f"{self.k} clusters give fewer than the 4 representatives a grasp needs; use --clusters 4 or more")
         return self
@@ -93,7 +99,8 @@ def cone_distance(points: np.ndarray, normals: np.ndarray, mu: float, sides: int
     # the angles only rank pairs for clustering: float32 halves the cost of arccos and of memory traffic
     f32, own32, cross32 = f.astype(np.float32), own.astype(np.float32), cross.astype(np.float32)
     out = np.zeros((n, n))
-    for s in range(0, n, chunk):
+
+    def rows(s: int) -> None:
         i = np.arange(s, min(n, s + chunk))
         j = np.arange(s, n)                                     # upper triangle only, mirrored below
         c, r = len(i), len(j)
@@ -110,6 +117,12 @@ def cone_distance(points: np.ndarray, normals: np.ndarray, mu: float, sides: int
         np.clip(cos, -1.0, 1.0, out=cos)
         ang = np.arccos(cos).reshape(c, r, m * m)[..., perm].reshape(c, r, m, m)
         out[s:s + c, s:] = ang.sum(axis=-1, dtype=np.float64).min(axis=-1) / m
+
+    # numpy releases the GIL in these array operations: two threads take alternate row blocks
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(2) as pool:
+        list(pool.map(rows, range(0, n, chunk)))
     out = np.triu(out, 1)
     return out + out.T
 
@@ -131,11 +144,8 @@ def affinity(d: np.ndarray) -> tuple[np.ndarray, float]:
 def spectral_clustering(a: np.ndarray, k: int, seed: int = 0, n_init: int = 10) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """NJW spectral clustering (Section III-B2, [9]): labels (N,), U (N, k), centres (k, k)."""
     from scipy.linalg import eigh
-    from sklearn.cluster import KMeans
-    return _njw(a, k, seed, n_init, eigh, KMeans)
+    from sklearn.cluster import KMeans   # imported here: scikit-learn takes a while to load
 
-
-def _njw(a: np.ndarray, k: int, seed: int, n_init: int, eigh, kmeans) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     deg = a.sum(axis=1)
     inv = 1.0 / np.sqrt(np.where(deg > 0, deg, 1.0))
     lap = inv[:, None] * a * inv[None, :]
@@ -143,7 +153,7 @@ def _njw(a: np.ndarray, k: int, seed: int, n_init: int, eigh, kmeans) -> tuple[n
     _, v = eigh(lap, subset_by_index=[n - k, n - 1])
     v = v[:, ::-1]                                               # largest eigenvalue first
     u = v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
-    km = kmeans(n_clusters=k, n_init=n_init, random_state=seed).fit(u)
+    km = KMeans(n_clusters=k, n_init=n_init, random_state=seed).fit(u)
     return km.labels_.astype(np.int64), u, km.cluster_centers_
 
 

@@ -33,6 +33,8 @@ from .errors import WorkbenchError
 
 # Directions u with u.v <= SPAN_TOL for all (unit-scale) v are treated as separating.
 SPAN_TOL = 1e-12
+# Pivots per item before the batched simplex hands an item to HiGHS.
+MAX_PIVOTS = 60
 _PAIRS6 = np.array([(0, 1, 2, 3), (0, 2, 1, 3), (0, 3, 1, 2), (1, 2, 0, 3), (1, 3, 0, 2), (2, 3, 0, 1)])
 
 
@@ -198,19 +200,42 @@ class SpanTable:
 # Exact test: origin strictly inside the convex hull of the primitive wrenches ([4], as a linear program)
 
 
-def strictly_inside(w: np.ndarray, max_iter: int = 60, threads: int = 2, gram: np.ndarray | None = None,
+def strictly_inside(w: np.ndarray, max_iter: int | None = None, threads: int = 2, gram: np.ndarray | None = None,
                     total: np.ndarray | None = None) -> np.ndarray:
     """(B,) bool: the origin is strictly inside the convex hull of each batch item's points w (B, n, d).
 
     Equivalent: rank(W) = d and W lambda = 0 for some lambda >= 1. Items are first screened by two exact
     certificates computed for all at once (a separating direction y with all w.y > 0, and a strictly positive
-    null vector), the rest go through the phase-1 simplex, split over `threads` threads (numpy releases
-    the GIL in its array operations). `gram` (B, d, d) = W^T W and `total` (B, d) = W^T 1 may be given when
-    they are cheaper to assemble by the caller.
+    null vector), the rest go through the phase-1 simplex. The batch is split over `threads` threads (numpy
+    releases the GIL in its array operations). `gram` (B, d, d) = W^T W and `total` (B, d) = W^T 1 may be given
+    when they are cheaper to assemble by the caller.
     """
     w = np.asarray(w, dtype=np.float64)
     if w.ndim != 3:
         raise ForceClosureError(f"wrench batch must have shape (B, n, d), got {w.shape}")
+    pick = (lambda a, p: None if a is None else a[p])
+    cap = MAX_PIVOTS if max_iter is None else max_iter
+    return _threaded(len(w), threads, lambda p: _decide(w[p], cap, pick(gram, p), pick(total, p)))
+
+
+def _threaded(count: int, threads: int, work: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """`work(indices)` over `threads` contiguous parts of range(count), concatenated."""
+    out = np.zeros(count, dtype=bool)
+    parts = np.array_split(np.arange(count), threads) if threads > 1 and count > 4096 else [np.arange(count)]
+    if len(parts) > 1:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(len(parts)) as pool:
+            results = list(pool.map(work, parts))
+    else:
+        results = [work(parts[0])]
+    for p, r in zip(parts, results):
+        out[p] = r
+    return out
+
+
+def _decide(w: np.ndarray, max_iter: int, gram: np.ndarray | None, total: np.ndarray | None) -> np.ndarray:
+    """One thread's share: screen in cache-sized chunks, then the simplex on the undecided items."""
     out = np.zeros(len(w), dtype=bool)
     lp: list[np.ndarray] = []
     step = 4096
@@ -220,18 +245,8 @@ def strictly_inside(w: np.ndarray, max_iter: int = 60, threads: int = 2, gram: n
         out[s:s + step] = inside
         lp.append(s + np.flatnonzero(~decided))
     rest = np.concatenate(lp) if lp else np.zeros(0, dtype=np.int64)
-    if len(rest) == 0:
-        return out
-    parts = np.array_split(rest, threads) if threads > 1 and len(rest) > 4096 else [rest]
-    if len(parts) > 1:
-        from concurrent.futures import ThreadPoolExecutor
-
-        with ThreadPoolExecutor(len(parts)) as pool:
-            results = list(pool.map(lambda p: _phase1(w[p], max_iter), parts))
-    else:
-        results = [_phase1(w[rest], max_iter)]
-    for p, r in zip(parts, results):
-        out[p] = r
+    if len(rest):
+        out[rest] = _phase1(w[rest], max_iter)
     return out
 
 
@@ -382,16 +397,15 @@ class ForceClosure:
         self._gram = np.einsum("nki,nkj->nij", self.wrenches, self.wrenches)    # per contact: sum of w w^T
         self._total = self.wrenches.sum(axis=1)                                 # per contact: sum of w
 
-    def _inside(self, g: np.ndarray) -> np.ndarray:
-        """The exact test on grasps g (G, 4), assembling W^T W and W^T 1 from per-contact sums."""
-        out = np.zeros(len(g), dtype=bool)
-        step = 32768
-        for s in range(0, len(g), step):
-            c = g[s:s + step]
+    def _inside(self, g: np.ndarray, threads: int = 2) -> np.ndarray:
+        """The exact test on grasps g (G, 4), W^T W and W^T 1 assembled from per-contact sums, in threads."""
+        def work(part: np.ndarray) -> np.ndarray:
+            c = g[part]
             gram = self._gram[c[:, 0]] + self._gram[c[:, 1]] + self._gram[c[:, 2]] + self._gram[c[:, 3]]
             total = self._total[c[:, 0]] + self._total[c[:, 1]] + self._total[c[:, 2]] + self._total[c[:, 3]]
-            out[s:s + step] = strictly_inside(self.wrenches[c].reshape(len(c), -1, 6), gram=gram, total=total)
-        return out
+            return _decide(self.wrenches[c].reshape(len(c), 4 * self.params.sides, 6), MAX_PIVOTS, gram, total)
+
+        return _threaded(len(g), threads, work)
 
     def _check(self, grasps: np.ndarray) -> np.ndarray:
         g = np.asarray(grasps, dtype=np.int64)
@@ -447,14 +461,15 @@ class ForceClosure:
         table = self.span_table(ids)
         local = combinations_array(len(ids), 4)
         cand = ids[local[table.may_span(local)]]
-        out = np.zeros(len(cand), dtype=bool)
-        step = 32768
-        it = range(0, len(cand), step)
         if progress:
             from tqdm import tqdm
-            it = tqdm(it, desc="force closure", unit="batch", leave=False)
-        for s in it:
-            out[s:s + step] = self._inside(cand[s:s + step])
+
+            out = np.zeros(len(cand), dtype=bool)
+            step = 32768
+            for s in tqdm(range(0, len(cand), step), desc="force closure", unit="batch", leave=False):
+                out[s:s + step] = self._inside(cand[s:s + step])
+        else:
+            out = self._inside(cand)
         return cand[out]
 
 

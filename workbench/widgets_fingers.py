@@ -62,6 +62,7 @@ class FingersExplorer:
                            f"clustering {self.planner.times['clustering']:.2f} s, roadmap {self.planner.times['roadmap']:.2f} s")
         self.vis["fingers"].delete()
         vf.show_clusters(self.vis, "fingers/clusters", self.contacts, cl.labels, cl.reps)
+        viz.frame_camera(self.vis, self.contacts.com, self.contacts.radius)
         self.step.max, self.step.value = 0, 0
         return self.planner
 

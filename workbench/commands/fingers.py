@@ -11,6 +11,7 @@ import json
 import sys
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -18,6 +19,9 @@ from ..clustering import ClusterParams
 from ..contacts import ContactParams
 from ..fingergaits import FingerPlanner, LocalStats, local_planning_stats, random_queries, sample_grasps
 from .grasps import add_object_arguments
+
+if TYPE_CHECKING:
+    from ..store.fingers import ContactIds
 
 
 def add_finger_arguments(parser: argparse.ArgumentParser) -> None:
@@ -53,7 +57,7 @@ class FingerRun:
     idroadmap: int
     idqueries: int | None
     planner: FingerPlanner
-    ids: object
+    ids: "ContactIds"
     stats: LocalStats | None
     reused: tuple[bool, bool]
 
@@ -109,6 +113,8 @@ def run(args: argparse.Namespace) -> int:
     from ..benchmarks import print_table
     from ..objects import load_object
 
+    import sklearn.cluster  # noqa: F401  (loaded before the clock starts on clustering)
+
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     params = ClusterParams(k=args.clusters, mu=args.friction, sides=args.pyramid, seed=args.seed)
     params.friction.validate()
@@ -149,7 +155,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _query_json(q, ids) -> dict:
+def _query_json(q, ids: "ContactIds") -> dict:
     """A query with contacts as stored idfingercontact ids; `sequence` is a list of grasps of four ids."""
     return {"start": ids.to_ids(q.start).tolist(), "goal": ids.to_ids(q.goal).tolist(), "connected": q.connected,
             "start_method": q.start_method, "goal_method": q.goal_method, "seconds": q.seconds,

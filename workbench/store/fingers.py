@@ -50,7 +50,7 @@ def contacts_stage(store: Store, idobject: int, obj: ObjectModel, params: Contac
     """T_O of an object (decimated to `params.faces`), computed once per object and parameters."""
     params.validate()
     with store.transaction():
-        pid, existed = store.paramset("fingers.contacts", {"faces": params.faces}, idobject)
+        pid, existed = store.paramset("fingers.contacts", {"faces": params.faces, "resolution": params.resolution}, idobject)
         if not existed:
             _put_contacts(store, pid, idobject, contact_points(obj, params))
     cs, ids = load_contacts(store, pid)

@@ -61,7 +61,7 @@ def show_fingers(vis: meshcat.Visualizer, path: str, contacts: ContactSet, finge
                  lifted: int = -1, lifted_from: np.ndarray | None = None, radius: float | None = None) -> None:
     """The five fingertips as spheres: the placed finger green, the lifted one red, the others blue, a waiting
     finger grey. `fingers` (5,) holds each finger's contact (-1: free); `lifted_from` the contact a free finger left."""
-    r = radius if radius is not None else 0.04 * contacts.radius
+    r = radius if radius is not None else 0.09 * contacts.radius
     lifted_from = np.full(5, -1) if lifted_from is None else np.asarray(lifted_from)
     pos = fingertip_positions(contacts, np.asarray(fingers), lifted_from, r)
     for f in range(5):
