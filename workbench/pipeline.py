@@ -64,7 +64,7 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
     """Free placements, free tabletop grips, tabletop placements and grips of a stored grasp set (Section IV)."""
     import time
 
-    from .placements import free_tabletop_grips, grips_above_table, stable_placements
+    from .placements import free_tabletop_grips, stable_placements
     from .store.placements import (find_placements, find_tabletop, load_free_tabletop_grips, load_placements,
                                    save_placements, save_tabletop)
     from .tabletop import select_grasps, tabletop

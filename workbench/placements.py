@@ -13,7 +13,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-import trimesh
 from scipy.spatial import ConvexHull
 
 from .errors import WorkbenchError

@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 import time
 
-import numpy as np
 
 from ..placements import PlacementParams
 from ..tabletop import TabletopParams
