@@ -66,13 +66,14 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
 
     from .placements import free_tabletop_grips, stable_placements
     from .store.placements import (find_placements, find_tabletop, load_free_tabletop_grips, load_placements,
-                                   save_placements, save_tabletop)
+                                   save_placements, save_tabletop, tabletop_counts)
     from .tabletop import select_grasps, tabletop
 
     store = db if isinstance(db, Store) else Store(db)
     timings: dict[str, float] = {}
     try:
         reused = True
+        grasps = None
         pl_pid = find_placements(store, idobject, grasp_pid, pparams)
         if pl_pid is None:
             reused = False
@@ -88,15 +89,14 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
         ftg = load_free_tabletop_grips(store, pl_pid)
         fp_index = np.searchsorted(stored["idfreetabletopplacement"], ftg["idfreetabletopplacement"])
         tt_pid = find_tabletop(store, idobject, pl_pid, tparams)
-        n_tp = n_tg = 0
         if tt_pid is None:
             reused = False
             t0 = time.perf_counter()
             grasp_ids = np.unique(ftg["idfreeairgrip"])
             usable = np.zeros((len(stored["stability"]), len(grasp_ids)), dtype=bool)
             usable[fp_index, np.searchsorted(grasp_ids, ftg["idfreeairgrip"])] = True
-            grasp_rows = load_grasps(store, idobject, grasp_pid)
-            poses = grasp_rows["rotmat"][np.searchsorted(grasp_rows["idfreeairgrip"], grasp_ids)]
+            grasps = load_grasps(store, idobject, grasp_pid) if grasps is None else grasps
+            poses = grasps["rotmat"][np.searchsorted(grasps["idfreeairgrip"], grasp_ids)]
             chosen = grasp_ids[select_grasps(poses, usable, tparams.max_grasps)]
             keep = np.isin(ftg["idfreeairgrip"], chosen)
             tt = tabletop(stored["rotmat"], fp_index, ftg["rotmat"], keep, tparams)
@@ -104,9 +104,7 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
             t0 = time.perf_counter()
             tt_pid = save_tabletop(store, idobject, pl_pid, tparams, tt, ftg, stored["idfreetabletopplacement"])
             timings["write_tabletop"] = time.perf_counter() - t0
-        n_tp, n_tg = store.one(
-            "SELECT count(DISTINCT p.idtabletopplacements), count(g.idtabletopgrips) FROM tabletopplacements p "
-            "LEFT JOIN tabletopgrips g USING (idtabletopplacements) WHERE p.idparamset = ?", [tt_pid])
+        n_tp, n_tg = tabletop_counts(store, tt_pid)
         return PlacementsResult(idplacements=pl_pid, idtabletop=tt_pid, reused=reused, placements=stored,
                                 n_free_grips=np.bincount(fp_index, minlength=len(stored["stability"])),
                                 n_tabletop_placements=int(n_tp), n_tabletop_grips=int(n_tg), timings=timings)

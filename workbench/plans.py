@@ -151,7 +151,8 @@ def _list(a: Any) -> Any:
     return np.asarray(a, dtype=np.float64).tolist()
 
 
-def _inv(m: np.ndarray) -> np.ndarray:
+def inverse_pose(m: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform."""
     out = np.eye(4)
     out[:3, :3] = m[:3, :3].T
     out[:3, 3] = -m[:3, :3].T @ m[:3, 3]
@@ -163,7 +164,7 @@ def step_from_side(kind: str, side, k: int) -> PlanStep:
     q = side.joints[k]
     return PlanStep(kind=kind, idfreeairgrip=int(side.grasp[k]), idfreetabletopplacement=int(side.query.idfreetabletopplacement),
                     position=np.array([side.query.x, side.query.y, 0.0]), yaw=float(side.query.yaw), object_pose=side.pose.copy(),
-                    tcp=side.tcp[k].copy(), grasp=_inv(side.pose) @ side.tcp[k], jawwidth=float(side.jawwidth[k]),
+                    tcp=side.tcp[k].copy(), grasp=inverse_pose(side.pose) @ side.tcp[k], jawwidth=float(side.jawwidth[k]),
                     q_approach=q[1].copy(), q_grasp=q[0].copy(), q_retract=q[2].copy())
 
 
@@ -172,7 +173,7 @@ def step_from_node(kind: str, roadmap, a: int) -> PlanStep:
     q = roadmap.joints[a]
     return PlanStep(kind=kind, idfreeairgrip=int(roadmap.idfreeairgrip[a]), idfreetabletopplacement=int(roadmap.idfreetabletopplacement[a]),
                     position=roadmap.position[a].copy(), yaw=float(roadmap.yaw[a]), object_pose=roadmap.placement[a].copy(),
-                    tcp=roadmap.tcp[a].copy(), grasp=_inv(roadmap.placement[a]) @ roadmap.tcp[a], jawwidth=float(roadmap.jawwidth[a]),
+                    tcp=roadmap.tcp[a].copy(), grasp=inverse_pose(roadmap.placement[a]) @ roadmap.tcp[a], jawwidth=float(roadmap.jawwidth[a]),
                     q_approach=q[1].copy(), q_grasp=q[0].copy(), q_retract=q[2].copy(),
                     idtabletopgrips=int(roadmap.idtabletopgrips[a]), idtabletopplacements=int(roadmap.idtabletopplacements[a]))
 

@@ -37,6 +37,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components, shortest_path
 
 from .errors import PlanningError
+from .tabletop import yaw
 
 if TYPE_CHECKING:  # pragma: no cover
     import trimesh
@@ -237,14 +238,6 @@ def build_roadmap(rows: dict[str, np.ndarray], feasible: np.ndarray | None = Non
 # Start and goal poses.
 
 
-def yaw_matrix(theta: float) -> np.ndarray:
-    """4x4 rotation about world z."""
-    c, s = math.cos(theta), math.sin(theta)
-    out = np.eye(4)
-    out[:2, :2] = [[c, -s], [s, c]]
-    return out
-
-
 @dataclass(frozen=True)
 class PoseQuery:
     """An object pose on the table: stable placement `idfreetabletopplacement` moved to (x, y) and turned by `yaw`
@@ -257,7 +250,7 @@ class PoseQuery:
 
     def move(self) -> np.ndarray:
         """The planar move applied to the free placement."""
-        m = yaw_matrix(self.yaw)
+        m = yaw(self.yaw)
         m[:2, 3] = (self.x, self.y)
         return m
 
@@ -316,7 +309,7 @@ def match_pose(pose: np.ndarray, free_ids: np.ndarray, free_poses: np.ndarray, l
     f = free_poses[k]
     m = r @ f[:3, :3].T
     theta = math.atan2(m[1, 0], m[0, 0])
-    xy = pose[:2, 3] - (yaw_matrix(theta)[:3, :3] @ f[:3, 3])[:2]
+    xy = pose[:2, 3] - (yaw(theta)[:3, :3] @ f[:3, 3])[:2]
     return PoseQuery(int(free_ids[k]), float(xy[0]), float(xy[1]), float(theta))
 
 
@@ -854,14 +847,16 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
     from .store.objects import get_object
     from .store.placements import latest_tabletop_paramset, load_free_tabletop_grips, load_placements
     from .store import plans as sql
-    from .store.robots import ikret_row, robot_row, scene_row
+    from .store.robots import ik_runs, ikret_row, robot_row, scene_row
 
     store = db if isinstance(db, Store) else Store(db)
     try:
         oid, obj = get_object(store, object_name)
         tt = latest_tabletop_paramset(store, oid) if idtabletop is None else int(idtabletop)
         rrow = robot_row(store, robot_name)
-        runs = sql.ik_runs(store, tt, rrow["idrobot"])
+        # the run with the most rows (then the newest) first: (idscene, idikret)
+        runs = [(int(r["idscene"]), int(r["idikret"])) for r in
+                sorted(ik_runs(store, idtabletop=tt, idrobot=rrow["idrobot"]), key=lambda r: (-r["rows"], -r["last"]))]
         if handx is not None or worldz is not None:
             runs = [r for r in runs if _ret_match(ikret_row(store, r[1]), handx, worldz)]
         if idscene is not None:

@@ -144,7 +144,7 @@ def synthetic_store(db, name: str = "box", **kwargs) -> tuple[int, int]:
         obj = from_trimesh(mesh, name)
         oid = put_object(store, obj)
         with store.transaction():
-            from ..store.placements import TABLETOP_STAGE
+            from ..store.placements import TABLETOP_STAGE, angle_ids
 
             params = {"synthetic": "box", "kwargs": {k: np.asarray(v).tolist() for k, v in kwargs.items()}}
             pid, existed = store.paramset(TABLETOP_STAGE, params, oid)
@@ -166,21 +166,7 @@ def synthetic_store(db, name: str = "box", **kwargs) -> tuple[int, int]:
             store.insert("freetabletopplacement", {
                 "idfreetabletopplacement": ftp0 + np.arange(len(pl)), "idobject": np.full(len(pl), oid),
                 "idparamset": np.full(len(pl), pid), "rotmat": pl.reshape(len(pl), 16), "stability": np.ones(len(pl))})
-            existing = store.query_arrays("SELECT idangle, value FROM angle")
-            ang_ids = []
-            nxt = store.next_id("angle", "idangle")
-            new_ids, new_vals = [], []
-            for a in t["angles"]:
-                hit = np.nonzero(np.abs(existing["value"] - a) < 1e-12)[0] if len(existing["value"]) else []
-                if len(hit):
-                    ang_ids.append(int(existing["idangle"][hit[0]]))
-                else:
-                    ang_ids.append(nxt)
-                    new_ids.append(nxt)
-                    new_vals.append(a)
-                    nxt += 1
-            store.insert("angle", {"idangle": np.array(new_ids, dtype=np.int64), "value": np.array(new_vals, dtype=float)})
-            ang_ids = np.array(ang_ids)
+            ang_ids = angle_ids(store, t["angles"])
             tp0 = store.next_id("tabletopplacements", "idtabletopplacements")
             ntp = len(t["tp_rot"])
             store.insert("tabletopplacements", {

@@ -91,6 +91,11 @@ class Store:
         _check_name(column)
         return int(self.one(f"SELECT coalesce(max({column}), 0) + 1 FROM {table}")[0])
 
+    def new_ids(self, table: str, n: int) -> np.ndarray:
+        """`n` fresh ids for `table` (its `id<table>` column), allocated inside the caller's transaction."""
+        first = self.next_id(table, f"id{table}")
+        return np.arange(first, first + n, dtype=np.int64)
+
     def insert(self, table: str, columns: dict[str, Any]) -> int:
         """Bulk-insert columns (numpy arrays; (N, k) float arrays become DOUBLE[k]) through Arrow; returns the row count."""
         _check_name(table)

@@ -63,10 +63,9 @@ def _put_contacts(store: Store, pid: int, idobject: int, cs: ContactSet) -> None
                       "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                       [mid, idobject, pid, len(cs.mesh.faces), cs.mesh.vertices.tolist(), cs.mesh.faces.tolist(),
                        cs.com.tolist(), cs.radius])
-    base = store.next_id("fingercontact", "idfingercontact")
     n = len(cs)
     store.insert("fingercontact", {
-        "idfingercontact": base + np.arange(n, dtype=np.int64),
+        "idfingercontact": store.new_ids("fingercontact", n),
         "idfingermesh": np.full(n, mid, dtype=np.int64),
         "idparamset": np.full(n, pid, dtype=np.int64),
         "idx": cs.face.astype(np.int32),
@@ -117,40 +116,38 @@ def _put_roadmap(store: Store, pid: int, idobject: int, idcontacts: int, planner
                       [rid, pid, idobject, idcontacts, cl.sigma, len(rm), len(rm.edges), rm.ncomponents,
                        planner.times.get("clustering", 0.0), planner.times.get("roadmap", 0.0)])
     k, n = cl.k, len(cl.labels)
-    cbase = store.next_id("fingercluster", "idfingercluster")
+    cluster_ids = store.new_ids("fingercluster", k)
     store.insert("fingercluster", {
-        "idfingercluster": cbase + np.arange(k, dtype=np.int64),
+        "idfingercluster": cluster_ids,
         "idparamset": np.full(k, pid, dtype=np.int64),
         "label": np.arange(k, dtype=np.int32),
         "idrepresentative": ids.to_ids(cl.reps),
         "center": _lists(cl.centers),
         "size": np.bincount(cl.labels, minlength=k).astype(np.int32),
     })
-    mbase = store.next_id("fingermember", "idfingermember")
     store.insert("fingermember", {
-        "idfingermember": mbase + np.arange(n, dtype=np.int64),
+        "idfingermember": store.new_ids("fingermember", n),
         "idparamset": np.full(n, pid, dtype=np.int64),
         "idfingercontact": ids.ids,
-        "idfingercluster": cbase + cl.labels,
+        "idfingercluster": cluster_ids[cl.labels],
         "embedding": _lists(cl.embedding),
         "distances": _lists(cl.E),
     })
     v = len(rm)
-    gbase = store.next_id("fingergrasp", "idfingergrasp")
+    grasp_ids = store.new_ids("fingergrasp", v)
     cid = ids.to_ids(rm.grasps) if v else np.zeros((0, 4), dtype=np.int64)
     store.insert("fingergrasp", {
-        "idfingergrasp": gbase + np.arange(v, dtype=np.int64),
+        "idfingergrasp": grasp_ids,
         "idparamset": np.full(v, pid, dtype=np.int64),
         **{f"idcontact{i}": cid[:, i] for i in range(4)},
         "component": rm.components.astype(np.int32),
     })
     e = len(rm.edges)
-    ebase = store.next_id("fingeredge", "idfingeredge")
     store.insert("fingeredge", {
-        "idfingeredge": ebase + np.arange(e, dtype=np.int64),
+        "idfingeredge": store.new_ids("fingeredge", e),
         "idparamset": np.full(e, pid, dtype=np.int64),
-        "idfingergrasp0": gbase + rm.edges[:, 0],
-        "idfingergrasp1": gbase + rm.edges[:, 1],
+        "idfingergrasp0": grasp_ids[rm.edges[:, 0]],
+        "idfingergrasp1": grasp_ids[rm.edges[:, 1]],
         "idlifted": ids.to_ids(rm.moves[:, 0]) if e else np.zeros(0, dtype=np.int64),
         "idplaced": ids.to_ids(rm.moves[:, 1]) if e else np.zeros(0, dtype=np.int64),
     })
@@ -231,10 +228,9 @@ def _put_queries(store: Store, pid: int, idroadmap: int, ids: ContactIds, st: Lo
         return
     import pyarrow as pa
 
-    base = store.next_id("fingerquery", "idfingerquery")
     seqs = [None if r.sequence is None else ids.to_ids(r.sequence).tolist() for r in q]
     store.insert("fingerquery", {
-        "idfingerquery": base + np.arange(len(q), dtype=np.int64),
+        "idfingerquery": store.new_ids("fingerquery", len(q)),
         "idparamset": np.full(len(q), pid, dtype=np.int64),
         "idroadmap": np.full(len(q), idroadmap, dtype=np.int64),
         "seq": np.arange(len(q), dtype=np.int32),

@@ -29,10 +29,9 @@ def save_grasps(store: Store, idobject: int, gripper: Gripper, params: GraspPara
         if existed:
             return pid, True
         gid = put_gripper(store, gripper)
-        first = store.next_id("freeairgrip", "idfreeairgrip")
         n = len(grasps)
         store.insert("freeairgrip", {
-            "idfreeairgrip": np.arange(first, first + n, dtype=np.int64),
+            "idfreeairgrip": store.new_ids("freeairgrip", n),
             "idobject": np.full(n, idobject, dtype=np.int64),
             "idparamset": np.full(n, pid, dtype=np.int64),
             "idgripper": np.full(n, gid, dtype=np.int64),

@@ -14,11 +14,6 @@ PLACEMENT_STAGE = "placements"
 TABLETOP_STAGE = "tabletop"
 
 
-def _ids(store: Store, table: str, n: int) -> np.ndarray:
-    first = store.next_id(table, f"id{table}")
-    return np.arange(first, first + n, dtype=np.int64)
-
-
 def _apply(poses: np.ndarray, points: np.ndarray) -> np.ndarray:
     return np.einsum("nij,nj->ni", poses[:, :3, :3], points) + poses[:, :3, 3]
 
@@ -42,7 +37,7 @@ def save_placements(store: Store, idobject: int, grasp_pid: int, params: Placeme
         if existed:
             return pid
         n = len(placements)
-        fp_ids = _ids(store, "freetabletopplacement", n)
+        fp_ids = store.new_ids("freetabletopplacement", n)
         store.insert("freetabletopplacement", {
             "idfreetabletopplacement": fp_ids, "idobject": np.full(n, idobject, dtype=np.int64),
             "idparamset": np.full(n, pid, dtype=np.int64), "rotmat": placements.poses, "stability": placements.stability,
@@ -51,7 +46,7 @@ def save_placements(store: Store, idobject: int, grasp_pid: int, params: Placeme
         p_idx, g_idx, poses = ftg
         place = placements.poses[p_idx]
         store.insert("freetabletopgrip", {
-            "idfreetabletopgrip": _ids(store, "freetabletopgrip", len(p_idx)),
+            "idfreetabletopgrip": store.new_ids("freetabletopgrip", len(p_idx)),
             "idfreetabletopplacement": fp_ids[p_idx], "idfreeairgrip": grasps["idfreeairgrip"][g_idx],
             "contactpoint0": _apply(place, grasps["contactpoint0"][g_idx]),
             "contactpoint1": _apply(place, grasps["contactpoint1"][g_idx]),
@@ -109,7 +104,7 @@ def save_tabletop(store: Store, idobject: int, idplacements: int, params: Tablet
         if existed:
             return pid
         aids = angle_ids(store, params.angle_values())
-        tp_ids = _ids(store, "tabletopplacements", len(tt.placement))
+        tp_ids = store.new_ids("tabletopplacements", len(tt.placement))
         store.insert("tabletopplacements", {
             "idtabletopplacements": tp_ids, "idfreetabletopplacement": fp_ids[tt.placement], "idangle": aids[tt.angle],
             "idparamset": np.full(len(tp_ids), pid, dtype=np.int64), "tabletopposition": tt.position, "rotmat": tt.poses,
@@ -118,7 +113,7 @@ def save_tabletop(store: Store, idobject: int, idplacements: int, params: Tablet
         m = tt.moves[tt.grip_tp]
         g = tt.grip_ftg
         store.insert("tabletopgrips", {
-            "idtabletopgrips": _ids(store, "tabletopgrips", len(g)), "idtabletopplacements": tp_ids[tt.grip_tp],
+            "idtabletopgrips": store.new_ids("tabletopgrips", len(g)), "idtabletopplacements": tp_ids[tt.grip_tp],
             "idfreeairgrip": ftg["idfreeairgrip"][g], "idfreetabletopgrip": ftg["idfreetabletopgrip"][g],
             "contactpoint0": _apply(m, ftg["contactpoint0"][g]), "contactpoint1": _apply(m, ftg["contactpoint1"][g]),
             "contactnormal0": _rotate(m, ftg["contactnormal0"][g]), "contactnormal1": _rotate(m, ftg["contactnormal1"][g]),
@@ -159,3 +154,11 @@ def load_tabletop_placements(store: Store, idparamset: int) -> dict[str, np.ndar
         [idparamset])
     out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
     return out
+
+
+def tabletop_counts(store: Store, idtabletop: int) -> tuple[int, int]:
+    """(tabletop placements, tabletop grips) of a tabletop parameter set."""
+    n_tp, n_tg = store.one(
+        "SELECT count(DISTINCT p.idtabletopplacements), count(g.idtabletopgrips) FROM tabletopplacements p "
+        "LEFT JOIN tabletopgrips g USING (idtabletopplacements) WHERE p.idparamset = ?", [idtabletop])
+    return int(n_tp), int(n_tg)

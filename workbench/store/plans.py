@@ -35,17 +35,6 @@ def list_column(table: pa.Table, name: str, width: int) -> np.ndarray:
     return out
 
 
-def ik_runs(store: Store, idtabletop: int, idrobot: int) -> list[tuple[int, int, int, int]]:
-    """(idscene, idikret, rows, feasible rows) of the IK runs stored for a tabletop parameter set and a robot, the
-    run with the most rows (then the newest) first."""
-    rows = store.run(
-        "SELECT k.idscene, k.idikret, count(*) AS n, count(*) FILTER (WHERE k.feasibility AND k.feasibility_handx "
-        "AND k.feasibility_handxworldz) AS f, max(k.idik) AS last "
-        "FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements p USING (idtabletopplacements) "
-        "WHERE p.idparamset = ? AND k.idrobot = ? GROUP BY k.idscene, k.idikret ORDER BY n DESC, last DESC", [idtabletop, idrobot])
-    return [(int(a), int(b), int(c), int(d)) for a, b, c, d, _ in rows]
-
-
 def count_grips(store: Store, idtabletop: int) -> int:
     row = store.one("SELECT count(*) FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) "
                     "WHERE p.idparamset = ?", [idtabletop])
@@ -120,8 +109,7 @@ def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray]) 
         cols = ["idplan", *plan.keys()]
         store.run(f"INSERT INTO plan ({', '.join(cols)}) VALUES ({', '.join('?' for _ in cols)})", [pid, *plan.values()])
         n = len(steps["seq"])
-        first = store.next_id("planstep", "idplanstep")
-        store.insert("planstep", {"idplanstep": np.arange(first, first + n, dtype=np.int64),
+        store.insert("planstep", {"idplanstep": store.new_ids("planstep", n),
                                   "idplan": np.full(n, pid, dtype=np.int64), **steps})
     return pid
 

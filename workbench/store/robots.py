@@ -108,9 +108,8 @@ def insert_ik(store: Store, idrobot: int, idscene: int, idikret: int, grip_ids: 
     if n == 0:
         return 0
     with store.transaction():
-        first = store.next_id("ik", "idik")
         store.insert("ik", {
-            "idik": np.arange(first, first + n, dtype=np.int64), "idrobot": np.full(n, idrobot, dtype=np.int64),
+            "idik": store.new_ids("ik", n), "idrobot": np.full(n, idrobot, dtype=np.int64),
             "idtabletopgrips": grip_ids, "idikret": np.full(n, idikret, dtype=np.int64),
             "idscene": np.full(n, idscene, dtype=np.int64), "feasibility": feasible[:, 0],
             "feasibility_handx": feasible[:, 1], "feasibility_handxworldz": feasible[:, 2],
@@ -203,18 +202,22 @@ def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: in
     return out
 
 
-def ik_runs(store: Store, idobject: int | None = None) -> list[dict[str, Any]]:
-    """Stored IK runs: idrobot, robot name, idscene, idikret, handx, worldz, rows and feasible counts (grasp, all three)."""
+def ik_runs(store: Store, idobject: int | None = None, idtabletop: int | None = None,
+            idrobot: int | None = None) -> list[dict[str, Any]]:
+    """Stored IK runs, optionally of one object, tabletop parameter set and robot: idrobot, robot name, idscene,
+    idikret, handx, worldz, rows, feasible counts (grasp, all three) and the newest idik (`last`)."""
     sql = ("SELECT k.idrobot, r.name, k.idscene, k.idikret, i.handx, i.worldz, count(*) AS n, "
            "count(*) FILTER (WHERE k.feasibility) AS f0, "
-           "count(*) FILTER (WHERE k.feasibility AND k.feasibility_handx AND k.feasibility_handxworldz) AS f3 "
+           "count(*) FILTER (WHERE k.feasibility AND k.feasibility_handx AND k.feasibility_handxworldz) AS f3, "
+           "max(k.idik) AS last "
            "FROM ik k JOIN robot r USING (idrobot) JOIN ikret i USING (idikret) "
            "JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements p USING (idtabletopplacements) "
-           "JOIN freetabletopplacement f USING (idfreetabletopplacement)")
+           "JOIN freetabletopplacement f USING (idfreetabletopplacement) WHERE true")
     params: list[Any] = []
-    if idobject is not None:
-        sql += " WHERE f.idobject = ?"
-        params.append(idobject)
+    for column, value in (("f.idobject", idobject), ("p.idparamset", idtabletop), ("k.idrobot", idrobot)):
+        if value is not None:
+            sql += f" AND {column} = ?"
+            params.append(int(value))
     sql += " GROUP BY k.idrobot, r.name, k.idscene, k.idikret, i.handx, i.worldz ORDER BY k.idrobot, k.idscene, k.idikret"
-    keys = ("idrobot", "robot", "idscene", "idikret", "handx", "worldz", "rows", "feasible", "feasible_all")
+    keys = ("idrobot", "robot", "idscene", "idikret", "handx", "worldz", "rows", "feasible", "feasible_all", "last")
     return [dict(zip(keys, r)) for r in store.run(sql, params)]

@@ -17,16 +17,10 @@ import meshcat.animation as manim
 import numpy as np
 import trimesh
 
+from ..plans import inverse_pose
 from . import frame_camera, new_scene, show_mesh, static_html
 
 OBJECT_COLOR, START_COLOR, GOAL_COLOR, TABLE_COLOR = 0xE0A030, 0xF0D040, 0x3366DD, 0x8B6B4A
-
-
-def _inv(m: np.ndarray) -> np.ndarray:
-    out = np.eye(4)
-    out[:3, :3] = m[:3, :3].T
-    out[:3, 3] = -m[:3, :3].T @ m[:3, 3]
-    return out
 
 
 def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int = 5, jaw_open: float = 0.08) -> list[dict]:
@@ -90,7 +84,7 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
     for i, fr in enumerate(frames):
         poses = view.poses(fr["q"], fr["jaw"])
         tcp = robot.tcp_pose(fr["q"])
-        obj_pose = tcp @ _inv(fr["grasp"]) if fr["held"] else fr["rest"]
+        obj_pose = tcp @ inverse_pose(fr["grasp"]) if fr["held"] else fr["rest"]
         with anim.at_frame(vis, i) as f:
             for name, m in poses.items():
                 f[name].set_transform(m)
