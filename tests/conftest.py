@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from workbench.gripper import franka_hand
-from workbench.objects import MeshWarning, from_trimesh, load_object
+from workbench.geometry.objects import MeshWarning, from_trimesh, load_object
 from workbench.resources import bundled_objects, paper_objects
+from workbench.robots.gripper import franka_hand
 
 
 @pytest.fixture(scope="session")

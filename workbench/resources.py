@@ -6,7 +6,7 @@ import importlib.metadata
 import os
 from pathlib import Path
 
-from .errors import WorkbenchError
+from workbench.errors import WorkbenchError
 
 ASSETS = Path(__file__).resolve().parent.parent / "assets"
 OBJECTS_DIR = ASSETS / "objects"

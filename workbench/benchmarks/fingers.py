@@ -12,10 +12,16 @@ import time
 
 import numpy as np
 
-from ..clustering import ClusterParams
-from ..contacts import ContactParams, contact_points
-from ..fingergaits import build_planner, local_planning_stats, random_queries, sample_grasps
-from . import print_table
+from workbench.benchmarks import print_table
+from workbench.benchmarks.paper import bench_objects
+from workbench.planners.phoka_sudsang.clustering import ClusterParams
+from workbench.planners.phoka_sudsang.contacts import ContactParams, contact_points
+from workbench.planners.phoka_sudsang.experiments import (
+    local_planning_stats,
+    random_queries,
+    sample_grasps,
+)
+from workbench.planners.phoka_sudsang.switching import build_planner
 
 # Phoka & Sudsang, Tables I-III, rows (a)-(f) (2.4 GHz PC)
 PAPER_I = [(25160, 1, 38.98), (6602, 5, 9.95), (2148, 13, 4.02), (2571, 15, 4.80), (2372, 21, 4.38), (19317, 1, 28.85)]
@@ -41,7 +47,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from .paper import bench_objects
 
     objects = [(label, obj) for label, _, obj in bench_objects(args.objects)][:6]
     params = ClusterParams(k=args.clusters, mu=args.friction, sides=args.pyramid, seed=args.seed)

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from ..grasps import GraspParams, plan_grasps
-from ..gripper import franka_hand
-from . import median_time, print_table
-from .paper import TABLE_I, bench_objects
+from workbench.benchmarks import median_time, print_table
+from workbench.benchmarks.paper import TABLE_I, bench_objects
+from workbench.grasping.grasps import GraspParams, plan_grasps
+from workbench.robots.gripper import franka_hand
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

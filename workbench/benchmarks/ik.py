@@ -11,12 +11,23 @@ a real store before any grasp planning.
 from __future__ import annotations
 
 import argparse
+import statistics
 import time
 
 import numpy as np
 import trimesh
+from scipy.spatial.transform import Rotation
 
-from . import print_table
+from workbench.benchmarks import print_table
+from workbench.geometry.objects import from_trimesh
+from workbench.robots import ik as kinematics
+from workbench.robots.collider import default_scene
+from workbench.robots.gripper import franka_hand
+from workbench.robots.ik import IKOptions, ik_feasibility
+from workbench.robots.model import get_robot
+from workbench.store import Store
+from workbench.store.objects import put_gripper, put_object
+from workbench.store.placements import TABLETOP_STAGE, angle_ids
 
 PAPER_ROWS = [  # obj, #-tpg, t-tpgikn (Nextage), t-tpgikh (HRP5P)
     ("TU", 18648, 1746.67, 1692.74), ("PB", 168, 4025.69, 4069.84), ("PW", 27048, 2200.94, 2346.49),
@@ -28,7 +39,6 @@ BOX = (0.04, 0.06, 0.12)
 
 
 def _rot(axis: np.ndarray, angle: float) -> np.ndarray:
-    from scipy.spatial.transform import Rotation
 
     out = np.eye(4)
     out[:3, :3] = Rotation.from_rotvec(np.asarray(axis, dtype=float) * angle).as_matrix()
@@ -82,7 +92,6 @@ def synthetic_grips(extents: tuple[float, float, float] = BOX, xs: np.ndarray = 
                     ) -> tuple[dict[str, np.ndarray], trimesh.Trimesh, dict[str, np.ndarray]]:
     """Tabletop grips of a box in the placements contract's format, the box mesh, and the free tables
     (grasps, placements, free tabletop grips) for `synthetic_store`."""
-    from ..gripper import franka_hand
 
     mesh = trimesh.creation.box(extents=extents)
     grasps, widths = box_grasps(extents, approaches, offsets)
@@ -133,10 +142,6 @@ def synthetic_grips(extents: tuple[float, float, float] = BOX, xs: np.ndarray = 
 def synthetic_store(db, name: str = "box", **kwargs) -> tuple[int, int]:
     """Write the synthetic box, its grasps, placements and tabletop grips into the store `db` (a path or Store);
     returns (idobject, idparamset of the tabletop placements). Reuses what is stored under `name`."""
-    from ..gripper import franka_hand
-    from ..objects import from_trimesh
-    from ..store import Store
-    from ..store.objects import put_gripper, put_object
 
     store = db if isinstance(db, Store) else Store(db)
     try:
@@ -144,7 +149,6 @@ def synthetic_store(db, name: str = "box", **kwargs) -> tuple[int, int]:
         obj = from_trimesh(mesh, name)
         oid = put_object(store, obj)
         with store.transaction():
-            from ..store.placements import TABLETOP_STAGE, angle_ids
 
             params = {"synthetic": "box", "kwargs": {k: np.asarray(v).tolist() for k, v in kwargs.items()}}
             pid, existed = store.paramset(TABLETOP_STAGE, params, oid)
@@ -209,11 +213,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    import statistics
 
-    from .. import kinematics
-    from ..kinematics import IKOptions, default_scene, ik_feasibility
-    from ..robots import get_robot
 
     grips, mesh = benchmark_grips(args.grips)
     n = len(grips["rotmat"])

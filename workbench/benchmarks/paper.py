@@ -1,3 +1,6 @@
+from workbench.geometry.objects import load_object
+from workbench.resources import bundled_objects, paper_objects
+
 """Table I of Wan & Harada ("Regrasp Planning using 10,000s of Grasps"), the numbers to beat."""
 
 TABLE_I = {
@@ -18,8 +21,6 @@ def bench_objects(which: str = "all"):
     """(label, Table I row, loaded object) for the bundled objects and the paper's objects when present."""
     import warnings
 
-    from ..objects import load_object
-    from ..resources import bundled_objects, paper_objects
 
     out = []
     with warnings.catch_warnings():

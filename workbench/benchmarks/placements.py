@@ -7,15 +7,19 @@ import tempfile
 import time
 from pathlib import Path
 
-from ..grasps import GraspParams
-from ..gripper import franka_hand
-from ..pipeline import ensure_grasps, ensure_placements
-from ..placements import PlacementParams, free_tabletop_grips, stable_placements
-from ..store import Store
-from ..store.grasps import load_grasps
-from ..tabletop import TabletopParams, paper_grid
-from . import median_time, print_table
-from .paper import TABLE_I, bench_objects
+from workbench.benchmarks import median_time, print_table
+from workbench.benchmarks.paper import TABLE_I, bench_objects
+from workbench.grasping.grasps import GraspParams
+from workbench.grasping.placements import (
+    PlacementParams,
+    free_tabletop_grips,
+    stable_placements,
+)
+from workbench.planners.wan_harada.stages import ensure_grasps, ensure_placements
+from workbench.planners.wan_harada.tabletop import TabletopParams, paper_grid
+from workbench.robots.gripper import franka_hand
+from workbench.store import Store
+from workbench.store.grasps import load_grasps
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -18,8 +18,17 @@ from pathlib import Path
 
 import numpy as np
 
-from . import print_table
-from .paper import BUNDLED_ROW, TABLE_I
+from workbench.benchmarks import print_table
+from workbench.benchmarks.paper import BUNDLED_ROW, TABLE_I
+from workbench.errors import PlanningError, WorkbenchError
+from workbench.geometry.objects import load_object
+from workbench.planners.wan_harada.plans import make_plan
+from workbench.planners.wan_harada.query import PoseQuery
+from workbench.planners.wan_harada.stages import build_all, load_planner
+from workbench.planners.wan_harada.tabletop import TabletopParams
+from workbench.resources import bundled_objects
+from workbench.store import Store
+from workbench.validation import validator_for
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -35,7 +44,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def random_pairs(placement_ids: list[int], grid, n: int, seed: int) -> list[tuple]:
     """`n` seeded (start, goal) PoseQuery pairs over the grid's area."""
-    from ..regrasp import PoseQuery
 
     rng = np.random.default_rng(seed)
     out = []
@@ -51,9 +59,6 @@ def random_pairs(placement_ids: list[int], grid, n: int, seed: int) -> list[tupl
 def bench_pairs(planner, pairs: list[tuple], alternatives: int = 2) -> dict:
     """gs (s) and regrasps per solved pair, outcome counts (solved; nogrip: a placement with no grasp clearing the
     table; unreachable: no IK-feasible grip at the start or goal; unconnected) and plans failing validation."""
-    from ..errors import PlanningError
-    from ..plans import make_plan
-    from ..validate import validator_for
 
     checker = validator_for(planner)
     gs, nr = [], []
@@ -75,18 +80,11 @@ def bench_pairs(planner, pairs: list[tuple], alternatives: int = 2) -> dict:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..objects import load_object
-    from ..regrasp import load_planner
-    from ..resources import bundled_objects
-    from ..store import Store
-    from ..tabletop import TabletopParams
-    from ..commands.build import build_all
 
     objs = bundled_objects()
     names = [n.strip() for n in args.objects.split(",") if n.strip()]
     unknown = [n for n in names if n not in objs]
     if unknown:
-        from ..errors import WorkbenchError
 
         raise WorkbenchError(f"unknown bundled objects {unknown}; use some of {', '.join(objs)}")
     grid = TabletopParams()

@@ -19,8 +19,8 @@ import duckdb
 import numpy as np
 import pyarrow as pa
 
-from ..errors import StoreError
-from .schema import ALL_TABLES, MIGRATIONS
+from workbench.errors import StoreError
+from workbench.store.schema import ALL_TABLES, MIGRATIONS
 
 
 class Store:

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import StoreError
-from ..gripper import Gripper
-from ..grasps import GraspParams, GraspSet
-from . import Store
-from .objects import gripper_digest, put_gripper
+from workbench.errors import StoreError
+from workbench.grasping.grasps import GraspParams, GraspSet
+from workbench.robots.gripper import Gripper
+from workbench.store import Store
+from workbench.store.objects import gripper_digest, put_gripper
 
 STAGE = "grasps"
 

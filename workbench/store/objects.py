@@ -6,10 +6,10 @@ import hashlib
 
 import numpy as np
 
-from ..errors import StoreError
-from ..gripper import Gripper
-from ..objects import ObjectModel, from_arrays
-from . import Store
+from workbench.errors import StoreError
+from workbench.geometry.objects import ObjectModel
+from workbench.robots.gripper import Gripper
+from workbench.store import Store
 
 
 def put_object(store: Store, obj: ObjectModel) -> int:
@@ -40,14 +40,12 @@ def object_id(store: Store, name: str) -> int:
     return int(row[0])
 
 
-def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
-    """The stored object `name` rebuilt as an ObjectModel (mesh in metres, stored centre of mass)."""
+def object_row(store: Store, name: str) -> tuple[int, dict]:
+    """The stored object `name`: its id and its row (source, scale, com, com_method, vertices, faces, digest)."""
     oid = object_id(store, name)
-    src, scale, com, method, verts, faces = store.one(
-        "SELECT source, scale, com, com_method, vertices, faces FROM object WHERE idobject = ?", [oid])
-    obj = from_arrays(np.asarray(verts, dtype=np.float64), np.asarray(faces, dtype=np.int64), scale=1.0, name=name, source=src)
-    return oid, ObjectModel(name=name, mesh=obj.mesh, com=np.asarray(com, dtype=np.float64), com_method=method,
-                            scale=scale, source=src, digest=obj.digest)
+    cols = ("source", "scale", "com", "com_method", "vertices", "faces", "digest")
+    row = store.one(f"SELECT {', '.join(cols)} FROM object WHERE idobject = ?", [oid])
+    return oid, dict(zip(cols, row))
 
 
 def gripper_digest(gripper: Gripper) -> str:

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import StoreError
-from ..placements import PlacementParams, Placements
-from ..tabletop import Tabletop, TabletopParams
-from . import Store
+from workbench.errors import StoreError
+from workbench.grasping.placements import PlacementParams, Placements
+from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams
+from workbench.store import Store
 
 PLACEMENT_STAGE = "placements"
 TABLETOP_STAGE = "tabletop"

@@ -23,9 +23,9 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 
-from ..errors import StoreError
-from ..robots import Robot
-from . import Store
+from workbench.errors import StoreError
+from workbench.robots.model import Robot
+from workbench.store import Store, from_arrow
 
 
 def robot_digest(robot: Robot) -> str:
@@ -181,7 +181,6 @@ def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: in
         sql += " AND f.idobject = ?"
         params.append(idobject)
     table = store.con.sql(sql + " ORDER BY k.idtabletopgrips", params=params).to_arrow_table()
-    from . import from_arrow
 
     out = {c: from_arrow(table.column(c)) for c in ("idik", "idtabletopgrips", "idtabletopplacements", "idfreeairgrip",
                                                       "jawwidth", "idangle")}

@@ -1,0 +1,251 @@
+"""IK feasibility of tabletop grips (Wan & Harada Section IV: robot, ikret, ik) on a real DuckDB store.
+
+The stored rows are checked with pinocchio directly on the stored URDF text, joint names, tip frame, mount and
+base (not through workbench.robots). Grips are a small synthetic box set written through the library.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from workbench.benchmarks.ik import synthetic_grips, synthetic_store
+from workbench.cli import main as cli
+from workbench.errors import RobotError, StoreError
+from workbench.planners.wan_harada.stages import HANDX, WORLDZ, run_ik
+from workbench.resources import erd_robots
+from workbench.robots.chain import forward
+from workbench.robots.collider import Scene, default_scene
+from workbench.robots.ik import IKOptions, ik_feasibility
+from workbench.robots.model import get_robot, robot_from_urdf
+from workbench.store import Store
+from workbench.store import robots as sql
+
+SMALL = dict(xs=np.array([0.4, 0.55]), ys=np.array([-0.15, 0.15]), angles=4, approaches=4, offsets=1)
+OPTS = IKOptions(chunk=32, lane=8, library=4096)
+
+
+@pytest.fixture(scope="module")
+def panda():
+    return get_robot("panda")
+
+
+@pytest.fixture(scope="module")
+def stored(tmp_path_factory, panda):
+    """A store with the small box grips and the panda's ik rows (computed once in this process)."""
+    db = tmp_path_factory.mktemp("ik") / "ik.duckdb"
+    with Store(db) as store:
+        oid, pid = synthetic_store(store, "box", **SMALL)
+        run = run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=pid)
+    return db, run
+
+
+def _stored_check(store: Store, idrobot: int, idscene: int, idikret: int) -> tuple[float, float, int]:
+    """Max position (m) and rotation (rad) error of the stored joint vectors against the stored TCP targets, using
+    pinocchio on the stored robot row only; and the number of checked vectors."""
+    row = sql.robot_row(store, idrobot)
+    handx, worldz = sql.ikret_row(store, idikret)
+    rows = sql.load_ik(store, idrobot, idscene, idikret)
+    model = pin.buildModelFromXML(row["urdf"])
+    data = model.createData()
+    fid = model.getFrameId(row["tip_frame"])
+    idx = [model.joints[model.getJointId(n)].idx_q for n in row["joint_names"]]
+    lo, hi = model.lowerPositionLimit[idx], model.upperPositionLimit[idx]
+    worst_p = worst_r = 0.0
+    count = 0
+    for i in range(len(rows["idik"])):
+        grasp = rows["rotmat"][i]
+        targets = [grasp.copy(), grasp.copy(), grasp.copy()]
+        targets[1][:3, 3] -= handx * grasp[:3, 2]
+        targets[2][:3, 3] = targets[1][:3, 3] + np.array([0.0, 0.0, worldz])
+        for k in range(3):
+            if not rows["feasible"][i, k]:
+                assert np.isnan(rows["joints"][i, k]).all()
+                continue
+            qv = rows["joints"][i, k]
+            assert (qv >= lo - 1e-9).all() and (qv <= hi + 1e-9).all()
+            q = pin.neutral(model)
+            for name, value in row["locked"].items():  # joints outside the arm, e.g. a humanoid's other arm
+                q[model.joints[model.getJointId(name)].idx_q] = value
+            q[idx] = qv
+            pin.framesForwardKinematics(model, data, q)
+            tcp = row["base"] @ np.asarray(data.oMf[fid].homogeneous) @ row["mount"]
+            worst_p = max(worst_p, float(np.linalg.norm(tcp[:3, 3] - targets[k][:3, 3])))
+            cos = (np.trace(tcp[:3, :3].T @ targets[k][:3, :3]) - 1) / 2
+            worst_r = max(worst_r, float(np.arccos(np.clip(cos, -1, 1))))
+            count += 1
+    return worst_p, worst_r, count
+
+
+def test_stored_joints_reproduce_tcp_and_respect_limits(stored):
+    db, run = stored
+    assert run.computed == run.grips > 50
+    assert 0 < run.feasible_all <= run.feasible < run.grips  # some far or awkward grips are infeasible
+    with Store(db, read_only=True) as store:
+        dp, dr, count = _stored_check(store, run.idrobot, run.idscene, run.idikret)
+        names = sql.robot_row(store, run.idrobot)["joint_names"]
+    assert count > 100
+    assert dp < 1e-3 and dr < np.radians(0.5)
+    assert names == [f"panda_joint{i}" for i in range(1, 8)]
+
+
+def test_humanoid_rows_rebuild_from_the_robot_row(tmp_path):
+    """Talos's stored row alone (URDF text, joint names incl. the waist, locked joints, base, mount) reproduces
+    every stored TCP pose."""
+    talos = get_robot("talos")
+    with Store(tmp_path / "talos.duckdb") as store:
+        oid, pid = synthetic_store(store, "box", **SMALL)
+        run = run_ik(store, "box", talos, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=pid)
+        row = sql.robot_row(store, run.idrobot)
+        assert row["joint_names"][:2] == ["torso_1_joint", "torso_2_joint"]
+        assert row["locked"] and set(row["locked"]).isdisjoint(row["joint_names"])
+        assert row["drop_geometry"]
+        dp, dr, count = _stored_check(store, run.idrobot, run.idscene, run.idikret)
+    assert count > 20 and dp < 1e-3 and dr < np.radians(0.5)
+
+
+def test_rerun_reuses_and_interrupted_run_resumes(stored, tmp_path, panda, monkeypatch):
+    db, run = stored
+    with Store(db) as store:
+        again = run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=run.idtabletop)
+        reference = sql.load_ik(store, run.idrobot, run.idscene, run.idikret)
+    assert again.reused and again.computed == 0 and again.feasible == run.feasible
+
+    # interrupt after the first chunk is written, then resume: the same rows as the uninterrupted run
+    db2 = tmp_path / "resume.duckdb"
+    calls = {"n": 0}
+    real = sql.insert_ik
+
+    def flaky(*args, **kwargs):
+        if calls["n"] == 1:
+            raise KeyboardInterrupt
+        calls["n"] += 1
+        return real(*args, **kwargs)
+
+    with Store(db2) as store:
+        _, pid = synthetic_store(store, "box", **SMALL)
+        monkeypatch.setattr(sql, "insert_ik", flaky)
+        with pytest.raises(KeyboardInterrupt):
+            run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=pid)
+        monkeypatch.setattr(sql, "insert_ik", real)
+        runs = sql.ik_runs(store)
+        assert len(runs) == 1 and runs[0]["rows"] == OPTS.chunk  # the first chunk survived the interruption
+        resumed = run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=pid)
+        rows = sql.load_ik(store, resumed.idrobot, resumed.idscene, resumed.idikret)
+    assert resumed.computed == run.grips - OPTS.chunk
+    np.testing.assert_array_equal(rows["idtabletopgrips"], reference["idtabletopgrips"])
+    np.testing.assert_array_equal(rows["feasible"], reference["feasible"])
+    np.testing.assert_array_equal(rows["joints"], reference["joints"])
+
+
+def test_same_inputs_same_rows_with_more_workers(panda):
+    grips, mesh, _ = synthetic_grips(**SMALL)
+    scene = default_scene("panda")
+    one = ik_feasibility(panda, grips, scene, HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
+    two = ik_feasibility(panda, grips, scene, HANDX, WORLDZ, mesh, OPTS, workers=2, progress=False)
+    np.testing.assert_array_equal(one.feasible, two.feasible)
+    np.testing.assert_array_equal(one.joints, two.joints)
+
+
+def _single(pose: np.ndarray) -> dict[str, np.ndarray]:
+    place = np.eye(4)
+    place[:3, 3] = pose[:3, 3] - np.array([0, 0, 0.02])
+    return {"idtabletopgrips": np.array([1]), "idfreeairgrip": np.array([1]), "rotmat": pose[None],
+            "placement_rotmat": place[None], "tabletopposition": place[None, :3, 3].copy(), "jawwidth": np.array([0.04])}
+
+
+def test_pose_far_outside_the_workspace_is_infeasible(panda):
+    far = np.eye(4)
+    far[:3, 3] = (3.0, 0.0, 0.3)
+    res = ik_feasibility(panda, _single(far), default_scene("panda"), HANDX, WORLDZ, None, OPTS, workers=1, progress=False)
+    assert not res.feasible.any()
+    assert np.isnan(res.joints).all()
+
+
+def test_grip_that_puts_the_arm_through_the_table_is_infeasible(panda):
+    # TCP 5 cm above the table, approaching straight up from below: the hand and wrist are under the table top
+    up = np.eye(4)  # the TCP's z (approach) along world +z
+    up[:3, 3] = (0.45, 0.0, 0.05)
+    grips = _single(up)
+    free = ik_feasibility(panda, grips, default_scene("panda"), 0.0, 0.0, None, IKOptions(collide=False, library=4096),
+                          workers=1, progress=False)
+    assert free.feasible[0, 0], "the pose is kinematically reachable, only the table forbids it"
+    # pinocchio (not the library) confirms the arm itself, not only the hand, is below the table top there
+    model = panda.model
+    data = model.createData()
+    pin.framesForwardKinematics(model, data, free.joints[0, 0])
+    z7 = (panda.base @ np.asarray(data.oMf[model.getFrameId("panda_link7")].homogeneous))[2, 3]
+    assert z7 < 0
+    res = ik_feasibility(panda, grips, default_scene("panda"), 0.0, 0.0, None, IKOptions(library=4096), workers=1, progress=False)
+    assert not res.feasible[0, 0]
+
+
+def test_batched_forward_kinematics_matches_pinocchio():
+    for name in ("ur5", "talos"):
+        robot = get_robot(name)
+        q = np.random.default_rng(3).uniform(robot.lower, robot.upper, size=(6, robot.nq))
+        _, _, rot, pos = forward(robot, q)
+        model = pin.buildModelFromXML(robot.spec.urdf)
+        data = model.createData()
+        fid = model.getFrameId(robot.spec.tip_frame)
+        for i in range(len(q)):
+            full = pin.neutral(model)
+            for jn, v in zip(robot.joint_names, q[i]):
+                full[model.joints[model.getJointId(jn)].idx_q] = v
+            for jn, v in robot.spec.locked:
+                full[model.joints[model.getJointId(jn)].idx_q] = v
+            pin.framesForwardKinematics(model, data, full)
+            tcp = robot.base @ np.asarray(data.oMf[fid].homogeneous) @ robot.mount
+            np.testing.assert_allclose(rot[i], tcp[:3, :3], atol=1e-12)
+            np.testing.assert_allclose(pos[i], tcp[:3, 3], atol=1e-12)
+
+
+def test_humanoid_arm_includes_the_waist():
+    talos = get_robot("talos")
+    assert talos.joint_names[:2] == ("torso_1_joint", "torso_2_joint") and talos.nq == 9
+    grips, mesh, _ = synthetic_grips(xs=np.array([0.45]), ys=np.array([0.1]), angles=1, approaches=4, offsets=1)
+    res = ik_feasibility(talos, grips, default_scene("talos"), HANDX, WORLDZ, mesh, IKOptions(library=4096),
+                         workers=1, progress=False)
+    assert res.feasible[:, 0].any()
+
+
+def test_bad_robot_inputs_name_the_input(tmp_path):
+    with pytest.raises(RobotError, match="does not exist"):
+        robot_from_urdf(tmp_path / "missing.urdf", "tool0")
+    bad = tmp_path / "bad.urdf"
+    bad.write_text("<robot name='x'><link name='a'/><joint name='j' type='revolute'></robot>")
+    with pytest.raises(RobotError, match="could not be loaded"):
+        robot_from_urdf(bad, "a")
+    with pytest.raises(RobotError, match="no tip frame 'nowhere'"):
+        robot_from_urdf(erd_robots() / "ur_description" / "urdf" / "ur5_robot.urdf", "nowhere")
+    with pytest.raises(RobotError, match="NaN"):
+        get_robot("panda", base=np.full((4, 4), np.nan))
+    nan = np.eye(4)
+    nan[0, 3] = np.nan
+    with pytest.raises(RobotError, match="TCP pose 0"):
+        ik_feasibility(get_robot("panda"), _single(nan), Scene(), HANDX, WORLDZ, None, OPTS, workers=1, progress=False)
+
+
+def test_cli_runs_reuses_and_reports_bad_input_in_one_line(stored, capsys, tmp_path):
+    db, run = stored
+    assert cli.main(["ik", "--db", str(db), "--object", "box", "--robot", "panda", "--no-progress", "--workers", "1",
+                     "--tabletop", str(run.idtabletop)]) == 0
+    out = capsys.readouterr().out
+    assert "ik panda:" in out
+    assert cli.main(["ik", "--db", str(db), "--object", "box", "--robot", str(tmp_path / "nope.urdf"), "--tip", "x"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "does not exist" in err[0]
+    assert cli.main(["ik", "--db", str(db), "--object", "nothing", "--robot", "panda"]) == 2
+    assert "no object 'nothing'" in capsys.readouterr().err
+    with Store(db) as holder:  # a locked store is a one-line error, not a traceback
+        import subprocess
+        import sys
+        from pathlib import Path
+
+        proc = subprocess.run([sys.executable, "-m", "workbench.cli", "ik", "--db", str(db), "--object", "box", "--robot", "panda"],
+                              capture_output=True, text=True, timeout=120, cwd=Path(__file__).resolve().parents[2])
+        assert holder is not None
+    assert proc.returncode == 2 and "locked" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    with pytest.raises(StoreError):
+        Store(tmp_path / "missing.duckdb", read_only=True)

@@ -1,0 +1,131 @@
+"""The package's architecture (issue 9): layers, import rules and no import cycles, read from the source itself."""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import inspect
+from pathlib import Path
+
+import networkx as nx
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "workbench"
+
+
+def _modules() -> dict[str, Path]:
+    out = {}
+    for p in PACKAGE.rglob("*.py"):
+        parts = list(p.relative_to(PACKAGE.parent).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join(parts)] = p
+    return out
+
+
+MODULES = _modules()
+
+
+def _imports(path: Path) -> list[tuple[str, list[str], bool]]:
+    """(module imported, names, at module top) for every workbench import in a file."""
+    tree = ast.parse(path.read_text())
+    top = {id(n) for n in tree.body}
+    type_checking = {id(s) for n in tree.body if isinstance(n, ast.If) and "TYPE_CHECKING" in ast.unparse(n.test)
+                     for s in ast.walk(n)}
+    out = []
+    for node in ast.walk(tree):
+        if id(node) in type_checking:
+            continue
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("workbench"):
+            assert node.level == 0, f"{path}: relative import"
+            names = [a.name for a in node.names]
+            for n in names:  # `from workbench.x import submodule`
+                sub = f"{node.module}.{n}"
+                out.append((sub if sub in MODULES else node.module, [n], id(node) in top))
+        elif isinstance(node, ast.Import):
+            out += [(a.name, [], id(node) in top) for a in node.names if a.name.startswith("workbench")]
+    return out
+
+
+def _graph() -> nx.DiGraph:
+    g = nx.DiGraph()
+    for mod, path in MODULES.items():
+        g.add_node(mod)
+        for target, _, _ in _imports(path):
+            if target != mod:
+                g.add_edge(mod, target)
+    return g
+
+
+def test_the_tree_shows_the_architecture():
+    for folder in ("geometry", "robots", "grasping", "planners/wan_harada", "planners/phoka_sudsang", "store", "viewer",
+                   "widgets", "cli", "benchmarks"):
+        assert (PACKAGE / folder / "__init__.py").exists(), folder
+    flat = sorted(p.name for p in PACKAGE.glob("*.py"))
+    assert flat == ["__init__.py", "errors.py", "resources.py", "validation.py"], flat
+
+
+def test_no_import_cycles():
+    cycles = list(nx.simple_cycles(_graph()))
+    assert not cycles, cycles[:5]
+
+
+def _layer(mod: str) -> str:
+    parts = mod.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def test_only_stages_store_cli_and_benchmarks_import_the_store():
+    allowed = {"store", "cli", "benchmarks"}
+    for mod, path in MODULES.items():
+        if _layer(mod) in allowed or mod.endswith(".stages"):
+            continue
+        bad = [t for t, _, _ in _imports(path) if t == "workbench.store" or t.startswith("workbench.store.")]
+        assert not bad, f"{mod} imports {bad}: only the planners' stages.py talk to the store"
+
+
+def test_store_imports_result_types_not_computations():
+    for mod in MODULES:
+        if _layer(mod) != "store":
+            continue
+        m = importlib.import_module(mod)
+        for target, names, _ in _imports(MODULES[mod]):
+            if target.startswith(("workbench.store", "workbench.errors")) or target in MODULES and not names:
+                continue
+            for n in names:
+                obj = getattr(m, n)
+                assert not inspect.isfunction(obj), f"{mod} imports the function {target}.{n}: the store computes nothing"
+
+
+def test_viewer_never_imports_widgets_and_nothing_but_cli_imports_cli():
+    for mod, path in MODULES.items():
+        targets = [t for t, _, _ in _imports(path)]
+        if _layer(mod) == "viewer":
+            assert not [t for t in targets if t.startswith("workbench.widgets")], mod
+        if _layer(mod) != "cli":
+            assert not [t for t in targets if t.startswith("workbench.cli")], mod
+
+
+def test_notebooks_use_stages_viewer_and_widgets_not_cli():
+    import json
+
+    for nb in (PACKAGE.parent / "notebooks").glob("*.ipynb"):
+        src = "\n".join("".join(c["source"]) for c in json.loads(nb.read_text())["cells"] if c["cell_type"] == "code")
+        assert "workbench.cli" not in src, nb.name
+
+
+def test_workbench_imports_sit_at_module_top():
+    late = [(mod, t) for mod, path in MODULES.items() for t, _, top in _imports(path) if not top]
+    assert not late, late
+
+
+def test_no_module_level_caches():
+    """Caches are explicit objects (a planner, a solver), never module-level dicts that outlive their inputs."""
+    for mod, path in MODULES.items():
+        tree = ast.parse(path.read_text())
+        for node in tree.body:
+            if isinstance(node, (ast.Assign, ast.AnnAssign)):
+                value = node.value
+                if isinstance(value, ast.Dict) and not value.keys:
+                    targets = node.targets if isinstance(node, ast.Assign) else [node.target]
+                    pytest.fail(f"{mod}: module-level mutable cache {ast.unparse(targets[0])}")

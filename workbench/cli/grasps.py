@@ -1,0 +1,77 @@
+"""`workbench grasps MESH --db DB`: plan free-air grasps and store them (Wan & Harada, Section III)."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from workbench.geometry.objects import load_object
+from workbench.grasping.grasps import GraspParams
+from workbench.planners.wan_harada.stages import ensure_grasps
+from workbench.robots.gripper import franka_hand
+from workbench.viewer.scenes import grasp_scene
+
+
+def add_object_arguments(parser: argparse.ArgumentParser) -> None:
+    """MESH, --scale/--units and --name, shared by the commands that load an object."""
+    parser.add_argument("mesh", help="STL, OBJ or PLY file of the object")
+    unit = parser.add_mutually_exclusive_group()
+    unit.add_argument("--scale", type=float, default=None, help="factor from the file's units to metres (e.g. 0.001)")
+    unit.add_argument("--units", choices=["m", "cm", "mm", "in"], default=None, help="the file's unit")
+    parser.add_argument("--name", default=None, help="object name in the store (default: the file's stem)")
+
+
+def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
+    """Grasp-planning parameters; angles in degrees, lengths in metres."""
+    d = GraspParams()
+    parser.add_argument("--tau-deg", type=float, default=float(np.degrees(d.tau)), help="facet normal threshold (degrees)")
+    parser.add_argument("--segmentation", choices=["over", "conventional"], default=d.segmentation)
+    parser.add_argument("--density", type=float, default=None, help="surface samples per square metre")
+    parser.add_argument("--neighbour-radius", type=float, default=d.neighbour_radius, help="near-neighbour filter radius (m)")
+    parser.add_argument("--dist-min", type=float, default=d.dist_min, help="min distance to the facet boundary (m)")
+    parser.add_argument("--dist-max", type=float, default=d.dist_max, help="max distance to the facet boundary (m)")
+    parser.add_argument("--parallel-deg", type=float, default=float(np.degrees(d.parallel_angle)), help="antiparallel tolerance (degrees)")
+    parser.add_argument("--com-max", type=float, default=d.com_max, help="max distance of the contact centre to the centre of mass (m)")
+    parser.add_argument("--rotations", type=int, default=d.rotations, help="hand rotations about the contact axis")
+    parser.add_argument("--seed", type=int, default=d.seed)
+
+
+def grasp_params(args: argparse.Namespace) -> GraspParams:
+    return GraspParams(tau=float(np.radians(args.tau_deg)), segmentation=args.segmentation, density=args.density,
+                       neighbour_radius=args.neighbour_radius, dist_min=args.dist_min, dist_max=args.dist_max,
+                       parallel_angle=float(np.radians(args.parallel_deg)), com_max=args.com_max,
+                       rotations=args.rotations, seed=args.seed)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser("grasps", help="plan free-air grasps of a mesh and store them")
+    add_object_arguments(parser)
+    parser.add_argument("--db", required=True, help="DuckDB store file")
+    add_grasp_arguments(parser)
+    parser.add_argument("--html", default=None, help="write a meshcat scene of the grasps to this HTML file")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+
+    params = grasp_params(args)
+    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
+    t0 = time.perf_counter()
+    result = ensure_grasps(args.db, obj, franka_hand(), params)
+    dt = time.perf_counter() - t0
+    verb = "reused" if result.reused else "stored"
+    print(f"{obj.name}: {obj.n_triangles} triangles, centre of mass {np.round(obj.com, 4).tolist()} m ({obj.com_method})")
+    if result.plan is not None:
+        c = result.plan.counts
+        print(f"facets {c['facets']}, samples {c['samples']} -> {c['samples_neighbour']} after neighbour filter, "
+              f"{c['facet_samples']} facet samples -> {c['facet_samples_distance']} after distance filter")
+        print(f"contact pairs {c['contact_pairs']} -> {c['pairs_width']} jaw -> {c['pairs_com']} com -> {c['pairs_level1']} level 1; "
+              f"hand poses {c['hand_poses']} -> {c['grasps']} level 2")
+    print(f"{verb} {result.count} free-air grasps in {args.db} (parameter set {result.idparamset}) in {dt:.2f} s")
+    if args.html:
+
+        path = grasp_scene(obj, franka_hand(), result.poses, result.widths, args.html)
+        print(f"scene: {path}")
+    return 0

@@ -1,0 +1,82 @@
+"""`workbench ik`: IK feasibility of every tabletop grip of an object for a robot (Wan & Harada Section IV).
+
+`run_ik` is the stage runner used by the command, the notebook and `workbench build`: it loads the tabletop
+grips, writes the robot, scene and ikret rows in one transaction, then computes and writes the `ik` rows chunk
+by chunk (each chunk in its own transaction), skipping chunks already stored, so an interrupted run resumes and a
+re-run with the same inputs computes nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from workbench.errors import RobotError
+from workbench.planners.wan_harada.stages import run_ik
+from workbench.robots.collider import Scene, default_scene
+from workbench.robots.ik import IKOptions
+from workbench.robots.model import ROBOTS, get_robot, pose_xyz_yaw
+from workbench.store import Store
+
+HANDX = 0.05
+WORLDZ = 0.10
+
+
+def _floats(text: str, n: int, label: str) -> list[float]:
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise RobotError(f"{label} must be {n} comma-separated numbers, got {text!r}") from None
+    if len(vals) != n or not np.isfinite(vals).all():
+        raise RobotError(f"{label} must be {n} comma-separated finite numbers, got {text!r}")
+    return vals
+
+
+def _mount(text: str) -> np.ndarray:
+
+    x, y, z, roll, pitch, yaw = _floats(text, 6, "--mount (x,y,z,roll,pitch,yaw in m and rad)")
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_euler("xyz", [roll, pitch, yaw]).as_matrix()
+    out[:3, 3] = (x, y, z)
+    return out
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("ik", help="IK feasibility of every tabletop grip for a robot (paper Section IV: ik, ikret)")
+    p.add_argument("--db", required=True, help="DuckDB store file")
+    p.add_argument("--object", required=True, help="object name in the store")
+    p.add_argument("--robot", required=True, help=f"one of {', '.join(ROBOTS)}, or the path of a URDF (then --tip)")
+    p.add_argument("--base", help="robot base in the world: X,Y,Z,YAW (m, rad); default per robot")
+    p.add_argument("--tip", help="the arm's tip frame (required for a URDF path)")
+    p.add_argument("--mount", help="tip frame to gripper TCP: x,y,z,roll,pitch,yaw (m, rad); default per robot")
+    p.add_argument("--table", help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
+    p.add_argument("--table-thickness", type=float, default=None, help="table slab thickness (m)")
+    p.add_argument("--handx", type=float, default=HANDX, help=f"retraction along the hand (m, default {HANDX})")
+    p.add_argument("--worldz", type=float, default=WORLDZ, help=f"then up along world z (m, default {WORLDZ})")
+    p.add_argument("--tabletop", type=int, default=None, help="tabletop parameter set id (default: the latest)")
+    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=main)
+
+
+def main(args: argparse.Namespace) -> int:
+
+    base = pose_xyz_yaw(*_floats(args.base, 4, "--base (X,Y,Z,YAW)")) if args.base else None
+    mount = _mount(args.mount) if args.mount else None
+    robot = get_robot(args.robot, base=base, tip_frame=args.tip, mount=mount)
+    scene = default_scene(robot.name)
+    if args.table or args.table_thickness is not None:
+        t = _floats(args.table, 4, "--table (XMIN,YMIN,XMAX,YMAX)") if args.table else [*scene.table_min, *scene.table_max]
+        scene = Scene(table_min=(t[0], t[1]), table_max=(t[2], t[3]),
+                      table_thickness=scene.table_thickness if args.table_thickness is None else args.table_thickness,
+                      workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
+    with Store(args.db) as store:
+        run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, IKOptions(), args.workers,
+                     progress=not args.no_progress, idtabletop=args.tabletop)
+    what = "reused" if run.reused else f"computed {run.computed:,}"
+    print(f"ik {robot.name}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "
+          f"with retractions {run.feasible_all:,}; robot {run.idrobot}, scene {run.idscene}, ikret {run.idikret}; "
+          f"{run.seconds:.1f} s")
+    return 0

@@ -1,0 +1,91 @@
+"""`workbench plan --db DB --object NAME --robot ROBOT --start P,X,Y,YAW --goal P,X,Y,YAW`: connect a start and a goal
+pose to the regrasp graph, search it, print and write the plan (Wan & Harada, Section V)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+from workbench.errors import PlanningError
+from workbench.planners.wan_harada.query import parse_pose
+from workbench.planners.wan_harada.stages import load_planner, save_plan
+from workbench.store import Store
+from workbench.viewer.wan_harada import plan_scene
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser("plan", help="plan regrasps from a start to a goal pose on the table",
+                            description="Poses are PLACEMENT,X,Y,YAW: a stable placement id (idfreetabletopplacement), "
+                                        "x and y in metres on the table (top at z = 0), yaw in radians about z.")
+    parser.add_argument("--db", required=True, help="DuckDB store file (built with `workbench build`)")
+    parser.add_argument("--object", required=True, help="object name in the store")
+    parser.add_argument("--robot", required=True, help="robot name in the store (panda, ur5, talos)")
+    parser.add_argument("--start", required=True, metavar="P,X,Y,YAW", help="start pose, e.g. 1,0.45,-0.1,0.0")
+    parser.add_argument("--goal", required=True, metavar="P,X,Y,YAW", help="goal pose, e.g. 3,0.55,0.1,1.57")
+    parser.add_argument("--alternatives", type=int, default=2, help="next best plans to list (default 2)")
+    parser.add_argument("--handx", type=float, default=None, help="use the IK run with this handx retraction (m)")
+    parser.add_argument("--worldz", type=float, default=None, help="use the IK run with this worldz retraction (m)")
+    parser.add_argument("--json", default=None, metavar="OUT", help="write the plan (and its alternatives) as JSON")
+    parser.add_argument("--html", default=None, metavar="OUT", help="write a meshcat animation of the plan as static HTML")
+    parser.add_argument("--meshes", choices=["collision", "visual"], default="collision",
+                        help="robot meshes in the HTML: collision (small file, default) or visual (nicer, larger)")
+    parser.add_argument("--no-save", action="store_true", help="do not store the plans in the store's plan tables")
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+
+    start, goal = parse_pose(args.start, "--start"), parse_pose(args.goal, "--goal")
+    if args.alternatives < 0:
+        raise PlanningError(f"--alternatives must be >= 0, got {args.alternatives}")
+    if not Path(args.db).is_file():
+        raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
+    with Store(args.db) as store:
+        t0 = time.perf_counter()
+        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz)
+        t_load = time.perf_counter() - t0
+        plans = planner.plan(start, goal, alternatives=args.alternatives)
+        report_graph(planner, t_load)
+        best = plans[0]
+        print_plan(best)
+        for p in plans[1:]:
+            print(f"alternative {p.rank}: {p.regrasps} regrasp(s), {p.transfers} transfer(s), grasps {' -> '.join(map(str, p.grasps))}")
+        print("validation: every listed plan passes (FK from the URDF, limits, collisions, stability, grasp, goal)")
+        if not args.no_save:
+
+            ids = [save_plan(store, p) for p in plans]
+            print(f"stored plan ids {ids} in {args.db}")
+    if args.json:
+        write_json(plans, args.json)
+        print(f"json: {Path(args.json).resolve()}")
+    if args.html:
+
+        print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes)).resolve()}")
+    return 0
+
+
+def report_graph(planner, t_load: float) -> None:
+    s = planner.roadmap.summary()
+    print(f"regrasp graph of {planner.object.name} for {planner.robot.name}: {s['nodes']:,} nodes (IK-feasible of {s['grips']:,} "
+          f"tabletop grips), {s['transfer_edges']:,} transfer and {s['transit_edges']:,} transit edges, {s['grasps']} grasps, "
+          f"{s['placements']} placements, {s['components']} component(s); ready in {t_load:.2f} s")
+
+
+def print_plan(plan) -> None:
+    print(f"start {plan.start.text()} -> goal {plan.goal.text()}")
+    for line in plan.lines():
+        print("  " + line)
+    t = plan.timings
+    print(f"{plan.regrasps} regrasp(s), {plan.transfers} transfer(s); time to connect {t.get('connect', 0) * 1000:.1f} ms, "
+          f"search {t.get('search', 0) * 1000:.1f} ms")
+
+
+def write_json(plans, out: str | Path) -> Path:
+    """The best plan with its alternatives as one JSON file: {"plan": ..., "alternatives": [...]}."""
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"plan": plans[0].as_dict(), "alternatives": [p.as_dict() for p in plans[1:]]}, indent=1))
+    return out

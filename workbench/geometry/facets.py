@@ -1,0 +1,186 @@
+"""Mesh segmentation into planar facets (Wan & Harada, Section III, Fig. 2).
+
+Two algorithms: the conventional one puts each triangle in exactly one facet; over-segmentation examines
+every triangle as a seed and lets facets overlap. A facet grows from its seed across shared edges to every
+triangle whose normal is within `tau` of the seed's normal. Seeds are taken in a fixed order (larger
+triangles first, then by index), so results are deterministic.
+
+The paper leaves open how near-identical facets are avoided when every triangle is a seed; here a seed is
+skipped when it already lies in a facet whose seed normal is within `merge_angle` of its own (0 examines
+literally every triangle; the default, tau/2, keeps facets overlapping while bounding their number).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from workbench.errors import WorkbenchError
+
+
+@dataclass(frozen=True)
+class Facets:
+    """Facets of a mesh in CSR form: facet f holds triangles `tri_index[tri_ptr[f]:tri_ptr[f+1]]`.
+
+    `normals` are area-weighted unit normals (outward), `centers` area-weighted centroids, `areas` the facet
+    areas, `seeds` the seed triangle of each facet; boundary edges of facet f are
+    `edges[edge_ptr[f]:edge_ptr[f+1]]` as (E, 2, 3) segment end points.
+    """
+
+    method: str
+    tau: float
+    tri_ptr: np.ndarray
+    tri_index: np.ndarray
+    normals: np.ndarray
+    centers: np.ndarray
+    areas: np.ndarray
+    seeds: np.ndarray
+    edge_ptr: np.ndarray
+    edges: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.seeds)
+
+    def triangles_of(self, f: int) -> np.ndarray:
+        return self.tri_index[self.tri_ptr[f]:self.tri_ptr[f + 1]]
+
+    def membership(self) -> tuple[np.ndarray, np.ndarray]:
+        """(facet id, triangle id) for every membership, sorted by triangle."""
+        fid = np.repeat(np.arange(len(self)), np.diff(self.tri_ptr))
+        order = np.argsort(self.tri_index, kind="stable")
+        return fid[order], self.tri_index[order]
+
+    def facet_of_triangle(self) -> np.ndarray:
+        """For the conventional segmentation, the one facet of each triangle (-1 for none)."""
+        fid, tid = self.membership()
+        out = np.full(int(self.tri_index.max()) + 1, -1, dtype=np.int64)
+        out[tid] = fid
+        return out
+
+
+def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = "over",
+            merge_angle: float | None = None) -> Facets:
+    """Segment `mesh` into facets: `method` "over" (over-segmentation) or "conventional" (Fig. 2)."""
+    if method not in ("over", "conventional"):
+        raise WorkbenchError(f"segmentation method must be 'over' or 'conventional', got {method!r}")
+    if not 0 < tau < np.pi / 2:
+        raise WorkbenchError(f"segmentation threshold tau must be between 0 and 90 degrees, got {np.degrees(tau):.3g} degrees")
+    merge = tau / 2 if merge_angle is None else float(merge_angle)
+    normals = np.asarray(mesh.face_normals)
+    areas = np.asarray(mesh.area_faces)
+    n_tri = len(normals)
+    nbr = _neighbour_table(np.asarray(mesh.face_adjacency), n_tri)
+    order = np.lexsort((np.arange(n_tri), -np.round(areas, 12)))
+    cos_tau, cos_merge = np.cos(tau), np.cos(merge)
+    assigned = np.zeros(n_tri, dtype=bool)
+    # for over-segmentation: best alignment of each triangle with the seed normal of a facet holding it
+    covered_cos = np.full(n_tri, -2.0)
+    facet_tris: list[np.ndarray] = []
+    seeds: list[int] = []
+    visited = np.zeros(n_tri + 1, dtype=bool)
+    visited[n_tri] = True
+    stamp = np.zeros(n_tri + 1, dtype=np.int64)
+    normals = np.vstack([normals, np.zeros(3)])
+    assigned = np.append(assigned, True)
+    for seed in order:
+        if method == "conventional":
+            if assigned[seed]:
+                continue
+        elif covered_cos[seed] >= cos_merge:
+            continue
+        ns = normals[seed]
+        region = [np.array([seed])]
+        visited[seed] = True
+        frontier = np.array([seed])
+        while len(frontier):
+            cand = nbr[frontier].ravel()
+            cand = cand[~visited[cand]]  # the padding index n_tri is always "visited"
+            if method == "conventional":
+                cand = cand[~assigned[cand]]
+            cand = cand[normals[cand] @ ns >= cos_tau]
+            # drop repeats without sorting: keep the last occurrence of each triangle
+            order = np.arange(len(cand))
+            stamp[cand] = order
+            cand = cand[stamp[cand] == order]
+            visited[cand] = True
+            region.append(cand)
+            frontier = cand
+        tris = np.unique(np.concatenate(region))
+        visited[tris] = False
+        if method == "conventional":
+            assigned[tris] = True
+        else:
+            np.maximum.at(covered_cos, tris, normals[tris] @ ns)
+        facet_tris.append(tris)
+        seeds.append(int(seed))
+    return _build(mesh, method, tau, facet_tris, np.array(seeds, dtype=np.int64))
+
+
+def _neighbour_table(adj: np.ndarray, n: int) -> np.ndarray:
+    """(n, k) neighbours across shared edges, padded with the index n (k = 3 on a manifold mesh)."""
+    src = np.concatenate([adj[:, 0], adj[:, 1]])
+    dst = np.concatenate([adj[:, 1], adj[:, 0]])
+    order = np.argsort(src, kind="stable")
+    src, dst = src[order], dst[order]
+    counts = np.bincount(src, minlength=n)
+    table = np.full((n, max(int(counts.max(initial=0)), 1)), n, dtype=np.int64)
+    slot = np.arange(len(src)) - np.repeat(np.cumsum(counts) - counts, counts)
+    table[src, slot] = dst
+    return table
+
+
+def _build(mesh: trimesh.Trimesh, method: str, tau: float, facet_tris: list[np.ndarray], seeds: np.ndarray) -> Facets:
+    counts = np.array([len(t) for t in facet_tris], dtype=np.int64)
+    tri_ptr = np.concatenate([[0], np.cumsum(counts)])
+    tri_index = np.concatenate(facet_tris) if facet_tris else np.zeros(0, dtype=np.int64)
+    fid = np.repeat(np.arange(len(facet_tris)), counts)
+    a = mesh.area_faces[tri_index]
+    wn = np.zeros((len(facet_tris), 3))
+    np.add.at(wn, fid, mesh.face_normals[tri_index] * a[:, None])
+    normals = wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300)
+    areas = np.bincount(fid, weights=a, minlength=len(facet_tris))
+    wc = np.zeros((len(facet_tris), 3))
+    np.add.at(wc, fid, mesh.triangles_center[tri_index] * a[:, None])
+    centers = wc / areas[:, None].clip(1e-300)
+    # boundary edges: edges used once inside the facet (sorted vertex pairs, keyed per facet)
+    e = mesh.faces[tri_index][:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)
+    e.sort(axis=1)
+    efid = np.repeat(fid, 3)
+    nv = len(mesh.vertices)
+    key = (efid * nv + e[:, 0]) * nv + e[:, 1]
+    uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
+    once = cnt[inv] == 1
+    bf, be = efid[once], e[once]
+    order = np.argsort(bf, kind="stable")
+    bf, be = bf[order], be[order]
+    edge_ptr = np.searchsorted(bf, np.arange(len(facet_tris) + 1))
+    edges = mesh.vertices[be]
+    return Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index, normals=normals, centers=centers,
+                  areas=areas, seeds=seeds, edge_ptr=edge_ptr, edges=edges)
+
+
+def distance_to_boundary(facets: Facets, facet_ids: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Distance from each point to the boundary of its facet, measured in the facet's plane (Section III, distance filter)."""
+    facet_ids = np.asarray(facet_ids, dtype=np.int64)
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    out = np.full(len(facet_ids), np.inf)
+    counts = facets.edge_ptr[facet_ids + 1] - facets.edge_ptr[facet_ids]
+    has = counts > 0
+    if not has.any():
+        return out
+    rows = np.repeat(np.arange(len(facet_ids)), counts)
+    starts = np.repeat(facets.edge_ptr[facet_ids] - np.cumsum(counts) + counts, counts)
+    seg = facets.edges[starts + np.arange(counts.sum())]
+    n = facets.normals[facet_ids][rows]
+    # project the segment and the point onto the facet plane, then point-to-segment distance
+    p = points[rows]
+    a = seg[:, 0] - (np.einsum("ij,ij->i", seg[:, 0] - p, n))[:, None] * n
+    b = seg[:, 1] - (np.einsum("ij,ij->i", seg[:, 1] - p, n))[:, None] * n
+    ab = b - a
+    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.einsum("ij,ij->i", ab, ab).clip(1e-300), 0.0, 1.0)
+    d = np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
+    first = np.concatenate([[0], np.cumsum(counts[has])[:-1]])
+    out[has] = np.minimum.reduceat(d, first)
+    return out

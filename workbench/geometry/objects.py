@@ -1,0 +1,142 @@
+"""Loading and validating object meshes (CONVENTIONS.md, Units): SI scaling, sanity checks, centre of mass."""
+
+from __future__ import annotations
+
+import hashlib
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from workbench.errors import MeshError
+
+UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254}
+MAX_EXTENT = 2.0
+MIN_EXTENT = 0.005
+
+
+class MeshWarning(UserWarning):
+    """A mesh was accepted after a repair or with a weaker assumption (degenerate faces, not watertight)."""
+
+
+@dataclass(frozen=True)
+class ObjectModel:
+    """A rigid object in its own frame, in metres.
+
+    `com_method` is "volume" for a watertight mesh and "area" otherwise; `digest` identifies the
+    scaled geometry, so stored results can be reused for the same mesh and scale.
+    """
+
+    name: str
+    mesh: trimesh.Trimesh
+    com: np.ndarray
+    com_method: str
+    scale: float
+    source: str = ""
+    digest: str = field(default="")
+
+    @property
+    def n_triangles(self) -> int:
+        return int(len(self.mesh.faces))
+
+
+def resolve_scale(scale: float | None, units: str | None) -> float:
+    """The factor to metres from an explicit scale or a unit name (`m`, `cm`, `mm`, `in`)."""
+    if scale is not None and units is not None:
+        raise MeshError("give either scale or units, not both")
+    if units is not None:
+        if units not in UNITS:
+            raise MeshError(f"unknown unit {units!r}: use one of {', '.join(UNITS)}")
+        return UNITS[units]
+    s = 1.0 if scale is None else float(scale)
+    if not np.isfinite(s) or s <= 0:
+        raise MeshError(f"scale must be a positive finite number, got {scale!r}")
+    return s
+
+
+def load_object(path: str | Path, scale: float | None = None, units: str | None = None,
+                name: str | None = None) -> ObjectModel:
+    """Load an STL, OBJ or PLY file as an object in metres (CONVENTIONS.md: scaled once, at load)."""
+    path = Path(path)
+    if not path.exists():
+        raise MeshError(f"object file {path} does not exist")
+    if path.is_dir():
+        raise MeshError(f"object file {path} is a folder; give a mesh file (STL, OBJ, PLY)")
+    if path.stat().st_size == 0:
+        raise MeshError(f"object file {path} is empty")
+    try:
+        loaded = trimesh.load(path, force=None, process=False)
+    except Exception as exc:  # trimesh raises many types for unreadable files
+        raise MeshError(f"object file {path} is not a readable mesh ({type(exc).__name__}: {exc})") from None
+    if isinstance(loaded, trimesh.Scene):
+        geoms = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
+        if not geoms:
+            raise MeshError(f"object file {path} holds no triangle mesh")
+        loaded = trimesh.util.concatenate(geoms)
+    if isinstance(loaded, trimesh.PointCloud):
+        raise MeshError(f"object file {path} has {len(loaded.vertices)} vertices but no triangle faces")
+    if not isinstance(loaded, trimesh.Trimesh):
+        raise MeshError(f"object file {path} is not a triangle mesh (got {type(loaded).__name__})")
+    return from_arrays(loaded.vertices, loaded.faces, scale=resolve_scale(scale, units),
+                       name=name or path.stem, source=str(path))
+
+
+def from_trimesh(mesh: trimesh.Trimesh, name: str, scale: float = 1.0) -> ObjectModel:
+    """Wrap a mesh built in code (already in metres unless `scale` says otherwise)."""
+    return from_arrays(mesh.vertices, mesh.faces, scale=scale, name=name, source="<memory>")
+
+
+def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str, source: str) -> ObjectModel:
+    """Validate vertex and face arrays, scale to metres, drop degenerate faces, compute the centre of mass."""
+    vertices = np.asarray(vertices, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    label = source if source != "<memory>" else f"mesh {name!r}"
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or len(vertices) == 0:
+        raise MeshError(f"{label} has no vertices")
+    if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
+        raise MeshError(f"{label} has no triangle faces")
+    if not np.isfinite(vertices).all():
+        bad = int((~np.isfinite(vertices)).any(axis=1).sum())
+        raise MeshError(f"{label} has {bad} vertices with NaN or infinite coordinates; repair the file")
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise MeshError(f"{label} has faces that index missing vertices; repair the file")
+    mesh = trimesh.Trimesh(vertices * scale, faces, process=True, validate=False)
+    areas = mesh.area_faces
+    repeated = (mesh.faces[:, 0] == mesh.faces[:, 1]) | (mesh.faces[:, 1] == mesh.faces[:, 2]) | (mesh.faces[:, 0] == mesh.faces[:, 2])
+    degenerate = repeated | (areas <= 1e-14 * max(1.0, float(areas.max(initial=0.0))))
+    if degenerate.all():
+        raise MeshError(f"{label} has only degenerate (zero-area) faces")
+    if degenerate.any():
+        warnings.warn(f"{label}: removed {int(degenerate.sum())} degenerate faces", MeshWarning, stacklevel=3)
+        mesh.update_faces(~degenerate)
+        mesh.remove_unreferenced_vertices()
+    extent = float(mesh.extents.max())
+    if extent > MAX_EXTENT or extent < MIN_EXTENT:
+        hint = _scale_hint(extent)
+        raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
+                        f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {hint}")
+    if mesh.is_watertight and not mesh.is_winding_consistent:
+        # a closed mesh with some faces flipped: its signed volume and centre of mass would be wrong
+        warnings.warn(f"{label}: faces were not consistently oriented; re-oriented them", MeshWarning, stacklevel=3)
+        trimesh.repair.fix_normals(mesh)
+    if mesh.is_watertight and mesh.volume < 0:
+        mesh.invert()
+    if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0:
+        com, method = np.asarray(mesh.center_mass, dtype=np.float64), "volume"
+    else:
+        warnings.warn(f"{label} is not watertight: centre of mass weighted by area", MeshWarning, stacklevel=3)
+        com = (mesh.triangles_center * mesh.area_faces[:, None]).sum(0) / mesh.area
+        method = "area"
+    digest = hashlib.sha256(np.ascontiguousarray(mesh.vertices).tobytes() + np.ascontiguousarray(mesh.faces).tobytes()).hexdigest()[:16]
+    return ObjectModel(name=name, mesh=mesh, com=com, com_method=method, scale=scale, source=source, digest=digest)
+
+
+def _scale_hint(extent: float) -> str:
+    for unit, factor in (("mm", 0.001), ("cm", 0.01), ("in", 0.0254)):
+        if MIN_EXTENT <= extent * factor <= MAX_EXTENT and extent > MAX_EXTENT:
+            return f"if the file is in {unit}, pass scale={factor:g} (units='{unit}')"
+    if extent < MIN_EXTENT:
+        return "if the file is in metres already it is too small; otherwise pass the right scale"
+    return "pass the scale that converts the file's units to metres"

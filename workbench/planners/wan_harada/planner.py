@@ -1,0 +1,229 @@
+"""The regrasp roadmap, connecting start and goal poses to it, and searching it (Wan & Harada, Section V).
+
+Graph (Section V, "Building the graph"): the nodes are the tabletop grips that are IK-feasible for a robot at the
+grasp and both retractions (the `ik` table's three flags). Two nodes sharing `idfreeairgrip` are joined by a
+transfer edge (carry the object from one placement to another with one grasp); two nodes sharing
+`idtabletopplacements` by a transit edge (release and regrasp at one placement). Both relations are cliques, so
+the graph is kept as two groupings of the node arrays (nodes sorted by grasp and by placement, CSR style) plus
+the grasp graph H (G x G, scipy.sparse): grasps g, g' are adjacent when some placement has nodes of both. A path
+of k transit edges is a walk of length k in H, so the fewest regrasps between two grasps is their breadth-first
+distance in H (all pairs are computed once per roadmap); transfers follow as k + 1.
+
+Queries (Section V, "Searching the graph"): a start or goal pose is a stable placement at a position and a yaw
+that need not be on the grid. Its grips are the placement's free tabletop grips moved to the pose; each needs IK
+at the grasp and both retractions without arm-table or arm-object collision, as the precomputation does.
+Start grips join roadmap nodes with the same grasp by transfer edges, goal grips likewise, and a start grip
+joins a goal grip directly when one grasp serves both. The search is a breadth-first search on the layered graph
+(layer = number of regrasps) over pairs of start and goal grasps, cost (regrasps, transfers) lexicographic.
+IK at the query poses is the expensive part, so it is evaluated lazily: in rounds, only the grips of the cheapest
+pairs whose feasibility is unsettled, most promising first (the grasp's IK feasibility at the nearest grid
+placements), first from the nearest stored solution and only when needed from the precomputation's fall-back
+seeds, until the best plans are proven (`lazy=False` evaluates every grip first; the optimum is the same).
+
+Cache: `load_planner` keeps the roadmap (and its IK adapter) per store file, object, robot, scene, retractions,
+tabletop parameter set and a fingerprint of the IK rows, so repeated queries only connect and search.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from workbench.errors import PlanningError
+from workbench.planners.wan_harada.plans import make_plan
+from workbench.planners.wan_harada.query import (
+    GripIK,
+    PoseQuery,
+    Query,
+    Side,
+    check_query,
+    match_pose,
+    parse_pose,
+)
+from workbench.planners.wan_harada.roadmap import Roadmap, _failure
+from workbench.planners.wan_harada.search import SearchResult, search
+from workbench.robots.ik import retract
+from workbench.validation import validator_for
+
+if TYPE_CHECKING:  # pragma: no cover
+
+    from workbench.geometry.objects import ObjectModel
+    from workbench.planners.wan_harada.plans import Plan
+    from workbench.robots.collider import Scene
+    from workbench.robots.ik import IKOptions
+    from workbench.robots.model import Robot
+
+
+class Planner:
+    """The regrasp graph of one object and robot from a store, with what connecting a query needs: the stable
+    placements and their free tabletop grips, the object, the robot, its scene (table) and the retractions
+    (Section V). Build it with `load_planner`; `plan` answers a start/goal query."""
+
+    def __init__(self, roadmap: Roadmap, free: dict[str, np.ndarray], ftg: dict[str, np.ndarray], obj: ObjectModel,
+                 robot: Robot, scene: Scene, handx: float, worldz: float, ids: dict[str, int], ik_opts: IKOptions | None = None,
+                 grid: dict[str, np.ndarray] | None = None):
+        self.roadmap, self.free, self.ftg = roadmap, free, ftg
+        self.grid = grid
+        self.rows: dict = {}
+        self.object, self.robot, self.scene = obj, robot, scene
+        self.handx, self.worldz = float(handx), float(worldz)
+        self.ids = dict(ids)
+        self.ik_opts = ik_opts
+        self._ik: GripIK | None = None
+        order = np.argsort(ftg["idfreetabletopplacement"], kind="stable")
+        self._ftg_order = order
+        self._ftg_keys = np.asarray(ftg["idfreetabletopplacement"])[order]
+
+    @property
+    def ik(self) -> GripIK:
+        """IK for start and goal grips, warm-started from the roadmap's joint vectors (built on first use)."""
+        if self._ik is None:
+
+            rm = self.roadmap
+            seeds_q = rm.joints.reshape(-1, rm.joints.shape[-1]) if rm.joints.size else np.zeros((0, self.robot.nq))
+            seeds_tcp = retract(rm.tcp, self.handx, self.worldz).reshape(-1, 4, 4) if rm.n_nodes else np.zeros((0, 4, 4))
+            self._ik = GripIK(self.robot, self.scene, self.object.mesh, self.handx, self.worldz, seeds_q, seeds_tcp, self.ik_opts)
+        return self._ik
+
+    def placement_ids(self) -> list[int]:
+        return [int(i) for i in self.free["idfreetabletopplacement"]]
+
+    def query_pose(self, query: PoseQuery, label: str = "pose") -> np.ndarray:
+        """translate(x, y, 0) @ yaw @ freetabletopplacement.rotmat, after checking the placement id and the table."""
+        check_query(query, label)
+        ids = self.free["idfreetabletopplacement"]
+        hit = np.flatnonzero(ids == query.idfreetabletopplacement)
+        if len(hit) == 0:
+            raise _failure("unstable", f"{label} placement {query.idfreetabletopplacement} is not a stable placement of {self.object.name} "
+                                f"(its placements: {', '.join(str(int(i)) for i in ids)}); give one of those ids")
+        lo, hi = self.scene.table_min, self.scene.table_max
+        if not (lo[0] <= query.x <= hi[0] and lo[1] <= query.y <= hi[1]):
+            raise PlanningError(f"{label} position ({query.x:g}, {query.y:g}) is off the table (x {lo[0]:g}..{hi[0]:g}, "
+                                f"y {lo[1]:g}..{hi[1]:g} m); give a position on it")
+        return query.move() @ self.free["rotmat"][hit[0]]
+
+    def side(self, query: Query, label: str = "start") -> Side:
+        """The grips of a start or goal pose (Section V, Fig. 8): the placement's free tabletop grips moved with it.
+        `query` is a PoseQuery, a `PLACEMENT,X,Y,YAW` string, or a 4x4 object pose matched to a stable placement."""
+        if isinstance(query, str):
+            query = parse_pose(query, label)
+        elif not isinstance(query, PoseQuery):
+            query = match_pose(query, self.free["idfreetabletopplacement"], self.free["rotmat"], label)
+        pose = self.query_pose(query, label)
+        lo = np.searchsorted(self._ftg_keys, query.idfreetabletopplacement, side="left")
+        hi = np.searchsorted(self._ftg_keys, query.idfreetabletopplacement, side="right")
+        rows = self._ftg_order[lo:hi]
+        if len(rows) == 0:
+            raise _failure("nogrip", f"{label} placement {query.idfreetabletopplacement} of {self.object.name} has no grasp that clears "
+                                f"the table; choose another placement ({', '.join(map(str, self.placement_ids()))})")
+        grasp = np.asarray(self.ftg["idfreeairgrip"])[rows].astype(np.int64)
+        order = np.argsort(grasp, kind="stable")
+        rows, grasp = rows[order], grasp[order]
+        tcp = query.move() @ np.asarray(self.ftg["rotmat"])[rows]
+        n = len(rows)
+        return Side(label=label, query=query, pose=pose, grasp=grasp, tcp=tcp, jawwidth=np.asarray(self.ftg["jawwidth"])[rows],
+                    rindex=self.roadmap.grasp_index(grasp), state=np.zeros(n, dtype=np.int8),
+                    joints=np.full((n, 3, self.robot.nq), np.nan), prior=self.prior(query, grasp))
+
+    def prior(self, query: PoseQuery, grasp: np.ndarray, k: int = 4) -> np.ndarray:
+        """For each grasp at a query pose, the share of the `k` nearest grid placements of the same stable placement
+        (position, and yaw at 0.1 m per rad) where the same grasp is IK-feasible; 0.5 where the grid has no row."""
+        g = self.grid
+        out = np.full(len(grasp), 0.5)
+        if g is None or len(g["tp_free"]) == 0:
+            return out
+        cand = np.flatnonzero(g["tp_free"] == query.idfreetabletopplacement)
+        if len(cand) == 0:
+            return out
+        dyaw = np.abs((g["tp_angle"][cand] - query.yaw + np.pi) % (2 * np.pi) - np.pi)
+        d = np.hypot(g["tp_pos"][cand, 0] - query.x, g["tp_pos"][cand, 1] - query.y) + 0.1 * dyaw
+        near = cand[np.lexsort((cand, d))[:k]]
+        keys = near[None, :].astype(np.int64) * g["stride"] + np.asarray(grasp, dtype=np.int64)[:, None]
+        pos = np.clip(np.searchsorted(g["keys"], keys), 0, len(g["keys"]) - 1)
+        found = g["keys"][pos] == keys
+        vals = np.where(found, g["feasible"][pos], np.nan)
+        has = found.any(axis=1)
+        out[has] = np.nanmean(vals[has], axis=1)
+        return out
+
+    def evaluate(self, requests: list[tuple[Side, np.ndarray]], fallback: bool = True) -> None:
+        """IK with retractions for grips of one or more sides in one batch (sets their state and joints): tier 1 for
+        unknown grips (state 0), then tier 2 when `fallback` for grips that failed tier 1 (state -2)."""
+        requests = [(side, np.asarray(idx, dtype=np.int64)) for side, idx in requests if len(idx)]
+        if not requests:
+            return
+        tcp = np.concatenate([side.tcp[idx] for side, idx in requests])
+        place = np.concatenate([np.repeat(side.pose[None], len(idx), axis=0) for side, idx in requests])
+        known = np.concatenate([side.joints[idx] for side, idx in requests])
+        unknown = np.concatenate([side.state[idx] == 0 for side, idx in requests])
+        feas, joints = self.ik.solve(tcp, place, known, warm=bool(unknown.any()), fallback=fallback)
+        k = 0
+        for side, idx in requests:
+            f = feas[k:k + len(idx)]
+            side.state[idx] = np.where(f, 1, -1 if fallback else -2)
+            side.joints[idx] = joints[k:k + len(idx)]
+            k += len(idx)
+
+    def search(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True) -> SearchResult:
+        """Connect start and goal and search (Section V); PlanningError names an unreachable or unconnected pose."""
+        t0 = time.perf_counter()
+        s, g = self.side(start, "start"), self.side(goal, "goal")
+        t_sides = time.perf_counter() - t0
+        result = search(self.roadmap, s, g, self.evaluate, alternatives, lazy)
+        result.timings["connect"] += t_sides
+        if not result.routes:
+            self.explain(result)
+        return result
+
+    def explain(self, result: SearchResult) -> None:
+        """Raise the PlanningError that says why no route exists (evaluates the remaining grips to tell)."""
+        s, g = result.start, result.goal
+        self.evaluate([(side, np.flatnonzero(side.state == 0)) for side in (s, g)], fallback=True)
+        self.evaluate([(side, np.flatnonzero(side.state == -2)) for side in (s, g)], fallback=True)
+        for side in (s, g):
+            if side.n_feasible == 0:
+                raise _failure(
+                    "unreachable", f"{side.label} pose ({side.query.text()}) is not reachable by {self.robot.name}: none of its {len(side.grasp)} grasps "
+                    f"has IK at the grasp and both retractions (handx {self.handx:g} m, worldz {self.worldz:g} m) without collision; "
+                    f"move it closer to the robot or choose another placement")
+        a, b = self.attach(s), self.attach(g)
+        raise _failure(
+            "unconnected", f"start ({s.query.text()}) and goal ({g.query.text()}) are not connected in the regrasp graph of {self.object.name} for "
+            f"{self.robot.name}: no feasible grasp serves both, and the start's {s.n_feasible} feasible grasps reach roadmap components "
+            f"{sorted(a['components']) or 'none'} while the goal's {g.n_feasible} reach {sorted(b['components']) or 'none'}; "
+            f"add grid positions, angles or grasps (workbench placements --x/--y/--angles/--max-grasps) and rebuild")
+
+    def attach(self, side: Side) -> dict:
+        """Where a side joins the roadmap: its feasible grasps, the roadmap nodes sharing them (transfer edges) and the
+        connected components of those nodes."""
+        feas = np.flatnonzero(side.state > 0)
+        r = side.rindex[feas]
+        r = np.unique(r[r >= 0])
+        nodes, _ = self.roadmap.nodes_of_grasps(r)
+        comps = np.unique(self.roadmap.component[nodes]) if len(nodes) else np.zeros(0, dtype=np.int64)
+        return {"grasps": side.grasp[feas], "nodes": nodes, "components": [int(c) for c in comps]}
+
+    def plan(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True, validate: bool = True) -> list[Plan]:
+        """The best plan and up to `alternatives` next best (Section V), each checked by `workbench.validate` when
+        `validate` (a plan that fails is dropped; PlanningError when none passes)."""
+
+        result = self.search(start, goal, alternatives, lazy)
+        plans = [make_plan(self, result, r, rank) for rank, r in enumerate(result.routes)]
+        if validate:
+
+            if not self.rows:
+                raise PlanningError("this planner has no store rows to validate its plans against; build it with "
+                                    "load_planner, or pass validate=False")
+            checker = validator_for(self)
+            reports = [checker.check(p) for p in plans]
+            good = [p for p, rep in zip(plans, reports) if rep.ok]
+            if not good:
+                raise PlanningError(f"the plan found from {result.start.query.text()} to {result.goal.query.text()} fails validation: "
+                                    f"{reports[0].errors[0]}; report this with the store")
+            for rank, p in enumerate(good):
+                p.rank = rank
+            plans = good
+        self.last = result
+        return plans

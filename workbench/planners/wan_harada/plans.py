@@ -1,0 +1,216 @@
+"""Regrasp plans: the steps a robot executes, from a route through the regrasp graph (Wan & Harada, Section V, Fig. 8).
+
+A plan with k regrasps has 2k + 2 steps: `pick` at the start pose with the first grasp; for each regrasp a
+`transfer` (carry the object with the current grasp to a placement on the table at a position and yaw, put it
+down and release it) and a `regrasp` (grasp it again at that placement with another grasp and lift it); and
+`place` at the goal pose with the last grasp. Every step carries the object pose in the world, the grasp (TCP in
+the object frame and in the world), the jaw width and three joint configurations: `approach` (the TCP backed
+off by `handx` along its approach axis), `grasp`, and `retract` (backed off and raised by `worldz`), the
+paper's ikret retractions. The hand moves retract -> approach -> grasp to take or put down the object and back
+the same way; the motion between steps (transit and transfer paths) is not planned, as in the paper.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from workbench.planners.wan_harada.query import PoseQuery
+from workbench.planners.wan_harada.search import Route, SearchResult
+
+KINDS = ("pick", "transfer", "regrasp", "place")
+
+
+@dataclass
+class PlanStep:
+    """One step: kind, grasp id, the stable placement and where it is (position, yaw), object pose (4, 4) in the world,
+    TCP pose (4, 4) in the world at the grasp, grasp (4, 4) TCP in the object frame, jaw width, and joint vectors
+    for approach, grasp and retract (robot.joint_names order). `idtabletopgrips` is the roadmap row (None at the
+    start and goal poses)."""
+
+    kind: str
+    idfreeairgrip: int
+    idfreetabletopplacement: int
+    position: np.ndarray
+    yaw: float
+    object_pose: np.ndarray
+    tcp: np.ndarray
+    grasp: np.ndarray
+    jawwidth: float
+    q_approach: np.ndarray
+    q_grasp: np.ndarray
+    q_retract: np.ndarray
+    idtabletopgrips: int | None = None
+    idtabletopplacements: int | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        out = {"kind": self.kind, "idfreeairgrip": int(self.idfreeairgrip), "idfreetabletopplacement": int(self.idfreetabletopplacement),
+               "idtabletopgrips": None if self.idtabletopgrips is None else int(self.idtabletopgrips),
+               "idtabletopplacements": None if self.idtabletopplacements is None else int(self.idtabletopplacements),
+               "position": _list(self.position), "yaw": float(self.yaw), "object_pose": _list(self.object_pose),
+               "tcp": _list(self.tcp), "grasp": _list(self.grasp), "jawwidth": float(self.jawwidth),
+               "q_approach": _list(self.q_approach), "q_grasp": _list(self.q_grasp), "q_retract": _list(self.q_retract)}
+        return out
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "PlanStep":
+        arr = lambda k, shape=None: np.asarray(d[k], dtype=np.float64) if shape is None else np.asarray(d[k], dtype=np.float64).reshape(shape)  # noqa: E731
+        return cls(kind=d["kind"], idfreeairgrip=int(d["idfreeairgrip"]), idfreetabletopplacement=int(d["idfreetabletopplacement"]),
+                   position=arr("position", (3,)), yaw=float(d["yaw"]), object_pose=arr("object_pose", (4, 4)), tcp=arr("tcp", (4, 4)),
+                   grasp=arr("grasp", (4, 4)), jawwidth=float(d["jawwidth"]), q_approach=arr("q_approach"), q_grasp=arr("q_grasp"),
+                   q_retract=arr("q_retract"), idtabletopgrips=d.get("idtabletopgrips"), idtabletopplacements=d.get("idtabletopplacements"))
+
+    def configurations(self) -> dict[str, np.ndarray]:
+        return {"approach": self.q_approach, "grasp": self.q_grasp, "retract": self.q_retract}
+
+
+@dataclass
+class Plan:
+    """A regrasp plan for one object and robot from a start to a goal pose (Section V); `rank` 0 is the best of a
+    search, higher ranks its alternatives. `timings` holds the search's connect and search times (s)."""
+
+    object: str
+    robot: str
+    joint_names: list[str]
+    start: PoseQuery
+    goal: PoseQuery
+    start_pose: np.ndarray
+    goal_pose: np.ndarray
+    steps: list[PlanStep]
+    handx: float
+    worldz: float
+    rank: int = 0
+    timings: dict = field(default_factory=dict)
+    ids: dict = field(default_factory=dict)
+
+    @property
+    def regrasps(self) -> int:
+        return sum(s.kind == "regrasp" for s in self.steps)
+
+    @property
+    def transfers(self) -> int:
+        return sum(s.kind in ("transfer", "place") for s in self.steps)
+
+    @property
+    def grasps(self) -> list[int]:
+        """The free-air grasp ids used, in order."""
+        return [s.idfreeairgrip for s in self.steps if s.kind in ("pick", "regrasp")]
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"object": self.object, "robot": self.robot, "joint_names": list(self.joint_names),
+                "start": self.start.as_dict(), "goal": self.goal.as_dict(), "start_pose": _list(self.start_pose),
+                "goal_pose": _list(self.goal_pose), "handx": self.handx, "worldz": self.worldz, "rank": self.rank,
+                "regrasps": self.regrasps, "transfers": self.transfers, "timings": {k: float(v) for k, v in self.timings.items()},
+                "ids": {k: int(v) for k, v in self.ids.items()}, "steps": [s.as_dict() for s in self.steps]}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "Plan":
+        q = lambda v: PoseQuery(int(v["placement"]), float(v["x"]), float(v["y"]), float(v["yaw"]))  # noqa: E731
+        return cls(object=d["object"], robot=d["robot"], joint_names=list(d["joint_names"]), start=q(d["start"]), goal=q(d["goal"]),
+                   start_pose=np.asarray(d["start_pose"], dtype=np.float64).reshape(4, 4),
+                   goal_pose=np.asarray(d["goal_pose"], dtype=np.float64).reshape(4, 4),
+                   steps=[PlanStep.from_dict(s) for s in d["steps"]], handx=float(d["handx"]), worldz=float(d["worldz"]),
+                   rank=int(d.get("rank", 0)), timings=dict(d.get("timings", {})), ids=dict(d.get("ids", {})))
+
+    def to_json(self, path: str | Path | None = None) -> str:
+        """The plan as JSON (written to `path` when given)."""
+        text = json.dumps(self.as_dict(), indent=1)
+        if path is not None:
+            out = Path(path)
+            out.parent.mkdir(parents=True, exist_ok=True)
+            out.write_text(text)
+        return text
+
+    @classmethod
+    def from_json(cls, path_or_text: str | Path) -> "Plan":
+        text = str(path_or_text)
+        if not text.lstrip().startswith("{"):
+            text = Path(path_or_text).read_text()
+        return cls.from_dict(json.loads(text))
+
+    def lines(self) -> list[str]:
+        """Human-readable steps."""
+        out = []
+        for i, s in enumerate(self.steps):
+            where = "start" if i == 0 else ("goal" if i == len(self.steps) - 1 else f"placement {s.idfreetabletopplacement}")
+            out.append(f"{i + 1:2d}. {s.kind:8s} grasp {s.idfreeairgrip:<6d} {where:14s} at x {s.position[0]:+.3f} y {s.position[1]:+.3f} "
+                       f"yaw {np.degrees(s.yaw):+7.1f} deg  jaw {s.jawwidth * 1000:5.1f} mm")
+        return out
+
+    def summary(self) -> str:
+        t = self.timings
+        gs = t.get("connect", 0.0) + t.get("search", 0.0)
+        return (f"{self.object} with {self.robot}: {self.regrasps} regrasp(s), {self.transfers} transfer(s), {len(self.steps)} steps; "
+                f"connect {t.get('connect', 0.0) * 1000:.1f} ms + search {t.get('search', 0.0) * 1000:.1f} ms = {gs * 1000:.1f} ms")
+
+
+def _list(a: Any) -> Any:
+    return np.asarray(a, dtype=np.float64).tolist()
+
+
+def inverse_pose(m: np.ndarray) -> np.ndarray:
+    """Inverse of a rigid 4x4 transform."""
+    out = np.eye(4)
+    out[:3, :3] = m[:3, :3].T
+    out[:3, 3] = -m[:3, :3].T @ m[:3, 3]
+    return out
+
+
+def step_from_side(kind: str, side, k: int) -> PlanStep:
+    """A pick (start) or place (goal) step from grip `k` of a query side."""
+    q = side.joints[k]
+    return PlanStep(kind=kind, idfreeairgrip=int(side.grasp[k]), idfreetabletopplacement=int(side.query.idfreetabletopplacement),
+                    position=np.array([side.query.x, side.query.y, 0.0]), yaw=float(side.query.yaw), object_pose=side.pose.copy(),
+                    tcp=side.tcp[k].copy(), grasp=inverse_pose(side.pose) @ side.tcp[k], jawwidth=float(side.jawwidth[k]),
+                    q_approach=q[1].copy(), q_grasp=q[0].copy(), q_retract=q[2].copy())
+
+
+def step_from_node(kind: str, roadmap, a: int) -> PlanStep:
+    """A transfer or regrasp step at roadmap node `a`."""
+    q = roadmap.joints[a]
+    return PlanStep(kind=kind, idfreeairgrip=int(roadmap.idfreeairgrip[a]), idfreetabletopplacement=int(roadmap.idfreetabletopplacement[a]),
+                    position=roadmap.position[a].copy(), yaw=float(roadmap.yaw[a]), object_pose=roadmap.placement[a].copy(),
+                    tcp=roadmap.tcp[a].copy(), grasp=inverse_pose(roadmap.placement[a]) @ roadmap.tcp[a], jawwidth=float(roadmap.jawwidth[a]),
+                    q_approach=q[1].copy(), q_grasp=q[0].copy(), q_retract=q[2].copy(),
+                    idtabletopgrips=int(roadmap.idtabletopgrips[a]), idtabletopplacements=int(roadmap.idtabletopplacements[a]))
+
+
+def make_plan(planner, result: SearchResult, route: Route, rank: int = 0) -> Plan:
+    """The steps of one route of a search (pick, transfer / regrasp per regrasp, place)."""
+    steps = [step_from_side("pick", result.start, route.start_grip)]
+    for a, b in route.regrasps:
+        steps.append(step_from_node("transfer", planner.roadmap, a))
+        steps.append(step_from_node("regrasp", planner.roadmap, b))
+    steps.append(step_from_side("place", result.goal, route.goal_grip))
+    return Plan(object=planner.object.name, robot=planner.robot.name, joint_names=list(planner.robot.joint_names),
+                start=result.start.query, goal=result.goal.query, start_pose=result.start.pose.copy(), goal_pose=result.goal.pose.copy(),
+                steps=steps, handx=planner.handx, worldz=planner.worldz, rank=rank, timings=dict(result.timings), ids=dict(planner.ids))
+
+
+def plan_rows(plan: Plan) -> tuple[dict, dict]:
+    """The `plan` row and the `planstep` columns of a plan (written by `stages.save_plan`)."""
+
+    ids = plan.ids
+    row = {"idobject": ids["idobject"], "idrobot": ids["idrobot"], "idscene": ids["idscene"], "idikret": ids["idikret"],
+           "idtabletop": ids["idtabletop"], "start_placement": plan.start.idfreetabletopplacement,
+           "start_xyyaw": [plan.start.x, plan.start.y, plan.start.yaw], "goal_placement": plan.goal.idfreetabletopplacement,
+           "goal_xyyaw": [plan.goal.x, plan.goal.y, plan.goal.yaw], "rank": plan.rank, "regrasps": plan.regrasps,
+           "transfers": plan.transfers, "t_connect": plan.timings.get("connect"), "t_search": plan.timings.get("search")}
+    s = plan.steps
+
+    steps = {"seq": np.arange(len(s), dtype=np.int32), "kind": np.array([x.kind for x in s], dtype=object),
+             "idfreeairgrip": np.array([x.idfreeairgrip for x in s], dtype=np.int64),
+             "idfreetabletopplacement": np.array([x.idfreetabletopplacement for x in s], dtype=np.int64),
+             "idtabletopgrips": pa.array([x.idtabletopgrips for x in s], type=pa.int64()),
+             "position": np.array([x.position for x in s]), "yaw": np.array([x.yaw for x in s]),
+             "object": np.array([x.object_pose.ravel() for x in s]), "tcp": np.array([x.tcp.ravel() for x in s]),
+             "jawwidth": np.array([x.jawwidth for x in s]),
+             "jnt_approach": pa.array([x.q_approach.tolist() for x in s], type=pa.list_(pa.float64())),
+             "jnt_grasp": pa.array([x.q_grasp.tolist() for x in s], type=pa.list_(pa.float64())),
+             "jnt_retract": pa.array([x.q_retract.tolist() for x in s], type=pa.list_(pa.float64()))}
+    return row, steps

@@ -1,0 +1,288 @@
+"""The regrasp roadmap, connecting start and goal poses to it, and searching it (Wan & Harada, Section V).
+
+Graph (Section V, "Building the graph"): the nodes are the tabletop grips that are IK-feasible for a robot at the
+grasp and both retractions (the `ik` table's three flags). Two nodes sharing `idfreeairgrip` are joined by a
+transfer edge (carry the object from one placement to another with one grasp); two nodes sharing
+`idtabletopplacements` by a transit edge (release and regrasp at one placement). Both relations are cliques, so
+the graph is kept as two groupings of the node arrays (nodes sorted by grasp and by placement, CSR style) plus
+the grasp graph H (G x G, scipy.sparse): grasps g, g' are adjacent when some placement has nodes of both. A path
+of k transit edges is a walk of length k in H, so the fewest regrasps between two grasps is their breadth-first
+distance in H (all pairs are computed once per roadmap); transfers follow as k + 1.
+
+Queries (Section V, "Searching the graph"): a start or goal pose is a stable placement at a position and a yaw
+that need not be on the grid. Its grips are the placement's free tabletop grips moved to the pose; each needs IK
+at the grasp and both retractions without arm-table or arm-object collision, as the precomputation does.
+Start grips join roadmap nodes with the same grasp by transfer edges, goal grips likewise, and a start grip
+joins a goal grip directly when one grasp serves both. The search is a breadth-first search on the layered graph
+(layer = number of regrasps) over pairs of start and goal grasps, cost (regrasps, transfers) lexicographic.
+IK at the query poses is the expensive part, so it is evaluated lazily: in rounds, only the grips of the cheapest
+pairs whose feasibility is unsettled, most promising first (the grasp's IK feasibility at the nearest grid
+placements), first from the nearest stored solution and only when needed from the precomputation's fall-back
+seeds, until the best plans are proven (`lazy=False` evaluates every grip first; the optimum is the same).
+
+Cache: `load_planner` keeps the roadmap (and its IK adapter) per store file, object, robot, scene, retractions,
+tabletop parameter set and a fingerprint of the IK rows, so repeated queries only connect and search.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Union
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from workbench.errors import PlanningError
+from workbench.planners.wan_harada.roadmap import _failure
+from workbench.planners.wan_harada.tabletop import yaw
+from workbench.robots import ik as kinematics
+from workbench.robots.chain import solve_ik
+from workbench.robots.collider import Collider
+from workbench.robots.ik import IKOptions, SeedLibrary, retract
+
+if TYPE_CHECKING:  # pragma: no cover
+    import trimesh
+
+    from workbench.robots.collider import Scene
+    from workbench.robots.ik import IKOptions
+    from workbench.robots.model import Robot
+
+
+Query = Union["PoseQuery", np.ndarray, str]
+"""A start or goal: a PoseQuery, a `PLACEMENT,X,Y,YAW` string, or a 4x4 object pose on a stable placement."""
+
+
+@dataclass(frozen=True)
+class PoseQuery:
+    """An object pose on the table: stable placement `idfreetabletopplacement` moved to (x, y) and turned by `yaw`
+    about world z: translate(x, y, 0) @ yaw(theta) @ freetabletopplacement.rotmat."""
+
+    idfreetabletopplacement: int
+    x: float
+    y: float
+    yaw: float
+
+    def move(self) -> np.ndarray:
+        """The planar move applied to the free placement."""
+        m = yaw(self.yaw)
+        m[:2, 3] = (self.x, self.y)
+        return m
+
+    def text(self) -> str:
+        return f"{self.idfreetabletopplacement},{self.x:g},{self.y:g},{self.yaw:g}"
+
+    def as_dict(self) -> dict:
+        return {"placement": self.idfreetabletopplacement, "x": self.x, "y": self.y, "yaw": self.yaw}
+
+
+def parse_pose(text: str, label: str = "pose") -> PoseQuery:
+    """`PLACEMENT,X,Y,YAW` (placement id, metres, metres, radians) as a PoseQuery; PlanningError on bad input."""
+    parts = [p.strip() for p in str(text).split(",")]
+    if len(parts) != 4:
+        raise PlanningError(f"{label} {text!r} must be PLACEMENT,X,Y,YAW (placement id, x and y in m, yaw in rad), e.g. 1,0.5,0.1,0.785")
+    try:
+        pid = int(parts[0])
+        x, y, yaw = (float(v) for v in parts[1:])
+    except ValueError:
+        raise PlanningError(f"{label} {text!r}: PLACEMENT must be an integer id and X, Y, YAW numbers (m, m, rad)") from None
+    return check_query(PoseQuery(pid, x, y, yaw), label)
+
+
+def check_query(query: PoseQuery, label: str) -> PoseQuery:
+    """A PoseQuery with finite values, or a PlanningError naming `label`."""
+    if not all(math.isfinite(v) for v in (query.x, query.y, query.yaw)):
+        raise PlanningError(f"{label} ({query.text()}) has NaN or infinite values; give finite x, y (m) and yaw (rad)")
+    return query
+
+
+def match_pose(pose: np.ndarray, free_ids: np.ndarray, free_poses: np.ndarray, label: str = "pose",
+               tol_pos: float = 2e-3, tol_rot: float = 0.02) -> PoseQuery:
+    """The stable placement, position and yaw of an object pose in the world (4x4), within `tol_pos` m of the
+    table contact height and `tol_rot` rad of tilt; PlanningError when the pose is not on a stable placement."""
+    pose = np.asarray(pose, dtype=np.float64)
+    if pose.shape != (4, 4) or not np.isfinite(pose).all():
+        raise PlanningError(f"{label} must be a finite 4x4 transform, got shape {pose.shape}")
+    r = pose[:3, :3]
+    if np.abs(r @ r.T - np.eye(3)).max() > 1e-6 or np.linalg.det(r) < 0:
+        raise PlanningError(f"{label} is not a rigid transform; give a rotation with orthonormal columns")
+    best = (np.inf, -1, 0.0)
+    for k, f in enumerate(np.asarray(free_poses)):
+        m = r @ f[:3, :3].T  # should be a rotation about z
+        tilt = float(np.arccos(np.clip(m[2, 2], -1.0, 1.0)))
+        dz = abs(float(pose[2, 3] - f[2, 3]))
+        score = tilt + dz / max(tol_pos, 1e-12) * tol_rot
+        if score < best[0]:
+            best = (score, k, tilt, dz)
+    if best[1] < 0:
+        raise PlanningError(f"{label}: the object has no stable placements; run `workbench placements` first")
+    _, k, tilt, dz = best
+    if tilt > tol_rot or dz > tol_pos:
+        raise _failure("unstable", f"{label} is not on a stable placement: the nearest (id {int(free_ids[k])}) is {np.degrees(tilt):.1f} deg "
+                            f"tilted and {dz * 1000:.1f} mm off in height; give a pose resting on one of the placements "
+                            f"{', '.join(str(int(i)) for i in free_ids)}")
+    f = free_poses[k]
+    m = r @ f[:3, :3].T
+    theta = math.atan2(m[1, 0], m[0, 0])
+    xy = pose[:2, 3] - (yaw(theta)[:3, :3] @ f[:3, 3])[:2]
+    return PoseQuery(int(free_ids[k]), float(xy[0]), float(xy[1]), float(theta))
+
+
+class GripIK:
+    """IK with retractions (grasp, handx, handxworldz) for grips at start and goal poses (Section IV's ik columns).
+
+    Each of the three TCP poses is solved by the kinematics module's batched Levenberg-Marquardt: tier 1 from the
+    stored roadmap solution whose TCP pose is nearest (k-d tree over position and weighted rotation), capped at
+    `tier1_iters` iterations (most poses converge in a few; the rest are left to tier 2); tier 2 with the
+    precomputation's own settings (its seed library, iteration limits, reachability pre-filter). Converged
+    configurations are checked for arm-table, gripper-table and arm-object collision with the object at its pose,
+    with the precomputation's collider. A grip is feasible when all three poses are."""
+
+    def __init__(self, robot: Robot, scene: Scene, obj_mesh: trimesh.Trimesh | None, handx: float, worldz: float,
+                 seed_q: np.ndarray, seed_tcp: np.ndarray, opts: IKOptions | None = None, rho: float = 0.1,
+                 tier1_iters: int = 15):
+
+
+        self.robot, self.scene = robot, scene
+        self.handx, self.worldz = float(handx), float(worldz)
+        self.opts = opts or IKOptions()
+        self.tier1_iters = min(int(tier1_iters), self.opts.iters_warm)
+        self.collider = Collider(robot, scene, obj_mesh)
+        self.rho = rho
+        seed_q = np.asarray(seed_q, dtype=np.float64).reshape(-1, robot.nq)
+        seed_tcp = np.asarray(seed_tcp, dtype=np.float64).reshape(-1, 4, 4)
+        ok = np.isfinite(seed_q).all(axis=1)
+        self.seed_q = seed_q[ok]
+        self.tree = cKDTree(self._embed(seed_tcp[ok])) if ok.any() else None
+
+        reach = getattr(kinematics, "ReachFilter", None)  # the precomputation's reachability pre-filter
+        self.prefilter = reach(robot, scene) if reach is not None else self._reach_sphere(robot, scene)
+        self._library = None
+
+    @staticmethod
+    def _reach_sphere(robot, scene):
+        centre, radius = robot.reach()
+        wmin, wmax = np.asarray(scene.workspace_min, dtype=np.float64), np.asarray(scene.workspace_max, dtype=np.float64)
+
+        def inside(poses: np.ndarray) -> np.ndarray:
+            p = poses[..., :3, 3]
+            return (np.linalg.norm(p - centre, axis=-1) <= radius) & (p >= wmin).all(-1) & (p <= wmax).all(-1)
+        return inside
+
+    def _embed(self, poses: np.ndarray) -> np.ndarray:
+        return np.concatenate([poses[:, :3, 3], self.rho * poses[:, :3, :3].reshape(len(poses), 9)], axis=1)
+
+    @property
+    def library(self):  # -> kinematics.SeedLibrary
+        if self._library is None:
+
+
+            kw = {"collider": self.collider} if "collider" in inspect.signature(SeedLibrary).parameters else {}
+            self._library = SeedLibrary(self.robot, self.opts.library, self.opts.seed, **kw)
+        return self._library
+
+    def _nearest_seeds(self, targets: np.ndarray) -> np.ndarray:
+        """The library seeds the precomputation's fall-back tries for these targets."""
+        o = self.opts
+        if hasattr(o, "seed_pool"):
+            return self.library.nearest(targets, o.seeds, pool=o.seed_pool, spread=o.seed_spread)
+        return self.library.nearest(targets, o.seeds)
+
+    def targets(self, tcp: np.ndarray) -> np.ndarray:
+        """(n, 3, 4, 4) grasp, handx and handxworldz TCP poses."""
+
+        return retract(np.asarray(tcp, dtype=np.float64).reshape(-1, 4, 4), self.handx, self.worldz)
+
+    def solve(self, tcp: np.ndarray, placements: np.ndarray, known: np.ndarray | None = None, warm: bool = True,
+              fallback: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """Feasible (n,) and joints (n, 3, nq) for TCP poses (n, 4, 4) of grips of the object at `placements` (n, 4, 4).
+
+        Tier 1 (`warm`): every pose from its nearest stored solution, one batched solve. Tier 2 (`fallback`): the
+        poses still unsolved from all their other seeds at once (second-nearest stored solution, the grasp's own
+        solution for the retractions, the library's nearest seeds, as the precomputation does), keeping the first
+        collision-free solution. `known` (n, 3, nq) holds poses already solved (NaN elsewhere), e.g. by tier 1.
+        Joints are returned for every solved pose, also of infeasible grips (NaN where unsolved)."""
+
+        o, robot = self.opts, self.robot
+        n = len(tcp)
+        q_out = np.full((n * 3, robot.nq), np.nan)
+        if known is not None:
+            q_out[:] = np.asarray(known, dtype=np.float64).reshape(n * 3, robot.nq)
+        good = np.isfinite(q_out).all(axis=1)
+        if n == 0:
+            return np.zeros(0, dtype=bool), q_out.reshape(0, 3, robot.nq)
+        flat = self.targets(tcp).reshape(n * 3, 4, 4)  # row = grip * 3 + kind
+        place = np.repeat(np.asarray(placements, dtype=np.float64).reshape(-1, 4, 4), 3, axis=0)
+        pre = np.asarray(self.prefilter(flat), dtype=bool)
+        alive = np.repeat(pre.reshape(n, 3).all(axis=1), 3)  # a grip needs all three poses
+
+        def attempt(rows: np.ndarray, q0: np.ndarray, iters: int) -> tuple[np.ndarray, np.ndarray]:
+            """Solve rows (repeats allowed) from q0: (joint vectors, converged and collision-free)."""
+            q, ok = solve_ik(robot, flat[rows], q0, iters, o.tol_pos, o.tol_rot)
+            if ok.any():
+                sel = np.flatnonzero(ok)
+                ok[sel[self.collider.collides_q(q[sel], place[rows[sel]])]] = False
+            return q, ok
+
+        near = None
+        rows = np.flatnonzero(alive & ~good)
+        if self.tree is not None and len(rows):
+            k = min(2, len(self.seed_q))
+            _, near = self.tree.query(self._embed(flat[rows]), k=k)
+            near = np.asarray(near).reshape(len(rows), k)
+            if warm:
+                q, ok = attempt(rows, self.seed_q[near[:, 0]], self.tier1_iters)
+                q_out[rows[ok]], good[rows[ok]] = q[ok], True
+        if fallback:
+            left = ~good[rows]
+            rows2, near2 = rows[left], (near[left] if near is not None else None)
+            if len(rows2):
+                seeds, owner = [], []
+                if near2 is not None and near2.shape[1] > 1:  # the nearest stored solution was tier 1's seed
+                    seeds.append(self.seed_q[near2[:, 1]])
+                    owner.append(np.arange(len(rows2)))
+                kind = rows2 % 3
+                own = (kind > 0) & good[rows2 - kind]
+                if own.any():
+                    seeds.append(q_out[rows2[own] - kind[own]])
+                    owner.append(np.flatnonzero(own))
+                if o.seeds > 0:
+                    lib = self._nearest_seeds(flat[rows2])
+                    seeds.append(self.library.q[lib.ravel()])
+                    owner.append(np.repeat(np.arange(len(rows2)), lib.shape[1]))
+                if seeds:
+                    owner = np.concatenate(owner)
+                    q, ok = attempt(rows2[owner], np.concatenate(seeds), o.iters_seed)
+                    hit = np.flatnonzero(ok)
+                    win = hit[np.unique(owner[hit], return_index=True)[1]]
+                    q_out[rows2[owner[win]]], good[rows2[owner[win]]] = q[win], True
+        feas = good.reshape(n, 3).all(axis=1) & alive.reshape(n, 3)[:, 0]
+        return feas, q_out.reshape(n, 3, robot.nq)
+
+
+@dataclass
+class Side:
+    """The grips of a start or goal pose: free-air grasp ids, TCP poses in the world, jaw widths, roadmap grasp index
+    (-1 when the grasp has no roadmap node), IK state (0 unknown, 1 feasible, -1 infeasible, -2 not solved from the
+    nearest stored solution, the fall-back seeds still untried), joints (NaN where unsolved), and `prior`:
+    the share of the nearest grid placements where the same grasp is IK-feasible (evaluation order only)."""
+
+    label: str
+    query: PoseQuery
+    pose: np.ndarray
+    grasp: np.ndarray
+    tcp: np.ndarray
+    jawwidth: np.ndarray
+    rindex: np.ndarray
+    state: np.ndarray
+    joints: np.ndarray
+    prior: np.ndarray | None = None
+
+    @property
+    def n_feasible(self) -> int:
+        return int((self.state > 0).sum())
+
+    @property
+    def n_evaluated(self) -> int:
+        return int((self.state != 0).sum())

@@ -1,0 +1,439 @@
+"""Runs planner stages against a store: reuse what is stored for the same inputs and parameters, else compute
+and write each stage in one transaction (CONVENTIONS.md, Store).
+
+The regrasp roadmap, connecting start and goal poses to it, and searching it (Wan & Harada, Section V).
+
+Graph (Section V, "Building the graph"): the nodes are the tabletop grips that are IK-feasible for a robot at the
+grasp and both retractions (the `ik` table's three flags). Two nodes sharing `idfreeairgrip` are joined by a
+transfer edge (carry the object from one placement to another with one grasp); two nodes sharing
+`idtabletopplacements` by a transit edge (release and regrasp at one placement). Both relations are cliques, so
+the graph is kept as two groupings of the node arrays (nodes sorted by grasp and by placement, CSR style) plus
+the grasp graph H (G x G, scipy.sparse): grasps g, g' are adjacent when some placement has nodes of both. A path
+of k transit edges is a walk of length k in H, so the fewest regrasps between two grasps is their breadth-first
+distance in H (all pairs are computed once per roadmap); transfers follow as k + 1.
+
+Queries (Section V, "Searching the graph"): a start or goal pose is a stable placement at a position and a yaw
+that need not be on the grid. Its grips are the placement's free tabletop grips moved to the pose; each needs IK
+at the grasp and both retractions without arm-table or arm-object collision, as the precomputation does.
+Start grips join roadmap nodes with the same grasp by transfer edges, goal grips likewise, and a start grip
+joins a goal grip directly when one grasp serves both. The search is a breadth-first search on the layered graph
+(layer = number of regrasps) over pairs of start and goal grasps, cost (regrasps, transfers) lexicographic.
+IK at the query poses is the expensive part, so it is evaluated lazily: in rounds, only the grips of the cheapest
+pairs whose feasibility is unsettled, most promising first (the grasp's IK feasibility at the nearest grid
+placements), first from the nearest stored solution and only when needed from the precomputation's fall-back
+seeds, until the best plans are proven (`lazy=False` evaluates every grip first; the optimum is the same).
+
+Cache: `load_planner` keeps the roadmap (and its IK adapter) per store file, object, robot, scene, retractions,
+tabletop parameter set and a fingerprint of the IK rows, so repeated queries only connect and search.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, fields
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from workbench.errors import PlanningError, RobotError
+from workbench.geometry.objects import ObjectModel, from_arrays
+from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
+from workbench.grasping.placements import (
+    PlacementParams,
+    free_tabletop_grips,
+    stable_placements,
+)
+from workbench.planners.wan_harada.planner import Planner
+from workbench.planners.wan_harada.plans import Plan, plan_rows
+from workbench.planners.wan_harada.query import PoseQuery
+from workbench.planners.wan_harada.roadmap import build_roadmap, grid_index
+from workbench.planners.wan_harada.tabletop import (
+    TabletopParams,
+    select_grasps,
+    tabletop,
+)
+from workbench.robots.collider import Collider, Scene, default_scene
+from workbench.robots.gripper import Gripper, franka_hand
+from workbench.robots.ik import IKOptions, iter_ik
+from workbench.robots.model import ROBOTS, Robot, RobotSpec, builtin_robot, get_robot
+from workbench.store import Store
+from workbench.store import robots as robot_sql
+from workbench.store import wan_harada as sql
+from workbench.store.grasps import find_grasps, load_grasps, save_grasps
+from workbench.store.objects import object_row, put_object
+from workbench.store.placements import (
+    find_placements,
+    find_tabletop,
+    latest_tabletop_paramset,
+    load_free_tabletop_grips,
+    load_placements,
+    load_tabletop_grips,
+    save_placements,
+    save_tabletop,
+    tabletop_counts,
+)
+from workbench.store.robots import ik_runs, ikret_row, robot_row, scene_row
+
+if TYPE_CHECKING:  # pragma: no cover
+
+    from workbench.geometry.objects import ObjectModel
+    from workbench.robots.collider import Scene
+    from workbench.robots.ik import IKOptions
+    from workbench.robots.model import Robot
+    from workbench.store import Store
+
+
+@dataclass
+class GraspsResult:
+    idobject: int
+    idparamset: int
+    reused: bool
+    count: int
+    poses: np.ndarray
+    widths: np.ndarray
+    plan: GraspPlan | None
+
+
+def ensure_grasps(db: str | Path | Store, obj: ObjectModel, gripper: Gripper, params: GraspParams) -> GraspsResult:
+    """Free-air grasps of `obj` in the store `db`: planned and stored, or reused when already stored."""
+    store = db if isinstance(db, Store) else Store(db)
+    try:
+        oid = put_object(store, obj)
+        pid = find_grasps(store, oid, gripper, params)
+        plan = None
+        if pid is None:
+            plan = plan_grasps(obj, gripper, params)
+            pid, _ = save_grasps(store, oid, gripper, params, plan.grasps)
+        rows = load_grasps(store, oid, pid)
+        return GraspsResult(idobject=oid, idparamset=pid, reused=plan is None, count=len(rows["jawwidth"]),
+                            poses=rows["rotmat"], widths=rows["jawwidth"], plan=plan)
+    finally:
+        if not isinstance(db, Store):
+            store.close()
+
+
+@dataclass
+class PlacementsResult:
+    idplacements: int
+    idtabletop: int
+    reused: bool
+    placements: dict
+    n_free_grips: np.ndarray
+    n_tabletop_placements: int
+    n_tabletop_grips: int
+    timings: dict
+
+
+def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, grasp_pid: int, gripper: Gripper,
+                      pparams: PlacementParams, tparams: TabletopParams) -> PlacementsResult:
+    """Free placements, free tabletop grips, tabletop placements and grips of a stored grasp set (Section IV)."""
+
+
+    store = db if isinstance(db, Store) else Store(db)
+    timings: dict[str, float] = {}
+    try:
+        reused = True
+        grasps = None
+        pl_pid = find_placements(store, idobject, grasp_pid, pparams)
+        if pl_pid is None:
+            reused = False
+            t0 = time.perf_counter()
+            grasps = load_grasps(store, idobject, grasp_pid)
+            placements = stable_placements(obj, pparams)
+            ftg = free_tabletop_grips(placements, grasps["rotmat"], gripper, pparams)
+            timings["placements"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            pl_pid = save_placements(store, idobject, grasp_pid, pparams, placements, grasps, ftg)
+            timings["write_placements"] = time.perf_counter() - t0
+        stored = load_placements(store, pl_pid)
+        ftg = load_free_tabletop_grips(store, pl_pid)
+        fp_index = np.searchsorted(stored["idfreetabletopplacement"], ftg["idfreetabletopplacement"])
+        tt_pid = find_tabletop(store, idobject, pl_pid, tparams)
+        if tt_pid is None:
+            reused = False
+            t0 = time.perf_counter()
+            grasp_ids = np.unique(ftg["idfreeairgrip"])
+            usable = np.zeros((len(stored["stability"]), len(grasp_ids)), dtype=bool)
+            usable[fp_index, np.searchsorted(grasp_ids, ftg["idfreeairgrip"])] = True
+            grasps = load_grasps(store, idobject, grasp_pid) if grasps is None else grasps
+            poses = grasps["rotmat"][np.searchsorted(grasps["idfreeairgrip"], grasp_ids)]
+            chosen = grasp_ids[select_grasps(poses, usable, tparams.max_grasps)]
+            keep = np.isin(ftg["idfreeairgrip"], chosen)
+            tt = tabletop(stored["rotmat"], fp_index, ftg["rotmat"], keep, tparams)
+            timings["tabletop"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            tt_pid = save_tabletop(store, idobject, pl_pid, tparams, tt, ftg, stored["idfreetabletopplacement"])
+            timings["write_tabletop"] = time.perf_counter() - t0
+        n_tp, n_tg = tabletop_counts(store, tt_pid)
+        return PlacementsResult(idplacements=pl_pid, idtabletop=tt_pid, reused=reused, placements=stored,
+                                n_free_grips=np.bincount(fp_index, minlength=len(stored["stability"])),
+                                n_tabletop_placements=int(n_tp), n_tabletop_grips=int(n_tg), timings=timings)
+    finally:
+        if not isinstance(db, Store):
+            store.close()
+
+
+_PLANNERS: dict[tuple, Planner] = {}
+
+
+def _scene_from(params: dict) -> tuple[Scene, IKOptions]:
+
+
+    def pick(cls, d):
+        names = {f.name for f in fields(cls)}
+        return {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items() if k in names}
+
+    sd = params.get("scene", params) if isinstance(params.get("scene"), dict) else params
+    scene = Scene(**pick(Scene, sd))
+    od = next((params[k] for k in ("ik", "opts", "options", "ik_options") if isinstance(params.get(k), dict)), None)
+    opts = IKOptions(**pick(IKOptions, od)) if od else IKOptions()
+    return scene, opts
+
+
+def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int, handx: float | None = None, worldz: float | None = None,
+                 idtabletop: int | None = None, idscene: int | None = None) -> Planner:
+    """The regrasp graph of `object_name` for `robot_name` (a stored robot name or idrobot) from a store (path or
+    Store), built from the latest tabletop parameter set and the IK run with the most rows (or the one with these
+    retractions or this scene); cached per store file, object, robot, scene, retractions and parameter set, so
+    repeated queries only connect and search."""
+
+    store = db if isinstance(db, Store) else Store(db)
+    try:
+        oid, obj = get_object(store, object_name)
+        tt = latest_tabletop_paramset(store, oid) if idtabletop is None else int(idtabletop)
+        rrow = robot_row(store, robot_name)
+        # the run with the most rows (then the newest) first: (idscene, idikret)
+        runs = [(int(r["idscene"]), int(r["idikret"])) for r in
+                sorted(ik_runs(store, idtabletop=tt, idrobot=rrow["idrobot"]), key=lambda r: (-r["rows"], -r["last"]))]
+        if handx is not None or worldz is not None:
+            runs = [r for r in runs if _ret_match(ikret_row(store, r[1]), handx, worldz)]
+        if idscene is not None:
+            runs = [r for r in runs if r[0] == int(idscene)]
+        if not runs:
+            raise PlanningError(f"store {store.path} has no IK of {object_name}'s tabletop grips for robot {robot_name}"
+                                f"{'' if handx is None and worldz is None else f' with handx {handx}, worldz {worldz}'}; "
+                                f"run `workbench ik --db {store.path} --object {object_name} --robot {robot_name}` first")
+        idscene, idikret = runs[0][0], runs[0][1]
+        fp = sql.ik_fingerprint(store, tt, rrow["idrobot"], idscene, idikret)
+        key = (str(store.path.resolve()), oid, tt, rrow["idrobot"], rrow["digest"], idscene, idikret, fp, obj.digest)
+        if key in _PLANNERS:
+            return _PLANNERS[key]
+        t0 = time.perf_counter()
+        robot = _robot_from_row(rrow)
+        rows = sql.roadmap_rows(store, tt, rrow["idrobot"], idscene, idikret, robot.nq)
+        t_load = time.perf_counter() - t0
+        roadmap = build_roadmap(rows, rows["feasible"])
+        roadmap.timings["load"] = t_load
+        pl = sql.placements_of_tabletop(store, tt)
+        free = load_placements(store, pl)
+        ftg = load_free_tabletop_grips(store, pl)
+        sparams = scene_row(store, idscene)
+        scene, opts = _scene_from(sparams)
+        hx, wz = ikret_row(store, idikret)
+        ids = {"idobject": oid, "idrobot": rrow["idrobot"], "idscene": idscene, "idikret": idikret, "idtabletop": tt, "idplacements": pl}
+        planner = Planner(roadmap, free, ftg, obj, robot, scene, hx, wz, ids, opts, grid=grid_index(rows))
+        roadmap.key = key
+        planner.rows = {"robot": rrow, "scene": sparams}  # raw store rows, for the independent validator
+        planner.ik.library  # build the IK adapter and its seed library now, not during the first query
+        if len(_PLANNERS) >= 8:
+            _PLANNERS.pop(next(iter(_PLANNERS)))
+        _PLANNERS[key] = planner
+        return planner
+    finally:
+        if store is not db:
+            store.close()
+
+
+def _ret_match(ret: tuple[float, float], handx: float | None, worldz: float | None) -> bool:
+    return (handx is None or abs(ret[0] - handx) < 1e-9) and (worldz is None or abs(ret[1] - worldz) < 1e-9)
+
+
+def _robot_from_row(row: dict) -> Robot:
+    """The library robot of a stored `robot` row: the built-in of that name at the stored base (it must have the
+    stored kinematics digest), or the stored URDF."""
+
+    name = row["name"]
+    builtin = name if name in ROBOTS else name.rsplit("-", 1)[0]  # "panda-<digest>": a panda at another base
+    if builtin in ROBOTS:
+        robot = builtin_robot(builtin, base=row["base"])
+        if row.get("digest") and robot.spec.digest != row["digest"]:
+            raise PlanningError(f"robot {row['name']!r} in the store was computed with other kinematics (URDF, frames, base or "
+                                f"locked joints) than the library's; rebuild its IK stage (workbench build / ik) in a new store")
+    else:
+        robot = Robot(RobotSpec(name=row["name"], urdf=row["urdf"], urdf_path="", tip_frame=row["tip_frame"],
+                                tcp_frame=row["tcp_frame"], mount=row["mount"], base=row["base"],
+                                joints=tuple(row["joint_names"]),
+                                locked=tuple((str(k), float(v)) for k, v in dict(row.get("locked") or {}).items())))
+    if list(robot.joint_names) != list(row["joint_names"]):
+        raise PlanningError(f"robot {row['name']!r}: the stored joint order {row['joint_names']} differs from the library's "
+                            f"{list(robot.joint_names)}; rebuild the ik stage")
+    return robot
+
+
+HANDX, WORLDZ = 0.05, 0.10
+
+
+@dataclass
+class BuildResult:
+    """Ids of every stage's rows, whether each was reused, counts and seconds per stage."""
+
+    name: str
+    robot: str
+    ids: dict = field(default_factory=dict)
+    reused: dict = field(default_factory=dict)
+    counts: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+
+
+def ensure_ik_rows(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
+                   workers: int | None = None, progress: bool = True) -> tuple[dict, bool]:
+    """IK feasibility of the tabletop grips for a robot (Section IV's ik and ikret tables), computed or reused by the
+    IK stage's runner (`stages.ensure_ik`); returns the run's ids and whether it was reused."""
+
+    run = ensure_ik(store, idobject, obj, idtabletop, robot_name, handx=handx, worldz=worldz, workers=workers, progress=progress)
+    return {"idrobot": run.idrobot, "idscene": run.idscene, "idikret": run.idikret}, run.reused
+
+
+def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pparams: PlacementParams = PlacementParams(),
+              tparams: TabletopParams = TabletopParams(), handx: float = HANDX, worldz: float = WORLDZ,
+              workers: int | None = None, progress: bool = True) -> BuildResult:
+    """Grasps, placements, tabletop grips, IK and the regrasp graph of `obj` (an ObjectModel) for `robot_name` in the
+    store `db` (path or Store), each stage reused when stored with the same inputs and parameters."""
+    from workbench.planners.wan_harada.stages import (
+        ensure_grasps,
+        ensure_placements,
+        load_planner,
+    )
+
+    store = db if isinstance(db, Store) else Store(db)
+    out = BuildResult(name=obj.name, robot=robot_name)
+    try:
+        hand = franka_hand()
+        t0 = time.perf_counter()
+        g = ensure_grasps(store, obj, hand, gparams)
+        out.timings["grasps"], out.reused["grasps"], out.counts["grasps"] = time.perf_counter() - t0, g.reused, g.count
+        t0 = time.perf_counter()
+        p = ensure_placements(store, g.idobject, obj, g.idparamset, hand, pparams, tparams)
+        out.timings["placements"], out.reused["placements"] = time.perf_counter() - t0, p.reused
+        out.counts.update(placements=len(p.placements["stability"]), tabletop_placements=p.n_tabletop_placements,
+                          tabletop_grips=p.n_tabletop_grips)
+        t0 = time.perf_counter()
+        ik_ids, reused = ensure_ik_rows(store, g.idobject, obj, p.idtabletop, robot_name, handx, worldz, workers, progress)
+        out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, reused
+        t0 = time.perf_counter()
+        planner = load_planner(store, obj.name, ik_ids["idrobot"], handx, worldz, idtabletop=p.idtabletop,
+                               idscene=ik_ids["idscene"])
+        out.timings["graph"] = time.perf_counter() - t0
+        out.counts.update({f"graph_{k}": v for k, v in planner.roadmap.summary().items()})
+        out.counts["placement_ids"] = planner.placement_ids()
+        out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **planner.ids}
+        return out
+    finally:
+        if store is not db:
+            store.close()
+
+
+@dataclass
+class IKRun:
+    """What one `run_ik` did: the ids of the run, the grips, how many were computed now, the feasible counts."""
+
+    idrobot: int
+    idscene: int
+    idikret: int
+    idtabletop: int
+    grips: int
+    computed: int
+    feasible: int
+    feasible_all: int
+    seconds: float
+
+    @property
+    def reused(self) -> bool:
+        return self.computed == 0
+
+
+def scene_params(robot: Robot, scene: Scene, opts: IKOptions) -> dict:
+    """Everything besides the robot row and the grips that changes the `ik` rows (stored in `scene.params`)."""
+    return {**scene.as_dict(), "ik": opts.as_dict(),
+            "robot": {"locked": {k: v for k, v in robot.spec.locked}, "drop_geometry": list(robot.spec.drop_geometry),
+                      "gripper": robot.gripper.name}}
+
+
+def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx: float = HANDX, worldz: float = WORLDZ,
+           opts: IKOptions = IKOptions(), workers: int | None = None, progress: bool = True,
+           idtabletop: int | None = None) -> IKRun:
+    """Compute (or reuse) the `ik` rows of every tabletop grip of `obj_name` for `robot` (Section IV)."""
+
+    t0 = time.perf_counter()
+    scene = scene or default_scene(robot.name)
+    hit = Collider(robot, scene, None).fixed_parts_hit_table()
+    if hit:
+        raise RobotError(f"the fixed links ({', '.join(hit[:3])}) of robot {robot.name!r} cut into the table; move its base "
+                         f"(--base) or the table (--table)")
+    oid, obj = get_object(store, obj_name)
+    grips = load_tabletop_grips(store, oid, idtabletop)
+    pid = int(np.asarray(grips["idparamset"])) if "idparamset" in grips else int(idtabletop if idtabletop is not None else -1)
+    ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
+    rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz)
+    done = robot_sql.stored_grips(store, rid, sid, kid)
+
+    def skip(ix: np.ndarray) -> bool:
+        return bool(np.isin(ids[ix], done, assume_unique=True).all())
+
+    computed = 0
+    arrays = {k: v for k, v in grips.items() if isinstance(v, np.ndarray) and v.shape[:1] == ids.shape}
+    for ix, feas, joints in iter_ik(robot, arrays, scene, handx, worldz, obj.mesh, opts, workers, skip=skip, progress=progress):
+        todo = ~np.isin(ids[ix], done)
+        computed += robot_sql.insert_ik(store, rid, sid, kid, ids[ix][todo], feas[todo], joints[todo])
+    counts = robot_sql.run_counts(store, rid, sid, kid, pid)
+    return IKRun(rid, sid, kid, pid, len(ids), computed, counts[0], counts[1], time.perf_counter() - t0)
+
+
+def ensure_ik(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
+              workers: int | None = None, progress: bool = True) -> IKRun:
+    """`run_ik` for a built-in robot (or URDF path) by name, with the signature `workbench build` expects."""
+    return run_ik(store, obj.name, get_robot(robot_name), None, handx, worldz, IKOptions(), workers, progress, idtabletop)
+
+
+DEMO_GRID = TabletopParams(x_min=0.35, x_max=0.65, nx=5, y_min=-0.2, y_max=0.2, ny=3, angles=8, max_grasps=60)
+
+
+def choose_task(planner, seed: int = 0, tries: int = 40, grid: TabletopParams = DEMO_GRID,
+                min_regrasps: int = 1) -> tuple:
+    """A start and a goal (PoseQuery) on the grid's area that need at least `min_regrasps` regrasps: seeded random
+    pairs of different stable placements; the one needing the most regrasps among the first solvable ones."""
+
+    rng = np.random.default_rng(seed)
+    ids = planner.placement_ids()
+    best = None
+    for _ in range(tries):
+        a, b = rng.choice(ids, size=2, replace=len(ids) < 2)
+        q = [PoseQuery(int(p), float(rng.uniform(grid.x_min, grid.x_max)), float(rng.uniform(grid.y_min, grid.y_max)),
+                       float(rng.uniform(-np.pi, np.pi))) for p in (a, b)]
+        try:
+            res = planner.search(q[0], q[1], alternatives=0)
+        except PlanningError:
+            continue
+        k = res.routes[0].n_regrasps
+        if k >= min_regrasps and (best is None or k > best[0]):
+            best = (k, q[0], q[1])
+            if k >= min_regrasps + 1:
+                break
+    if best is None:
+        raise PlanningError(f"no start/goal pair among {tries} random ones needs {min_regrasps}+ regrasps; try another --seed")
+    return best[1], best[2]
+
+
+def save_plan(store: Store, plan: Plan) -> int:
+    """Store a plan and its steps (tables `plan`, `planstep`) in one transaction; returns idplan."""
+    return sql.save_plan(store, *plan_rows(plan))
+
+
+def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
+    """The stored object `name` rebuilt as an ObjectModel (mesh in metres, the stored centre of mass)."""
+    oid, row = object_row(store, name)
+    obj = from_arrays(np.asarray(row["vertices"], dtype=np.float64), np.asarray(row["faces"], dtype=np.int64), scale=1.0,
+                      name=name, source=row["source"])
+    return oid, ObjectModel(name=name, mesh=obj.mesh, com=np.asarray(row["com"], dtype=np.float64),
+                            com_method=row["com_method"], scale=row["scale"], source=row["source"], digest=obj.digest)

@@ -1,0 +1,148 @@
+"""Tabletop placements and grips over a grid of table positions and rotations (Wan & Harada, Section IV, Fig. 7).
+
+Each free placement is displaced to every grid position and rotated about world z by every value of the
+`angle` table; every free tabletop grip of that placement follows it into the world. The world frame is the
+table frame here (table top z = 0). Table I uses 21 positions and 8 rotations (168 tabletop placements per free
+placement); Fig. 7 shows 91 positions. `max_grasps` caps the free-air grasps carried into the roadmap, picked
+spread out over the object (farthest-point order, preferring grasps usable in more placements, and keeping a few
+for every placement), so a dense grasp set still gives a roadmap of tens of thousands of grips that IK can process.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from workbench.errors import WorkbenchError
+
+
+@dataclass(frozen=True)
+class TabletopParams:
+    """Table grid (metres, world frame): x from x_min to x_max in nx steps, y likewise; `angles` rotations about
+    z in [0, 2 pi); `max_grasps` free-air grasps carried into the roadmap (None: all)."""
+
+    x_min: float = 0.35
+    x_max: float = 0.65
+    nx: int = 7
+    y_min: float = -0.20
+    y_max: float = 0.20
+    ny: int = 3
+    angles: int = 8
+    max_grasps: int | None = 80
+
+    def __post_init__(self) -> None:
+        if self.nx < 1 or self.ny < 1 or self.angles < 1 or (self.max_grasps is not None and self.max_grasps < 1):
+            raise WorkbenchError(f"tabletop grid needs nx, ny, angles, max_grasps >= 1, got {self}")
+        if not (np.isfinite([self.x_min, self.x_max, self.y_min, self.y_max]).all() and self.x_min <= self.x_max and self.y_min <= self.y_max):
+            raise WorkbenchError(f"tabletop grid bounds must be finite with min <= max, got {self}")
+
+    def positions(self) -> np.ndarray:
+        """Grid positions (nx * ny, 3) on the table top, x-major."""
+        xs = np.linspace(self.x_min, self.x_max, self.nx) if self.nx > 1 else np.array([(self.x_min + self.x_max) / 2])
+        ys = np.linspace(self.y_min, self.y_max, self.ny) if self.ny > 1 else np.array([(self.y_min + self.y_max) / 2])
+        gx, gy = np.meshgrid(xs, ys, indexing="ij")
+        return np.column_stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)])
+
+    def angle_values(self) -> np.ndarray:
+        return 2 * np.pi * np.arange(self.angles) / self.angles
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+def paper_grid() -> TabletopParams:
+    """The grid of Fig. 7: 91 positions (13 x 7) and 8 rotations, all grasps."""
+    return TabletopParams(x_min=0.35, x_max=0.65, nx=7, y_min=-0.30, y_max=0.30, ny=13, angles=8, max_grasps=None)
+
+
+def select_grasps(grasp_poses: np.ndarray, usable: np.ndarray, count: int | None, per_placement: int = 4) -> np.ndarray:
+    """Indices of about `count` grasps spread over contact centres and approach directions (farthest-point order),
+    starting from and favouring grasps usable in more placements. Every placement keeps at least `per_placement`
+    of its usable grasps (or all it has), so no placement drops out of the roadmap. `usable` is the (P, G) mask."""
+    uses = usable.sum(axis=0)
+    cand = np.flatnonzero(uses > 0)
+    if count is None or len(cand) <= count:
+        return cand
+    pos = grasp_poses[cand, :3, 3]
+    scale = max(float(np.ptp(pos, axis=0).max()), 1e-9)
+    feat = np.column_stack([pos / scale, 0.5 * grasp_poses[cand, :3, 2]])
+    weight = 0.5 + uses[cand] / uses[cand].max()
+    chosen = np.zeros(len(cand), dtype=bool)
+    dist = np.full(len(cand), np.inf)
+
+    def take(k: int) -> None:
+        chosen[k] = True
+        np.minimum(dist, np.linalg.norm(feat - feat[k], axis=1), out=dist)
+
+    take(int(np.argmax(uses[cand])))
+    for _ in range(count - 1):
+        take(int(np.argmax(np.where(chosen, -1.0, dist * weight))))
+    for row in usable[:, cand]:
+        need = min(per_placement, int(row.sum())) - int((row & chosen).sum())
+        for _ in range(max(need, 0)):
+            take(int(np.argmax(np.where(row & ~chosen, dist, -1.0))))
+    return cand[chosen]
+
+
+def yaw(theta: float | np.ndarray) -> np.ndarray:
+    """Rotation(s) about world z as 4x4 transforms."""
+    t = np.atleast_1d(np.asarray(theta, dtype=np.float64))
+    out = np.zeros((len(t), 4, 4))
+    out[:, 0, 0] = out[:, 1, 1] = np.cos(t)
+    out[:, 0, 1], out[:, 1, 0] = -np.sin(t), np.sin(t)
+    out[:, 2, 2] = out[:, 3, 3] = 1.0
+    return out if np.ndim(theta) else out[0]
+
+
+@dataclass(frozen=True)
+class Tabletop:
+    """Tabletop placements (T rows: free placement index, angle index, position, object pose in the world, and the
+    move (translation and yaw) from the free placement) and tabletop grips (R rows: tabletop placement row, free
+    tabletop grip row, TCP pose in the world)."""
+
+    placement: np.ndarray
+    angle: np.ndarray
+    position: np.ndarray
+    poses: np.ndarray
+    moves: np.ndarray
+    grip_tp: np.ndarray
+    grip_ftg: np.ndarray
+    grip_poses: np.ndarray
+
+
+def tabletop(free_poses: np.ndarray, ftg_placement: np.ndarray, ftg_poses: np.ndarray, ftg_keep: np.ndarray,
+             params: TabletopParams) -> Tabletop:
+    """Displace and rotate every free placement over the grid; carry the kept free tabletop grips along.
+
+    free_poses: (P, 4, 4) free placements; ftg_placement: (F,) placement index of each free tabletop grip;
+    ftg_poses: (F, 4, 4) their TCP poses in the table frame; ftg_keep: (F,) which grips enter the roadmap.
+    """
+    pos = params.positions()
+    ang = params.angle_values()
+    n_p, n_a, n_x = len(free_poses), len(ang), len(pos)
+    move = yaw(ang)[None, :, :, :].repeat(n_x, axis=0)  # (X, A, 4, 4)
+    move[..., :3, 3] = pos[:, None, :]
+    move = move.reshape(-1, 4, 4)  # position-major, then angle
+    tp_place = np.repeat(np.arange(n_p), n_x * n_a)
+    tp_angle = np.tile(np.tile(np.arange(n_a), n_x), n_p)
+    tp_pos = np.tile(np.repeat(pos, n_a, axis=0), (n_p, 1))
+    tp_move = np.tile(move, (n_p, 1, 1))
+    tp_poses = tp_move @ free_poses[tp_place]
+    # grips: for each free placement, its kept grips times its X*A tabletop placements
+    kept = np.flatnonzero(ftg_keep)
+    per = np.bincount(ftg_placement[kept], minlength=n_p)
+    order = kept[np.argsort(ftg_placement[kept], kind="stable")]
+    grip_tp, grip_ftg = [], []
+    start = 0
+    for p in range(n_p):
+        g = order[start:start + per[p]]
+        start += per[p]
+        tps = np.arange(p * n_x * n_a, (p + 1) * n_x * n_a)
+        grip_tp.append(np.repeat(tps, len(g)))
+        grip_ftg.append(np.tile(g, len(tps)))
+    grip_tp = np.concatenate(grip_tp) if grip_tp else np.zeros(0, dtype=np.int64)
+    grip_ftg = np.concatenate(grip_ftg) if grip_ftg else np.zeros(0, dtype=np.int64)
+    grip_poses = tp_move[grip_tp] @ ftg_poses[grip_ftg]
+    return Tabletop(placement=tp_place, angle=tp_angle, position=tp_pos, poses=tp_poses, moves=tp_move, grip_tp=grip_tp,
+                    grip_ftg=grip_ftg, grip_poses=grip_poses)

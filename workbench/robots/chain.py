@@ -1,0 +1,237 @@
+"""IK feasibility of tabletop grips (Wan & Harada Section IV: the `ik` and `ikret` tables).
+
+For every tabletop grip (a TCP pose in the world) three poses are solved: the grasp, the grasp retracted
+by `handx` along the TCP's -z (the paper's hand x axis is our approach axis), and that pose raised by
+`worldz` along world +z. A pose is feasible when IK converges (position within `tol_pos`, orientation
+within `tol_rot`) inside the joint limits and the arm and the gripper at that configuration do not collide
+with the table, nor the arm with the object (python-fcl on the URDF's collision geometry; the gripper's
+contact with the object is the grasp planner's business).
+
+Speed (Section VI, Table I's t-tpgik): a reachability pre-filter (`ReachFilter`: distance from the
+shoulder, also over a humanoid's waist, and the workspace box); grips sorted so neighbours are the same
+grasp at the next position, then rotation; each chunk of the sorted grips split into lanes solved in
+lock-step, so one batched Levenberg-Marquardt iteration (numpy forward kinematics and Jacobians of the
+serial chain, entry-major arrays) serves hundreds of poses while each lane warm-starts from its previous
+grip's solution (per pose kind); fall-back seeds come from a deterministic library of table-clear sampled configurations nearest to the
+target; chunks run on all cores (forked concurrent.futures workers that inherit the solver) with a tqdm
+progress bar. Chunk boundaries depend only on the sorted input, so a resumed run produces the same rows as
+an uninterrupted one, whatever the number of workers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from workbench.robots.model import Robot
+
+STALL_WINDOW = 6  # LM iterations between progress checks
+
+
+STALL_RATIO = 0.8  # a row whose error did not drop below this fraction over the window is given up
+
+
+def _joint_terms(robot: Robot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per joint, constant matrices with placement_R @ Rot(axis, q) = M0 + sin(q) Ms + cos(q) Mc (Rodrigues)."""
+    cached = getattr(robot, "_joint_terms", None)
+    if cached is None:
+        m0, ms, mc = [], [], []
+        for pl, (x, y, z), pr in zip(robot.chain_placement, robot.chain_axis, robot.chain_prismatic):
+            r = pl[:3, :3]
+            if pr:
+                m0.append(r)
+                ms.append(np.zeros((3, 3)))
+                mc.append(np.zeros((3, 3)))
+                continue
+            k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+            m0.append(r @ (np.eye(3) + k @ k))
+            ms.append(r @ k)
+            mc.append(-r @ k @ k)
+        cached = (np.array(m0), np.array(ms), np.array(mc))
+        robot._joint_terms = cached
+    return cached
+
+
+def _mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Batched 3x3 products in entry-major layout: (3, 3, B) x (3, 3, B) -> (3, 3, B)."""
+    return np.einsum("ikb,kjb->ijb", a, b)
+
+
+def _aligned(robot: Robot) -> list[tuple[int, float, bool]]:
+    """Per joint: (axis index, sign) when its axis is a coordinate axis (else index -1), and whether its placement
+    rotation is the identity."""
+    cached = getattr(robot, "_aligned", None)
+    if cached is None:
+        cached = []
+        for pl, ax in zip(robot.chain_placement, robot.chain_axis):
+            k = int(np.argmax(np.abs(ax)))
+            aligned = abs(abs(ax[k]) - 1.0) < 1e-12
+            cached.append((k if aligned else -1, float(np.sign(ax[k])), bool(np.abs(pl[:3, :3] - np.eye(3)).max() < 1e-15)))
+        robot._aligned = cached
+    return cached
+
+
+def _fk(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`forward_soa` plus the joints' world axes (n, 3, B). Joints about a coordinate axis rotate two columns of the
+    running rotation (no 3x3 product); others use Rodrigues' constant terms."""
+    n, b = q.shape
+    m0, ms, mc = _joint_terms(robot)
+    info = _aligned(robot)
+    sq, cq = np.sin(q), np.cos(q)
+    rot = np.empty((n, 3, 3, b))
+    pos = np.empty((n, 3, b))
+    axes = np.empty((n, 3, b))
+    r = np.repeat(robot.base[:3, :3, None], b, axis=2)
+    t = np.repeat(robot.base[:3, 3, None], b, axis=1)
+    for i in range(n):
+        pl = robot.chain_placement[i]
+        t = t + np.einsum("ikb,k->ib", r, pl[:3, 3])
+        k, sign, identity = info[i]
+        if robot.chain_prismatic[i]:
+            r = np.einsum("ikb,kj->ijb", r, m0[i])
+            axes[i] = np.einsum("ikb,k->ib", r, robot.chain_axis[i])
+            t = t + axes[i] * q[i]
+            rot[i] = r
+        elif k >= 0:
+            if not identity:
+                r = np.einsum("ikb,kj->ijb", r, pl[:3, :3])
+            u, v = (k + 1) % 3, (k + 2) % 3
+            c, s_ = cq[i], sq[i] * sign
+            out = rot[i]
+            out[:, u] = c * r[:, u] + s_ * r[:, v]
+            out[:, v] = c * r[:, v] - s_ * r[:, u]
+            out[:, k] = r[:, k]
+            r = out
+            axes[i] = r[:, k] * sign
+        else:
+            local = m0[i][:, :, None] + ms[i][:, :, None] * sq[i] + mc[i][:, :, None] * cq[i]
+            r = _mm(r, local)
+            rot[i] = r
+            axes[i] = np.einsum("ikb,k->ib", r, robot.chain_axis[i])
+        pos[i] = t
+    tip = robot.tip_in_joint
+    tcp_t = t + np.einsum("ikb,k->ib", r, tip[:3, 3])
+    tcp_r = np.einsum("ikb,kj->ijb", r, tip[:3, :3])
+    return rot, pos, axes, tcp_r, tcp_t
+
+
+def forward_soa(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Batched forward kinematics in entry-major layout (the batch is the last, contiguous axis): joint rotations
+    (n, 3, 3, B), joint origins (n, 3, B), TCP rotation (3, 3, B) and position (3, B) for joint vectors q (n, B)."""
+    rot, pos, _, tcp_r, tcp_t = _fk(robot, q)
+    return rot, pos, tcp_r, tcp_t
+
+
+def forward(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Batched forward kinematics in the world: joint rotations (B, n, 3, 3), joint origins (B, n, 3), TCP rotation
+    (B, 3, 3) and TCP position (B, 3) for joint vectors q (B, n)."""
+    q = np.atleast_2d(np.asarray(q, dtype=np.float64))
+    rot, pos, tcp_r, tcp_t = forward_soa(robot, np.ascontiguousarray(q.T))
+    return rot.transpose(3, 0, 1, 2), pos.transpose(2, 0, 1), tcp_r.transpose(2, 0, 1), tcp_t.T
+
+
+def _jacobian_soa(robot: Robot, axes: np.ndarray, pos: np.ndarray, tcp_t: np.ndarray) -> np.ndarray:
+    """World-frame geometric Jacobian of the TCP, (6, n, B), linear rows first, from the joints' world axes."""
+    d = tcp_t[None] - pos
+    lin = np.stack([axes[:, 1] * d[:, 2] - axes[:, 2] * d[:, 1],
+                    axes[:, 2] * d[:, 0] - axes[:, 0] * d[:, 2],
+                    axes[:, 0] * d[:, 1] - axes[:, 1] * d[:, 0]], axis=0)  # (3, n, B)
+    ang = axes.transpose(1, 0, 2)
+    pr = robot.chain_prismatic
+    if pr.any():
+        lin[:, pr] = ang[:, pr]
+        ang = ang.copy()
+        ang[:, pr] = 0.0
+    return np.concatenate([lin, ang], axis=0)
+
+
+def jacobian(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """World-frame geometric Jacobian (B, 6, n) of the TCP at joint vectors q (B, n), linear rows first."""
+    q = np.atleast_2d(np.asarray(q, dtype=np.float64))
+    _, pos, axes, _, tcp_t = _fk(robot, np.ascontiguousarray(q.T))
+    return _jacobian_soa(robot, axes, pos, tcp_t).transpose(2, 0, 1)
+
+
+def _rotvec_soa(m: np.ndarray) -> np.ndarray:
+    """Rotation vectors (3, B) of rotations (3, 3, B) (SO(3) log; near pi through scipy)."""
+    v = 0.5 * np.stack([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
+    c = np.clip(0.5 * (m[0, 0] + m[1, 1] + m[2, 2] - 1.0), -1.0, 1.0)
+    s = np.sqrt((v * v).sum(0))
+    theta = np.arctan2(s, c)
+    out = v * np.where(s > 1e-9, theta / np.maximum(s, 1e-300), 1.0)
+    far = c < -0.95
+    if far.any():
+        out[:, far] = Rotation.from_matrix(m[:, :, far].transpose(2, 0, 1)).as_rotvec().T
+    return out
+
+
+def rotvec(m: np.ndarray) -> np.ndarray:
+    """Rotation vectors (B, 3) of rotation matrices (B, 3, 3) (the SO(3) log map)."""
+    return _rotvec_soa(np.ascontiguousarray(np.asarray(m, dtype=np.float64).transpose(1, 2, 0))).T
+
+
+def _spd_solve(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Solve a x = rhs for symmetric positive definite a (m, m, B), rhs (m, B), by Cholesky in entry-major layout."""
+    m = a.shape[0]
+    low = np.zeros_like(a)
+    for j in range(m):
+        d = a[j, j] - (low[j, :j] ** 2).sum(0)
+        low[j, j] = np.sqrt(np.maximum(d, 1e-300))
+        if j + 1 < m:
+            low[j + 1:, j] = (a[j + 1:, j] - (low[j + 1:, :j] * low[j, :j][None]).sum(1)) / low[j, j]
+    y = np.empty_like(rhs)
+    for i in range(m):
+        y[i] = (rhs[i] - (low[i, :i] * y[:i]).sum(0)) / low[i, i]
+    x = np.empty_like(rhs)
+    for i in range(m - 1, -1, -1):
+        x[i] = (y[i] - (low[i + 1:, i] * x[i + 1:]).sum(0)) / low[i, i]
+    return x
+
+
+def solve_ik(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, tol_pos: float = 1e-4,
+             tol_rot: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
+    """Batched Levenberg-Marquardt IK (Sugihara's damping E + 1e-3) with joint-limit clamping.
+
+    The step is J^T (J J^T + lambda I)^-1 e, solved per pose by a 6x6 Cholesky vectorised across poses.
+    Converged rows leave the active set; rows whose error stalls for STALL_WINDOW iterations are given up.
+    Returns the joint vectors (M, n) and which converged (M,)."""
+    targets = np.asarray(targets, dtype=np.float64)
+    q = np.ascontiguousarray(np.clip(np.array(q0, dtype=np.float64), robot.lower, robot.upper).T)  # (n, M)
+    n, m = q.shape
+    lo, hi = robot.lower[:, None], robot.upper[:, None]
+    t_rot = np.ascontiguousarray(targets[:, :3, :3].transpose(1, 2, 0))
+    t_pos = np.ascontiguousarray(targets[:, :3, 3].T)
+    ok = np.zeros(m, dtype=bool)
+    active = np.arange(m)
+    last = np.full(m, np.inf)
+    eye6 = np.eye(6)[:, :, None]
+    qa, tr, tp = q, t_rot, t_pos
+    for it in range(iters + 1):
+        _, pos, axes, tcp_r, tcp_t = _fk(robot, qa)
+        ep = tp - tcp_t
+        er = _rotvec_soa(np.einsum("ikb,jkb->ijb", tr, tcp_r))
+        np_, nr = np.sqrt((ep * ep).sum(0)), np.sqrt((er * er).sum(0))
+        conv = (np_ < tol_pos) & (nr < tol_rot)
+        q[:, active] = qa
+        ok[active[conv]] = True
+        keep = ~conv
+        err = np_ + 0.2 * nr
+        if it > 0 and it % STALL_WINDOW == 0:
+            keep &= err <= STALL_RATIO * last[active]
+            last[active] = err
+        elif it == 0:
+            last[active] = err
+        if it == iters or not keep.any():
+            break
+        if not keep.all():
+            active, qa, tr, tp = active[keep], qa[:, keep], tr[..., keep], tp[:, keep]
+            axes, pos, tcp_t, ep, er = axes[..., keep], pos[..., keep], tcp_t[:, keep], ep[:, keep], er[:, keep]
+        e = np.concatenate([ep, er], axis=0)  # (6, B)
+        jac = _jacobian_soa(robot, axes, pos, tcp_t)  # (6, n, B)
+        energy = 0.5 * (e * e).sum(0)
+        a = np.einsum("inb,jnb->ijb", jac, jac) + eye6 * (energy + 1e-3)
+        dq = np.einsum("inb,ib->nb", jac, _spd_solve(a, e))
+        step = np.abs(dq).max(axis=0)
+        dq *= np.minimum(1.0, 0.6 / np.maximum(step, 1e-12))
+        qa = np.clip(qa + dq, lo, hi)
+    return np.ascontiguousarray(q.T), ok

@@ -1,0 +1,221 @@
+"""IK feasibility of tabletop grips (Wan & Harada Section IV: the `ik` and `ikret` tables).
+
+For every tabletop grip (a TCP pose in the world) three poses are solved: the grasp, the grasp retracted
+by `handx` along the TCP's -z (the paper's hand x axis is our approach axis), and that pose raised by
+`worldz` along world +z. A pose is feasible when IK converges (position within `tol_pos`, orientation
+within `tol_rot`) inside the joint limits and the arm and the gripper at that configuration do not collide
+with the table, nor the arm with the object (python-fcl on the URDF's collision geometry; the gripper's
+contact with the object is the grasp planner's business).
+
+Speed (Section VI, Table I's t-tpgik): a reachability pre-filter (`ReachFilter`: distance from the
+shoulder, also over a humanoid's waist, and the workspace box); grips sorted so neighbours are the same
+grasp at the next position, then rotation; each chunk of the sorted grips split into lanes solved in
+lock-step, so one batched Levenberg-Marquardt iteration (numpy forward kinematics and Jacobians of the
+serial chain, entry-major arrays) serves hundreds of poses while each lane warm-starts from its previous
+grip's solution (per pose kind); fall-back seeds come from a deterministic library of table-clear sampled configurations nearest to the
+target; chunks run on all cores (forked concurrent.futures workers that inherit the solver) with a tqdm
+progress bar. Chunk boundaries depend only on the sorted input, so a resumed run produces the same rows as
+an uninterrupted one, whatever the number of workers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+import trimesh
+
+from workbench.errors import RobotError
+from workbench.robots.chain import forward
+from workbench.robots.model import Robot
+
+
+@dataclass(frozen=True)
+class Scene:
+    """The table in the world (its top is z = 0) and the workspace box for the pre-filter, in metres.
+
+    `table_min`/`table_max` are the table top's x-y corners; the slab is `table_thickness` thick.
+    `workspace_min`/`workspace_max` bound the TCP position of poses worth solving."""
+
+    table_min: tuple[float, float] = (-0.3, -0.8)
+    table_max: tuple[float, float] = (1.0, 0.8)
+    table_thickness: float = 0.05
+    workspace_min: tuple[float, float, float] = (-1.5, -1.5, 0.0)
+    workspace_max: tuple[float, float, float] = (1.5, 1.5, 1.5)
+
+    def __post_init__(self) -> None:
+        vals = np.array([*self.table_min, *self.table_max, self.table_thickness, *self.workspace_min, *self.workspace_max], dtype=float)
+        if not np.isfinite(vals).all():
+            raise RobotError(f"scene has NaN or infinite values: {self}")
+        if self.table_max[0] <= self.table_min[0] or self.table_max[1] <= self.table_min[1] or self.table_thickness <= 0:
+            raise RobotError(f"scene table is empty: min {self.table_min}, max {self.table_max}, thickness {self.table_thickness}")
+
+    def as_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+DEFAULT_SCENES = {
+    "panda": Scene(),
+    "ur5": Scene(),
+    # Talos stands in front of the table: the table starts 0.2 m in front of its pelvis.
+    "talos": Scene(table_min=(0.2, -0.8), table_max=(1.2, 0.8)),
+}
+
+
+def default_scene(robot_name: str) -> Scene:
+    """The default table for a built-in robot (a table under and in front of it); other robots get `Scene()`."""
+    return DEFAULT_SCENES.get(robot_name, Scene())
+
+
+def _geometry_mesh(go, fcl_mod) -> tuple[object, trimesh.Trimesh]:
+    """An fcl geometry and a trimesh of one pinocchio GeometryObject (in the geometry's own frame)."""
+    geom = go.geometry
+    kind = type(geom).__name__
+    if kind == "Box" or hasattr(geom, "halfSide"):
+        ext = 2 * np.asarray(geom.halfSide, dtype=np.float64)
+        return fcl_mod.Box(*ext), trimesh.creation.box(extents=ext)
+    if kind == "Cylinder":
+        r, h = float(geom.radius), 2 * float(geom.halfLength)
+        return fcl_mod.Cylinder(r, h), trimesh.creation.cylinder(radius=r, height=h, sections=24)
+    if kind == "Sphere":
+        r = float(geom.radius)
+        return fcl_mod.Sphere(r), trimesh.creation.icosphere(radius=r, subdivisions=2)
+    if kind == "Capsule":
+        r, h = float(geom.radius), 2 * float(geom.halfLength)
+        return fcl_mod.Capsule(r, h), trimesh.creation.capsule(radius=r, height=h)
+    if go.meshPath:
+        mesh = trimesh.load(go.meshPath, force="mesh")
+        mesh.apply_scale(np.asarray(go.meshScale, dtype=np.float64))
+        return _bvh(mesh, fcl_mod), mesh
+    raise RobotError(f"collision geometry {go.name} has unsupported type {kind}")
+
+
+def _bvh(mesh: trimesh.Trimesh, fcl_mod):
+    model = fcl_mod.BVHModel()
+    model.beginModel(len(mesh.vertices), len(mesh.faces))
+    model.addSubModel(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int32))
+    model.endModel()
+    return model
+
+
+def _obb(mesh: trimesh.Trimesh, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Bounding box of `mesh` (axis-aligned in the mesh's frame) placed at `pose`: rotation (3, 3), centre (3,),
+    half extents (3,) (plus 0.1 mm)."""
+    lo, hi = np.asarray(mesh.bounds, dtype=np.float64)
+    centre = pose[:3, :3] @ (0.5 * (lo + hi)) + pose[:3, 3]
+    return pose[:3, :3].copy(), centre, 0.5 * (hi - lo) + 1e-4
+
+
+class Collider:
+    """Arm (without its own hand) and planning gripper against the table slab and the object.
+
+    Broad phase: world axis-aligned boxes of each part's oriented bounding box (numpy, batched over
+    configurations); narrow phase: python-fcl on the URDF's collision geometry for the overlapping
+    (configuration, part) pairs only."""
+
+    def __init__(self, robot: Robot, scene: Scene, obj_mesh: trimesh.Trimesh | None):
+        import fcl
+
+        self.fcl = fcl
+        self.robot = robot
+        joints, obbs, objs, vs_obj, names = [], [], [], [], []
+        for k in robot.arm_geometry():
+            go = robot.geom.geometryObjects[k]
+            g, mesh = _geometry_mesh(go, fcl)
+            pl = np.asarray(go.placement.homogeneous)
+            joints.append(go.parentJoint - 1)
+            obbs.append(_obb(mesh, pl))
+            objs.append((pl, fcl.CollisionObject(g, fcl.Transform())))
+            vs_obj.append(True)
+            names.append(go.name)
+        grip = robot.gripper.collision_mesh()
+        joints.append(robot.nq - 1)
+        obbs.append(_obb(grip, robot.tip_in_joint))
+        objs.append((robot.tip_in_joint, fcl.CollisionObject(_bvh(grip, fcl), fcl.Transform())))
+        vs_obj.append(False)
+        names.append("gripper")
+        self.names = names
+        self.joint = np.array(joints)
+        self.parts = objs
+        self.obb_r = np.array([o[0] for o in obbs])
+        self.obb_c = np.array([o[1] for o in obbs])
+        self.obb_h = np.array([o[2] for o in obbs])
+        self.vs_object = np.array(vs_obj)
+        tmin = np.array([scene.table_min[0], scene.table_min[1], -scene.table_thickness])
+        tmax = np.array([scene.table_max[0], scene.table_max[1], 0.0])
+        self.table_box = (tmin, tmax)
+        self.table = fcl.CollisionObject(fcl.Box(*(tmax - tmin)), fcl.Transform(0.5 * (tmin + tmax)))
+        self.obj = None
+        if obj_mesh is not None:
+            self.obj = fcl.CollisionObject(_bvh(obj_mesh, fcl), fcl.Transform())
+            self.obj_obb = _obb(obj_mesh, np.eye(4))
+        self.request = fcl.CollisionRequest()
+
+    def fixed_parts_hit_table(self) -> list[str]:
+        """Names of the robot's fixed collision objects (base, locked legs) that cut into the table below its top 5 mm."""
+        fcl = self.fcl
+        robot = self.robot
+        tmin, tmax = self.table_box
+        depth = max(tmax[2] - tmin[2] - 0.005, 1e-3)
+        top = fcl.CollisionObject(fcl.Box(tmax[0] - tmin[0], tmax[1] - tmin[1], depth),
+                                  fcl.Transform(np.array([0.5 * (tmin[0] + tmax[0]), 0.5 * (tmin[1] + tmax[1]), -0.005 - depth / 2])))
+        out = []
+        for k in robot.fixed_geometry():
+            go = robot.geom.geometryObjects[k]
+            g, _ = _geometry_mesh(go, fcl)
+            pose = robot.base @ np.asarray(go.placement.homogeneous)
+            obj = fcl.CollisionObject(g, fcl.Transform(pose[:3, :3], pose[:3, 3]))
+            if fcl.collide(obj, top, self.request, fcl.CollisionResult()):
+                out.append(go.name)
+        return out
+
+    def boxes(self, rot: np.ndarray, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per configuration and part: world axis-aligned box (min, max), each (B, P, 3)."""
+        rj = rot[:, self.joint]  # (B, P, 3, 3)
+        rw = np.einsum("bpij,pjk->bpik", rj, self.obb_r)
+        cw = np.einsum("bpij,pj->bpi", rj, self.obb_c) + pos[:, self.joint]
+        hw = np.einsum("bpij,pj->bpi", np.abs(rw), self.obb_h)
+        return cw - hw, cw + hw
+
+    def collides(self, rot: np.ndarray, pos: np.ndarray, placements: np.ndarray | None,
+                 table_only: bool = False) -> np.ndarray:
+        """(B,) True where a configuration's arm or gripper hits the table or its arm hits the object placed at
+        `placements` (B, 4, 4)."""
+        fcl = self.fcl
+        b = len(rot)
+        if b == 0:
+            return np.zeros(0, dtype=bool)
+        lo, hi = self.boxes(rot, pos)
+        tmin, tmax = self.table_box
+        cand_table = (lo <= tmax).all(-1) & (hi >= tmin).all(-1)
+        cand_obj = np.zeros_like(cand_table)
+        if self.obj is not None and placements is not None and not table_only:
+            orr, oc, oh = self.obj_obb
+            rw = placements[:, :3, :3] @ orr
+            cw = placements[:, :3, :3] @ oc + placements[:, :3, 3]
+            hw = np.einsum("bij,j->bi", np.abs(rw), oh)
+            cand_obj = (lo <= (cw + hw)[:, None]).all(-1) & (hi >= (cw - hw)[:, None]).all(-1) & self.vs_object[None]
+        hit = np.zeros(b, dtype=bool)
+        for bi, pi in zip(*np.nonzero(cand_table | cand_obj)):
+            if hit[bi]:
+                continue
+            j = self.joint[pi]
+            pl, cobj = self.parts[pi]
+            cobj.setRotation(rot[bi, j] @ pl[:3, :3])
+            cobj.setTranslation(rot[bi, j] @ pl[:3, 3] + pos[bi, j])
+            if cand_table[bi, pi] and fcl.collide(cobj, self.table, self.request, fcl.CollisionResult()):
+                hit[bi] = True
+                continue
+            if cand_obj[bi, pi]:
+                p = placements[bi]
+                self.obj.setRotation(p[:3, :3])
+                self.obj.setTranslation(p[:3, 3])
+                if fcl.collide(cobj, self.obj, self.request, fcl.CollisionResult()):
+                    hit[bi] = True
+        return hit
+
+    def collides_q(self, q: np.ndarray, placements: np.ndarray | None, table_only: bool = False) -> np.ndarray:
+        """`collides` for joint vectors (B, n)."""
+        rot, pos, _, _ = forward(self.robot, np.atleast_2d(q))
+        pl = None if placements is None else np.asarray(placements).reshape(-1, 4, 4)
+        return self.collides(rot, pos, pl, table_only)

@@ -1,0 +1,385 @@
+"""IK feasibility of tabletop grips (Wan & Harada Section IV: the `ik` and `ikret` tables).
+
+For every tabletop grip (a TCP pose in the world) three poses are solved: the grasp, the grasp retracted
+by `handx` along the TCP's -z (the paper's hand x axis is our approach axis), and that pose raised by
+`worldz` along world +z. A pose is feasible when IK converges (position within `tol_pos`, orientation
+within `tol_rot`) inside the joint limits and the arm and the gripper at that configuration do not collide
+with the table, nor the arm with the object (python-fcl on the URDF's collision geometry; the gripper's
+contact with the object is the grasp planner's business).
+
+Speed (Section VI, Table I's t-tpgik): a reachability pre-filter (`ReachFilter`: distance from the
+shoulder, also over a humanoid's waist, and the workspace box); grips sorted so neighbours are the same
+grasp at the next position, then rotation; each chunk of the sorted grips split into lanes solved in
+lock-step, so one batched Levenberg-Marquardt iteration (numpy forward kinematics and Jacobians of the
+serial chain, entry-major arrays) serves hundreds of poses while each lane warm-starts from its previous
+grip's solution (per pose kind); fall-back seeds come from a deterministic library of table-clear sampled configurations nearest to the
+target; chunks run on all cores (forked concurrent.futures workers that inherit the solver) with a tqdm
+progress bar. Chunk boundaries depend only on the sorted input, so a resumed run produces the same rows as
+an uninterrupted one, whatever the number of workers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from dataclasses import asdict, dataclass, field
+from typing import Callable, Iterator
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from workbench.errors import RobotError
+from workbench.robots.chain import forward, solve_ik
+from workbench.robots.collider import Collider, Scene
+from workbench.robots.model import Robot, RobotSpec, robot_from_spec
+
+KINDS = ("grasp", "handx", "handxworldz")
+
+
+@dataclass(frozen=True)
+class IKOptions:
+    """Solver settings (they change the rows, so they are stored with the scene).
+
+    tol_pos (m) and tol_rot (rad): convergence; iters_warm/iters_seed: LM iterations from a warm start and
+    from a library seed; seeds: library seeds tried after the warm start, picked among the seed_pool nearest
+    library poses at least seed_spread rad apart; library: size of the seed
+    library; chunk: grips per parallel task (resume unit); lane: grips per warm-start lane; seed: RNG seed."""
+
+    tol_pos: float = 1e-4
+    tol_rot: float = 1e-3
+    iters_warm: int = 60
+    iters_seed: int = 300
+    seeds: int = 5
+    seed_pool: int = 24
+    seed_spread: float = 1.0
+    library: int = 32768
+    chunk: int = 4096
+    lane: int = 16
+    seed: int = 0
+    collide: bool = True
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass
+class IKResult:
+    """Per grip (in input order): feasibility (N, 3) for grasp, handx, handxworldz; joints (N, 3, nq), NaN where infeasible."""
+
+    feasible: np.ndarray
+    joints: np.ndarray
+    order: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+
+
+class SeedLibrary:
+    """Deterministic sampled configurations and their TCP poses; `nearest` picks the seeds whose TCP pose is
+    closest to each target (k-d tree over position and `rho`-weighted rotation matrix entries)."""
+
+    def __init__(self, robot: Robot, size: int, seed: int, rho: float = 0.1, collider: "Collider | None" = None):
+
+        rng = np.random.default_rng(seed)
+        q = rng.uniform(robot.lower, robot.upper, size=(size, robot.nq))
+        q[0] = robot.neutral()
+        if collider is not None:  # keep seeds whose arm is clear of the table
+            free = ~collider.collides_q(q, None, table_only=True)
+            if free.sum() >= min(size, 64):
+                q = q[free]
+        self.q = q
+        size = len(q)
+        _, _, r, t = forward(robot, self.q)
+        self.rho = rho
+        self.tree = cKDTree(np.concatenate([t, rho * r.reshape(size, 9)], axis=1))
+
+    def nearest(self, targets: np.ndarray, k: int, pool: int = 1, spread: float = 1.0) -> np.ndarray:
+        """(M, k) library indices, nearest first. With pool > k, the k are picked greedily among the `pool` nearest
+        so that each differs from those already picked by more than `spread` rad (Euclidean in joint space),
+        filling up with the nearest remaining ones: diverse seeds reach different IK branches."""
+        k = max(1, min(k, len(self.q)))
+        pool = max(k, min(pool, len(self.q)))
+        emb = np.concatenate([targets[:, :3, 3], self.rho * targets[:, :3, :3].reshape(len(targets), 9)], axis=1)
+        _, ix = self.tree.query(emb, k=pool)
+        ix = np.asarray(ix, dtype=np.int64).reshape(len(targets), pool)
+        if pool == k:
+            return ix
+        m = len(ix)
+        cand = self.q[ix]  # (M, pool, n)
+        chosen = np.zeros((m, pool), dtype=bool)
+        chosen[:, 0] = True
+        count = np.ones(m, dtype=np.int64)
+        for c in range(1, pool):
+            d = np.linalg.norm(cand[:, :c] - cand[:, c:c + 1], axis=2)
+            d = np.where(chosen[:, :c], d, np.inf).min(axis=1)
+            take = (d > spread) & (count < k)
+            chosen[:, c] = take
+            count += take
+        # fill rows that found fewer than k diverse seeds with the nearest unchosen ones
+        for c in range(1, pool):
+            take = ~chosen[:, c] & (count < k)
+            chosen[:, c] |= take
+            count += take
+        order = np.argsort(~chosen, axis=1, kind="stable")[:, :k]
+        return np.take_along_axis(ix, order, axis=1)
+
+
+def retract(poses: np.ndarray, handx: float, worldz: float) -> np.ndarray:
+    """(N, 3, 4, 4): the grasp, the pose moved back by `handx` along the TCP's -z, and that pose raised by `worldz`
+    along world +z (Section IV, ikret)."""
+    poses = np.asarray(poses, dtype=np.float64)
+    out = np.repeat(poses[:, None], 3, axis=1)
+    out[:, 1, :3, 3] -= handx * poses[:, :3, 2]
+    out[:, 2, :3, 3] = out[:, 1, :3, 3]
+    out[:, 2, 2, 3] += worldz
+    return out
+
+
+def check_poses(poses: np.ndarray, label: str = "TCP pose") -> np.ndarray:
+    """(N, 4, 4) finite rigid transforms, or a RobotError naming the first bad one."""
+    poses = np.asarray(poses, dtype=np.float64)
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4):
+        raise RobotError(f"{label}s must be an (N, 4, 4) array, got shape {poses.shape}")
+    bad = ~np.isfinite(poses).all(axis=(1, 2))
+    if bad.any():
+        raise RobotError(f"{label} {int(np.argmax(bad))} (of {len(poses)}) has NaN or infinite entries; rebuild the tabletop grips")
+    r = poses[:, :3, :3]
+    dev = np.abs(r @ r.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2))
+    if (dev > 1e-5).any():
+        raise RobotError(f"{label} {int(np.argmax(dev > 1e-5))} (of {len(poses)}) is not a rigid transform; rebuild the tabletop grips")
+    return poses
+
+
+def neighbour_order(grips: dict[str, np.ndarray]) -> np.ndarray:
+    """Indices sorting grips so consecutive ones are close: by free-air grasp, then placement orientation (which
+    includes the rotation angle), then position in a serpentine over the grid (x rows, y alternating)."""
+    n = len(grips["rotmat"])
+    if n == 0:
+        return np.zeros(0, dtype=np.int64)
+    prot = np.round(np.asarray(grips["placement_rotmat"])[:, :3, :3].reshape(n, 9), 6)
+    _, orient = np.unique(prot, axis=0, return_inverse=True)
+    pos = np.asarray(grips["tabletopposition"], dtype=np.float64)
+    ix = np.unique(np.round(pos[:, 0], 4), return_inverse=True)[1].ravel()
+    iy = np.unique(np.round(pos[:, 1], 4), return_inverse=True)[1].ravel()
+    iy_s = np.where(ix % 2 == 0, iy, -iy)
+    return np.lexsort((np.asarray(grips["idtabletopgrips"]), iy_s, ix, orient.ravel(), np.asarray(grips["idfreeairgrip"])))
+
+
+def chunk_bounds(n: int, chunk: int) -> list[tuple[int, int]]:
+    """Fixed chunk boundaries over the sorted grips (they depend only on n, so resumed runs match)."""
+    return [(s, min(s + chunk, n)) for s in range(0, n, chunk)]
+
+
+class ReachFilter:
+    """Reachability pre-filter: necessary conditions on the TCP position only (never rejects a reachable pose).
+
+    For a split joint s, the TCP is within L_s (the summed link lengths from joint s's origin to the TCP) of
+    joint s's origin, which itself lies on the set swept by the joints before s. For the deepest joint whose
+    origin no earlier joint moves (the shoulder) that set is a point; for up to `grid_joints` joints further
+    (a humanoid's waist, a UR's shoulder offset) it is sampled on a grid of those joints within their limits,
+    and the slack is the largest distance between neighbouring samples. A pose passes when every split's
+    condition and the workspace box hold."""
+
+    def __init__(self, robot: Robot, scene: Scene, grid_joints: int = 2, grid: int = 48):
+
+        j0, _ = robot.shoulder()  # 1-based joint index
+        n = robot.nq
+        self.tests = []
+        for s in range(j0, min(j0 + grid_joints, n) + 1):
+            length = float(np.linalg.norm(robot.tip_in_joint[:3, 3]))
+            for j in range(s + 1, n + 1):
+                length += float(np.linalg.norm(robot.chain_placement[j - 1][:3, 3]))
+            for j in range(s, n + 1):
+                if robot.chain_prismatic[j - 1]:
+                    length += float(max(abs(robot.lower[j - 1]), abs(robot.upper[j - 1])))
+            gridded = [j for j in range(1, s) if j > 0] if s > j0 else []
+            if len(gridded) > grid_joints:
+                continue
+            axes = [np.linspace(robot.lower[j - 1], robot.upper[j - 1], grid) for j in gridded]
+            q = np.tile(robot.neutral(), (grid ** len(gridded), 1))
+            if gridded:
+                mesh = np.meshgrid(*axes, indexing="ij")
+                for j, m in zip(gridded, mesh):
+                    q[:, j - 1] = m.ravel()
+            _, pos, _, _ = forward(robot, q)
+            pts = pos[:, s - 1]
+            slack = 0.0
+            if gridded:
+                g = pts.reshape(*([grid] * len(gridded)), 3)
+                for ax in range(len(gridded)):
+                    slack += float(np.linalg.norm(np.diff(g, axis=ax), axis=-1).max())
+            self.tests.append((cKDTree(pts), length + slack))
+        self.wmin = np.asarray(scene.workspace_min)
+        self.wmax = np.asarray(scene.workspace_max)
+
+    def __call__(self, poses: np.ndarray) -> np.ndarray:
+        """(...) bool for TCP poses (..., 4, 4): True where the pose may be reachable."""
+        p = np.asarray(poses)[..., :3, 3]
+        flat = p.reshape(-1, 3)
+        ok = (flat >= self.wmin).all(-1) & (flat <= self.wmax).all(-1)
+        for tree, bound in self.tests:
+            if ok.any():
+                d, _ = tree.query(flat[ok], k=1)
+                sub = ok[ok]
+                sub &= d <= bound
+                ok[ok] = sub
+        return ok.reshape(p.shape[:-1])
+
+
+class _Solver:
+    """Per-process state: robot, seed library, collider, pre-filter (built once per worker)."""
+
+    def __init__(self, spec: RobotSpec, scene: Scene, opts: IKOptions, obj_mesh: trimesh.Trimesh | None):
+        self.robot = robot_from_spec(spec)
+        self.scene, self.opts = scene, opts
+        self.collider = Collider(self.robot, scene, obj_mesh) if opts.collide else None
+        self.library = SeedLibrary(self.robot, opts.library, opts.seed, collider=self.collider)
+        self.prefilter = ReachFilter(self.robot, scene)
+
+    def _feasible(self, rows: np.ndarray, q: np.ndarray, ok: np.ndarray, placements: np.ndarray) -> np.ndarray:
+        """Converged rows whose configuration is collision-free."""
+        good = ok.copy()
+        if self.collider is not None and ok.any():
+            sel = np.nonzero(ok)[0]
+            good[sel] = ~self.collider.collides_q(q[sel], placements[rows[sel]])
+        return good
+
+    def chunk(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One chunk of sorted grips: targets (C, 3, 4, 4) -> feasible (C, 3), joints (C, 3, n).
+
+        Pass 1 walks the lanes in lock-step: every (lane, kind) starts from its previous feasible solution, or from
+        the library seed nearest to the target; pass 2 retries the failures from up to `seeds` library seeds, one
+        seed rank at a time for the poses still unsolved."""
+        o, robot = self.opts, self.robot
+        c, n = len(targets), robot.nq
+        flat = targets.transpose(1, 0, 2, 3).reshape(3 * c, 4, 4)  # row = kind * c + grip
+        place = np.tile(placements, (3, 1, 1))
+        pre = self.prefilter(flat)
+        q_out = np.full((3 * c, n), np.nan)
+        good = np.zeros(3 * c, dtype=bool)
+        lane = max(1, o.lane)
+        nl = -(-c // lane)
+        starts = np.arange(nl) * lane
+        prev = np.full((3 * nl, n), np.nan)
+        from_library = np.zeros(3 * c, dtype=bool)  # pass 1 already tried the nearest library seed
+        for step in range(lane):
+            idx = starts + step
+            live = idx < c
+            lanes = np.concatenate([np.nonzero(live)[0] + k * nl for k in range(3)])
+            rows = np.concatenate([idx[live] + k * c for k in range(3)])
+            keep = pre[rows]
+            rows, lanes = rows[keep], lanes[keep]
+            if len(rows) == 0:
+                continue
+            q0 = prev[lanes].copy()
+            cold = np.isnan(q0).any(axis=1)
+            if cold.any():
+                q0[cold] = self.library.q[self.library.nearest(flat[rows[cold]], 1)[:, 0]]
+                from_library[rows[cold]] = True
+            q, ok = solve_ik(robot, flat[rows], q0, o.iters_warm, o.tol_pos, o.tol_rot)
+            ok = self._feasible(rows, q, ok, place)
+            q_out[rows[ok]] = q[ok]
+            good[rows[ok]] = True
+            prev[lanes[ok]] = q[ok]
+        pool = np.nonzero(pre & ~good)[0]
+        if len(pool) and o.seeds > 0:
+            near = self.library.nearest(flat[pool], o.seeds, pool=o.seed_pool, spread=o.seed_spread)
+            left = np.ones(len(pool), dtype=bool)
+            for k in range(near.shape[1]):  # seed by seed, only for the poses still unsolved
+                if not left.any():
+                    break
+                sel = np.flatnonzero(left & ~from_library[pool]) if k == 0 else np.flatnonzero(left)
+                if len(sel) == 0:
+                    continue
+                rows = pool[sel]
+                q, ok = solve_ik(robot, flat[rows], self.library.q[near[sel, k]], o.iters_seed, o.tol_pos, o.tol_rot)
+                ok = self._feasible(rows, q, ok, place)
+                q_out[rows[ok]] = q[ok]
+                good[rows[ok]] = True
+                left[sel[ok]] = False
+        feas = good.reshape(3, c).T.copy()
+        joints = q_out.reshape(3, c, n).transpose(1, 0, 2).copy()
+        return feas, joints
+
+
+_SOLVERS: dict[tuple, _Solver] = {}
+
+
+def _solver(spec: RobotSpec, scene: Scene, opts: IKOptions, obj_key: str, obj_mesh: trimesh.Trimesh | None) -> _Solver:
+    key = (spec.digest, scene, opts, obj_key)
+    if key not in _SOLVERS:
+        _SOLVERS.clear()
+        _SOLVERS[key] = _Solver(spec, scene, opts, obj_mesh)
+    return _SOLVERS[key]
+
+
+_JOB: dict = {}  # the current run's solver and arrays, inherited by forked workers
+
+
+def _run_chunk(start: int, end: int) -> tuple[np.ndarray, np.ndarray]:
+    ix = _JOB["order"][start:end]
+    return _JOB["solver"].chunk(_JOB["targets"][ix], _JOB["placements"][ix])
+
+
+def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: float, worldz: float,
+            obj_mesh: trimesh.Trimesh | None = None, opts: IKOptions = IKOptions(), workers: int | None = None,
+            skip: Callable[[np.ndarray], bool] | None = None, progress: bool = True
+            ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """IK feasibility chunk by chunk (Section IV): yields (grip indices, feasible (C, 3), joints (C, 3, n)).
+
+    `grips` follows the placements contract (rotmat: TCP poses in the world, placement_rotmat: object poses,
+    idfreeairgrip, tabletopposition, idtabletopgrips). Chunks for which `skip(indices)` is True are not computed
+    (already stored). The solver (robot, seed library, collision models) is built once here; with workers > 1
+    (default: all cores) forked processes inherit it and the arrays, so only chunk bounds and results travel."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    from tqdm.auto import tqdm
+
+    poses = check_poses(grips["rotmat"])
+    placements = check_poses(grips["placement_rotmat"], "object placement")
+    for label, value in (("handx", handx), ("worldz", worldz)):
+        if not np.isfinite(value) or value < 0:
+            raise RobotError(f"retraction {label} must be a finite distance >= 0 m, got {value}")
+    order = neighbour_order(grips)
+    bounds = chunk_bounds(len(order), opts.chunk)
+    todo = [(s, e) for s, e in bounds if skip is None or not skip(order[s:e])]
+    if not todo:
+        return
+    obj_key = ""
+    if obj_mesh is not None:
+        obj_key = hashlib.sha256(np.asarray(obj_mesh.vertices, dtype=np.float64).tobytes()
+                                 + np.asarray(obj_mesh.faces, dtype=np.int64).tobytes()).hexdigest()[:16]
+    _JOB.update(solver=_solver(robot.spec, scene, opts, obj_key, obj_mesh), order=order,
+                targets=retract(poses, handx, worldz), placements=placements)
+    workers = workers or os.cpu_count() or 1
+    workers = max(1, min(workers, len(todo)))
+    if workers > 1 and "fork" not in mp.get_all_start_methods():
+        workers = 1
+    bar = tqdm(total=int(sum(e - s for s, e in todo)), desc=f"ik {robot.name}", unit="grip", disable=not progress, leave=False)
+    pool = None
+    try:
+        if workers == 1:
+            results = (_run_chunk(s, e) for s, e in todo)
+        else:
+            pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"))
+            futures = [pool.submit(_run_chunk, s, e) for s, e in todo]
+            results = (f.result() for f in futures)
+        for (s, e), (feas, joints) in zip(todo, results):
+            bar.update(e - s)
+            yield order[s:e], feas, joints
+    finally:
+        bar.close()
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+        _JOB.clear()
+
+
+def ik_feasibility(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: float, worldz: float,
+                   obj_mesh: trimesh.Trimesh | None = None, opts: IKOptions = IKOptions(), workers: int | None = None,
+                   progress: bool = True) -> IKResult:
+    """IK feasibility of every grip at the grasp, handx and handxworldz poses (Section IV), in input order."""
+    n = len(grips["rotmat"])
+    feas = np.zeros((n, 3), dtype=bool)
+    joints = np.full((n, 3, robot.nq), np.nan)
+    for ix, f, j in iter_ik(robot, grips, scene, handx, worldz, obj_mesh, opts, workers, progress=progress):
+        feas[ix], joints[ix] = f, j
+    return IKResult(feasible=feas, joints=joints, order=neighbour_order(grips))

@@ -1,0 +1,130 @@
+"""SQL of the regrasp roadmap's inputs and of the `plan` and `planstep` tables (Wan & Harada, Section V).
+
+Reads: the tabletop grips of a tabletop parameter set joined with their `ik` rows for one robot, scene and
+retraction set (the roadmap's nodes and joint vectors) and the IK runs available for an object and robot; the
+robot, scene and ikret rows come from `store.robots`. Writes: plans and their steps, each plan in one transaction.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+
+from workbench.errors import StoreError
+from workbench.store import Store, from_arrow
+
+
+def list_column(table: pa.Table, name: str, width: int) -> np.ndarray:
+    """A DOUBLE[] column as an (N, width) float array, NaN rows for NULL (no per-row Python)."""
+    col = table.column(name).combine_chunks()
+    n = len(col)
+    out = np.full((n, width), np.nan)
+    if n == 0 or width == 0:
+        return out
+    if pa.types.is_fixed_size_list(col.type) or pa.types.is_list(col.type) or pa.types.is_large_list(col.type):
+        valid = ~np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)
+        if valid.any():
+            sub = col.filter(pa.array(valid))
+            flat = np.asarray(sub.flatten().to_numpy(zero_copy_only=False), dtype=np.float64)
+            if len(flat) != len(sub) * width:
+                raise StoreError(f"joint vectors in column {name} do not all have {width} entries; rebuild the ik stage")
+            out[valid] = flat.reshape(-1, width)
+    return out
+
+
+def count_grips(store: Store, idtabletop: int) -> int:
+    row = store.one("SELECT count(*) FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) "
+                    "WHERE p.idparamset = ?", [idtabletop])
+    return int(row[0])
+
+
+def ik_fingerprint(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int) -> tuple[int, int]:
+    """(rows, max idik) of one IK run: changes whenever its rows change (cache key of the roadmap)."""
+    row = store.one(
+        "SELECT count(*), coalesce(max(k.idik), 0) FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) "
+        "JOIN tabletopplacements p USING (idtabletopplacements) "
+        "WHERE p.idparamset = ? AND k.idrobot = ? AND k.idscene = ? AND k.idikret = ?", [idtabletop, idrobot, idscene, idikret])
+    return int(row[0]), int(row[1])
+
+
+def roadmap_rows(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int, nq: int) -> dict[str, np.ndarray]:
+    """Every tabletop grip of a tabletop parameter set with its placement, angle and IK row (Section V's inputs):
+    idtabletopgrips, idtabletopplacements, idfreeairgrip, rotmat (N, 4, 4), jawwidth, placement_rotmat (N, 4, 4),
+    idfreetabletopplacement, tabletopposition (N, 3), angle (rad), feasible (N, 3) (False where no IK row) and
+    joints (N, 3, nq) for grasp, handx, handxworldz (NaN where infeasible)."""
+    table = store.con.sql(
+        "SELECT g.idtabletopgrips, g.idtabletopplacements, g.idfreeairgrip, g.rotmat, g.jawwidth, "
+        "p.rotmat AS placement_rotmat, p.idfreetabletopplacement, p.tabletopposition, a.value AS angle, "
+        "coalesce(k.feasibility, false) AS f0, coalesce(k.feasibility_handx, false) AS f1, "
+        "coalesce(k.feasibility_handxworldz, false) AS f2, k.jnt_grasp, k.jnt_handx, k.jnt_handxworldz "
+        "FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) JOIN angle a USING (idangle) "
+        "LEFT JOIN ik k ON k.idtabletopgrips = g.idtabletopgrips AND k.idrobot = $robot AND k.idscene = $scene AND k.idikret = $ikret "
+        "WHERE p.idparamset = $tabletop ORDER BY g.idtabletopgrips",
+        params={"robot": idrobot, "scene": idscene, "ikret": idikret, "tabletop": idtabletop}).to_arrow_table()
+
+    out = {name: from_arrow(table.column(name)) for name in
+           ("idtabletopgrips", "idtabletopplacements", "idfreeairgrip", "rotmat", "jawwidth", "placement_rotmat",
+            "idfreetabletopplacement", "tabletopposition", "angle")}
+    n = len(out["idtabletopgrips"])
+    out["rotmat"] = np.asarray(out["rotmat"], dtype=np.float64).reshape(n, 4, 4)
+    out["placement_rotmat"] = np.asarray(out["placement_rotmat"], dtype=np.float64).reshape(n, 4, 4)
+    out["tabletopposition"] = np.asarray(out["tabletopposition"], dtype=np.float64).reshape(n, 3)
+    out["feasible"] = np.stack([np.asarray(from_arrow(table.column(c)), dtype=bool) for c in ("f0", "f1", "f2")], axis=1).reshape(n, 3)
+    out["joints"] = np.stack([list_column(table, c, nq) for c in ("jnt_grasp", "jnt_handx", "jnt_handxworldz")], axis=1)
+    return out
+
+
+def placements_of_tabletop(store: Store, idtabletop: int) -> int:
+    """The placement parameter set a tabletop parameter set was built from."""
+    row = store.one("SELECT params FROM paramset WHERE idparamset = ? AND stage = 'tabletop'", [idtabletop])
+    if row is not None:
+        params = json.loads(row[0])
+        if "placements" in params:
+            return int(params["placements"])
+    row = store.one("SELECT max(f.idparamset) FROM tabletopplacements p JOIN freetabletopplacement f USING (idfreetabletopplacement) "
+                    "WHERE p.idparamset = ?", [idtabletop])
+    if row is None or row[0] is None:
+        raise StoreError(f"store {store.path}: tabletop parameter set {idtabletop} has no placements; run `workbench placements`")
+    return int(row[0])
+
+
+def free_placement_pose(store: Store, idfreetabletopplacement: int) -> np.ndarray | None:
+    """`freetabletopplacement.rotmat` of one stable placement (object in the table frame), or None."""
+    row = store.one("SELECT rotmat FROM freetabletopplacement WHERE idfreetabletopplacement = ?", [idfreetabletopplacement])
+    return None if row is None else np.asarray(row[0], dtype=np.float64).reshape(4, 4)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Plans.
+
+
+def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray]) -> int:
+    """Store one plan (columns of `plan`) and its steps (columns of `planstep`, arrays) in one transaction; returns idplan."""
+    with store.transaction():
+        pid = store.next_id("plan", "idplan")
+        cols = ["idplan", *plan.keys()]
+        store.run(f"INSERT INTO plan ({', '.join(cols)}) VALUES ({', '.join('?' for _ in cols)})", [pid, *plan.values()])
+        n = len(steps["seq"])
+        store.insert("planstep", {"idplanstep": store.new_ids("planstep", n),
+                                  "idplan": np.full(n, pid, dtype=np.int64), **steps})
+    return pid
+
+
+def load_plan_rows(store: Store, idplan: int) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """A stored plan row (as a dict) and its steps (arrays, in order)."""
+    table = store.con.sql("SELECT * FROM plan WHERE idplan = ?", params=[idplan]).to_arrow_table()
+    if table.num_rows == 0:
+        raise StoreError(f"store {store.path} has no plan {idplan}")
+    plan = {k: v[0] for k, v in table.to_pydict().items()}
+    steps = store.con.sql("SELECT * FROM planstep WHERE idplan = ? ORDER BY seq", params=[idplan]).to_arrow_table()
+    return plan, steps
+
+
+def plan_ids(store: Store, idobject: int | None = None) -> list[int]:
+    """Ids of stored plans (of one object), oldest first."""
+    if idobject is None:
+        return [int(r[0]) for r in store.run("SELECT idplan FROM plan ORDER BY idplan")]
+    return [int(r[0]) for r in store.run("SELECT idplan FROM plan WHERE idobject = ? ORDER BY idplan", [idobject])]

@@ -1,0 +1,151 @@
+"""meshcat animation of a regrasp plan: robot, gripper and object through every step (Wan & Harada, Section V,
+Figs. 11-12), exported as static HTML that opens without a server.
+
+The robot and the planning gripper (at the step's jaw opening) are drawn by `workbench.viewer.robot.RobotView` from
+the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper.
+Each step plays: move to the retract configuration, retract -> approach -> grasp, close or open the jaw, grasp ->
+approach -> retract; the object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue)
+poses stay as ghosts, intermediate placements as faint outlines.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import meshcat
+import meshcat.animation as manim
+import numpy as np
+import trimesh
+
+from workbench.planners.wan_harada.plans import inverse_pose
+from workbench.viewer.robot import RobotView
+from workbench.viewer.scenes import (
+    frame_camera,
+    new_scene,
+    palette,
+    show_mesh,
+    show_points,
+    static_html,
+)
+
+OBJECT_COLOR, START_COLOR, GOAL_COLOR, TABLE_COLOR = 0xE0A030, 0xF0D040, 0x3366DD, 0x8B6B4A
+
+
+def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int = 5, jaw_open: float = 0.08) -> list[dict]:
+    """The animation as a list of frames: joint vector `q`, jaw opening, whether the object is held, its pose when
+    resting, and the grasp (TCP in the object frame) when held."""
+    out: list[dict] = []
+    steps = plan.steps
+    if not steps:
+        return out
+    q = np.asarray(steps[0].q_retract, dtype=np.float64)
+    held, rest, grasp = False, np.asarray(plan.start_pose, dtype=np.float64), np.eye(4)
+
+    def line(q0: np.ndarray, q1: np.ndarray, n: int, jaw: float) -> None:
+        for t in np.linspace(0.0, 1.0, n + 1)[1:]:
+            out.append({"q": (1 - t) * q0 + t * q1, "jaw": jaw, "held": held, "rest": rest, "grasp": grasp})
+
+    out.append({"q": q, "jaw": jaw_open, "held": False, "rest": rest, "grasp": grasp})
+    for s in steps:
+        qa, qg, qr = (np.asarray(v, dtype=np.float64) for v in (s.q_approach, s.q_grasp, s.q_retract))
+        taking = s.kind in ("pick", "regrasp")
+        jaw_before = jaw_open if taking else s.jawwidth
+        line(q, qr, frames_move, jaw_before)
+        line(qr, qa, frames_line, jaw_before)
+        line(qa, qg, frames_line, jaw_before)
+        if taking:
+            held, grasp = True, np.asarray(s.grasp, dtype=np.float64)
+            jaws = np.linspace(jaw_open, s.jawwidth, frames_jaw)
+        else:
+            held, rest = False, np.asarray(s.object_pose, dtype=np.float64)
+            jaws = np.linspace(s.jawwidth, jaw_open, frames_jaw)
+        for w in jaws:
+            out.append({"q": qg, "jaw": float(w), "held": held, "rest": rest, "grasp": grasp})
+        jaw_after = s.jawwidth if taking else jaw_open
+        line(qg, qa, frames_line, jaw_after)
+        line(qa, qr, frames_line, jaw_after)
+        q = qr
+    return out
+
+
+def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30,
+              path: str = "plan", kind: str = "visual") -> manim.Animation:
+    """Draw the plan's scene under `path` and attach its animation to `vis` (looped). The robot and the planning
+    gripper are drawn by `workbench.viewer.robot.RobotView` (`kind`: the URDF's visual or collision meshes)."""
+
+    vis[path].delete()
+    vis["/Grid"].set_property("visible", False)  # the table stands for the plane z = 0
+    if table is not None:
+        (x0, y0), (x1, y1), thick = table
+        box = trimesh.creation.box(extents=(x1 - x0, y1 - y0, thick))
+        box.apply_translation(((x0 + x1) / 2, (y0 + y1) / 2, -thick / 2))
+        show_mesh(vis, f"{path}/table", box, color=TABLE_COLOR, opacity=0.5)
+    show_mesh(vis, f"{path}/start", obj_mesh, color=START_COLOR, opacity=0.35, pose=plan.start_pose)
+    show_mesh(vis, f"{path}/goal", obj_mesh, color=GOAL_COLOR, opacity=0.35, pose=plan.goal_pose)
+    for i, s in enumerate(plan.steps[1:-1:2]):
+        show_mesh(vis, f"{path}/placements/{i}", obj_mesh, color=0x999999, opacity=0.15, pose=s.object_pose)
+    show_mesh(vis, f"{path}/object", obj_mesh, color=OBJECT_COLOR)
+    view = RobotView(vis, robot, f"{path}/robot", kind)
+    frames = keyframes(plan, jaw_open=robot.gripper.jaw_max)
+    anim = manim.Animation(default_framerate=fps)
+    for i, fr in enumerate(frames):
+        poses = view.poses(fr["q"], fr["jaw"])
+        tcp = robot.tcp_pose(fr["q"])
+        obj_pose = tcp @ inverse_pose(fr["grasp"]) if fr["held"] else fr["rest"]
+        with anim.at_frame(vis, i) as f:
+            for name, m in poses.items():
+                f[name].set_transform(m)
+            f[f"{path}/object"].set_transform(obj_pose)
+    if frames:  # the first frame as the scene's static state (shown before playing)
+        view.show(frames[0]["q"], frames[0]["jaw"])
+        vis[f"{path}/object"].set_transform(plan.start_pose)
+    vis.set_animation(anim, play=True, repetitions=1000)
+    return anim
+
+
+def scene_table(planner) -> tuple:
+    sc = planner.rows["scene"]
+    s = sc.get("scene", sc) if isinstance(sc.get("scene"), dict) else sc
+    return tuple(s["table_min"]), tuple(s["table_max"]), float(s["table_thickness"])
+
+
+def plan_scene(plan, planner, out: str | Path | None = None, vis: meshcat.Visualizer | None = None,
+               kind: str = "collision") -> Path | meshcat.Visualizer:
+    """The plan's animation in a meshcat scene (a new one unless `vis`); written as static HTML when `out` is given
+    (returns its path), else the visualizer is returned. `kind`: the robot's collision meshes (a file of a few MB)
+    or its visual meshes (nicer, about 15 MB for the Panda)."""
+    if vis is None:
+        import contextlib
+        import io
+
+        with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its (temporary) server's URL
+            vis = new_scene()
+    show_plan(vis, plan, planner.robot, planner.object.mesh, scene_table(planner), kind=kind)
+    pts = np.array([plan.start_pose[:3, 3], plan.goal_pose[:3, 3], planner.robot.base[:3, 3]])
+    frame_camera(vis, pts.mean(axis=0) + [0, 0, 0.15], 0.3)
+    if out is None:
+        return vis
+    return static_html(vis, out)
+
+
+def show_roadmap(vis: meshcat.Visualizer, planner, result=None, path: str = "roadmap", limit: int = 20000) -> dict:
+    """The regrasp graph's nodes as points at their object positions, lifted by component (grey shades, one layer
+    per component), with the roadmap nodes the start grips attach to (transfer edges) in yellow and the goal's in
+    blue; returns the attach summaries."""
+
+    rm = planner.roadmap
+    vis[path].delete()
+    if rm.n_nodes == 0:
+        return {}
+    pick = np.unique(np.linspace(0, rm.n_nodes - 1, min(limit, rm.n_nodes)).astype(int))
+    pts = rm.tcp[pick, :3, 3]
+    colors = palette(max(rm.n_components, 1))[rm.component[pick] % max(rm.n_components, 1)]
+    show_points(vis, f"{path}/nodes", pts, colors, size=0.004)
+    out = {}
+    if result is not None:
+        for side, color in ((result.start, START_COLOR), (result.goal, GOAL_COLOR)):
+            att = planner.attach(side)
+            out[side.label] = att
+            nodes = att["nodes"]
+            show_points(vis, f"{path}/{side.label}", rm.tcp[nodes, :3, 3] + [0, 0, 0.002], color, size=0.007)
+    return out

@@ -1,0 +1,116 @@
+"""ipywidgets front-ends for grasp planning and placements (notebooks 01 and 02). Logic stays in the stages;
+these classes only read widgets, call the library and draw with `workbench.viewer`.
+"""
+
+from __future__ import annotations
+
+import ipywidgets as W
+import numpy as np
+import trimesh
+
+from workbench.geometry.objects import ObjectModel
+from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
+from workbench.robots.gripper import Gripper
+from workbench.viewer import scenes as viz
+
+
+def counts_table(counts: dict, title: str = "") -> str:
+    """An HTML table of stage counts."""
+    rows = "".join(f"<tr><td>{k.replace('_', ' ')}</td><td style='text-align:right'>{v if isinstance(v, str) else f'{v:,}'}</td></tr>"
+                   for k, v in counts.items())
+    return f"<b>{title}</b><table>{rows}</table>"
+
+
+class GraspExplorer:
+    """Tune segmentation, sampling, filters and rotations; see facets, samples, pairs and hands (Section III)."""
+
+    def __init__(self, obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspParams(), vis=None,
+                 max_hands: int = 40):
+        self.obj, self.gripper, self.max_hands = obj, gripper, max_hands
+        self.vis = vis if vis is not None else viz.new_scene()
+        self.plan: GraspPlan | None = None
+        self.tau = W.FloatSlider(value=np.degrees(params.tau), min=2, max=45, step=1, description="tau (deg)")
+        self.method = W.ToggleButtons(options=[("over-segmentation", "over"), ("conventional", "conventional")],
+                                      value=params.segmentation)
+        self.density = W.FloatLogSlider(value=params.density or 8.0 / params.neighbour_radius**2, base=10, min=3, max=6,
+                                        description="samples/m²")
+        self.dist = W.FloatRangeSlider(value=(params.dist_min * 1e3, params.dist_max * 1e3), min=0, max=50, step=0.5,
+                                       description="boundary (mm)")
+        self.radius = W.FloatSlider(value=params.neighbour_radius * 1e3, min=0, max=30, step=0.5, description="nbr r (mm)")
+        self.rotations = W.IntSlider(value=params.rotations, min=1, max=24, description="rotations")
+        self.facet = W.IntSlider(value=0, min=0, max=0, description="facet")
+        self.layers = {name: W.Checkbox(value=on, description=name, indent=False) for name, on in (
+            ("facets", True), ("all samples", False), ("after neighbour filter", False), ("after distance filter", True),
+            ("contact pairs", True), ("collided hands", False), ("free hands", True))}
+        self.button = W.Button(description="plan grasps", button_style="primary")
+        self.counts = W.HTML()
+        self.button.on_click(lambda _: self.run())
+        self.facet.observe(lambda _: self.draw_facet(), names="value")
+        for box in self.layers.values():
+            box.observe(lambda _: self.draw(), names="value")
+        self.widget = W.VBox([W.HBox([self.tau, self.method]), W.HBox([self.density, self.radius]),
+                              W.HBox([self.dist, self.rotations]), W.HBox(list(self.layers.values())),
+                              W.HBox([self.button, self.facet]), self.counts])
+
+    def params(self) -> GraspParams:
+        return GraspParams(tau=float(np.radians(self.tau.value)), segmentation=self.method.value, density=self.density.value,
+                           neighbour_radius=self.radius.value / 1e3, dist_min=self.dist.value[0] / 1e3,
+                           dist_max=self.dist.value[1] / 1e3, rotations=self.rotations.value)
+
+    def run(self) -> GraspPlan:
+        self.plan = plan_grasps(self.obj, self.gripper, self.params())
+        self.facet.max = max(len(self.plan.facets) - 1, 0)
+        self.counts.value = counts_table(self.plan.counts, "counts at every stage") + \
+            counts_table({k: f"{v * 1e3:.1f} ms" for k, v in self.plan.timings.items()}, "time per stage")
+        self.draw()
+        return self.plan
+
+    def draw(self) -> None:
+        plan, vis, on = self.plan, self.vis, {k: w.value for k, w in self.layers.items()}
+        if plan is None:
+            return
+        vis["grasps"].delete()
+        mesh = self.obj.mesh
+        if on["facets"]:
+            fid, tid = plan.facets.membership()
+            first = np.full(len(mesh.faces), -1)
+            first[tid[::-1]] = fid[::-1]  # colour each triangle by the first facet holding it
+            viz.show_face_colors(vis, "grasps/facets", mesh, viz.palette(len(plan.facets))[first])
+        else:
+            viz.show_mesh(vis, "grasps/facets", mesh, color=viz.GREY, opacity=0.5)
+        s = plan.samples
+        if on["all samples"]:
+            viz.show_points(vis, "grasps/samples/all", s.points, viz.WHITE, size=0.002)
+        if on["after neighbour filter"]:
+            viz.show_points(vis, "grasps/samples/neighbour", s.points[s.kept], viz.BLUE, size=0.003)
+        if on["after distance filter"]:
+            viz.show_points(vis, "grasps/samples/distance", s.points[np.unique(s.pair_sample[s.pair_ok])], viz.GREEN, size=0.004)
+        p = plan.pairs
+        live = p.level1_ok
+        if on["contact pairs"]:
+            viz.show_segments(vis, "grasps/pairs/free", p.point0[live], p.point1[live], viz.GREEN)
+            dead = (p.width_ok & p.com_ok) & ~live
+            viz.show_segments(vis, "grasps/pairs/level1", p.point0[dead], p.point1[dead], viz.RED)
+        if on["collided hands"]:
+            viz.show_grippers(vis, "grasps/hands/collided", self.gripper, plan.candidate_poses[~plan.candidate_free],
+                              p.width[plan.candidate_pair[~plan.candidate_free]], viz.RED, 0.15, self.max_hands // 2)
+        if on["free hands"]:
+            g = plan.grasps
+            viz.show_grippers(vis, "grasps/hands/free", self.gripper, g.poses, g.jawwidth, viz.GREEN, 0.3, self.max_hands)
+        self.draw_facet()
+        viz.frame_camera(vis, mesh.bounds.mean(axis=0), float(mesh.scale) + 0.1)
+
+    def draw_facet(self) -> None:
+        """One facet in orange with its samples: kept by the distance filter (green) or removed (white)."""
+        plan = self.plan
+        if plan is None or len(plan.facets) == 0:
+            return
+        f = self.facet.value
+        tris = plan.facets.triangles_of(f)
+        sub = trimesh.Trimesh(self.obj.mesh.vertices, self.obj.mesh.faces[tris], process=False)
+        normal = plan.facets.normals[f]
+        viz.show_mesh(self.vis, "grasps/facet/mesh", sub.copy().apply_translation(1e-4 * normal), color=viz.ORANGE)
+        s = plan.samples
+        mine = s.pair_facet == f
+        viz.show_points(self.vis, "grasps/facet/kept", s.points[s.pair_sample[mine & s.pair_ok]], viz.GREEN, 0.005)
+        viz.show_points(self.vis, "grasps/facet/removed", s.points[s.pair_sample[mine & ~s.pair_ok]], viz.WHITE, 0.005)

@@ -1,0 +1,309 @@
+"""meshcat animation of a regrasp plan: robot, gripper and object through every step (Wan & Harada, Section V,
+Figs. 11-12), exported as static HTML that opens without a server.
+
+The robot and the planning gripper (at the step's jaw opening) are drawn by `workbench.viewer.robot.RobotView` from
+the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper.
+Each step plays: move to the retract configuration, retract -> approach -> grasp, close or open the jaw, grasp ->
+approach -> retract; the object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue)
+poses stay as ghosts, intermediate placements as faint outlines.
+
+A robot in meshcat at joint configurations (Wan & Harada Section IV, Fig. 6(e)-(g): feasible IKs).
+
+The URDF's visual meshes (DAE/STL/OBJ files are sent as they are; boxes and cylinders as primitives) or its
+collision geometry, placed by pinocchio's forward kinematics of the robot's reduced model, plus the planning
+gripper's visual meshes at the TCP with the jaw at a given width. `RobotView.show(q)` moves it; `animate(qs)`
+plays a list of configurations; `show_table` draws a scene's table slab.
+
+ipywidgets front-ends for grasp planning and placements (notebooks 01 and 02). Logic stays in the stages;
+these classes only read widgets, call the library and draw with `workbench.viewer`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import ipywidgets as W
+import meshcat
+import numpy as np
+import trimesh
+
+from workbench.errors import PlanningError
+from workbench.geometry.objects import ObjectModel, load_object
+from workbench.grasping.placements import (
+    PlacementParams,
+    grips_above_table,
+    stable_placements,
+)
+from workbench.planners.wan_harada.query import PoseQuery
+from workbench.planners.wan_harada.stages import load_planner
+from workbench.planners.wan_harada.tabletop import TabletopParams, yaw
+from workbench.robots.gripper import Gripper
+from workbench.robots.model import Robot
+from workbench.viewer import scenes as viz
+from workbench.viewer.robot import RobotView
+from workbench.viewer.scenes import frame_camera, new_scene, show_mesh, table_mesh
+from workbench.viewer.wan_harada import scene_table, show_plan, show_roadmap
+from workbench.widgets.grasping import counts_table
+
+
+class RegraspExplorer:
+    """ipywidgets front-end of notebook 04: choose object, robot, start and goal (placement, x, y, yaw), search,
+    animate the plan in meshcat, and report the graph (size, components, where start and goal attach)."""
+
+    def __init__(self, db, objects: dict, robots=("panda", "ur5", "talos"), tparams=None, vis=None, build=None):
+        import ipywidgets as W
+
+        self.db, self.objects, self.tparams, self.build = Path(db), dict(objects), tparams, build
+        self.vis = vis if vis is not None else new_scene()
+        self.planner, self.plans, self.result = None, [], None
+        self.object = W.Dropdown(options=list(self.objects), description="object")
+        self.robot = W.Dropdown(options=list(robots), description="robot")
+        self.load_button = W.Button(description="build / load graph", button_style="info")
+        self.ends = {}
+        for label in ("start", "goal"):
+            self.ends[label] = (W.Dropdown(options=[], description=f"{label} pl."),
+                                W.FloatSlider(value=0.5, min=0.3, max=0.7, step=0.005, description="x (m)"),
+                                W.FloatSlider(value=0.0, min=-0.25, max=0.25, step=0.005, description="y (m)"),
+                                W.FloatSlider(value=0.0, min=-np.pi, max=np.pi, step=0.01, description="yaw (rad)"))
+        self.alternatives = W.IntSlider(value=2, min=0, max=5, description="alternatives")
+        self.full = W.Checkbox(value=False, description="evaluate every start/goal grip (not lazy)", indent=False)
+        self.plan_button = W.Button(description="search", button_style="primary")
+        self.which = W.Dropdown(options=[], description="animate")
+        self.info = W.HTML()
+        self.load_button.on_click(lambda _: self.load())
+        self.plan_button.on_click(lambda _: self.run())
+        self.which.observe(lambda _: self.animate(), names="value")
+        rows = [W.HBox(list(self.ends[k])) for k in ("start", "goal")]
+        self.widget = W.VBox([W.HBox([self.object, self.robot, self.load_button]), *rows,
+                              W.HBox([self.alternatives, self.full, self.plan_button, self.which]), self.info])
+
+    def load(self):  # -> regrasp.Planner
+        """Build (or reuse) the store's stages for the chosen object and robot and load the regrasp graph."""
+
+        obj = load_object(self.objects[self.object.value])
+        if self.build is not None:
+            self.build(self.db, obj, self.robot.value)
+        self.planner = load_planner(self.db, obj.name, self.robot.value)
+        ids = self.planner.placement_ids()
+        for label in ("start", "goal"):
+            self.ends[label][0].options = ids
+        self.ends["goal"][0].value = ids[-1]
+        self.info.value = self.graph_html()
+        return self.planner
+
+    def set_query(self, start, goal) -> None:
+        """Put two PoseQuery values into the widgets."""
+        for label, q in (("start", start), ("goal", goal)):
+            p, x, y, yaw = self.ends[label]
+            p.value, x.value, y.value, yaw.value = q.idfreetabletopplacement, q.x, q.y, q.yaw
+
+    def query(self, label: str):  # -> regrasp.PoseQuery
+
+        p, x, y, yaw = self.ends[label]
+        return PoseQuery(int(p.value), float(x.value), float(y.value), float(yaw.value))
+
+    def run(self) -> list:
+        """Search (Section V) from the widgets' start to their goal; animate the best plan."""
+
+        if self.planner is None:
+            self.load()
+        try:
+            self.plans = self.planner.plan(self.query("start"), self.query("goal"), alternatives=self.alternatives.value,
+                                           lazy=not self.full.value)
+            self.result = self.planner.last
+        except PlanningError as exc:
+            self.plans, self.result = [], None
+            self.info.value = self.graph_html() + f"<p style='color:#b00'><b>no plan:</b> {exc}</p>"
+            return []
+        self.which.options = [(f"{'best' if p.rank == 0 else f'alternative {p.rank}'}: {p.regrasps} regrasp(s)", p.rank)
+                              for p in self.plans]
+        self.which.value = 0
+        self.animate()
+        return self.plans
+
+    def animate(self) -> None:
+        if not self.plans:
+            return
+        plan = self.plans[self.which.value or 0]
+        self.vis.delete()
+        show_plan(self.vis, plan, self.planner.robot, self.planner.object.mesh, scene_table(self.planner))
+        attach = show_roadmap(self.vis, self.planner, self.result)
+        pts = np.array([plan.start_pose[:3, 3], plan.goal_pose[:3, 3]])
+        frame_camera(self.vis, pts.mean(axis=0) + [0, 0, 0.15], 0.3)
+        self.info.value = self.graph_html(attach) + self.plan_html(plan)
+
+    def graph_html(self, attach: dict | None = None) -> str:
+
+        rm = self.planner.roadmap
+        s = rm.summary()
+        sizes = rm.component_sizes()
+        counts = {"tabletop grips": s["grips"], "nodes (IK-feasible)": s["nodes"], "transfer edges": s["transfer_edges"],
+                  "transit edges": s["transit_edges"], "grasps": s["grasps"], "placements": s["placements"],
+                  "components": s["components"], "component sizes": ", ".join(f"{int(n):,}" for n in sizes[:8])}
+        html = counts_table(counts, f"regrasp graph of {self.planner.object.name} for {self.planner.robot.name}")
+        if attach:
+            rows = {}
+            for label, side in (("start", self.result.start), ("goal", self.result.goal)):
+                a = attach[label]
+                rows[f"{label}: grips evaluated / feasible / all"] = f"{side.n_evaluated} / {side.n_feasible} / {len(side.grasp)}"
+                rows[f"{label}: attached nodes (transfer edges)"] = f"{len(a['nodes']):,}"
+                rows[f"{label}: components reached"] = ", ".join(map(str, a["components"])) or "none"
+            html += counts_table(rows, "where start and goal attach")
+        return html
+
+    def plan_html(self, plan) -> str:
+        t = plan.timings
+        lines = "<br>".join(plan.lines())
+        return (f"<p><b>{plan.regrasps} regrasp(s), {plan.transfers} transfer(s)</b>; connect {t.get('connect', 0) * 1e3:.1f} ms, "
+                f"search {t.get('search', 0) * 1e3:.1f} ms</p><pre>{lines}</pre>")
+
+
+class IKBrowser:
+    """The robot at the feasible tabletop grips: a slider over them, a choice of grasp / handx / handxworldz, and the
+    object at the grip's placement. `widget` holds the ipywidgets."""
+
+    def __init__(self, vis: meshcat.Visualizer, robot: Robot, rows: dict[str, np.ndarray], obj_mesh, kind: str = "visual"):
+        import ipywidgets as w
+
+
+        self.vis, self.robot, self.rows, self.mesh = vis, robot, rows, obj_mesh
+        self.view = RobotView(vis, robot, "robot", kind)
+        self.feasible = np.flatnonzero(np.asarray(rows["feasible"])[:, 0])
+        self.slider = w.IntSlider(min=0, max=max(len(self.feasible) - 1, 0), value=0, description="feasible grip",
+                                  continuous_update=False, layout=w.Layout(width="520px"))
+        self.kind = w.ToggleButtons(options=["grasp", "handx", "handxworldz"], value="grasp")
+        self.label = w.HTML()
+        self.slider.observe(lambda _: self.update(), names="value")
+        self.kind.observe(lambda _: self.update(), names="value")
+        self.widget = w.VBox([w.HBox([self.slider, self.kind]), self.label])
+        self._show_mesh = show_mesh
+        self.update()
+
+    def update(self) -> int | None:
+        """Show the selected grip; returns its row index (None when no grip is feasible)."""
+        if len(self.feasible) == 0:
+            self.label.value = "no feasible grip"
+            return None
+        i = int(self.feasible[self.slider.value])
+        k = ["grasp", "handx", "handxworldz"].index(self.kind.value)
+        q = self.rows["joints"][i, k]
+        ok = bool(self.rows["feasible"][i, k])
+        if not ok:
+            q = self.rows["joints"][i, 0]
+        self.view.show(q, float(self.rows["jawwidth"][i]) if k == 0 else None)
+        self._show_mesh(self.vis, "object", self.mesh, color=0x4477CC, pose=self.rows["placement_rotmat"][i])
+        self.label.value = (f"tabletop grip {int(self.rows['idtabletopgrips'][i])}, free-air grasp {int(self.rows['idfreeairgrip'][i])}, "
+                            f"position {np.round(self.rows['tabletopposition'][i][:2], 3).tolist()} m; {self.kind.value}: "
+                            f"{'feasible' if ok else 'infeasible (showing the grasp)'}; q = {np.round(q, 3).tolist()}")
+        return i
+
+
+def plot_feasibility(rows: dict[str, np.ndarray], title: str = ""):
+    """Feasible counts per placement (tabletop placement's free placement and angle) and per grid position."""
+    import matplotlib.pyplot as plt
+
+    f = np.asarray(rows["feasible"], dtype=bool)
+    fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
+    key = np.asarray(rows["idtabletopplacements"])
+    pos = np.round(np.asarray(rows["tabletopposition"])[:, :2], 4)
+    # per free placement and angle: the tabletop placements share the placement's rotation
+    rot = np.round(np.asarray(rows["placement_rotmat"])[:, :3, :3].reshape(len(key), 9), 5)
+    _, group = np.unique(rot, axis=0, return_inverse=True)
+    group = group.ravel()
+    n = group.max() + 1 if len(group) else 0
+    total = np.bincount(group, minlength=n)
+    grasp = np.bincount(group, weights=f[:, 0], minlength=n)
+    both = np.bincount(group, weights=f.all(1), minlength=n)
+    ax[0].bar(np.arange(n), total, color="#dddddd", label="tabletop grips")
+    ax[0].bar(np.arange(n), grasp, color="#e8b400", label="IK feasible (grasp)")
+    ax[0].bar(np.arange(n), both, color="#33aa55", label="with handx and handxworldz")
+    ax[0].set(xlabel="placement x rotation", ylabel="grips", title="per placement and angle (summed over positions)")
+    ax[0].legend(fontsize=8)
+    xs, ix = np.unique(pos[:, 0], return_inverse=True)
+    ys, iy = np.unique(pos[:, 1], return_inverse=True)
+    cnt = np.zeros((len(xs), len(ys)))
+    tot = np.zeros((len(xs), len(ys)))
+    np.add.at(cnt, (ix.ravel(), iy.ravel()), f.all(1))
+    np.add.at(tot, (ix.ravel(), iy.ravel()), 1)
+    dx = np.diff(xs).min() / 2 if len(xs) > 1 else 0.025
+    dy = np.diff(ys).min() / 2 if len(ys) > 1 else 0.025
+    im = ax[1].imshow(np.divide(cnt, tot, out=np.zeros_like(cnt), where=tot > 0).T, origin="lower", vmin=0, vmax=1,
+                      cmap="RdYlGn", extent=[xs[0] - dx, xs[-1] + dx, ys[0] - dy, ys[-1] + dy], aspect="auto")
+    fig.colorbar(im, ax=ax[1], label="feasible share (all three)")
+    ax[1].set(xlabel="x (m)", ylabel="y (m)", title="per position")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+class PlacementExplorer:
+    """Tune the stability threshold and the table grid; inspect placements, their grips and the roadmap (Section IV)."""
+
+    def __init__(self, obj: ObjectModel, gripper: Gripper, grasp_poses: np.ndarray, grasp_widths: np.ndarray, vis=None,
+                 max_hands: int = 30):
+        self.obj, self.gripper, self.max_hands = obj, gripper, max_hands
+        self.grasp_poses, self.grasp_widths = grasp_poses, grasp_widths
+        self.vis = vis if vis is not None else viz.new_scene()
+        t = TabletopParams()
+        self.stability = W.FloatSlider(value=PlacementParams().min_stability, min=0, max=1.5, step=0.01, description="min stability")
+        self.angles = W.IntSlider(value=t.angles, min=1, max=16, description="rotations")
+        self.nx = W.IntSlider(value=t.nx, min=1, max=15, description="grid x")
+        self.ny = W.IntSlider(value=t.ny, min=1, max=15, description="grid y")
+        self.which = W.IntSlider(value=0, min=0, max=0, description="placement")
+        self.roadmap = W.Checkbox(value=True, description="whole tabletop roadmap", indent=False)
+        self.info = W.HTML()
+        for w in (self.stability,):
+            w.observe(lambda _: self.run(), names="value")
+        for w in (self.angles, self.nx, self.ny, self.which, self.roadmap):
+            w.observe(lambda _: self.draw(), names="value")
+        self.widget = W.VBox([W.HBox([self.stability, self.which]), W.HBox([self.nx, self.ny, self.angles]),
+                              self.roadmap, self.info])
+        self.placements = None
+
+    def grid(self) -> TabletopParams:
+        return TabletopParams(nx=self.nx.value, ny=self.ny.value, angles=self.angles.value)
+
+    def run(self):
+        self.placements = stable_placements(self.obj, PlacementParams(min_stability=self.stability.value))
+        self.ok = grips_above_table(self.placements.poses, self.grasp_poses, self.gripper, PlacementParams().clearance)
+        self.which.max = max(len(self.placements) - 1, 0)
+        self.draw()
+        return self.placements
+
+    def draw(self) -> None:
+        pl, vis = self.placements, self.vis
+        if pl is None:
+            return
+        vis["placements"].delete()
+        viz.show_mesh(vis, "placements/table", table_mesh(), color=0x8B6B4A, opacity=0.6)
+        grid = self.grid()
+        counts = {"stable placements": len(pl), "rejected faces": len(pl.rejected_stability),
+                  "tabletop placements": len(pl) * grid.nx * grid.ny * grid.angles,
+                  "tabletop grips": int(self.ok.sum()) * grid.nx * grid.ny * grid.angles}
+        if len(pl) == 0:
+            self.info.value = counts_table(counts, "no stable placement at this threshold")
+            return
+        k = self.which.value
+        show_at = np.eye(4)
+        show_at[:3, 3] = (grid.x_min - 0.25, 0.0, 0.0)  # the selected placement beside the grid
+        pose = show_at @ pl.poses[k]
+        viz.show_mesh(vis, "placements/selected/object", self.obj.mesh, color=0xE0C040, pose=pose)
+        ring = pl.supports[k] + show_at[:3, 3] + [0, 0, 1e-4]
+        viz.show_segments(vis, "placements/selected/support", ring, np.roll(ring, -1, axis=0), viz.RED)
+        grips = show_at @ pl.poses[k] @ self.grasp_poses
+        viz.show_grippers(vis, "placements/selected/grips", self.gripper, grips, self.grasp_widths,
+                          np.where(self.ok[k], viz.GREEN, viz.RED), 0.25, self.max_hands)
+        if self.roadmap.value:
+            hull = self.obj.mesh.convex_hull
+            moves = yaw(grid.angle_values())[None].repeat(grid.nx * grid.ny, axis=0)
+            moves[..., :3, 3] = grid.positions()[:, None, :]
+            colors = viz.palette(len(pl))
+            for p in range(len(pl)):
+                parts = [hull.copy().apply_transform(m @ pl.poses[p]) for m in moves.reshape(-1, 4, 4)]
+                viz.show_mesh(vis, f"placements/roadmap/{p}", trimesh.util.concatenate(parts), color=int(colors[p]),
+                              opacity=1.0 if p == k else 0.15)
+        viz.frame_camera(vis, np.array([(grid.x_min + grid.x_max) / 2 - 0.1, 0.0, 0.0]), 0.3)
+        counts["selected stability"] = f"{pl.stability[k]:.3f}"
+        counts["selected grips kept / collided"] = f"{int(self.ok[k].sum())} / {int((~self.ok[k]).sum())}"
+        self.info.value = counts_table(counts, "placements and the tabletop roadmap")
