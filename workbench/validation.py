@@ -26,6 +26,7 @@ import trimesh
 from scipy.spatial import ConvexHull
 
 from workbench.errors import PlanningError
+from workbench.resources import erd_share
 
 
 @dataclass
@@ -315,54 +316,20 @@ def _in_subtree(link: str, prefix: str, parents: dict[str, str]) -> bool:
     return False
 
 
-def robot_extras(row: dict, scene: dict | None = None) -> tuple[tuple[str, ...], dict]:
-    """(hand link prefixes, locked joint values) of a stored robot: from the IK run's scene parameters (`robot`:
-    `drop_geometry`, `locked`) or the row when they hold them, else from the built-in robot of that name (its own
-    hand is replaced by the planning gripper, a humanoid's other arm is locked tucked away), else none."""
-    extra = (scene or {}).get("robot") if isinstance((scene or {}).get("robot"), dict) else {}
-    hand = extra.get("drop_geometry", row.get("drop_geometry"))
-    locked = extra.get("locked", row.get("locked"))
-    if hand is None or locked is None:
-        try:
-            from workbench.robots.model import ROBOTS, builtin_robot
-        except ImportError:  # pragma: no cover
-            ROBOTS = ()
-        name = row["name"] if row["name"] in ROBOTS else row["name"].rsplit("-", 1)[0]
-        spec = builtin_robot(name, base=row.get("base")).spec if name in ROBOTS else None
-        if hand is None:
-            hand = tuple(spec.drop_geometry) if spec is not None else ()
-        if locked is None:
-            locked = dict(getattr(spec, "locked", ()) or ()) if spec is not None else {}
-    if not isinstance(locked, dict):
-        locked = {str(k): float(v) for k, v in locked}
-    return tuple(hand), locked
-
-
-
-
-_VALIDATORS: dict[tuple, PlanValidator] = {}
-
-
-def validator_for(planner) -> PlanValidator:
-    """The validator of a planner's store rows (robot row, scene, object, stable placements), cached."""
-    from workbench.resources import erd_share
-
-    key = planner.roadmap.key or (id(planner),)
-    if key not in _VALIDATORS:
-        rows = planner.rows
-        r, sc = rows["robot"], rows["scene"]
-        scene = sc.get("scene", sc) if isinstance(sc.get("scene"), dict) else sc
-        table = (tuple(scene["table_min"]), tuple(scene["table_max"]), float(scene["table_thickness"]))
-        free = {int(i): p for i, p in zip(planner.free["idfreetabletopplacement"], planner.free["rotmat"])}
-        obj = planner.object
-        hand, locked = robot_extras(r, sc)
-        _VALIDATORS.clear()
-        _VALIDATORS[key] = PlanValidator(r["urdf"], r["tip_frame"], r["mount"], r["base"], r["joint_names"], table,
-                                         obj.mesh.vertices, obj.mesh.faces, obj.com, planner.robot.gripper.collision_mesh(),
-                                         hand_links=hand, free_poses=free, package_dirs=(str(erd_share()),), locked=locked)
-    return _VALIDATORS[key]
-
-
-def validate_plan(plan, planner) -> ValidationReport:
-    """Check one plan against the store rows of `planner` (see the module docstring)."""
-    return validator_for(planner).check(plan)
+def validator_from_rows(rows: dict, free_poses: dict | None = None) -> PlanValidator:
+    """A validator rebuilt from stored rows only (`robot`, `scene`, `object`, `gripper` as the store returns them:
+    URDF text, frames, mount, base, joint names, locked joints, dropped hand links, mesh folders; the table; the
+    object's mesh and centre of mass; the gripper's collision mesh), so it shares no code or object with the
+    planner. `free_poses`: {idfreetabletopplacement: rotmat} of the stable placements."""
+    r, sc, obj, grip = rows["robot"], rows["scene"], rows["object"], rows.get("gripper")
+    if grip is None or grip.get("collision_vertices") is None:
+        raise PlanningError("validator: the store has no collision mesh of the robot's gripper (a store written by an "
+                            "older version); rebuild the IK stage in a new store")
+    scene = sc.scene
+    table = (tuple(scene.table_min), tuple(scene.table_max), float(scene.table_thickness))
+    gripper = trimesh.Trimesh(grip["collision_vertices"], grip["collision_faces"], process=False)
+    return PlanValidator(r["urdf"], r["tip_frame"], r["mount"], r["base"], r["joint_names"], table,
+                         np.asarray(obj["vertices"], dtype=np.float64), np.asarray(obj["faces"], dtype=np.int64),
+                         np.asarray(obj["com"], dtype=np.float64), gripper, hand_links=tuple(r.get("drop_geometry") or ()),
+                         free_poses=free_poses, package_dirs=(str(erd_share()), *(r.get("package_dirs") or ())),
+                         locked=dict(r.get("locked") or {}))

@@ -13,7 +13,6 @@ from workbench.cli.main import main
 from workbench.planners.wan_harada.plans import Plan
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.stages import load_planner
-from workbench.validation import validate_plan, validator_for
 
 
 @pytest.fixture(scope="module")
@@ -37,16 +36,16 @@ def test_demo_writes_a_plan_with_a_regrasp_that_validates(demo, plan, planner):
     assert (demo / "plan.html").stat().st_size > 10_000
     assert "set_animation" in (demo / "plan.html").read_text()[:5_000_000]
     assert plan.regrasps >= 1 and plan.transfers == plan.regrasps + 1
-    report = validate_plan(plan, planner)
+    report = planner.validate(plan)
     assert report.ok, report.errors
     assert report.checks > 20
     # the alternatives written beside it validate too
     for alt in json.loads((demo / "plan.json").read_text())["alternatives"]:
-        assert validate_plan(Plan.from_dict(alt), planner).ok
+        assert planner.validate(Plan.from_dict(alt)).ok
 
 
 def _errors(plan, planner):
-    report = validate_plan(plan, planner)
+    report = planner.validate(plan)
     assert not report.ok
     return " | ".join(report.errors)
 
@@ -59,7 +58,7 @@ def test_rejects_a_corrupted_joint_vector(plan, planner):
     bad.steps[0].q_retract[:] = np.nan
     assert "retract joint vector is missing" in _errors(bad, planner)
     bad = copy.deepcopy(plan)
-    v = validator_for(planner)
+    v = planner.validator
     bad.steps[-1].q_approach[0] = v.upper[0] + 0.2
     assert "outside their limits" in _errors(bad, planner)
 
@@ -103,7 +102,7 @@ def test_rejects_a_plan_that_misses_the_goal(plan, planner):
 
 
 def test_stability_check_uses_the_hull(planner):
-    v = validator_for(planner)
+    v = planner.validator
     for pose in planner.free["rotmat"]:
         ok, why = v.stability(PoseQuery(0, 0.5, 0.1, 0.7).move() @ pose)
         assert ok, why
@@ -114,7 +113,7 @@ def test_stability_check_uses_the_hull(planner):
 
 def test_collision_check_agrees_with_the_planner_collider(planner):
     """Own fcl objects from the URDF against the kinematics module's collider on random configurations."""
-    v = validator_for(planner)
+    v = planner.validator
     robot = planner.robot
     rng = np.random.default_rng(0)
     q = rng.uniform(robot.lower, robot.upper, size=(150, robot.nq))

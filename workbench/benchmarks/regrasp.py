@@ -28,7 +28,6 @@ from workbench.planners.wan_harada.stages import build_all, load_planner
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.resources import bundled_objects
 from workbench.store import Store
-from workbench.validation import validator_for
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,7 +59,7 @@ def bench_pairs(planner, pairs: list[tuple], alternatives: int = 2) -> dict:
     """gs (s) and regrasps per solved pair, outcome counts (solved; nogrip: a placement with no grasp clearing the
     table; unreachable: no IK-feasible grip at the start or goal; unconnected) and plans failing validation."""
 
-    checker = validator_for(planner)
+    checker = planner.validator
     gs, nr = [], []
     counts = {"solved": 0, "nogrip": 0, "unreachable": 0, "unconnected": 0, "invalid": 0}
     for start, goal in pairs:

@@ -20,7 +20,6 @@ from workbench.planners.wan_harada.stages import (
 )
 from workbench.resources import bundled_objects
 from workbench.store import Store
-from workbench.validation import validate_plan
 from workbench.viewer.wan_harada import plan_scene
 
 
@@ -54,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
         plans = planner.plan(start, goal, alternatives=2)
         best = plans[0]
         print_plan(best)
-        rep = validate_plan(best, planner)
+        rep = planner.validate(best)
         rep.raise_if_failed()
         print(f"validation: ok ({rep.checks} checks: FK from the URDF, joint limits, arm/gripper-table and arm-object collisions, "
               f"stable placements, constant grasp along transfers, object at the goal)")

@@ -7,8 +7,9 @@ the TCP frame: +z approach (palm toward fingertips), fingers along +/-y, origin 
 
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,17 @@ class Gripper:
     jaw_max: float
     visuals: tuple[Visual, ...] = ()
     urdf: str = ""
+
+    @cached_property
+    def digest(self) -> str:
+        """Identifies the gripper's geometry: body mesh, finger boxes and jaw range (enters every digest that
+        depends on the gripper: grasps, the robot, IK rows)."""
+        h = hashlib.sha256()
+        h.update(np.round(self.body.vertices, 9).tobytes())
+        for ext, pose in self.finger_boxes:
+            h.update(np.round(ext, 9).tobytes() + np.round(pose, 9).tobytes())
+        h.update(np.array([self.jaw_min, self.jaw_max]).tobytes())
+        return h.hexdigest()[:24]
 
     @property
     def pad_extents(self) -> np.ndarray:

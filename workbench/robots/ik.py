@@ -13,21 +13,25 @@ grasp at the next position, then rotation; each chunk of the sorted grips split 
 lock-step, so one batched Levenberg-Marquardt iteration (numpy forward kinematics and Jacobians of the
 serial chain, entry-major arrays) serves hundreds of poses while each lane warm-starts from its previous
 grip's solution (per pose kind); fall-back seeds come from a deterministic library of table-clear sampled configurations nearest to the
-target; chunks run on all cores (forked concurrent.futures workers that inherit the solver) with a tqdm
-progress bar. Chunk boundaries depend only on the sorted input, so a resumed run produces the same rows as
+target; chunks run on all cores (an `IKPool` of forkserver worker processes, each building the solver once)
+with a tqdm progress bar. Chunk boundaries depend only on the sorted input, so a resumed run produces the same rows as
 an uninterrupted one, whatever the number of workers.
 """
 
 from __future__ import annotations
 
 import hashlib
+import multiprocessing as mp
 import os
+import sys
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass, field
 from typing import Callable, Iterator
 
 import numpy as np
 import trimesh
 from scipy.spatial import cKDTree
+from tqdm.auto import tqdm
 
 from workbench.errors import RobotError
 from workbench.robots.chain import forward, solve_ik
@@ -224,23 +228,34 @@ class ReachFilter:
         return ok.reshape(p.shape[:-1])
 
 
-class _Solver:
-    """Per-process state: robot, seed library, collider, pre-filter (built once per worker)."""
+class IKSolver:
+    """One robot's IK engine for a scene and an object (Section IV): the robot, its seed library, its collider
+    (arm and gripper against the table, arm against the object) and the reachability pre-filter, built once.
 
-    def __init__(self, spec: RobotSpec, scene: Scene, opts: IKOptions, obj_mesh: trimesh.Trimesh | None):
-        self.robot = robot_from_spec(spec)
-        self.scene, self.opts = scene, opts
-        self.collider = Collider(self.robot, scene, obj_mesh) if opts.collide else None
-        self.library = SeedLibrary(self.robot, opts.library, opts.seed, collider=self.collider)
-        self.prefilter = ReachFilter(self.robot, scene)
+    `solve` is the one batched solve-and-check step; `chunk` walks sorted grips in warm-started lanes (the
+    precomputation); the roadmap planner's query-time IK (`planners.wan_harada.query.GripIK`) calls `solve`
+    with its own seeds (the nearest stored solutions) and `library_seeds` for the fall-back."""
 
-    def _feasible(self, rows: np.ndarray, q: np.ndarray, ok: np.ndarray, placements: np.ndarray) -> np.ndarray:
-        """Converged rows whose configuration is collision-free."""
-        good = ok.copy()
+    def __init__(self, robot: Robot, scene: Scene, opts: IKOptions = IKOptions(), obj_mesh: trimesh.Trimesh | None = None):
+        self.robot, self.scene, self.opts = robot, scene, opts
+        self.collider = Collider(robot, scene, obj_mesh) if opts.collide else None
+        self.library = SeedLibrary(robot, opts.library, opts.seed, collider=self.collider)
+        self.prefilter = ReachFilter(robot, scene)
+
+    def solve(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray, iters: int) -> tuple[np.ndarray, np.ndarray]:
+        """Joint vectors (M, n) from seeds `q0` for TCP poses (M, 4, 4) of grips of the object at `placements`
+        (M, 4, 4), and whether each converged within the limits and is collision-free."""
+        o = self.opts
+        q, ok = solve_ik(self.robot, targets, q0, iters, o.tol_pos, o.tol_rot)
         if self.collider is not None and ok.any():
-            sel = np.nonzero(ok)[0]
-            good[sel] = ~self.collider.collides_q(q[sel], placements[rows[sel]])
-        return good
+            sel = np.flatnonzero(ok)
+            ok[sel[self.collider.collides_q(q[sel], placements[sel])]] = False
+        return q, ok
+
+    def library_seeds(self, targets: np.ndarray) -> np.ndarray:
+        """(M, seeds) library indices tried after the warm start, diverse among the nearest (IKOptions)."""
+        o = self.opts
+        return self.library.nearest(targets, o.seeds, pool=o.seed_pool, spread=o.seed_spread)
 
     def chunk(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One chunk of sorted grips: targets (C, 3, 4, 4) -> feasible (C, 3), joints (C, 3, n).
@@ -274,14 +289,13 @@ class _Solver:
             if cold.any():
                 q0[cold] = self.library.q[self.library.nearest(flat[rows[cold]], 1)[:, 0]]
                 from_library[rows[cold]] = True
-            q, ok = solve_ik(robot, flat[rows], q0, o.iters_warm, o.tol_pos, o.tol_rot)
-            ok = self._feasible(rows, q, ok, place)
+            q, ok = self.solve(flat[rows], place[rows], q0, o.iters_warm)
             q_out[rows[ok]] = q[ok]
             good[rows[ok]] = True
             prev[lanes[ok]] = q[ok]
         pool = np.nonzero(pre & ~good)[0]
         if len(pool) and o.seeds > 0:
-            near = self.library.nearest(flat[pool], o.seeds, pool=o.seed_pool, spread=o.seed_spread)
+            near = self.library_seeds(flat[pool])
             left = np.ones(len(pool), dtype=bool)
             for k in range(near.shape[1]):  # seed by seed, only for the poses still unsolved
                 if not left.any():
@@ -290,8 +304,7 @@ class _Solver:
                 if len(sel) == 0:
                     continue
                 rows = pool[sel]
-                q, ok = solve_ik(robot, flat[rows], self.library.q[near[sel, k]], o.iters_seed, o.tol_pos, o.tol_rot)
-                ok = self._feasible(rows, q, ok, place)
+                q, ok = self.solve(flat[rows], place[rows], self.library.q[near[sel, k]], o.iters_seed)
                 q_out[rows[ok]] = q[ok]
                 good[rows[ok]] = True
                 left[sel[ok]] = False
@@ -300,40 +313,63 @@ class _Solver:
         return feas, joints
 
 
-_SOLVERS: dict[tuple, _Solver] = {}
+_WORKER_SOLVER: IKSolver | None = None  # the solver of an IKPool worker process, built by its initializer
 
 
-def _solver(spec: RobotSpec, scene: Scene, opts: IKOptions, obj_key: str, obj_mesh: trimesh.Trimesh | None) -> _Solver:
-    key = (spec.digest, scene, opts, obj_key)
-    if key not in _SOLVERS:
-        _SOLVERS.clear()
-        _SOLVERS[key] = _Solver(spec, scene, opts, obj_mesh)
-    return _SOLVERS[key]
+def _init_worker(spec: RobotSpec, scene: Scene, opts: IKOptions, obj_mesh: trimesh.Trimesh | None) -> None:
+    global _WORKER_SOLVER
+    _WORKER_SOLVER = IKSolver(robot_from_spec(spec), scene, opts, obj_mesh)
 
 
-_JOB: dict = {}  # the current run's solver and arrays, inherited by forked workers
+def _work_chunk(targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    return _WORKER_SOLVER.chunk(targets, placements)
 
 
-def _run_chunk(start: int, end: int) -> tuple[np.ndarray, np.ndarray]:
-    ix = _JOB["order"][start:end]
-    return _JOB["solver"].chunk(_JOB["targets"][ix], _JOB["placements"][ix])
+class IKPool:
+    """Worker processes that each build the solver once (from the picklable robot spec, which covers the gripper)
+    and then solve chunks. Started with `forkserver` (or `spawn`), never `fork`: forking a process that runs
+    threads (a Jupyter kernel, BLAS) can deadlock. Make one per run, or keep one for several runs of the same
+    robot, scene, options and object; close it (or use it as a context manager) when done."""
+
+    def __init__(self, robot: Robot, scene: Scene, opts: IKOptions, obj_mesh: trimesh.Trimesh | None, workers: int):
+        methods = mp.get_all_start_methods()
+        ctx = mp.get_context("forkserver" if "forkserver" in methods else "spawn")
+        self.key = (robot.spec.digest, scene, opts, _mesh_key(obj_mesh))
+        self.workers = int(workers)
+        self.executor = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_init_worker,
+                                            initargs=(robot.spec, scene, opts, obj_mesh))
+
+    def submit(self, targets: np.ndarray, placements: np.ndarray):
+        return self.executor.submit(_work_chunk, targets, placements)
+
+    def close(self) -> None:
+        self.executor.shutdown(wait=True, cancel_futures=True)
+
+    def __enter__(self) -> "IKPool":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _mesh_key(mesh: trimesh.Trimesh | None) -> str:
+    if mesh is None:
+        return ""
+    return hashlib.sha256(np.asarray(mesh.vertices, dtype=np.float64).tobytes()
+                          + np.asarray(mesh.faces, dtype=np.int64).tobytes()).hexdigest()[:16]
 
 
 def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: float, worldz: float,
             obj_mesh: trimesh.Trimesh | None = None, opts: IKOptions = IKOptions(), workers: int | None = None,
-            skip: Callable[[np.ndarray], bool] | None = None, progress: bool = True
-            ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+            skip: Callable[[np.ndarray], bool] | None = None, progress: bool = True, solver: IKSolver | None = None,
+            pool: IKPool | None = None) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """IK feasibility chunk by chunk (Section IV): yields (grip indices, feasible (C, 3), joints (C, 3, n)).
 
     `grips` follows the placements contract (rotmat: TCP poses in the world, placement_rotmat: object poses,
     idfreeairgrip, tabletopposition, idtabletopgrips). Chunks for which `skip(indices)` is True are not computed
-    (already stored). The solver (robot, seed library, collision models) is built once here; with workers > 1
-    (default: all cores) forked processes inherit it and the arrays, so only chunk bounds and results travel."""
-    import multiprocessing as mp
-    from concurrent.futures import ProcessPoolExecutor
-
-    from tqdm.auto import tqdm
-
+    (already stored). With one worker the chunks are solved here (by `solver`, or one built for this run); with
+    more (default: all cores) by an `IKPool` (`pool`, or one made for this run), whose processes each build the
+    solver once."""
     poses = check_poses(grips["rotmat"])
     placements = check_poses(grips["placement_rotmat"], "object placement")
     for label, value in (("handx", handx), ("worldz", worldz)):
@@ -344,33 +380,30 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
     todo = [(s, e) for s, e in bounds if skip is None or not skip(order[s:e])]
     if not todo:
         return
-    obj_key = ""
-    if obj_mesh is not None:
-        obj_key = hashlib.sha256(np.asarray(obj_mesh.vertices, dtype=np.float64).tobytes()
-                                 + np.asarray(obj_mesh.faces, dtype=np.int64).tobytes()).hexdigest()[:16]
-    _JOB.update(solver=_solver(robot.spec, scene, opts, obj_key, obj_mesh), order=order,
-                targets=retract(poses, handx, worldz), placements=placements)
-    workers = workers or os.cpu_count() or 1
+    targets = retract(poses, handx, worldz)
+    workers = pool.workers if pool is not None else (workers or os.cpu_count() or 1)
     workers = max(1, min(workers, len(todo)))
-    if workers > 1 and "fork" not in mp.get_all_start_methods():
-        workers = 1
-    bar = tqdm(total=int(sum(e - s for s, e in todo)), desc=f"ik {robot.name}", unit="grip", disable=not progress, leave=False)
-    pool = None
+    if pool is not None and pool.key != (robot.spec.digest, scene, opts, _mesh_key(obj_mesh)):
+        raise RobotError("the IK pool was made for another robot, scene, options or object; make a new one")
+    own_pool = None
+    bar = tqdm(total=int(sum(e - s for s, e in todo)), desc=f"ik {robot.name}", unit="grip", disable=not progress,
+               leave=False, file=sys.stderr)
     try:
-        if workers == 1:
-            results = (_run_chunk(s, e) for s, e in todo)
+        if workers == 1 and pool is None:
+            solver = solver or IKSolver(robot, scene, opts, obj_mesh)
+            results = (solver.chunk(targets[order[s:e]], placements[order[s:e]]) for s, e in todo)
         else:
-            pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"))
-            futures = [pool.submit(_run_chunk, s, e) for s, e in todo]
+            if pool is None:
+                pool = own_pool = IKPool(robot, scene, opts, obj_mesh, workers)
+            futures = [pool.submit(targets[order[s:e]], placements[order[s:e]]) for s, e in todo]
             results = (f.result() for f in futures)
         for (s, e), (feas, joints) in zip(todo, results):
             bar.update(e - s)
             yield order[s:e], feas, joints
     finally:
         bar.close()
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
-        _JOB.clear()
+        if own_pool is not None:
+            own_pool.close()
 
 
 def ik_feasibility(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: float, worldz: float,

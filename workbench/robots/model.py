@@ -32,6 +32,7 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 
 from workbench.errors import RobotError
 from workbench.resources import erd_robots, erd_share
@@ -96,17 +97,27 @@ class RobotSpec:
     drop_geometry: tuple[str, ...] = ()
     package_dirs: tuple[str, ...] = ()
     locked: tuple[tuple[str, float], ...] = ()
+    gripper: Gripper | None = None
+
+    @cached_property
+    def hand(self) -> Gripper:
+        """The planning gripper (the Franka hand unless the spec names another)."""
+        return self.gripper if self.gripper is not None else franka_hand()
 
     @cached_property
     def digest(self) -> str:
-        """Identifies the kinematics: URDF text, frames, mount, base, joints, dropped geometry."""
+        """Identifies the kinematics and the hand: URDF text, frames, mount, base, joints, dropped geometry and the
+        planning gripper's geometry (its digest), so caches, worker processes and `ik` rows follow the gripper."""
         h = hashlib.sha256()
+        h.update(self.hand.digest.encode())
         h.update(self.urdf.encode())
         h.update(json.dumps([self.tip_frame, self.tcp_frame, list(self.joints or ()), list(self.drop_geometry),
                              [[k, float(v)] for k, v in self.locked]]).encode())
         h.update(np.round(np.asarray(self.mount, dtype=np.float64), 12).tobytes())
         h.update(np.round(np.asarray(self.base, dtype=np.float64), 12).tobytes())
         return h.hexdigest()[:24]
+
+
 
 
 class Robot:
@@ -117,11 +128,9 @@ class Robot:
     its axis in its own frame and whether it is prismatic; `tip` is the TCP in the last joint's frame.
     """
 
-    def __init__(self, spec: RobotSpec, gripper: Gripper | None = None):
-        import pinocchio as pin
-
+    def __init__(self, spec: RobotSpec):
         self.spec = spec
-        self.gripper = gripper or franka_hand()
+        self.gripper = spec.hand
         self.base = check_pose(spec.base, f"base pose of robot {spec.name!r}")
         self.mount = check_pose(spec.mount, f"mount transform of robot {spec.name!r}")
         dirs = [str(erd_share()), *spec.package_dirs]
@@ -215,7 +224,6 @@ class Robot:
 
     def tcp_pose(self, q: np.ndarray) -> np.ndarray:
         """The TCP pose in the world at joint vector `q` (pinocchio, one configuration)."""
-        import pinocchio as pin
 
         data = self.model.createData()
         pin.framesForwardKinematics(self.model, data, np.asarray(q, dtype=np.float64))
@@ -223,7 +231,6 @@ class Robot:
 
     def visual_model(self):
         """The reduced pinocchio VISUAL geometry model (meshes of the URDF, same locked joints as the arm)."""
-        import pinocchio as pin
 
         if self._visual is None:
             full = pin.buildModelFromXML(self.spec.urdf)
@@ -253,7 +260,6 @@ class Robot:
         """The deepest arm joint whose origin no earlier joint moves, and that origin in the base frame.
 
         Distances from it to the TCP are bounded by the chain's length (reachability pre-filter)."""
-        import pinocchio as pin
 
         rng = np.random.default_rng(0)
         data = self.model.createData()
@@ -293,8 +299,9 @@ class Robot:
 def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = None, mount: np.ndarray | None = None,
                     tcp_frame: str | None = None, name: str | None = None, joints: tuple[str, ...] | None = None,
                     drop_geometry: tuple[str, ...] = (), package_dirs: tuple[str, ...] = (),
-                    locked: tuple[tuple[str, float], ...] = ()) -> Robot:
-    """Any robot: a URDF path, its base pose in the world, the arm's tip frame, and the gripper mount (tip to TCP)."""
+                    locked: tuple[tuple[str, float], ...] = (), gripper: Gripper | None = None) -> Robot:
+    """Any robot: a URDF path, its base pose in the world, the arm's tip frame, the gripper mount (tip to TCP) and
+    the planning gripper (default: the Franka hand)."""
     path = Path(urdf)
     if not path.is_file():
         raise RobotError(f"robot URDF {path} does not exist; give the path of a .urdf file or one of {', '.join(ROBOTS)}")
@@ -310,7 +317,7 @@ def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = 
                      mount=np.eye(4) if mount is None else np.asarray(mount, dtype=np.float64),
                      base=np.eye(4) if base is None else np.asarray(base, dtype=np.float64),
                      joints=joints, drop_geometry=tuple(drop_geometry), package_dirs=tuple(package_dirs),
-                     locked=tuple((str(k), float(v)) for k, v in locked))
+                     locked=tuple((str(k), float(v)) for k, v in locked), gripper=gripper)
     return Robot(spec)
 
 
@@ -325,46 +332,36 @@ DEFAULT_BASES = {
 
 
 def builtin_robot(name: str, base: np.ndarray | None = None, tip_frame: str | None = None,
-                  mount: np.ndarray | None = None) -> Robot:
+                  mount: np.ndarray | None = None, gripper: Gripper | None = None) -> Robot:
     """One of the built-in robots (`panda`, `ur5`, `talos`), optionally at another base, tip or mount."""
     root = erd_robots()
     base = DEFAULT_BASES[name] if base is None else base
     if name == "panda":
         return robot_from_urdf(root / "panda_description" / "urdf" / "panda.urdf", tip_frame or "panda_hand_tcp", base=base,
                                mount=mount, tcp_frame="panda_hand_tcp" if mount is None else None, name="panda",
-                               drop_geometry=("panda_hand", "panda_leftfinger", "panda_rightfinger"))
+                               drop_geometry=("panda_hand", "panda_leftfinger", "panda_rightfinger"), gripper=gripper)
     if name == "ur5":
         return robot_from_urdf(root / "ur_description" / "urdf" / "ur5_robot.urdf", tip_frame or "tool0", base=base,
                                mount=_trans(0, 0, TCP_OFFSET) if mount is None else mount, tcp_frame="franka_hand_tcp",
-                               name="ur5")
+                               name="ur5", gripper=gripper)
     if name == "talos":
         return robot_from_urdf(root / "talos_data" / "robots" / "talos_reduced.urdf", tip_frame or "wrist_left_ft_tool_link",
                                base=base, mount=(_rot_x(np.pi) @ _trans(0, 0, TCP_OFFSET)) if mount is None else mount,
                                tcp_frame="franka_hand_tcp", name="talos", drop_geometry=("gripper_left_",),
-                               locked=TALOS_RIGHT_ARM_TUCKED)
+                               locked=TALOS_RIGHT_ARM_TUCKED, gripper=gripper)
     raise RobotError(f"unknown robot {name!r}: use one of {', '.join(ROBOTS)} or the path of a URDF")
 
 
 def get_robot(name_or_path: str, base: np.ndarray | None = None, tip_frame: str | None = None,
-              mount: np.ndarray | None = None) -> Robot:
+              mount: np.ndarray | None = None, gripper: Gripper | None = None) -> Robot:
     """A built-in robot by name, or a robot from a URDF path (then `tip_frame` is required)."""
     if name_or_path in ROBOTS:
-        return builtin_robot(name_or_path, base=base, tip_frame=tip_frame, mount=mount)
+        return builtin_robot(name_or_path, base=base, tip_frame=tip_frame, mount=mount, gripper=gripper)
     if tip_frame is None:
         raise RobotError(f"robot {name_or_path!r} is not one of {', '.join(ROBOTS)}; for a URDF path also give --tip FRAME")
-    return robot_from_urdf(name_or_path, tip_frame, base=base, mount=mount)
+    return robot_from_urdf(name_or_path, tip_frame, base=base, mount=mount, gripper=gripper)
 
 
 def robot_from_spec(spec: RobotSpec) -> Robot:
-    """Rebuild a robot from its spec (worker processes cache it by digest)."""
-    return _cached(spec.digest, spec)
-
-
-_CACHE: dict[str, Robot] = {}
-
-
-def _cached(digest: str, spec: RobotSpec) -> Robot:
-    if digest not in _CACHE:
-        _CACHE.clear()
-        _CACHE[digest] = Robot(spec)
-    return _CACHE[digest]
+    """Rebuild a robot from its spec (in worker processes, from the pickled spec)."""
+    return Robot(spec)

@@ -8,13 +8,13 @@ from workbench.errors import StoreError
 from workbench.grasping.grasps import GraspParams, GraspSet
 from workbench.robots.gripper import Gripper
 from workbench.store import Store
-from workbench.store.objects import gripper_digest, put_gripper
+from workbench.store.objects import put_gripper
 
 STAGE = "grasps"
 
 
 def grasp_param_dict(params: GraspParams, gripper: Gripper) -> dict:
-    return {**params.as_dict(), "gripper": gripper_digest(gripper)}
+    return {**params.as_dict(), "gripper": gripper.digest}
 
 
 def find_grasps(store: Store, idobject: int, gripper: Gripper, params: GraspParams) -> int | None:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 
 from workbench.errors import StoreError
@@ -48,23 +46,28 @@ def object_row(store: Store, name: str) -> tuple[int, dict]:
     return oid, dict(zip(cols, row))
 
 
-def gripper_digest(gripper: Gripper) -> str:
-    """Identifies a gripper's geometry: body mesh, finger boxes and jaw range."""
-    h = hashlib.sha256()
-    h.update(np.round(gripper.body.vertices, 9).tobytes())
-    for ext, pose in gripper.finger_boxes:
-        h.update(np.round(ext, 9).tobytes() + np.round(pose, 9).tobytes())
-    h.update(np.array([gripper.jaw_min, gripper.jaw_max]).tobytes())
-    return h.hexdigest()[:24]
-
-
 def put_gripper(store: Store, gripper: Gripper) -> int:
     """Store a gripper (reused when its geometry is already stored); call inside the stage's transaction."""
-    digest = gripper_digest(gripper)
+    digest = gripper.digest
     row = store.one("SELECT idgripper FROM gripper WHERE digest = ?", [digest])
     if row is not None:
         return int(row[0])
     gid = store.next_id("gripper", "idgripper")
-    store.run("INSERT INTO gripper (idgripper, name, urdf, jaw_min, jaw_max, digest) VALUES (?, ?, ?, ?, ?, ?)",
-                      [gid, gripper.name, gripper.urdf, gripper.jaw_min, gripper.jaw_max, digest])
+    mesh = gripper.collision_mesh()
+    store.run("INSERT INTO gripper (idgripper, name, urdf, jaw_min, jaw_max, digest, collision_vertices, collision_faces) "
+              "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+              [gid, gripper.name, gripper.urdf, gripper.jaw_min, gripper.jaw_max, digest, mesh.vertices.tolist(),
+               mesh.faces.tolist()])
     return gid
+
+
+def gripper_row(store: Store, idgripper: int) -> dict:
+    """A stored gripper: name, jaw range, digest and its collision mesh at full opening (vertices, faces)."""
+    row = store.one("SELECT name, jaw_min, jaw_max, digest, collision_vertices, collision_faces FROM gripper "
+                    "WHERE idgripper = ?", [idgripper])
+    if row is None:
+        raise StoreError(f"store {store.path} has no gripper {idgripper}")
+    name, lo, hi, digest, verts, faces = row
+    return {"idgripper": int(idgripper), "name": name, "jaw_min": lo, "jaw_max": hi, "digest": digest,
+            "collision_vertices": None if verts is None else np.asarray(verts, dtype=np.float64),
+            "collision_faces": None if faces is None else np.asarray(faces, dtype=np.int64)}

@@ -18,14 +18,19 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import dataclass, fields
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
 
 from workbench.errors import StoreError
+from workbench.robots.collider import Scene
+from workbench.robots.ik import IKOptions
 from workbench.robots.model import Robot
 from workbench.store import Store, from_arrow
+from workbench.store.objects import put_gripper
 
 
 def robot_digest(robot: Robot) -> str:
@@ -43,12 +48,14 @@ def put_robot(store: Store, robot: Robot) -> int:
     if store.one("SELECT idrobot FROM robot WHERE name = ?", [name]) is not None:
         name = f"{robot.name}-{digest[:8]}"
     rid = store.next_id("robot", "idrobot")
+    gid = put_gripper(store, robot.gripper)
     store.run("INSERT INTO robot (idrobot, name, urdf, tcp_frame, tip_frame, mount, base, joint_names, locked, "
-              "drop_geometry, digest) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+              "drop_geometry, digest, package_dirs, idgripper) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
               [rid, name, robot.spec.urdf, robot.spec.tcp_frame, robot.spec.tip_frame, robot.mount.ravel().tolist(),
                robot.base.ravel().tolist(), list(robot.joint_names),
                json.dumps({k: float(v) for k, v in robot.spec.locked}, sort_keys=True), list(robot.spec.drop_geometry),
-               digest])
+               digest, list(robot.spec.package_dirs) + ([str(Path(robot.spec.urdf_path).parent)] if robot.spec.urdf_path else []),
+               gid])
     return rid
 
 
@@ -141,29 +148,43 @@ def robot_row(store: Store, robot: int | str) -> dict[str, Any]:
     joint_names, locked ({joint: value}), drop_geometry, digest; a StoreError naming the stored robots if none."""
     by_id = isinstance(robot, (int, np.integer))
     row = store.one("SELECT idrobot, name, urdf, tcp_frame, tip_frame, mount, base, joint_names, locked, drop_geometry, "
-                    f"digest FROM robot WHERE {'idrobot' if by_id else 'name'} = ?", [int(robot) if by_id else robot])
+                    f"digest, package_dirs, idgripper FROM robot WHERE {'idrobot' if by_id else 'name'} = ?",
+                    [int(robot) if by_id else robot])
     if row is None:
         names = [r[0] for r in store.run("SELECT name FROM robot ORDER BY name")]
         raise StoreError(f"store {store.path} has no robot {robot!r} (it has: {', '.join(names) or 'none'}); "
                          f"run `workbench ik --robot NAME` or `workbench build --robot NAME` first")
-    rid, name, urdf, tcp, tip, mount, base, joints, locked, drop, digest = row
+    rid, name, urdf, tcp, tip, mount, base, joints, locked, drop, digest, dirs, gid = row
     return {"idrobot": int(rid), "name": name, "urdf": urdf, "tcp_frame": tcp, "tip_frame": tip,
             "mount": np.asarray(mount, dtype=np.float64).reshape(4, 4), "base": np.asarray(base, dtype=np.float64).reshape(4, 4),
-            "joint_names": list(joints), "locked": json.loads(locked), "drop_geometry": list(drop), "digest": digest}
+            "joint_names": list(joints), "locked": json.loads(locked), "drop_geometry": list(drop), "digest": digest,
+            "package_dirs": list(dirs or []), "idgripper": None if gid is None else int(gid)}
 
 
-def robots(store: Store) -> list[tuple[int, str]]:
-    """(idrobot, name) of the stored robots."""
-    return [(int(a), str(b)) for a, b in store.run("SELECT idrobot, name FROM robot ORDER BY idrobot")]
+@dataclass(frozen=True)
+class StoredScene:
+    """A stored `scene` row, typed: the table and workspace, the IK solver settings and the robot's extras
+    (locked joints, dropped hand geometry, gripper digest) that entered the `ik` rows."""
+
+    idscene: int
+    scene: Scene
+    ik: IKOptions
+    robot: dict
 
 
-def scene_row(store: Store, idscene: int) -> dict[str, Any]:
-    """The parameters of a stored scene."""
+def scene_row(store: Store, idscene: int) -> StoredScene:
+    """The one reader of a stored scene's parameters (written by `stages.scene_params`)."""
     row = store.one("SELECT params FROM scene WHERE idscene = ?", [idscene])
     if row is None:
         raise StoreError(f"store {store.path} has no scene {idscene}; run `workbench ik` first")
-    return json.loads(row[0])
+    d = json.loads(row[0])
 
+    def pick(cls, values: dict) -> dict:
+        names = {f.name for f in fields(cls)}
+        return {k: (tuple(v) if isinstance(v, list) else v) for k, v in values.items() if k in names}
+
+    return StoredScene(int(idscene), Scene(**pick(Scene, d)), IKOptions(**pick(IKOptions, d.get("ik") or {})),
+                       dict(d.get("robot") or {}))
 
 def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: int | None = None) -> dict[str, np.ndarray]:
     """The `ik` rows of a run joined with their tabletop grips, ordered by idtabletopgrips: idik, idtabletopgrips,

@@ -25,7 +25,8 @@ Paper tables
 Extra tables
 - paramset(idparamset, stage, digest, params, idobject, created): every stage run's parameters (JSON) and
   the inputs they apply to; a stage's rows reference it, and a re-run with the same digest reuses them.
-- gripper(idgripper, name, urdf, jaw_min, jaw_max, digest).
+- gripper(idgripper, name, urdf, jaw_min, jaw_max, digest, collision_vertices, collision_faces): the collision mesh
+  (hand body and both fingers at full opening, in the TCP frame) lets checkers rebuild the hand without the library.
 - scene(idscene, name, table_pose, table_size, ...): where the table sits in the world for IK.
 """
 
@@ -326,4 +327,8 @@ ALL_TABLES = ALL_TABLES + FINGER_TABLES
 MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS locked VARCHAR DEFAULT '{}'",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS drop_geometry VARCHAR[] DEFAULT []",
+    "ALTER TABLE robot ADD COLUMN IF NOT EXISTS package_dirs VARCHAR[] DEFAULT []",
+    "ALTER TABLE robot ADD COLUMN IF NOT EXISTS idgripper BIGINT",
+    "ALTER TABLE gripper ADD COLUMN IF NOT EXISTS collision_vertices DOUBLE[][]",
+    "ALTER TABLE gripper ADD COLUMN IF NOT EXISTS collision_faces INTEGER[][]",
 )

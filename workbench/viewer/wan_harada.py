@@ -104,9 +104,9 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
 
 
 def scene_table(planner) -> tuple:
-    sc = planner.rows["scene"]
-    s = sc.get("scene", sc) if isinstance(sc.get("scene"), dict) else sc
-    return tuple(s["table_min"]), tuple(s["table_max"]), float(s["table_thickness"])
+    """(table_min, table_max, thickness) of the planner's scene."""
+    s = planner.scene
+    return tuple(s.table_min), tuple(s.table_max), float(s.table_thickness)
 
 
 def plan_scene(plan, planner, out: str | Path | None = None, vis: meshcat.Visualizer | None = None,

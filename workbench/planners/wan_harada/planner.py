@@ -45,7 +45,7 @@ from workbench.planners.wan_harada.query import (
 from workbench.planners.wan_harada.roadmap import Roadmap, _failure
 from workbench.planners.wan_harada.search import SearchResult, search
 from workbench.robots.ik import retract
-from workbench.validation import validator_for
+from workbench.validation import PlanValidator, ValidationReport, validator_from_rows
 
 if TYPE_CHECKING:  # pragma: no cover
 
@@ -67,6 +67,7 @@ class Planner:
         self.roadmap, self.free, self.ftg = roadmap, free, ftg
         self.grid = grid
         self.rows: dict = {}
+        self._validator: PlanValidator | None = None
         self.object, self.robot, self.scene = obj, robot, scene
         self.handx, self.worldz = float(handx), float(worldz)
         self.ids = dict(ids)
@@ -205,6 +206,18 @@ class Planner:
         comps = np.unique(self.roadmap.component[nodes]) if len(nodes) else np.zeros(0, dtype=np.int64)
         return {"grasps": side.grasp[feas], "nodes": nodes, "components": [int(c) for c in comps]}
 
+    @property
+    def validator(self) -> PlanValidator:
+        """The independent validator of this planner's store rows (built once, from the rows only)."""
+        if self._validator is None:
+            free = {int(i): p for i, p in zip(self.free["idfreetabletopplacement"], self.free["rotmat"])}
+            self._validator = validator_from_rows(self.rows, free)
+        return self._validator
+
+    def validate(self, plan: Plan) -> ValidationReport:
+        """Check one plan with the independent validator (see `workbench.validation`)."""
+        return self.validator.check(plan)
+
     def plan(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True, validate: bool = True) -> list[Plan]:
         """The best plan and up to `alternatives` next best (Section V), each checked by `workbench.validate` when
         `validate` (a plan that fails is dropped; PlanningError when none passes)."""
@@ -216,7 +229,7 @@ class Planner:
             if not self.rows:
                 raise PlanningError("this planner has no store rows to validate its plans against; build it with "
                                     "load_planner, or pass validate=False")
-            checker = validator_for(self)
+            checker = self.validator
             reports = [checker.check(p) for p in plans]
             good = [p for p, rep in zip(plans, reports) if rep.ok]
             if not good:

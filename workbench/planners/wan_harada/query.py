@@ -26,7 +26,6 @@ tabletop parameter set and a fingerprint of the IK rows, so repeated queries onl
 
 from __future__ import annotations
 
-import inspect
 import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Union
@@ -37,10 +36,7 @@ from scipy.spatial import cKDTree
 from workbench.errors import PlanningError
 from workbench.planners.wan_harada.roadmap import _failure
 from workbench.planners.wan_harada.tabletop import yaw
-from workbench.robots import ik as kinematics
-from workbench.robots.chain import solve_ik
-from workbench.robots.collider import Collider
-from workbench.robots.ik import IKOptions, SeedLibrary, retract
+from workbench.robots.ik import IKOptions, IKSolver, retract
 
 if TYPE_CHECKING:  # pragma: no cover
     import trimesh
@@ -130,81 +126,51 @@ def match_pose(pose: np.ndarray, free_ids: np.ndarray, free_poses: np.ndarray, l
 
 
 class GripIK:
-    """IK with retractions (grasp, handx, handxworldz) for grips at start and goal poses (Section IV's ik columns).
+    """IK with retractions (grasp, handx, handxworldz) for grips at start and goal poses (Section IV's ik columns),
+    with the precomputation's solver (`robots.ik.IKSolver`: same seed library, collider and pre-filter).
 
-    Each of the three TCP poses is solved by the kinematics module's batched Levenberg-Marquardt: tier 1 from the
-    stored roadmap solution whose TCP pose is nearest (k-d tree over position and weighted rotation), capped at
-    `tier1_iters` iterations (most poses converge in a few; the rest are left to tier 2); tier 2 with the
-    precomputation's own settings (its seed library, iteration limits, reachability pre-filter). Converged
-    configurations are checked for arm-table, gripper-table and arm-object collision with the object at its pose,
-    with the precomputation's collider. A grip is feasible when all three poses are."""
+    Tier 1 solves every pose from the stored roadmap solution whose TCP pose is nearest (k-d tree over position
+    and weighted rotation), capped at `tier1_iters` iterations (most poses converge in a few); tier 2 retries the
+    rest from all their other seeds at once (second-nearest stored solution, the grasp's own solution for the
+    retractions, the solver's library seeds). A grip is feasible when all three poses are."""
 
     def __init__(self, robot: Robot, scene: Scene, obj_mesh: trimesh.Trimesh | None, handx: float, worldz: float,
                  seed_q: np.ndarray, seed_tcp: np.ndarray, opts: IKOptions | None = None, rho: float = 0.1,
                  tier1_iters: int = 15):
-
-
         self.robot, self.scene = robot, scene
         self.handx, self.worldz = float(handx), float(worldz)
         self.opts = opts or IKOptions()
         self.tier1_iters = min(int(tier1_iters), self.opts.iters_warm)
-        self.collider = Collider(robot, scene, obj_mesh)
         self.rho = rho
         seed_q = np.asarray(seed_q, dtype=np.float64).reshape(-1, robot.nq)
         seed_tcp = np.asarray(seed_tcp, dtype=np.float64).reshape(-1, 4, 4)
         ok = np.isfinite(seed_q).all(axis=1)
         self.seed_q = seed_q[ok]
         self.tree = cKDTree(self._embed(seed_tcp[ok])) if ok.any() else None
+        self._obj_mesh = obj_mesh
+        self._solver: IKSolver | None = None
 
-        reach = getattr(kinematics, "ReachFilter", None)  # the precomputation's reachability pre-filter
-        self.prefilter = reach(robot, scene) if reach is not None else self._reach_sphere(robot, scene)
-        self._library = None
-
-    @staticmethod
-    def _reach_sphere(robot, scene):
-        centre, radius = robot.reach()
-        wmin, wmax = np.asarray(scene.workspace_min, dtype=np.float64), np.asarray(scene.workspace_max, dtype=np.float64)
-
-        def inside(poses: np.ndarray) -> np.ndarray:
-            p = poses[..., :3, 3]
-            return (np.linalg.norm(p - centre, axis=-1) <= radius) & (p >= wmin).all(-1) & (p <= wmax).all(-1)
-        return inside
+    @property
+    def solver(self) -> IKSolver:
+        """The precomputation's solver for this robot, scene and object (built on first use)."""
+        if self._solver is None:
+            self._solver = IKSolver(self.robot, self.scene, self.opts, self._obj_mesh)
+        return self._solver
 
     def _embed(self, poses: np.ndarray) -> np.ndarray:
         return np.concatenate([poses[:, :3, 3], self.rho * poses[:, :3, :3].reshape(len(poses), 9)], axis=1)
 
-    @property
-    def library(self):  # -> kinematics.SeedLibrary
-        if self._library is None:
-
-
-            kw = {"collider": self.collider} if "collider" in inspect.signature(SeedLibrary).parameters else {}
-            self._library = SeedLibrary(self.robot, self.opts.library, self.opts.seed, **kw)
-        return self._library
-
-    def _nearest_seeds(self, targets: np.ndarray) -> np.ndarray:
-        """The library seeds the precomputation's fall-back tries for these targets."""
-        o = self.opts
-        if hasattr(o, "seed_pool"):
-            return self.library.nearest(targets, o.seeds, pool=o.seed_pool, spread=o.seed_spread)
-        return self.library.nearest(targets, o.seeds)
-
     def targets(self, tcp: np.ndarray) -> np.ndarray:
         """(n, 3, 4, 4) grasp, handx and handxworldz TCP poses."""
-
         return retract(np.asarray(tcp, dtype=np.float64).reshape(-1, 4, 4), self.handx, self.worldz)
 
     def solve(self, tcp: np.ndarray, placements: np.ndarray, known: np.ndarray | None = None, warm: bool = True,
               fallback: bool = True) -> tuple[np.ndarray, np.ndarray]:
         """Feasible (n,) and joints (n, 3, nq) for TCP poses (n, 4, 4) of grips of the object at `placements` (n, 4, 4).
 
-        Tier 1 (`warm`): every pose from its nearest stored solution, one batched solve. Tier 2 (`fallback`): the
-        poses still unsolved from all their other seeds at once (second-nearest stored solution, the grasp's own
-        solution for the retractions, the library's nearest seeds, as the precomputation does), keeping the first
-        collision-free solution. `known` (n, 3, nq) holds poses already solved (NaN elsewhere), e.g. by tier 1.
-        Joints are returned for every solved pose, also of infeasible grips (NaN where unsolved)."""
-
-        o, robot = self.opts, self.robot
+        `known` (n, 3, nq) holds poses already solved (NaN elsewhere), e.g. by tier 1. Joints are returned for every
+        solved pose, also of infeasible grips (NaN where unsolved)."""
+        o, robot, solver = self.opts, self.robot, self.solver
         n = len(tcp)
         q_out = np.full((n * 3, robot.nq), np.nan)
         if known is not None:
@@ -214,16 +180,8 @@ class GripIK:
             return np.zeros(0, dtype=bool), q_out.reshape(0, 3, robot.nq)
         flat = self.targets(tcp).reshape(n * 3, 4, 4)  # row = grip * 3 + kind
         place = np.repeat(np.asarray(placements, dtype=np.float64).reshape(-1, 4, 4), 3, axis=0)
-        pre = np.asarray(self.prefilter(flat), dtype=bool)
+        pre = np.asarray(solver.prefilter(flat), dtype=bool)
         alive = np.repeat(pre.reshape(n, 3).all(axis=1), 3)  # a grip needs all three poses
-
-        def attempt(rows: np.ndarray, q0: np.ndarray, iters: int) -> tuple[np.ndarray, np.ndarray]:
-            """Solve rows (repeats allowed) from q0: (joint vectors, converged and collision-free)."""
-            q, ok = solve_ik(robot, flat[rows], q0, iters, o.tol_pos, o.tol_rot)
-            if ok.any():
-                sel = np.flatnonzero(ok)
-                ok[sel[self.collider.collides_q(q[sel], place[rows[sel]])]] = False
-            return q, ok
 
         near = None
         rows = np.flatnonzero(alive & ~good)
@@ -232,7 +190,7 @@ class GripIK:
             _, near = self.tree.query(self._embed(flat[rows]), k=k)
             near = np.asarray(near).reshape(len(rows), k)
             if warm:
-                q, ok = attempt(rows, self.seed_q[near[:, 0]], self.tier1_iters)
+                q, ok = solver.solve(flat[rows], place[rows], self.seed_q[near[:, 0]], self.tier1_iters)
                 q_out[rows[ok]], good[rows[ok]] = q[ok], True
         if fallback:
             left = ~good[rows]
@@ -248,12 +206,12 @@ class GripIK:
                     seeds.append(q_out[rows2[own] - kind[own]])
                     owner.append(np.flatnonzero(own))
                 if o.seeds > 0:
-                    lib = self._nearest_seeds(flat[rows2])
-                    seeds.append(self.library.q[lib.ravel()])
+                    lib = solver.library_seeds(flat[rows2])
+                    seeds.append(solver.library.q[lib.ravel()])
                     owner.append(np.repeat(np.arange(len(rows2)), lib.shape[1]))
                 if seeds:
                     owner = np.concatenate(owner)
-                    q, ok = attempt(rows2[owner], np.concatenate(seeds), o.iters_seed)
+                    q, ok = solver.solve(flat[rows2[owner]], place[rows2[owner]], np.concatenate(seeds), o.iters_seed)
                     hit = np.flatnonzero(ok)
                     win = hit[np.unique(owner[hit], return_index=True)[1]]
                     q_out[rows2[owner[win]]], good[rows2[owner[win]]] = q[win], True

@@ -30,7 +30,7 @@ tabletop parameter set and a fingerprint of the IK rows, so repeated queries onl
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -61,7 +61,7 @@ from workbench.store import Store
 from workbench.store import robots as robot_sql
 from workbench.store import wan_harada as sql
 from workbench.store.grasps import find_grasps, load_grasps, save_grasps
-from workbench.store.objects import object_row, put_object
+from workbench.store.objects import gripper_row, object_row, put_object
 from workbench.store.placements import (
     find_placements,
     find_tabletop,
@@ -174,29 +174,35 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
             store.close()
 
 
-_PLANNERS: dict[tuple, Planner] = {}
+class PlannerCache:
+    """Loaded planners kept by the key of every input that changes them (store file, object digest, tabletop
+    parameter set, robot digest, scene, retractions, a fingerprint of the `ik` rows), so repeated queries only
+    connect and search. Hold one where planners are loaded repeatedly (a notebook, a benchmark)."""
 
+    def __init__(self, size: int = 8):
+        self.size = int(size)
+        self._planners: dict[tuple, Planner] = {}
 
-def _scene_from(params: dict) -> tuple[Scene, IKOptions]:
+    def get(self, key: tuple) -> Planner | None:
+        return self._planners.get(key)
 
+    def put(self, key: tuple, planner: Planner) -> None:
+        if len(self._planners) >= self.size:
+            self._planners.pop(next(iter(self._planners)))
+        self._planners[key] = planner
 
-    def pick(cls, d):
-        names = {f.name for f in fields(cls)}
-        return {k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items() if k in names}
-
-    sd = params.get("scene", params) if isinstance(params.get("scene"), dict) else params
-    scene = Scene(**pick(Scene, sd))
-    od = next((params[k] for k in ("ik", "opts", "options", "ik_options") if isinstance(params.get(k), dict)), None)
-    opts = IKOptions(**pick(IKOptions, od)) if od else IKOptions()
-    return scene, opts
+    def clear(self) -> None:
+        self._planners.clear()
 
 
 def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int, handx: float | None = None, worldz: float | None = None,
-                 idtabletop: int | None = None, idscene: int | None = None) -> Planner:
+                 idtabletop: int | None = None, idscene: int | None = None, cache: PlannerCache | None = None,
+                 gripper: Gripper | None = None) -> Planner:
     """The regrasp graph of `object_name` for `robot_name` (a stored robot name or idrobot) from a store (path or
     Store), built from the latest tabletop parameter set and the IK run with the most rows (or the one with these
-    retractions or this scene); cached per store file, object, robot, scene, retractions and parameter set, so
-    repeated queries only connect and search."""
+    retractions or this scene); with a `cache`, a planner already loaded for the same inputs is returned.
+    `gripper` is the planning gripper the robot was stored with (default: the Franka hand; the stored robot
+    digest covers it)."""
 
     store = db if isinstance(db, Store) else Store(db)
     try:
@@ -217,10 +223,10 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
         idscene, idikret = runs[0][0], runs[0][1]
         fp = sql.ik_fingerprint(store, tt, rrow["idrobot"], idscene, idikret)
         key = (str(store.path.resolve()), oid, tt, rrow["idrobot"], rrow["digest"], idscene, idikret, fp, obj.digest)
-        if key in _PLANNERS:
-            return _PLANNERS[key]
+        if cache is not None and cache.get(key) is not None:
+            return cache.get(key)
         t0 = time.perf_counter()
-        robot = _robot_from_row(rrow)
+        robot = _robot_from_row(rrow, gripper)
         rows = sql.roadmap_rows(store, tt, rrow["idrobot"], idscene, idikret, robot.nq)
         t_load = time.perf_counter() - t0
         roadmap = build_roadmap(rows, rows["feasible"])
@@ -228,17 +234,19 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
         pl = sql.placements_of_tabletop(store, tt)
         free = load_placements(store, pl)
         ftg = load_free_tabletop_grips(store, pl)
-        sparams = scene_row(store, idscene)
-        scene, opts = _scene_from(sparams)
+        stored = scene_row(store, idscene)
+        scene, opts = stored.scene, stored.ik
         hx, wz = ikret_row(store, idikret)
         ids = {"idobject": oid, "idrobot": rrow["idrobot"], "idscene": idscene, "idikret": idikret, "idtabletop": tt, "idplacements": pl}
         planner = Planner(roadmap, free, ftg, obj, robot, scene, hx, wz, ids, opts, grid=grid_index(rows))
         roadmap.key = key
-        planner.rows = {"robot": rrow, "scene": sparams}  # raw store rows, for the independent validator
-        planner.ik.library  # build the IK adapter and its seed library now, not during the first query
-        if len(_PLANNERS) >= 8:
-            _PLANNERS.pop(next(iter(_PLANNERS)))
-        _PLANNERS[key] = planner
+        _, orow = object_row(store, object_name)
+        gid = rrow["idgripper"]
+        planner.rows = {"robot": rrow, "scene": stored, "object": orow,  # raw store rows, for the independent validator
+                        "gripper": gripper_row(store, gid) if gid is not None else None}
+        planner.ik.solver  # build the IK solver and its seed library now, not during the first query
+        if cache is not None:
+            cache.put(key, planner)
         return planner
     finally:
         if store is not db:
@@ -249,22 +257,22 @@ def _ret_match(ret: tuple[float, float], handx: float | None, worldz: float | No
     return (handx is None or abs(ret[0] - handx) < 1e-9) and (worldz is None or abs(ret[1] - worldz) < 1e-9)
 
 
-def _robot_from_row(row: dict) -> Robot:
-    """The library robot of a stored `robot` row: the built-in of that name at the stored base (it must have the
-    stored kinematics digest), or the stored URDF."""
-
-    name = row["name"]
-    builtin = name if name in ROBOTS else name.rsplit("-", 1)[0]  # "panda-<digest>": a panda at another base
-    if builtin in ROBOTS:
-        robot = builtin_robot(builtin, base=row["base"])
-        if row.get("digest") and robot.spec.digest != row["digest"]:
-            raise PlanningError(f"robot {row['name']!r} in the store was computed with other kinematics (URDF, frames, base or "
-                                f"locked joints) than the library's; rebuild its IK stage (workbench build / ik) in a new store")
-    else:
-        robot = Robot(RobotSpec(name=row["name"], urdf=row["urdf"], urdf_path="", tip_frame=row["tip_frame"],
-                                tcp_frame=row["tcp_frame"], mount=row["mount"], base=row["base"],
-                                joints=tuple(row["joint_names"]),
-                                locked=tuple((str(k), float(v)) for k, v in dict(row.get("locked") or {}).items())))
+def _robot_from_row(row: dict, gripper: Gripper | None = None) -> Robot:
+    """The library robot of a stored `robot` row, rebuilt from the row itself (URDF text, frames, mount, base,
+    joints, locked joints, dropped hand geometry, mesh folders) with the planning `gripper`; it must reproduce
+    the stored digest, which also covers the gripper."""
+    spec = RobotSpec(name=row["name"], urdf=row["urdf"], urdf_path="", tip_frame=row["tip_frame"],
+                     tcp_frame=row["tcp_frame"], mount=row["mount"], base=row["base"],
+                     drop_geometry=tuple(row.get("drop_geometry") or ()), package_dirs=tuple(row.get("package_dirs") or ()),
+                     locked=tuple((str(k), float(v)) for k, v in dict(row.get("locked") or {}).items()), gripper=gripper)
+    builtin = row["name"] if row["name"] in ROBOTS else row["name"].rsplit("-", 1)[0]
+    if spec.digest != row["digest"] and builtin in ROBOTS:  # a built-in stored with its own joint selection
+        spec = builtin_robot(builtin, base=row["base"], gripper=gripper).spec
+    if spec.digest != row["digest"]:
+        raise PlanningError(f"robot {row['name']!r} in the store was computed with other kinematics or another gripper "
+                            f"(URDF, frames, base, locked joints, hand) than given here; rebuild its IK stage "
+                            f"(workbench build / ik) in a new store, or pass the gripper it was built with")
+    robot = Robot(spec)
     if list(robot.joint_names) != list(row["joint_names"]):
         raise PlanningError(f"robot {row['name']!r}: the stored joint order {row['joint_names']} differs from the library's "
                             f"{list(robot.joint_names)}; rebuild the ik stage")
@@ -357,7 +365,7 @@ def scene_params(robot: Robot, scene: Scene, opts: IKOptions) -> dict:
     """Everything besides the robot row and the grips that changes the `ik` rows (stored in `scene.params`)."""
     return {**scene.as_dict(), "ik": opts.as_dict(),
             "robot": {"locked": {k: v for k, v in robot.spec.locked}, "drop_geometry": list(robot.spec.drop_geometry),
-                      "gripper": robot.gripper.name}}
+                      "gripper": robot.gripper.digest}}
 
 
 def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx: float = HANDX, worldz: float = WORLDZ,
