@@ -129,3 +129,18 @@ def test_no_module_level_caches():
                 if isinstance(value, ast.Dict) and not value.keys:
                     targets = node.targets if isinstance(node, ast.Assign) else [node.target]
                     pytest.fail(f"{mod}: module-level mutable cache {ast.unparse(targets[0])}")
+
+
+def test_a_wheel_ships_the_bundled_objects(tmp_path):
+    """A wheel install finds the bundled parts: they are package data, not files beside the repository."""
+    import subprocess
+    import sys
+    import zipfile
+
+    root = PACKAGE.parent
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--quiet", "--no-deps", "-w", str(tmp_path),
+                    str(root)], check=True, capture_output=True)
+    wheel = next(tmp_path.glob("*.whl"))
+    names = zipfile.ZipFile(wheel).namelist()
+    stls = [n for n in names if n.startswith("workbench/assets/objects/") and n.endswith(".stl")]
+    assert {Path(n).stem for n in stls} >= {"tube", "wheel", "bracket", "planebody", "tail", "drill"}

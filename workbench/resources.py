@@ -8,7 +8,7 @@ from pathlib import Path
 
 from workbench.errors import WorkbenchError
 
-ASSETS = Path(__file__).resolve().parent.parent / "assets"
+ASSETS = Path(__file__).resolve().parent / "assets"  # package data: found in a wheel install too
 OBJECTS_DIR = ASSETS / "objects"
 
 
@@ -30,14 +30,14 @@ def erd_robots() -> Path:
 
 
 def bundled_objects() -> dict[str, Path]:
-    """The project's own objects in assets/objects, by name (file stem), in metres."""
+    """The project's own objects (package data `workbench/assets/objects`), by name (file stem), in metres."""
     return {p.stem: p for p in sorted(OBJECTS_DIR.glob("*.stl"))}
 
 
 def paper_objects() -> dict[str, Path]:
     """The Wan-Harada Table I objects in ../shared/objects/wan-harada (millimetres), when present, by Table I row."""
     roots = [Path(os.environ["WORKBENCH_SHARED"]) if "WORKBENCH_SHARED" in os.environ else None,
-             ASSETS.parent.parent / "shared"]
+             Path(__file__).resolve().parents[2] / "shared", Path.cwd().parent / "shared"]
     for root in roots:
         if root is not None and (root / "objects" / "wan-harada").is_dir():
             return {p.stem.split("_")[0]: p for p in sorted((root / "objects" / "wan-harada").glob("*.stl"))}

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from manifold3d import CrossSection, JoinType, Manifold, OpType
 
-OUT = Path(__file__).resolve().parent
+OUT = Path(__file__).resolve().parents[2] / "workbench" / "assets" / "objects"  # shipped as package data
 MM = 0.001
 
 

@@ -308,11 +308,6 @@ def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pp
               workers: int | None = None, progress: bool = True) -> BuildResult:
     """Grasps, placements, tabletop grips, IK and the regrasp graph of `obj` (an ObjectModel) for `robot_name` in the
     store `db` (path or Store), each stage reused when stored with the same inputs and parameters."""
-    from workbench.planners.wan_harada.stages import (
-        ensure_grasps,
-        ensure_placements,
-        load_planner,
-    )
 
     store = db if isinstance(db, Store) else Store(db)
     out = BuildResult(name=obj.name, robot=robot_name)
