@@ -203,3 +203,19 @@ def test_store_round_trip_and_reuse(tmp_path, box, hand):
     with Store(db) as store:
         assert store.one("SELECT count(*) FROM freeairgrip")[0] == n_rows + other.count
         assert store.one("SELECT count(*) FROM object")[0] == 1
+
+
+def test_stored_rotation_is_the_right_handed_angle_about_the_jaw_axis(box, hand):
+    """`freeairgrip.rotation` is the angle that turns the reference approach z0 into the grasp's z about +y
+    (right-handed), as the schema documents; recomputed here from the poses alone."""
+    plan = plan_grasps(box, hand, GraspParams(rotations=8))
+    g = plan.grasps
+    assert len(g.poses) > 0
+    y = g.poses[:, :3, 1]
+    z = g.poses[:, :3, 2]
+    ref = np.eye(3)[np.argmin(np.abs(y), axis=1)]
+    z0 = ref - np.einsum("ij,ij->i", ref, y)[:, None] * y
+    z0 /= np.linalg.norm(z0, axis=1, keepdims=True)
+    angle = np.arctan2(np.einsum("ij,ij->i", np.cross(z0, z), y), np.einsum("ij,ij->i", z0, z))
+    diff = np.angle(np.exp(1j * (angle - g.rotation)))
+    assert np.abs(diff).max() < 1e-9

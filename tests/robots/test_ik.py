@@ -249,3 +249,34 @@ def test_cli_runs_reuses_and_reports_bad_input_in_one_line(stored, capsys, tmp_p
     assert proc.returncode == 2 and "locked" in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
     with pytest.raises(StoreError):
         Store(tmp_path / "missing.duckdb", read_only=True)
+
+
+def test_the_gripper_enters_the_robot_digest_the_workers_and_the_ik_rows(tmp_path, panda):
+    """A robot carrying another gripper is another robot: its digest differs, a worker process rebuilds it with that
+    gripper (from the pickled spec), and its IK run writes its own robot row and `ik` rows."""
+    import pickle
+
+    from workbench.robots.gripper import parametric_gripper
+    from workbench.robots.model import robot_from_spec
+
+    small = parametric_gripper(pad_size=(0.015, 0.015), jaw_range=(0.0, 0.05))
+    other = get_robot("panda", gripper=small)
+    assert other.spec.digest != panda.spec.digest
+    rebuilt = robot_from_spec(pickle.loads(pickle.dumps(other.spec)))  # what an IKPool worker does
+    assert rebuilt.gripper.digest == small.digest != panda.gripper.digest
+    db = tmp_path / "grippers.duckdb"
+    with Store(db) as store:
+        _, pid = synthetic_store(store, "box", **SMALL)
+        a = run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=pid)
+        b = run_ik(store, "box", other, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=pid)
+        assert a.idrobot != b.idrobot and b.computed == b.grips > 0
+        assert sql.robot_row(store, b.idrobot)["digest"] == other.spec.digest
+
+
+def test_ik_pool_workers_give_the_rows_of_the_serial_run(panda):
+    """Chunks solved by forkserver worker processes (each building the solver once) equal the in-process ones."""
+    grips, mesh, _ = synthetic_grips(**SMALL)
+    serial = ik_feasibility(panda, grips, Scene(), HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
+    pooled = ik_feasibility(panda, grips, Scene(), HANDX, WORLDZ, mesh, OPTS, workers=2, progress=False)
+    assert np.array_equal(serial.feasible, pooled.feasible)
+    assert np.allclose(np.nan_to_num(serial.joints), np.nan_to_num(pooled.joints))

@@ -135,3 +135,19 @@ def test_cli_grasps_then_placements(tmp_path, capsys):
     assert main(["placements", "--db", db, "--object", "block", "--x", "0.4,0.5,2", "--y", "0,0,1", "--angles", "2"]) == 0
     out = capsys.readouterr().out
     assert "6 stable placements" in out and "24 tabletop placements" in out
+
+
+def test_consumers_take_the_parameter_set_used_last_not_the_highest_id(tmp_path, box, hand):
+    """grasps A, then B, then A again (reused): the next stage consumes A, and so do its consumers."""
+    from workbench.grasping.grasps import GraspParams
+    from workbench.planners.wan_harada.stages import ensure_grasps
+    from workbench.store.grasps import latest_grasp_paramset
+
+    db = tmp_path / "chain.duckdb"
+    a, b = GraspParams(rotations=4), GraspParams(rotations=6)
+    ra = ensure_grasps(db, box, hand, a)
+    rb = ensure_grasps(db, box, hand, b)
+    again = ensure_grasps(db, box, hand, a)
+    assert again.reused and again.idparamset == ra.idparamset and rb.idparamset > ra.idparamset
+    with Store(db) as store:
+        assert latest_grasp_paramset(store, ra.idobject) == ra.idparamset

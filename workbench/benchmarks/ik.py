@@ -212,8 +212,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-
-
     grips, mesh = benchmark_grips(args.grips)
     n = len(grips["rotmat"])
     rows = []

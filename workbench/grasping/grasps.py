@@ -249,11 +249,11 @@ def contact_frames(point0: np.ndarray, point1: np.ndarray) -> tuple[np.ndarray, 
 
 
 def grasp_poses(point0: np.ndarray, point1: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """TCP poses (P * A, 4, 4): origin at the pair's midpoint, y toward point0, approach z rotated by each angle
-    about y (pair-major order)."""
-    y, z0, w = contact_frames(point0, point1)
+    """TCP poses (P * A, 4, 4): origin at the pair's midpoint, y toward point0, approach z = the reference z0
+    rotated by +angle about y (right-handed; the stored `freeairgrip.rotation`), pair-major order."""
+    y, z0, x0 = contact_frames(point0, point1)
     c, s = np.cos(angles)[None, :, None], np.sin(angles)[None, :, None]
-    z = c * z0[:, None, :] - s * w[:, None, :]
+    z = c * z0[:, None, :] + s * x0[:, None, :]  # R_y(angle) z0 = cos z0 + sin (y x z0)
     yy = np.broadcast_to(y[:, None, :], z.shape)
     x = np.cross(yy, z)
     poses = np.zeros((len(y), len(angles), 4, 4))

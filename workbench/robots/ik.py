@@ -25,6 +25,7 @@ import multiprocessing as mp
 import os
 import sys
 from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import asdict, dataclass, field
 from typing import Callable, Iterator
 
@@ -334,6 +335,8 @@ class IKPool:
     def __init__(self, robot: Robot, scene: Scene, opts: IKOptions, obj_mesh: trimesh.Trimesh | None, workers: int):
         methods = mp.get_all_start_methods()
         ctx = mp.get_context("forkserver" if "forkserver" in methods else "spawn")
+        if ctx.get_start_method() == "forkserver":
+            ctx.set_forkserver_preload(["workbench.robots.ik"])  # the server imports the library, not the caller
         self.key = (robot.spec.digest, scene, opts, _mesh_key(obj_mesh))
         self.workers = int(workers)
         self.executor = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_init_worker,
@@ -357,6 +360,14 @@ def _mesh_key(mesh: trimesh.Trimesh | None) -> str:
         return ""
     return hashlib.sha256(np.asarray(mesh.vertices, dtype=np.float64).tobytes()
                           + np.asarray(mesh.faces, dtype=np.int64).tobytes()).hexdigest()[:16]
+
+
+def _result(future):
+    try:
+        return future.result()
+    except BrokenProcessPool:
+        raise RobotError("the IK worker processes stopped before finishing (a script that starts workers must guard its "
+                         "code with `if __name__ == '__main__':`, or use --workers 1)") from None
 
 
 def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: float, worldz: float,
@@ -396,7 +407,7 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
             if pool is None:
                 pool = own_pool = IKPool(robot, scene, opts, obj_mesh, workers)
             futures = [pool.submit(targets[order[s:e]], placements[order[s:e]]) for s, e in todo]
-            results = (f.result() for f in futures)
+            results = (_result(f) for f in futures)
         for (s, e), (feas, joints) in zip(todo, results):
             bar.update(e - s)
             yield order[s:e], feas, joints

@@ -122,13 +122,28 @@ class Store:
         """
         found = self.find_paramset(stage, params, idobject)
         if found is not None:
+            self.mark_used(found)
             return found, True
         text = json.dumps(params, sort_keys=True, default=_json_default)
         digest = _digest(stage, params, idobject)
         pid = self.next_id("paramset", "idparamset")
         self.run("INSERT INTO paramset (idparamset, stage, digest, params, idobject) VALUES (?, ?, ?, ?, ?)",
                          [pid, stage, digest, text, idobject])
+        self.mark_used(pid)
         return pid, False
+
+    def mark_used(self, idparamset: int) -> None:
+        """Record that a stage has just produced or reused this parameter set: consumers that are given none take
+        the most recently used one (`last_used_paramset`), never the highest id."""
+        self.run("UPDATE paramset SET used = (SELECT coalesce(max(used), 0) + 1 FROM paramset) WHERE idparamset = ?",
+                 [int(idparamset)])
+
+    def last_used_paramset(self, stage: str, idobject: int) -> int | None:
+        """The parameter set of `stage` for an object that was produced or reused last. Each stage's parameters
+        name the parameter set it consumed (`grasps`, `placements`), so following them from here is the chain."""
+        row = self.one("SELECT idparamset FROM paramset WHERE stage = ? AND idobject = ? ORDER BY used DESC, "
+                       "idparamset DESC LIMIT 1", [stage, idobject])
+        return None if row is None else int(row[0])
 
     def find_paramset(self, stage: str, params: dict[str, Any], idobject: int | None) -> int | None:
         """The id of a stored parameter set of `stage` for these parameters and object, or None."""

@@ -45,11 +45,11 @@ def save_grasps(store: Store, idobject: int, gripper: Gripper, params: GraspPara
 
 
 def latest_grasp_paramset(store: Store, idobject: int) -> int:
-    """The most recent grasp parameter set of an object."""
-    row = store.one("SELECT max(idparamset) FROM paramset WHERE stage = ? AND idobject = ?", [STAGE, idobject])
-    if row is None or row[0] is None:
+    """The grasp parameter set of an object produced or reused last (not the highest id)."""
+    pid = store.last_used_paramset(STAGE, idobject)
+    if pid is None:
         raise StoreError(f"store {store.path} has no grasps for object id {idobject}; run `workbench grasps` first")
-    return int(row[0])
+    return pid
 
 
 def load_grasps(store: Store, idobject: int, idparamset: int | None = None) -> dict[str, np.ndarray]:

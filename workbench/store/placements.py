@@ -123,11 +123,11 @@ def save_tabletop(store: Store, idobject: int, idplacements: int, params: Tablet
 
 
 def latest_tabletop_paramset(store: Store, idobject: int) -> int:
-    """The most recent tabletop parameter set of an object."""
-    row = store.one("SELECT max(idparamset) FROM paramset WHERE stage = ? AND idobject = ?", [TABLETOP_STAGE, idobject])
-    if row is None or row[0] is None:
+    """The tabletop parameter set of an object produced or reused last (not the highest id)."""
+    pid = store.last_used_paramset(TABLETOP_STAGE, idobject)
+    if pid is None:
         raise StoreError(f"store {store.path} has no tabletop placements for object id {idobject}; run `workbench placements` first")
-    return int(row[0])
+    return pid
 
 
 def load_tabletop_grips(store: Store, idobject: int, idparamset: int | None = None) -> dict[str, np.ndarray]:

@@ -328,6 +328,7 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS locked VARCHAR DEFAULT '{}'",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS drop_geometry VARCHAR[] DEFAULT []",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS package_dirs VARCHAR[] DEFAULT []",
+    "ALTER TABLE paramset ADD COLUMN IF NOT EXISTS used BIGINT DEFAULT 0",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS idgripper BIGINT",
     "ALTER TABLE gripper ADD COLUMN IF NOT EXISTS collision_vertices DOUBLE[][]",
     "ALTER TABLE gripper ADD COLUMN IF NOT EXISTS collision_faces INTEGER[][]",

@@ -105,6 +105,8 @@ def ensure_grasps(db: str | Path | Store, obj: ObjectModel, gripper: Gripper, pa
         if pid is None:
             plan = plan_grasps(obj, gripper, params)
             pid, _ = save_grasps(store, oid, gripper, params, plan.grasps)
+        else:
+            store.mark_used(pid)
         rows = load_grasps(store, oid, pid)
         return GraspsResult(idobject=oid, idparamset=pid, reused=plan is None, count=len(rows["jawwidth"]),
                             poses=rows["rotmat"], widths=rows["jawwidth"], plan=plan)
@@ -128,8 +130,6 @@ class PlacementsResult:
 def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, grasp_pid: int, gripper: Gripper,
                       pparams: PlacementParams, tparams: TabletopParams) -> PlacementsResult:
     """Free placements, free tabletop grips, tabletop placements and grips of a stored grasp set (Section IV)."""
-
-
     store = db if isinstance(db, Store) else Store(db)
     timings: dict[str, float] = {}
     try:
@@ -165,6 +165,9 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
             t0 = time.perf_counter()
             tt_pid = save_tabletop(store, idobject, pl_pid, tparams, tt, ftg, stored["idfreetabletopplacement"])
             timings["write_tabletop"] = time.perf_counter() - t0
+        if reused:
+            store.mark_used(pl_pid)
+            store.mark_used(tt_pid)
         n_tp, n_tg = tabletop_counts(store, tt_pid)
         return PlacementsResult(idplacements=pl_pid, idtabletop=tt_pid, reused=reused, placements=stored,
                                 n_free_grips=np.bincount(fp_index, minlength=len(stored["stability"])),
