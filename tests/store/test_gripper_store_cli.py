@@ -151,3 +151,23 @@ def test_consumers_take_the_parameter_set_used_last_not_the_highest_id(tmp_path,
     assert again.reused and again.idparamset == ra.idparamset and rb.idparamset > ra.idparamset
     with Store(db) as store:
         assert latest_grasp_paramset(store, ra.idobject) == ra.idparamset
+
+
+def test_transactions_nest_by_joining_the_outermost(tmp_path):
+    """A writer called inside another's transaction joins it: one commit, and an error anywhere rolls back all."""
+    with Store(tmp_path / "nest.duckdb") as store:
+        with store.transaction():
+            store.run("INSERT INTO angle (idangle, value) VALUES (1, 0.5)")
+            with store.transaction():  # e.g. put_gripper inside save_grasps
+                store.run("INSERT INTO angle (idangle, value) VALUES (2, 1.0)")
+        assert store.one("SELECT count(*) FROM angle")[0] == 2
+        with pytest.raises(RuntimeError):
+            with store.transaction():
+                store.run("INSERT INTO angle (idangle, value) VALUES (3, 1.5)")
+                with store.transaction():
+                    store.run("INSERT INTO angle (idangle, value) VALUES (4, 2.0)")
+                    raise RuntimeError("stage failed")
+        assert store.one("SELECT count(*) FROM angle")[0] == 2
+        with store.transaction():  # the store is usable again
+            store.run("INSERT INTO angle (idangle, value) VALUES (5, 2.5)")
+        assert store.one("SELECT count(*) FROM angle")[0] == 3

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from workbench.errors import PlanningError
 from workbench.planners.wan_harada.query import parse_pose
-from workbench.planners.wan_harada.stages import load_planner, save_plan
+from workbench.planners.wan_harada.stages import load_planner, save_plans
 from workbench.store import Store
 from workbench.viewer.wan_harada import plan_scene
 
@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
         print("validation: every listed plan passes (FK from the URDF, limits, collisions, stability, grasp, goal)")
         if not args.no_save:
 
-            ids = [save_plan(store, p) for p in plans]
+            ids = save_plans(store, plans)
             print(f"stored plan ids {ids} in {args.db}")
     if args.json:
         write_json(plans, args.json)

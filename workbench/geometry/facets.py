@@ -52,13 +52,6 @@ class Facets:
         order = np.argsort(self.tri_index, kind="stable")
         return fid[order], self.tri_index[order]
 
-    def facet_of_triangle(self) -> np.ndarray:
-        """For the conventional segmentation, the one facet of each triangle (-1 for none)."""
-        fid, tid = self.membership()
-        out = np.full(int(self.tri_index.max()) + 1, -1, dtype=np.int64)
-        out[tid] = fid
-        return out
-
 
 def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = "over",
             merge_angle: float | None = None) -> Facets:

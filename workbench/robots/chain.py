@@ -1,21 +1,6 @@
-"""IK feasibility of tabletop grips (Wan & Harada Section IV: the `ik` and `ikret` tables).
-
-For every tabletop grip (a TCP pose in the world) three poses are solved: the grasp, the grasp retracted
-by `handx` along the TCP's -z (the paper's hand x axis is our approach axis), and that pose raised by
-`worldz` along world +z. A pose is feasible when IK converges (position within `tol_pos`, orientation
-within `tol_rot`) inside the joint limits and the arm and the gripper at that configuration do not collide
-with the table, nor the arm with the object (python-fcl on the URDF's collision geometry; the gripper's
-contact with the object is the grasp planner's business).
-
-Speed (Section VI, Table I's t-tpgik): a reachability pre-filter (`ReachFilter`: distance from the
-shoulder, also over a humanoid's waist, and the workspace box); grips sorted so neighbours are the same
-grasp at the next position, then rotation; each chunk of the sorted grips split into lanes solved in
-lock-step, so one batched Levenberg-Marquardt iteration (numpy forward kinematics and Jacobians of the
-serial chain, entry-major arrays) serves hundreds of poses while each lane warm-starts from its previous
-grip's solution (per pose kind); fall-back seeds come from a deterministic library of table-clear sampled configurations nearest to the
-target; chunks run on all cores (forked concurrent.futures workers that inherit the solver) with a tqdm
-progress bar. Chunk boundaries depend only on the sorted input, so a resumed run produces the same rows as
-an uninterrupted one, whatever the number of workers.
+"""Batched kinematics of a serial chain (Wan & Harada Section IV needs IK for 10,000s of grips): forward
+kinematics and Jacobians of many configurations at once in numpy (entry-major arrays), and a damped
+Levenberg-Marquardt IK solve within the joint limits (`solve_ik`), with stall detection per row.
 """
 
 from __future__ import annotations

@@ -277,18 +277,6 @@ class Robot:
         pin.forwardKinematics(self.model, data, pin.neutral(self.model))
         return best, np.asarray(data.oMi[best].translation).copy()
 
-    def reach(self) -> tuple[np.ndarray, float]:
-        """The shoulder in the world and an upper bound on its distance to the TCP (sum of link lengths)."""
-        j0, centre = self.shoulder()
-        length = 0.0
-        for j in range(j0 + 1, self.model.njoints):
-            length += float(np.linalg.norm(self.chain_placement[j - 1][:3, 3]))
-            if self.chain_prismatic[j - 1]:
-                length += float(max(abs(self.lower[j - 1]), abs(self.upper[j - 1])))
-        if self.chain_prismatic[j0 - 1]:
-            length += float(max(abs(self.lower[j0 - 1]), abs(self.upper[j0 - 1])))
-        length += float(np.linalg.norm(self.tip_in_joint[:3, 3]))
-        return (self.base @ np.append(centre, 1.0))[:3], length
 
     def neutral(self) -> np.ndarray:
         """The zero configuration clipped into the joint limits."""

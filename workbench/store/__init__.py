@@ -28,6 +28,7 @@ class Store:
 
     def __init__(self, path: str | Path, read_only: bool = False):
         self.path = Path(path)
+        self._depth = 0  # open transaction() levels
         if read_only and not self.path.exists():
             raise StoreError(f"store {self.path} does not exist; build it first (workbench build / grasps)")
         if self.path.exists() and self.path.is_dir():
@@ -66,14 +67,28 @@ class Store:
 
     @contextmanager
     def transaction(self) -> Iterator[duckdb.DuckDBPyConnection]:
-        """One stage's writes: committed together or not at all."""
+        """One stage's writes: committed together or not at all.
+
+        The convention: every function that writes opens `transaction()`; one opened inside another joins the
+        outermost, so a stage that calls several writers (an object, a gripper, its rows) still commits once,
+        and an error anywhere rolls the whole stage back."""
+        if self._depth:
+            self._depth += 1
+            try:
+                yield self.con
+            finally:
+                self._depth -= 1
+            return
         self.run("BEGIN TRANSACTION")
+        self._depth = 1
         try:
             yield self.con
         except BaseException:
+            self._depth = 0
             self.run("ROLLBACK")
             raise
         else:
+            self._depth = 0
             self.run("COMMIT")
 
     def run(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> list[tuple]:
@@ -144,6 +159,13 @@ class Store:
         row = self.one("SELECT idparamset FROM paramset WHERE stage = ? AND idobject = ? ORDER BY used DESC, "
                        "idparamset DESC LIMIT 1", [stage, idobject])
         return None if row is None else int(row[0])
+
+    def require_last_used(self, stage: str, idobject: int, what: str, command: str) -> int:
+        """`last_used_paramset`, or a StoreError naming what is missing and the command that makes it."""
+        pid = self.last_used_paramset(stage, idobject)
+        if pid is None:
+            raise StoreError(f"store {self.path} has no {what} for object id {idobject}; run `workbench {command}` first")
+        return pid
 
     def find_paramset(self, stage: str, params: dict[str, Any], idobject: int | None) -> int | None:
         """The id of a stored parameter set of `stage` for these parameters and object, or None."""

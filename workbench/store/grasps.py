@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from workbench.errors import StoreError
 from workbench.grasping.grasps import GraspParams, GraspSet
 from workbench.robots.gripper import Gripper
 from workbench.store import Store
@@ -46,10 +45,7 @@ def save_grasps(store: Store, idobject: int, gripper: Gripper, params: GraspPara
 
 def latest_grasp_paramset(store: Store, idobject: int) -> int:
     """The grasp parameter set of an object produced or reused last (not the highest id)."""
-    pid = store.last_used_paramset(STAGE, idobject)
-    if pid is None:
-        raise StoreError(f"store {store.path} has no grasps for object id {idobject}; run `workbench grasps` first")
-    return pid
+    return store.require_last_used(STAGE, idobject, "grasps", "grasps")
 
 
 def load_grasps(store: Store, idobject: int, idparamset: int | None = None) -> dict[str, np.ndarray]:

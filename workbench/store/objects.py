@@ -47,17 +47,18 @@ def object_row(store: Store, name: str) -> tuple[int, dict]:
 
 
 def put_gripper(store: Store, gripper: Gripper) -> int:
-    """Store a gripper (reused when its geometry is already stored); call inside the stage's transaction."""
+    """Store a gripper (reused when its geometry is already stored) and return its id."""
     digest = gripper.digest
     row = store.one("SELECT idgripper FROM gripper WHERE digest = ?", [digest])
     if row is not None:
         return int(row[0])
-    gid = store.next_id("gripper", "idgripper")
     mesh = gripper.collision_mesh()
-    store.run("INSERT INTO gripper (idgripper, name, urdf, jaw_min, jaw_max, digest, collision_vertices, collision_faces) "
-              "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-              [gid, gripper.name, gripper.urdf, gripper.jaw_min, gripper.jaw_max, digest, mesh.vertices.tolist(),
-               mesh.faces.tolist()])
+    with store.transaction():
+        gid = store.next_id("gripper", "idgripper")
+        store.run("INSERT INTO gripper (idgripper, name, urdf, jaw_min, jaw_max, digest, collision_vertices, collision_faces) "
+                  "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+                  [gid, gripper.name, gripper.urdf, gripper.jaw_min, gripper.jaw_max, digest, mesh.vertices.tolist(),
+                   mesh.faces.tolist()])
     return gid
 
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from workbench.errors import StoreError
 from workbench.grasping.placements import PlacementParams, Placements
 from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams
 from workbench.store import Store
@@ -124,10 +123,7 @@ def save_tabletop(store: Store, idobject: int, idplacements: int, params: Tablet
 
 def latest_tabletop_paramset(store: Store, idobject: int) -> int:
     """The tabletop parameter set of an object produced or reused last (not the highest id)."""
-    pid = store.last_used_paramset(TABLETOP_STAGE, idobject)
-    if pid is None:
-        raise StoreError(f"store {store.path} has no tabletop placements for object id {idobject}; run `workbench placements` first")
-    return pid
+    return store.require_last_used(TABLETOP_STAGE, idobject, "tabletop placements", "placements")
 
 
 def load_tabletop_grips(store: Store, idobject: int, idparamset: int | None = None) -> dict[str, np.ndarray]:
@@ -145,15 +141,6 @@ def load_tabletop_grips(store: Store, idobject: int, idparamset: int | None = No
     out["idparamset"] = pid
     return out
 
-
-def load_tabletop_placements(store: Store, idparamset: int) -> dict[str, np.ndarray]:
-    """Tabletop placements of a parameter set: ids, free placement, angle id and value, position, rotmat (T, 4, 4)."""
-    out = store.query_arrays(
-        "SELECT p.idtabletopplacements, p.idfreetabletopplacement, p.idangle, a.value AS angle, p.tabletopposition, p.rotmat "
-        "FROM tabletopplacements p JOIN angle a USING (idangle) WHERE p.idparamset = ? ORDER BY p.idtabletopplacements",
-        [idparamset])
-    out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
-    return out
 
 
 def tabletop_counts(store: Store, idtabletop: int) -> tuple[int, int]:

@@ -33,14 +33,9 @@ from workbench.store import Store, from_arrow
 from workbench.store.objects import put_gripper
 
 
-def robot_digest(robot: Robot) -> str:
-    """The kinematics digest of a robot (URDF, frames, mount, base, joints, locked joints)."""
-    return robot.spec.digest
-
-
 def put_robot(store: Store, robot: Robot) -> int:
     """The id of the robot's row (created if new); call inside a transaction."""
-    digest = robot_digest(robot)
+    digest = robot.spec.digest
     row = store.one("SELECT idrobot FROM robot WHERE digest = ?", [digest])
     if row is not None:
         return int(row[0])

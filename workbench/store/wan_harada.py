@@ -35,11 +35,6 @@ def list_column(table: pa.Table, name: str, width: int) -> np.ndarray:
     return out
 
 
-def count_grips(store: Store, idtabletop: int) -> int:
-    row = store.one("SELECT count(*) FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) "
-                    "WHERE p.idparamset = ?", [idtabletop])
-    return int(row[0])
-
 
 def ik_fingerprint(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int) -> tuple[int, int]:
     """(rows, max idik) of one IK run: changes whenever its rows change (cache key of the roadmap)."""
@@ -91,11 +86,6 @@ def placements_of_tabletop(store: Store, idtabletop: int) -> int:
     return int(row[0])
 
 
-def free_placement_pose(store: Store, idfreetabletopplacement: int) -> np.ndarray | None:
-    """`freetabletopplacement.rotmat` of one stable placement (object in the table frame), or None."""
-    row = store.one("SELECT rotmat FROM freetabletopplacement WHERE idfreetabletopplacement = ?", [idfreetabletopplacement])
-    return None if row is None else np.asarray(row[0], dtype=np.float64).reshape(4, 4)
-
 
 # ----------------------------------------------------------------------------------------------------------------
 # Plans.
@@ -123,8 +113,3 @@ def load_plan_rows(store: Store, idplan: int) -> tuple[dict[str, Any], dict[str,
     return plan, steps
 
 
-def plan_ids(store: Store, idobject: int | None = None) -> list[int]:
-    """Ids of stored plans (of one object), oldest first."""
-    if idobject is None:
-        return [int(r[0]) for r in store.run("SELECT idplan FROM plan ORDER BY idplan")]
-    return [int(r[0]) for r in store.run("SELECT idplan FROM plan WHERE idobject = ? ORDER BY idplan", [idobject])]

@@ -1,12 +1,7 @@
-"""meshcat helpers: meshes, facets, points, normals, the gripper at poses, and static HTML export.
+"""meshcat helpers: meshes, facets, points, normals, the gripper at poses, the table, and static HTML export.
 
-Everything takes a `meshcat.Visualizer` and a scene path; colours are 0xRRGGBB integers. `static_html`
-writes a file that opens in a browser without a running server.
-
-Ready-made meshcat scenes written as static HTML (for the command line and `make demo`).
-
-ipywidgets front-ends for grasp planning and placements (notebooks 01 and 02). Logic stays in the stages;
-these classes only read widgets, call the library and draw with `workbench.viewer`.
+Everything takes a `meshcat.Visualizer` and a scene path; colours are 0xRRGGBB integers. `static_html` writes a
+file that opens in a browser without a running server; `grasp_scene` is a ready-made scene for the command line.
 """
 
 from __future__ import annotations

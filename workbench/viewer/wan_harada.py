@@ -1,11 +1,11 @@
 """meshcat animation of a regrasp plan: robot, gripper and object through every step (Wan & Harada, Section V,
 Figs. 11-12), exported as static HTML that opens without a server.
 
-The robot and the planning gripper (at the step's jaw opening) are drawn by `workbench.viewer.robot.RobotView` from
-the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper.
-Each step plays: move to the retract configuration, retract -> approach -> grasp, close or open the jaw, grasp ->
-approach -> retract; the object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue)
-poses stay as ghosts, intermediate placements as faint outlines.
+The robot and the planning gripper (at the step's jaw opening) are drawn by `workbench.viewer.robot.RobotView`
+from the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper. Each step
+plays: move to the retract configuration, retract -> approach -> grasp, close or open the jaw, grasp -> approach
+-> retract; the object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue) poses stay
+as ghosts, intermediate placements as faint outlines.
 """
 
 from __future__ import annotations

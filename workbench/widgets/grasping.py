@@ -4,6 +4,8 @@ these classes only read widgets, call the library and draw with `workbench.viewe
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import ipywidgets as W
 import numpy as np
 import trimesh
@@ -27,6 +29,7 @@ class GraspExplorer:
     def __init__(self, obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspParams(), vis=None,
                  max_hands: int = 40):
         self.obj, self.gripper, self.max_hands = obj, gripper, max_hands
+        self.base = params  # parameters without a widget (merge_angle, parallel_angle, com_max, seed, ...) stay as given
         self.vis = vis if vis is not None else viz.new_scene()
         self.plan: GraspPlan | None = None
         self.tau = W.FloatSlider(value=np.degrees(params.tau), min=2, max=45, step=1, description="tau (deg)")
@@ -53,9 +56,10 @@ class GraspExplorer:
                               W.HBox([self.button, self.facet]), self.counts])
 
     def params(self) -> GraspParams:
-        return GraspParams(tau=float(np.radians(self.tau.value)), segmentation=self.method.value, density=self.density.value,
-                           neighbour_radius=self.radius.value / 1e3, dist_min=self.dist.value[0] / 1e3,
-                           dist_max=self.dist.value[1] / 1e3, rotations=self.rotations.value)
+        """The given parameters with the widgets' values; the others are kept."""
+        return replace(self.base, tau=float(np.radians(self.tau.value)), segmentation=self.method.value,
+                       density=self.density.value, neighbour_radius=self.radius.value / 1e3,
+                       dist_min=self.dist.value[0] / 1e3, dist_max=self.dist.value[1] / 1e3, rotations=self.rotations.value)
 
     def run(self) -> GraspPlan:
         self.plan = plan_grasps(self.obj, self.gripper, self.params())

@@ -1,25 +1,11 @@
-"""meshcat animation of a regrasp plan: robot, gripper and object through every step (Wan & Harada, Section V,
-Figs. 11-12), exported as static HTML that opens without a server.
-
-The robot and the planning gripper (at the step's jaw opening) are drawn by `workbench.viewer.robot.RobotView` from
-the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper.
-Each step plays: move to the retract configuration, retract -> approach -> grasp, close or open the jaw, grasp ->
-approach -> retract; the object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue)
-poses stay as ghosts, intermediate placements as faint outlines.
-
-A robot in meshcat at joint configurations (Wan & Harada Section IV, Fig. 6(e)-(g): feasible IKs).
-
-The URDF's visual meshes (DAE/STL/OBJ files are sent as they are; boxes and cylinders as primitives) or its
-collision geometry, placed by pinocchio's forward kinematics of the robot's reduced model, plus the planning
-gripper's visual meshes at the TCP with the jaw at a given width. `RobotView.show(q)` moves it; `animate(qs)`
-plays a list of configurations; `show_table` draws a scene's table slab.
-
-ipywidgets front-ends for grasp planning and placements (notebooks 01 and 02). Logic stays in the stages;
-these classes only read widgets, call the library and draw with `workbench.viewer`.
+"""ipywidgets and matplotlib front-ends of the roadmap planner (notebooks 02-04): placements and the tabletop
+roadmap, IK feasibility of tabletop grips, and regrasp queries. They read widgets, call the library (stages and
+stage functions) and draw with `workbench.viewer`; no planning logic lives here.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import ipywidgets as W
@@ -31,12 +17,12 @@ from workbench.errors import PlanningError
 from workbench.geometry.objects import ObjectModel, load_object
 from workbench.grasping.placements import (
     PlacementParams,
-    grips_above_table,
+    free_tabletop_grips,
     stable_placements,
 )
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.stages import load_planner
-from workbench.planners.wan_harada.tabletop import TabletopParams, yaw
+from workbench.planners.wan_harada.tabletop import TabletopParams, plan_tabletop
 from workbench.robots.gripper import Gripper
 from workbench.robots.model import Robot
 from workbench.viewer import scenes as viz
@@ -241,12 +227,13 @@ class PlacementExplorer:
     """Tune the stability threshold and the table grid; inspect placements, their grips and the roadmap (Section IV)."""
 
     def __init__(self, obj: ObjectModel, gripper: Gripper, grasp_poses: np.ndarray, grasp_widths: np.ndarray, vis=None,
-                 max_hands: int = 30):
+                 max_hands: int = 30, params: PlacementParams = PlacementParams(), tabletop: TabletopParams = TabletopParams()):
         self.obj, self.gripper, self.max_hands = obj, gripper, max_hands
         self.grasp_poses, self.grasp_widths = grasp_poses, grasp_widths
         self.vis = vis if vis is not None else viz.new_scene()
-        t = TabletopParams()
-        self.stability = W.FloatSlider(value=PlacementParams().min_stability, min=0, max=1.5, step=0.01, description="min stability")
+        self.base, self.base_grid = params, tabletop  # parameters without a widget stay as given
+        t = tabletop
+        self.stability = W.FloatSlider(value=params.min_stability, min=0, max=1.5, step=0.01, description="min stability")
         self.angles = W.IntSlider(value=t.angles, min=1, max=16, description="rotations")
         self.nx = W.IntSlider(value=t.nx, min=1, max=15, description="grid x")
         self.ny = W.IntSlider(value=t.ny, min=1, max=15, description="grid y")
@@ -262,11 +249,15 @@ class PlacementExplorer:
         self.placements = None
 
     def grid(self) -> TabletopParams:
-        return TabletopParams(nx=self.nx.value, ny=self.ny.value, angles=self.angles.value)
+        return replace(self.base_grid, nx=self.nx.value, ny=self.ny.value, angles=self.angles.value)
 
     def run(self):
-        self.placements = stable_placements(self.obj, PlacementParams(min_stability=self.stability.value))
-        self.ok = grips_above_table(self.placements.poses, self.grasp_poses, self.gripper, PlacementParams().clearance)
+        """Placements and free tabletop grips with the library's stages (the numbers the store would hold)."""
+        params = replace(self.base, min_stability=self.stability.value)
+        self.placements = stable_placements(self.obj, params)
+        self.ftg = free_tabletop_grips(self.placements, self.grasp_poses, self.gripper, params)
+        self.ok = np.zeros((len(self.placements), len(self.grasp_poses)), dtype=bool)
+        self.ok[self.ftg[0], self.ftg[1]] = True
         self.which.max = max(len(self.placements) - 1, 0)
         self.draw()
         return self.placements
@@ -278,9 +269,9 @@ class PlacementExplorer:
         vis["placements"].delete()
         viz.show_mesh(vis, "placements/table", table_mesh(), color=0x8B6B4A, opacity=0.6)
         grid = self.grid()
+        tt = plan_tabletop(pl.poses, self.ftg[0], self.ftg[1], self.ftg[2], self.grasp_poses, grid)
         counts = {"stable placements": len(pl), "rejected faces": len(pl.rejected_stability),
-                  "tabletop placements": len(pl) * grid.nx * grid.ny * grid.angles,
-                  "tabletop grips": int(self.ok.sum()) * grid.nx * grid.ny * grid.angles}
+                  "tabletop placements": len(tt.poses), "tabletop grips": len(tt.grip_poses)}
         if len(pl) == 0:
             self.info.value = counts_table(counts, "no stable placement at this threshold")
             return
@@ -296,11 +287,9 @@ class PlacementExplorer:
                           np.where(self.ok[k], viz.GREEN, viz.RED), 0.25, self.max_hands)
         if self.roadmap.value:
             hull = self.obj.mesh.convex_hull
-            moves = yaw(grid.angle_values())[None].repeat(grid.nx * grid.ny, axis=0)
-            moves[..., :3, 3] = grid.positions()[:, None, :]
             colors = viz.palette(len(pl))
             for p in range(len(pl)):
-                parts = [hull.copy().apply_transform(m @ pl.poses[p]) for m in moves.reshape(-1, 4, 4)]
+                parts = [hull.copy().apply_transform(m) for m in tt.poses[tt.placement == p]]
                 viz.show_mesh(vis, f"placements/roadmap/{p}", trimesh.util.concatenate(parts), color=int(colors[p]),
                               opacity=1.0 if p == k else 0.15)
         viz.frame_camera(vis, np.array([(grid.x_min + grid.x_max) / 2 - 0.1, 0.0, 0.0]), 0.3)

@@ -1,15 +1,6 @@
-"""Five-finger regrasp planning by finger switching (Phoka & Sudsang, Sections III-A, III-C, III-D).
-
-A grasp is four contact indices (rows kept ascending). Two force-closure grasps sharing three contacts switch
-into each other: the fifth finger is placed on the new contact, then the finger on the dropped contact lifts.
-
-- `switching_edges`, `Roadmap`: a graph of force-closure grasps and its connected components.
-- `build_roadmap`: R, every force-closure 4-subset of the representatives T_R (Section III-C).
-- `construct_roadmap` / `find_path`: the paper's ConstructRoadmap(S1, S2, S3, S4) and FindPath.
-- `algorithm1`, `find_nearest_cluster`, `algorithm2`, `algorithm3`: linking an arbitrary force-closure
-  grasp to R (Section III-D, Algorithms 1-3).
-- `query`: a finger-switching sequence from a start to a goal grasp through R.
-- `sample_grasps`, `local_planning_stats`: the experiments of Tables II and III.
+"""Linking an arbitrary force-closure grasp to the representative roadmap R (Phoka & Sudsang, Section III-D):
+Algorithm 1 (the grasp's representative grasp), `find_nearest_cluster` and Algorithm 2, Algorithm 3 (extending
+R), and the local planner FindPath over the paper's sets S1..S4.
 """
 
 from __future__ import annotations

@@ -1,30 +1,9 @@
-"""Runs planner stages against a store: reuse what is stored for the same inputs and parameters, else compute
-and write each stage in one transaction (CONVENTIONS.md, Store).
+"""Stage runners of the roadmap planner (Wan & Harada, Sections III-V) against a DuckDB store.
 
-The regrasp roadmap, connecting start and goal poses to it, and searching it (Wan & Harada, Section V).
-
-Graph (Section V, "Building the graph"): the nodes are the tabletop grips that are IK-feasible for a robot at the
-grasp and both retractions (the `ik` table's three flags). Two nodes sharing `idfreeairgrip` are joined by a
-transfer edge (carry the object from one placement to another with one grasp); two nodes sharing
-`idtabletopplacements` by a transit edge (release and regrasp at one placement). Both relations are cliques, so
-the graph is kept as two groupings of the node arrays (nodes sorted by grasp and by placement, CSR style) plus
-the grasp graph H (G x G, scipy.sparse): grasps g, g' are adjacent when some placement has nodes of both. A path
-of k transit edges is a walk of length k in H, so the fewest regrasps between two grasps is their breadth-first
-distance in H (all pairs are computed once per roadmap); transfers follow as k + 1.
-
-Queries (Section V, "Searching the graph"): a start or goal pose is a stable placement at a position and a yaw
-that need not be on the grid. Its grips are the placement's free tabletop grips moved to the pose; each needs IK
-at the grasp and both retractions without arm-table or arm-object collision, as the precomputation does.
-Start grips join roadmap nodes with the same grasp by transfer edges, goal grips likewise, and a start grip
-joins a goal grip directly when one grasp serves both. The search is a breadth-first search on the layered graph
-(layer = number of regrasps) over pairs of start and goal grasps, cost (regrasps, transfers) lexicographic.
-IK at the query poses is the expensive part, so it is evaluated lazily: in rounds, only the grips of the cheapest
-pairs whose feasibility is unsettled, most promising first (the grasp's IK feasibility at the nearest grid
-placements), first from the nearest stored solution and only when needed from the precomputation's fall-back
-seeds, until the best plans are proven (`lazy=False` evaluates every grip first; the optimum is the same).
-
-Cache: `load_planner` keeps the roadmap (and its IK adapter) per store file, object, robot, scene, retractions,
-tabletop parameter set and a fingerprint of the IK rows, so repeated queries only connect and search.
+Each stage is computed once per input and parameters and reused from the store: grasps (`ensure_grasps`),
+placements and the tabletop roadmap (`ensure_placements`), IK with retractions (`run_ik`, `ensure_ik`), the whole
+build (`build_all`), the regrasp graph (`load_planner`, with an explicit `PlannerCache`) and plans (`save_plan`).
+This is the only module of the planner that talks to the store; computations run outside write transactions.
 """
 
 from __future__ import annotations
@@ -50,8 +29,7 @@ from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.roadmap import build_roadmap, grid_index
 from workbench.planners.wan_harada.tabletop import (
     TabletopParams,
-    select_grasps,
-    tabletop,
+    plan_tabletop,
 )
 from workbench.robots.collider import Collider, Scene, default_scene
 from workbench.robots.gripper import Gripper, franka_hand
@@ -153,14 +131,9 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
         if tt_pid is None:
             reused = False
             t0 = time.perf_counter()
-            grasp_ids = np.unique(ftg["idfreeairgrip"])
-            usable = np.zeros((len(stored["stability"]), len(grasp_ids)), dtype=bool)
-            usable[fp_index, np.searchsorted(grasp_ids, ftg["idfreeairgrip"])] = True
             grasps = load_grasps(store, idobject, grasp_pid) if grasps is None else grasps
-            poses = grasps["rotmat"][np.searchsorted(grasps["idfreeairgrip"], grasp_ids)]
-            chosen = grasp_ids[select_grasps(poses, usable, tparams.max_grasps)]
-            keep = np.isin(ftg["idfreeairgrip"], chosen)
-            tt = tabletop(stored["rotmat"], fp_index, ftg["rotmat"], keep, tparams)
+            g_index = np.searchsorted(grasps["idfreeairgrip"], ftg["idfreeairgrip"])
+            tt = plan_tabletop(stored["rotmat"], fp_index, g_index, ftg["rotmat"], grasps["rotmat"], tparams)
             timings["tabletop"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             tt_pid = save_tabletop(store, idobject, pl_pid, tparams, tt, ftg, stored["idfreetabletopplacement"])
@@ -434,6 +407,13 @@ def choose_task(planner, seed: int = 0, tries: int = 40, grid: TabletopParams = 
 def save_plan(store: Store, plan: Plan) -> int:
     """Store a plan and its steps (tables `plan`, `planstep`) in one transaction; returns idplan."""
     return sql.save_plan(store, *plan_rows(plan))
+
+
+def save_plans(store: Store, plans: list[Plan]) -> list[int]:
+    """Store a plan and its alternatives in one transaction; returns their idplan."""
+    rows = [plan_rows(p) for p in plans]
+    with store.transaction():
+        return [sql.save_plan(store, *r) for r in rows]
 
 
 def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:

@@ -146,3 +146,17 @@ def tabletop(free_poses: np.ndarray, ftg_placement: np.ndarray, ftg_poses: np.nd
     grip_poses = tp_move[grip_tp] @ ftg_poses[grip_ftg]
     return Tabletop(placement=tp_place, angle=tp_angle, position=tp_pos, poses=tp_poses, moves=tp_move, grip_tp=grip_tp,
                     grip_ftg=grip_ftg, grip_poses=grip_poses)
+
+
+def plan_tabletop(free_poses: np.ndarray, ftg_placement: np.ndarray, ftg_grasp: np.ndarray, ftg_poses: np.ndarray,
+                  grasp_poses: np.ndarray, params: TabletopParams) -> Tabletop:
+    """The tabletop roadmap's placements and grips of Section IV from the free placements and free tabletop grips:
+    the grasps carried along (`select_grasps`, capped by `params.max_grasps`), then `tabletop`.
+
+    ftg_placement, ftg_grasp: (F,) placement index and grasp index (into `grasp_poses`, (G, 4, 4) TCP in the
+    object frame) of each free tabletop grip; ftg_poses: (F, 4, 4) their TCP poses in the table frame."""
+    ids = np.unique(ftg_grasp)
+    usable = np.zeros((len(free_poses), len(ids)), dtype=bool)
+    usable[ftg_placement, np.searchsorted(ids, ftg_grasp)] = True
+    chosen = ids[select_grasps(grasp_poses[ids], usable, params.max_grasps)] if len(ids) else ids
+    return tabletop(free_poses, ftg_placement, ftg_poses, np.isin(ftg_grasp, chosen), params)
