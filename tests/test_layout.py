@@ -144,3 +144,41 @@ def test_a_wheel_ships_the_bundled_objects(tmp_path):
     names = zipfile.ZipFile(wheel).namelist()
     stls = [n for n in names if n.startswith("workbench/assets/objects/") and n.endswith(".stl")]
     assert {Path(n).stem for n in stls} >= {"tube", "wheel", "bracket", "planebody", "tail", "drill"}
+
+
+def test_the_validator_shares_no_code_with_the_planners():
+    """It rebuilds the robot, the gripper, the table and the object from stored rows, with its own FK and collisions."""
+    targets = {t for t, _, _ in _imports(MODULES["workbench.validation"])}
+    assert targets <= {"workbench.errors", "workbench.resources"}, targets
+
+
+def test_one_ik_solver_and_one_home_for_python_fcl():
+    for mod, path in MODULES.items():
+        text = path.read_text()
+        if mod not in ("workbench.robots.ik", "workbench.robots.chain"):
+            assert "solve_ik(" not in text, f"{mod} runs its own IK tiers; use robots.ik.IKSolver"
+        if mod not in ("workbench.geometry.collision", "workbench.validation"):
+            assert "import fcl" not in text and "fcl." not in text, f"{mod} calls python-fcl outside geometry.collision"
+
+
+def test_every_third_party_import_is_a_declared_dependency():
+    import sys
+    import tomllib
+
+    deps = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())["project"]["dependencies"]
+    declared = {d.split(">")[0].split("=")[0].split("[")[0].strip().lower().replace("-", "_") for d in deps}
+    alias = {"fcl": "python_fcl", "pinocchio": "pin", "sklearn": "scikit_learn", "yaml": "pyyaml", "IPython": "ipython",
+             "example_robot_data": "example_robot_data", "embreex": "embreex", "manifold3d": "manifold3d",
+             "fast_simplification": "fast_simplification", "coal": "pin"}
+    missing = set()
+    for mod, path in MODULES.items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else (
+                [node.module] if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module else [])
+            for n in names:
+                top = n.split(".")[0]
+                if top == "workbench" or top in sys.stdlib_module_names or top == "__future__":
+                    continue
+                if alias.get(top, top).lower().replace("-", "_") not in declared:
+                    missing.add((mod, top))
+    assert not missing, sorted(missing)

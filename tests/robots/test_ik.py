@@ -280,3 +280,24 @@ def test_ik_pool_workers_give_the_rows_of_the_serial_run(panda):
     pooled = ik_feasibility(panda, grips, Scene(), HANDX, WORLDZ, mesh, OPTS, workers=2, progress=False)
     assert np.array_equal(serial.feasible, pooled.feasible)
     assert np.allclose(np.nan_to_num(serial.joints), np.nan_to_num(pooled.joints))
+
+
+def test_a_stored_urdf_robot_is_rebuilt_from_its_row_with_every_field(tmp_path):
+    """A URDF robot with dropped hand geometry is rebuilt from its `robot` row alone (drop_geometry, mesh folders,
+    digest check); a row whose digest does not match is refused in one line."""
+    from workbench.errors import PlanningError
+    from workbench.planners.wan_harada.stages import _robot_from_row
+
+    urdf = erd_robots() / "panda_description" / "urdf" / "panda.urdf"
+    robot = robot_from_urdf(urdf, "panda_hand_tcp", name="mypanda",
+                            drop_geometry=("panda_hand", "panda_leftfinger", "panda_rightfinger"))
+    with Store(tmp_path / "urdf.duckdb") as store:
+        with store.transaction():
+            rid = sql.put_robot(store, robot)
+        row = sql.robot_row(store, rid)
+    rebuilt = _robot_from_row(row)
+    assert rebuilt.spec.digest == robot.spec.digest
+    assert rebuilt.spec.drop_geometry == robot.spec.drop_geometry
+    assert str(urdf.parent) in rebuilt.spec.package_dirs
+    with pytest.raises(PlanningError, match="other kinematics"):
+        _robot_from_row({**row, "digest": "0" * 24})

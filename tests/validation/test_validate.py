@@ -118,7 +118,7 @@ def test_collision_check_agrees_with_the_planner_collider(planner):
     rng = np.random.default_rng(0)
     q = rng.uniform(robot.lower, robot.upper, size=(150, robot.nq))
     place = np.repeat((PoseQuery(int(planner.placement_ids()[0]), 0.5, 0.0, 0.0).move() @ planner.free["rotmat"][0])[None], len(q), 0)
-    lib = planner.ik.collider.collides_q(q, place)
+    lib = planner.ik.solver.collider.collides_q(q, place)
     own = np.array([bool(v.collisions(qi, place[0])) for qi in q])
     assert lib.any() and (~lib).any()
     assert (lib == own).mean() >= 0.99

@@ -1,10 +1,18 @@
-"""python-fcl helpers: BVH models from meshes and one geometry tested at many poses against a fixed object."""
+"""Every python-fcl call of the planners: BVH models from meshes, shapes from pinocchio collision geometry,
+collision objects at poses, one geometry tested at many poses against a fixed object, swept cylinders.
+
+(The independent plan validator keeps its own collision code on purpose, so that it shares none with the
+planners it checks.)"""
 
 from __future__ import annotations
 
 import fcl
 import numpy as np
 import trimesh
+
+from workbench.errors import WorkbenchError
+
+REQUEST = fcl.CollisionRequest()  # stateless: a boolean contact query
 
 
 def bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
@@ -34,3 +42,60 @@ def object_collider(mesh: trimesh.Trimesh, pose: np.ndarray | None = None) -> fc
     if pose is not None:
         obj.setTransform(fcl.Transform(pose[:3, :3], pose[:3, 3]))
     return obj
+
+
+def collision_object(geometry: fcl.CollisionGeometry, pose: np.ndarray | None = None) -> fcl.CollisionObject:
+    """An fcl collision object of `geometry` at a 4x4 `pose` (identity by default)."""
+    if pose is None:
+        return fcl.CollisionObject(geometry, fcl.Transform())
+    return fcl.CollisionObject(geometry, fcl.Transform(np.asarray(pose[:3, :3]), np.asarray(pose[:3, 3])))
+
+
+def box(extents: np.ndarray) -> fcl.Box:
+    """An fcl box of full `extents` (3,), centred on its frame."""
+    return fcl.Box(*np.asarray(extents, dtype=np.float64))
+
+
+def set_pose(obj: fcl.CollisionObject, rotation: np.ndarray, translation: np.ndarray) -> None:
+    """Move a collision object to a rotation (3, 3) and translation (3,)."""
+    obj.setRotation(rotation)
+    obj.setTranslation(translation)
+
+
+def collide(a: fcl.CollisionObject, b: fcl.CollisionObject) -> bool:
+    """Whether two placed collision objects intersect."""
+    return fcl.collide(a, b, REQUEST, fcl.CollisionResult()) > 0
+
+
+def pinocchio_geometry(go) -> tuple[fcl.CollisionGeometry, trimesh.Trimesh]:
+    """An fcl geometry and a trimesh of one pinocchio GeometryObject (in the geometry's own frame)."""
+    geom = go.geometry
+    kind = type(geom).__name__
+    if kind == "Box" or hasattr(geom, "halfSide"):
+        ext = 2 * np.asarray(geom.halfSide, dtype=np.float64)
+        return fcl.Box(*ext), trimesh.creation.box(extents=ext)
+    if kind == "Cylinder":
+        r, h = float(geom.radius), 2 * float(geom.halfLength)
+        return fcl.Cylinder(r, h), trimesh.creation.cylinder(radius=r, height=h, sections=24)
+    if kind == "Sphere":
+        r = float(geom.radius)
+        return fcl.Sphere(r), trimesh.creation.icosphere(radius=r, subdivisions=2)
+    if kind == "Capsule":
+        r, h = float(geom.radius), 2 * float(geom.halfLength)
+        return fcl.Capsule(r, h), trimesh.creation.capsule(radius=r, height=h)
+    if go.meshPath:
+        mesh = trimesh.load(go.meshPath, force="mesh")
+        mesh.apply_scale(np.asarray(go.meshScale, dtype=np.float64))
+        return bvh(mesh), mesh
+    raise WorkbenchError(f"collision geometry {go.name} has unsupported type {kind}; use meshes or primitives")
+
+
+def cylinders_collide(radius: float, lengths: np.ndarray, rotations: np.ndarray, centres: np.ndarray,
+                      target: fcl.CollisionObject, skip: np.ndarray | None = None) -> np.ndarray:
+    """(N,) whether each cylinder (radius, length along its z, rotation (N, 3, 3), centre (N, 3)) hits `target`;
+    rows where `skip` is True are not tested (False)."""
+    out = np.zeros(len(lengths), dtype=bool)
+    for k in np.flatnonzero(~skip if skip is not None else np.ones(len(lengths), dtype=bool)):
+        cyl = fcl.CollisionObject(fcl.Cylinder(radius, float(lengths[k])), fcl.Transform(rotations[k], centres[k]))
+        out[k] = collide(cyl, target)
+    return out

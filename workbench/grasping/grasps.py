@@ -17,7 +17,12 @@ import numpy as np
 import trimesh
 
 from workbench.errors import WorkbenchError
-from workbench.geometry.collision import bvh, collide_at_poses, object_collider
+from workbench.geometry.collision import (
+    bvh,
+    collide_at_poses,
+    cylinders_collide,
+    object_collider,
+)
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
@@ -271,8 +276,6 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     side's facet normal and the jaw axis: a flat pad closing on a facet tilted within the antiparallel tolerance
     first touches it at the pad's rim, and that touch is the contact, not a collision.
     """
-    import fcl
-
     out = np.zeros(len(point0), dtype=bool)
     if len(point0) == 0:
         return out
@@ -280,7 +283,6 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     width = np.linalg.norm(point0 - point1, axis=1)
     radius, y_near, y_far = gripper.pad_sweep(width)
     mid = 0.5 * (point0 + point1)
-    req = fcl.CollisionRequest()
     for side, normal in ((1.0, normal0), (-1.0, normal1)):
         axis = side * y
         near = y_near.copy()
@@ -290,7 +292,5 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
         near = np.minimum(near, y_far - 1e-4)
         rot = np.stack([z0, np.cross(axis, z0), axis], axis=2)  # right-handed: fcl needs a proper rotation
         centre = mid + axis * (0.5 * (near + y_far))[:, None]
-        for k in np.flatnonzero(~out):
-            cyl = fcl.CollisionObject(fcl.Cylinder(radius, y_far[k] - near[k]), fcl.Transform(rot[k], centre[k]))
-            out[k] = fcl.collide(cyl, target, req, fcl.CollisionResult()) > 0
+        out |= cylinders_collide(radius, y_far - near, rot, centre, target, skip=out)
     return out

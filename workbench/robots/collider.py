@@ -11,6 +11,14 @@ import numpy as np
 import trimesh
 
 from workbench.errors import RobotError
+from workbench.geometry.collision import (
+    box,
+    bvh,
+    collide,
+    collision_object,
+    pinocchio_geometry,
+    set_pose,
+)
 from workbench.robots.chain import forward
 from workbench.robots.model import Robot
 
@@ -52,37 +60,6 @@ def default_scene(robot_name: str) -> Scene:
     return DEFAULT_SCENES.get(robot_name, Scene())
 
 
-def _geometry_mesh(go, fcl_mod) -> tuple[object, trimesh.Trimesh]:
-    """An fcl geometry and a trimesh of one pinocchio GeometryObject (in the geometry's own frame)."""
-    geom = go.geometry
-    kind = type(geom).__name__
-    if kind == "Box" or hasattr(geom, "halfSide"):
-        ext = 2 * np.asarray(geom.halfSide, dtype=np.float64)
-        return fcl_mod.Box(*ext), trimesh.creation.box(extents=ext)
-    if kind == "Cylinder":
-        r, h = float(geom.radius), 2 * float(geom.halfLength)
-        return fcl_mod.Cylinder(r, h), trimesh.creation.cylinder(radius=r, height=h, sections=24)
-    if kind == "Sphere":
-        r = float(geom.radius)
-        return fcl_mod.Sphere(r), trimesh.creation.icosphere(radius=r, subdivisions=2)
-    if kind == "Capsule":
-        r, h = float(geom.radius), 2 * float(geom.halfLength)
-        return fcl_mod.Capsule(r, h), trimesh.creation.capsule(radius=r, height=h)
-    if go.meshPath:
-        mesh = trimesh.load(go.meshPath, force="mesh")
-        mesh.apply_scale(np.asarray(go.meshScale, dtype=np.float64))
-        return _bvh(mesh, fcl_mod), mesh
-    raise RobotError(f"collision geometry {go.name} has unsupported type {kind}")
-
-
-def _bvh(mesh: trimesh.Trimesh, fcl_mod):
-    model = fcl_mod.BVHModel()
-    model.beginModel(len(mesh.vertices), len(mesh.faces))
-    model.addSubModel(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int32))
-    model.endModel()
-    return model
-
-
 def _obb(mesh: trimesh.Trimesh, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bounding box of `mesh` (axis-aligned in the mesh's frame) placed at `pose`: rotation (3, 3), centre (3,),
     half extents (3,) (plus 0.1 mm)."""
@@ -99,24 +76,21 @@ class Collider:
     (configuration, part) pairs only."""
 
     def __init__(self, robot: Robot, scene: Scene, obj_mesh: trimesh.Trimesh | None):
-        import fcl
-
-        self.fcl = fcl
         self.robot = robot
         joints, obbs, objs, vs_obj, names = [], [], [], [], []
         for k in robot.arm_geometry():
             go = robot.geom.geometryObjects[k]
-            g, mesh = _geometry_mesh(go, fcl)
+            g, mesh = pinocchio_geometry(go)
             pl = np.asarray(go.placement.homogeneous)
             joints.append(go.parentJoint - 1)
             obbs.append(_obb(mesh, pl))
-            objs.append((pl, fcl.CollisionObject(g, fcl.Transform())))
+            objs.append((pl, collision_object(g)))
             vs_obj.append(True)
             names.append(go.name)
         grip = robot.gripper.collision_mesh()
         joints.append(robot.nq - 1)
         obbs.append(_obb(grip, robot.tip_in_joint))
-        objs.append((robot.tip_in_joint, fcl.CollisionObject(_bvh(grip, fcl), fcl.Transform())))
+        objs.append((robot.tip_in_joint, collision_object(bvh(grip))))
         vs_obj.append(False)
         names.append("gripper")
         self.names = names
@@ -129,28 +103,27 @@ class Collider:
         tmin = np.array([scene.table_min[0], scene.table_min[1], -scene.table_thickness])
         tmax = np.array([scene.table_max[0], scene.table_max[1], 0.0])
         self.table_box = (tmin, tmax)
-        self.table = fcl.CollisionObject(fcl.Box(*(tmax - tmin)), fcl.Transform(0.5 * (tmin + tmax)))
+        at = np.eye(4)
+        at[:3, 3] = 0.5 * (tmin + tmax)
+        self.table = collision_object(box(tmax - tmin), at)
         self.obj = None
         if obj_mesh is not None:
-            self.obj = fcl.CollisionObject(_bvh(obj_mesh, fcl), fcl.Transform())
+            self.obj = collision_object(bvh(obj_mesh))
             self.obj_obb = _obb(obj_mesh, np.eye(4))
-        self.request = fcl.CollisionRequest()
 
     def fixed_parts_hit_table(self) -> list[str]:
         """Names of the robot's fixed collision objects (base, locked legs) that cut into the table below its top 5 mm."""
-        fcl = self.fcl
         robot = self.robot
         tmin, tmax = self.table_box
         depth = max(tmax[2] - tmin[2] - 0.005, 1e-3)
-        top = fcl.CollisionObject(fcl.Box(tmax[0] - tmin[0], tmax[1] - tmin[1], depth),
-                                  fcl.Transform(np.array([0.5 * (tmin[0] + tmax[0]), 0.5 * (tmin[1] + tmax[1]), -0.005 - depth / 2])))
+        at = np.eye(4)
+        at[:3, 3] = (0.5 * (tmin[0] + tmax[0]), 0.5 * (tmin[1] + tmax[1]), -0.005 - depth / 2)
+        top = collision_object(box(np.array([tmax[0] - tmin[0], tmax[1] - tmin[1], depth])), at)
         out = []
         for k in robot.fixed_geometry():
             go = robot.geom.geometryObjects[k]
-            g, _ = _geometry_mesh(go, fcl)
-            pose = robot.base @ np.asarray(go.placement.homogeneous)
-            obj = fcl.CollisionObject(g, fcl.Transform(pose[:3, :3], pose[:3, 3]))
-            if fcl.collide(obj, top, self.request, fcl.CollisionResult()):
+            g, _ = pinocchio_geometry(go)
+            if collide(collision_object(g, robot.base @ np.asarray(go.placement.homogeneous)), top):
                 out.append(go.name)
         return out
 
@@ -166,7 +139,6 @@ class Collider:
                  table_only: bool = False) -> np.ndarray:
         """(B,) True where a configuration's arm or gripper hits the table or its arm hits the object placed at
         `placements` (B, 4, 4)."""
-        fcl = self.fcl
         b = len(rot)
         if b == 0:
             return np.zeros(0, dtype=bool)
@@ -186,16 +158,14 @@ class Collider:
                 continue
             j = self.joint[pi]
             pl, cobj = self.parts[pi]
-            cobj.setRotation(rot[bi, j] @ pl[:3, :3])
-            cobj.setTranslation(rot[bi, j] @ pl[:3, 3] + pos[bi, j])
-            if cand_table[bi, pi] and fcl.collide(cobj, self.table, self.request, fcl.CollisionResult()):
+            set_pose(cobj, rot[bi, j] @ pl[:3, :3], rot[bi, j] @ pl[:3, 3] + pos[bi, j])
+            if cand_table[bi, pi] and collide(cobj, self.table):
                 hit[bi] = True
                 continue
             if cand_obj[bi, pi]:
                 p = placements[bi]
-                self.obj.setRotation(p[:3, :3])
-                self.obj.setTranslation(p[:3, 3])
-                if fcl.collide(cobj, self.obj, self.request, fcl.CollisionResult()):
+                set_pose(self.obj, p[:3, :3], p[:3, 3])
+                if collide(cobj, self.obj):
                     hit[bi] = True
         return hit
 
