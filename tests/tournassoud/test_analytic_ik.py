@@ -1,0 +1,77 @@
+"""Closed-form IK of spherical-wrist arms (Tournassoud et al. 1987, Section 5.2) checked against pinocchio's FK.
+
+Every branch returned for a pose must reproduce that pose through pinocchio's forward kinematics on the URDF, and
+the configuration the pose came from must be one of the 8 branches.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from workbench.analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
+from workbench.errors import RobotError
+from workbench.resources import ASSETS
+from workbench.robots import get_robot, robot_from_urdf
+
+HAND = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
+
+
+@pytest.fixture(scope="module")
+def puma():
+    return robot_from_urdf(ASSETS / "robots" / "puma560.urdf", "panda_hand_tcp", name="puma560", drop_geometry=HAND)
+
+
+def _fk(robot, qs: np.ndarray) -> np.ndarray:
+    """TCP poses of joint vectors with pinocchio on the URDF text (not the solver's chain description)."""
+    model = pin.buildModelFromXML(robot.spec.urdf)
+    data = model.createData()
+    fid = model.getFrameId("panda_hand_tcp")
+    idx = [model.joints[model.getJointId(n)].idx_q for n in robot.joint_names]
+    out = []
+    for q in qs:
+        full = pin.neutral(model)
+        full[idx] = q
+        pin.framesForwardKinematics(model, data, full)
+        out.append(robot.base @ np.asarray(data.oMf[fid].homogeneous))
+    return np.array(out)
+
+
+def test_puma_has_spherical_wrist_others_not(puma):
+    assert spherical_wrist_reason(puma) == ""
+    assert "joints" in spherical_wrist_reason(get_robot("panda"))
+    assert "spherical wrist" in spherical_wrist_reason(get_robot("ur5"))
+    with pytest.raises(RobotError, match="no closed-form IK"):
+        analytic_ik(get_robot("ur5"))
+
+
+def test_eight_branches_reproduce_fk(puma):
+    rng = np.random.default_rng(7)
+    qs = rng.uniform(puma.lower, puma.upper, size=(1000, 6))
+    poses = _fk(puma, qs)
+    joints, valid = solve(analytic_ik(puma, limits=False), poses)
+    assert joints.shape == (1000, 8, 6)
+    assert valid.all()
+    back = _fk(puma, joints.reshape(-1, 6)).reshape(1000, 8, 4, 4)
+    assert np.abs(back - poses[:, None]).max() < 1e-9
+    # the 8 branches are distinct and one of them is the configuration the pose came from
+    diff = np.abs(np.angle(np.exp(1j * (joints - qs[:, None])))).max(axis=2)
+    assert diff.min(axis=1).max() < 1e-9
+    dist = np.abs(joints[:, :, None] - joints[:, None, :]).max(axis=3) + np.eye(8) * 10
+    assert (dist.min(axis=(1, 2)) > 1e-6).mean() > 0.99
+
+
+def test_joint_limits_applied(puma):
+    rng = np.random.default_rng(3)
+    qs = rng.uniform(puma.lower, puma.upper, size=(300, 6))
+    joints, valid = solve(analytic_ik(puma), _fk(puma, qs))
+    ok = joints[valid]
+    assert ((ok >= puma.lower - 1e-12) & (ok <= puma.upper + 1e-12)).all()
+    assert valid.any(axis=1).all()  # the generating configuration is within limits
+    near, found = nearest_branch(joints, valid, qs)
+    assert found.all() and np.abs(near - qs).max() < 1e-8
+    # a pose out of reach has no branch
+    far = np.eye(4)
+    far[:3, 3] = (3.0, 0, 0.5)
+    assert not solve(analytic_ik(puma), far[None])[1].any()

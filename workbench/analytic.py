@@ -1,0 +1,270 @@
+"""Closed-form inverse kinematics of 6R arms with a spherical wrist (Tournassoud, Lozano-Perez & Mazer 1987,
+Section 5.2: the last three axes intersect, so joints 1-3 follow from the wrist point, joints 4-6 from the
+orientation).
+
+The solver is read off the pinocchio model of any `Robot` (no DH table needed). It applies when
+
+- the arm has six revolute joints;
+- axes 4, 5 and 6 meet in one point, the wrist centre W (a spherical wrist);
+- axes 1 and 2 meet in one point O (a PUMA-like shoulder, as in the PUMA 560, KUKA, ABB and Staubli arms).
+
+Then (Pieper's decoupling, solved with Paden-Kahan subproblems):
+
+1. |W - O| does not depend on q1, q2: one equation A cos q3 + B sin q3 = C, two solutions (elbow);
+2. W's height along axis 1 does not depend on q1: A cos q2 + B sin q2 = C, two solutions (shoulder);
+3. q1 rotates the resulting point onto W about axis 1 (one solution);
+4. with c the wrist's last axis: a4 . R5(q5) c = a4 . Y c gives two q5 (wrist flip); q4 and q6 are single rotations.
+
+All 2 x 2 x 2 = 8 branches are computed for many poses at once with numpy (struct-of-arrays, no per-pose loop).
+Branches without a real solution or outside the joint limits come back as NaN with `valid` False.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import RobotError
+
+TOL_AXES = 1e-9  # metres: how close lines must pass to count as intersecting
+
+
+@dataclass(frozen=True)
+class AnalyticIK:
+    """Constants of the closed form for one robot (see the module docstring); build with `analytic_ik(robot)`."""
+
+    base_inv: np.ndarray      # world -> robot root
+    tip_inv: np.ndarray       # TCP -> joint-6 frame
+    m1_inv: np.ndarray        # root -> joint-1 parent placement removed
+    m: tuple                  # (R, t) placements of joints 2..6 in their parent joint's frame
+    axes: np.ndarray          # (6, 3) joint axes in their own frames
+    o: np.ndarray             # intersection of axes 1 and 2, joint-1 frame
+    o2: np.ndarray            # the same point in joint-2 frame
+    w3: np.ndarray            # wrist centre in joint-3 frame
+    c6: np.ndarray            # wrist centre in joint-6 frame
+    wrist_a: np.ndarray       # axes 4, 5, 6 expressed in joint-4 frame at q = 0
+    wrist_b: np.ndarray
+    wrist_c: np.ndarray
+    wrist_d: np.ndarray       # a unit vector orthogonal to wrist_c
+    wrist_at: np.ndarray      # (R5 R6)^T: maps joint-6 frame vectors to joint-4 frame at q5 = q6 = 0
+    lower: np.ndarray
+    upper: np.ndarray
+    joint_names: tuple[str, ...]
+
+
+def _closest(p: np.ndarray, u: np.ndarray, q: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, float]:
+    """Midpoint of the closest points of lines p + s u and q + t v, and their distance (inf if parallel)."""
+    w = p - q
+    a, b, c, d, e = u @ u, u @ v, v @ v, u @ w, v @ w
+    den = a * c - b * b
+    if den < 1e-12:
+        return p, float("inf")
+    s, t = (b * e - c * d) / den, (a * e - b * d) / den
+    x, y = p + s * u, q + t * v
+    return (x + y) / 2, float(np.linalg.norm(x - y))
+
+
+def _dist_line(x: np.ndarray, p: np.ndarray, u: np.ndarray) -> float:
+    r = x - p
+    return float(np.linalg.norm(r - (r @ u) * u))
+
+
+def spherical_wrist_reason(robot) -> str:
+    """Why the closed form does not apply to `robot` ('' when it does)."""
+    if robot.nq != 6:
+        return f"it has {robot.nq} joints, not 6"
+    if robot.chain_prismatic.any():
+        return "it has prismatic joints"
+    pl, ax = robot.chain_placement, robot.chain_axis
+    # axes 4, 5, 6 in joint-4 frame
+    m5, m6 = pl[4], pl[5]
+    a4, p4 = ax[3], np.zeros(3)
+    a5, p5 = m5[:3, :3] @ ax[4], m5[:3, 3]
+    m56 = m5 @ m6
+    a6, p6 = m56[:3, :3] @ ax[5], m56[:3, 3]
+    w, d45 = _closest(p4, a4, p5, a5)
+    if d45 > TOL_AXES or _dist_line(w, p6, a6) > TOL_AXES:
+        return "its last three axes do not meet in one point (no spherical wrist)"
+    m2 = pl[1]
+    _, d12 = _closest(np.zeros(3), ax[0], m2[:3, 3], m2[:3, :3] @ ax[1])
+    if d12 > TOL_AXES:
+        return "its first two axes do not intersect"
+    return ""
+
+
+def analytic_ik(robot, limits: bool = True) -> AnalyticIK:
+    """The closed-form solver of `robot` (Section 5.2), or a RobotError saying why it has none.
+
+    `limits=False` keeps every branch regardless of the joint limits (angles then in (-pi, pi])."""
+    why = spherical_wrist_reason(robot)
+    if why:
+        raise RobotError(f"robot {robot.name!r} has no closed-form IK: {why}; use the numerical IK (ik_feasibility)")
+    pl, ax = robot.chain_placement, robot.chain_axis
+    m2 = pl[1]
+    o, _ = _closest(np.zeros(3), ax[0], m2[:3, 3], m2[:3, :3] @ ax[1])
+    inv = np.linalg.inv
+    o2 = (inv(m2) @ np.append(o, 1))[:3]
+    m5, m6 = pl[4], pl[5]
+    w4, _ = _closest(np.zeros(3), ax[3], m5[:3, 3], m5[:3, :3] @ ax[4])
+    w3 = (pl[3] @ np.append(w4, 1))[:3]
+    c6 = (inv(m5 @ m6) @ np.append(w4, 1))[:3]
+    r56 = m5[:3, :3] @ m6[:3, :3]
+    a, b, c = ax[3], m5[:3, :3] @ ax[4], r56 @ ax[5]
+    d = np.cross(c, [1.0, 0, 0]) if abs(c[0]) < 0.9 else np.cross(c, [0, 1.0, 0])
+    d /= np.linalg.norm(d)
+    big = np.full(6, np.inf)
+    return AnalyticIK(base_inv=inv(robot.base), tip_inv=inv(robot.tip_in_joint), m1_inv=inv(pl[0]),
+                      m=tuple((pl[k][:3, :3].copy(), pl[k][:3, 3].copy()) for k in range(1, 6)), axes=ax.copy(),
+                      o=o, o2=o2, w3=w3, c6=c6, wrist_a=a, wrist_b=b, wrist_c=c, wrist_d=d, wrist_at=r56.T,
+                      lower=robot.lower.copy() if limits else -big, upper=robot.upper.copy() if limits else big,
+                      joint_names=tuple(robot.joint_names))
+
+
+# -- vector helpers, struct of arrays: vectors (3, N) ---------------------------------------------------------------
+
+
+def _rot(k: np.ndarray, c: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v (3, N) about the constant unit axis k by angles with cosines c and sines s (Rodrigues)."""
+    kv = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1 - c)
+    return np.stack((v[0] * c + (k[1] * v[2] - k[2] * v[1]) * s + k[0] * kv,
+                     v[1] * c + (k[2] * v[0] - k[0] * v[2]) * s + k[1] * kv,
+                     v[2] * c + (k[0] * v[1] - k[1] * v[0]) * s + k[2] * kv))
+
+
+def _lin(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Constant 3x3 matrix times vectors (3, N)."""
+    return np.stack((r[0, 0] * v[0] + r[0, 1] * v[1] + r[0, 2] * v[2],
+                     r[1, 0] * v[0] + r[1, 1] * v[1] + r[1, 2] * v[2],
+                     r[2, 0] * v[0] + r[2, 1] * v[1] + r[2, 2] * v[2]))
+
+
+def _dot(k: np.ndarray, v: np.ndarray) -> np.ndarray:
+    return k[0] * v[0] + k[1] * v[1] + k[2] * v[2]
+
+
+def _acs(a, b, c) -> tuple[np.ndarray, np.ndarray]:
+    """Both solutions x of a cos x + b sin x = c as (cos x, sin x), each (2, N) (NaN where there is none)."""
+    r2 = a * a + b * b
+    x = c / np.sqrt(r2)
+    x = np.where(np.abs(x) <= 1 + 1e-10, np.clip(x, -1, 1), np.nan)
+    sd = np.sqrt(1 - x * x)
+    ca, sa = a / np.sqrt(r2), b / np.sqrt(r2)
+    # x = phi +/- delta with cos phi = ca, sin phi = sa, cos delta = x, sin delta = sd
+    cs = np.stack((ca * x - sa * sd, ca * x + sa * sd))
+    sn = np.stack((sa * x + ca * sd, sa * x - ca * sd))
+    return cs, sn
+
+
+def _sub1(k: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(cos, sin) of the angle rotating u onto v about the constant unit axis k (Paden-Kahan subproblem 1)."""
+    ku, kv = _dot(k, u), _dot(k, v)
+    up = u - np.multiply.outer(k, ku)
+    vp = v - np.multiply.outer(k, kv)
+    y = (k[0] * (up[1] * vp[2] - up[2] * vp[1]) + k[1] * (up[2] * vp[0] - up[0] * vp[2])
+         + k[2] * (up[0] * vp[1] - up[1] * vp[0]))
+    x = up[0] * vp[0] + up[1] * vp[1] + up[2] * vp[2]
+    h = np.hypot(x, y)
+    h = np.where(h > 0, h, 1.0)
+    return np.where(h > 0, x / h, 1.0), y / h
+
+
+def _limit(q: np.ndarray, lo: float, hi: float) -> np.ndarray:
+    """q in (-pi, pi] moved by a multiple of 2 pi into [lo, hi] (the representative nearest to 0), NaN if none."""
+    ok = (q >= lo) & (q <= hi)
+    if ok.all() or not np.isfinite(lo) and not np.isfinite(hi):
+        return q
+    out = np.where(ok, q, np.nan)
+    for shift in (-2 * np.pi, 2 * np.pi):
+        alt = q + shift
+        out = np.where(np.isnan(out) & (alt >= lo) & (alt <= hi), alt, out)
+    return out
+
+
+def _tile(v: np.ndarray, k: int) -> np.ndarray:
+    """Repeat the last axis block k times: (..., N) -> (..., k N), branch-major."""
+    return np.concatenate([v] * k, axis=-1)
+
+
+def solve(ik: AnalyticIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """All 8 IK branches of TCP poses (N, 4, 4) in the world: joints (N, 8, 6) and valid (N, 8).
+
+    Branch index bits: 4 = elbow (q3 root), 2 = shoulder (q2 root), 1 = wrist flip (q5 root). Section 5.2."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    n = len(poses)
+    # the joint-6 frame in the robot root is B P T (B = base^-1, P = pose, T = TCP -> joint 6); only its products
+    # with constant vectors are needed: B P T u = B (P_R (T_R u) + P_t + P_R T_t) ...
+    pr = poses[:, :3, :3].transpose(1, 2, 0)                 # (3, 3, N)
+    b, t, m1i = ik.base_inv, ik.tip_inv, ik.m1_inv
+
+    def rot6(u: np.ndarray) -> np.ndarray:
+        """R6 u in the joint-1 parent frame with M1's rotation removed: M1_R^T B_R P_R T_R u."""
+        k = t[:3, :3] @ u
+        return _lin(m1i[:3, :3] @ b[:3, :3], pr[:, 0] * k[0] + pr[:, 1] * k[1] + pr[:, 2] * k[2])
+
+    k = t[:3, :3] @ ik.c6 + t[:3, 3]
+    w = pr[:, 0] * k[0] + pr[:, 1] * k[1] + pr[:, 2] * k[2] + poses[:, :3, 3].T
+    mb = m1i @ b
+    pw = _lin(mb[:3, :3], w) + mb[:3, 3][:, None]             # wrist centre before q1
+    ax = ik.axes
+    (r2, p2), (r3, p3), (r4, _), _, _ = ik.m
+    a1, a2, a3 = ax[0], ax[1], ax[2]
+    # 1. elbow: |v(q3) - o2|^2 = |pw - o|^2 -> two q3
+    rad2 = ((pw - ik.o[:, None]) ** 2).sum(0)
+    g = r3.T @ (p3 - ik.o2)
+    w3 = ik.w3
+    wpar = a3 * (a3 @ w3)
+    c0 = (p3 - ik.o2) @ (p3 - ik.o2) + w3 @ w3 + 2 * g @ wpar
+    c3, s3 = _acs(2 * g @ (w3 - wpar), 2 * g @ np.cross(a3, w3), rad2 - c0)
+    c3, s3 = c3.reshape(-1), s3.reshape(-1)                    # (2N)
+    m = 2 * n
+    wv = np.broadcast_to(w3[:, None], (3, m))
+    v = _lin(r3, _rot(a3, c3, s3, wv)) + p3[:, None]
+    # 2. shoulder: height of W along axis 1 -> two q2 per q3
+    a1p = r2.T @ a1
+    vpar = np.multiply.outer(a2, _dot(a2, v))
+    vperp = v - vpar
+    av = np.stack((a2[1] * v[2] - a2[2] * v[1], a2[2] * v[0] - a2[0] * v[2], a2[0] * v[1] - a2[1] * v[0]))
+    h = _tile(_dot(a1, pw) - a1 @ p2, 2)
+    c2, s2 = _acs(_dot(a1p, vperp), _dot(a1p, av), h - _dot(a1p, vpar))
+    c2, s2 = c2.reshape(-1), s2.reshape(-1)                    # (4N): [q2 root][q3 root][pose]
+    m = 4 * n
+    vpar, vperp, av = _tile(vpar, 2), _tile(vperp, 2), _tile(av, 2)
+    c3, s3 = _tile(c3, 2), _tile(s3, 2)
+    x = _lin(r2, vpar + vperp * c2 + av * s2) + p2[:, None]
+    # 3. base: rotate x onto W about axis 1
+    c1, s1 = _sub1(a1, x, _tile(pw, 4))
+    # 4. wrist: Y = R4^T R03^T R6 (R5 R6)^T; only Y c and Y d are needed
+    wa, wb, wc, wd = ik.wrist_a, ik.wrist_b, ik.wrist_c, ik.wrist_d
+    ys = []
+    for vec in (wc, wd):
+        y = _rot(a1, c1, -s1, _tile(rot6(ik.wrist_at @ vec), 4))
+        y = _rot(a2, c2, -s2, _lin(r2.T, y))
+        ys.append(_lin(r4.T, _rot(a3, c3, -s3, _lin(r3.T, y))))
+    yc, yd = ys
+    cpar = wb * (wb @ wc)
+    c5, s5 = _acs(wa @ (wc - cpar), wa @ np.cross(wb, wc), _dot(wa, yc) - wa @ cpar)
+    c5, s5 = c5.reshape(-1), s5.reshape(-1)                    # (8N): [q5 root][q2][q3][pose]
+    m = 8 * n
+    u = _rot(wb, c5, s5, np.broadcast_to(wc[:, None], (3, m)))
+    yc, yd = _tile(yc, 2), _tile(yd, 2)
+    c4, s4 = _sub1(wa, u, yc)
+    tt = _rot(wb, c5, -s5, _rot(wa, c4, -s4, yd))
+    c6, s6 = _sub1(wc, np.broadcast_to(wd[:, None], (3, m)), tt)
+    c1, s1, c2, s2, c3, s3 = (_tile(z, 2) for z in (c1, s1, c2, s2, c3, s3))
+    q = np.arctan2(np.stack((s1, s2, s3, s4, s5, s6)), np.stack((c1, c2, c3, c4, c5, c6)))  # (6, 8N)
+    for j in range(6):
+        q[j] = _limit(q[j], ik.lower[j], ik.upper[j])
+    # (6, [q5][q2][q3], N) -> (N, branch = 4 q3 + 2 q2 + q5, 6)
+    q = q.reshape(6, 2, 2, 2, n).transpose(4, 3, 2, 1, 0).reshape(n, 8, 6)
+    valid = np.isfinite(q).all(axis=2)
+    return q, valid
+
+
+def nearest_branch(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose, the valid branch nearest to `q_ref` ((6,) or (N, 6)): joints (N, 6) and whether one exists (N,)."""
+    ref = np.asarray(q_ref, dtype=np.float64)
+    ref = ref[:, None] if ref.ndim == 2 else ref
+    dist = np.where(valid, np.abs(np.nan_to_num(joints - ref, nan=0.0)).sum(axis=2), np.inf)
+    k = np.argmin(dist, axis=1)
+    return joints[np.arange(len(joints)), k], np.isfinite(dist[np.arange(len(joints)), k])
