@@ -261,10 +261,18 @@ def solve(ik: AnalyticIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return q, valid
 
 
-def nearest_branch(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per pose, the valid branch nearest to `q_ref` ((6,) or (N, 6)): joints (N, 6) and whether one exists (N,)."""
+def nearest_branch(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,
+                   upper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose, the valid branch nearest to `q_ref` ((6,) or (N, 6)): joints (N, 6) and whether one exists (N,).
+
+    With limits, each joint is first moved by whole turns toward the reference when that stays within its limits
+    (a wrist joint spanning more than a turn)."""
     ref = np.asarray(q_ref, dtype=np.float64)
-    ref = ref[:, None] if ref.ndim == 2 else ref
+    ref = np.broadcast_to(ref[:, None] if ref.ndim == 2 else ref, joints.shape)
+    if lower is not None and upper is not None:
+        alt = joints + 2 * np.pi * np.round((ref - joints) / (2 * np.pi))
+        joints = np.where((alt >= lower) & (alt <= upper), alt, joints)
     dist = np.where(valid, np.abs(np.nan_to_num(joints - ref, nan=0.0)).sum(axis=2), np.inf)
     k = np.argmin(dist, axis=1)
-    return joints[np.arange(len(joints)), k], np.isfinite(dist[np.arange(len(joints)), k])
+    rows = np.arange(len(joints))
+    return joints[rows, k], np.isfinite(dist[rows, k])

@@ -69,8 +69,8 @@ def test_joint_limits_applied(puma):
     ok = joints[valid]
     assert ((ok >= puma.lower - 1e-12) & (ok <= puma.upper + 1e-12)).all()
     assert valid.any(axis=1).all()  # the generating configuration is within limits
-    near, found = nearest_branch(joints, valid, qs)
-    assert found.all() and np.abs(np.angle(np.exp(1j * (near - qs)))).max() < 1e-8
+    near, found = nearest_branch(joints, valid, qs, puma.lower, puma.upper)
+    assert found.all() and np.abs(near - qs).max() < 1e-8
     # a pose out of reach has no branch
     far = np.eye(4)
     far[:3, 3] = (3.0, 0, 0.5)
