@@ -1,0 +1,256 @@
+"""Features of a polyhedron for grasp classes (Tournassoud, Lozano-Perez & Mazer 1987, Section 2.1).
+
+- Faces: the mesh's coplanar facets (trimesh's facets, lone triangles as their own face), each with its outward
+  normal, plane offset, triangles and area.
+- Edges: feature edges, i.e. mesh edges whose dihedral angle exceeds a parameter; collinear feature edges that
+  share a vertex are merged into one segment.
+- Vertices: the convex ones: at least three distinct adjacent face normals, and every neighbouring vertex strictly
+  on the inner side of the plane through the vertex normal to the mean adjacent face normal.
+
+2D helpers (convex clipping, point in triangle) serve the projections of Section 2.1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+
+@dataclass(frozen=True)
+class Face:
+    """A planar face: outward unit normal, plane offset (normal . x = offset), triangles (T, 3, 3) and area."""
+
+    normal: np.ndarray
+    offset: float
+    triangles: np.ndarray
+    area: float
+
+
+@dataclass(frozen=True)
+class Edge:
+    """A feature edge segment p0-p1 with the outward normals of its two adjacent faces."""
+
+    p0: np.ndarray
+    p1: np.ndarray
+    normals: np.ndarray  # (2, 3)
+
+    @property
+    def direction(self) -> np.ndarray:
+        d = self.p1 - self.p0
+        return d / np.linalg.norm(d)
+
+
+@dataclass(frozen=True)
+class Vertex:
+    """A convex vertex with the outward normals of its adjacent faces."""
+
+    point: np.ndarray
+    normals: np.ndarray  # (K, 3)
+
+
+@dataclass(frozen=True)
+class Features:
+    faces: list[Face]
+    edges: list[Edge]
+    vertices: list[Vertex]
+
+
+def faces_of(mesh: trimesh.Trimesh, min_area: float) -> list[Face]:
+    """The coplanar facets of `mesh` with area >= `min_area`, largest first (Section 2.1)."""
+    groups = [np.asarray(f) for f in mesh.facets]
+    used = np.zeros(len(mesh.faces), dtype=bool)
+    for g in groups:
+        used[g] = True
+    groups += [np.array([t]) for t in np.flatnonzero(~used)]
+    tris = np.asarray(mesh.triangles)
+    areas = np.asarray(mesh.area_faces)
+    out = []
+    for g in groups:
+        area = float(areas[g].sum())
+        if area < min_area:
+            continue
+        n = (np.asarray(mesh.face_normals)[g] * areas[g, None]).sum(axis=0)
+        n /= np.linalg.norm(n)
+        out.append(Face(normal=n, offset=float(np.mean(tris[g].reshape(-1, 3) @ n)), triangles=tris[g], area=area))
+    out.sort(key=lambda f: -f.area)
+    return out
+
+
+def feature_edges(mesh: trimesh.Trimesh, min_angle: float, min_length: float = 0.0) -> list[Edge]:
+    """Mesh edges with a dihedral angle above `min_angle` (radians), collinear neighbours merged (Section 2.1)."""
+    adj = np.asarray(mesh.face_adjacency)
+    if len(adj) == 0:
+        return []
+    angles = np.asarray(mesh.face_adjacency_angles)
+    convex = np.asarray(mesh.face_adjacency_convex)
+    keep = (angles > min_angle) & convex
+    pairs = np.asarray(mesh.face_adjacency_edges)[keep]
+    fn = np.asarray(mesh.face_normals)[adj[keep]]
+    v = np.asarray(mesh.vertices)
+    segs = [[int(a), int(b), n] for (a, b), n in zip(pairs, fn)]
+    # merge collinear segments that share a vertex and the same pair of face normals
+    merged = True
+    while merged:
+        merged = False
+        by_vertex: dict[int, list[int]] = {}
+        for k, (a, b, _) in enumerate(segs):
+            by_vertex.setdefault(a, []).append(k)
+            by_vertex.setdefault(b, []).append(k)
+        for vid, ks in by_vertex.items():
+            if len(ks) != 2:
+                continue
+            s, t = segs[ks[0]], segs[ks[1]]
+            if s is None or t is None:
+                continue
+            da = v[s[1]] - v[s[0]]
+            db = v[t[1]] - v[t[0]]
+            if abs(abs(da @ db) - np.linalg.norm(da) * np.linalg.norm(db)) > 1e-9 * (np.linalg.norm(da) * np.linalg.norm(db)):
+                continue
+            if np.abs(np.abs(s[2] @ t[2].T) - np.eye(2)).max() > 1e-6 and np.abs(np.abs(s[2] @ t[2][::-1].T) - np.eye(2)).max() > 1e-6:
+                continue
+            ends = [x for x in (s[0], s[1], t[0], t[1]) if x != vid]
+            segs[ks[0]] = [ends[0], ends[1], s[2]]
+            segs[ks[1]] = None
+            merged = True
+        segs = [s for s in segs if s is not None]
+    out = [Edge(v[a].copy(), v[b].copy(), n) for a, b, n in segs if np.linalg.norm(v[b] - v[a]) >= min_length]
+    out.sort(key=lambda e: -float(np.linalg.norm(e.p1 - e.p0)))
+    return out
+
+
+def convex_vertices(mesh: trimesh.Trimesh) -> list[Vertex]:
+    """Convex vertices: corners (>= 3 distinct adjacent normals) with all neighbours strictly inside (Section 2.1)."""
+    v = np.asarray(mesh.vertices)
+    fn = np.asarray(mesh.face_normals)
+    out = []
+    nbrs = mesh.vertex_neighbors
+    vf = mesh.vertex_faces
+    for i in range(len(v)):
+        faces = vf[i][vf[i] >= 0]
+        if len(faces) < 3:
+            continue
+        normals = fn[faces]
+        distinct = [normals[0]]
+        for n in normals[1:]:
+            if all(n @ d < 1 - 1e-6 for d in distinct):
+                distinct.append(n)
+        if len(distinct) < 3:
+            continue
+        m = np.mean(distinct, axis=0)
+        if np.linalg.norm(m) < 1e-9:
+            continue
+        m /= np.linalg.norm(m)
+        d = (v[nbrs[i]] - v[i]) @ m
+        if len(d) and (d < -1e-9).all():
+            out.append(Vertex(v[i].copy(), np.array(distinct)))
+    return out
+
+
+def features(mesh: trimesh.Trimesh, min_face_area: float, edge_angle: float) -> Features:
+    """Faces, feature edges and convex vertices of `mesh` (Section 2.1)."""
+    return Features(faces_of(mesh, min_face_area), feature_edges(mesh, edge_angle), convex_vertices(mesh))
+
+
+# -- 2D geometry in a plane --------------------------------------------------------------------------------------
+
+
+def plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A right-handed orthonormal basis (u, v) of the plane normal to n (u x v = n), fixed by n alone."""
+    ref = np.eye(3)[int(np.argmin(np.abs(n)))]
+    u = np.cross(ref, n)
+    u /= np.linalg.norm(u)
+    return u, np.cross(n, u)
+
+
+def clip_convex(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
+    """Sutherland-Hodgman: the convex polygon `subject` (K, 2) clipped by the convex polygon `clip` (M, 2, ccw)."""
+    out = subject
+    m = len(clip)
+    for k in range(m):
+        if len(out) == 0:
+            break
+        a, b = clip[k], clip[(k + 1) % m]
+        e = b - a
+        side = e[0] * (out[:, 1] - a[1]) - e[1] * (out[:, 0] - a[0])  # >= 0 inside (left of a->b)
+        nxt = np.roll(out, -1, axis=0)
+        side_n = np.roll(side, -1)
+        pts = []
+        for p, q, sp, sq in zip(out, nxt, side, side_n):
+            if sp >= 0:
+                pts.append(p)
+            if (sp >= 0) != (sq >= 0):
+                pts.append(p + (q - p) * (sp / (sp - sq)))
+        out = np.array(pts).reshape(-1, 2)
+    return out
+
+
+def ccw(poly: np.ndarray) -> np.ndarray:
+    return poly if area2d(poly) >= 0 else poly[::-1]
+
+
+def area2d(poly: np.ndarray) -> float:
+    """Signed area of a polygon (K, 2)."""
+    if len(poly) < 3:
+        return 0.0
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
+
+
+def centroid2d(poly: np.ndarray) -> np.ndarray:
+    a = area2d(poly)
+    if abs(a) < 1e-18:
+        return poly.mean(axis=0)
+    x, y = poly[:, 0], poly[:, 1]
+    xn, yn = np.roll(x, -1), np.roll(y, -1)
+    cr = x * yn - xn * y
+    return np.array([((x + xn) * cr).sum(), ((y + yn) * cr).sum()]) / (6 * a)
+
+
+def in_triangles(points: np.ndarray, tris: np.ndarray, eps: float = 1e-12) -> np.ndarray:
+    """(N,) whether each 2D point lies inside one of the 2D triangles (T, 3, 2): strictly for eps > 0, edges
+    included for eps < 0."""
+    p = points[:, None, :]
+    a, b, c = tris[None, :, 0], tris[None, :, 1], tris[None, :, 2]
+
+    def cross(o, s, t):
+        return (s[..., 0] - o[..., 0]) * (t[..., 1] - o[..., 1]) - (s[..., 1] - o[..., 1]) * (t[..., 0] - o[..., 0])
+
+    d1, d2, d3 = cross(a, b, p), cross(b, c, p), cross(c, a, p)
+    pos = (d1 > eps) & (d2 > eps) & (d3 > eps)
+    neg = (d1 < -eps) & (d2 < -eps) & (d3 < -eps)
+    return (pos | neg).any(axis=1)
+
+
+def clip_segment(p0: np.ndarray, p1: np.ndarray, tris: np.ndarray) -> list[tuple[float, float]]:
+    """Parameter intervals [s0, s1] of the 2D segment p0 + s (p1 - p0) inside the union of triangles (T, 3, 2)."""
+    spans = []
+    d = p1 - p0
+    for tri in tris:
+        tri = ccw(tri)
+        lo, hi = 0.0, 1.0
+        for k in range(3):
+            a, b = tri[k], tri[(k + 1) % 3]
+            e = b - a
+            f0 = e[0] * (p0[1] - a[1]) - e[1] * (p0[0] - a[0])
+            fd = e[0] * d[1] - e[1] * d[0]
+            if abs(fd) < 1e-18:
+                if f0 < 0:
+                    lo, hi = 1.0, 0.0
+                continue
+            s = -f0 / fd
+            if fd > 0:
+                lo = max(lo, s)
+            else:
+                hi = min(hi, s)
+        if hi - lo > 1e-12:
+            spans.append((lo, hi))
+    spans.sort()
+    merged: list[list[float]] = []
+    for lo, hi in spans:
+        if merged and lo <= merged[-1][1] + 1e-12:
+            merged[-1][1] = max(merged[-1][1], hi)
+        else:
+            merged.append([lo, hi])
+    return [(a, b) for a, b in merged]

@@ -1,0 +1,194 @@
+"""The grasp-placement table Q_ij (Tournassoud, Lozano-Perez & Mazer 1987, Sections 4.1 and 5).
+
+For a grasp class G_i (angle theta) and a placement class P_j (angle phi about the vertical through the table
+point H), the object rests at  T_H Rz(phi) P_j  in the world and the TCP is at  T_H Rz(phi) P_j G_i(theta).
+Q_ij, the legal (theta, phi) pairs, is sampled on a theta x phi grid and pruned in the paper's order:
+
+1. hand-object collision: theta inside the class's legal intervals (Section 5.1, `classes.py`);
+2. hand-table collision: the hand and both fingers at full opening stay `clearance` above the table. It depends
+   on theta and P_j only, not on phi (a rotation about the vertical keeps heights);
+3. inverse kinematics within the joint limits (Section 5.2): for each remaining theta sample, the phi samples with
+   at least one IK branch; stored as a union of phi intervals. Arms with a spherical wrist use the closed form
+   (`workbench.analytic`, all 8 branches); other arms the workbench's numerical IK.
+
+The table is a boolean array q[i, j, t, f] over classes, placements, theta samples and phi samples.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+from tqdm import tqdm
+
+from ...analytic import analytic_ik, solve, spherical_wrist_reason
+from ...errors import WorkbenchError
+from ...placements import grips_above_table
+from ...robots import Robot
+from .classes import GraspClass
+
+
+@dataclass(frozen=True)
+class TableParams:
+    """Resolutions (radians), the table point H = (x, y) on the table top in the world, the hand's clearance above
+    the table (m) and the IK batch size."""
+
+    theta_step: float = np.radians(5.0)
+    phi_step: float = np.radians(5.0)
+    table_point: tuple[float, float] = (0.45, 0.0)
+    clearance: float = 0.002
+    chunk: int = 20000
+
+    def __post_init__(self) -> None:
+        for name in ("theta_step", "phi_step"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and 0 < v <= np.pi / 2):
+                raise WorkbenchError(f"{name.replace('_', ' ')} must be in (0, 90] degrees, got {np.degrees(v):g}")
+        if len(self.table_point) != 2 or not np.isfinite(self.table_point).all():
+            raise WorkbenchError(f"table point must be two finite numbers X,Y in metres, got {self.table_point}")
+        if self.clearance < 0:
+            raise WorkbenchError(f"clearance must be non-negative, got {self.clearance}")
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d["table_point"] = [float(x) for x in self.table_point]
+        return d
+
+
+def grid(step: float) -> np.ndarray:
+    """Samples k * (2 pi / n) of [0, 2 pi) with n = round(2 pi / step)."""
+    n = max(int(round(2 * np.pi / step)), 1)
+    return np.arange(n) * (2 * np.pi / n)
+
+
+def table_frame(point: tuple[float, float]) -> np.ndarray:
+    out = np.eye(4)
+    out[:2, 3] = point
+    return out
+
+
+def rz(phi: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) rotations about z."""
+    phi = np.asarray(phi, dtype=np.float64).reshape(-1)
+    out = np.zeros((len(phi), 4, 4))
+    c, s = np.cos(phi), np.sin(phi)
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -s, s, c
+    out[:, 2, 2] = out[:, 3, 3] = 1.0
+    return out
+
+
+@dataclass
+class GraspPlacementTable:
+    """Q_ij sampled: q (C, P, T, F) bool, with the stage masks of Section 5 and build timings (s)."""
+
+    theta: np.ndarray
+    phi: np.ndarray
+    hand_object: np.ndarray   # (C, T)
+    hand_table: np.ndarray    # (C, P, T)
+    q: np.ndarray             # (C, P, T, F)
+    placements: np.ndarray    # (P, 4, 4) object in the table frame (centre of mass above the origin)
+    frame: np.ndarray         # (4, 4) table frame at H in the world
+    timings: dict = field(default_factory=dict)
+    _matrix: np.ndarray | None = None
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return tuple(self.q.shape)
+
+    def object_pose(self, j: int, phi: float) -> np.ndarray:
+        """The object in the world at placement (P_j, phi) (Section 3)."""
+        return self.frame @ rz(phi)[0] @ self.placements[j]
+
+    def phi_intervals(self, i: int, j: int, t: int) -> list[tuple[float, float]]:
+        """The phi samples of Q_ij at theta sample t as closed intervals [first, last] of sample values."""
+        return runs(self.q[i, j, t], self.phi)
+
+    def matrix(self) -> np.ndarray:
+        """Q as a (C T, P F) float32 matrix for the chaining's cross-sections (built once)."""
+        if self._matrix is None:
+            c, p, t, f = self.q.shape
+            self._matrix = np.ascontiguousarray(self.q.transpose(0, 2, 1, 3).reshape(c * t, p * f), dtype=np.float32)
+        return self._matrix
+
+
+def runs(mask: np.ndarray, values: np.ndarray) -> list[tuple[float, float]]:
+    """Maximal runs of True in a 1D mask as (first value, last value); a run may wrap around the end."""
+    n = len(mask)
+    if n == 0 or not mask.any():
+        return []
+    if mask.all():
+        return [(float(values[0]), float(values[-1]))]
+    start = int(np.argmin(mask))
+    m = np.roll(mask, -start)
+    idx = (np.arange(n) + start) % n
+    d = np.diff(np.concatenate([[0], m.astype(np.int8), [0]]))
+    a, b = np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+    return [(float(values[idx[x]]), float(values[idx[y]])) for x, y in zip(a, b)]
+
+
+def legal_theta(classes: list[GraspClass], theta: np.ndarray) -> np.ndarray:
+    """(C, T): theta samples inside each class's hand-object intervals (Section 5.1)."""
+    return np.array([c.legal(theta) for c in classes]).reshape(len(classes), len(theta))
+
+
+def build_table(classes: list[GraspClass], placements: np.ndarray, robot: Robot, gripper, params: TableParams = TableParams(),
+                progress: bool = True) -> GraspPlacementTable:
+    """The grasp-placement table of Section 5 (see the module docstring)."""
+    t0 = time.perf_counter()
+    theta, phi = grid(params.theta_step), grid(params.phi_step)
+    c_n, p_n, t_n, f_n = len(classes), len(placements), len(theta), len(phi)
+    placements = np.asarray(placements, dtype=np.float64).reshape(-1, 4, 4)
+    frame = table_frame(params.table_point)
+    ho = legal_theta(classes, theta)
+    t1 = time.perf_counter()
+    # 2. hand-table: one mask for every (placement, class, theta)
+    grasps = np.array([c.pose(theta) for c in classes]).reshape(-1, 4, 4)
+    ht = np.zeros((c_n, p_n, t_n), dtype=bool)
+    if len(grasps) and p_n:
+        above = grips_above_table(placements, grasps, gripper, params.clearance).reshape(p_n, c_n, t_n)
+        ht = above.transpose(1, 0, 2) & ho[:, None, :]
+    t2 = time.perf_counter()
+    # 3. IK per (class, placement, theta) left, for every phi
+    q = np.zeros((c_n, p_n, t_n, f_n), dtype=bool)
+    ci, pj, tk = np.nonzero(ht)
+    if len(ci):
+        base = frame[None] @ rz(phi)                                  # (F, 4, 4)
+        held = placements[pj] @ grasps.reshape(c_n, t_n, 4, 4)[ci, tk]  # (K, 4, 4) TCP in the table frame
+        ok = reachable(robot, base, held, params.chunk, progress)
+        q[ci, pj, tk] = ok
+    t3 = time.perf_counter()
+    return GraspPlacementTable(theta=theta, phi=phi, hand_object=ho, hand_table=ht, q=q, placements=placements, frame=frame,
+                               timings={"hand_object": t1 - t0, "hand_table": t2 - t1, "ik": t3 - t2, "total": t3 - t0,
+                                        "ik_poses": int(len(ci) * f_n)})
+
+
+def reachable(robot: Robot, base: np.ndarray, held: np.ndarray, chunk: int, progress: bool) -> np.ndarray:
+    """(K, F): whether TCP pose base[f] @ held[k] has an IK solution within the joint limits (Section 5.2)."""
+    k_n, f_n = len(held), len(base)
+    out = np.zeros((k_n, f_n), dtype=bool)
+    if spherical_wrist_reason(robot):
+        return _reachable_numeric(robot, base, held, out, progress)
+    ik = analytic_ik(robot)
+    rows = max(chunk // f_n, 1)
+    for s in tqdm(range(0, k_n, rows), desc="IK (closed form)", unit="chunk", disable=not progress, leave=False):
+        h = held[s:s + rows]
+        poses = np.einsum("fij,kjl->kfil", base, h).reshape(-1, 4, 4)
+        _, valid = solve(ik, poses)
+        out[s:s + rows] = valid.any(axis=1).reshape(len(h), f_n)
+    return out
+
+
+def _reachable_numeric(robot: Robot, base: np.ndarray, held: np.ndarray, out: np.ndarray, progress: bool) -> np.ndarray:
+    """The numerical IK (Levenberg-Marquardt from a seed library) for arms without a closed form."""
+    from ...kinematics import IKOptions, SeedLibrary, solve_ik
+
+    opts = IKOptions()
+    lib = SeedLibrary(robot, opts.library, opts.seed)
+    poses = np.einsum("fij,kjl->kfil", base, held).reshape(-1, 4, 4)
+    for s in tqdm(range(0, len(poses), 4096), desc="IK (numerical)", unit="chunk", disable=not progress, leave=False):
+        target = poses[s:s + 4096]
+        seeds = lib.q[lib.nearest(target, 1)[:, 0]]
+        q, ok = solve_ik(robot, target, seeds, opts.iters_seed)
+        out.reshape(-1)[s:s + len(target)] = ok
+    return out
