@@ -32,12 +32,14 @@ from .classes import GraspClass
 @dataclass(frozen=True)
 class TableParams:
     """Resolutions (radians), the table point H = (x, y) on the table top in the world, the hand's clearance above
-    the table (m) and the IK batch size."""
+    the table (m; negative lets the hand go that far below the table plane, i.e. a table that far away), whether
+    IK applies the joint limits, and the IK batch size."""
 
     theta_step: float = np.radians(5.0)
     phi_step: float = np.radians(5.0)
     table_point: tuple[float, float] = (0.45, 0.0)
     clearance: float = 0.002
+    limits: bool = True
     chunk: int = 20000
 
     def __post_init__(self) -> None:
@@ -47,8 +49,8 @@ class TableParams:
                 raise WorkbenchError(f"{name.replace('_', ' ')} must be in (0, 90] degrees, got {np.degrees(v):g}")
         if len(self.table_point) != 2 or not np.isfinite(self.table_point).all():
             raise WorkbenchError(f"table point must be two finite numbers X,Y in metres, got {self.table_point}")
-        if self.clearance < 0:
-            raise WorkbenchError(f"clearance must be non-negative, got {self.clearance}")
+        if not np.isfinite(self.clearance):
+            raise WorkbenchError(f"clearance must be finite, got {self.clearance}")
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -155,7 +157,7 @@ def build_table(classes: list[GraspClass], placements: np.ndarray, robot: Robot,
     if len(ci):
         base = frame[None] @ rz(phi)                                  # (F, 4, 4)
         held = placements[pj] @ grasps.reshape(c_n, t_n, 4, 4)[ci, tk]  # (K, 4, 4) TCP in the table frame
-        ok = reachable(robot, base, held, params.chunk, progress)
+        ok = reachable(robot, base, held, params.chunk, progress, params.limits)
         q[ci, pj, tk] = ok
     t3 = time.perf_counter()
     return GraspPlacementTable(theta=theta, phi=phi, hand_object=ho, hand_table=ht, q=q, placements=placements, frame=frame,
@@ -163,13 +165,13 @@ def build_table(classes: list[GraspClass], placements: np.ndarray, robot: Robot,
                                         "ik_poses": int(len(ci) * f_n)})
 
 
-def reachable(robot: Robot, base: np.ndarray, held: np.ndarray, chunk: int, progress: bool) -> np.ndarray:
+def reachable(robot: Robot, base: np.ndarray, held: np.ndarray, chunk: int, progress: bool, limits: bool = True) -> np.ndarray:
     """(K, F): whether TCP pose base[f] @ held[k] has an IK solution within the joint limits (Section 5.2)."""
     k_n, f_n = len(held), len(base)
     out = np.zeros((k_n, f_n), dtype=bool)
     if spherical_wrist_reason(robot):
         return _reachable_numeric(robot, base, held, out, progress)
-    ik = analytic_ik(robot)
+    ik = analytic_ik(robot, limits=limits)
     rows = max(chunk // f_n, 1)
     for s in tqdm(range(0, k_n, rows), desc="IK (closed form)", unit="chunk", disable=not progress, leave=False):
         h = held[s:s + rows]

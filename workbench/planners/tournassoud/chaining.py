@@ -1,0 +1,202 @@
+"""Regrasping by backward chaining in the grasp-placement table (Tournassoud, Lozano-Perez & Mazer 1987, Sections
+4.2 and 6, Fig. 7).
+
+States are grasps (G_i, theta sample); a regrasp goes through a placement (P_j, phi sample) compatible with both
+grasps (Proposition 1). One chaining step (Fig. 7): for each placement P_j, the phi range is the union of the phi
+cross-sections of Q_goal,j over the current theta range; then for every class G_k the new theta range is the union
+of the theta cross-sections of Q_kj over that phi range. Both unions are one boolean matrix product each with Q
+laid out as a (classes x theta, placements x phi) matrix. The chaining expands level by level (breadth first) from
+the goal set until it meets the start set, so the returned sequence has the minimum number of placements.
+
+Two queries:
+- grasp to grasp (the paper's): an initial grasp (G_ini, theta_ini) and a goal class with a theta range;
+- placement to placement (Proposition 2's dual reading): the object from (P_s, phi_s) to (P_g, phi_g), so the same
+  task can be given to the roadmap planner. The start set is every grasp compatible with (P_s, phi_s), the goal
+  set every grasp compatible with (P_g, phi_g).
+
+Concrete angles are the middles of the longest runs of the legal samples, so they sit away from the boundaries.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ...errors import PlanningError
+from .table import GraspPlacementTable
+
+
+@dataclass
+class Sequence:
+    """A regrasp sequence: grasps [(class, theta sample)] and placements [(placement, phi sample)] interleaved as
+    grasp_0, placement_1, grasp_1, ..., placement_n, grasp_n (grasp query), or for a placement query
+    placement_0, grasp_1, placement_1, ..., grasp_n, placement_n. `levels` is the number of chaining steps."""
+
+    kind: str
+    grasps: list[tuple[int, int]]
+    placements: list[tuple[int, int]]
+    levels: int
+    seconds: float = 0.0
+    theta_ini: float | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def regrasps(self) -> int:
+        """Number of regrasps: intermediate placements (grasp query) or grasp changes (placement query)."""
+        return len(self.placements) if self.kind == "grasp" else max(len(self.grasps) - 1, 0)
+
+    def as_dict(self, table: GraspPlacementTable | None = None) -> dict:
+        out = {"kind": self.kind, "levels": self.levels, "regrasps": self.regrasps, "seconds": self.seconds,
+               "grasps": [[int(c), int(t)] for c, t in self.grasps], "placements": [[int(p), int(f)] for p, f in self.placements]}
+        if table is not None:
+            out["theta"] = [float(table.theta[t]) for _, t in self.grasps]
+            out["phi"] = [float(table.phi[f]) for _, f in self.placements]
+        return out
+
+
+def _middle(mask: np.ndarray) -> int:
+    """Index at the middle of the longest circular run of True (mask must have a True)."""
+    n = len(mask)
+    if mask.all():
+        return n // 2
+    start = int(np.argmin(mask))
+    m = np.roll(mask, -start)
+    best, best_len, k = 0, -1, 0
+    while k < n:
+        if m[k]:
+            j = k
+            while j + 1 < n and m[j + 1]:
+                j += 1
+            if j - k > best_len:
+                best, best_len = (k + j) // 2, j - k
+            k = j + 1
+        else:
+            k += 1
+    return (best + start) % n
+
+
+def _pick2(mask: np.ndarray) -> tuple[int, int]:
+    """(row, column) of a robust True in a 2D mask: the row with the longest run, its run's middle."""
+    rows = np.flatnonzero(mask.any(axis=1))
+    lengths = [mask[r].sum() for r in rows]
+    r = int(rows[int(np.argmax(lengths))])
+    return r, _middle(mask[r])
+
+
+def chain(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, max_levels: int = 32) -> list[np.ndarray] | None:
+    """Backward chaining (Fig. 7) from `goal` (C, T) bool until `start` (C, T) is met. Returns the level sets
+    [goal, level 1, ..., level L] (each (C, T), L = number of placements crossed) or None when unreachable."""
+    m = table.matrix()
+    c_n, t_n = table.q.shape[0], table.q.shape[2]
+    goal = np.asarray(goal, dtype=bool).reshape(c_n, t_n)
+    start = np.asarray(start, dtype=bool).reshape(c_n, t_n)
+    levels = [goal]
+    if (goal & start).any():
+        return levels
+    seen = goal.copy()
+    frontier = goal
+    for _ in range(max_levels):
+        phi = (frontier.reshape(-1).astype(np.float32) @ m) > 0           # (P F): placements reachable
+        if not phi.any():
+            return None
+        grasp = ((m @ phi.astype(np.float32)) > 0).reshape(c_n, t_n)       # every grasp sharing one of them
+        new = grasp & ~seen
+        if not new.any():
+            return None
+        levels.append(new)
+        if (new & start).any():
+            return levels
+        seen |= new
+        frontier = new
+    return None
+
+
+def _through(table: GraspPlacementTable, grasp: tuple[int, int], prev: np.ndarray) -> tuple[tuple[int, int], tuple[int, int]]:
+    """A placement (j, f) compatible with `grasp` and a grasp of the level set `prev` compatible with it."""
+    c, t = grasp
+    q = table.q
+    p_n, f_n = q.shape[1], q.shape[3]
+    reach = ((prev.reshape(-1).astype(np.float32) @ table.matrix()) > 0).reshape(p_n, f_n)
+    cand = q[c, :, t, :] & reach
+    j, f = _pick2(cand)
+    nxt = q[:, j, :, f] & prev
+    k, tk = _pick2(nxt)
+    return (j, f), (k, tk)
+
+
+def grasp_query(table: GraspPlacementTable, initial: tuple[int, float], goal_class: int, goal_range: tuple[float, float]) -> Sequence:
+    """Section 6: from (G_ini, theta_ini) to (G_goal, [theta_min, theta_max]) (radians); theta_ini is taken at its
+    nearest sample. Raises PlanningError when no sequence exists."""
+    t0 = time.perf_counter()
+    c_n, t_n = table.q.shape[0], table.q.shape[2]
+    ci, theta_ini = initial
+    for name, c in (("initial", ci), ("goal", goal_class)):
+        if not 0 <= c < c_n:
+            raise PlanningError(f"{name} grasp class {c} does not exist: the table has classes 0..{c_n - 1}")
+    ti = nearest_sample(table.theta, theta_ini)
+    if not table.hand_object[ci, ti]:
+        raise PlanningError(f"initial grasp (class {ci}, theta {np.degrees(theta_ini):.1f} deg) collides with the object; "
+                            f"choose theta inside the class's legal range")
+    start = np.zeros((c_n, t_n), dtype=bool)
+    start[ci, ti] = True
+    goal = np.zeros((c_n, t_n), dtype=bool)
+    goal[goal_class] = in_range(table.theta, goal_range) & table.hand_object[goal_class]
+    if not goal.any():
+        raise PlanningError(f"goal class {goal_class} has no legal theta in [{np.degrees(goal_range[0]):.1f}, "
+                            f"{np.degrees(goal_range[1]):.1f}] deg; widen the range")
+    levels = chain(table, start, goal)
+    if levels is None:
+        raise PlanningError(f"no regrasp sequence from class {ci} at {np.degrees(theta_ini):.1f} deg to class {goal_class}: "
+                            f"the grasp-placement table does not connect them (try another table point or finer steps)")
+    grasps, placements = [(ci, ti)], []
+    cur = (ci, ti)
+    for prev in reversed(levels[:-1]):
+        pl, cur = _through(table, cur, prev)
+        placements.append(pl)
+        grasps.append(cur)
+    return Sequence("grasp", grasps, placements, len(levels) - 1, time.perf_counter() - t0, theta_ini=float(theta_ini))
+
+
+def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: tuple[int, float]) -> Sequence:
+    """The object from placement (P_s, phi_s) to (P_g, phi_g) (radians, nearest samples), fewest grasps."""
+    t0 = time.perf_counter()
+    p_n = table.q.shape[1]
+    (ps, phs), (pg, phg) = start, goal
+    for name, p in (("start", ps), ("goal", pg)):
+        if not 0 <= p < p_n:
+            raise PlanningError(f"{name} placement {p} does not exist: the table has placements 0..{p_n - 1}")
+    fs, fg = nearest_sample(table.phi, phs), nearest_sample(table.phi, phg)
+    a = table.q[:, ps, :, fs]
+    b = table.q[:, pg, :, fg]
+    if not a.any():
+        raise PlanningError(f"no grasp can pick the object at placement {ps}, {np.degrees(phs):.1f} deg; choose another angle")
+    if not b.any():
+        raise PlanningError(f"no grasp can put the object at placement {pg}, {np.degrees(phg):.1f} deg; choose another angle")
+    levels = chain(table, a, b)
+    if levels is None:
+        raise PlanningError(f"no regrasp sequence from placement {ps} to placement {pg}: the table does not connect them")
+    cur = _pick2(levels[-1] & a)
+    grasps, placements = [cur], [(ps, fs)]
+    for prev in reversed(levels[:-1]):
+        pl, cur = _through(table, cur, prev)
+        placements.append(pl)
+        grasps.append(cur)
+    # the last grasp belongs to the goal set; it puts the object down at the goal
+    placements.append((pg, fg))
+    return Sequence("placement", grasps, placements, len(levels) - 1, time.perf_counter() - t0)
+
+
+def nearest_sample(grid: np.ndarray, angle: float) -> int:
+    n = len(grid)
+    return int(np.round(np.mod(angle, 2 * np.pi) / (2 * np.pi / n))) % n
+
+
+def in_range(grid: np.ndarray, rng: tuple[float, float]) -> np.ndarray:
+    """Samples inside [lo, hi] (radians, hi >= lo; wraps around 2 pi)."""
+    lo, hi = rng
+    if hi - lo >= 2 * np.pi - 1e-12:
+        return np.ones(len(grid), dtype=bool)
+    d = np.mod(grid - lo, 2 * np.pi)
+    return d <= (hi - lo) + 1e-9
