@@ -178,7 +178,7 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
             w = fa.offset - float(vx.point @ n)
             if not (jaw_min <= w <= jaw_max) or w <= 0:
                 continue
-            if not in_triangles(_project(vx.point, u, v)[None], tri_a)[0]:
+            if not in_triangles(_project(vx.point, u, v)[None], tri_a, eps=-1e-15)[0]:
                 continue
             out.append(dict(kind="face/vertex", features={"faces": [a], "vertex": vx.point.tolist()}, normal=n, u=u, v=v,
                             opening=w, candidates=(vx.point + (w / 2) * n)[None], pieces=None, mid=fa.offset - w / 2))

@@ -1,0 +1,194 @@
+"""Grasp classes, the grasp-placement table and backward chaining (Tournassoud et al. 1987, Sections 2-6)."""
+
+from __future__ import annotations
+
+from collections import deque
+
+import numpy as np
+import pytest
+import trimesh
+
+from workbench.errors import PlanningError, WorkbenchError
+from workbench.kinematics import Scene
+from workbench.objects import from_trimesh
+from workbench.placements import stable_placements
+from workbench.planners.tournassoud.chaining import chain, grasp_query, placement_query
+from workbench.planners.tournassoud.classes import grasp_classes
+from workbench.planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
+from workbench.planners.tournassoud.table import GraspPlacementTable, TableParams, build_table, runs
+from workbench.resources import erd_share
+from workbench.validate import PlanValidator
+
+from .conftest import extrude, puma
+
+
+def test_box_has_three_face_face_classes(box, hand):
+    classes = grasp_classes(box, hand)
+    assert [c.kind for c in classes] == ["face/face"] * 3
+    assert sorted(round(c.opening, 6) for c in classes) == [0.03, 0.04, 0.05]
+    for c in classes:
+        assert np.allclose(np.abs(c.normal), np.round(np.abs(c.normal)))      # along a box axis
+        assert np.allclose(c.point, 0, atol=1e-9)                              # centre of the overlap
+        assert abs(c.eccentricity) < 1e-9
+        g = c.pose(0.7)
+        assert np.allclose(g[:3, :3] @ g[:3, :3].T, np.eye(3)) and np.linalg.det(g[:3, :3]) > 0
+        assert np.allclose(g[:3, 1], c.normal)                                 # jaw axis = n_i
+
+
+def test_l_part_classes_of_fig1(lpart, hand):
+    classes = grasp_classes(lpart, hand)
+    assert all(c.kind == "face/face" for c in classes)
+    got = sorted((round(c.opening, 6), tuple(np.abs(np.round(c.normal, 6)))) for c in classes)
+    assert got == sorted([(0.03, (0.0, 1.0, 0.0)),                       # the two L-shaped faces
+                          (0.02, (0.0, 0.0, 1.0)), (0.06, (0.0, 0.0, 1.0)),  # across each leg and along the upright
+                          (0.02, (1.0, 0.0, 0.0)), (0.06, (1.0, 0.0, 0.0))])
+    inside = lpart.mesh.contains(np.array([c.point for c in classes]))
+    assert inside.all()                                                   # C_i lies between the contacts, in the part
+    for c in classes:
+        assert 0 < c.legal_range <= 2 * np.pi + 1e-9
+
+
+def test_face_edge_and_face_vertex_classes(hand):
+    wedge = from_trimesh(extrude([(-0.025, 0), (0.025, 0), (0, 0.03)], [(0, 1, 2)], 0.04), "wedge")
+    kinds = [(c.kind, round(c.opening, 6), tuple(np.round(c.normal, 6))) for c in grasp_classes(wedge, hand)]
+    assert ("face/edge", 0.03, (0.0, 0.0, -1.0)) in kinds                 # base against the ridge
+    pyramid = from_trimesh(trimesh.creation.cone(radius=0.03, height=0.03, sections=4), "pyramid")
+    fv = [c for c in grasp_classes(pyramid, hand) if c.kind == "face/vertex"]
+    assert len(fv) == 1 and abs(fv[0].opening - 0.03) < 1e-9 and np.allclose(fv[0].point, [0, 0, 0.015])
+
+
+def test_table_far_away_no_limits_is_theta_range_times_all_phi(box, hand):
+    classes = grasp_classes(box, hand)
+    pl = stable_placements(box).poses
+    robot = puma(base_z=-0.4)  # shoulder 0.27 m above the table: every orientation reachable near H
+    t = build_table(classes, pl, robot, hand, TableParams(table_point=(0.45, 0.0), clearance=-1.0, limits=False), progress=False)
+    expect = np.broadcast_to(t.hand_object[:, None, :, None], t.q.shape)
+    assert t.hand_object.any(axis=1).all()
+    assert np.array_equal(t.q, expect)
+    # with the table at its place, the hand-table stage prunes (jaw vertical on a resting face is impossible)
+    near = build_table(classes, pl, robot, hand, TableParams(table_point=(0.45, 0.0), limits=False), progress=False)
+    assert near.q.sum() < t.q.sum() and not (near.q & ~t.q).any()
+
+
+def _bfs(q: np.ndarray, start: np.ndarray, goal: np.ndarray) -> int | None:
+    """Fewest placements between a start and a goal grasp over the explicit graph (grasp) - (placement) - (grasp)."""
+    c_n, p_n, t_n, f_n = q.shape
+    dist = {}
+    todo = deque()
+    for c, t in zip(*np.nonzero(start)):
+        dist[("g", c, t)] = 0
+        todo.append(("g", c, t))
+    while todo:
+        node = todo.popleft()
+        d = dist[node]
+        if node[0] == "g":
+            if goal[node[1], node[2]]:
+                return d // 2
+            nbrs = [("p", j, f) for j, f in zip(*np.nonzero(q[node[1], :, node[2], :]))]
+        else:
+            nbrs = [("g", c, t) for c, t in zip(*np.nonzero(q[:, node[1], :, node[2]]))]
+        for nb in nbrs:
+            if nb not in dist:
+                dist[nb] = d + 1
+                todo.append(nb)
+    return None
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_backward_chaining_is_minimal_like_bfs(seed):
+    rng = np.random.default_rng(seed)
+    shape = (4, 3, 6, 5)
+    q = rng.random(shape) < rng.uniform(0.03, 0.12)
+    t = GraspPlacementTable(theta=np.arange(6) * np.pi / 3, phi=np.arange(5) * 2 * np.pi / 5, hand_object=q.any(axis=(1, 3)),
+                            hand_table=q.any(axis=3), q=q, placements=np.repeat(np.eye(4)[None], 3, axis=0), frame=np.eye(4))
+    for _ in range(6):
+        start = np.zeros((4, 6), dtype=bool)
+        start[rng.integers(4), rng.integers(6)] = True
+        goal = np.zeros((4, 6), dtype=bool)
+        goal[rng.integers(4), rng.integers(0, 6, size=2)] = True
+        levels = chain(t, start, goal)
+        expect = _bfs(q, start, goal)
+        assert (levels is None) == (expect is None)
+        if levels is None:
+            continue
+        assert len(levels) - 1 == expect
+        if not (start & goal).any():
+            c, ti = np.argwhere(start)[0]
+            gc = int(np.argwhere(goal)[0][0])
+            lo = t.theta[np.flatnonzero(goal[gc])].min()
+            hi = t.theta[np.flatnonzero(goal[gc])].max()
+            if (goal[gc] == ((t.theta >= lo) & (t.theta <= hi))).all():
+                seq = grasp_query(t, (int(c), float(t.theta[ti])), gc, (lo, hi))
+                assert seq.regrasps == expect
+                # each step of the sequence is a legal transition (Proposition 1)
+                for k, (j, f) in enumerate(seq.placements):
+                    (c0, t0), (c1, t1) = seq.grasps[k], seq.grasps[k + 1]
+                    assert q[c0, j, t0, f] and q[c1, j, t1, f]
+    # placement queries against the same brute force with start/goal sets from placements
+    for _ in range(6):
+        ps, fs, pg, fg = rng.integers(3), rng.integers(5), rng.integers(3), rng.integers(5)
+        a, b = q[:, ps, :, fs], q[:, pg, :, fg]
+        if not a.any() or not b.any():
+            with pytest.raises(PlanningError):
+                placement_query(t, (int(ps), float(t.phi[fs])), (int(pg), float(t.phi[fg])))
+            continue
+        expect = _bfs(q, a, b)
+        if expect is None:
+            with pytest.raises(PlanningError, match="does not connect"):
+                placement_query(t, (int(ps), float(t.phi[fs])), (int(pg), float(t.phi[fg])))
+        else:
+            assert placement_query(t, (int(ps), float(t.phi[fs])), (int(pg), float(t.phi[fg]))).regrasps == expect
+
+
+def test_runs_wrap_around():
+    vals = np.arange(8.0)
+    assert runs(np.array([1, 1, 0, 0, 1, 0, 1, 1], dtype=bool), vals) == [(4.0, 4.0), (6.0, 1.0)]
+    assert runs(np.zeros(8, dtype=bool), vals) == []
+    assert runs(np.ones(8, dtype=bool), vals) == [(0.0, 7.0)]
+
+
+@pytest.fixture(scope="module")
+def box_setup(box, hand, puma560):
+    classes = grasp_classes(box, hand)
+    pl = stable_placements(box)
+    table = build_table(classes, pl.poses, puma560, hand, TableParams(table_point=(0.45, 0.1)), progress=False)
+    scene = Scene()
+    realiser = Realiser(puma560, scene, box.mesh)
+    r = puma560
+    validator = PlanValidator(r.spec.urdf, r.spec.tip_frame, r.mount, r.base, list(r.joint_names),
+                              (scene.table_min, scene.table_max, scene.table_thickness), box.mesh.vertices, box.mesh.faces,
+                              box.com, hand.collision_mesh(), hand_links=r.spec.drop_geometry,
+                              free_poses={j: p for j, p in enumerate(pl.poses)}, package_dirs=(str(erd_share()),))
+    return classes, table, realiser, validator
+
+
+def test_every_sequence_passes_the_validator(box_setup, puma560):
+    classes, table, realiser, validator = box_setup
+    n = 0
+    for a in range(len(classes)):
+        for b in range(len(classes)):
+            seq, plan = plan_grasp_query(table, classes, realiser, puma560, "box", (a, np.radians(15)), b,
+                                         (np.radians(60), np.radians(120)))
+            if plan is None:
+                continue
+            rep = validator.check(plan)
+            assert rep.ok, rep.errors
+            assert plan.regrasps == seq.regrasps
+            n += 1
+    for ps, pg in [(0, 3), (0, 1), (2, 5), (4, 1)]:
+        seq, plan = plan_placement_query(table, classes, realiser, puma560, "box", (ps, 0.0), (pg, 1.0))
+        rep = validator.check(plan)
+        assert rep.ok, rep.errors
+        assert plan.regrasps == seq.regrasps
+        n += 1
+    assert n >= 8
+
+
+def test_bad_queries(box_setup):
+    classes, table, _, _ = box_setup
+    with pytest.raises(PlanningError, match="does not exist"):
+        grasp_query(table, (99, 0.0), 0, (0.0, 1.0))
+    with pytest.raises(PlanningError, match="placement 42 does not exist"):
+        placement_query(table, (42, 0.0), (0, 0.0))
+    with pytest.raises(WorkbenchError, match="theta step"):
+        TableParams(theta_step=0.0)
