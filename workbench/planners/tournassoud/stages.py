@@ -1,0 +1,122 @@
+"""Stages of the grasp-placement table planner against the store (the only module of the planner that imports
+`workbench.store`). Tournassoud, Lozano-Perez & Mazer (1987), Sections 2-6.
+
+- `classes_stage`: grasp classes of an object for a gripper and parameters (stage `tournassoud.classes`);
+- `table_stage`: placement classes and the table Q_ij for a robot and table parameters (stage `tournassoud.table`);
+- `load_planner`: a stored table with its classes, object and robot, ready for queries.
+
+Each stage computes outside any transaction and writes in one; a re-run with the same inputs and parameters loads
+the stored rows (keyed by the parameter-set digest) instead of computing again.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...errors import WorkbenchError
+from ...gripper import Gripper, franka_hand
+from ...objects import ObjectModel
+from ...placements import PlacementParams, stable_placements
+from ...robots import Robot, RobotSpec, get_robot, robot_from_spec
+from ...store import Store
+from ...store import tournassoud as sql
+from ...store.objects import get_object, gripper_digest, put_object
+from ...store.robots import put_robot, robot_row
+from .classes import ClassParams, GraspClass, grasp_classes
+from .table import GraspPlacementTable, TableParams, build_table, table_frame, grid
+
+CLASSES = "tournassoud.classes"
+TABLE = "tournassoud.table"
+
+
+@dataclass
+class TableRun:
+    """A built or loaded table with everything needed to answer queries."""
+
+    obj: ObjectModel
+    robot: Robot
+    gripper: Gripper
+    classes: list[GraspClass]
+    table: GraspPlacementTable
+    idclasses: int
+    idtable: int
+    reused: tuple[bool, bool]
+    seconds: float = 0.0
+
+
+def classes_stage(store: Store, obj: ObjectModel, gripper: Gripper, params: ClassParams) -> tuple[int, list[GraspClass], bool]:
+    """Grasp classes of `obj` (Sections 2, 5.1): (paramset, classes, reused from the store)."""
+    sql.ensure_schema(store)
+    idobject = put_object(store, obj)
+    key = {"classes": params.as_dict(), "gripper": gripper_digest(gripper)}
+    pid = store.find_paramset(CLASSES, key, idobject)
+    if pid is not None:
+        return pid, [GraspClass(**d) for d in sql.load_classes(store, pid)], True
+    classes = grasp_classes(obj, gripper, params)
+    return sql.save_classes(store, CLASSES, key, idobject, classes), classes, False
+
+
+def _table_key(idclasses: int, robot: Robot, params: TableParams, placement: PlacementParams) -> dict:
+    tp = params.as_dict()
+    tp.pop("chunk", None)
+    return {"classes": idclasses, "robot": robot.spec.digest, "table": tp, "placements": placement.as_dict()}
+
+
+def table_stage(store: Store, obj: ObjectModel, robot: Robot, gripper: Gripper | None = None,
+                class_params: ClassParams = ClassParams(), params: TableParams = TableParams(),
+                placement: PlacementParams = PlacementParams(), progress: bool = False) -> TableRun:
+    """Classes, placement classes and the grasp-placement table (Sections 2-5), stored or reused."""
+    t0 = time.perf_counter()
+    gripper = gripper or robot.gripper or franka_hand()
+    idc, classes, reused_c = classes_stage(store, obj, gripper, class_params)
+    idobject = put_object(store, obj)
+    with store.transaction():
+        idrobot = put_robot(store, robot)
+    key = _table_key(idc, robot, params, placement)
+    pid = store.find_paramset(TABLE, key, idobject)
+    if pid is not None:
+        return TableRun(obj, robot, gripper, classes, _table_from_rows(sql.load_table(store, pid)), idc, pid,
+                        (reused_c, True), time.perf_counter() - t0)
+    pl = stable_placements(obj, placement)
+    table = build_table(classes, pl.poses, robot, gripper, params, progress=progress)
+    pid = sql.save_table(store, TABLE, key, idobject, idrobot, idc, table, pl.normals, pl.stability)
+    return TableRun(obj, robot, gripper, classes, table, idc, pid, (reused_c, False), time.perf_counter() - t0)
+
+
+def _table_from_rows(rows: dict) -> GraspPlacementTable:
+    return GraspPlacementTable(theta=grid(2 * np.pi / rows["ntheta"]), phi=grid(2 * np.pi / rows["nphi"]),
+                               hand_object=rows["hand_object"], hand_table=rows["hand_table"], q=rows["q"],
+                               placements=rows["placements"], frame=table_frame(rows["table_point"]), timings=rows["timings"])
+
+
+def load_planner(db: str, object_name: str, robot_name: str | None = None) -> TableRun:
+    """The newest stored table of `object_name` (and robot), its classes, object and robot rebuilt from the store."""
+    with Store(db, read_only=True) as store:
+        idobject, obj = get_object(store, object_name)
+        idrobot = None
+        if robot_name is not None:
+            idrobot = robot_row(store, robot_name)["idrobot"]
+        pid = sql.latest_table(store, idobject, idrobot)
+        rows = sql.load_table(store, pid)
+        classes = [GraspClass(**d) for d in sql.load_classes(store, rows["idclasses"])]
+        r = robot_row(store, rows["idrobot"])
+    robot = _robot(r)
+    return TableRun(obj, robot, robot.gripper, classes, _table_from_rows(rows), rows["idclasses"], pid, (True, True))
+
+
+def _robot(row: dict) -> Robot:
+    """The stored robot rebuilt: the built-in of that name when its kinematics digest matches, else from the row."""
+    name = row["name"]
+    try:
+        robot = get_robot(name)
+        if robot.spec.digest == row["digest"]:
+            return robot
+    except WorkbenchError:
+        pass
+    spec = RobotSpec(name=name, urdf=row["urdf"], urdf_path="", tip_frame=row["tip_frame"], tcp_frame=row["tcp_frame"],
+                     mount=row["mount"], base=row["base"], drop_geometry=tuple(row["drop_geometry"]),
+                     locked=tuple((k, float(v)) for k, v in row["locked"].items()))
+    return robot_from_spec(spec)
