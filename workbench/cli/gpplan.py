@@ -1,0 +1,106 @@
+"""`workbench gpplan --db DB --object NAME --initial CLASS,THETA --goal CLASS,MIN:MAX`: a regrasp sequence by
+backward chaining in a stored grasp-placement table (Tournassoud et al. 1987, Section 6); or, with
+`--from P,PHI --to P,PHI`, the object from one placement to another. Angles in degrees."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+import numpy as np
+
+from ..errors import WorkbenchError
+
+
+def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
+    parts = [p.strip() for p in str(text).split(sep)]
+    if len(parts) != n:
+        raise WorkbenchError(f"{label} {text!r} is malformed; see `workbench gpplan --help`")
+    return parts
+
+
+def parse_grasp(text: str, label: str = "--initial") -> tuple[int, float]:
+    """CLASS,THETA (degrees) -> (class, radians)."""
+    c, t = _nums(text, label, 2)
+    try:
+        return int(c), float(np.radians(float(t)))
+    except ValueError:
+        raise WorkbenchError(f"{label} {text!r} must be CLASS,THETA (class index, degrees), e.g. 0,30") from None
+
+
+def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
+    """CLASS,MIN:MAX (degrees) -> (class, (radians, radians))."""
+    c, rng = _nums(text, "--goal", 2)
+    try:
+        lo, hi = (float(v) for v in _nums(rng, "--goal", 2, ":"))
+        cls = int(c)
+    except ValueError:
+        raise WorkbenchError(f"--goal {text!r} must be CLASS,MIN:MAX (class index, degrees), e.g. 2,60:120") from None
+    if hi < lo:
+        raise WorkbenchError(f"--goal {text!r}: MAX {hi:g} is below MIN {lo:g}; give MIN:MAX with MIN <= MAX")
+    return cls, (float(np.radians(lo)), float(np.radians(hi)))
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)")
+    p.add_argument("--db", required=True, help="DuckDB store file with a table built by `workbench gptable`")
+    p.add_argument("--object", required=True, help="object name in the store")
+    p.add_argument("--robot", default=None, help="robot name in the store (default: the newest table's robot)")
+    p.add_argument("--initial", default=None, help="initial grasp CLASS,THETA (degrees)")
+    p.add_argument("--goal", default=None, help="goal class and theta range CLASS,MIN:MAX (degrees)")
+    p.add_argument("--from", dest="from_", default=None, help="start placement P,PHI (degrees), instead of --initial")
+    p.add_argument("--to", default=None, help="goal placement P,PHI (degrees), instead of --goal")
+    p.add_argument("--handx", type=float, default=0.05, help="approach distance along the hand's axis (m)")
+    p.add_argument("--worldz", type=float, default=0.05, help="lift after the approach (m)")
+    p.add_argument("--json", default=None, help="write the sequence and its plan to this JSON file")
+    p.add_argument("--html", default=None, help="write the table with the sequence overlaid (Fig. 6) to this HTML file")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..kinematics import default_scene
+    from ..planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
+    from ..planners.tournassoud.stages import load_planner
+
+    grasp_mode = args.initial is not None or args.goal is not None
+    place_mode = args.from_ is not None or args.to is not None
+    if grasp_mode == place_mode or (grasp_mode and (args.initial is None or args.goal is None)) or \
+            (place_mode and (args.from_ is None or args.to is None)):
+        raise WorkbenchError("give either --initial CLASS,THETA with --goal CLASS,MIN:MAX, or --from P,PHI with --to P,PHI")
+    for label, v in (("--handx", args.handx), ("--worldz", args.worldz)):
+        if not np.isfinite(v) or v < 0:
+            raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
+    r = load_planner(args.db, args.object, args.robot)
+    realiser = Realiser(r.robot, default_scene(r.robot.name), r.obj.mesh, args.handx, args.worldz)
+    if grasp_mode:
+        initial = parse_grasp(args.initial)
+        gc, rng = parse_goal(args.goal)
+        seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng)
+    else:
+        start = parse_grasp(args.from_, "--from")
+        goal = parse_grasp(args.to, "--to")
+        seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal)
+    t = r.table
+    print(f"{r.obj.name} with {r.robot.name}: {seq.regrasps} regrasp(s), chaining {seq.levels} step(s) in {seq.seconds * 1000:.2f} ms")
+    for k, (c, ti) in enumerate(seq.grasps):
+        print(f"  grasp {k}: class {c} ({r.classes[c].kind}) theta {np.degrees(t.theta[ti]):6.1f} deg")
+    for k, (j, fi) in enumerate(seq.placements):
+        print(f"  placement {k}: class {j} phi {np.degrees(t.phi[fi]):6.1f} deg")
+    if plan is None:
+        print("the initial grasp is already in the goal range: nothing to do")
+    else:
+        print(plan.summary())
+    if args.json:
+        doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict()}
+        with open(args.json, "w") as fh:
+            json.dump(doc, fh, indent=1)
+        print(f"json: {args.json}")
+    if args.html:
+        from ..planners.tournassoud.figures import table_html
+
+        with open(args.html, "w") as fh:
+            fh.write(table_html(t, r.classes, seq, title=f"{r.obj.name} with {r.robot.name}"))
+        print(f"html: {args.html}")
+    sys.stdout.flush()
+    return 0

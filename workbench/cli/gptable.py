@@ -1,0 +1,100 @@
+"""`workbench gptable MESH --robot ROBOT --db DB`: grasp classes, placement classes and the grasp-placement table
+(Tournassoud, Lozano-Perez & Mazer 1987, Sections 2-5), built and stored (or reused from the store)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+import numpy as np
+
+from ..errors import WorkbenchError
+from .grasps import add_object_arguments
+
+
+def parse_point(text: str, label: str = "--table-point") -> tuple[float, float]:
+    """`X,Y` in metres."""
+    try:
+        x, y = (float(v) for v in str(text).split(","))
+    except ValueError:
+        raise WorkbenchError(f"{label} {text!r} must be X,Y in metres, e.g. 0.45,0.1") from None
+    return x, y
+
+
+def add_table_arguments(parser: argparse.ArgumentParser) -> None:
+    """Class and table parameters (degrees and metres on the command line)."""
+    from ..planners.tournassoud.classes import ClassParams
+    from ..planners.tournassoud.table import TableParams
+
+    c, t = ClassParams(), TableParams()
+    parser.add_argument("--robot", default="puma560", help="a built-in robot or the path of a URDF (then --tip)")
+    parser.add_argument("--tip", default=None, help="tip frame of a URDF robot")
+    parser.add_argument("--theta-step", type=float, default=float(np.degrees(t.theta_step)), help="theta resolution (degrees)")
+    parser.add_argument("--phi-step", type=float, default=float(np.degrees(t.phi_step)), help="phi resolution (degrees)")
+    parser.add_argument("--table-point", default=",".join(f"{v:g}" for v in t.table_point),
+                        help="the table point H as X,Y in metres (world frame, in the robot's dextrous workspace)")
+    parser.add_argument("--clearance", type=float, default=t.clearance, help="hand clearance above the table (m)")
+    parser.add_argument("--edge-angle", type=float, default=float(np.degrees(c.edge_angle)),
+                        help="dihedral angle above which a mesh edge is a feature edge (degrees)")
+    parser.add_argument("--min-face-area", type=float, default=c.min_face_area, help="smallest face used by a class (m^2)")
+    parser.add_argument("--min-contact-area", type=float, default=c.min_contact_area,
+                        help="pad area that must cover the face overlap at every legal theta (m^2, Section 5.1; 0: off)")
+
+
+def params_from_args(args: argparse.Namespace):
+    from ..planners.tournassoud.classes import ClassParams
+    from ..planners.tournassoud.table import TableParams
+
+    cp = ClassParams(min_face_area=args.min_face_area, edge_angle=float(np.radians(args.edge_angle)),
+                     theta_step=float(np.radians(args.theta_step)), bisection=min(float(np.radians(0.1)), float(np.radians(args.theta_step))),
+                     min_contact_area=args.min_contact_area)
+    tp = TableParams(theta_step=float(np.radians(args.theta_step)), phi_step=float(np.radians(args.phi_step)),
+                     table_point=parse_point(args.table_point), clearance=args.clearance)
+    return cp, tp
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("gptable", help="grasp classes and the grasp-placement table (Tournassoud et al. 1987)")
+    add_object_arguments(p)
+    p.add_argument("--db", required=True, help="DuckDB store file")
+    add_table_arguments(p)
+    p.set_defaults(func=run)
+
+
+def summary(run) -> list[str]:
+    """Counts of a table run: classes by kind, placement classes, non-empty cells, timings."""
+    from ..planners.tournassoud.classes import KINDS
+
+    t = run.table
+    kinds = {k: sum(c.kind == k for c in run.classes) for k in KINDS}
+    c_n, p_n, t_n, f_n = t.q.shape
+    cells = int(t.q.any(axis=(2, 3)).sum())
+    tm = t.timings
+    return [f"{run.obj.name}: {len(run.classes)} grasp classes ({', '.join(f'{v} {k}' for k, v in kinds.items())}), "
+            f"{p_n} placement classes, theta x phi grid {t_n} x {f_n}",
+            f"table: {cells} of {c_n * p_n} cells non-empty, {int(t.q.sum())} legal (theta, phi) samples"
+            + (" (reused from the store)" if run.reused[1] else
+               f"; built in {tm.get('total', 0.0):.2f} s (IK {tm.get('ik', 0.0):.2f} s for {tm.get('ik_poses', 0)} poses)")]
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..objects import load_object
+    from ..planners.tournassoud.stages import table_stage
+    from ..robots import get_robot
+    from ..store import Store
+
+    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
+    cp, tp = params_from_args(args)
+    robot = get_robot(args.robot, tip_frame=args.tip)
+    with Store(args.db) as store:
+        r = table_stage(store, obj, robot, robot.gripper, cp, tp, progress=sys.stderr.isatty())
+    for line in summary(r):
+        print(line)
+    if not r.classes:
+        print(f"warning: no grasp class: the gripper (jaw {robot.gripper.jaw_max * 1000:.0f} mm) spans no pair of parallel "
+              f"features of {obj.name}; check the scale or lower --min-face-area", file=sys.stderr)
+    elif not r.table.q.any():
+        print("warning: the table is empty: no grasp class reaches any placement at the table point; "
+              "move --table-point into the robot's workspace", file=sys.stderr)
+    print(f"store {args.db}: classes paramset {r.idclasses}, table paramset {r.idtable}")
+    return 0
