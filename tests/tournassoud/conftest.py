@@ -8,11 +8,11 @@ import trimesh
 
 from workbench.gripper import franka_hand
 from workbench.objects import from_trimesh
+from workbench.planners.tournassoud.shapes import l_part, prism
 from workbench.resources import ASSETS
 from workbench.robots import robot_from_urdf
 
 HAND = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
-L_OUTLINE = [(0, 0), (0.06, 0), (0.06, 0.02), (0.02, 0.02), (0.02, 0.06), (0, 0.06)]
 
 
 def puma(base_z: float = 0.0):
@@ -21,25 +21,10 @@ def puma(base_z: float = 0.0):
     return robot_from_urdf(ASSETS / "robots" / "puma560.urdf", "panda_hand_tcp", name="puma560", drop_geometry=HAND, base=base)
 
 
-def extrude(outline: list[tuple[float, float]], caps: list[tuple[int, int, int]], depth: float) -> trimesh.Trimesh:
-    """A watertight prism: the x-z polygon `outline` (triangulated by `caps`) extruded along y, centred."""
-    n = len(outline)
-    verts = [(x, -depth / 2, z) for x, z in outline] + [(x, depth / 2, z) for x, z in outline]
-    faces = []
-    for k in range(n):
-        a, b = k, (k + 1) % n
-        faces += [(a, b, n + b), (a, n + b, n + a)]
-    for a, b, c in caps:
-        faces += [(a, c, b), (n + a, n + b, n + c)]
-    mesh = trimesh.Trimesh(np.array(verts, dtype=np.float64), np.array(faces), process=True)
-    trimesh.repair.fix_normals(mesh)
+def extrude(outline, caps, depth):
+    mesh = prism(outline, caps, depth)
     assert mesh.is_watertight and mesh.volume > 0
     return mesh
-
-
-def l_part():
-    """The L-shaped part of Fig. 1: legs 60 x 20 mm and 20 x 60 mm in x-z, 30 mm deep along y."""
-    return from_trimesh(extrude(L_OUTLINE, [(0, 1, 2), (0, 2, 3), (0, 3, 4), (0, 4, 5)], 0.03), "L")
 
 
 @pytest.fixture(scope="session")

@@ -10,9 +10,10 @@ The angle theta (Section 2.3) fixes the hand relative to the object: the TCP (CO
 y axis (jaw) along n_i and its approach axis z = cos(theta) u_i + sin(theta) v_i.
 
 The paper leaves the grasp point open (Section 2.3, "as wide as possible"). Here it is chosen among a few
-candidates inside the overlap of the contacts' projections: for face/face the overlap's centroid and the centroids
-of its largest convex pieces, for face/edge the middles of the edge's pieces over the face and the quarter points
-of the longest, for face/vertex the vertex's projection. The candidate with the widest legal theta range against
+candidates inside the overlap of the contacts' projections (rasterised at about 1/200 of its size, >= 0.2 mm): for
+face/face the overlap's centroid, its deepest point (farthest from its boundary) and the centroids of its largest
+connected pieces; for face/edge the middles of the edge's pieces over the face and the quarter points of the
+longest; for face/vertex the vertex's projection. The candidate with the widest legal theta range against
 hand-object collision (Section 5.1) wins; ties go to the earlier candidate. Legal theta ranges are intervals found
 at `theta_step` and refined at their ends by bisection down to `bisection`. With `min_contact_area` > 0 the pad's
 rectangle must also cover that much of the face overlap at each theta (Section 5.1's minimum contact area).
@@ -32,8 +33,8 @@ from ...collision import bvh, collide_at_poses, object_collider
 from ...errors import WorkbenchError
 from ...gripper import Gripper
 from ...objects import ObjectModel
-from .features import (Features, area2d, ccw, centroid2d, clip_convex, clip_segment, features, in_triangles,
-                       plane_basis)
+from .features import (Features, Raster, face_overlap, features, grid_for, in_triangles, plane_basis, rasterise,
+                       segment_spans)
 
 KINDS = ("face/face", "face/edge", "face/vertex")
 
@@ -118,101 +119,108 @@ def _project(points: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
 
 
 def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> list[dict]:
-    """Every feature pair of Section 2.1 with its normal, opening and candidate grasp points."""
+    """Every feature pair of Section 2.1 with its normal, opening and candidate grasp points. The geometric filters
+    (parallelism, opening, which side the contact faces) run on arrays over all edges and vertices per face."""
     cos_par = np.cos(p.parallel_tol)
     sin_par = np.sin(p.parallel_tol)
     jaw_min, jaw_max = opening
     out = []
     faces = feats.faces
     normals = np.array([f.normal for f in faces]).reshape(-1, 3)
+    offsets = np.array([f.offset for f in faces])
+    edges = feats.edges
+    e0 = np.array([e.p0 for e in edges]).reshape(-1, 3)
+    e1 = np.array([e.p1 for e in edges]).reshape(-1, 3)
+    ed = e1 - e0
+    elen = np.linalg.norm(ed, axis=1)
+    en = np.array([e.normals for e in edges]).reshape(-1, 2, 3)
+    verts = feats.vertices
+    vp = np.array([v.point for v in verts]).reshape(-1, 3)
+    vn = np.concatenate([v.normals for v in verts]) if verts else np.zeros((0, 3))
+    vstart = np.concatenate([[0], np.cumsum([len(v.normals) for v in verts])[:-1]]).astype(np.int64) if verts else np.zeros(0, np.int64)
     for a, fa in enumerate(faces):
         n = fa.normal
         u, v = plane_basis(n)
         tri_a = _project(fa.triangles, u, v)
-        # (i) face/face
-        for b in range(a + 1, len(faces)):
+        # (i) face/face: opposite normals, the other face behind this one by an opening the gripper spans
+        w_all = fa.offset + offsets
+        ok = (normals @ n <= -cos_par) & (w_all >= max(jaw_min, 1e-9)) & (w_all <= jaw_max) & (np.arange(len(faces)) > a)
+        for b in np.flatnonzero(ok):
             fb = faces[b]
-            if normals[b] @ n > -cos_par:
+            w = float(w_all[b])
+            region = face_overlap(tri_a, _project(fb.triangles, u, v))
+            if region is None or region.area < p.min_overlap:
                 continue
-            w = fa.offset + fb.offset
-            if not (jaw_min <= w <= jaw_max) or w <= 0:
-                continue
-            tri_b = _project(fb.triangles, u, v)
-            pieces = _overlap(tri_a, tri_b)
-            area = sum(area2d(q) for q in pieces)
-            if area < p.min_overlap:
-                continue
-            cands = _face_candidates(pieces, p.candidates)
+            area = region.area
+            cands = _face_candidates(region, p.candidates)
             mid = fa.offset - w / 2
             pts = cands[:, :1] * u + cands[:, 1:] * v + mid * n
-            out.append(dict(kind="face/face", features={"faces": [a, b], "overlap": float(area)}, normal=n, u=u, v=v,
-                            opening=w, candidates=pts, pieces=pieces, mid=mid))
-        # (ii) face/edge
-        for k, e in enumerate(feats.edges):
-            d = e.p1 - e.p0
-            if abs(d @ n) > sin_par * np.linalg.norm(d):
-                continue
-            en = e.normals @ n
-            if not ((en < 1e-9).all() and (en < -1e-9).any() and (en > -cos_par).all()):
-                continue
-            w = fa.offset - float((e.p0 + e.p1) @ n) / 2
-            if not (jaw_min <= w <= jaw_max) or w <= 0:
-                continue
-            q0, q1 = _project(e.p0, u, v), _project(e.p1, u, v)
-            spans = clip_segment(q0, q1, tri_a)
-            length = sum(b - a_ for a_, b in spans) * float(np.linalg.norm(d))
-            if length < 1e-4:
-                continue
-            ss = [(a_ + b) / 2 for a_, b in spans]
-            lo, hi = max(spans, key=lambda s: s[1] - s[0])
-            ss += [lo + (hi - lo) / 4, lo + 3 * (hi - lo) / 4]
-            pts = np.array([e.p0 + s * d + (w / 2) * n for s in ss[: max(p.candidates, 1)]])
-            out.append(dict(kind="face/edge", features={"faces": [a], "edge": [e.p0.tolist(), e.p1.tolist()],
-                                                        "length": length}, normal=n, u=u, v=v, opening=w,
-                            candidates=pts, pieces=None, mid=fa.offset - w / 2))
-        # (iii) face/vertex
-        for k, vx in enumerate(feats.vertices):
-            vn = vx.normals @ n
-            if not ((vn < -1e-9).all() and (vn > -cos_par).all()):
-                continue
-            w = fa.offset - float(vx.point @ n)
-            if not (jaw_min <= w <= jaw_max) or w <= 0:
-                continue
-            if not in_triangles(_project(vx.point, u, v)[None], tri_a, eps=-1e-15)[0]:
-                continue
-            out.append(dict(kind="face/vertex", features={"faces": [a], "vertex": vx.point.tolist()}, normal=n, u=u, v=v,
-                            opening=w, candidates=(vx.point + (w / 2) * n)[None], pieces=None, mid=fa.offset - w / 2))
+            out.append(dict(kind="face/face", features={"faces": [a, int(b)], "overlap": float(area)}, normal=n, u=u, v=v,
+                            opening=w, candidates=pts, region=region, mid=mid))
+        # (ii) face/edge: an edge parallel to the face, convex toward -n, at an opening the gripper spans
+        if len(edges):
+            face_region = None
+            dots = en @ n                                                       # (E, 2)
+            w_e = fa.offset - ((e0 + e1) @ n) / 2
+            ok = ((np.abs(ed @ n) <= sin_par * elen) & (dots < 1e-9).all(axis=1) & (dots < -1e-9).any(axis=1)
+                  & (dots > -cos_par).all(axis=1) & (w_e >= max(jaw_min, 1e-9)) & (w_e <= jaw_max))
+            for k in np.flatnonzero(ok):
+                w = float(w_e[k])
+                if face_region is None:
+                    flat = tri_a.reshape(-1, 2)
+                    face_region = rasterise(tri_a, *grid_for(flat.min(0), flat.max(0)))
+                spans = segment_spans(_project(e0[k], u, v), _project(e1[k], u, v), face_region)
+                length = sum(b_ - a_ for a_, b_ in spans) * float(elen[k])
+                if length < 1e-4:
+                    continue
+                ss = [(a_ + b_) / 2 for a_, b_ in spans]
+                lo, hi = max(spans, key=lambda sp: sp[1] - sp[0])
+                ss += [lo + (hi - lo) / 4, lo + 3 * (hi - lo) / 4]
+                pts = np.array([e0[k] + t * ed[k] + (w / 2) * n for t in ss[: max(p.candidates, 1)]])
+                out.append(dict(kind="face/edge", features={"faces": [a], "edge": [e0[k].tolist(), e1[k].tolist()],
+                                                            "length": length}, normal=n, u=u, v=v, opening=w,
+                                candidates=pts, region=None, mid=fa.offset - w / 2))
+        # (iii) face/vertex: a convex vertex pointing toward -n whose projection lies in the face
+        if len(verts):
+            d = vn @ n
+            hi_d = np.maximum.reduceat(d, vstart)
+            lo_d = np.minimum.reduceat(d, vstart)
+            w_v = fa.offset - vp @ n
+            ok = (hi_d < -1e-9) & (lo_d > -cos_par) & (w_v >= max(jaw_min, 1e-9)) & (w_v <= jaw_max)
+            idx = np.flatnonzero(ok)
+            if len(idx):
+                inside = in_triangles(_project(vp[idx], u, v), tri_a, eps=-1e-15)
+                for k in idx[inside]:
+                    w = float(w_v[k])
+                    out.append(dict(kind="face/vertex", features={"faces": [a], "vertex": vp[k].tolist()}, normal=n, u=u, v=v,
+                                    opening=w, candidates=(vp[k] + (w / 2) * n)[None], region=None, mid=fa.offset - w / 2))
     return out
 
 
-def _overlap(tri_a: np.ndarray, tri_b: np.ndarray) -> list[np.ndarray]:
-    """Convex pieces of the overlap of two triangle sets in 2D (pairs pre-filtered by bounding boxes)."""
-    la, ha = tri_a.min(axis=1), tri_a.max(axis=1)
-    lb, hb = tri_b.min(axis=1), tri_b.max(axis=1)
-    hit = ((la[:, None] < hb[None]) & (lb[None] < ha[:, None])).all(axis=2)
-    pieces = []
-    for i, j in zip(*np.nonzero(hit)):
-        q = clip_convex(ccw(tri_a[i]), ccw(tri_b[j]))
-        if len(q) >= 3 and area2d(q) > 1e-12:
-            pieces.append(q)
-    return pieces
+def _face_candidates(region: Raster, k: int) -> np.ndarray:
+    """Grasp point candidates in an overlap region (2D): its centroid when inside, its deepest point (farthest from
+    the boundary) and the centroids of its largest connected pieces."""
+    from scipy import ndimage
 
-
-def _face_candidates(pieces: list[np.ndarray], k: int) -> np.ndarray:
-    """The overlap's centroid (when it lies in a piece) and the centroids of the largest pieces."""
-    areas = np.array([area2d(q) for q in pieces])
-    cents = np.array([centroid2d(q) for q in pieces])
-    overall = (cents * areas[:, None]).sum(axis=0) / areas.sum()
+    pts = region.points()
     out = []
-    tris = np.array([[q[0], q[m], q[m + 1]] for q in pieces for m in range(1, len(q) - 1)])
-    if in_triangles(overall[None], tris, eps=-1e-15)[0]:
-        out.append(overall)
-    for i in np.argsort(-areas, kind="stable"):
-        if len(out) >= k:
-            break
-        if all(np.linalg.norm(cents[i] - c) > 1e-6 for c in out):
-            out.append(cents[i])
-    return np.array(out)
+    centroid = pts.mean(axis=0)
+    if region.lookup(centroid[None])[0]:
+        out.append(centroid)
+    depth = ndimage.distance_transform_edt(np.pad(region.mask, 1))[1:-1, 1:-1]
+    i, j = np.unravel_index(int(np.argmax(depth)), depth.shape)
+    out.append(region.origin + (np.array([j, i]) + 0.5) * region.cell)
+    labels, n = ndimage.label(region.mask)
+    if n > 1:
+        sizes = np.bincount(labels.ravel())[1:]
+        for lab in np.argsort(-sizes, kind="stable")[: max(k - len(out), 0)] + 1:
+            ii, jj = np.nonzero(labels == lab)
+            out.append(region.origin + (np.array([jj.mean(), ii.mean()]) + 0.5) * region.cell)
+    uniq = []
+    for c in out:
+        if all(np.linalg.norm(c - d) > 1e-6 for d in uniq):
+            uniq.append(c)
+    return np.array(uniq[:k])
 
 
 # -- legal theta ranges (Section 5.1) -------------------------------------------------------------------------------
@@ -227,10 +235,10 @@ class HandObject:
         self._geom: dict[float, fcl.BVHModel] = {}
 
     def geometry(self, opening: float) -> fcl.BVHModel:
-        key = round(float(opening), 9)
+        """The hand with its pads `tolerance` clear of both contacts, widths rounded up to 0.1 mm (shared BVHs)."""
+        key = float(np.ceil((opening + 2 * self.tol) * 1e4) / 1e4)
         if key not in self._geom:
-            width = min(opening + 2 * self.tol, self.gripper.jaw_max)
-            self._geom[key] = bvh(self.gripper.collision_mesh(width))
+            self._geom[key] = bvh(self.gripper.collision_mesh(min(key, self.gripper.jaw_max)))
         return self._geom[key]
 
     def free(self, cls: dict, point: np.ndarray, theta: np.ndarray) -> np.ndarray:
@@ -287,25 +295,31 @@ def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = Clas
     theta = np.arange(int(round(2 * np.pi / step))) * (2 * np.pi / round(2 * np.pi / step))
     step = float(theta[1] - theta[0]) if len(theta) > 1 else 2 * np.pi
     out = []
+    coarse = theta[:: max(len(theta) // 24, 1)]
     for cls in pairs:
-        best, best_free, best_k = None, -1, 0
-        for k, c in enumerate(cls["candidates"]):
-            free = hand.free(cls, c, theta)
-            if params.min_contact_area > 0 and cls["pieces"] is not None:
-                free &= _contact_area(cls, c, theta, gripper) >= params.min_contact_area
-            if free.sum() > best_free:
-                best, best_free, best_k = free, int(free.sum()), k
-        if best_free <= 0:
-            continue
-        point = cls["candidates"][best_k]
 
-        def test(t, cls=cls, point=point):
+        def test(t, cls=cls, point=None):
             ok = hand.free(cls, point, t)
-            if params.min_contact_area > 0 and cls["pieces"] is not None:
+            if params.min_contact_area > 0 and cls["region"] is not None:
                 ok &= _contact_area(cls, point, t, gripper) >= params.min_contact_area
             return ok
 
-        intervals = _intervals(best, theta, step, test, params.bisection)
+        # the candidate with the widest legal range at a coarse step (stop at one free everywhere), then the full step
+        cands = cls["candidates"]
+        best_k, best_free = 0, -1
+        if len(cands) > 1:
+            for k, c in enumerate(cands):
+                n_free = int(test(coarse, point=c).sum())
+                if n_free > best_free:
+                    best_k, best_free = k, n_free
+                if n_free == len(coarse):
+                    break
+        point = cands[best_k]
+        best = test(theta, point=point)
+        if not best.any():
+            continue
+
+        intervals = _intervals(best, theta, step, lambda t, cls=cls, point=point: test(t, cls, point), params.bisection)
         n, u, v = cls["normal"], cls["u"], cls["v"]
         out.append(GraspClass(kind=cls["kind"], features=cls["features"], normal=n.copy(), u=u, v=v, point=point.copy(),
                               eccentricity=float(n @ (point - obj.com)), opening=float(cls["opening"]),
@@ -315,16 +329,12 @@ def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = Clas
 
 
 def _contact_area(cls: dict, point: np.ndarray, theta: np.ndarray, gripper: Gripper) -> np.ndarray:
-    """Area of the pad rectangle (rotated by theta in the grasp plane) over the face overlap (Section 5.1)."""
+    """Area of the face overlap covered by the pad rectangle rotated by theta in the grasp plane (Section 5.1)."""
     ext, centre = gripper.pad_extents, gripper.pad_center
-    u, v = cls["u"], cls["v"]
-    c2 = np.array([point @ u, point @ v])
-    out = np.zeros(len(theta))
-    for k, t in enumerate(theta):
-        z2 = np.array([np.cos(t), np.sin(t)])          # approach in the plane
-        x2 = np.array([-np.sin(t), np.cos(t)])         # TCP x = n x z (u x v = n)
-        corners = [c2 + x2 * (centre[0] + sx * ext[0] / 2) + z2 * (centre[2] + sz * ext[2] / 2)
-                   for sx, sz in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
-        rect = ccw(np.array(corners))
-        out[k] = sum(abs(area2d(clip_convex(ccw(q), rect))) for q in cls["pieces"])
-    return out
+    region: Raster = cls["region"]
+    rel = region.points() - np.array([point @ cls["u"], point @ cls["v"]])
+    th = np.asarray(theta, dtype=np.float64).reshape(-1, 1)
+    along = rel[:, 0] * np.cos(th) + rel[:, 1] * np.sin(th)     # approach z in the plane
+    across = -rel[:, 0] * np.sin(th) + rel[:, 1] * np.cos(th)   # TCP x = n x z (u x v = n)
+    inside = (np.abs(along - centre[2]) <= ext[2] / 2) & (np.abs(across - centre[0]) <= ext[0] / 2)
+    return inside.sum(axis=1) * region.cell ** 2

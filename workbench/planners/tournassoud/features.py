@@ -164,50 +164,6 @@ def plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return u, np.cross(n, u)
 
 
-def clip_convex(subject: np.ndarray, clip: np.ndarray) -> np.ndarray:
-    """Sutherland-Hodgman: the convex polygon `subject` (K, 2) clipped by the convex polygon `clip` (M, 2, ccw)."""
-    out = subject
-    m = len(clip)
-    for k in range(m):
-        if len(out) == 0:
-            break
-        a, b = clip[k], clip[(k + 1) % m]
-        e = b - a
-        side = e[0] * (out[:, 1] - a[1]) - e[1] * (out[:, 0] - a[0])  # >= 0 inside (left of a->b)
-        nxt = np.roll(out, -1, axis=0)
-        side_n = np.roll(side, -1)
-        pts = []
-        for p, q, sp, sq in zip(out, nxt, side, side_n):
-            if sp >= 0:
-                pts.append(p)
-            if (sp >= 0) != (sq >= 0):
-                pts.append(p + (q - p) * (sp / (sp - sq)))
-        out = np.array(pts).reshape(-1, 2)
-    return out
-
-
-def ccw(poly: np.ndarray) -> np.ndarray:
-    return poly if area2d(poly) >= 0 else poly[::-1]
-
-
-def area2d(poly: np.ndarray) -> float:
-    """Signed area of a polygon (K, 2)."""
-    if len(poly) < 3:
-        return 0.0
-    x, y = poly[:, 0], poly[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
-
-
-def centroid2d(poly: np.ndarray) -> np.ndarray:
-    a = area2d(poly)
-    if abs(a) < 1e-18:
-        return poly.mean(axis=0)
-    x, y = poly[:, 0], poly[:, 1]
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
-    cr = x * yn - xn * y
-    return np.array([((x + xn) * cr).sum(), ((y + yn) * cr).sum()]) / (6 * a)
-
-
 def in_triangles(points: np.ndarray, tris: np.ndarray, eps: float = 1e-12) -> np.ndarray:
     """(N,) whether each 2D point lies inside one of the 2D triangles (T, 3, 2): strictly for eps > 0, edges
     included for eps < 0."""
@@ -223,34 +179,69 @@ def in_triangles(points: np.ndarray, tris: np.ndarray, eps: float = 1e-12) -> np
     return (pos | neg).any(axis=1)
 
 
-def clip_segment(p0: np.ndarray, p1: np.ndarray, tris: np.ndarray) -> list[tuple[float, float]]:
-    """Parameter intervals [s0, s1] of the 2D segment p0 + s (p1 - p0) inside the union of triangles (T, 3, 2)."""
-    spans = []
-    d = p1 - p0
-    for tri in tris:
-        tri = ccw(tri)
-        lo, hi = 0.0, 1.0
-        for k in range(3):
-            a, b = tri[k], tri[(k + 1) % 3]
-            e = b - a
-            f0 = e[0] * (p0[1] - a[1]) - e[1] * (p0[0] - a[0])
-            fd = e[0] * d[1] - e[1] * d[0]
-            if abs(fd) < 1e-18:
-                if f0 < 0:
-                    lo, hi = 1.0, 0.0
-                continue
-            s = -f0 / fd
-            if fd > 0:
-                lo = max(lo, s)
-            else:
-                hi = min(hi, s)
-        if hi - lo > 1e-12:
-            spans.append((lo, hi))
-    spans.sort()
-    merged: list[list[float]] = []
-    for lo, hi in spans:
-        if merged and lo <= merged[-1][1] + 1e-12:
-            merged[-1][1] = max(merged[-1][1], hi)
-        else:
-            merged.append([lo, hi])
-    return [(a, b) for a, b in merged]
+@dataclass(frozen=True)
+class Raster:
+    """A 2D region sampled on a grid: cell (i, j) is the square of side `cell` at origin + (j, i) * cell."""
+
+    origin: np.ndarray
+    cell: float
+    mask: np.ndarray
+
+    @property
+    def area(self) -> float:
+        return float(self.mask.sum()) * self.cell ** 2
+
+    def points(self) -> np.ndarray:
+        """Centres of the cells inside (K, 2)."""
+        i, j = np.nonzero(self.mask)
+        return self.origin + (np.stack([j, i], axis=1) + 0.5) * self.cell
+
+    def lookup(self, pts: np.ndarray) -> np.ndarray:
+        """Whether 2D points fall in a cell inside."""
+        ij = np.floor((np.asarray(pts) - self.origin) / self.cell).astype(np.int64)
+        h, w = self.mask.shape
+        ok = (ij[:, 0] >= 0) & (ij[:, 0] < w) & (ij[:, 1] >= 0) & (ij[:, 1] < h)
+        out = np.zeros(len(ij), dtype=bool)
+        out[ok] = self.mask[ij[ok, 1], ij[ok, 0]]
+        return out
+
+
+def grid_for(lo: np.ndarray, hi: np.ndarray, cells: int = 200, min_cell: float = 2e-4) -> tuple[np.ndarray, float, tuple[int, int]]:
+    """Origin, cell size and (height, width) of a grid covering the box [lo, hi] with about `cells` along its longest side."""
+    cell = max(float(np.max(hi - lo)) / cells, min_cell)
+    shape = (int(np.ceil((hi[1] - lo[1]) / cell)) + 1, int(np.ceil((hi[0] - lo[0]) / cell)) + 1)
+    return np.asarray(lo, dtype=np.float64), cell, shape
+
+
+def rasterise(tris: np.ndarray, origin: np.ndarray, cell: float, shape: tuple[int, int]) -> Raster:
+    """Fill 2D triangles (T, 3, 2) on a grid (PIL's polygon fill, cells whose centre is covered)."""
+    from PIL import Image, ImageDraw
+
+    img = Image.new("1", (shape[1], shape[0]), 0)
+    draw = ImageDraw.Draw(img)
+    px = (np.asarray(tris) - origin) / cell - 0.5
+    for t in px:
+        draw.polygon([tuple(p) for p in t], fill=1, outline=1)
+    return Raster(np.asarray(origin, dtype=np.float64), cell, np.asarray(img, dtype=bool))
+
+
+def face_overlap(tri_a: np.ndarray, tri_b: np.ndarray, cells: int = 200) -> Raster | None:
+    """The overlap of two triangle sets in 2D as a raster (None when their bounding boxes miss)."""
+    lo = np.maximum(tri_a.reshape(-1, 2).min(0), tri_b.reshape(-1, 2).min(0))
+    hi = np.minimum(tri_a.reshape(-1, 2).max(0), tri_b.reshape(-1, 2).max(0))
+    if (hi <= lo).any():
+        return None
+    origin, cell, shape = grid_for(lo, hi, cells)
+    a = rasterise(tri_a, origin, cell, shape)
+    b = rasterise(tri_b, origin, cell, shape)
+    return Raster(origin, cell, a.mask & b.mask)
+
+
+def segment_spans(p0: np.ndarray, p1: np.ndarray, region: Raster) -> list[tuple[float, float]]:
+    """Parameter intervals [s0, s1] of the 2D segment p0 + s (p1 - p0) inside a raster region (sampled at half cells)."""
+    n = max(int(np.ceil(np.linalg.norm(p1 - p0) / (region.cell / 2))), 2)
+    s = np.linspace(0.0, 1.0, n + 1)
+    inside = region.lookup(p0 + s[:, None] * (p1 - p0))
+    d = np.diff(np.concatenate([[0], inside.astype(np.int8), [0]]))
+    a, b = np.flatnonzero(d == 1), np.flatnonzero(d == -1) - 1
+    return [(float(s[x]), float(s[y])) for x, y in zip(a, b) if y > x]

@@ -1,0 +1,78 @@
+"""ipywidgets front-end of the grasp-placement table planner (notebook 06; Tournassoud et al. 1987).
+
+Widgets pick a grasp class, theta, a placement class, phi and both resolutions; changing a resolution rebuilds the
+table through the planner's stages (reused from the store when already built); the Fig. 5 plot updates and the
+meshcat view follows. No planning logic lives here.
+"""
+
+from __future__ import annotations
+
+import ipywidgets as W
+import matplotlib.pyplot as plt
+import numpy as np
+
+from . import viz
+from .objects import ObjectModel
+from .planners.tournassoud.figures import table_figure
+from .planners.tournassoud.stages import TableRun, table_stage
+from .planners.tournassoud.table import TableParams
+from .robots import Robot
+from .store import Store
+from .viz.tournassoud import show_class, show_conjunction
+
+
+class TableExplorer:
+    """The table of `obj` for `robot` stored in `db`; `widget` holds the controls, `vis` the meshcat scene."""
+
+    def __init__(self, db: str, obj: ObjectModel, robot: Robot, params: TableParams = TableParams(), vis=None):
+        self.db, self.obj, self.robot, self.params = db, obj, robot, params
+        self.vis = vis if vis is not None else viz.new_scene()
+        self.run: TableRun | None = None
+        self.cls = W.Dropdown(description="class G_i")
+        self.theta = W.FloatSlider(value=90.0, min=0.0, max=359.0, step=1.0, description="theta (deg)", continuous_update=False)
+        self.place = W.Dropdown(description="placement P_j")
+        self.phi = W.FloatSlider(value=0.0, min=0.0, max=359.0, step=1.0, description="phi (deg)", continuous_update=False)
+        self.theta_step = W.FloatSlider(value=float(np.degrees(params.theta_step)), min=1.0, max=30.0, step=1.0,
+                                        description="theta step", continuous_update=False)
+        self.phi_step = W.FloatSlider(value=float(np.degrees(params.phi_step)), min=1.0, max=30.0, step=1.0,
+                                      description="phi step", continuous_update=False)
+        self.info = W.HTML()
+        self.plot = W.Output()
+        for w in (self.cls, self.theta, self.place, self.phi):
+            w.observe(lambda _: self.show(), names="value")
+        for w in (self.theta_step, self.phi_step):
+            w.observe(lambda _: self.build(), names="value")
+        self.widget = W.VBox([W.HBox([self.cls, self.theta]), W.HBox([self.place, self.phi]),
+                              W.HBox([self.theta_step, self.phi_step]), self.info, self.plot])
+        self.build()
+
+    def build(self) -> TableRun:
+        """(Re)build or load the table at the current resolutions and redraw."""
+        p = TableParams(theta_step=float(np.radians(self.theta_step.value)), phi_step=float(np.radians(self.phi_step.value)),
+                        table_point=self.params.table_point, clearance=self.params.clearance)
+        with Store(self.db) as store:
+            self.run = table_stage(store, self.obj, self.robot, self.robot.gripper, params=p)
+        r = self.run
+        self.cls.options = [(f"G{i} {c.kind} ({c.opening * 1000:.0f} mm)", i) for i, c in enumerate(r.classes)]
+        self.place.options = [(f"P{j}", j) for j in range(len(r.table.placements))]
+        with self.plot:
+            self.plot.clear_output(wait=True)
+            fig = table_figure(r.table, r.classes)
+            plt.show(fig)
+        self.show()
+        return r
+
+    def show(self) -> bool | None:
+        """The hand at (G_i, theta) on the object, and the object at (P_j, phi) with the hand on the table."""
+        r = self.run
+        if r is None or not r.classes or self.cls.value is None or self.place.value is None:
+            self.info.value = "no grasp class or placement class: nothing to show"
+            return None
+        i, j = int(self.cls.value), int(self.place.value)
+        th, ph = float(np.radians(self.theta.value)), float(np.radians(self.phi.value))
+        c = r.classes[i]
+        show_class(self.vis, r.obj.mesh, c, r.gripper, th, pose=np.array([[1, 0, 0, 0.0], [0, 1, 0, -0.3], [0, 0, 1, 0.2], [0, 0, 0, 1]]))
+        legal = show_conjunction(self.vis, r.obj.mesh, r.table, r.classes, i, r.gripper, j, th, ph)
+        self.info.value = (f"G{i}: {c.kind}, opening {c.opening * 1000:.1f} mm, e = {c.eccentricity * 1000:.1f} mm, legal theta "
+                           f"{np.degrees(c.legal_range):.0f} deg; (theta, phi) in Q_{i}{j}: <b>{'yes' if legal else 'no'}</b>")
+        return legal
