@@ -17,7 +17,7 @@ their collision boxes and meshes, copied verbatim) is bolted to the flange throu
 real PUMA 560's wrist-centre-to-flange distance; DH d6 = 0 puts the flange at the wrist centre). The links carry
 simple cylinder collision geometry along their DH segments.
 
-Run: `python assets/robots/make_puma560.py [OUT]` (default: puma560.urdf next to this script).
+Run: `python assets/robots/make_puma560.py [OUT]` (default: the package data `workbench/assets/robots/puma560.urdf`).
 """
 
 from __future__ import annotations
@@ -111,7 +111,8 @@ def main() -> None:
 
     dist = importlib.metadata.distribution("example-robot-data")
     panda = Path(str(dist.locate_file("cmeel.prefix/share"))) / "example-robot-data" / "robots" / "panda_description" / "urdf" / "panda.urdf"
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).with_name("puma560.urdf")
+    default = Path(__file__).resolve().parents[2] / "workbench" / "assets" / "robots" / "puma560.urdf"
+    out = Path(sys.argv[1]) if len(sys.argv) > 1 else default
     out.write_text(puma560_urdf(panda))
     print(out)
 

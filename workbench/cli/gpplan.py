@@ -10,7 +10,11 @@ import sys
 
 import numpy as np
 
-from ..errors import WorkbenchError
+from workbench.errors import WorkbenchError
+from workbench.planners.tournassoud.figures import table_html
+from workbench.planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
+from workbench.planners.tournassoud.stages import load_planner
+from workbench.robots.collider import default_scene
 
 
 def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
@@ -59,10 +63,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..kinematics import default_scene
-    from ..planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
-    from ..planners.tournassoud.stages import load_planner
-
     grasp_mode = args.initial is not None or args.goal is not None
     place_mode = args.from_ is not None or args.to is not None
     if grasp_mode == place_mode or (grasp_mode and (args.initial is None or args.goal is None)) or \
@@ -97,8 +97,6 @@ def run(args: argparse.Namespace) -> int:
             json.dump(doc, fh, indent=1)
         print(f"json: {args.json}")
     if args.html:
-        from ..planners.tournassoud.figures import table_html
-
         with open(args.html, "w") as fh:
             fh.write(table_html(t, r.classes, seq, title=f"{r.obj.name} with {r.robot.name}"))
         print(f"html: {args.html}")

@@ -8,8 +8,13 @@ import sys
 
 import numpy as np
 
-from ..errors import WorkbenchError
-from .grasps import add_object_arguments
+from workbench.cli.grasps import add_object_arguments
+from workbench.errors import WorkbenchError
+from workbench.geometry.objects import load_object
+from workbench.planners.tournassoud.classes import KINDS, ClassParams
+from workbench.planners.tournassoud.stages import table_stage_at
+from workbench.planners.tournassoud.table import TableParams
+from workbench.robots.model import get_robot
 
 
 def parse_point(text: str, label: str = "--table-point") -> tuple[float, float]:
@@ -23,9 +28,6 @@ def parse_point(text: str, label: str = "--table-point") -> tuple[float, float]:
 
 def add_table_arguments(parser: argparse.ArgumentParser) -> None:
     """Class and table parameters (degrees and metres on the command line)."""
-    from ..planners.tournassoud.classes import ClassParams
-    from ..planners.tournassoud.table import TableParams
-
     c, t = ClassParams(), TableParams()
     parser.add_argument("--robot", default="puma560", help="a built-in robot or the path of a URDF (then --tip)")
     parser.add_argument("--tip", default=None, help="tip frame of a URDF robot")
@@ -42,9 +44,6 @@ def add_table_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def params_from_args(args: argparse.Namespace):
-    from ..planners.tournassoud.classes import ClassParams
-    from ..planners.tournassoud.table import TableParams
-
     cp = ClassParams(min_face_area=args.min_face_area, edge_angle=float(np.radians(args.edge_angle)),
                      theta_step=float(np.radians(args.theta_step)), bisection=min(float(np.radians(0.1)), float(np.radians(args.theta_step))),
                      min_contact_area=args.min_contact_area)
@@ -63,8 +62,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def summary(run) -> list[str]:
     """Counts of a table run: classes by kind, placement classes, non-empty cells, timings."""
-    from ..planners.tournassoud.classes import KINDS
-
     t = run.table
     kinds = {k: sum(c.kind == k for c in run.classes) for k in KINDS}
     c_n, p_n, t_n, f_n = t.q.shape
@@ -78,16 +75,10 @@ def summary(run) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..objects import load_object
-    from ..planners.tournassoud.stages import table_stage
-    from ..robots import get_robot
-    from ..store import Store
-
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     cp, tp = params_from_args(args)
     robot = get_robot(args.robot, tip_frame=args.tip)
-    with Store(args.db) as store:
-        r = table_stage(store, obj, robot, robot.gripper, cp, tp, progress=sys.stderr.isatty())
+    r = table_stage_at(args.db, obj, robot, cp, tp, progress=sys.stderr.isatty())
     for line in summary(r):
         print(line)
     if not r.classes:

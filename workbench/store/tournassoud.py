@@ -31,8 +31,8 @@ import json
 import numpy as np
 import pyarrow as pa
 
-from ..errors import StoreError
-from . import Store
+from workbench.errors import StoreError
+from workbench.store import Store
 
 TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS tgraspclass (

@@ -8,11 +8,12 @@ import meshcat
 import numpy as np
 import trimesh
 
-from ..gripper import Gripper
-from ..planners.tournassoud.classes import ClassParams, GraspClass
-from ..planners.tournassoud.features import faces_of
-from ..planners.tournassoud.table import GraspPlacementTable
-from . import BLUE, GREEN, GREY, ORANGE, RED, show_gripper, show_mesh, show_segments, show_spheres
+from workbench.robots.gripper import Gripper
+from workbench.planners.tournassoud.classes import ClassParams, GraspClass
+from workbench.planners.tournassoud.features import faces_of
+from workbench.planners.tournassoud.table import GraspPlacementTable
+from workbench.viewer import BLUE, GREEN, GREY, ORANGE, RED, show_gripper, show_mesh, show_segments, show_spheres
+from workbench.viewer.wan_harada import show_plan
 
 FEATURE_COLOR = 0xDD3333
 
@@ -72,6 +73,4 @@ def show_conjunction(vis: meshcat.Visualizer, mesh: trimesh.Trimesh, table: Gras
 
 def show_sequence(vis: meshcat.Visualizer, plan, robot, mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30):
     """A realised sequence animated with the robot (the plan animation of `workbench.viz.plan`)."""
-    from .plan import show_plan
-
     return show_plan(vis, plan, robot, mesh, table, fps=fps)

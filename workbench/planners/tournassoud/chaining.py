@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...errors import PlanningError
-from .table import GraspPlacementTable
+from workbench.errors import PlanningError
+from workbench.planners.tournassoud.table import GraspPlacementTable
 
 
 @dataclass

@@ -15,9 +15,9 @@ import io
 
 import numpy as np
 
-from .chaining import Sequence
-from .classes import GraspClass
-from .table import GraspPlacementTable
+from workbench.planners.tournassoud.chaining import Sequence
+from workbench.planners.tournassoud.classes import GraspClass
+from workbench.planners.tournassoud.table import GraspPlacementTable
 
 COLOURS = np.array([[0.35, 0.35, 0.35], [0.8, 0.8, 0.8], [1.0, 1.0, 1.0], [0.2, 0.45, 0.85]])
 

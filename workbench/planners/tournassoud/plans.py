@@ -25,15 +25,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
-from ...errors import PlanningError
-from ...kinematics import Collider, IKOptions, SeedLibrary, Scene, retract, solve_ik
-from ...plans import Plan, PlanStep
-from ...regrasp import PoseQuery
-from ...robots import Robot
-from .chaining import Sequence, grasp_query, placement_query
-from .classes import GraspClass
-from .table import GraspPlacementTable
+from workbench.robots.analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
+from workbench.errors import PlanningError
+from workbench.robots.chain import solve_ik
+from workbench.robots.collider import Collider, Scene
+from workbench.robots.ik import IKOptions, SeedLibrary, retract
+from workbench.planners.wan_harada.plans import Plan, PlanStep
+from workbench.planners.wan_harada.query import PoseQuery
+from workbench.robots.model import Robot
+from workbench.planners.tournassoud.chaining import Sequence, grasp_query, placement_query
+from workbench.planners.tournassoud.classes import GraspClass
+from workbench.planners.tournassoud.table import GraspPlacementTable
 
 
 @dataclass

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from ...objects import ObjectModel, from_trimesh
+from workbench.geometry.objects import ObjectModel, from_trimesh
 
 
 def prism(outline: list[tuple[float, float]], caps: list[tuple[int, int, int]], depth: float) -> trimesh.Trimesh:

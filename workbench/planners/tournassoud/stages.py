@@ -16,17 +16,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...errors import WorkbenchError
-from ...gripper import Gripper, franka_hand
-from ...objects import ObjectModel
-from ...placements import PlacementParams, stable_placements
-from ...robots import Robot, RobotSpec, get_robot, robot_from_spec
-from ...store import Store
-from ...store import tournassoud as sql
-from ...store.objects import get_object, gripper_digest, put_object
-from ...store.robots import put_robot, robot_row
-from .classes import ClassParams, GraspClass, grasp_classes
-from .table import GraspPlacementTable, TableParams, build_table, table_frame, grid
+from workbench.errors import WorkbenchError
+from workbench.robots.gripper import Gripper, franka_hand
+from workbench.geometry.objects import ObjectModel
+from workbench.grasping.placements import PlacementParams, stable_placements
+from workbench.robots.model import Robot, RobotSpec, get_robot, robot_from_spec
+from workbench.store import Store
+from workbench.store import tournassoud as sql
+from workbench.store.objects import get_object, gripper_digest, put_object
+from workbench.store.robots import put_robot, robot_row
+from workbench.planners.tournassoud.classes import ClassParams, GraspClass, grasp_classes
+from workbench.planners.tournassoud.table import GraspPlacementTable, TableParams, build_table, table_frame, grid
 
 CLASSES = "tournassoud.classes"
 TABLE = "tournassoud.table"
@@ -84,6 +84,14 @@ def table_stage(store: Store, obj: ObjectModel, robot: Robot, gripper: Gripper |
     table = build_table(classes, pl.poses, robot, gripper, params, progress=progress)
     pid = sql.save_table(store, TABLE, key, idobject, idrobot, idc, table, pl.normals, pl.stability)
     return TableRun(obj, robot, gripper, classes, table, idc, pid, (reused_c, False), time.perf_counter() - t0)
+
+
+def table_stage_at(db: str, obj: ObjectModel, robot: Robot, class_params: ClassParams = ClassParams(),
+                   params: TableParams = TableParams(), placement: PlacementParams = PlacementParams(),
+                   progress: bool = False) -> TableRun:
+    """`table_stage` on the store file `db` (opened and closed here), with the robot's planning gripper."""
+    with Store(db) as store:
+        return table_stage(store, obj, robot, robot.gripper, class_params, params, placement, progress)
 
 
 def _table_from_rows(rows: dict) -> GraspPlacementTable:

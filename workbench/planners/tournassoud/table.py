@@ -22,11 +22,13 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from ...analytic import analytic_ik, solve, spherical_wrist_reason
-from ...errors import WorkbenchError
-from ...placements import grips_above_table
-from ...robots import Robot
-from .classes import GraspClass
+from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
+from workbench.errors import WorkbenchError
+from workbench.grasping.placements import grips_above_table
+from workbench.robots.chain import solve_ik
+from workbench.robots.ik import IKOptions, SeedLibrary
+from workbench.robots.model import Robot
+from workbench.planners.tournassoud.classes import GraspClass
 
 
 @dataclass(frozen=True)
@@ -183,8 +185,6 @@ def reachable(robot: Robot, base: np.ndarray, held: np.ndarray, chunk: int, prog
 
 def _reachable_numeric(robot: Robot, base: np.ndarray, held: np.ndarray, out: np.ndarray, progress: bool) -> np.ndarray:
     """The numerical IK (Levenberg-Marquardt from a seed library) for arms without a closed form."""
-    from ...kinematics import IKOptions, SeedLibrary, solve_ik
-
     opts = IKOptions()
     lib = SeedLibrary(robot, opts.library, opts.seed)
     poses = np.einsum("fij,kjl->kfil", base, held).reshape(-1, 4, 4)

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import RobotError
+from workbench.errors import RobotError
 
 TOL_AXES = 1e-9  # metres: how close lines must pass to count as intersecting
 

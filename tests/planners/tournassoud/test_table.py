@@ -9,17 +9,15 @@ import pytest
 import trimesh
 
 from workbench.errors import PlanningError, WorkbenchError
-from workbench.kinematics import Scene
-from workbench.objects import from_trimesh
-from workbench.placements import stable_placements
+from workbench.geometry.objects import from_trimesh
+from workbench.grasping.placements import stable_placements
 from workbench.planners.tournassoud.chaining import chain, grasp_query, placement_query
 from workbench.planners.tournassoud.classes import grasp_classes
 from workbench.planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
 from workbench.planners.tournassoud.table import GraspPlacementTable, TableParams, build_table, runs
 from workbench.resources import erd_share
-from workbench.validate import PlanValidator
-
-from .conftest import extrude, puma
+from workbench.robots.collider import Scene
+from workbench.validation import PlanValidator
 
 
 def test_box_has_three_face_face_classes(box, hand):
@@ -48,7 +46,7 @@ def test_l_part_classes_of_fig1(lpart, hand):
         assert 0 < c.legal_range <= 2 * np.pi + 1e-9
 
 
-def test_face_edge_and_face_vertex_classes(hand):
+def test_face_edge_and_face_vertex_classes(hand, extrude):
     wedge = from_trimesh(extrude([(-0.025, 0), (0.025, 0), (0, 0.03)], [(0, 1, 2)], 0.04), "wedge")
     kinds = [(c.kind, round(c.opening, 6), tuple(np.round(c.normal, 6))) for c in grasp_classes(wedge, hand)]
     assert ("face/edge", 0.03, (0.0, 0.0, -1.0)) in kinds                 # base against the ridge
@@ -57,10 +55,10 @@ def test_face_edge_and_face_vertex_classes(hand):
     assert len(fv) == 1 and abs(fv[0].opening - 0.03) < 1e-9 and np.allclose(fv[0].point, [0, 0, 0.015])
 
 
-def test_table_far_away_no_limits_is_theta_range_times_all_phi(box, hand):
+def test_table_far_away_no_limits_is_theta_range_times_all_phi(box, hand, make_puma):
     classes = grasp_classes(box, hand)
     pl = stable_placements(box).poses
-    robot = puma(base_z=-0.4)  # shoulder 0.27 m above the table: every orientation reachable near H
+    robot = make_puma(base_z=-0.4)  # shoulder 0.27 m above the table: every orientation reachable near H
     t = build_table(classes, pl, robot, hand, TableParams(table_point=(0.45, 0.0), clearance=-1.0, limits=False), progress=False)
     expect = np.broadcast_to(t.hand_object[:, None, :, None], t.q.shape)
     assert t.hand_object.any(axis=1).all()

@@ -10,17 +10,14 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from workbench.analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
 from workbench.errors import RobotError
-from workbench.resources import ASSETS
-from workbench.robots import get_robot, robot_from_urdf
-
-HAND = ("panda_hand", "panda_leftfinger", "panda_rightfinger")
+from workbench.robots.analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
+from workbench.robots.model import get_robot
 
 
 @pytest.fixture(scope="module")
 def puma():
-    return robot_from_urdf(ASSETS / "robots" / "puma560.urdf", "panda_hand_tcp", name="puma560", drop_geometry=HAND)
+    return get_robot("puma560")
 
 
 def _fk(robot, qs: np.ndarray) -> np.ndarray:

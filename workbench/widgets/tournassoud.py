@@ -11,14 +11,13 @@ import ipywidgets as W
 import matplotlib.pyplot as plt
 import numpy as np
 
-from . import viz
-from .objects import ObjectModel
-from .planners.tournassoud.figures import table_figure
-from .planners.tournassoud.stages import TableRun, table_stage
-from .planners.tournassoud.table import TableParams
-from .robots import Robot
-from .store import Store
-from .viz.tournassoud import show_class, show_conjunction
+from workbench import viewer
+from workbench.geometry.objects import ObjectModel
+from workbench.planners.tournassoud.figures import table_figure
+from workbench.planners.tournassoud.stages import TableRun, table_stage_at
+from workbench.planners.tournassoud.table import TableParams
+from workbench.robots.model import Robot
+from workbench.viewer.tournassoud import show_class, show_conjunction
 
 
 class TableExplorer:
@@ -26,7 +25,7 @@ class TableExplorer:
 
     def __init__(self, db: str, obj: ObjectModel, robot: Robot, params: TableParams = TableParams(), vis=None):
         self.db, self.obj, self.robot, self.params = db, obj, robot, params
-        self.vis = vis if vis is not None else viz.new_scene()
+        self.vis = vis if vis is not None else viewer.new_scene()
         self.run: TableRun | None = None
         self.cls = W.Dropdown(description="class G_i")
         self.theta = W.FloatSlider(value=90.0, min=0.0, max=359.0, step=1.0, description="theta (deg)", continuous_update=False)
@@ -50,8 +49,7 @@ class TableExplorer:
         """(Re)build or load the table at the current resolutions and redraw."""
         p = TableParams(theta_step=float(np.radians(self.theta_step.value)), phi_step=float(np.radians(self.phi_step.value)),
                         table_point=self.params.table_point, clearance=self.params.clearance)
-        with Store(self.db) as store:
-            self.run = table_stage(store, self.obj, self.robot, self.robot.gripper, params=p)
+        self.run = table_stage_at(self.db, self.obj, self.robot, params=p)
         r = self.run
         self.cls.options = [(f"G{i} {c.kind} ({c.opening * 1000:.0f} mm)", i) for i, c in enumerate(r.classes)]
         self.place.options = [(f"P{j}", j) for j in range(len(r.table.placements))]
