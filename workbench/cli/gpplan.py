@@ -11,9 +11,10 @@ import sys
 import numpy as np
 
 from workbench.errors import WorkbenchError
+from workbench.planners.tournassoud.chaining import NoSequence
 from workbench.planners.tournassoud.figures import table_html
 from workbench.planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
-from workbench.planners.tournassoud.stages import load_planner
+from workbench.planners.tournassoud.stages import load_planner, plan_validator
 from workbench.robots.collider import default_scene
 
 
@@ -72,15 +73,24 @@ def run(args: argparse.Namespace) -> int:
         if not np.isfinite(v) or v < 0:
             raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
     r = load_planner(args.db, args.object, args.robot)
-    realiser = Realiser(r.robot, default_scene(r.robot.name), r.obj.mesh, args.handx, args.worldz)
-    if grasp_mode:
-        initial = parse_grasp(args.initial)
-        gc, rng = parse_goal(args.goal)
-        seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng)
-    else:
-        start = parse_grasp(args.from_, "--from")
-        goal = parse_grasp(args.to, "--to")
-        seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal)
+    scene = default_scene(r.robot.name)
+    realiser = Realiser(r.robot, scene, r.obj.mesh, args.handx, args.worldz)
+    try:
+        if grasp_mode:
+            initial = parse_grasp(args.initial)
+            gc, rng = parse_goal(args.goal)
+            seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng)
+        else:
+            start = parse_grasp(args.from_, "--from")
+            goal = parse_grasp(args.to, "--to")
+            seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal)
+    except NoSequence as exc:
+        print(f"warning: {exc}", file=sys.stderr)
+        print(f"{r.obj.name} with {r.robot.name}: no regrasp sequence (0 results)")
+        if args.json:
+            with open(args.json, "w") as fh:
+                json.dump({"sequence": None, "plan": None, "reason": str(exc)}, fh, indent=1)
+        return 0
     t = r.table
     print(f"{r.obj.name} with {r.robot.name}: {seq.regrasps} regrasp(s), chaining {seq.levels} step(s) in {seq.seconds * 1000:.2f} ms")
     for k, (c, ti) in enumerate(seq.grasps):
@@ -91,6 +101,8 @@ def run(args: argparse.Namespace) -> int:
         print("the initial grasp is already in the goal range: nothing to do")
     else:
         print(plan.summary())
+        report = plan_validator(args.db, r, scene).check(plan)
+        print("validator: " + ("ok" if report.ok else "FAILED: " + "; ".join(report.errors[:3])))
     if args.json:
         doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict()}
         with open(args.json, "w") as fh:

@@ -251,3 +251,19 @@ def latest_table(store: Store, idobject: int, idrobot: int | None = None) -> int
     if row is None:
         raise StoreError(f"store {store.path} has no grasp-placement table for this object and robot; run `workbench gptable` first")
     return int(row[0])
+
+
+def table_robot(store: Store, pid: int) -> int:
+    """The idrobot of the table with paramset `pid`."""
+    row = store.one("SELECT idrobot FROM tgptable WHERE idparamset = ?", [pid])
+    if row is None:
+        raise StoreError(f"store {store.path} has no grasp-placement table for paramset {pid}; run `workbench gptable` first")
+    return int(row[0])
+
+
+def gripper_id(store: Store, digest: str) -> int:
+    """The idgripper of the stored gripper with this digest."""
+    row = store.one("SELECT idgripper FROM gripper WHERE digest = ?", [digest])
+    if row is None:
+        raise StoreError(f"store {store.path} has no row of this gripper; rebuild the table with `workbench gptable`")
+    return int(row[0])

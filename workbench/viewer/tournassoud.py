@@ -8,11 +8,11 @@ import meshcat
 import numpy as np
 import trimesh
 
-from workbench.robots.gripper import Gripper
 from workbench.planners.tournassoud.classes import ClassParams, GraspClass
 from workbench.planners.tournassoud.features import faces_of
 from workbench.planners.tournassoud.table import GraspPlacementTable
-from workbench.viewer import BLUE, GREEN, GREY, ORANGE, RED, show_gripper, show_mesh, show_segments, show_spheres
+from workbench.robots.gripper import Gripper
+from workbench.viewer.scenes import BLUE, GREEN, GREY, ORANGE, RED, show_gripper, show_mesh, show_segments, show_spheres
 from workbench.viewer.wan_harada import show_plan
 
 FEATURE_COLOR = 0xDD3333

@@ -11,7 +11,7 @@ import ipywidgets as W
 import matplotlib.pyplot as plt
 import numpy as np
 
-from workbench import viewer
+from workbench.viewer import scenes as viewer
 from workbench.geometry.objects import ObjectModel
 from workbench.planners.tournassoud.figures import table_figure
 from workbench.planners.tournassoud.stages import TableRun, table_stage_at

@@ -25,7 +25,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from workbench.errors import PlanningError
-from workbench.planners.tournassoud.table import GraspPlacementTable
+from workbench.planners.tournassoud.table import GraspPlacementTable, runs
+
+
+class NoSequence(PlanningError):
+    """A valid query without an answer: the table does not connect its start and goal (zero results)."""
 
 
 @dataclass
@@ -137,8 +141,9 @@ def grasp_query(table: GraspPlacementTable, initial: tuple[int, float], goal_cla
             raise PlanningError(f"{name} grasp class {c} does not exist: the table has classes 0..{c_n - 1}")
     ti = nearest_sample(table.theta, theta_ini)
     if not table.hand_object[ci, ti]:
+        legal = ", ".join(f"{np.degrees(a):.0f}..{np.degrees(b):.0f}" for a, b in runs(table.hand_object[ci], table.theta)) or "none"
         raise PlanningError(f"initial grasp (class {ci}, theta {np.degrees(theta_ini):.1f} deg) collides with the object; "
-                            f"choose theta inside the class's legal range")
+                            f"choose theta in the class's legal range (deg: {legal})")
     start = np.zeros((c_n, t_n), dtype=bool)
     start[ci, ti] = True
     goal = np.zeros((c_n, t_n), dtype=bool)
@@ -148,7 +153,7 @@ def grasp_query(table: GraspPlacementTable, initial: tuple[int, float], goal_cla
                             f"{np.degrees(goal_range[1]):.1f}] deg; widen the range")
     levels = chain(table, start, goal)
     if levels is None:
-        raise PlanningError(f"no regrasp sequence from class {ci} at {np.degrees(theta_ini):.1f} deg to class {goal_class}: "
+        raise NoSequence(f"no regrasp sequence from class {ci} at {np.degrees(theta_ini):.1f} deg to class {goal_class}: "
                             f"the grasp-placement table does not connect them (try another table point or finer steps)")
     grasps, placements = [(ci, ti)], []
     cur = (ci, ti)
@@ -176,7 +181,7 @@ def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: 
         raise PlanningError(f"no grasp can put the object at placement {pg}, {np.degrees(phg):.1f} deg; choose another angle")
     levels = chain(table, a, b)
     if levels is None:
-        raise PlanningError(f"no regrasp sequence from placement {ps} to placement {pg}: the table does not connect them")
+        raise NoSequence(f"no regrasp sequence from placement {ps} to placement {pg}: the table does not connect them")
     cur = _pick2(levels[-1] & a)
     grasps, placements = [cur], [(ps, fs)]
     for prev in reversed(levels[:-1]):

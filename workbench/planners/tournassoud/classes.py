@@ -29,12 +29,12 @@ from dataclasses import asdict, dataclass, field
 import fcl
 import numpy as np
 
-from workbench.geometry.collision import bvh, collide_at_poses, object_collider
 from workbench.errors import WorkbenchError
-from workbench.robots.gripper import Gripper
+from workbench.geometry.collision import bvh, collide_at_poses, object_collider
 from workbench.geometry.objects import ObjectModel
-from workbench.planners.tournassoud.features import (Features, Raster, face_overlap, features, grid_for, in_triangles, plane_basis, rasterise,
-                       segment_spans)
+from workbench.planners.tournassoud.features import (Features, Raster, face_overlap, features, grid_for, in_triangles,
+                                                     plane_basis, rasterise, segment_spans)
+from workbench.robots.gripper import Gripper
 
 KINDS = ("face/face", "face/edge", "face/vertex")
 

@@ -25,17 +25,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workbench.robots.analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
 from workbench.errors import PlanningError
+from workbench.planners.tournassoud.chaining import NoSequence, Sequence, grasp_query, placement_query
+from workbench.planners.tournassoud.classes import GraspClass
+from workbench.planners.tournassoud.table import GraspPlacementTable
+from workbench.planners.wan_harada.plans import Plan, PlanStep
+from workbench.planners.wan_harada.query import PoseQuery
+from workbench.robots.analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
 from workbench.robots.chain import solve_ik
 from workbench.robots.collider import Collider, Scene
 from workbench.robots.ik import IKOptions, SeedLibrary, retract
-from workbench.planners.wan_harada.plans import Plan, PlanStep
-from workbench.planners.wan_harada.query import PoseQuery
 from workbench.robots.model import Robot
-from workbench.planners.tournassoud.chaining import Sequence, grasp_query, placement_query
-from workbench.planners.tournassoud.classes import GraspClass
-from workbench.planners.tournassoud.table import GraspPlacementTable
 
 
 @dataclass
@@ -125,7 +125,7 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
         (c, t), (j, f) = bad
         work.q[c, j, t, f] = False
         work._matrix = None
-    raise PlanningError(f"no executable regrasp sequence after {attempts} attempts: the table's conjunctions fail their approach, "
+    raise NoSequence(f"no executable regrasp sequence after {attempts} attempts: the table's conjunctions fail their approach, "
                         f"retract or arm collision checks; try another table point or larger handx/worldz")
 
 

@@ -17,16 +17,20 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.errors import WorkbenchError
-from workbench.robots.gripper import Gripper, franka_hand
 from workbench.geometry.objects import ObjectModel
+from workbench.validation import PlanValidator, validator_from_rows
 from workbench.grasping.placements import PlacementParams, stable_placements
+from workbench.planners.tournassoud.classes import ClassParams, GraspClass, grasp_classes
+from workbench.planners.tournassoud.table import GraspPlacementTable, TableParams, build_table, table_frame, grid
+from workbench.planners.wan_harada.stages import get_object
+from workbench.robots.gripper import Gripper, franka_hand
+from workbench.robots.collider import Scene
+from workbench.robots.ik import IKOptions
 from workbench.robots.model import Robot, RobotSpec, get_robot, robot_from_spec
 from workbench.store import Store
 from workbench.store import tournassoud as sql
-from workbench.store.objects import get_object, gripper_digest, put_object
-from workbench.store.robots import put_robot, robot_row
-from workbench.planners.tournassoud.classes import ClassParams, GraspClass, grasp_classes
-from workbench.planners.tournassoud.table import GraspPlacementTable, TableParams, build_table, table_frame, grid
+from workbench.store.objects import gripper_row, object_row, put_gripper, put_object
+from workbench.store.robots import StoredScene, put_robot, robot_row
 
 CLASSES = "tournassoud.classes"
 TABLE = "tournassoud.table"
@@ -51,7 +55,7 @@ def classes_stage(store: Store, obj: ObjectModel, gripper: Gripper, params: Clas
     """Grasp classes of `obj` (Sections 2, 5.1): (paramset, classes, reused from the store)."""
     sql.ensure_schema(store)
     idobject = put_object(store, obj)
-    key = {"classes": params.as_dict(), "gripper": gripper_digest(gripper)}
+    key = {"classes": params.as_dict(), "gripper": gripper.digest}
     pid = store.find_paramset(CLASSES, key, idobject)
     if pid is not None:
         return pid, [GraspClass(**d) for d in sql.load_classes(store, pid)], True
@@ -73,6 +77,7 @@ def table_stage(store: Store, obj: ObjectModel, robot: Robot, gripper: Gripper |
     gripper = gripper or robot.gripper or franka_hand()
     idc, classes, reused_c = classes_stage(store, obj, gripper, class_params)
     idobject = put_object(store, obj)
+    put_gripper(store, gripper)
     with store.transaction():
         idrobot = put_robot(store, robot)
     key = _table_key(idc, robot, params, placement)
@@ -128,3 +133,15 @@ def _robot(row: dict) -> Robot:
                      mount=row["mount"], base=row["base"], drop_geometry=tuple(row["drop_geometry"]),
                      locked=tuple((k, float(v)) for k, v in row["locked"].items()))
     return robot_from_spec(spec)
+
+
+def plan_validator(db: str, run: TableRun, scene: Scene) -> PlanValidator:
+    """The independent plan validator rebuilt from the store's rows of this table (robot, object, gripper) and the
+    scene's table; the placement classes are the stable placements it checks start and goal poses against."""
+    with Store(db, read_only=True) as store:
+        _, obj = object_row(store, run.obj.name)
+        r = robot_row(store, sql.table_robot(store, run.idtable))
+        g = gripper_row(store, sql.gripper_id(store, run.gripper.digest))
+    rows = {"robot": r, "object": obj, "gripper": g,
+            "scene": StoredScene(idscene=0, scene=scene, ik=IKOptions(), robot={})}
+    return validator_from_rows(rows, free_poses=dict(enumerate(run.table.placements)))

@@ -22,13 +22,13 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
 from workbench.errors import WorkbenchError
 from workbench.grasping.placements import grips_above_table
+from workbench.planners.tournassoud.classes import GraspClass
+from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
 from workbench.robots.chain import solve_ik
 from workbench.robots.ik import IKOptions, SeedLibrary
 from workbench.robots.model import Robot
-from workbench.planners.tournassoud.classes import GraspClass
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,83 @@
+"""The grasp-placement planner against a real DuckDB store and through the command line (Tournassoud et al. 1987)."""
+
+from __future__ import annotations
+
+import json
+
+import duckdb
+import numpy as np
+import trimesh
+
+from workbench.cli.main import main
+from workbench.planners.tournassoud.stages import load_planner, table_stage_at
+from workbench.planners.tournassoud.table import TableParams
+
+PARAMS = TableParams(theta_step=np.radians(10), phi_step=np.radians(10), table_point=(0.45, 0.1))
+
+
+def test_store_round_trip_and_reuse(tmp_path, lpart, puma560):
+    db = str(tmp_path / "gp.duckdb")
+    built = table_stage_at(db, lpart, puma560, params=PARAMS)
+    again = table_stage_at(db, lpart, puma560, params=PARAMS)
+    assert built.reused == (False, False) and again.reused == (True, True)
+    loaded = load_planner(db, "L", "puma560")
+    for run in (again, loaded):
+        assert np.array_equal(run.table.q, built.table.q)
+        assert np.array_equal(run.table.hand_table, built.table.hand_table)
+        assert np.array_equal(run.table.hand_object, built.table.hand_object)
+        assert np.allclose(run.table.placements, built.table.placements)
+        assert [c.intervals for c in run.classes] == [c.intervals for c in built.classes]
+    # the stored phi intervals, read with plain SQL, give back the table
+    con = duckdb.connect(db, read_only=True)
+    rows = con.execute("SELECT g.idx, p.idx, c.itheta, c.phi_lo, c.phi_hi FROM tgpcell c JOIN tgraspclass g USING (idtgraspclass) "
+                       "JOIN tplacementclass p USING (idtplacementclass)").fetchall()
+    con.close()
+    step = 2 * np.pi / built.table.q.shape[3]
+    q = np.zeros_like(built.table.q)
+    for i, j, t, lo, hi in rows:
+        for a, b in zip(lo, hi):
+            q[i, j, t, int(round(a / step)):int(round(b / step)) + 1] = True
+    assert np.array_equal(q, built.table.q) and q.any()
+    # another resolution is another table
+    other = table_stage_at(db, lpart, puma560, params=TableParams(theta_step=np.radians(15), phi_step=np.radians(10),
+                                                                   table_point=(0.45, 0.1)))
+    assert other.reused == (True, False) and other.table.q.shape[2] == 24
+
+
+def test_cli_gptable_and_gpplan(tmp_path, lpart, capsys):
+    mesh = tmp_path / "L.stl"
+    lpart.mesh.export(mesh)
+    db = str(tmp_path / "cli.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--theta-step", "10", "--phi-step", "10", "--table-point", "0.45,0.1"]) == 0
+    out = capsys.readouterr().out
+    assert "5 grasp classes (5 face/face" in out and "5 placement classes" in out
+    run = load_planner(db, "L")
+    legal = np.flatnonzero(run.table.hand_object[0])
+    theta0 = float(np.degrees(run.table.theta[legal[len(legal) // 2]]))
+    js = tmp_path / "plan.json"
+    html = tmp_path / "plan.html"
+    code = main(["gpplan", "--db", db, "--object", "L", "--initial", f"0,{theta0:g}", "--goal", "3,0:360",
+                 "--json", str(js), "--html", str(html)])
+    assert code == 0
+    out = capsys.readouterr().out
+    doc = json.loads(js.read_text())
+    if doc["plan"] is not None:
+        assert "validator: ok" in out
+        assert doc["sequence"]["regrasps"] == doc["plan"]["regrasps"]
+    assert html.read_text().startswith("<!doctype html>")
+    # bad input: one line, status 2
+    assert main(["gpplan", "--db", db, "--object", "L", "--initial", "0,abc", "--goal", "3,0:360"]) == 2
+    assert main(["gpplan", "--db", db, "--object", "L", "--initial", "0,10", "--goal", "3,90:10"]) == 2
+    assert main(["gpplan", "--db", db, "--object", "nope", "--initial", "0,10", "--goal", "3,0:90"]) == 2
+    assert main(["gpplan", "--db", db, "--object", "L", "--initial", "42,10", "--goal", "3,0:90"]) == 2
+    assert main(["gptable", str(mesh), "--db", db, "--table-point", "x"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len([ln for ln in err.splitlines() if ln.startswith("workbench")]) == 5
+
+
+def test_zero_classes_is_a_warning(tmp_path, capsys):
+    big = tmp_path / "slab.stl"
+    trimesh.creation.box((0.3, 0.2, 0.15)).export(big)  # wider than the 80 mm jaw in every direction
+    assert main(["gptable", str(big), "--db", str(tmp_path / "z.duckdb"), "--theta-step", "15", "--phi-step", "15"]) == 0
+    cap = capsys.readouterr()
+    assert "0 grasp classes" in cap.out and "warning: no grasp class" in cap.err
