@@ -10,8 +10,11 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from workbench.benchmarks.ik import synthetic_grips
 from workbench.errors import RobotError
 from workbench.robots.analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
+from workbench.robots.collider import default_scene
+from workbench.robots.ik import IKOptions, ik_feasibility
 from workbench.robots.model import get_robot
 
 
@@ -72,3 +75,25 @@ def test_joint_limits_applied(puma):
     far = np.eye(4)
     far[:3, 3] = (3.0, 0, 0.5)
     assert not solve(analytic_ik(puma), far[None])[1].any()
+
+
+def test_roadmap_ik_stage_closed_form_option(puma):
+    """The roadmap planner's IK stage with the closed form: every stored vector reproduces its target through pinocchio,
+    and it finds at least every grip the numerical solver finds (the closed form is complete)."""
+    grips, mesh, _ = synthetic_grips(xs=np.array([0.4, 0.55]), ys=np.array([-0.15, 0.15]), angles=4, approaches=4, offsets=1)
+    scene = default_scene("puma560")
+    closed = ik_feasibility(puma, grips, scene, 0.05, 0.05, mesh, IKOptions(closed_form=True, chunk=64), workers=1, progress=False)
+    numeric = ik_feasibility(puma, grips, scene, 0.05, 0.05, mesh, IKOptions(chunk=64, lane=8, library=4096), workers=1,
+                             progress=False)
+    assert closed.feasible.any()
+    assert not (numeric.feasible & ~closed.feasible).any()
+    targets = grips["rotmat"]
+    back = targets.copy()
+    back[:, :3, 3] -= 0.05 * targets[:, :3, 2]
+    up = back.copy()
+    up[:, 2, 3] += 0.05
+    for k, t in enumerate((targets, back, up)):
+        rows = np.flatnonzero(closed.feasible[:, k])
+        fk = _fk(puma, closed.joints[rows, k])
+        assert np.abs(fk - t[rows]).max() < 1e-9
+    assert IKOptions().as_dict() == {k: v for k, v in IKOptions(closed_form=True).as_dict().items() if k != "closed_form"}

@@ -58,6 +58,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tabletop", type=int, default=None, help="tabletop parameter set id (default: the latest)")
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--closed-form", action="store_true",
+                   help="closed-form IK (all 8 branches) for arms with a spherical wrist, e.g. puma560, instead of the numerical solver")
     p.set_defaults(func=main)
 
 
@@ -73,7 +75,7 @@ def main(args: argparse.Namespace) -> int:
                       table_thickness=scene.table_thickness if args.table_thickness is None else args.table_thickness,
                       workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
     with Store(args.db) as store:
-        run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, IKOptions(), args.workers,
+        run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, IKOptions(closed_form=args.closed_form), args.workers,
                      progress=not args.no_progress, idtabletop=args.tabletop)
     what = "reused" if run.reused else f"computed {run.computed:,}"
     print(f"ik {robot.name}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "

@@ -35,6 +35,8 @@ from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
 from workbench.errors import RobotError
+from workbench.robots.analytic import analytic_ik, nearest_branch
+from workbench.robots.analytic import solve as analytic_solve
 from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
 from workbench.robots.model import Robot, RobotSpec, robot_from_spec
@@ -49,7 +51,9 @@ class IKOptions:
     tol_pos (m) and tol_rot (rad): convergence; iters_warm/iters_seed: LM iterations from a warm start and
     from a library seed; seeds: library seeds tried after the warm start, picked among the seed_pool nearest
     library poses at least seed_spread rad apart; library: size of the seed
-    library; chunk: grips per parallel task (resume unit); lane: grips per warm-start lane; seed: RNG seed."""
+    library; chunk: grips per parallel task (resume unit); lane: grips per warm-start lane; seed: RNG seed.
+    closed_form: solve with the closed form of spherical-wrist arms (`workbench.robots.analytic`, all 8 branches,
+    Tournassoud et al. 1987 Section 5.2) instead of Levenberg-Marquardt; the seeds then only pick the nearest branch."""
 
     tol_pos: float = 1e-4
     tol_rot: float = 1e-3
@@ -63,9 +67,13 @@ class IKOptions:
     lane: int = 16
     seed: int = 0
     collide: bool = True
+    closed_form: bool = False
 
     def as_dict(self) -> dict:
-        return asdict(self)
+        d = asdict(self)
+        if not self.closed_form:  # the numerical solver's rows keep their stored digest
+            d.pop("closed_form")
+        return d
 
 
 @dataclass
@@ -240,18 +248,49 @@ class IKSolver:
     def __init__(self, robot: Robot, scene: Scene, opts: IKOptions = IKOptions(), obj_mesh: trimesh.Trimesh | None = None):
         self.robot, self.scene, self.opts = robot, scene, opts
         self.collider = Collider(robot, scene, obj_mesh) if opts.collide else None
-        self.library = SeedLibrary(robot, opts.library, opts.seed, collider=self.collider)
+        self.analytic = analytic_ik(robot) if opts.closed_form else None
+        self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)
 
     def solve(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray, iters: int) -> tuple[np.ndarray, np.ndarray]:
         """Joint vectors (M, n) from seeds `q0` for TCP poses (M, 4, 4) of grips of the object at `placements`
-        (M, 4, 4), and whether each converged within the limits and is collision-free."""
+        (M, 4, 4), and whether each converged within the limits and is collision-free. With the closed form: the
+        collision-free branch nearest to the seed."""
         o = self.opts
+        if self.analytic is not None:
+            return self._closed(targets, placements, q0)
         q, ok = solve_ik(self.robot, targets, q0, iters, o.tol_pos, o.tol_rot)
         if self.collider is not None and ok.any():
             sel = np.flatnonzero(ok)
             ok[sel[self.collider.collides_q(q[sel], placements[sel])]] = False
         return q, ok
+
+    def _closed(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The closed-form branches of every target, collision-checked, the nearest to `q0` (rows of NaN: none)."""
+        m, n = len(targets), self.robot.nq
+        joints, valid = analytic_solve(self.analytic, targets)
+        if self.collider is not None and valid.any():
+            r, b = np.nonzero(valid)
+            hit = self.collider.collides_q(joints[r, b], placements[r])
+            valid[r[hit], b[hit]] = False
+        ref = np.where(np.isfinite(q0), q0, 0.0) if q0 is not None else np.zeros((m, n))
+        q, ok = nearest_branch(joints, valid, ref, self.robot.lower, self.robot.upper)
+        return np.where(ok[:, None], q, np.nan), ok
+
+    def _chunk_closed(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`chunk` with the closed form: the grasp takes its first collision-free branch, handx and handxworldz the
+        branch nearest to the grasp's (or to each other's when the grasp has none)."""
+        c, n = len(targets), self.robot.nq
+        feas = np.zeros((c, 3), dtype=bool)
+        joints = np.full((c, 3, n), np.nan)
+        q, ok = self._closed(targets[:, 0], placements, np.zeros((c, n)))
+        feas[:, 0], joints[:, 0] = ok, q
+        ref = np.where(ok[:, None], q, 0.0)
+        for k in (1, 2):
+            q, ok = self._closed(targets[:, k], placements, ref)
+            feas[:, k], joints[:, k] = ok, q
+            ref = np.where(feas[:, :1] | ~ok[:, None], ref, q)
+        return feas, joints
 
     def library_seeds(self, targets: np.ndarray) -> np.ndarray:
         """(M, seeds) library indices tried after the warm start, diverse among the nearest (IKOptions)."""
@@ -264,6 +303,8 @@ class IKSolver:
         Pass 1 walks the lanes in lock-step: every (lane, kind) starts from its previous feasible solution, or from
         the library seed nearest to the target; pass 2 retries the failures from up to `seeds` library seeds, one
         seed rank at a time for the poses still unsolved."""
+        if self.analytic is not None:
+            return self._chunk_closed(targets, placements)
         o, robot = self.opts, self.robot
         c, n = len(targets), robot.nq
         flat = targets.transpose(1, 0, 2, 3).reshape(3 * c, 4, 4)  # row = kind * c + grip
