@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES = ("grasps", "placements", "ik", "regrasp", "fingers")
+BENCHES = ("grasps", "placements", "ik", "regrasp", "fingers", "gptable")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

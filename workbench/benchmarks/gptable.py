@@ -1,0 +1,184 @@
+"""Grasp-placement table (Tournassoud, Lozano-Perez & Mazer 1987): classes, build times, chaining, closed-form IK,
+and regrasp counts beside the roadmap planner's for the same start and goal placements.
+
+Per object (the L-shaped part of Fig. 1, a box, the bundled parts; the Wan-Harada objects when present): grasp
+classes by kind, placement classes, non-empty cells; the table's build time at 5 x 5 and 1 x 1 degrees (the 1 x 1
+table is skipped, with its pose count, when it would need more than --max-poses IK poses); the backward-chaining
+time of a grasp query (median over seeded random queries); and, with --compare, the regrasps of this planner and
+of the roadmap planner (Wan & Harada, built for the same robot with its IK on a one-position grid at H) for the
+same seeded start and goal placements at H. The closed-form IK throughput is measured once (poses per second).
+Targets: 100 classes x 10 placements at 5 x 5 degrees <= 2 s; a query <= 10 ms; IK >= 500,000 poses/s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from workbench.benchmarks import print_table
+from workbench.benchmarks.paper import bench_objects
+from workbench.errors import PlanningError, WorkbenchError
+from workbench.geometry.objects import ObjectModel, from_trimesh
+from workbench.grasping.placements import stable_placements
+from workbench.planners.tournassoud.chaining import NoSequence, grasp_query, placement_query
+from workbench.planners.tournassoud.classes import KINDS, grasp_classes
+from workbench.planners.tournassoud.shapes import l_part
+from workbench.planners.tournassoud.table import TableParams, build_table, grid
+from workbench.planners.wan_harada.query import PoseQuery
+from workbench.planners.wan_harada.stages import build_all, load_planner
+from workbench.planners.wan_harada.tabletop import TabletopParams
+from workbench.robots.analytic import analytic_ik, solve
+from workbench.robots.model import get_robot
+from workbench.store import Store
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--objects", default="L,box,tube,planebody,wheel,bracket,tail",
+                        help="comma-separated: L, box, bundled object names, paper (the Wan-Harada objects when present)")
+    parser.add_argument("--robot", default="puma560", help="robot (default puma560)")
+    parser.add_argument("--table-point", default="0.45,0.1", help="H as X,Y (m)")
+    parser.add_argument("--queries", type=int, default=50, help="random grasp queries per object for the chaining time")
+    parser.add_argument("--max-poses", type=float, default=4e6, help="skip the 1 x 1 degree table above this many IK poses")
+    parser.add_argument("--compare", default="L,box", help="objects compared with the roadmap planner ('' for none)")
+    parser.add_argument("--pairs", type=int, default=5, help="start/goal placement pairs per compared object")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the queries and pairs")
+    parser.add_argument("--dir", default="build/bench/gptable", help="folder of the roadmap planner's stores")
+
+
+def _objects(spec: str) -> list[tuple[str, ObjectModel]]:
+    names = [n.strip() for n in spec.split(",") if n.strip()]
+    pool = {label.split(" ")[0]: obj for label, _, obj in bench_objects("all")}
+    out = []
+    for n in names:
+        if n == "L":
+            out.append(("L (Fig. 1)", l_part()))
+        elif n == "box":
+            out.append(("box", from_trimesh(trimesh.creation.box((0.05, 0.04, 0.03)), "box")))
+        elif n == "paper":
+            out += [(label, obj) for label, _, obj in bench_objects("paper")]
+        elif n in pool:
+            out.append((n, pool[n]))
+        else:
+            raise WorkbenchError(f"unknown object {n!r}: use L, box, paper or one of {', '.join(pool)}")
+    return out
+
+
+def ik_throughput(robot, n: int = 200_000, repeats: int = 3) -> float:
+    """Closed-form IK poses per second (all 8 branches with limits), best of `repeats`, on FK of random configurations."""
+    ik = analytic_ik(robot)
+    rng = np.random.default_rng(0)
+    q = rng.uniform(robot.lower, robot.upper, size=(256, robot.nq))
+    poses = np.array([robot.tcp_pose(x) for x in q])
+    poses = np.tile(poses, (n // len(poses) + 1, 1, 1))[:n]
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for s in range(0, n, 20000):
+            solve(ik, poses[s:s + 20000])
+        best = min(best, time.perf_counter() - t0)
+    return n / best
+
+
+def chaining_times(table, classes, queries: int, seed: int) -> list[float]:
+    """Seconds of `queries` seeded grasp queries (any outcome; the time of the chaining itself)."""
+    rng = np.random.default_rng(seed)
+    out = []
+    legal = np.argwhere(table.hand_object)
+    if not len(legal):
+        return out
+    for _ in range(queries):
+        c, t = legal[rng.integers(len(legal))]
+        g = int(rng.integers(len(classes)))
+        lo = float(rng.uniform(0, 2 * np.pi))
+        t0 = time.perf_counter()
+        try:
+            grasp_query(table, (int(c), float(table.theta[t])), g, (lo, lo + np.pi / 2))
+        except PlanningError:
+            pass
+        out.append(time.perf_counter() - t0)
+    return out
+
+
+def compare_roadmap(name: str, obj: ObjectModel, robot_name: str, table, point, pairs: int, seed: int, folder: Path) -> tuple:
+    """(this planner's regrasps, the roadmap planner's) over seeded start/goal placement pairs at H (None: no plan)."""
+    tp = TabletopParams(x_min=point[0], x_max=point[0], nx=1, y_min=point[1], y_max=point[1], ny=1, angles=8)
+    folder.mkdir(parents=True, exist_ok=True)
+    db = folder / f"{name.split(' ')[0]}_{robot_name}.duckdb"
+    build_all(db, obj, robot_name, tparams=tp, progress=False)
+    rng = np.random.default_rng(seed)
+    ours, theirs = [], []
+    with Store(db) as store:
+        planner = load_planner(store, obj.name, robot_name)
+        free_ids, free_poses = planner.free["idfreetabletopplacement"], planner.free["rotmat"]
+        # the same stable placements: match the table's placement classes to the stored free placements
+        match = {}
+        for j, p in enumerate(table.placements):
+            hit = [int(i) for i, f in zip(free_ids, free_poses) if np.allclose(f, p, atol=1e-6)]
+            if hit:
+                match[j] = hit[0]
+        js = sorted(match)
+        for _ in range(pairs if js else 0):
+            (a, b), (fa, fb) = rng.choice(js, 2), rng.uniform(0, 2 * np.pi, 2)
+            try:
+                ours.append(placement_query(table, (int(a), float(fa)), (int(b), float(fb))).regrasps)
+            except NoSequence:
+                ours.append(None)
+            try:
+                res = planner.search(PoseQuery(match[int(a)], point[0], point[1], float(fa)),
+                                     PoseQuery(match[int(b)], point[0], point[1], float(fb)), 0)
+                theirs.append(res.routes[0].n_regrasps)
+            except PlanningError:
+                theirs.append(None)
+    return ours, theirs
+
+
+def run(args: argparse.Namespace) -> int:
+    point = tuple(float(v) for v in args.table_point.split(","))
+    robot = get_robot(args.robot)
+    hand = robot.gripper
+    compare = {n.strip() for n in args.compare.split(",") if n.strip()}
+    rows, cmp_rows = [], []
+    for label, obj in _objects(args.objects):
+        t0 = time.perf_counter()
+        classes = grasp_classes(obj, hand)
+        t_cls = time.perf_counter() - t0
+        pl = stable_placements(obj)
+        p5 = TableParams(table_point=point)
+        t0 = time.perf_counter()
+        table = build_table(classes, pl.poses, robot, hand, p5, progress=False)
+        t5 = time.perf_counter() - t0
+        # the 1 x 1 degree table: estimate its IK poses from the hand-table stage of a 1-degree theta grid
+        n1 = len(grid(np.radians(1.0)))
+        est = int(table.hand_table.sum() * (n1 / len(table.theta)) * n1)
+        if est <= args.max_poses:
+            t0 = time.perf_counter()
+            build_table(classes, pl.poses, robot, hand, TableParams(theta_step=np.radians(1.0), phi_step=np.radians(1.0),
+                                                                     table_point=point), progress=False)
+            t1 = f"{time.perf_counter() - t0:.2f}"
+        else:
+            t1 = f"skipped ({est / 1e6:.0f} M poses)"
+        times = chaining_times(table, classes, args.queries, args.seed)
+        kinds = [sum(c.kind == k for c in classes) for k in KINDS]
+        rows.append([label, obj.n_triangles, *kinds, len(pl), f"{int(table.q.any(axis=(2, 3)).sum())}/{len(classes) * len(pl)}",
+                     round(t_cls, 2), round(t5, 2), table.timings.get("ik_poses", 0), t1,
+                     statistics.median(times) * 1000 if times else "-", max(times) * 1000 if times else "-"])
+        if label.split(" ")[0] in compare:
+            ours, theirs = compare_roadmap(label, obj, args.robot, table, point, args.pairs, args.seed, Path(args.dir))
+            fmt = lambda v: "-" if v is None else str(v)  # noqa: E731
+            cmp_rows.append([label, len(ours), " ".join(map(fmt, ours)), " ".join(map(fmt, theirs))])
+    print_table(["object", "#tri", "face/face", "face/edge", "face/vertex", "placements", "non-empty cells", "classes s",
+                 "table 5x5 s", "IK poses 5x5", "table 1x1 s", "chain med ms", "chain max ms"], rows,
+                title=f"Grasp-placement table for {args.robot} at H = {point} (Tournassoud et al. 1987); targets: 100 classes x 10 "
+                      "placements at 5x5 deg <= 2 s, a query <= 10 ms")
+    print()
+    print(f"closed-form IK ({args.robot}, 8 branches, joint limits): {ik_throughput(robot):,.0f} poses/s (target >= 500,000)")
+    if cmp_rows:
+        print()
+        print_table(["object", "pairs", "regrasps (this planner)", "regrasps (roadmap planner)"], cmp_rows,
+                    title="Same start/goal placements at H, seeded ('-': no plan)")
+    return 0
