@@ -4,11 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import trimesh
 
-from workbench.geometry.objects import from_trimesh
 from workbench.planners.tournassoud.shapes import l_part, prism
-from workbench.robots.gripper import franka_hand
 from workbench.robots.model import get_robot
 
 
@@ -30,16 +27,6 @@ def extrude():
         assert mesh.is_watertight and mesh.volume > 0
         return mesh
     return make
-
-
-@pytest.fixture(scope="session")
-def hand():
-    return franka_hand()
-
-
-@pytest.fixture(scope="session")
-def box():
-    return from_trimesh(trimesh.creation.box((0.05, 0.04, 0.03)), "box")
 
 
 @pytest.fixture(scope="session")

@@ -46,6 +46,20 @@ class Sequence:
     theta_ini: float | None = None
     extra: dict = field(default_factory=dict)
 
+    def conjunctions(self) -> list[tuple[tuple[int, int], tuple[int, int]]]:
+        """The (grasp, placement) conjunctions in execution order: each grasp with the placement it picks the object
+        from and the one it puts it down on."""
+        g, p = self.grasps, self.placements
+        if self.kind == "grasp":
+            out = []
+            for k, pl in enumerate(p):
+                out += [(g[k], pl), (g[k + 1], pl)]
+            return out
+        out = [(g[0], p[0])]
+        for k in range(1, len(p) - 1):
+            out += [(g[k - 1], p[k]), (g[k], p[k])]
+        return out + [(g[-1], p[-1])]
+
     @property
     def regrasps(self) -> int:
         """Number of regrasps: intermediate placements (grasp query) or grasp changes (placement query)."""

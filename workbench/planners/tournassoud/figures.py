@@ -61,7 +61,7 @@ def table_figure(table: GraspPlacementTable, classes: list[GraspClass], seq: Seq
     ax.set_xlabel("placement class P_j (phi 0..360 deg within each column)")
     ax.set_ylabel("grasp class G_i (theta 0..360 deg upward within each row)")
     if seq is not None:
-        pts = [_xy(table, g, p) for g, p in _conjunctions(seq)]
+        pts = [_xy(table, g, p) for g, p in seq.conjunctions()]
         if pts:
             x, y = np.array(pts).T
             ax.plot(x, y, "-", color="crimson", lw=1.8)
@@ -72,19 +72,6 @@ def table_figure(table: GraspPlacementTable, classes: list[GraspClass], seq: Seq
     ax.set_title(title or "grasp-placement table (blue: legal; white: no IK; light grey: hand-table; dark: hand-object)",
                  fontsize=9)
     return fig
-
-
-def _conjunctions(seq: Sequence) -> list:
-    g, p = seq.grasps, seq.placements
-    if seq.kind == "grasp":
-        out = []
-        for k, pl in enumerate(p):
-            out += [(g[k], pl), (g[k + 1], pl)]
-        return out
-    out = [(g[0], p[0])]
-    for k in range(1, len(p) - 1):
-        out += [(g[k - 1], p[k]), (g[k], p[k])]
-    return out + [(g[-1], p[-1])] if p else out
 
 
 def table_html(table: GraspPlacementTable, classes: list[GraspClass], seq: Sequence | None = None, title: str = "") -> str:
@@ -101,7 +88,7 @@ def table_html(table: GraspPlacementTable, classes: list[GraspClass], seq: Seque
     img = base64.b64encode(buf.getvalue()).decode()
     rows = []
     if seq is not None:
-        for k, ((c, t), (j, f)) in enumerate(_conjunctions(seq)):
+        for k, ((c, t), (j, f)) in enumerate(seq.conjunctions()):
             rows.append(f"<tr><td>{k}</td><td>G{c} ({html.escape(classes[c].kind)})</td><td>{np.degrees(table.theta[t]):.1f}</td>"
                         f"<td>P{j}</td><td>{np.degrees(table.phi[f]):.1f}</td></tr>")
     body = ("<table border=1 cellpadding=3><tr><th>#</th><th>grasp class</th><th>theta (deg)</th><th>placement</th>"

@@ -109,7 +109,7 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
                                q=table.q.copy(), placements=table.placements, frame=table.frame, timings=table.timings)
     for _ in range(attempts):
         seq = query(work, **kw)
-        pairs = _pairs(seq)
+        pairs = seq.conjunctions()
         out, q_prev, bad = [], None, None
         for g, p in pairs:
             theta = seq.theta_ini if (seq.kind == "grasp" and g == seq.grasps[0]) else None
@@ -127,20 +127,6 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
         work._matrix = None
     raise NoSequence(f"no executable regrasp sequence after {attempts} attempts: the table's conjunctions fail their approach, "
                         f"retract or arm collision checks; try another table point or larger handx/worldz")
-
-
-def _pairs(seq: Sequence) -> list[tuple[tuple[int, int], tuple[int, int]]]:
-    """The conjunctions of a sequence in execution order."""
-    g, p = seq.grasps, seq.placements
-    if seq.kind == "grasp":
-        out = []
-        for k, pl in enumerate(p):
-            out += [(g[k], pl), (g[k + 1], pl)]
-        return out
-    out = [(g[0], p[0])]
-    for k in range(1, len(p) - 1):
-        out += [(g[k - 1], p[k]), (g[k], p[k])]
-    return out + [(g[-1], p[-1])]
 
 
 def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, classes: list[GraspClass], robot: Robot,
