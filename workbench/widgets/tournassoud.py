@@ -7,8 +7,11 @@ meshcat view follows. No planning logic lives here.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import ipywidgets as W
 import matplotlib.pyplot as plt
+from IPython.display import display
 import numpy as np
 
 from workbench.viewer import scenes as viewer
@@ -47,8 +50,7 @@ class TableExplorer:
 
     def build(self) -> TableRun:
         """(Re)build or load the table at the current resolutions and redraw."""
-        p = TableParams(theta_step=float(np.radians(self.theta_step.value)), phi_step=float(np.radians(self.phi_step.value)),
-                        table_point=self.params.table_point, clearance=self.params.clearance)
+        p = replace(self.params, theta_step=float(np.radians(self.theta_step.value)), phi_step=float(np.radians(self.phi_step.value)))
         self.run = table_stage_at(self.db, self.obj, self.robot, params=p)
         r = self.run
         self.cls.options = [(f"G{i} {c.kind} ({c.opening * 1000:.0f} mm)", i) for i, c in enumerate(r.classes)]
@@ -56,7 +58,8 @@ class TableExplorer:
         with self.plot:
             self.plot.clear_output(wait=True)
             fig = table_figure(r.table, r.classes)
-            plt.show(fig)
+            display(fig)
+            plt.close(fig)
         self.show()
         return r
 
