@@ -124,8 +124,27 @@ def analytic_ik(robot, limits: bool = True) -> AnalyticIK:
 # -- vector helpers, struct of arrays: vectors (3, N) ---------------------------------------------------------------
 
 
+def _axis(k: np.ndarray) -> tuple[int, float] | None:
+    """(index, sign) when the unit vector k is a coordinate axis, else None (the fast paths below)."""
+    m = int(np.argmax(np.abs(k)))
+    return (m, float(np.sign(k[m]))) if abs(abs(k[m]) - 1.0) < 1e-15 else None
+
+
+_NEXT = ((1, 2), (2, 0), (0, 1))  # the two other coordinates, cyclic
+
+
 def _rot(k: np.ndarray, c: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors v (3, N) about the constant unit axis k by angles with cosines c and sines s (Rodrigues)."""
+    ax = _axis(k)
+    if ax is not None:
+        m, sg = ax
+        i, j = _NEXT[m]
+        out = np.empty(np.broadcast_shapes(v.shape, (3,) + np.shape(c)))
+        ss = s if sg > 0 else -s
+        out[i] = v[i] * c - v[j] * ss
+        out[j] = v[i] * ss + v[j] * c
+        out[m] = v[m]
+        return out
     kv = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1 - c)
     return np.stack((v[0] * c + (k[1] * v[2] - k[2] * v[1]) * s + k[0] * kv,
                      v[1] * c + (k[2] * v[0] - k[0] * v[2]) * s + k[1] * kv,
@@ -133,13 +152,24 @@ def _rot(k: np.ndarray, c: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarr
 
 
 def _lin(r: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Constant 3x3 matrix times vectors (3, N)."""
-    return np.stack((r[0, 0] * v[0] + r[0, 1] * v[1] + r[0, 2] * v[2],
-                     r[1, 0] * v[0] + r[1, 1] * v[1] + r[1, 2] * v[2],
-                     r[2, 0] * v[0] + r[2, 1] * v[1] + r[2, 2] * v[2]))
+    """Constant 3x3 matrix times vectors (3, N); zero entries skipped, unit entries not multiplied (DH-like frames)."""
+    rows = []
+    for i in range(3):
+        acc = None
+        for j in range(3):
+            c = float(r[i, j])
+            if abs(c) < 1e-15:
+                continue
+            term = v[j] if abs(c - 1) < 1e-15 else (-v[j] if abs(c + 1) < 1e-15 else c * v[j])
+            acc = term if acc is None else acc + term
+        rows.append(np.zeros_like(v[0]) if acc is None else acc)
+    return np.stack(rows)
 
 
 def _dot(k: np.ndarray, v: np.ndarray) -> np.ndarray:
+    ax = _axis(k)
+    if ax is not None:
+        return v[ax[0]] * ax[1]
     return k[0] * v[0] + k[1] * v[1] + k[2] * v[2]
 
 
@@ -158,15 +188,23 @@ def _acs(a, b, c) -> tuple[np.ndarray, np.ndarray]:
 
 def _sub1(k: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(cos, sin) of the angle rotating u onto v about the constant unit axis k (Paden-Kahan subproblem 1)."""
-    ku, kv = _dot(k, u), _dot(k, v)
-    up = u - np.multiply.outer(k, ku)
-    vp = v - np.multiply.outer(k, kv)
-    y = (k[0] * (up[1] * vp[2] - up[2] * vp[1]) + k[1] * (up[2] * vp[0] - up[0] * vp[2])
-         + k[2] * (up[0] * vp[1] - up[1] * vp[0]))
-    x = up[0] * vp[0] + up[1] * vp[1] + up[2] * vp[2]
+    ax = _axis(k)
+    if ax is not None:
+        m, sg = ax
+        i, j = _NEXT[m]
+        x = u[i] * v[i] + u[j] * v[j]
+        y = (u[i] * v[j] - u[j] * v[i]) * sg
+    else:
+        ku, kv = _dot(k, u), _dot(k, v)
+        up = u - np.multiply.outer(k, ku)
+        vp = v - np.multiply.outer(k, kv)
+        y = (k[0] * (up[1] * vp[2] - up[2] * vp[1]) + k[1] * (up[2] * vp[0] - up[0] * vp[2])
+             + k[2] * (up[0] * vp[1] - up[1] * vp[0]))
+        x = up[0] * vp[0] + up[1] * vp[1] + up[2] * vp[2]
     h = np.hypot(x, y)
-    h = np.where(h > 0, h, 1.0)
-    return np.where(h > 0, x / h, 1.0), y / h
+    ok = h > 0
+    h = np.where(ok, h, 1.0)
+    return np.where(ok, x / h, 1.0), y / h
 
 
 def _limit(q: np.ndarray, lo: float, hi: float) -> np.ndarray:
