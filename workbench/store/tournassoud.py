@@ -190,11 +190,15 @@ def save_table(store: Store, stage: str, params: dict, idobject: int, idrobot: i
                    int(table.q.any(axis=(2, 3)).sum()), table.timings.get("hand_object"), table.timings.get("hand_table"),
                    table.timings.get("ik"), int(table.timings.get("ik_poses", 0))])
         pids = store.new_ids("tplacementclass", p_n)
+        if p_n == 0:
+            return pid
         store.insert("tplacementclass", {"idtplacementclass": pids, "idtgptable": np.full(p_n, tid, dtype=np.int64),
                                          "idx": np.arange(p_n, dtype=np.int32), "normal": np.asarray(normals).reshape(p_n, 3),
                                          "rotmat": table.placements.reshape(p_n, 16), "stability": np.asarray(stability, dtype=np.float64)})
         ci, pj, tk = np.meshgrid(np.arange(c_n), np.arange(p_n), np.arange(t_n), indexing="ij")
         n = c_n * p_n * t_n
+        if n == 0:
+            return pid
         store.insert("tgpcell", {
             "idtgpcell": store.new_ids("tgpcell", n),
             "idtgptable": np.full(n, tid, dtype=np.int64),
