@@ -4,8 +4,9 @@
 States are grasps (G_i, theta sample); a regrasp goes through a placement (P_j, phi sample) compatible with both
 grasps (Proposition 1). One chaining step (Fig. 7): for each placement P_j, the phi range is the union of the phi
 cross-sections of Q_goal,j over the current theta range; then for every class G_k the new theta range is the union
-of the theta cross-sections of Q_kj over that phi range. Both unions are one boolean matrix product each with Q
-laid out as a (classes x theta, placements x phi) matrix. The chaining expands level by level (breadth first) from
+of the theta cross-sections of Q_kj over that phi range. Both unions are computed at once over all placements with Q
+laid out as a boolean (classes x theta, placements x phi) matrix: the rows of the current grasps (or placements,
+in the transpose) are OR-ed together. The chaining expands level by level (breadth first) from
 the goal set until it meets the start set, so the returned sequence has the minimum number of placements.
 
 Two queries:
@@ -106,7 +107,6 @@ def _pick2(mask: np.ndarray) -> tuple[int, int]:
 def chain(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, max_levels: int = 32) -> list[np.ndarray] | None:
     """Backward chaining (Fig. 7) from `goal` (C, T) bool until `start` (C, T) is met. Returns the level sets
     [goal, level 1, ..., level L] (each (C, T), L = number of placements crossed) or None when unreachable."""
-    m = table.matrix()
     c_n, t_n = table.q.shape[0], table.q.shape[2]
     goal = np.asarray(goal, dtype=bool).reshape(c_n, t_n)
     start = np.asarray(start, dtype=bool).reshape(c_n, t_n)
@@ -116,10 +116,10 @@ def chain(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, max_l
     seen = goal.copy()
     frontier = goal
     for _ in range(max_levels):
-        phi = (frontier.reshape(-1).astype(np.float32) @ m) > 0           # (P F): placements reachable
+        phi = table.placements_of(frontier)                              # (P F): placements reachable
         if not phi.any():
             return None
-        grasp = ((m @ phi.astype(np.float32)) > 0).reshape(c_n, t_n)       # every grasp sharing one of them
+        grasp = table.grasps_of(phi).reshape(c_n, t_n)                   # every grasp sharing one of them
         new = grasp & ~seen
         if not new.any():
             return None
@@ -136,7 +136,7 @@ def _through(table: GraspPlacementTable, grasp: tuple[int, int], prev: np.ndarra
     c, t = grasp
     q = table.q
     p_n, f_n = q.shape[1], q.shape[3]
-    reach = ((prev.reshape(-1).astype(np.float32) @ table.matrix()) > 0).reshape(p_n, f_n)
+    reach = table.placements_of(prev).reshape(p_n, f_n)
     cand = q[c, :, t, :] & reach
     j, f = _pick2(cand)
     nxt = q[:, j, :, f] & prev

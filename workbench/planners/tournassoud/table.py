@@ -94,7 +94,7 @@ class GraspPlacementTable:
     placements: np.ndarray    # (P, 4, 4) object in the table frame (centre of mass above the origin)
     frame: np.ndarray         # (4, 4) table frame at H in the world
     timings: dict = field(default_factory=dict)
-    _matrix: np.ndarray | None = None
+    _matrix: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -108,12 +108,26 @@ class GraspPlacementTable:
         """The phi samples of Q_ij at theta sample t as closed intervals [first, last] of sample values."""
         return runs(self.q[i, j, t], self.phi)
 
-    def matrix(self) -> np.ndarray:
-        """Q as a (C T, P F) float32 matrix for the chaining's cross-sections (built once)."""
+    def matrix(self) -> tuple[np.ndarray, np.ndarray]:
+        """Q as a boolean (C T, P F) matrix and its transpose, both row-contiguous, for the chaining's cross-sections:
+        rows of grasps select placements, rows of placements select grasps (built once)."""
         if self._matrix is None:
             c, p, t, f = self.q.shape
-            self._matrix = np.ascontiguousarray(self.q.transpose(0, 2, 1, 3).reshape(c * t, p * f), dtype=np.float32)
+            m = np.ascontiguousarray(self.q.transpose(0, 2, 1, 3).reshape(c * t, p * f))
+            self._matrix = (m, np.ascontiguousarray(m.T))
         return self._matrix
+
+    def placements_of(self, grasps: np.ndarray) -> np.ndarray:
+        """(P F) bool: the placements compatible with any grasp of the (C, T) mask (union of phi cross-sections)."""
+        m, _ = self.matrix()
+        rows = np.flatnonzero(grasps.reshape(-1))
+        return m[rows].any(axis=0) if len(rows) else np.zeros(m.shape[1], dtype=bool)
+
+    def grasps_of(self, placements: np.ndarray) -> np.ndarray:
+        """(C T) bool: the grasps compatible with any placement of the (P F) mask (union of theta cross-sections)."""
+        _, mt = self.matrix()
+        rows = np.flatnonzero(placements.reshape(-1))
+        return mt[rows].any(axis=0) if len(rows) else np.zeros(mt.shape[1], dtype=bool)
 
 
 def runs(mask: np.ndarray, values: np.ndarray) -> list[tuple[float, float]]:
