@@ -14,7 +14,8 @@ candidates inside the overlap of the contacts' projections (rasterised at about 
 face/face the overlap's centroid, its deepest point (farthest from its boundary) and the centroids of its largest
 connected pieces; for face/edge the middles of the edge's pieces over the face and the quarter points of the
 longest; for face/vertex the vertex's projection. The candidate with the widest legal theta range against
-hand-object collision (Section 5.1) wins; ties go to the earlier candidate. Legal theta ranges are intervals found
+hand-object collision (Section 5.1) at a coarse step (1/24 turn) wins; ties go to the earlier candidate; a class
+free at no coarse sample is dropped (a legal range narrower than 15 degrees is no use for regrasping). Legal theta ranges are intervals found
 at `theta_step` and refined at their ends by bisection down to `bisection`. With `min_contact_area` > 0 the pad's
 rectangle must also cover that much of the face overlap at each theta (Section 5.1's minimum contact area).
 
@@ -305,15 +306,17 @@ def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = Clas
             return ok
 
         # the candidate with the widest legal range at a coarse step (stop at one free everywhere), then the full step
+        # (a class free at no coarse sample is dropped: its legal range, if any, is narrower than the coarse step)
         cands = cls["candidates"]
-        best_k, best_free = 0, -1
-        if len(cands) > 1:
-            for k, c in enumerate(cands):
-                n_free = int(test(coarse, point=c).sum())
-                if n_free > best_free:
-                    best_k, best_free = k, n_free
-                if n_free == len(coarse):
-                    break
+        best_k, best_free = 0, 0
+        for k, c in enumerate(cands):
+            n_free = int(test(coarse, point=c).sum())
+            if n_free > best_free:
+                best_k, best_free = k, n_free
+            if n_free == len(coarse):
+                break
+        if best_free == 0:
+            continue
         point = cands[best_k]
         best = test(theta, point=point)
         if not best.any():
