@@ -33,8 +33,8 @@ import numpy as np
 from workbench.errors import WorkbenchError
 from workbench.geometry.collision import bvh, collide_at_poses, object_collider
 from workbench.geometry.objects import ObjectModel
-from workbench.planners.tournassoud.features import (Features, Raster, face_overlap, features, grid_for, in_triangles,
-                                                     plane_basis, rasterise, segment_spans)
+from workbench.planners.tournassoud.features import (Features, Raster, face_overlap, features, grid_for, plane_basis,
+                                                     rasterise, segment_spans)
 from workbench.robots.gripper import Gripper
 
 KINDS = ("face/face", "face/edge", "face/vertex")
@@ -158,9 +158,14 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
             pts = cands[:, :1] * u + cands[:, 1:] * v + mid * n
             out.append(dict(kind="face/face", features={"faces": [a, int(b)], "overlap": float(area)}, normal=n, u=u, v=v,
                             opening=w, candidates=pts, region=region, mid=mid))
+        face_region: Raster | None = None
+
+        def region_of_face(tri_a=tri_a) -> Raster:
+            flat = tri_a.reshape(-1, 2)
+            return rasterise(tri_a, *grid_for(flat.min(0), flat.max(0)))
+
         # (ii) face/edge: an edge parallel to the face, convex toward -n, at an opening the gripper spans
         if len(edges):
-            face_region = None
             dots = en @ n                                                       # (E, 2)
             w_e = fa.offset - ((e0 + e1) @ n) / 2
             ok = ((np.abs(ed @ n) <= sin_par * elen) & (dots < 1e-9).all(axis=1) & (dots < -1e-9).any(axis=1)
@@ -168,8 +173,7 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
             for k in np.flatnonzero(ok):
                 w = float(w_e[k])
                 if face_region is None:
-                    flat = tri_a.reshape(-1, 2)
-                    face_region = rasterise(tri_a, *grid_for(flat.min(0), flat.max(0)))
+                    face_region = region_of_face()
                 spans = segment_spans(_project(e0[k], u, v), _project(e1[k], u, v), face_region)
                 length = sum(b_ - a_ for a_, b_ in spans) * float(elen[k])
                 if length < 1e-4:
@@ -190,7 +194,9 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
             ok = (hi_d < -1e-9) & (lo_d > -cos_par) & (w_v >= max(jaw_min, 1e-9)) & (w_v <= jaw_max)
             idx = np.flatnonzero(ok)
             if len(idx):
-                inside = in_triangles(_project(vp[idx], u, v), tri_a, eps=-1e-15)
+                if face_region is None:
+                    face_region = region_of_face()
+                inside = face_region.lookup(_project(vp[idx], u, v))
                 for k in idx[inside]:
                     w = float(w_v[k])
                     out.append(dict(kind="face/vertex", features={"faces": [a], "vertex": vp[k].tolist()}, normal=n, u=u, v=v,

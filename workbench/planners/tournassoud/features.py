@@ -7,7 +7,8 @@
 - Vertices: the convex ones: at least three distinct adjacent face normals, and every neighbouring vertex strictly
   on the inner side of the plane through the vertex normal to the mean adjacent face normal.
 
-2D helpers (convex clipping, point in triangle) serve the projections of Section 2.1.
+2D helpers serve the projections of Section 2.1: faces and their overlaps rasterised on a grid (PIL polygon fill),
+segments sampled against a raster.
 """
 
 from __future__ import annotations
@@ -162,21 +163,6 @@ def plane_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     u = np.cross(ref, n)
     u /= np.linalg.norm(u)
     return u, np.cross(n, u)
-
-
-def in_triangles(points: np.ndarray, tris: np.ndarray, eps: float = 1e-12) -> np.ndarray:
-    """(N,) whether each 2D point lies inside one of the 2D triangles (T, 3, 2): strictly for eps > 0, edges
-    included for eps < 0."""
-    p = points[:, None, :]
-    a, b, c = tris[None, :, 0], tris[None, :, 1], tris[None, :, 2]
-
-    def cross(o, s, t):
-        return (s[..., 0] - o[..., 0]) * (t[..., 1] - o[..., 1]) - (s[..., 1] - o[..., 1]) * (t[..., 0] - o[..., 0])
-
-    d1, d2, d3 = cross(a, b, p), cross(b, c, p), cross(c, a, p)
-    pos = (d1 > eps) & (d2 > eps) & (d3 > eps)
-    neg = (d1 < -eps) & (d2 < -eps) & (d3 < -eps)
-    return (pos | neg).any(axis=1)
 
 
 @dataclass(frozen=True)
