@@ -12,7 +12,7 @@ from workbench.errors import PlanningError, WorkbenchError
 from workbench.geometry.objects import from_trimesh
 from workbench.grasping.placements import stable_placements
 from workbench.planners.tournassoud.chaining import chain, grasp_query, placement_query
-from workbench.planners.tournassoud.classes import grasp_classes
+from workbench.planners.tournassoud.classes import ClassParams, grasp_classes
 from workbench.planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
 from workbench.planners.tournassoud.table import GraspPlacementTable, TableParams, build_table, runs
 from workbench.resources import erd_share
@@ -190,3 +190,17 @@ def test_bad_queries(box_setup):
         placement_query(table, (42, 0.0), (0, 0.0))
     with pytest.raises(WorkbenchError, match="theta step"):
         TableParams(theta_step=0.0)
+
+
+def test_minimum_contact_area(box, hand):
+    """Section 5.1: the pad must cover `min_contact_area` of the face overlap at every legal theta."""
+    pad = float(hand.pad_extents[0] * hand.pad_extents[2])
+    assert len(grasp_classes(box, hand, ClassParams(min_contact_area=0.9 * pad))) == 3   # every box face covers the pad
+    assert grasp_classes(box, hand, ClassParams(min_contact_area=1.1 * pad)) == []       # more than the pad itself
+    # a bar 6 mm thick: across its 30 mm width the faces are 6 mm strips, narrower than the pad
+    bar = from_trimesh(trimesh.creation.box((0.06, 0.006, 0.03)), "bar")
+    plain = grasp_classes(bar, hand)
+    strict = grasp_classes(bar, hand, ClassParams(min_contact_area=0.5 * pad))
+    assert any(abs(c.opening - 0.03) < 1e-9 for c in plain)
+    assert not any(abs(c.opening - 0.03) < 1e-9 for c in strict)
+    assert any(abs(c.opening - 0.006) < 1e-9 for c in strict)
