@@ -7,19 +7,19 @@ meshcat view follows. No planning logic lives here.
 
 from __future__ import annotations
 
+import io
 from dataclasses import replace
 
 import ipywidgets as W
 import matplotlib.pyplot as plt
-from IPython.display import display
 import numpy as np
 
-from workbench.viewer import scenes as viewer
 from workbench.geometry.objects import ObjectModel
 from workbench.planners.tournassoud.figures import table_figure
 from workbench.planners.tournassoud.stages import TableRun, table_stage_at
 from workbench.planners.tournassoud.table import TableParams
 from workbench.robots.model import Robot
+from workbench.viewer import scenes as viewer
 from workbench.viewer.tournassoud import show_class, show_conjunction
 
 
@@ -39,7 +39,7 @@ class TableExplorer:
         self.phi_step = W.FloatSlider(value=float(np.degrees(params.phi_step)), min=1.0, max=30.0, step=1.0,
                                       description="phi step", continuous_update=False)
         self.info = W.HTML()
-        self.plot = W.Output()
+        self.plot = W.Image(format="png")
         for w in (self.cls, self.theta, self.place, self.phi):
             w.observe(lambda _: self.show(), names="value")
         for w in (self.theta_step, self.phi_step):
@@ -55,11 +55,11 @@ class TableExplorer:
         r = self.run
         self.cls.options = [(f"G{i} {c.kind} ({c.opening * 1000:.0f} mm)", i) for i, c in enumerate(r.classes)]
         self.place.options = [(f"P{j}", j) for j in range(len(r.table.placements))]
-        with self.plot:
-            self.plot.clear_output(wait=True)
-            fig = table_figure(r.table, r.classes)
-            display(fig)
-            plt.close(fig)
+        fig = table_figure(r.table, r.classes)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
+        plt.close(fig)
+        self.plot.value = buf.getvalue()
         self.show()
         return r
 

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
-import fcl
 import numpy as np
 
 from workbench.errors import WorkbenchError
@@ -234,14 +233,15 @@ def _face_candidates(region: Raster, k: int) -> np.ndarray:
 
 
 class HandObject:
-    """Hand-object collision of the gripper at a class's opening (+ tolerance) against the object mesh (python-fcl)."""
+    """Hand-object collision of the gripper at a class's opening (+ tolerance) against the object mesh
+    (`geometry.collision`: python-fcl BVHs, one per opening rounded up to 0.1 mm)."""
 
     def __init__(self, obj: ObjectModel, gripper: Gripper, tolerance: float):
         self.target = object_collider(obj.mesh)
         self.gripper, self.tol = gripper, tolerance
-        self._geom: dict[float, fcl.BVHModel] = {}
+        self._geom: dict[float, object] = {}
 
-    def geometry(self, opening: float) -> fcl.BVHModel:
+    def geometry(self, opening: float) -> object:
         """The hand with its pads `tolerance` clear of both contacts, widths rounded up to 0.1 mm (shared BVHs)."""
         key = float(np.ceil((opening + 2 * self.tol) * 1e4) / 1e4)
         if key not in self._geom:

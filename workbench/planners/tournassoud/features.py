@@ -7,7 +7,7 @@
 - Vertices: the convex ones: at least three distinct adjacent face normals, and every neighbouring vertex strictly
   on the inner side of the plane through the vertex normal to the mean adjacent face normal.
 
-2D helpers serve the projections of Section 2.1: faces and their overlaps rasterised on a grid (PIL polygon fill),
+2D helpers serve the projections of Section 2.1: faces and their overlaps rasterised on a grid (cell centres inside a triangle),
 segments sampled against a raster.
 """
 
@@ -200,15 +200,31 @@ def grid_for(lo: np.ndarray, hi: np.ndarray, cells: int = 200, min_cell: float =
 
 
 def rasterise(tris: np.ndarray, origin: np.ndarray, cell: float, shape: tuple[int, int]) -> Raster:
-    """Fill 2D triangles (T, 3, 2) on a grid (PIL's polygon fill, cells whose centre is covered)."""
-    from PIL import Image, ImageDraw
+    """The cells of a grid whose centre lies in (or on the edge of) one of the 2D triangles (T, 3, 2), all at once:
+    every triangle's bounding box of cells is enumerated and tested with edge functions."""
+    h, w = shape
+    mask = np.zeros((h, w), dtype=bool)
+    p = (np.asarray(tris, dtype=np.float64).reshape(-1, 3, 2) - origin) / cell - 0.5  # cell (i, j) centre at (j, i)
+    if len(p) == 0:
+        return Raster(np.asarray(origin, dtype=np.float64), cell, mask)
+    lo = np.clip(np.ceil(p.min(axis=1) - 1e-9), 0, [w - 1, h - 1]).astype(np.int64)
+    hi = np.clip(np.floor(p.max(axis=1) + 1e-9), -1, [w - 1, h - 1]).astype(np.int64)
+    nx, ny = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0), np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
+    counts = nx * ny
+    tri = np.repeat(np.arange(len(p)), counts)
+    k = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+    jx = lo[tri, 0] + k % nx[tri]
+    iy = lo[tri, 1] + k // nx[tri]
+    a, b, c = p[tri, 0], p[tri, 1], p[tri, 2]
 
-    img = Image.new("1", (shape[1], shape[0]), 0)
-    draw = ImageDraw.Draw(img)
-    px = (np.asarray(tris) - origin) / cell - 0.5
-    for t in px:
-        draw.polygon([tuple(p) for p in t], fill=1, outline=1)
-    return Raster(np.asarray(origin, dtype=np.float64), cell, np.asarray(img, dtype=bool))
+    def edge(o, q):
+        return (q[:, 0] - o[:, 0]) * (iy - o[:, 1]) - (q[:, 1] - o[:, 1]) * (jx - o[:, 0])
+
+    d1, d2, d3 = edge(a, b), edge(b, c), edge(c, a)
+    eps = 1e-9
+    inside = ((d1 >= -eps) & (d2 >= -eps) & (d3 >= -eps)) | ((d1 <= eps) & (d2 <= eps) & (d3 <= eps))
+    mask[iy[inside], jx[inside]] = True
+    return Raster(np.asarray(origin, dtype=np.float64), cell, mask)
 
 
 def face_overlap(tri_a: np.ndarray, tri_b: np.ndarray, cells: int = 200) -> Raster | None:

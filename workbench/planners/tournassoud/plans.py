@@ -4,7 +4,8 @@ Section 6: "a sequence of grasps and placements"; the plan format of `workbench.
 Every conjunction (grasp G_i at theta, placement P_j at phi) of a sequence gets three joint vectors, as in the roadmap
 planner's plans: `grasp` (TCP at the grasp), `approach` (backed off by `handx` along the TCP's -z) and `retract`
 (the approach raised by `worldz`). Each is an IK branch within the joint limits whose arm and hand clear the table and
-whose arm clears the object (`Collider`); approach and retract take the branch nearest to the grasp's.
+whose arm clears the object (the IK solver's collider); approach and retract start from the grasp's configuration
+(with the closed form: the branch nearest to it).
 
 The table only checks the grasp's IK (Section 5.2). A conjunction that fails here (no collision-free branch or no
 approach/retract) is removed from a copy of the table and the query is answered again, so the returned sequence is
@@ -31,10 +32,9 @@ from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable
 from workbench.planners.wan_harada.plans import Plan, PlanStep
 from workbench.planners.wan_harada.query import PoseQuery
-from workbench.robots.analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
-from workbench.robots.chain import solve_ik
-from workbench.robots.collider import Collider, Scene
-from workbench.robots.ik import IKOptions, SeedLibrary, retract
+from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
+from workbench.robots.collider import Scene
+from workbench.robots.ik import IKOptions, IKSolver, retract
 from workbench.robots.model import Robot
 
 
@@ -50,44 +50,43 @@ class Conjunction:
 
 
 class Realiser:
-    """IK branches and collision checks for conjunctions (see the module docstring)."""
+    """IK and collision checks for conjunctions through the workbench's IK solver (`robots.ik.IKSolver`): its
+    closed form for spherical-wrist arms (every branch tried as a seed), its Levenberg-Marquardt tiers from library
+    seeds otherwise; its collider rejects arm or hand against the table and arm against the object."""
 
     def __init__(self, robot: Robot, scene: Scene, obj_mesh, handx: float = 0.05, worldz: float = 0.05, seed: int = 0):
         self.robot, self.handx, self.worldz = robot, handx, worldz
-        self.collider = Collider(robot, scene, obj_mesh)
         self.closed = not spherical_wrist_reason(robot)
-        if self.closed:
-            self.ik = analytic_ik(robot)
-        else:
-            self.lib = SeedLibrary(robot, 8192, seed)
+        self.opts = IKOptions(closed_form=self.closed, library=8192, seed=seed)
+        self.solver = IKSolver(robot, scene, self.opts, obj_mesh)
+        self.ik = analytic_ik(robot) if self.closed else None
 
-    def branches(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(N, B, n) candidate joint vectors and (N, B) validity for TCP poses (N, 4, 4)."""
-        if self.closed:
-            return solve(self.ik, poses)
-        k = 8
-        seeds = self.lib.nearest(poses, k, pool=32, spread=1.0)
-        target = np.repeat(poses, k, axis=0)
-        q, ok = solve_ik(self.robot, target, self.lib.q[seeds.reshape(-1)], IKOptions().iters_seed)
-        return q.reshape(len(poses), k, -1), ok.reshape(len(poses), k)
+    def seeds(self, pose: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray:
+        """Seeds for the grasp: the previous configuration first, then every closed-form branch or diverse library seeds."""
+        if self.ik is not None:
+            q, ok = solve(self.ik, pose[None])
+            cand = q[0, ok[0]]
+        else:
+            cand = self.solver.library.q[self.solver.library_seeds(pose[None])[0]]
+        if q_prev is not None and len(cand):
+            cand = cand[np.argsort(np.abs(cand - q_prev).sum(axis=1), kind="stable")]
+        return cand
 
     def configurations(self, object_pose: np.ndarray, tcp: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray | None:
-        """(3, n) grasp/approach/retract joint vectors, or None when no branch works."""
+        """(3, n) grasp/approach/retract joint vectors, or None when no seed gives all three collision-free."""
         poses = retract(tcp[None], self.handx, self.worldz)[0]  # (3, 4, 4)
-        q, ok = self.branches(poses)
-        lo, hi = self.robot.lower, self.robot.upper
-        cand = np.flatnonzero(ok[0])
-        if q_prev is not None and len(cand):
-            cand = cand[np.argsort(np.abs(q[0, cand] - q_prev).sum(axis=1))]
-        for b in cand:
-            qg = q[0, b]
-            qa, fa = nearest_branch(q[1:2], ok[1:2], qg, lo, hi)
-            qr, fr = nearest_branch(q[2:3], ok[2:3], qg, lo, hi)
-            if not (fa[0] and fr[0]):
+        place = object_pose[None]
+        o = self.opts
+        for q0 in self.seeds(poses[0], q_prev):
+            qg, ok = self.solver.solve(poses[:1], place, q0[None], o.iters_seed)
+            if not ok[0]:
                 continue
-            trio = np.stack([qg, qa[0], qr[0]])
-            if not self.collider.collides_q(trio, np.repeat(object_pose[None], 3, axis=0)).any():
-                return trio
+            qa, oka = self.solver.solve(poses[1:2], place, qg, o.iters_warm)
+            if not oka[0]:
+                continue
+            qr, okr = self.solver.solve(poses[2:3], place, qa, o.iters_warm)
+            if okr[0]:
+                return np.stack([qg[0], qa[0], qr[0]])
         return None
 
 

@@ -26,8 +26,8 @@ from workbench.errors import WorkbenchError
 from workbench.grasping.placements import grips_above_table
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
-from workbench.robots.chain import solve_ik
-from workbench.robots.ik import IKOptions, SeedLibrary
+from workbench.robots.collider import default_scene
+from workbench.robots.ik import IKOptions, IKSolver
 from workbench.robots.model import Robot
 
 
@@ -198,13 +198,15 @@ def reachable(robot: Robot, base: np.ndarray, held: np.ndarray, chunk: int, prog
 
 
 def _reachable_numeric(robot: Robot, base: np.ndarray, held: np.ndarray, out: np.ndarray, progress: bool) -> np.ndarray:
-    """The numerical IK (Levenberg-Marquardt from a seed library) for arms without a closed form."""
-    opts = IKOptions()
-    lib = SeedLibrary(robot, opts.library, opts.seed)
+    """The workbench's numerical IK (`IKSolver`, Levenberg-Marquardt from the nearest library seed, no collision
+    check: Section 5.2 asks for joint angles within their limits) for arms without a closed form."""
+    opts = IKOptions(collide=False)
+    solver = IKSolver(robot, default_scene(robot.name), opts)
     poses = np.einsum("fij,kjl->kfil", base, held).reshape(-1, 4, 4)
+    flat = out.reshape(-1)
     for s in tqdm(range(0, len(poses), 4096), desc="IK (numerical)", unit="chunk", disable=not progress, leave=False):
         target = poses[s:s + 4096]
-        seeds = lib.q[lib.nearest(target, 1)[:, 0]]
-        q, ok = solve_ik(robot, target, seeds, opts.iters_seed)
-        out.reshape(-1)[s:s + len(target)] = ok
+        seeds = solver.library.q[solver.library.nearest(target, 1)[:, 0]]
+        _, ok = solver.solve(target, np.repeat(np.eye(4)[None], len(target), axis=0), seeds, opts.iters_seed)
+        flat[s:s + len(target)] = ok
     return out
