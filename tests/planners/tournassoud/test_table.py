@@ -175,6 +175,7 @@ def test_every_sequence_passes_the_validator(box_setup, puma560):
             n += 1
     for ps, pg in [(0, 3), (0, 1), (2, 5), (4, 1)]:
         seq, plan = plan_placement_query(table, classes, realiser, puma560, "box", (ps, 0.0), (pg, 1.0))
+        assert np.allclose(plan.goal_pose, table.object_pose(pg, 1.0))  # the query's angle, not its nearest sample
         rep = validator.check(plan)
         assert rep.ok, rep.errors
         assert plan.regrasps == seq.regrasps

@@ -179,7 +179,8 @@ def grasp_query(table: GraspPlacementTable, initial: tuple[int, float], goal_cla
 
 
 def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: tuple[int, float]) -> Sequence:
-    """The object from placement (P_s, phi_s) to (P_g, phi_g) (radians, nearest samples), fewest grasps."""
+    """The object from placement (P_s, phi_s) to (P_g, phi_g) (radians; the table is read at the nearest samples, the
+    plan realises the exact angles), fewest grasps."""
     t0 = time.perf_counter()
     p_n = table.q.shape[1]
     (ps, phs), (pg, phg) = start, goal
@@ -204,7 +205,8 @@ def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: 
         grasps.append(cur)
     # the last grasp belongs to the goal set; it puts the object down at the goal
     placements.append((pg, fg))
-    return Sequence("placement", grasps, placements, len(levels) - 1, time.perf_counter() - t0)
+    return Sequence("placement", grasps, placements, len(levels) - 1, time.perf_counter() - t0,
+                    extra={"phi_start": float(phs), "phi_goal": float(phg)})
 
 
 def nearest_sample(grid: np.ndarray, angle: float) -> int:

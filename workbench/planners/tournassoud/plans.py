@@ -47,6 +47,7 @@ class Conjunction:
     object_pose: np.ndarray
     tcp: np.ndarray
     q: np.ndarray  # (3, n): grasp, approach, retract
+    phi: float = 0.0  # the placement's angle (the sample's, or the query's own at its start and goal)
 
 
 class Realiser:
@@ -91,11 +92,12 @@ class Realiser:
 
 
 def conjunction_poses(table: GraspPlacementTable, classes: list[GraspClass], grasp: tuple[int, int], placement: tuple[int, int],
-                      theta: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(object pose in the world, TCP in the world, grasp = TCP in the object frame) of a conjunction (Section 4.1)."""
+                      theta: float | None = None, phi: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(object pose in the world, TCP in the world, grasp = TCP in the object frame) of a conjunction (Section 4.1),
+    at the samples' angles or at the given exact `theta`, `phi`."""
     c, t = grasp
     j, f = placement
-    obj = table.object_pose(j, table.phi[f])
+    obj = table.object_pose(j, table.phi[f] if phi is None else phi)
     g = classes[c].pose(table.theta[t] if theta is None else theta)
     return obj, obj @ g, g
 
@@ -110,14 +112,16 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
         seq = query(work, **kw)
         pairs = seq.conjunctions()
         out, q_prev, bad = [], None, None
-        for g, p in pairs:
-            theta = seq.theta_ini if (seq.kind == "grasp" and g == seq.grasps[0]) else None
-            obj, tcp, _ = conjunction_poses(work, classes, g, p, theta)
+        for k, (g, p) in enumerate(pairs):
+            # the query's own angles, not their nearest samples, at the initial grasp / the start and goal poses
+            theta = seq.theta_ini if (seq.kind == "grasp" and k == 0) else None
+            phi = seq.extra.get("phi_start") if k == 0 else (seq.extra.get("phi_goal") if k == len(pairs) - 1 else None)
+            obj, tcp, _ = conjunction_poses(work, classes, g, p, theta, phi)
             q = realiser.configurations(obj, tcp, q_prev)
             if q is None:
                 bad = (g, p)
                 break
-            out.append(Conjunction(g, p, obj, tcp, q))
+            out.append(Conjunction(g, p, obj, tcp, q, work.phi[p[1]] if phi is None else phi))
             q_prev = q[0]
         if bad is None:
             return seq, out
@@ -140,7 +144,7 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
         (c, t), (j, f) = cj.grasp, cj.placement
         g = np.linalg.solve(cj.object_pose, cj.tcp)
         return PlanStep(kind=kind, idfreeairgrip=int(c * t_n + t), idfreetabletopplacement=int(j), position=np.array([hx, hy, 0.0]),
-                        yaw=float(table.phi[f]), object_pose=cj.object_pose, tcp=cj.tcp, grasp=g,
+                        yaw=float(cj.phi), object_pose=cj.object_pose, tcp=cj.tcp, grasp=g,
                         jawwidth=float(classes[c].opening), q_approach=cj.q[1], q_grasp=cj.q[0], q_retract=cj.q[2])
 
     if seq.kind == "placement":
