@@ -20,6 +20,7 @@ from scipy.spatial.transform import Rotation
 
 from workbench.benchmarks import print_table
 from workbench.geometry.objects import from_trimesh
+from workbench.robots.analytic import spherical_wrist_reason
 from workbench.robots.collider import default_scene
 from workbench.robots.gripper import franka_hand
 from workbench.robots.ik import IKOptions, ik_feasibility
@@ -203,7 +204,9 @@ def benchmark_grips(n: int = 40000, seed: int = 0) -> tuple[dict[str, np.ndarray
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--robots", default="panda,ur5,talos", help="comma-separated robots (default: panda,ur5,talos)")
+    parser.add_argument("--robots", default="panda,ur5,talos,puma560",
+                        help="comma-separated robots (default: panda,ur5,talos,puma560); a robot with a spherical wrist "
+                             "is run with the numerical solver and with its closed form (Tournassoud et al. 1987)")
     parser.add_argument("--grips", type=int, default=40000, help="tabletop grips (default 40,000)")
     parser.add_argument("--repeats", type=int, default=3, help="cold runs per robot; the median is printed (default 3)")
     parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
@@ -215,18 +218,23 @@ def run(args: argparse.Namespace) -> int:
     grips, mesh = benchmark_grips(args.grips)
     n = len(grips["rotmat"])
     rows = []
+    runs = []
     for name in args.robots.split(","):
+        runs.append((name.strip(), False))
+        if not spherical_wrist_reason(get_robot(name.strip())):
+            runs.append((name.strip(), True))
+    for name, closed in runs:
         times, res = [], None
         for _ in range(max(1, args.repeats)):
             t0 = time.perf_counter()
-            robot = get_robot(name.strip())
-            res = ik_feasibility(robot, grips, default_scene(robot.name), args.handx, args.worldz, mesh, IKOptions(),
-                                 workers=args.workers, progress=False)
+            robot = get_robot(name)
+            res = ik_feasibility(robot, grips, default_scene(robot.name), args.handx, args.worldz, mesh,
+                                 IKOptions(closed_form=closed), workers=args.workers, progress=False)
             times.append(time.perf_counter() - t0)
         f = res.feasible
         t = statistics.median(times)
-        rows.append((robot.name, robot.nq, n, t, int(f[:, 0].sum()), int(f.all(1).sum()), f"{n / t:,.0f}",
-                     f"{min(times):.1f}-{max(times):.1f}"))
+        rows.append((robot.name + (" (closed form)" if closed else ""), robot.nq, n, t, int(f[:, 0].sum()), int(f.all(1).sum()),
+                     f"{n / t:,.0f}", f"{min(times):.1f}-{max(times):.1f}"))
     print_table(["robot", "dof", "#-tpg", "t-tpgik (s)", "#feasible grasp", "#feasible +handx+handxworldz", "grips/s", "range (s)"],
                 rows, title=f"IK feasibility of {n:,} tabletop grips of a 4 x 6 x 12 cm box, 91 positions x 8 angles; each run cold: "
                             f"robot, seed library, collision models and worker processes built in the timing "
