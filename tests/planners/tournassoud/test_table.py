@@ -145,19 +145,45 @@ def test_runs_wrap_around():
     assert runs(np.ones(8, dtype=bool), vals) == [(0.0, 7.0)]
 
 
-@pytest.fixture(scope="module")
-def box_setup(box, hand, puma560):
-    classes = grasp_classes(box, hand)
-    pl = stable_placements(box)
-    table = build_table(classes, pl.poses, puma560, hand, TableParams(table_point=(0.45, 0.1)), progress=False)
+def _setup(obj, hand, robot):
+    """Classes, table, realiser and an independent validator (built here from the URDF text and the meshes)."""
+    classes = grasp_classes(obj, hand)
+    pl = stable_placements(obj)
+    table = build_table(classes, pl.poses, robot, hand, TableParams(table_point=(0.45, 0.1)), progress=False)
     scene = Scene()
-    realiser = Realiser(puma560, scene, box.mesh)
-    r = puma560
+    realiser = Realiser(robot, scene, obj.mesh)
+    r = robot
     validator = PlanValidator(r.spec.urdf, r.spec.tip_frame, r.mount, r.base, list(r.joint_names),
-                              (scene.table_min, scene.table_max, scene.table_thickness), box.mesh.vertices, box.mesh.faces,
-                              box.com, hand.collision_mesh(), hand_links=r.spec.drop_geometry,
+                              (scene.table_min, scene.table_max, scene.table_thickness), obj.mesh.vertices, obj.mesh.faces,
+                              obj.com, hand.collision_mesh(), hand_links=r.spec.drop_geometry,
                               free_poses={j: p for j, p in enumerate(pl.poses)}, package_dirs=(str(erd_share()),))
     return classes, table, realiser, validator
+
+
+@pytest.fixture(scope="module")
+def box_setup(box, hand, puma560):
+    return _setup(box, hand, puma560)
+
+
+def test_l_part_sequences_pass_the_validator(lpart, hand, puma560):
+    classes, table, realiser, validator = _setup(lpart, hand, puma560)
+    rng = np.random.default_rng(1)
+    legal = np.argwhere(table.hand_object)
+    n = 0
+    for _ in range(30):
+        c, t = legal[rng.integers(len(legal))]
+        goal = int((c + rng.integers(1, len(classes))) % len(classes))  # another class: at least one regrasp
+        try:
+            seq, plan = plan_grasp_query(table, classes, realiser, puma560, "L", (int(c), float(table.theta[t])), goal,
+                                         (0.0, 2 * np.pi))
+        except PlanningError:
+            continue
+        if plan is None:
+            continue
+        rep = validator.check(plan)
+        assert rep.ok, rep.errors
+        n += 1
+    assert n >= 3
 
 
 def test_every_sequence_passes_the_validator(box_setup, puma560):
