@@ -140,9 +140,14 @@ def _rot(k: np.ndarray, c: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarr
         m, sg = ax
         i, j = _NEXT[m]
         out = np.empty(np.broadcast_shapes(v.shape, (3,) + np.shape(c)))
-        ss = s if sg > 0 else -s
-        out[i] = v[i] * c - v[j] * ss
-        out[j] = v[i] * ss + v[j] * c
+        np.multiply(v[i], c, out=out[i])
+        np.multiply(v[j], c, out=out[j])
+        if sg > 0:
+            out[i] -= v[j] * s
+            out[j] += v[i] * s
+        else:
+            out[i] += v[j] * s
+            out[j] -= v[i] * s
         out[m] = v[m]
         return out
     kv = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1 - c)
@@ -219,11 +224,6 @@ def _limit(q: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return out
 
 
-def _tile(v: np.ndarray, k: int) -> np.ndarray:
-    """Repeat the last axis block k times: (..., N) -> (..., k N), branch-major."""
-    return np.concatenate([v] * k, axis=-1)
-
-
 def solve(ik: AnalyticIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """All 8 IK branches of TCP poses (N, 4, 4) in the world: joints (N, 8, 6) and valid (N, 8).
 
@@ -247,6 +247,12 @@ def solve(ik: AnalyticIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     ax = ik.axes
     (r2, p2), (r3, p3), (r4, _), _, _ = ik.m
     a1, a2, a3 = ax[0], ax[1], ax[2]
+
+    def col(x: np.ndarray) -> np.ndarray:
+        """A constant vector (3,) or per-pose vectors (3, N) as (3, A, B, C, N|1) for broadcasting over the branch axes
+        A (q3 root), B (q2 root), C (q5 root): scalars per branch are (A, B, C, N), vectors get a leading 3."""
+        return x.reshape(3, 1, 1, 1, -1)
+
     # 1. elbow: |v(q3) - o2|^2 = |pw - o|^2 -> two q3
     rad2 = ((pw - ik.o[:, None]) ** 2).sum(0)
     g = r3.T @ (p3 - ik.o2)
@@ -254,47 +260,41 @@ def solve(ik: AnalyticIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     wpar = a3 * (a3 @ w3)
     c0 = (p3 - ik.o2) @ (p3 - ik.o2) + w3 @ w3 + 2 * g @ wpar
     c3, s3 = _acs(2 * g @ (w3 - wpar), 2 * g @ np.cross(a3, w3), rad2 - c0)
-    c3, s3 = c3.reshape(-1), s3.reshape(-1)                    # (2N)
-    m = 2 * n
-    wv = np.broadcast_to(w3[:, None], (3, m))
-    v = _lin(r3, _rot(a3, c3, s3, wv)) + p3[:, None]
+    c3, s3 = c3[:, None, None, :], s3[:, None, None, :]                      # (2, 1, 1, N)
+    v = _lin(r3, _rot(a3, c3, s3, col(w3))) + col(p3)
     # 2. shoulder: height of W along axis 1 -> two q2 per q3
     a1p = r2.T @ a1
     vpar = np.multiply.outer(a2, _dot(a2, v))
     vperp = v - vpar
     av = np.stack((a2[1] * v[2] - a2[2] * v[1], a2[2] * v[0] - a2[0] * v[2], a2[0] * v[1] - a2[1] * v[0]))
-    h = _tile(_dot(a1, pw) - a1 @ p2, 2)
+    h = _dot(a1, pw) - a1 @ p2
     c2, s2 = _acs(_dot(a1p, vperp), _dot(a1p, av), h - _dot(a1p, vpar))
-    c2, s2 = c2.reshape(-1), s2.reshape(-1)                    # (4N): [q2 root][q3 root][pose]
-    m = 4 * n
-    vpar, vperp, av = _tile(vpar, 2), _tile(vperp, 2), _tile(av, 2)
-    c3, s3 = _tile(c3, 2), _tile(s3, 2)
-    x = _lin(r2, vpar + vperp * c2 + av * s2) + p2[:, None]
+    c2, s2 = c2[:, :, 0].swapaxes(0, 1), s2[:, :, 0].swapaxes(0, 1)          # (2, 2, 1, N)
+    x = _lin(r2, vpar + vperp * c2 + av * s2) + col(p2)
     # 3. base: rotate x onto W about axis 1
-    c1, s1 = _sub1(a1, x, _tile(pw, 4))
+    c1, s1 = _sub1(a1, x, col(pw))
     # 4. wrist: Y = R4^T R03^T R6 (R5 R6)^T; only Y c and Y d are needed
     wa, wb, wc, wd = ik.wrist_a, ik.wrist_b, ik.wrist_c, ik.wrist_d
     ys = []
     for vec in (wc, wd):
-        y = _rot(a1, c1, -s1, _tile(rot6(ik.wrist_at @ vec), 4))
+        y = _rot(a1, c1, -s1, col(rot6(ik.wrist_at @ vec)))
         y = _rot(a2, c2, -s2, _lin(r2.T, y))
         ys.append(_lin(r4.T, _rot(a3, c3, -s3, _lin(r3.T, y))))
     yc, yd = ys
     cpar = wb * (wb @ wc)
     c5, s5 = _acs(wa @ (wc - cpar), wa @ np.cross(wb, wc), _dot(wa, yc) - wa @ cpar)
-    c5, s5 = c5.reshape(-1), s5.reshape(-1)                    # (8N): [q5 root][q2][q3][pose]
-    m = 8 * n
-    u = _rot(wb, c5, s5, np.broadcast_to(wc[:, None], (3, m)))
-    yc, yd = _tile(yc, 2), _tile(yd, 2)
+    c5, s5 = np.moveaxis(c5[..., 0, :], 0, 2), np.moveaxis(s5[..., 0, :], 0, 2)  # (2, 2, 2, N)
+    u = _rot(wb, c5, s5, col(wc))
     c4, s4 = _sub1(wa, u, yc)
     tt = _rot(wb, c5, -s5, _rot(wa, c4, -s4, yd))
-    c6, s6 = _sub1(wc, np.broadcast_to(wd[:, None], (3, m)), tt)
-    c1, s1, c2, s2, c3, s3 = (_tile(z, 2) for z in (c1, s1, c2, s2, c3, s3))
-    q = np.arctan2(np.stack((s1, s2, s3, s4, s5, s6)), np.stack((c1, c2, c3, c4, c5, c6)))  # (6, 8N)
+    c6, s6 = _sub1(wc, col(wd), tt)
+    sins = np.stack(np.broadcast_arrays(s1, s2, s3, s4, s5, s6))
+    coss = np.stack(np.broadcast_arrays(c1, c2, c3, c4, c5, c6))
+    q = np.arctan2(sins, coss)                                                # (6, 2, 2, 2, N)
     for j in range(6):
         q[j] = _limit(q[j], ik.lower[j], ik.upper[j])
-    # (6, [q5][q2][q3], N) -> (N, branch = 4 q3 + 2 q2 + q5, 6)
-    q = q.reshape(6, 2, 2, 2, n).transpose(4, 3, 2, 1, 0).reshape(n, 8, 6)
+    # (6, q3, q2, q5, N) -> (N, branch = 4 q3 + 2 q2 + q5, 6)
+    q = q.transpose(4, 1, 2, 3, 0).reshape(n, 8, 6)
     valid = np.isfinite(q).all(axis=2)
     return q, valid
 
