@@ -28,6 +28,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
+from tqdm import tqdm
 
 from workbench.errors import WorkbenchError
 from workbench.geometry.collision import bvh, collide_at_poses, object_collider
@@ -291,7 +292,8 @@ def _bisect(good: float, bad: float, test, resolution: float) -> float:
     return good
 
 
-def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = ClassParams()) -> list[GraspClass]:
+def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = ClassParams(),
+                  progress: bool = False) -> list[GraspClass]:
     """The grasp classes of `obj` for `gripper` with their grasp points and legal theta intervals (Sections 2, 5.1).
 
     Classes whose legal theta range is empty are dropped."""
@@ -303,7 +305,7 @@ def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = Clas
     step = float(theta[1] - theta[0]) if len(theta) > 1 else 2 * np.pi
     out = []
     coarse = theta[:: max(len(theta) // 24, 1)]
-    for cls in pairs:
+    for cls in tqdm(pairs, desc="grasp classes", unit="pair", disable=not progress, leave=False):
 
         def test(t, cls=cls, point=None):
             ok = hand.free(cls, point, t)

@@ -51,7 +51,8 @@ class TableRun:
     seconds: float = 0.0
 
 
-def classes_stage(store: Store, obj: ObjectModel, gripper: Gripper, params: ClassParams) -> tuple[int, list[GraspClass], bool]:
+def classes_stage(store: Store, obj: ObjectModel, gripper: Gripper, params: ClassParams,
+                  progress: bool = False) -> tuple[int, list[GraspClass], bool]:
     """Grasp classes of `obj` (Sections 2, 5.1): (paramset, classes, reused from the store)."""
     sql.ensure_schema(store)
     idobject = put_object(store, obj)
@@ -59,7 +60,7 @@ def classes_stage(store: Store, obj: ObjectModel, gripper: Gripper, params: Clas
     pid = store.find_paramset(CLASSES, key, idobject)
     if pid is not None:
         return pid, [GraspClass(**d) for d in sql.load_classes(store, pid)], True
-    classes = grasp_classes(obj, gripper, params)
+    classes = grasp_classes(obj, gripper, params, progress=progress)
     return sql.save_classes(store, CLASSES, key, idobject, classes), classes, False
 
 
@@ -75,7 +76,7 @@ def table_stage(store: Store, obj: ObjectModel, robot: Robot, gripper: Gripper |
     """Classes, placement classes and the grasp-placement table (Sections 2-5), stored or reused."""
     t0 = time.perf_counter()
     gripper = gripper or robot.gripper or franka_hand()
-    idc, classes, reused_c = classes_stage(store, obj, gripper, class_params)
+    idc, classes, reused_c = classes_stage(store, obj, gripper, class_params, progress)
     idobject = put_object(store, obj)
     put_gripper(store, gripper)
     with store.transaction():
