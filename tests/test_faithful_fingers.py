@@ -116,8 +116,8 @@ def test_lazy_search_matches_the_eager_roadmap_when_one_contact_lies_in_two_sets
     switch that moves the shared contact to its other set (which a slot-by-slot search cannot make) is found."""
     rng = np.random.default_rng(5)
     compared = swaps = 0
-    for _ in range(60):
-        sets, shared, i, j = one_shared_sets(rng, planner.n)
+    for _ in range(25):
+        sets, shared, i, j = one_shared_sets(rng, planner.n, 5)
         graph = brute_local_graph(planner.tester, sets)
         nodes = list(graph.nodes)
         if len(nodes) < 2:
@@ -153,7 +153,7 @@ def test_lazy_search_matches_the_eager_roadmap_when_one_contact_lies_in_two_sets
                     path = local_path(planner.tester, sets, np.array(a), np.array(b))
                     assert path is not None and len(path) == 2
                     swaps += 1
-    assert compared >= 50 and swaps >= 1, (compared, swaps)
+    assert compared >= 30 and swaps >= 1, (compared, swaps)
 
 
 # ---------------------------------------------------------------------------------------------------------- Algorithm 3
@@ -201,22 +201,40 @@ def test_algorithm3_updates_r_and_the_next_query_reuses_it(contacts, samples):
     assert np.array_equal(oneoff.representatives, base.representatives)
 
 
-def test_persistent_updates_are_stored_and_loaded(tmp_path):
+def test_persistent_updates_are_stored_and_loaded(tmp_path, samples):
+    """An update made by one queries run is stored with it and applied when the roadmap is loaded by a later run."""
     from workbench.commands.fingers import run_pipeline
+    from workbench.fingergaits import LocalStats
     from workbench.objects import load_object
     from workbench.store import Store
+    from workbench.store import fingers as fstore
 
     mesh = tmp_path / "pebble.stl"
     pebble().export(mesh)
     db = tmp_path / "f.duckdb"
     obj = load_object(mesh)
-    params = ClusterParams(k=16, mu=0.5, sides=6)
-    first = run_pipeline(str(db), obj, ContactParams(faces=None), params, 300, 3, 12)
-    added = sum(len(u) for u in first.planner.updates)
+    first = run_pipeline(str(db), obj, ContactParams(faces=None), PARAMS, 300, 0, 0)
+    planner = first.planner
+    hard = unlinkable(planner, samples, 2)
+    assert len(hard) == 2
+
+    def compute():                      # a queries run whose queries needed Algorithm 3 for two grasps
+        for g in hard:
+            planner.update_roadmap(g)
+        return LocalStats(samples=0), planner.updates
+
     with Store(db) as store:
+        fstore.queries_stage(store, first.idobject, first.idroadmap, first.ids, {"test": 1}, compute)
         stored = store.one("SELECT count(*) FROM fingerupdategrasp")[0]
-    assert stored == added
-    # a later run (other queries) starts from R with every stored update, and its representatives
-    later = run_pipeline(str(db), obj, ContactParams(faces=None), params, 300, 3, 5)
-    assert len(later.planner.roadmap) >= len(first.planner.roadmap)
-    assert set(first.planner.representatives.tolist()) <= set(later.planner.representatives.tolist())
+        n_updates = store.one("SELECT count(*) FROM fingerupdate")[0]
+    added = sum(len(u.grasps) for u in planner.updates)
+    assert stored == added > 0 and n_updates == 2
+    assert len(planner.roadmap) == len(planner.base) + added
+    # a later run starts from R with every stored update and its representatives; Table I still reports R itself
+    later = run_pipeline(str(db), obj, ContactParams(faces=None), PARAMS, 300, 0, 0)
+    assert np.array_equal(later.planner.roadmap.grasps, planner.roadmap.grasps)
+    assert np.array_equal(later.planner.representatives, planner.representatives)
+    assert len(later.planner.base) == len(first.planner.base)
+    for g in hard:
+        assert later.planner.roadmap.index(g[None])[0] >= 0
+        assert query(later.planner, g, hard[0] if g is not hard[0] else hard[1]).start_method == "roadmap"
