@@ -215,16 +215,19 @@ ALL_TABLES = ALL_TABLES + PLAN_TABLES
 # - fingers.contacts (params: faces): fingermesh, the decimated mesh whose face centroids are the contact
 #   points; fingercontact, T_O: one row per face, idx its index in T_O (and face in the mesh), position (m),
 #   normal (inward unit).
-# - fingers.roadmap (params: contacts paramset, k, mu, sides, seed, n_init): fingerroadmap, one summary row
+# - fingers.roadmap (params: contacts paramset, k, mu, sides, seed, n_init, torque_scale): fingerroadmap, one summary row
 #   (sigma of the affinity, #vertex, #edge, #CC, seconds of clustering and roadmap construction);
 #   fingercluster, one row per cluster with its representative (T_R), k-means centre in U space and size;
 #   fingermember, T_O's cluster of every contact with its row of U (embedding) and of E (distances to every
 #   centre, by cluster label); fingergrasp, the vertices of R (four contacts, ascending idx) with their
 #   connected component; fingeredge, the edges of R: grasp 0 becomes grasp 1 by lifting `idlifted` and
 #   placing `idplaced`.
-# - fingers.queries (params: roadmap paramset, samples, picks, queries, seed): fingerlocalstats, the
+# - fingers.queries (params: roadmap paramset, samples, picks, queries, seed, algorithm3): fingerlocalstats, the
 #   numbers of Table II; fingerquery, one row per query of Table III: start and goal grasps and the sequence
-#   (a list of grasps, each four idfingercontact), how each end linked to R (alg1, alg2, alg3) and seconds.
+#   (a list of grasps, each four idfingercontact), how each end linked to R (roadmap, alg1, alg2, alg3) and
+#   seconds; fingerupdate, one row per persistent Algorithm 3 update of R these queries made (seq orders the
+#   updates of one roadmap), with T_G, the four contacts it made representatives; fingerupdategrasp, the
+#   vertices it added to R. Loading a roadmap applies every stored update, so later queries reuse them.
 FINGER_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS fingermesh (
         idfingermesh BIGINT PRIMARY KEY,
@@ -318,6 +321,22 @@ FINGER_TABLES: tuple[str, ...] = (
         seconds DOUBLE NOT NULL,
         sequence BIGINT[][],
         UNIQUE (idparamset, seq)
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingerupdate (
+        idfingerupdate BIGINT PRIMARY KEY,
+        idroadmap BIGINT NOT NULL REFERENCES paramset(idparamset),
+        idqueries BIGINT NOT NULL REFERENCES paramset(idparamset),
+        seq INTEGER NOT NULL,
+        tg BIGINT[] NOT NULL,
+        UNIQUE (idroadmap, seq)
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingerupdategrasp (
+        idfingerupdategrasp BIGINT PRIMARY KEY,
+        idfingerupdate BIGINT NOT NULL REFERENCES fingerupdate(idfingerupdate),
+        idcontact0 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idcontact1 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idcontact2 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idcontact3 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact)
     )""",
 )
 

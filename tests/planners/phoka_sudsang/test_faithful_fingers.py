@@ -13,12 +13,15 @@ import numpy as np
 import pytest
 import trimesh
 
-from workbench.clustering import ClusterParams, cluster_contacts, cone_distance
-from workbench.contacts import ContactParams, contact_points
-from workbench.fingergaits import (algorithm1_applies, build_planner, construct_roadmap, find_nearest_cluster,
-                                   find_path, local_path, query, sample_grasps)
-from workbench.forceclosure import friction_pyramid
-from workbench.objects import from_trimesh
+from workbench.geometry.objects import from_trimesh
+from workbench.planners.phoka_sudsang.clustering import ClusterParams, cluster_contacts, cone_distance
+from workbench.planners.phoka_sudsang.contacts import ContactParams, contact_points
+from workbench.planners.phoka_sudsang.experiments import sample_grasps
+from workbench.planners.phoka_sudsang.forceclosure import friction_pyramid
+from workbench.planners.phoka_sudsang.linking import (algorithm1_applies, find_nearest_cluster, find_path, local_path,
+                                                      update_roadmap)
+from workbench.planners.phoka_sudsang.query import query
+from workbench.planners.phoka_sudsang.switching import build_planner, construct_roadmap
 
 PARAMS = ClusterParams(k=16, mu=0.5, sides=6, seed=0)
 
@@ -179,7 +182,7 @@ def test_algorithm3_updates_r_and_the_next_query_reuses_it(contacts, samples):
     persistent = copy.deepcopy(base)
     assert persistent.persistent                                  # the paper's behaviour is the default
     n0, reps0 = len(persistent.roadmap), set(persistent.representatives.tolist())
-    ext = persistent.update_roadmap(g)                            # Algorithm 3: T_G joins T_R, L joins R
+    ext = update_roadmap(persistent, g)                            # Algorithm 3: T_G joins T_R, L joins R
     assert len(ext.grasps) > 0 and len(persistent.roadmap) == n0 + len(ext.grasps)
     assert persistent.roadmap.index(g[None])[0] >= 0
     assert set(g.tolist()) <= set(persistent.representatives.tolist()) and reps0 < set(persistent.representatives.tolist())
@@ -203,11 +206,11 @@ def test_algorithm3_updates_r_and_the_next_query_reuses_it(contacts, samples):
 
 def test_persistent_updates_are_stored_and_loaded(tmp_path, samples):
     """An update made by one queries run is stored with it and applied when the roadmap is loaded by a later run."""
-    from workbench.commands.fingers import run_pipeline
-    from workbench.fingergaits import LocalStats
-    from workbench.objects import load_object
+    from workbench.geometry.objects import load_object
+    from workbench.planners.phoka_sudsang import stages
+    from workbench.planners.phoka_sudsang.experiments import LocalStats
+    from workbench.planners.phoka_sudsang.stages import run_pipeline
     from workbench.store import Store
-    from workbench.store import fingers as fstore
 
     mesh = tmp_path / "pebble.stl"
     pebble().export(mesh)
@@ -220,11 +223,11 @@ def test_persistent_updates_are_stored_and_loaded(tmp_path, samples):
 
     def compute():                      # a queries run whose queries needed Algorithm 3 for two grasps
         for g in hard:
-            planner.update_roadmap(g)
+            update_roadmap(planner, g)
         return LocalStats(samples=0), planner.updates
 
     with Store(db) as store:
-        fstore.queries_stage(store, first.idobject, first.idroadmap, first.ids, {"test": 1}, compute)
+        stages.queries_stage(store, first.idobject, first.idroadmap, first.ids, {"test": 1}, compute)
         stored = store.one("SELECT count(*) FROM fingerupdategrasp")[0]
         n_updates = store.one("SELECT count(*) FROM fingerupdate")[0]
     added = sum(len(u.grasps) for u in planner.updates)
