@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 from workbench.cli.grasps import add_grasp_arguments, add_object_arguments, grasp_params
-from workbench.cli.placements import add_placement_arguments, placement_params
+from workbench.cli.placements import add_placement_arguments, placement_params, roadmap_grasps_line
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import load_object
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ, BuildResult, build_all
@@ -46,7 +46,7 @@ def print_build(res: BuildResult, db, seconds: float) -> None:
     verb = lambda k: "reused" if r.get(k) else "computed"  # noqa: E731
     print(f"{res.name}: {c['grasps']} free-air grasps ({verb('grasps')}, {t['grasps']:.1f} s); {c['placements']} stable placements, "
           f"{c['tabletop_placements']:,} tabletop placements, {c['tabletop_grips']:,} tabletop grips ({verb('placements')}, "
-          f"{t['placements']:.1f} s)")
+          f"{t['placements']:.1f} s); {roadmap_grasps_line(c['grasps_label'], c['roadmap_grasps'], c['usable_grasps'])}")
     print(f"IK for {res.robot} ({verb('ik')}, {t['ik']:.1f} s); regrasp graph: {c['graph_nodes']:,} nodes, {c['graph_transfer_edges']:,} "
           f"transfer and {c['graph_transit_edges']:,} transit edges, {c['graph_grasps']} grasps, {c['graph_placements']} placements, "
           f"{c['graph_components']} component(s) ({t['graph']:.1f} s)")

@@ -10,15 +10,16 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from workbench import cli
+from workbench.cli.main import main as cli_main
 from workbench.errors import PlanningError
-from workbench.gripper import franka_hand
-from workbench.pipeline import ensure_grasps, ensure_placements
-from workbench.placements import PlacementParams
-from workbench.regrasp import PoseQuery, build_roadmap
-from workbench.grasps import GraspParams
-from workbench.kinematics import KINDS, retract
-from workbench.tabletop import TabletopParams
+from workbench.grasping.grasps import GraspParams
+from workbench.grasping.placements import PlacementParams
+from workbench.planners.wan_harada.query import PoseQuery
+from workbench.planners.wan_harada.roadmap import build_roadmap
+from workbench.planners.wan_harada.stages import ensure_grasps, ensure_placements
+from workbench.planners.wan_harada.tabletop import TabletopParams
+from workbench.robots.gripper import franka_hand
+from workbench.robots.ik import KINDS, retract
 
 GRID = dict(x_min=0.4, x_max=0.6, nx=2, y_min=-0.1, y_max=0.1, ny=1, angles=2)
 
@@ -47,13 +48,13 @@ def test_placements_command_names_the_cap(tmp_path, bundled, capsys):
     db = tmp_path / "c.duckdb"
     mesh = tmp_path / "tube.stl"
     bundled["tube"].mesh.export(mesh)
-    assert cli.main(["grasps", str(mesh), "--db", str(db), "--name", "tube"]) == 0
-    grid = ["--x", "0.4,0.6,2", "--y", "-0.1,0.1,1", "--angles", "2"]
+    assert cli_main(["grasps", str(mesh), "--db", str(db), "--name", "tube"]) == 0
+    grid = ["--x", "0.4,0.6,2", "--y=-0.1,0.1,1", "--angles", "2"]
     capsys.readouterr()
-    assert cli.main(["placements", "--db", str(db), "--object", "tube", *grid]) == 0
+    assert cli_main(["placements", "--db", str(db), "--object", "tube", *grid]) == 0
     out = capsys.readouterr().out
     assert "all" in out and "capped" not in out
-    assert cli.main(["placements", "--db", str(db), "--object", "tube", *grid, "--max-grasps", "15"]) == 0
+    assert cli_main(["placements", "--db", str(db), "--object", "tube", *grid, "--max-grasps", "15"]) == 0
     assert "capped at 15" in capsys.readouterr().out
 
 
@@ -99,7 +100,7 @@ SMALL = TabletopParams(x_min=0.4, x_max=0.6, nx=3, y_min=-0.15, y_max=0.15, ny=2
 
 @pytest.fixture(scope="module")
 def small_store(tmp_path_factory, bundled):
-    from workbench.commands.build import build_all
+    from workbench.planners.wan_harada.stages import build_all
 
     db = tmp_path_factory.mktemp("faithful") / "small.duckdb"
     build_all(db, bundled["tube"], "panda", tparams=SMALL, workers=1, progress=False)
@@ -108,14 +109,14 @@ def small_store(tmp_path_factory, bundled):
 
 @pytest.fixture(scope="module")
 def planner(small_store):
-    from workbench.regrasp import load_planner
+    from workbench.planners.wan_harada.stages import load_planner
 
     return load_planner(small_store, "tube", "panda")
 
 
 def test_ik_rows_store_the_lift_feasibilities_and_the_roadmap_gates_on_them(small_store, planner):
     from workbench.store import Store
-    from workbench.store import plans as sql
+    from workbench.store import wan_harada as sql
     from workbench.store import robots as rsql
 
     ids = planner.ids

@@ -50,6 +50,7 @@ from workbench.store.placements import (
     save_placements,
     save_tabletop,
     tabletop_counts,
+    tabletop_grasp_count,
 )
 from workbench.store.robots import ik_runs, ikret_row, robot_row, scene_row
 
@@ -103,6 +104,9 @@ class PlacementsResult:
     n_tabletop_placements: int
     n_tabletop_grips: int
     timings: dict
+    n_usable_grasps: int = 0
+    n_roadmap_grasps: int = 0
+    grasps_label: str = "all grasps"
 
 
 def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, grasp_pid: int, gripper: Gripper,
@@ -144,7 +148,9 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
         n_tp, n_tg = tabletop_counts(store, tt_pid)
         return PlacementsResult(idplacements=pl_pid, idtabletop=tt_pid, reused=reused, placements=stored,
                                 n_free_grips=np.bincount(fp_index, minlength=len(stored["stability"])),
-                                n_tabletop_placements=int(n_tp), n_tabletop_grips=int(n_tg), timings=timings)
+                                n_tabletop_placements=int(n_tp), n_tabletop_grips=int(n_tg), timings=timings,
+                                n_usable_grasps=len(np.unique(ftg["idfreeairgrip"])),
+                                n_roadmap_grasps=tabletop_grasp_count(store, tt_pid), grasps_label=tparams.grasps_label())
     finally:
         if not isinstance(db, Store):
             store.close()
@@ -296,7 +302,8 @@ def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pp
         p = ensure_placements(store, g.idobject, obj, g.idparamset, hand, pparams, tparams)
         out.timings["placements"], out.reused["placements"] = time.perf_counter() - t0, p.reused
         out.counts.update(placements=len(p.placements["stability"]), tabletop_placements=p.n_tabletop_placements,
-                          tabletop_grips=p.n_tabletop_grips)
+                          tabletop_grips=p.n_tabletop_grips, usable_grasps=p.n_usable_grasps, roadmap_grasps=p.n_roadmap_grasps,
+                          grasps_label=p.grasps_label)
         t0 = time.perf_counter()
         ik_ids, reused = ensure_ik_rows(store, g.idobject, obj, p.idtabletop, robot_name, handx, worldz, workers, progress)
         out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, reused
