@@ -12,6 +12,7 @@ from workbench.cli.placements import add_placement_arguments, placement_params, 
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import load_object
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ, BuildResult, build_all
+from workbench.robots.ik import WORLDA
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,6 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--db", required=True, help="DuckDB store file (created when missing)")
     parser.add_argument("--handx", type=float, default=HANDX, help=f"retraction along the approach axis (m, default {HANDX})")
     parser.add_argument("--worldz", type=float, default=WORLDZ, help=f"retraction up along world z (m, default {WORLDZ})")
+    parser.add_argument("--worlda", type=float, default=WORLDA,
+                        help=f"lift of the held object straight up along world z (m, default {WORLDA})")
     parser.add_argument("--workers", type=int, default=None, help="IK processes (default: all cores)")
     add_placement_arguments(parser)
     add_grasp_arguments(parser)
@@ -30,13 +33,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
 
-    for label, v in (("--handx", args.handx), ("--worldz", args.worldz)):
+    for label, v in (("--handx", args.handx), ("--worldz", args.worldz), ("--worlda", args.worlda)):
         if not v >= 0:
             raise WorkbenchError(f"{label} must be a distance >= 0 m, got {v}")
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     pparams, tparams = placement_params(args)
     t0 = time.perf_counter()
-    res = build_all(args.db, obj, args.robot, grasp_params(args), pparams, tparams, args.handx, args.worldz, args.workers)
+    res = build_all(args.db, obj, args.robot, grasp_params(args), pparams, tparams, args.handx, args.worldz, args.workers,
+                    worlda=args.worlda)
     print_build(res, args.db, time.perf_counter() - t0)
     return 0
 
