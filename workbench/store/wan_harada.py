@@ -11,7 +11,6 @@ import json
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 
 from workbench.errors import StoreError
 from workbench.store import Store, from_arrow
