@@ -9,7 +9,9 @@ of mass must project inside the support polygon of the hull vertices within 0.1 
 
 Checks, per plan: the step sequence (pick, then transfer / regrasp pairs, then place); each joint vector is
 finite, within limits and reproduces its TCP pose (grasp, approach = backed off by handx along the TCP's -z,
-retract = approach raised by worldz); no arm-table, gripper-table or arm-object collision (the object at the
+retract = approach raised by worldz, worlda = the grasp raised by worlda along world z with the part held,
+worldaworldz = that raised by worldz; the part moves with the hand at the last two, so it leaves and reaches the
+table only vertically); no arm-table, gripper-table or arm-object collision (the object at the
 step's pose); every object pose rests on the table and is stable; the object stays put between a transfer and
 its regrasp; the grasp (object in the TCP frame, from forward kinematics) is unchanged along each transfer;
 the object starts at the start pose and ends at the goal pose.
@@ -243,8 +245,14 @@ class PlanValidator:
             back[:3, 3] -= plan.handx * tcp[:3, 2]
             up = back.copy()
             up[2, 3] += plan.worldz
-            for label, q, target in (("grasp", s.q_grasp, tcp), ("approach", s.q_approach, back), ("retract", s.q_retract, up)):
-                q = np.asarray(q, dtype=np.float64)
+            lift = np.eye(4)
+            lift[2, 3] = plan.worlda            # the held part lifted straight up, then by worldz more
+            lift2 = np.eye(4)
+            lift2[2, 3] = plan.worlda + plan.worldz
+            for label, q, target, at in (("grasp", s.q_grasp, tcp, obj), ("approach", s.q_approach, back, obj),
+                                         ("retract", s.q_retract, up, obj), ("worlda", s.q_worlda, lift @ tcp, lift @ obj),
+                                         ("worldaworldz", s.q_worldaworldz, lift2 @ tcp, lift2 @ obj)):
+                q = np.asarray(np.nan if q is None else q, dtype=np.float64)
                 if q.shape != (len(self.joint_names),) or not np.isfinite(q).all():
                     need(False, f"{tag}: the {label} joint vector is missing, has NaN or the wrong length")
                     continue
@@ -255,7 +263,7 @@ class PlanValidator:
                 dp, dr = float(np.linalg.norm(f[:3, 3] - target[:3, 3])), _angle(f, target)
                 need(dp <= self.tol_pos and dr <= self.tol_rot,
                      f"{tag}: the {label} configuration reaches a TCP {dp * 1000:.2f} mm / {np.degrees(dr):.2f} deg from its pose")
-                hits = self.collisions(q, obj)
+                hits = self.collisions(q, at)
                 need(not hits, f"{tag}: at the {label} configuration {', '.join(hits)}")
             stable, why = self.stability(obj)
             need(stable, f"{tag}: the object pose is not a stable placement: {why}")

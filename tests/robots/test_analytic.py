@@ -12,7 +12,12 @@ import pytest
 
 from workbench.benchmarks.ik import synthetic_grips
 from workbench.errors import RobotError
-from workbench.robots.analytic import analytic_ik, nearest_branch, solve, spherical_wrist_reason
+from workbench.robots.analytic import (
+    analytic_ik,
+    nearest_branch,
+    solve,
+    spherical_wrist_reason,
+)
 from workbench.robots.collider import default_scene
 from workbench.robots.ik import IKOptions, ik_feasibility
 from workbench.robots.model import get_robot

@@ -45,7 +45,8 @@ def _stored_check(store: Store, idrobot: int, idscene: int, idikret: int) -> tup
     """Max position (m) and rotation (rad) error of the stored joint vectors against the stored TCP targets, using
     pinocchio on the stored robot row only; and the number of checked vectors."""
     row = sql.robot_row(store, idrobot)
-    handx, worldz = sql.ikret_row(store, idikret)
+    ret = sql.ikret_row(store, idikret)
+    handx, worldz, worlda = ret["handx"], ret["worldz"], ret["worlda"]
     rows = sql.load_ik(store, idrobot, idscene, idikret)
     model = pin.buildModelFromXML(row["urdf"])
     data = model.createData()
@@ -56,10 +57,12 @@ def _stored_check(store: Store, idrobot: int, idscene: int, idikret: int) -> tup
     count = 0
     for i in range(len(rows["idik"])):
         grasp = rows["rotmat"][i]
-        targets = [grasp.copy(), grasp.copy(), grasp.copy()]
+        targets = [grasp.copy() for _ in range(5)]
         targets[1][:3, 3] -= handx * grasp[:3, 2]
         targets[2][:3, 3] = targets[1][:3, 3] + np.array([0.0, 0.0, worldz])
-        for k in range(3):
+        targets[3][2, 3] += worlda                  # the held object lifted straight up
+        targets[4][2, 3] += worlda + worldz
+        for k in range(5):
             if not rows["feasible"][i, k]:
                 assert np.isnan(rows["joints"][i, k]).all()
                 continue

@@ -70,6 +70,7 @@ def test_rejects_a_swapped_grasp(plan, planner):
     t = bad.steps[1]
     t.idfreeairgrip, t.grasp, t.tcp, t.jawwidth = other.idfreeairgrip, other.grasp.copy(), other.tcp.copy(), other.jawwidth
     t.q_approach, t.q_grasp, t.q_retract = other.q_approach.copy(), other.q_grasp.copy(), other.q_retract.copy()
+    t.q_worlda, t.q_worldaworldz = other.q_worlda.copy(), other.q_worldaworldz.copy()
     errors = _errors(bad, planner)
     assert "the grasp changes along the transfer" in errors
     assert "moves in the hand" in errors

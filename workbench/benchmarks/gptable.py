@@ -25,7 +25,11 @@ from workbench.benchmarks.paper import bench_objects
 from workbench.errors import PlanningError, WorkbenchError
 from workbench.geometry.objects import ObjectModel, from_trimesh
 from workbench.grasping.placements import stable_placements
-from workbench.planners.tournassoud.chaining import NoSequence, grasp_query, placement_query
+from workbench.planners.tournassoud.chaining import (
+    NoSequence,
+    grasp_query,
+    placement_query,
+)
 from workbench.planners.tournassoud.classes import KINDS, grasp_classes
 from workbench.planners.tournassoud.shapes import l_part
 from workbench.planners.tournassoud.table import TableParams, build_table, grid

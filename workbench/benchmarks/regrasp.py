@@ -7,6 +7,14 @@ to compute the IK-feasible grasps at the start and goal, connect them to the gra
 over the pairs); nr the regrasps of the best plan (median over solved pairs). Every pair ends in a plan, or in a
 PlanningError saying the start or goal is unreachable or the two are not connected; every plan is checked by the
 independent validator.
+
+That is `--protocol interactive` (warm caches: a warm-up query first, lazy IK at the start and goal, random pairs).
+`--protocol paper` (default) measures what Table I's gs and nr measure: one fixed task per object, stated in the
+output (start: the first stable placement at x 0.45, y -0.10, yaw 0; goal: the second at x 0.55, y 0.10, yaw 90
+degrees, the same placement turned when there is only one), in the spirit of Fig. 10; every repeat loads a fresh
+planner (no cache) and times the search with every start and goal grip's IK evaluated (lazy=False), so gs covers
+the IK at the initial and goal poses, connecting them and the search. The store keeps every grasp (Table I's
+#-tpg) unless --max-grasps is given, which the output names.
 """
 
 from __future__ import annotations
@@ -26,14 +34,19 @@ from workbench.planners.wan_harada.plans import make_plan
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.stages import build_all, load_planner
 from workbench.planners.wan_harada.tabletop import TabletopParams
-from workbench.resources import bundled_objects
+from workbench.resources import bundled_objects, paper_objects
 from workbench.store import Store
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--objects", default="tube,planebody,wheel,bracket,tail,drill",
-                        help="comma-separated bundled objects (default: all six)")
+                        help="comma-separated bundled objects or Table I rows of the paper's objects (TU, PB, PW, PS, PT, ED)")
     parser.add_argument("--robots", default="panda,ur5,talos", help="comma-separated robots (default panda,ur5,talos)")
+    parser.add_argument("--protocol", choices=["paper", "interactive"], default="paper",
+                        help="paper: a fixed task per object, cold planner, IK at start and goal included; interactive: "
+                             "random pairs, warm caches, lazy IK")
+    parser.add_argument("--repeats", type=int, default=3, help="paper protocol: cold repeats of the task (median)")
+    parser.add_argument("--max-grasps", type=int, default=0, help="cap the roadmap's grasps (0: all, as Table I)")
     parser.add_argument("--pairs", type=int, default=30, help="random start/goal pairs per object and robot (default 30)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random pairs")
     parser.add_argument("--alternatives", type=int, default=2, help="next best plans searched per pair (default 2)")
@@ -78,44 +91,89 @@ def bench_pairs(planner, pairs: list[tuple], alternatives: int = 2) -> dict:
     return {"gs": gs, "nr": nr, **counts}
 
 
+def paper_task(placement_ids: list[int]) -> tuple[PoseQuery, PoseQuery]:
+    """The fixed task of the paper protocol: the first stable placement at (0.45, -0.10), yaw 0, to the second at
+    (0.55, 0.10), yaw 90 degrees (the first again, turned, when the object has one stable placement)."""
+    ids = sorted(placement_ids)
+    return PoseQuery(ids[0], 0.45, -0.10, 0.0), PoseQuery(ids[1 % len(ids)], 0.55, 0.10, float(np.pi / 2))
+
+
+def paper_task_objects(spec: str) -> list[tuple[str, str, object]]:
+    """(label, Table I row, loaded object) for bundled names and paper rows (millimetre meshes in ../shared)."""
+    objs, paper = bundled_objects(), paper_objects()
+    out = []
+    for name in [n.strip() for n in spec.split(",") if n.strip()]:
+        if name in objs:
+            out.append((name, BUNDLED_ROW.get(name, "-"), load_object(objs[name])))
+        elif name in paper:
+            out.append((f"{name} (paper)", name, load_object(paper[name], units="mm", name=name)))
+        else:
+            raise WorkbenchError(f"unknown object {name!r}; use bundled objects ({', '.join(objs)}) or paper rows "
+                                 f"({', '.join(paper) or 'none found: set WORKBENCH_SHARED to the shared folder'})")
+    return out
+
+
 def run(args: argparse.Namespace) -> int:
-
-    objs = bundled_objects()
-    names = [n.strip() for n in args.objects.split(",") if n.strip()]
-    unknown = [n for n in names if n not in objs]
-    if unknown:
-
-        raise WorkbenchError(f"unknown bundled objects {unknown}; use some of {', '.join(objs)}")
-    grid = TabletopParams()
+    grid = TabletopParams(max_grasps=args.max_grasps or None)
     folder = Path(args.dir)
     rows = []
-    for name in names:
-        obj = load_object(objs[name])
-        db = folder / f"{name}.duckdb"
+    for label, row, obj in paper_task_objects(args.objects):
+        db = folder / f"{obj.name}{'' if grid.max_grasps is None else f'-cap{grid.max_grasps}'}.duckdb"
         for robot in [r.strip() for r in args.robots.split(",") if r.strip()]:
             t0 = time.perf_counter()
             build_all(db, obj, robot, tparams=grid, workers=args.workers)
             t_build = time.perf_counter() - t0
+            paper = TABLE_I.get(row)
+            ref = [f"{paper[10]:g} / {paper[11]:g}" if paper else "-", f"{paper[12]} / {paper[13]}" if paper else "-"]
+            if args.protocol == "paper":
+                rows.append([label, row, robot, *_paper_task(db, obj.name, robot, args.repeats), *ref, round(t_build, 1)])
+                continue
             with Store(db) as store:
                 planner = load_planner(store, obj.name, robot)
                 ids = planner.placement_ids()
                 pairs = random_pairs(ids, grid, args.pairs, args.seed)
                 bench_pairs(planner, pairs[:1], args.alternatives)  # warm-up (caches), not counted
                 out = bench_pairs(planner, pairs, args.alternatives)
-            row = BUNDLED_ROW.get(name, "-")
-            paper = TABLE_I.get(row)
             gs, nr = out["gs"], out["nr"]
-            rows.append([name, row, robot, planner.roadmap.n_grips, planner.roadmap.n_nodes,
+            rows.append([label, row, robot, planner.roadmap.n_grips, planner.roadmap.n_nodes,
                          statistics.median(gs) * 1000 if gs else "-", max(gs) * 1000 if gs else "-",
                          statistics.median(nr) if nr else "-", max(nr) if nr else "-", f"{out['solved']}/{len(pairs)}",
-                         out["nogrip"], out["unreachable"], out["unconnected"], out["invalid"],
-                         f"{paper[10]:g} / {paper[11]:g}" if paper else "-", f"{paper[12]} / {paper[13]}" if paper else "-",
-                         round(t_build, 1)])
+                         out["nogrip"], out["unreachable"], out["unconnected"], out["invalid"], *ref, round(t_build, 1)])
+    if args.protocol == "paper":
+        print_table(["object", "T-I", "robot", "#-tpg", "nodes", "task (placement,x,y,yaw deg)", "gs s", "gs range s", "nr",
+                     "outcome", "load s", "paper gs n/h s", "paper nr n/h", "store s"], rows,
+                    title=f"Regrasp search, protocol paper (Table I's gsn/gsh, nrn/nrh): one fixed task per object, "
+                          f"{grid.grasps_label()}; each of {args.repeats} repeats loads a fresh planner (load s, not in gs) "
+                          "and times IK at every start and goal grip + connect + search (gs, median); nr = regrasps of the "
+                          "best plan. Paper: Nextage (n) / HRP5P (h), Xeon 2.8 GHz, its Fig. 10 tasks")
+        return 0
     print_table(["object", "T-I", "robot", "#-tpg", "nodes", "gs med ms", "gs max ms", "nr med", "nr max", "solved", "no grip",
                  "unreach", "unconn", "invalid", "paper gs n/h s", "paper nr n/h", "store s"], rows,
-                title=f"Regrasp search (Table I right half): {args.pairs} random start/goal pairs per object and robot (seed {args.seed}), "
+                title=f"Regrasp search, protocol interactive (warm caches, lazy IK; not Table I's protocol): {args.pairs} random "
+                      f"start/goal pairs per object and robot (seed {args.seed}), {grid.grasps_label()}, "
                       f"best plan + {args.alternatives} alternatives; gs = IK at start/goal + connect + search, over the solved "
                       "pairs; unsolved pairs: a placement with no grasp clearing the table (no grip), no IK-feasible grip at start "
                       "or goal (unreach), not connected (unconn); invalid = plans the validator rejects. "
                       "Paper: Nextage (n) / HRP5P (h), Xeon 2.8 GHz, its Fig. 10 tasks")
     return 0
+
+
+def _paper_task(db: Path, name: str, robot: str, repeats: int) -> list:
+    """#-tpg, nodes, the task, gs median and range (s), nr, outcome and load time of the paper protocol's task."""
+    gs, loads, nr, outcome = [], [], "-", "solved"
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        with Store(db) as store:
+            planner = load_planner(store, name, robot)   # fresh: no planner cache
+        loads.append(time.perf_counter() - t0)
+        start, goal = paper_task(planner.placement_ids())
+        t0 = time.perf_counter()
+        try:
+            res = planner.search(start, goal, alternatives=0, lazy=False)
+            nr = res.routes[0].n_regrasps
+        except PlanningError as exc:
+            outcome = getattr(exc, "reason", "failed")
+        gs.append(time.perf_counter() - t0)
+    task = " -> ".join(f"{q.idfreetabletopplacement},{q.x:.2f},{q.y:.2f},{np.degrees(q.yaw):.0f}" for q in (start, goal))
+    return [planner.roadmap.n_grips, planner.roadmap.n_nodes, task, statistics.median(gs),
+            f"{min(gs):.2f}-{max(gs):.2f}", nr, outcome, statistics.median(loads)]

@@ -31,6 +31,8 @@ def add_finger_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--clusters", type=int, default=d.k, help="number of clusters k (= representatives)")
     parser.add_argument("--friction", type=float, default=d.mu, help="Coulomb friction coefficient")
     parser.add_argument("--pyramid", type=int, default=d.sides, help="sides m of the friction pyramid")
+    parser.add_argument("--torque-scale", choices=["none", "radius"], default=d.torque_scale,
+                        help="torque arms of d(i, j): none (the paper's formula, metres) or divided by the object's radius")
     parser.add_argument("--seed", type=int, default=d.seed, help="seed of k-means and of the sampled grasps and queries")
     parser.add_argument("--samples", type=int, default=10000, help="sampled force-closure grasps (Table II)")
     parser.add_argument("--picks", type=int, default=30, help="grasps picked per algorithm (Table II)")
@@ -42,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_object_arguments(parser)
     parser.add_argument("--db", required=True, help="DuckDB store file")
     add_finger_arguments(parser)
+    parser.add_argument("--algorithm3", choices=["update", "one-off"], default="update",
+                        help="update: Algorithm 3 adds to R for good, stored and reused by later queries (the paper); "
+                             "one-off: each query's extension is forgotten")
     parser.add_argument("--json", default=None, help="write the tables and every query's sequence to this JSON file")
     parser.set_defaults(func=run)
 
@@ -51,16 +56,16 @@ def run(args: argparse.Namespace) -> int:
 
 
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
-    params = ClusterParams(k=args.clusters, mu=args.friction, sides=args.pyramid, seed=args.seed)
+    params = ClusterParams(k=args.clusters, mu=args.friction, sides=args.pyramid, seed=args.seed, torque_scale=args.torque_scale)
     params.friction.validate()
     t0 = time.perf_counter()
     r = run_pipeline(args.db, obj, ContactParams(faces=args.faces or None), params, args.samples, args.picks, args.queries,
-                     progress=sys.stderr.isatty())
+                     progress=sys.stderr.isatty(), persistent=args.algorithm3 == "update")
     dt = time.perf_counter() - t0
     tab = tables(r)
     n = len(r.planner.contacts)
     print(f"{obj.name}: {obj.n_triangles} triangles -> {n} contact points; k={params.k}, mu={params.mu}, m={params.sides}, "
-          f"seed={params.seed}")
+          f"seed={params.seed}, torque arms {'/ radius' if params.torque_scale == 'radius' else 'in metres (the paper)'}")
     t1 = tab["table1"]
     print_table(["#vertex", "#edge", "#CC", "clustering s", "roadmap s"],
                 [[t1["vertex"], t1["edges"], t1["cc"], t1["seconds_clustering"], t1["seconds_roadmap"]]],
@@ -76,12 +81,14 @@ def run(args: argparse.Namespace) -> int:
         print_table(["#connect", "min s", "max s", "average s"],
                     [[f"{t3['connect']}/{t3['queries']}", t3["min"] if t3["min"] is not None else "-",
                       t3["max"] if t3["max"] is not None else "-", t3["average"] if t3["average"] is not None else "-"]],
-                    title="Table III: regrasp queries")
+                    title=f"Table III: regrasp queries (Algorithm 3: {args.algorithm3}; R has {t1['vertex_updated']:,} vertices "
+                          f"after {t1['updates']} stored update(s))")
     print(f"\nstore {args.db}: contacts paramset {r.idcontacts}, roadmap paramset {r.idroadmap}"
           + (f", queries paramset {r.idqueries}" if r.idqueries else "") + f" ({dt:.2f} s)")
     if args.json:
         doc = {"object": obj.name, "contacts": n, "params": {"faces": args.faces, "k": params.k, "mu": params.mu,
-                                                             "sides": params.sides, "seed": params.seed},
+                                                             "sides": params.sides, "seed": params.seed,
+                                                             "torque_scale": params.torque_scale, "algorithm3": args.algorithm3},
                "paramsets": {"contacts": r.idcontacts, "roadmap": r.idroadmap, "queries": r.idqueries}, **tab,
                "queries": [_query_json(q, r.ids) for q in (r.stats.queries if r.stats else [])]}
         with open(args.json, "w") as fh:

@@ -13,7 +13,11 @@ import numpy as np
 from workbench.errors import WorkbenchError
 from workbench.planners.tournassoud.chaining import NoSequence
 from workbench.planners.tournassoud.figures import table_html
-from workbench.planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
+from workbench.planners.tournassoud.plans import (
+    Realiser,
+    plan_grasp_query,
+    plan_placement_query,
+)
 from workbench.planners.tournassoud.stages import load_planner, plan_validator
 from workbench.robots.collider import default_scene
 

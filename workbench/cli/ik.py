@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 from workbench.errors import RobotError
 from workbench.planners.wan_harada.stages import run_ik
 from workbench.robots.collider import Scene, default_scene
-from workbench.robots.ik import IKOptions
+from workbench.robots.ik import WORLDA, IKOptions
 from workbench.robots.model import ROBOTS, get_robot, pose_xyz_yaw
 from workbench.store import Store
 
@@ -55,6 +55,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--table-thickness", type=float, default=None, help="table slab thickness (m)")
     p.add_argument("--handx", type=float, default=HANDX, help=f"retraction along the hand (m, default {HANDX})")
     p.add_argument("--worldz", type=float, default=WORLDZ, help=f"then up along world z (m, default {WORLDZ})")
+    p.add_argument("--worlda", type=float, default=WORLDA,
+                   help=f"lift of the held object straight up along world z (m, default {WORLDA}); then worldz more")
     p.add_argument("--tabletop", type=int, default=None, help="tabletop parameter set id (default: the latest)")
     p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -75,10 +77,10 @@ def main(args: argparse.Namespace) -> int:
                       table_thickness=scene.table_thickness if args.table_thickness is None else args.table_thickness,
                       workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
     with Store(args.db) as store:
-        run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, IKOptions(closed_form=args.closed_form), args.workers,
-                     progress=not args.no_progress, idtabletop=args.tabletop)
+        run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, IKOptions(closed_form=args.closed_form),
+                     args.workers, progress=not args.no_progress, idtabletop=args.tabletop, worlda=args.worlda)
     what = "reused" if run.reused else f"computed {run.computed:,}"
     print(f"ik {robot.name}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "
-          f"with retractions {run.feasible_all:,}; robot {run.idrobot}, scene {run.idscene}, ikret {run.idikret}; "
+          f"at all five poses (retractions and lifts) {run.feasible_all:,}; robot {run.idrobot}, scene {run.idscene}, ikret {run.idikret}; "
           f"{run.seconds:.1f} s")
     return 0

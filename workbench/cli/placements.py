@@ -23,7 +23,8 @@ def add_placement_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--x", type=_range, default=(t.x_min, t.x_max, t.nx), metavar="MIN,MAX,N", help="grid along x")
     parser.add_argument("--y", type=_range, default=(t.y_min, t.y_max, t.ny), metavar="MIN,MAX,N", help="grid along y")
     parser.add_argument("--angles", type=int, default=t.angles, help="rotations about z (the angle table)")
-    parser.add_argument("--max-grasps", type=int, default=t.max_grasps, help="free-air grasps carried into the roadmap (0: all)")
+    parser.add_argument("--max-grasps", type=int, default=0,
+                        help="cap the free-air grasps carried into the roadmap, for a quick look (default 0: all, as the paper)")
 
 
 def _range(text: str) -> tuple[float, float, int]:
@@ -59,9 +60,17 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def roadmap_grasps_line(label: str, roadmap: int, usable: int) -> str:
+    """One line naming how many free-air grasps the roadmap carries, and the cap when there is one."""
+    if label == "all grasps":
+        return f"roadmap grasps: all {roadmap} usable grasps"
+    return f"roadmap grasps: {roadmap} of {usable} usable, {label}"
+
+
 def print_placements(name: str, result, seconds: float) -> None:
     stab = result.placements["stability"]
     print(f"{name}: {len(stab)} stable placements (stability {', '.join(f'{s:.2f}' for s in stab)})")
     print(f"free tabletop grips per placement: {', '.join(str(int(n)) for n in result.n_free_grips)}")
+    print(roadmap_grasps_line(result.grasps_label, result.n_roadmap_grasps, result.n_usable_grasps))
     print(f"{'reused' if result.reused else 'stored'} {result.n_tabletop_placements} tabletop placements and "
           f"{result.n_tabletop_grips} tabletop grips (parameter sets {result.idplacements}, {result.idtabletop}) in {seconds:.2f} s")

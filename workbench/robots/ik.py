@@ -1,11 +1,14 @@
 """IK feasibility of tabletop grips (Wan & Harada Section IV: the `ik` and `ikret` tables).
 
-For every tabletop grip (a TCP pose in the world) three poses are solved: the grasp, the grasp retracted
-by `handx` along the TCP's -z (the paper's hand x axis is our approach axis), and that pose raised by
-`worldz` along world +z. A pose is feasible when IK converges (position within `tol_pos`, orientation
-within `tol_rot`) inside the joint limits and the arm and the gripper at that configuration do not collide
-with the table, nor the arm with the object (python-fcl on the URDF's collision geometry; the gripper's
-contact with the object is the grasp planner's business).
+For every tabletop grip (a TCP pose in the world) five poses are solved, as the paper's reference implementation
+does (the `ik` table's feasibility columns): the grasp; `handx`, the grasp retracted by `handx` along the TCP's -z
+(the paper's hand x axis is our approach axis) and `handxworldz`, that pose raised by `worldz` along world +z (the
+empty hand leaving or approaching the resting object); `worlda`, the grasp lifted by `worlda` along world +z with
+the object held (the object lifted straight off the table), and `worldaworldz`, that pose raised by `worldz`.
+A pose is feasible when IK converges (position within `tol_pos`, orientation within `tol_rot`) inside the joint
+limits and the arm and the gripper at that configuration do not collide with the table, nor the arm with the
+object, which rests on its placement for the first three poses and moves with the hand for the lifts (python-fcl
+on the URDF's collision geometry; the gripper's contact with the object is the grasp planner's business).
 
 Speed (Section VI, Table I's t-tpgik): a reachability pre-filter (`ReachFilter`: distance from the
 shoulder, also over a humanoid's waist, and the workspace box); grips sorted so neighbours are the same
@@ -41,7 +44,9 @@ from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
 from workbench.robots.model import Robot, RobotSpec, robot_from_spec
 
-KINDS = ("grasp", "handx", "handxworldz")
+KINDS = ("grasp", "handx", "handxworldz", "worlda", "worldaworldz")
+HELD = np.array([False, False, False, True, True])  # kinds at which the object moves with the hand
+WORLDA = 0.05  # default lift of the held object straight up (m), the paper's ikret worlda
 
 
 @dataclass(frozen=True)
@@ -78,7 +83,8 @@ class IKOptions:
 
 @dataclass
 class IKResult:
-    """Per grip (in input order): feasibility (N, 3) for grasp, handx, handxworldz; joints (N, 3, nq), NaN where infeasible."""
+    """Per grip (in input order): feasibility (N, 5) for the KINDS (grasp, handx, handxworldz, worlda,
+    worldaworldz); joints (N, 5, nq), NaN where infeasible."""
 
     feasible: np.ndarray
     joints: np.ndarray
@@ -135,14 +141,28 @@ class SeedLibrary:
         return np.take_along_axis(ix, order, axis=1)
 
 
-def retract(poses: np.ndarray, handx: float, worldz: float) -> np.ndarray:
-    """(N, 3, 4, 4): the grasp, the pose moved back by `handx` along the TCP's -z, and that pose raised by `worldz`
-    along world +z (Section IV, ikret)."""
+def retract(poses: np.ndarray, handx: float, worldz: float, worlda: float = WORLDA) -> np.ndarray:
+    """(N, 5, 4, 4) TCP poses of the KINDS (Section IV, ikret): the grasp; moved back by `handx` along the TCP's -z;
+    that pose raised by `worldz` along world +z; the grasp raised by `worlda` along world +z (the held object lifted
+    straight up); and that pose raised by `worldz`. The orientation is the grasp's throughout."""
     poses = np.asarray(poses, dtype=np.float64)
-    out = np.repeat(poses[:, None], 3, axis=1)
+    out = np.repeat(poses[:, None], len(KINDS), axis=1)
     out[:, 1, :3, 3] -= handx * poses[:, :3, 2]
     out[:, 2, :3, 3] = out[:, 1, :3, 3]
     out[:, 2, 2, 3] += worldz
+    out[:, 3, 2, 3] += worlda
+    out[:, 4, 2, 3] += worlda + worldz
+    return out
+
+
+def held_placements(targets: np.ndarray, placements: np.ndarray) -> np.ndarray:
+    """(N, K, 4, 4) object poses at each pose kind of `targets` (N, K, 4, 4): the resting placement, or for the
+    lifts (HELD) the placement carried along by the hand (T_k T_grasp^-1 placement)."""
+    out = np.repeat(np.asarray(placements, dtype=np.float64)[:, None], targets.shape[1], axis=1)
+    held = np.flatnonzero(HELD[:targets.shape[1]])
+    if len(held):
+        rel = targets[:, held] @ np.linalg.inv(targets[:, :1])
+        out[:, held] = rel @ out[:, held]
     return out
 
 
@@ -298,7 +318,7 @@ class IKSolver:
         return self.library.nearest(targets, o.seeds, pool=o.seed_pool, spread=o.seed_spread)
 
     def chunk(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """One chunk of sorted grips: targets (C, 3, 4, 4) -> feasible (C, 3), joints (C, 3, n).
+        """One chunk of sorted grips: targets (C, K, 4, 4) -> feasible (C, K), joints (C, K, n) for the K = 5 KINDS.
 
         Pass 1 walks the lanes in lock-step: every (lane, kind) starts from its previous feasible solution, or from
         the library seed nearest to the target; pass 2 retries the failures from up to `seeds` library seeds, one
@@ -306,22 +326,22 @@ class IKSolver:
         if self.analytic is not None:
             return self._chunk_closed(targets, placements)
         o, robot = self.opts, self.robot
-        c, n = len(targets), robot.nq
-        flat = targets.transpose(1, 0, 2, 3).reshape(3 * c, 4, 4)  # row = kind * c + grip
-        place = np.tile(placements, (3, 1, 1))
+        c, n, nk = len(targets), robot.nq, targets.shape[1]
+        flat = targets.transpose(1, 0, 2, 3).reshape(nk * c, 4, 4)  # row = kind * c + grip
+        place = held_placements(targets, placements).transpose(1, 0, 2, 3).reshape(nk * c, 4, 4)
         pre = self.prefilter(flat)
-        q_out = np.full((3 * c, n), np.nan)
-        good = np.zeros(3 * c, dtype=bool)
+        q_out = np.full((nk * c, n), np.nan)
+        good = np.zeros(nk * c, dtype=bool)
         lane = max(1, o.lane)
         nl = -(-c // lane)
         starts = np.arange(nl) * lane
-        prev = np.full((3 * nl, n), np.nan)
-        from_library = np.zeros(3 * c, dtype=bool)  # pass 1 already tried the nearest library seed
+        prev = np.full((nk * nl, n), np.nan)
+        from_library = np.zeros(nk * c, dtype=bool)  # pass 1 already tried the nearest library seed
         for step in range(lane):
             idx = starts + step
             live = idx < c
-            lanes = np.concatenate([np.nonzero(live)[0] + k * nl for k in range(3)])
-            rows = np.concatenate([idx[live] + k * c for k in range(3)])
+            lanes = np.concatenate([np.nonzero(live)[0] + k * nl for k in range(nk)])
+            rows = np.concatenate([idx[live] + k * c for k in range(nk)])
             keep = pre[rows]
             rows, lanes = rows[keep], lanes[keep]
             if len(rows) == 0:
@@ -350,8 +370,8 @@ class IKSolver:
                 q_out[rows[ok]] = q[ok]
                 good[rows[ok]] = True
                 left[sel[ok]] = False
-        feas = good.reshape(3, c).T.copy()
-        joints = q_out.reshape(3, c, n).transpose(1, 0, 2).copy()
+        feas = good.reshape(nk, c).T.copy()
+        joints = q_out.reshape(nk, c, n).transpose(1, 0, 2).copy()
         return feas, joints
 
 
@@ -414,8 +434,9 @@ def _result(future):
 def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: float, worldz: float,
             obj_mesh: trimesh.Trimesh | None = None, opts: IKOptions = IKOptions(), workers: int | None = None,
             skip: Callable[[np.ndarray], bool] | None = None, progress: bool = True, solver: IKSolver | None = None,
-            pool: IKPool | None = None) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-    """IK feasibility chunk by chunk (Section IV): yields (grip indices, feasible (C, 3), joints (C, 3, n)).
+            pool: IKPool | None = None, worlda: float = WORLDA) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """IK feasibility chunk by chunk (Section IV): yields (grip indices, feasible (C, 5), joints (C, 5, n)) for the
+    KINDS (grasp, handx, handxworldz, worlda, worldaworldz).
 
     `grips` follows the placements contract (rotmat: TCP poses in the world, placement_rotmat: object poses,
     idfreeairgrip, tabletopposition, idtabletopgrips). Chunks for which `skip(indices)` is True are not computed
@@ -424,7 +445,7 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
     solver once."""
     poses = check_poses(grips["rotmat"])
     placements = check_poses(grips["placement_rotmat"], "object placement")
-    for label, value in (("handx", handx), ("worldz", worldz)):
+    for label, value in (("handx", handx), ("worldz", worldz), ("worlda", worlda)):
         if not np.isfinite(value) or value < 0:
             raise RobotError(f"retraction {label} must be a finite distance >= 0 m, got {value}")
     order = neighbour_order(grips)
@@ -432,7 +453,7 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
     todo = [(s, e) for s, e in bounds if skip is None or not skip(order[s:e])]
     if not todo:
         return
-    targets = retract(poses, handx, worldz)
+    targets = retract(poses, handx, worldz, worlda)
     workers = pool.workers if pool is not None else (workers or os.cpu_count() or 1)
     workers = max(1, min(workers, len(todo)))
     if pool is not None and pool.key != (robot.spec.digest, scene, opts, _mesh_key(obj_mesh)):
@@ -460,11 +481,11 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
 
 def ik_feasibility(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: float, worldz: float,
                    obj_mesh: trimesh.Trimesh | None = None, opts: IKOptions = IKOptions(), workers: int | None = None,
-                   progress: bool = True) -> IKResult:
-    """IK feasibility of every grip at the grasp, handx and handxworldz poses (Section IV), in input order."""
+                   progress: bool = True, worlda: float = WORLDA) -> IKResult:
+    """IK feasibility of every grip at the five KINDS of pose (Section IV), in input order."""
     n = len(grips["rotmat"])
-    feas = np.zeros((n, 3), dtype=bool)
-    joints = np.full((n, 3, robot.nq), np.nan)
-    for ix, f, j in iter_ik(robot, grips, scene, handx, worldz, obj_mesh, opts, workers, progress=progress):
+    feas = np.zeros((n, len(KINDS)), dtype=bool)
+    joints = np.full((n, len(KINDS), robot.nq), np.nan)
+    for ix, f, j in iter_ik(robot, grips, scene, handx, worldz, obj_mesh, opts, workers, progress=progress, worlda=worlda):
         feas[ix], joints[ix] = f, j
     return IKResult(feasible=feas, joints=joints, order=neighbour_order(grips))

@@ -19,6 +19,7 @@ from workbench.planners.phoka_sudsang.contacts import (
     ContactSet,
 )
 from workbench.planners.phoka_sudsang.experiments import LocalStats
+from workbench.planners.phoka_sudsang.linking import Extension
 from workbench.planners.phoka_sudsang.query import QueryResult
 from workbench.planners.phoka_sudsang.switching import FingerPlanner, Roadmap
 from workbench.store import Store
@@ -92,7 +93,7 @@ def load_contacts(store: Store, pid: int) -> tuple[ContactSet, ContactIds]:
 
 def roadmap_params(params: ClusterParams, idcontacts: int) -> dict:
     return {"contacts": idcontacts, "k": params.k, "mu": params.mu, "sides": params.sides, "seed": params.seed,
-            "n_init": params.n_init}
+            "n_init": params.n_init, "torque_scale": params.torque_scale}
 
 
 def save_roadmap(store: Store, idobject: int, idcontacts: int, key: dict, planner: FingerPlanner, ids: ContactIds) -> int:
@@ -195,13 +196,56 @@ def roadmap_summary(store: Store, pid: int) -> dict:
 # Tables II and III
 
 
-def save_queries(store: Store, idobject: int, idroadmap: int, key: dict, ids: ContactIds, stats: LocalStats) -> int:
-    """Write Tables II and III of a run in one transaction; returns the paramset id."""
+def save_queries(store: Store, idobject: int, idroadmap: int, key: dict, ids: ContactIds, stats: LocalStats,
+                 updates: list[Extension] | None = None) -> int:
+    """Write Tables II and III of a run, and the persistent Algorithm 3 updates of R its queries made, in one
+    transaction; returns the paramset id."""
     with store.transaction():
         pid, existed = store.paramset("fingers.queries", key, idobject)
         if not existed:
             _put_queries(store, pid, idroadmap, ids, stats)
+            _put_updates(store, idroadmap, pid, updates or [], ids)
     return pid
+
+
+def _put_updates(store: Store, idroadmap: int, idqueries: int, updates: list[Extension], ids: ContactIds) -> None:
+    """Append Algorithm 3 updates of a roadmap (T_G and the vertices each added), after those already stored."""
+    if not updates:
+        return
+    first = int(store.one("SELECT coalesce(max(seq) + 1, 0) FROM fingerupdate WHERE idroadmap = ?", [idroadmap])[0])
+    uids = store.new_ids("fingerupdate", len(updates))
+    store.insert("fingerupdate", {
+        "idfingerupdate": uids,
+        "idroadmap": np.full(len(updates), idroadmap, dtype=np.int64),
+        "idqueries": np.full(len(updates), idqueries, dtype=np.int64),
+        "seq": np.arange(first, first + len(updates), dtype=np.int32),
+        "tg": pa.array([ids.to_ids(u.tg).tolist() for u in updates], type=pa.list_(pa.int64())),
+    })
+    sizes = np.array([len(u.grasps) for u in updates])
+    if sizes.sum() == 0:
+        return
+    grasps = ids.to_ids(np.vstack([u.grasps.reshape(-1, 4) for u in updates]))
+    store.insert("fingerupdategrasp", {
+        "idfingerupdategrasp": store.new_ids("fingerupdategrasp", int(sizes.sum())),
+        "idfingerupdate": np.repeat(uids, sizes),
+        **{f"idcontact{i}": grasps[:, i] for i in range(4)},
+    })
+
+
+def load_updates(store: Store, idroadmap: int, ids: ContactIds) -> list[Extension]:
+    """The persistent Algorithm 3 updates of a roadmap in the order they were made (T_G, the vertices added)."""
+    u = store.query_arrays("SELECT idfingerupdate, tg FROM fingerupdate WHERE idroadmap = ? ORDER BY seq", [idroadmap])
+    if len(u["idfingerupdate"]) == 0:
+        return []
+    g = store.query_arrays("SELECT g.idfingerupdate, g.idcontact0, g.idcontact1, g.idcontact2, g.idcontact3 "
+                           "FROM fingerupdategrasp g JOIN fingerupdate u USING (idfingerupdate) WHERE u.idroadmap = ? "
+                           "ORDER BY g.idfingerupdategrasp", [idroadmap])
+    owner = np.asarray(g["idfingerupdate"], dtype=np.int64)
+    grasps = (ids.to_index(np.stack([g[f"idcontact{i}"] for i in range(4)], axis=1)) if len(owner)
+              else np.zeros((0, 4), dtype=np.int64))
+    none = np.zeros((0, 2), dtype=np.int64)
+    return [Extension(grasps[owner == uid].reshape(-1, 4), none, none, ids.to_index(np.asarray(tg, dtype=np.int64)))
+            for uid, tg in zip(np.asarray(u["idfingerupdate"]).tolist(), u["tg"])]
 
 
 def _put_queries(store: Store, pid: int, idroadmap: int, ids: ContactIds, st: LocalStats) -> None:

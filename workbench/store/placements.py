@@ -143,6 +143,12 @@ def load_tabletop_grips(store: Store, idobject: int, idparamset: int | None = No
 
 
 
+def tabletop_grasp_count(store: Store, idtabletop: int) -> int:
+    """Distinct free-air grasps among the tabletop grips of a tabletop parameter set (the roadmap's grasps)."""
+    return int(store.one("SELECT count(DISTINCT g.idfreeairgrip) FROM tabletopgrips g JOIN tabletopplacements p "
+                         "USING (idtabletopplacements) WHERE p.idparamset = ?", [idtabletop])[0])
+
+
 def tabletop_counts(store: Store, idtabletop: int) -> tuple[int, int]:
     """(tabletop placements, tabletop grips) of a tabletop parameter set."""
     n_tp, n_tg = store.one(

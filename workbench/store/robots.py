@@ -6,9 +6,9 @@
   A robot whose name is taken by other kinematics (another base, say) is stored as `name-<digest[:8]>`.
 - scene: the table, workspace box and solver options of an IK run, plus the robot's locked joint values and
   replaced collision links (JSON `params`; keys: the Scene fields, `ik` (IKOptions), `robot`).
-- ikret: retraction distances (handx, worldz) in metres, reused when equal.
-- ik: one row per (robot, tabletop grip, ikret, scene): the three feasibility flags and the joint vectors
-  (jnt_grasp, jnt_handx, jnt_handxworldz; NULL where infeasible).
+- ikret: retraction distances (handx, worldz, worlda) in metres, reused when equal.
+- ik: one row per (robot, tabletop grip, ikret, scene): the five feasibility flags (FEASIBILITY, in the order of
+  `robots.ik.KINDS`) and the joint vectors (JOINTS; NULL where infeasible).
 
 Robot, scene and ikret rows of a run are written in one transaction; the `ik` rows chunk by chunk, each chunk in
 its own transaction, so an interrupted run keeps its finished chunks and a re-run computes only the rest.
@@ -66,20 +66,27 @@ def put_scene(store: Store, params: dict[str, Any]) -> int:
     return sid
 
 
-def put_ikret(store: Store, handx: float, worldz: float) -> int:
-    """The id of the retraction set (handx, worldz) in metres (created if new); call inside a transaction."""
-    row = store.one("SELECT idikret FROM ikret WHERE handx = ? AND worldz = ?", [float(handx), float(worldz)])
+FEASIBILITY = ("feasibility", "feasibility_handx", "feasibility_handxworldz", "feasibility_worlda", "feasibility_worldaworldz")
+JOINTS = ("jnt_grasp", "jnt_handx", "jnt_handxworldz", "jnt_worlda", "jnt_worldaworldz")
+ALL_FEASIBLE = " AND ".join(f"k.{c}" for c in FEASIBILITY)
+
+
+def put_ikret(store: Store, handx: float, worldz: float, worlda: float) -> int:
+    """The id of the retraction set (handx, worldz, worlda) in metres (created if new); call inside a transaction."""
+    args = [float(handx), float(worldz), float(worlda)]
+    row = store.one("SELECT idikret FROM ikret WHERE handx = ? AND worldz = ? AND worlda = ?", args)
     if row is not None:
         return int(row[0])
     kid = store.next_id("ikret", "idikret")
-    store.run("INSERT INTO ikret (idikret, handx, worldz) VALUES (?, ?, ?)", [kid, float(handx), float(worldz)])
+    store.run("INSERT INTO ikret (idikret, handx, worldz, worlda) VALUES (?, ?, ?, ?)", [kid, *args])
     return kid
 
 
-def prepare_run(store: Store, robot: Robot, scene_params: dict[str, Any], handx: float, worldz: float) -> tuple[int, int, int]:
+def prepare_run(store: Store, robot: Robot, scene_params: dict[str, Any], handx: float, worldz: float,
+                worlda: float) -> tuple[int, int, int]:
     """Robot, scene and ikret rows of one IK run in one transaction: (idrobot, idscene, idikret)."""
     with store.transaction():
-        return put_robot(store, robot), put_scene(store, scene_params), put_ikret(store, handx, worldz)
+        return put_robot(store, robot), put_scene(store, scene_params), put_ikret(store, handx, worldz, worlda)
 
 
 def stored_grips(store: Store, idrobot: int, idscene: int, idikret: int) -> np.ndarray:
@@ -104,8 +111,9 @@ def insert_ik(store: Store, idrobot: int, idscene: int, idikret: int, grip_ids: 
               joints: np.ndarray) -> int:
     """Write one chunk of `ik` rows in its own transaction; returns the number of rows."""
     grip_ids = np.asarray(grip_ids, dtype=np.int64)
-    feasible = np.asarray(feasible, dtype=bool).reshape(len(grip_ids), 3)
-    joints = np.asarray(joints, dtype=np.float64).reshape(len(grip_ids), 3, -1)
+    k = len(FEASIBILITY)
+    feasible = np.asarray(feasible, dtype=bool).reshape(len(grip_ids), k)
+    joints = np.asarray(joints, dtype=np.float64).reshape(len(grip_ids), k, -1)
     n = len(grip_ids)
     if n == 0:
         return 0
@@ -113,29 +121,28 @@ def insert_ik(store: Store, idrobot: int, idscene: int, idikret: int, grip_ids: 
         store.insert("ik", {
             "idik": store.new_ids("ik", n), "idrobot": np.full(n, idrobot, dtype=np.int64),
             "idtabletopgrips": grip_ids, "idikret": np.full(n, idikret, dtype=np.int64),
-            "idscene": np.full(n, idscene, dtype=np.int64), "feasibility": feasible[:, 0],
-            "feasibility_handx": feasible[:, 1], "feasibility_handxworldz": feasible[:, 2],
-            "jnt_grasp": _joint_lists(joints[:, 0], feasible[:, 0]), "jnt_handx": _joint_lists(joints[:, 1], feasible[:, 1]),
-            "jnt_handxworldz": _joint_lists(joints[:, 2], feasible[:, 2])})
+            "idscene": np.full(n, idscene, dtype=np.int64),
+            **{c: feasible[:, i] for i, c in enumerate(FEASIBILITY)},
+            **{c: _joint_lists(joints[:, i], feasible[:, i]) for i, c in enumerate(JOINTS)}})
     return n
 
 
 def run_counts(store: Store, idrobot: int, idscene: int, idikret: int, idtabletop: int) -> tuple[int, int]:
-    """(feasible at the grasp, feasible with both retractions) of one IK run over a tabletop parameter set."""
+    """(feasible at the grasp, feasible at all five poses) of one IK run over a tabletop parameter set."""
     row = store.one("SELECT count(*) FILTER (WHERE k.feasibility), "
-                    "count(*) FILTER (WHERE k.feasibility AND k.feasibility_handx AND k.feasibility_handxworldz) "
+                    f"count(*) FILTER (WHERE {ALL_FEASIBLE}) "
                     "FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements p USING (idtabletopplacements) "
                     "WHERE k.idrobot = ? AND k.idscene = ? AND k.idikret = ? AND p.idparamset = ?",
                     [idrobot, idscene, idikret, idtabletop])
     return int(row[0] or 0), int(row[1] or 0)
 
 
-def ikret_row(store: Store, idikret: int) -> tuple[float, float]:
-    """(handx, worldz) of a retraction set, metres."""
-    row = store.one("SELECT handx, worldz FROM ikret WHERE idikret = ?", [idikret])
+def ikret_row(store: Store, idikret: int) -> dict[str, float]:
+    """The distances of a retraction set, metres: {"handx", "worldz", "worlda"}."""
+    row = store.one("SELECT handx, worldz, worlda FROM ikret WHERE idikret = ?", [idikret])
     if row is None:
         raise StoreError(f"store {store.path} has no ikret {idikret}; run `workbench ik` first")
-    return float(row[0]), float(row[1])
+    return {"handx": float(row[0]), "worldz": float(row[1]), "worlda": float(row[2])}
 
 
 def robot_row(store: Store, robot: int | str) -> dict[str, Any]:
@@ -184,11 +191,11 @@ def scene_row(store: Store, idscene: int) -> StoredScene:
 def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: int | None = None) -> dict[str, np.ndarray]:
     """The `ik` rows of a run joined with their tabletop grips, ordered by idtabletopgrips: idik, idtabletopgrips,
     idtabletopplacements, idfreeairgrip, rotmat (N, 4, 4), placement_rotmat (N, 4, 4), tabletopposition (N, 3),
-    idangle, feasible (N, 3) and joints (N, 3, nq), NaN where infeasible."""
+    idangle, feasible (N, 5) and joints (N, 5, nq) for the five poses (`robots.ik.KINDS`), NaN where infeasible."""
     nq = len(robot_row(store, idrobot)["joint_names"])
     sql = ("SELECT k.idik, k.idtabletopgrips, g.idtabletopplacements, g.idfreeairgrip, g.rotmat, g.jawwidth, "
            "p.rotmat AS placement_rotmat, p.tabletopposition, p.idangle, "
-           "k.feasibility, k.feasibility_handx, k.feasibility_handxworldz, k.jnt_grasp, k.jnt_handx, k.jnt_handxworldz "
+           + ", ".join(f"k.{c}" for c in FEASIBILITY + JOINTS) + " "
            "FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements p USING (idtabletopplacements) "
            "JOIN freetabletopplacement f USING (idfreetabletopplacement) "
            "WHERE k.idrobot = ? AND k.idscene = ? AND k.idikret = ?")
@@ -204,26 +211,46 @@ def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: in
     out["rotmat"] = np.asarray(from_arrow(table.column("rotmat")), dtype=np.float64).reshape(n, 4, 4)
     out["placement_rotmat"] = np.asarray(from_arrow(table.column("placement_rotmat")), dtype=np.float64).reshape(n, 4, 4)
     out["tabletopposition"] = np.asarray(from_arrow(table.column("tabletopposition")), dtype=np.float64).reshape(n, 3)
-    out["feasible"] = np.stack([np.asarray(from_arrow(table.column(c)), dtype=bool) for c in
-                                ("feasibility", "feasibility_handx", "feasibility_handxworldz")], axis=1).reshape(n, 3)
-    joints = np.full((n, 3, nq), np.nan)
-    for k, c in enumerate(("jnt_grasp", "jnt_handx", "jnt_handxworldz")):
-        col = table.column(c).combine_chunks()
+    out["feasible"], out["joints"] = feasibility_arrays(table, n, nq)
+    return out
+
+
+def list_column(table: pa.Table, name: str, width: int) -> np.ndarray:
+    """A DOUBLE[] column as an (N, width) float array, NaN rows for NULL (no per-row Python)."""
+    col = table.column(name).combine_chunks()
+    n = len(col)
+    out = np.full((n, width), np.nan)
+    if n == 0 or width == 0:
+        return out
+    if pa.types.is_fixed_size_list(col.type) or pa.types.is_list(col.type) or pa.types.is_large_list(col.type):
         valid = ~np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)
         if valid.any():
-            flat = np.asarray(col.filter(pa.array(valid)).flatten().to_numpy(zero_copy_only=False), dtype=np.float64)
-            joints[valid, k] = flat.reshape(-1, nq)
-    out["joints"] = joints
+            sub = col.filter(pa.array(valid))
+            flat = np.asarray(sub.flatten().to_numpy(zero_copy_only=False), dtype=np.float64)
+            if len(flat) != len(sub) * width:
+                raise StoreError(f"joint vectors in column {name} do not all have {width} entries; rebuild the ik stage")
+            out[valid] = flat.reshape(-1, width)
     return out
+
+
+def feasibility_arrays(table: pa.Table, n: int, nq: int, names: tuple[tuple[str, ...], tuple[str, ...]] = (FEASIBILITY, JOINTS)
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(feasible (N, 5), joints (N, 5, nq), NaN where NULL) from the feasibility and joint columns of an Arrow table
+    (NULL feasibility reads as False)."""
+    fcols, jcols = names
+    feasible = np.stack([np.asarray(table.column(c).fill_null(False).to_numpy(zero_copy_only=False), dtype=bool)
+                         for c in fcols], axis=1).reshape(n, len(fcols))
+    joints = np.stack([list_column(table, c, nq) for c in jcols], axis=1) if n else np.full((0, len(jcols), nq), np.nan)
+    return feasible, joints
 
 
 def ik_runs(store: Store, idobject: int | None = None, idtabletop: int | None = None,
             idrobot: int | None = None) -> list[dict[str, Any]]:
     """Stored IK runs, optionally of one object, tabletop parameter set and robot: idrobot, robot name, idscene,
-    idikret, handx, worldz, rows, feasible counts (grasp, all three) and the newest idik (`last`)."""
-    sql = ("SELECT k.idrobot, r.name, k.idscene, k.idikret, i.handx, i.worldz, count(*) AS n, "
+    idikret, handx, worldz, worlda, rows, feasible counts (grasp, all five poses) and the newest idik (`last`)."""
+    sql = ("SELECT k.idrobot, r.name, k.idscene, k.idikret, i.handx, i.worldz, i.worlda, count(*) AS n, "
            "count(*) FILTER (WHERE k.feasibility) AS f0, "
-           "count(*) FILTER (WHERE k.feasibility AND k.feasibility_handx AND k.feasibility_handxworldz) AS f3, "
+           f"count(*) FILTER (WHERE {ALL_FEASIBLE}) AS f5, "
            "max(k.idik) AS last "
            "FROM ik k JOIN robot r USING (idrobot) JOIN ikret i USING (idikret) "
            "JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements p USING (idtabletopplacements) "
@@ -233,6 +260,6 @@ def ik_runs(store: Store, idobject: int | None = None, idtabletop: int | None = 
         if value is not None:
             sql += f" AND {column} = ?"
             params.append(int(value))
-    sql += " GROUP BY k.idrobot, r.name, k.idscene, k.idikret, i.handx, i.worldz ORDER BY k.idrobot, k.idscene, k.idikret"
-    keys = ("idrobot", "robot", "idscene", "idikret", "handx", "worldz", "rows", "feasible", "feasible_all", "last")
+    sql += " GROUP BY k.idrobot, r.name, k.idscene, k.idikret, i.handx, i.worldz, i.worlda ORDER BY k.idrobot, k.idscene, k.idikret"
+    keys = ("idrobot", "robot", "idscene", "idikret", "handx", "worldz", "worlda", "rows", "feasible", "feasible_all", "last")
     return [dict(zip(keys, r)) for r in store.run(sql, params)]

@@ -18,9 +18,12 @@ Paper tables
 - angle(idangle, value): rotations about world z in radians.
 - tabletopplacements: rotmat is the object in the world; tabletopposition the (x, y, z) of the placement.
 - tabletopgrips: rotmat is the TCP in the world.
-- ikret(idikret, handx, worldz): retraction distances in metres.
-- ik: feasibility per (robot, tabletop grip, retraction set); extra columns hold the joint vectors
-  (jnt_grasp, jnt_handx, jnt_handxworldz, in robot.joint_names order; NULL where infeasible) and idscene.
+- ikret(idikret, handx, worldz, worlda): retraction distances in metres (worlda: the held object lifted straight
+  up, as in the paper's reference implementation).
+- ik: feasibility per (robot, tabletop grip, retraction set) at the five poses (feasibility, feasibility_handx,
+  feasibility_handxworldz, feasibility_worlda, feasibility_worldaworldz); a grip enters the regrasp graph when
+  all five hold. Extra columns hold the joint vectors (jnt_grasp, jnt_handx, jnt_handxworldz, jnt_worlda,
+  jnt_worldaworldz, in robot.joint_names order; NULL where infeasible) and idscene.
 
 Extra tables
 - paramset(idparamset, stage, digest, params, idobject, created): every stage run's parameters (JSON) and
@@ -137,7 +140,8 @@ CORE_TABLES: tuple[str, ...] = (
         idikret BIGINT PRIMARY KEY,
         handx DOUBLE NOT NULL,
         worldz DOUBLE NOT NULL,
-        UNIQUE (handx, worldz)
+        worlda DOUBLE,
+        UNIQUE (handx, worldz, worlda)
     )""",
     """CREATE TABLE IF NOT EXISTS scene (
         idscene BIGINT PRIMARY KEY,
@@ -153,9 +157,13 @@ CORE_TABLES: tuple[str, ...] = (
         feasibility BOOLEAN NOT NULL,
         feasibility_handx BOOLEAN NOT NULL,
         feasibility_handxworldz BOOLEAN NOT NULL,
+        feasibility_worlda BOOLEAN,
+        feasibility_worldaworldz BOOLEAN,
         jnt_grasp DOUBLE[],
         jnt_handx DOUBLE[],
         jnt_handxworldz DOUBLE[],
+        jnt_worlda DOUBLE[],
+        jnt_worldaworldz DOUBLE[],
         UNIQUE (idrobot, idtabletopgrips, idikret, idscene)
     )""",
 )
@@ -204,6 +212,8 @@ PLAN_TABLES: tuple[str, ...] = (
         jnt_approach DOUBLE[] NOT NULL,
         jnt_grasp DOUBLE[] NOT NULL,
         jnt_retract DOUBLE[] NOT NULL,
+        jnt_worlda DOUBLE[],
+        jnt_worldaworldz DOUBLE[],
         UNIQUE (idplan, seq)
     )""",
 )
@@ -215,16 +225,19 @@ ALL_TABLES = ALL_TABLES + PLAN_TABLES
 # - fingers.contacts (params: faces): fingermesh, the decimated mesh whose face centroids are the contact
 #   points; fingercontact, T_O: one row per face, idx its index in T_O (and face in the mesh), position (m),
 #   normal (inward unit).
-# - fingers.roadmap (params: contacts paramset, k, mu, sides, seed, n_init): fingerroadmap, one summary row
+# - fingers.roadmap (params: contacts paramset, k, mu, sides, seed, n_init, torque_scale): fingerroadmap, one summary row
 #   (sigma of the affinity, #vertex, #edge, #CC, seconds of clustering and roadmap construction);
 #   fingercluster, one row per cluster with its representative (T_R), k-means centre in U space and size;
 #   fingermember, T_O's cluster of every contact with its row of U (embedding) and of E (distances to every
 #   centre, by cluster label); fingergrasp, the vertices of R (four contacts, ascending idx) with their
 #   connected component; fingeredge, the edges of R: grasp 0 becomes grasp 1 by lifting `idlifted` and
 #   placing `idplaced`.
-# - fingers.queries (params: roadmap paramset, samples, picks, queries, seed): fingerlocalstats, the
+# - fingers.queries (params: roadmap paramset, samples, picks, queries, seed, algorithm3): fingerlocalstats, the
 #   numbers of Table II; fingerquery, one row per query of Table III: start and goal grasps and the sequence
-#   (a list of grasps, each four idfingercontact), how each end linked to R (alg1, alg2, alg3) and seconds.
+#   (a list of grasps, each four idfingercontact), how each end linked to R (roadmap, alg1, alg2, alg3) and
+#   seconds; fingerupdate, one row per persistent Algorithm 3 update of R these queries made (seq orders the
+#   updates of one roadmap), with T_G, the four contacts it made representatives; fingerupdategrasp, the
+#   vertices it added to R. Loading a roadmap applies every stored update, so later queries reuse them.
 FINGER_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS fingermesh (
         idfingermesh BIGINT PRIMARY KEY,
@@ -319,6 +332,22 @@ FINGER_TABLES: tuple[str, ...] = (
         sequence BIGINT[][],
         UNIQUE (idparamset, seq)
     )""",
+    """CREATE TABLE IF NOT EXISTS fingerupdate (
+        idfingerupdate BIGINT PRIMARY KEY,
+        idroadmap BIGINT NOT NULL REFERENCES paramset(idparamset),
+        idqueries BIGINT NOT NULL REFERENCES paramset(idparamset),
+        seq INTEGER NOT NULL,
+        tg BIGINT[] NOT NULL,
+        UNIQUE (idroadmap, seq)
+    )""",
+    """CREATE TABLE IF NOT EXISTS fingerupdategrasp (
+        idfingerupdategrasp BIGINT PRIMARY KEY,
+        idfingerupdate BIGINT NOT NULL REFERENCES fingerupdate(idfingerupdate),
+        idcontact0 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idcontact1 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idcontact2 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact),
+        idcontact3 BIGINT NOT NULL REFERENCES fingercontact(idfingercontact)
+    )""",
 )
 
 ALL_TABLES = ALL_TABLES + FINGER_TABLES
@@ -332,4 +361,15 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS idgripper BIGINT",
     "ALTER TABLE gripper ADD COLUMN IF NOT EXISTS collision_vertices DOUBLE[][]",
     "ALTER TABLE gripper ADD COLUMN IF NOT EXISTS collision_faces INTEGER[][]",
+    # the lift retractions (issue 16): ik rows computed before them lack two of the five poses; they are dropped so
+    # the next `workbench ik` run computes them again, and their retraction set gets the default worlda
+    "ALTER TABLE ikret ADD COLUMN IF NOT EXISTS worlda DOUBLE",
+    "ALTER TABLE ik ADD COLUMN IF NOT EXISTS feasibility_worlda BOOLEAN",
+    "ALTER TABLE ik ADD COLUMN IF NOT EXISTS feasibility_worldaworldz BOOLEAN",
+    "ALTER TABLE ik ADD COLUMN IF NOT EXISTS jnt_worlda DOUBLE[]",
+    "ALTER TABLE ik ADD COLUMN IF NOT EXISTS jnt_worldaworldz DOUBLE[]",
+    "DELETE FROM ik WHERE feasibility_worlda IS NULL OR feasibility_worldaworldz IS NULL",
+    "UPDATE ikret SET worlda = 0.05 WHERE worlda IS NULL",
+    "ALTER TABLE planstep ADD COLUMN IF NOT EXISTS jnt_worlda DOUBLE[]",
+    "ALTER TABLE planstep ADD COLUMN IF NOT EXISTS jnt_worldaworldz DOUBLE[]",
 )

@@ -11,29 +11,10 @@ import json
 from typing import Any
 
 import numpy as np
-import pyarrow as pa
 
 from workbench.errors import StoreError
 from workbench.store import Store, from_arrow
-
-
-def list_column(table: pa.Table, name: str, width: int) -> np.ndarray:
-    """A DOUBLE[] column as an (N, width) float array, NaN rows for NULL (no per-row Python)."""
-    col = table.column(name).combine_chunks()
-    n = len(col)
-    out = np.full((n, width), np.nan)
-    if n == 0 or width == 0:
-        return out
-    if pa.types.is_fixed_size_list(col.type) or pa.types.is_list(col.type) or pa.types.is_large_list(col.type):
-        valid = ~np.asarray(col.is_null().to_numpy(zero_copy_only=False), dtype=bool)
-        if valid.any():
-            sub = col.filter(pa.array(valid))
-            flat = np.asarray(sub.flatten().to_numpy(zero_copy_only=False), dtype=np.float64)
-            if len(flat) != len(sub) * width:
-                raise StoreError(f"joint vectors in column {name} do not all have {width} entries; rebuild the ik stage")
-            out[valid] = flat.reshape(-1, width)
-    return out
-
+from workbench.store.robots import FEASIBILITY, JOINTS, feasibility_arrays
 
 
 def ik_fingerprint(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int) -> tuple[int, int]:
@@ -48,13 +29,12 @@ def ik_fingerprint(store: Store, idtabletop: int, idrobot: int, idscene: int, id
 def roadmap_rows(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int, nq: int) -> dict[str, np.ndarray]:
     """Every tabletop grip of a tabletop parameter set with its placement, angle and IK row (Section V's inputs):
     idtabletopgrips, idtabletopplacements, idfreeairgrip, rotmat (N, 4, 4), jawwidth, placement_rotmat (N, 4, 4),
-    idfreetabletopplacement, tabletopposition (N, 3), angle (rad), feasible (N, 3) (False where no IK row) and
-    joints (N, 3, nq) for grasp, handx, handxworldz (NaN where infeasible)."""
+    idfreetabletopplacement, tabletopposition (N, 3), angle (rad), feasible (N, 5) (False where no IK row) and
+    joints (N, 5, nq) for the five poses of `robots.ik.KINDS` (NaN where infeasible)."""
     table = store.con.sql(
         "SELECT g.idtabletopgrips, g.idtabletopplacements, g.idfreeairgrip, g.rotmat, g.jawwidth, "
         "p.rotmat AS placement_rotmat, p.idfreetabletopplacement, p.tabletopposition, a.value AS angle, "
-        "coalesce(k.feasibility, false) AS f0, coalesce(k.feasibility_handx, false) AS f1, "
-        "coalesce(k.feasibility_handxworldz, false) AS f2, k.jnt_grasp, k.jnt_handx, k.jnt_handxworldz "
+        + ", ".join(f"k.{c}" for c in FEASIBILITY + JOINTS) + " "
         "FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) JOIN angle a USING (idangle) "
         "LEFT JOIN ik k ON k.idtabletopgrips = g.idtabletopgrips AND k.idrobot = $robot AND k.idscene = $scene AND k.idikret = $ikret "
         "WHERE p.idparamset = $tabletop ORDER BY g.idtabletopgrips",
@@ -67,8 +47,7 @@ def roadmap_rows(store: Store, idtabletop: int, idrobot: int, idscene: int, idik
     out["rotmat"] = np.asarray(out["rotmat"], dtype=np.float64).reshape(n, 4, 4)
     out["placement_rotmat"] = np.asarray(out["placement_rotmat"], dtype=np.float64).reshape(n, 4, 4)
     out["tabletopposition"] = np.asarray(out["tabletopposition"], dtype=np.float64).reshape(n, 3)
-    out["feasible"] = np.stack([np.asarray(from_arrow(table.column(c)), dtype=bool) for c in ("f0", "f1", "f2")], axis=1).reshape(n, 3)
-    out["joints"] = np.stack([list_column(table, c, nq) for c in ("jnt_grasp", "jnt_handx", "jnt_handxworldz")], axis=1)
+    out["feasible"], out["joints"] = feasibility_arrays(table, n, nq)
     return out
 
 

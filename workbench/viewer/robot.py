@@ -140,8 +140,9 @@ FEASIBLE_ALL, FEASIBLE_GRASP, INFEASIBLE = 0x33AA55, 0xE8B400, 0xDD3333
 
 
 def feasibility_colors(feasible: np.ndarray) -> np.ndarray:
-    """Per grip: green when grasp, handx and handxworldz are feasible, yellow for the grasp only, red otherwise."""
-    f = np.asarray(feasible, dtype=bool).reshape(-1, 3)
+    """Per grip: green when all poses (grasp, retractions, lifts) are feasible, yellow for the grasp only, red otherwise."""
+    f = np.asarray(feasible, dtype=bool)
+    f = f.reshape(len(f), -1)
     return np.where(f.all(1), FEASIBLE_ALL, np.where(f[:, 0], FEASIBLE_GRASP, INFEASIBLE))
 
 

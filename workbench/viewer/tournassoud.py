@@ -12,7 +12,17 @@ from workbench.planners.tournassoud.classes import ClassParams, GraspClass
 from workbench.planners.tournassoud.features import faces_of
 from workbench.planners.tournassoud.table import GraspPlacementTable
 from workbench.robots.gripper import Gripper
-from workbench.viewer.scenes import BLUE, GREEN, GREY, ORANGE, RED, show_gripper, show_mesh, show_segments, show_spheres
+from workbench.viewer.scenes import (
+    BLUE,
+    GREEN,
+    GREY,
+    ORANGE,
+    RED,
+    show_gripper,
+    show_mesh,
+    show_segments,
+    show_spheres,
+)
 from workbench.viewer.wan_harada import show_plan
 
 FEATURE_COLOR = 0xDD3333

@@ -38,7 +38,7 @@ def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int
     steps = plan.steps
     if not steps:
         return out
-    q = np.asarray(steps[0].q_retract, dtype=np.float64)
+    q = np.asarray(steps[0].waypoints()[0].q, dtype=np.float64)
     held, rest, grasp = False, np.asarray(plan.start_pose, dtype=np.float64), np.eye(4)
 
     def line(q0: np.ndarray, q1: np.ndarray, n: int, jaw: float) -> None:
@@ -46,25 +46,22 @@ def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int
             out.append({"q": (1 - t) * q0 + t * q1, "jaw": jaw, "held": held, "rest": rest, "grasp": grasp})
 
     out.append({"q": q, "jaw": jaw_open, "held": False, "rest": rest, "grasp": grasp})
-    for s in steps:
-        qa, qg, qr = (np.asarray(v, dtype=np.float64) for v in (s.q_approach, s.q_grasp, s.q_retract))
-        taking = s.kind in ("pick", "regrasp")
-        jaw_before = jaw_open if taking else s.jawwidth
-        line(q, qr, frames_move, jaw_before)
-        line(qr, qa, frames_line, jaw_before)
-        line(qa, qg, frames_line, jaw_before)
-        if taking:
-            held, grasp = True, np.asarray(s.grasp, dtype=np.float64)
-            jaws = np.linspace(jaw_open, s.jawwidth, frames_jaw)
-        else:
-            held, rest = False, np.asarray(s.object_pose, dtype=np.float64)
-            jaws = np.linspace(s.jawwidth, jaw_open, frames_jaw)
-        for w in jaws:
-            out.append({"q": qg, "jaw": float(w), "held": held, "rest": rest, "grasp": grasp})
-        jaw_after = s.jawwidth if taking else jaw_open
-        line(qg, qa, frames_line, jaw_after)
-        line(qa, qr, frames_line, jaw_after)
-        q = qr
+    for s in steps:  # the step's waypoints in order (PlanStep.waypoints): the part only moves vertically near the table
+        wps = s.waypoints()
+        for k, wp in enumerate(wps):
+            qw = np.asarray(wp.q, dtype=np.float64)
+            if wp.holding != held:  # the hand closes on the part (or opens) at the grasp configuration
+                if wp.holding:
+                    held, grasp = True, np.asarray(s.grasp, dtype=np.float64)
+                    jaws = np.linspace(jaw_open, s.jawwidth, frames_jaw)
+                else:
+                    held, rest = False, np.asarray(s.object_pose, dtype=np.float64)
+                    jaws = np.linspace(s.jawwidth, jaw_open, frames_jaw)
+                for w in jaws:
+                    out.append({"q": qw, "jaw": float(w), "held": held, "rest": rest, "grasp": grasp})
+                continue
+            line(q, qw, frames_move if k == 0 else frames_line, s.jawwidth if held else jaw_open)
+            q = qw
     return out
 
 

@@ -24,6 +24,7 @@ from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.stages import load_planner
 from workbench.planners.wan_harada.tabletop import TabletopParams, plan_tabletop
 from workbench.robots.gripper import Gripper
+from workbench.robots.ik import KINDS
 from workbench.robots.model import Robot
 from workbench.viewer import scenes as viz
 from workbench.viewer.robot import RobotView
@@ -157,7 +158,7 @@ class IKBrowser:
         self.feasible = np.flatnonzero(np.asarray(rows["feasible"])[:, 0])
         self.slider = w.IntSlider(min=0, max=max(len(self.feasible) - 1, 0), value=0, description="feasible grip",
                                   continuous_update=False, layout=w.Layout(width="520px"))
-        self.kind = w.ToggleButtons(options=["grasp", "handx", "handxworldz"], value="grasp")
+        self.kind = w.ToggleButtons(options=list(KINDS), value="grasp")
         self.label = w.HTML()
         self.slider.observe(lambda _: self.update(), names="value")
         self.kind.observe(lambda _: self.update(), names="value")
@@ -171,7 +172,7 @@ class IKBrowser:
             self.label.value = "no feasible grip"
             return None
         i = int(self.feasible[self.slider.value])
-        k = ["grasp", "handx", "handxworldz"].index(self.kind.value)
+        k = list(KINDS).index(self.kind.value)
         q = self.rows["joints"][i, k]
         ok = bool(self.rows["feasible"][i, k])
         if not ok:
@@ -202,7 +203,7 @@ def plot_feasibility(rows: dict[str, np.ndarray], title: str = ""):
     both = np.bincount(group, weights=f.all(1), minlength=n)
     ax[0].bar(np.arange(n), total, color="#dddddd", label="tabletop grips")
     ax[0].bar(np.arange(n), grasp, color="#e8b400", label="IK feasible (grasp)")
-    ax[0].bar(np.arange(n), both, color="#33aa55", label="with handx and handxworldz")
+    ax[0].bar(np.arange(n), both, color="#33aa55", label="at all five poses (retractions, lifts)")
     ax[0].set(xlabel="placement x rotation", ylabel="grips", title="per placement and angle (summed over positions)")
     ax[0].legend(fontsize=8)
     xs, ix = np.unique(pos[:, 0], return_inverse=True)
@@ -215,7 +216,7 @@ def plot_feasibility(rows: dict[str, np.ndarray], title: str = ""):
     dy = np.diff(ys).min() / 2 if len(ys) > 1 else 0.025
     im = ax[1].imshow(np.divide(cnt, tot, out=np.zeros_like(cnt), where=tot > 0).T, origin="lower", vmin=0, vmax=1,
                       cmap="RdYlGn", extent=[xs[0] - dx, xs[-1] + dx, ys[0] - dy, ys[-1] + dy], aspect="auto")
-    fig.colorbar(im, ax=ax[1], label="feasible share (all three)")
+    fig.colorbar(im, ax=ax[1], label="feasible share (all five poses)")
     ax[1].set(xlabel="x (m)", ylabel="y (m)", title="per position")
     if title:
         fig.suptitle(title)

@@ -13,8 +13,17 @@ from workbench.geometry.objects import from_trimesh
 from workbench.grasping.placements import stable_placements
 from workbench.planners.tournassoud.chaining import chain, grasp_query, placement_query
 from workbench.planners.tournassoud.classes import ClassParams, grasp_classes
-from workbench.planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
-from workbench.planners.tournassoud.table import GraspPlacementTable, TableParams, build_table, runs
+from workbench.planners.tournassoud.plans import (
+    Realiser,
+    plan_grasp_query,
+    plan_placement_query,
+)
+from workbench.planners.tournassoud.table import (
+    GraspPlacementTable,
+    TableParams,
+    build_table,
+    runs,
+)
 from workbench.resources import erd_share
 from workbench.robots.collider import Scene
 from workbench.validation import PlanValidator

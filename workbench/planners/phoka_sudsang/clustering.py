@@ -9,8 +9,10 @@
   centre), the matrix E of distances from every row of U to every centre, and the tables T_O (the contact
   points with their cluster) and T_R (the representatives).
 
-Torque arms are divided by a length (the object's radius by default), as in `forceclosure`, so that the angles
-do not depend on the mesh's units.
+The torque term is the paper's, (r - c) x f in metres (`torque_scale="none"`, the default). Dividing the torque
+arms by the object's radius (`torque_scale="radius"`, as `forceclosure` does for its own, scale-free test) makes
+the angles independent of the part's size but is not in the paper; it is kept as an option and both are measured
+by `workbench bench fingers` (cluster agreement, %run, #connect).
 """
 
 from __future__ import annotations
@@ -29,6 +31,7 @@ from workbench.planners.phoka_sudsang.forceclosure import (
 )
 
 MAX_CONTACTS = 4000
+TORQUE_SCALES = ("none", "radius")
 
 
 class ClusteringError(WorkbenchError):
@@ -44,6 +47,7 @@ class ClusterParams:
     sides: int = 8
     seed: int = 0
     n_init: int = 10
+    torque_scale: str = "none"
 
     @property
     def friction(self) -> FrictionParams:
@@ -59,6 +63,9 @@ class ClusterParams:
         if n_contacts > MAX_CONTACTS:
             raise ClusteringError(f"{n_contacts} contact points are too many to cluster (the distance matrix grows as N^2 m^2); "
                                   f"decimate the mesh to about 500 triangles (--faces 500)")
+        if self.torque_scale not in TORQUE_SCALES:
+            raise ClusteringError(f"torque scaling {self.torque_scale!r} is not one of {', '.join(TORQUE_SCALES)} "
+                                  f"(none: the paper's d(i, j); radius: torque arms divided by the object's radius)")
         if self.k < 4:
             raise ClusteringError(f"{self.k} clusters give fewer than the 4 representatives a grasp needs; use --clusters 4 or more")
         return self
@@ -164,10 +171,12 @@ def spectral_clustering(a: np.ndarray, k: int, seed: int = 0, n_init: int = 10) 
 
 @single_blas
 def cluster_contacts(contacts: ContactSet, params: ClusterParams = ClusterParams(), length: float | None = None) -> Clustering:
-    """Cluster T_O into k groups and pick T_R, the representatives (Section III-B)."""
+    """Cluster T_O into k groups and pick T_R, the representatives (Section III-B). `length` overrides the divisor
+    of the torque arms that `params.torque_scale` picks (1 m: the paper's d(i, j))."""
     params.validate(len(contacts))
-    d = cone_distance(contacts.points, contacts.normals, params.mu, params.sides,
-                      contacts.radius if length is None else length)
+    if length is None:
+        length = contacts.radius if params.torque_scale == "radius" else 1.0
+    d = cone_distance(contacts.points, contacts.normals, params.mu, params.sides, length)
     a, sigma = affinity(d)
     labels, u, centers = spectral_clustering(a, params.k, params.seed, params.n_init)
     present = np.unique(labels)

@@ -41,16 +41,27 @@ def local_path(tester: ForceClosure, sets: list[np.ndarray], start: np.ndarray, 
 
     A bidirectional breadth-first search over the grasps with one contact from each set, testing force closure
     only for the grasps it reaches (one batch per layer) instead of for the whole product. It returns a shortest
-    path of the local roadmap exactly when the eager construction would find one. Sets that overlap (a contact
-    in two sets) fall back to the eager construction.
+    path of the local roadmap exactly when the eager construction would find one.
+
+    Why this is exact when at most one contact c lies in two sets S_i, S_j (the case Algorithm 2 builds when p_x
+    joins K_y' while its own cluster is also one of f's): every other contact lies in one set, so a grasp of the
+    product has exactly one assignment of its contacts to the sets (c takes whichever of S_i, S_j the others leave
+    free), and the search's states (slot tuples) are the local roadmap's vertices. An edge G -> G' = G - u + v
+    keeps the slots of G's three shared contacts except when c is one of them and {c, u} fill slots {i, j}: then
+    G' may hold v in c's slot and c in u's slot. Such swap moves are generated besides the one-slot moves, so the
+    neighbours are exactly the eager roadmap's edges. More shared contacts fall back to the eager construction.
     """
     sets = [np.unique(np.asarray(s, dtype=np.int64)) for s in sets]
     allc = np.concatenate(sets)
     shared = len(allc) - len(np.unique(allc))
     if shared > 1:
         return find_path(construct_roadmap(tester, *sets), np.sort(start), np.sort(goal))
-    # with at most one contact in two sets, every grasp of the product has one slot assignment, so slot-wise
-    # switches are exactly the local roadmap's edges
+    swaps = []          # (c, i, j): c in S_i and S_j; a state with c in slot i may move c to slot j
+    if shared == 1:
+        vals, counts = np.unique(allc, return_counts=True)
+        c = int(vals[counts > 1][0])
+        i, j = (k for k, s in enumerate(sets) if c in s)
+        swaps = [(c, i, j), (c, j, i)]
     n = tester.n
     g0, g1 = np.sort(start), np.sort(goal)
     s0, s1 = _slots(g0, sets), _slots(g1, sets)
@@ -72,6 +83,18 @@ def local_path(tester: ForceClosure, sets: list[np.ndarray], start: np.ndarray, 
             keep = (cand[:, i:i + 1] != np.delete(cand, i, axis=1)).all(axis=1)    # distinct contacts
             nbrs.append(cand[keep])
             src.append(np.repeat(key(f), len(s))[keep])
+        for c, i, j in swaps:       # c leaves slot i for slot j, dropping slot j's contact; v of S_i fills slot i
+            at = f[f[:, i] == c]
+            s = sets[i][sets[i] != c]
+            if len(at) == 0 or len(s) == 0:
+                continue
+            cand = np.repeat(at, len(s), axis=0)
+            cand[:, j] = c
+            cand[:, i] = np.tile(s, len(at))
+            srt = np.sort(cand, axis=1)
+            keep = (srt[:, 1:] != srt[:, :-1]).all(axis=1)
+            nbrs.append(cand[keep])
+            src.append(np.repeat(key(at), len(s))[keep])
         cand, src = np.concatenate(nbrs), np.concatenate(src)
         ck = key(cand)
         fresh = np.array([k not in parents[side] for k in ck.tolist()], dtype=bool)
@@ -211,13 +234,14 @@ class Extension:
     grasps: np.ndarray          # (L, 4) new force-closure grasps not in R
     edges: np.ndarray           # (E, 2) among the new grasps
     cross: np.ndarray           # (C, 2) new grasp index, vertex of R
+    tg: np.ndarray              # T_G: the contacts made representatives
 
 
 @single_blas
 def extend_roadmap(planner: FingerPlanner, g: np.ndarray) -> Extension:
     """Algorithm 3 lines 1-4: T_G = g, T_A = T_R + T_G, L = ConstructRoadmap(T_A, T_A, T_A, T_G), linked to R."""
     tg = np.unique(g)
-    ta = np.unique(np.concatenate([planner.clustering.reps, tg]))
+    ta = np.unique(np.concatenate([planner.representatives, tg]))
     local = combinations_array(len(ta), 4)
     cand = ta[local[np.isin(ta[local], tg).any(axis=1)]]
     rm = planner.roadmap
@@ -235,7 +259,15 @@ def extend_roadmap(planner: FingerPlanner, g: np.ndarray) -> Extension:
         first = np.repeat(np.cumsum(counts) - counts, counts)
         dst = rm._trows[np.repeat(lo, counts) + (np.arange(counts.sum()) - first)]
         cross = np.stack([src, dst], axis=1)
-    return Extension(new, edges, np.asarray(cross, dtype=np.int64).reshape(-1, 2))
+    return Extension(new, edges, np.asarray(cross, dtype=np.int64).reshape(-1, 2), tg.astype(np.int64))
+
+
+def update_roadmap(planner: FingerPlanner, g: np.ndarray) -> Extension:
+    """Algorithm 3 applied to R for good (line 4, "Update R by adding L and linking L to R"): T_G = g joins T_R and
+    L = ConstructRoadmap(T_A, T_A, T_A, T_G) joins R; later links and queries use both."""
+    ext = extend_roadmap(planner, np.sort(np.asarray(g, dtype=np.int64).reshape(4)))
+    planner.apply(ext)
+    return ext
 
 
 def algorithm3(planner: FingerPlanner, g: np.ndarray, ext: Extension | None = None) -> Link | None:
@@ -265,10 +297,18 @@ def algorithm3(planner: FingerPlanner, g: np.ndarray, ext: Extension | None = No
     return Link(np.vstack([ext.grasps[chain], planner.roadmap.grasps[v][None]]), "alg3", v)
 
 
-def link(planner: FingerPlanner, g: np.ndarray) -> Link | None:
-    """Link a force-closure grasp to R: Algorithm 1, else 2, else 3 (Section III-D)."""
-    for alg in (algorithm1, algorithm2, algorithm3):
+def link(planner: FingerPlanner, g: np.ndarray, update: bool = False) -> Link | None:
+    """Link a force-closure grasp to R (Section III-D): a vertex of R already ("roadmap"), else Algorithm 1, else
+    2, else 3. With `update`, Algorithm 3 updates R itself (`update_roadmap`) and g becomes a vertex of R."""
+    v = int(planner.roadmap.index(g[None])[0])
+    if v >= 0:
+        return Link(g[None].copy(), "roadmap", v)
+    for alg in (algorithm1, algorithm2):
         out = alg(planner, g)
         if out is not None:
             return out
-    return None
+    if not update:
+        return algorithm3(planner, g)
+    update_roadmap(planner, g)
+    v = int(planner.roadmap.index(g[None])[0])
+    return Link(g[None].copy(), "alg3", v) if v >= 0 else None

@@ -11,7 +11,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.planners.phoka_sudsang.forceclosure import ForceClosure, single_blas
-from workbench.planners.phoka_sudsang.linking import extend_roadmap, link
+from workbench.planners.phoka_sudsang.linking import (
+    extend_roadmap,
+    link,
+    update_roadmap,
+)
 from workbench.planners.phoka_sudsang.switching import FingerPlanner, Roadmap
 
 
@@ -36,22 +40,39 @@ def query(planner: FingerPlanner, start: np.ndarray | list[int], goal: np.ndarra
     """A regrasp sequence from `start` to `goal` (Section III-D): link both to R, then search R.
 
     When the linked vertices lie in different components of R, both grasps are added to R by Algorithm 3 and
-    the search runs in the updated roadmap. The update is local to this query (R itself is not changed).
+    the search runs in the updated roadmap. With `planner.persistent` (the paper's "Update R", default) the
+    updates stay in R for later queries; otherwise they are local to this query (R itself is not changed).
     """
     t0 = time.perf_counter()
     g = planner.check_grasp(start, "start grasp")
     h = planner.check_grasp(goal, "goal grasp")
     if np.array_equal(g, h):
         return QueryResult(g, h, g[None].copy(), "same", "same", time.perf_counter() - t0)
-    lg, lh = link(planner, g), link(planner, h)
-    rm = planner.roadmap
+    keep = planner.persistent
+    lg, lh = link(planner, g, update=keep), link(planner, h, update=keep)
+    rm = planner.roadmap            # after any update: vertices are looked up again from each link's last grasp
     seq = None
-    if lg is not None and lh is not None and rm.components[lg.vertex] == rm.components[lh.vertex]:
-        mid = rm.path(lg.vertex, np.array([lh.vertex]))
-        seq = _join([lg.path, rm.grasps[mid], lh.path[::-1]])
+    if lg is not None and lh is not None:
+        vg, vh = (int(rm.index(x.path[-1][None])[0]) for x in (lg, lh))
+        if vg >= 0 and vh >= 0 and rm.components[vg] == rm.components[vh]:
+            mid = rm.path(vg, np.array([vh]))
+            seq = _join([lg.path, rm.grasps[mid], lh.path[::-1]])
     if seq is None:
-        seq = _search_extended(planner, g, h)
+        seq = _search_updated(planner, g, h) if keep else _search_extended(planner, g, h)
     return QueryResult(g, h, seq, lg.method if lg else "none", lh.method if lh else "none", time.perf_counter() - t0)
+
+
+def _search_updated(planner: FingerPlanner, g: np.ndarray, h: np.ndarray) -> np.ndarray | None:
+    """Algorithm 3 for g and h applied to R for good (those not yet vertices), then a search in R."""
+    for x in (g, h):
+        if planner.roadmap.index(x[None])[0] < 0:
+            update_roadmap(planner, x)
+    rm = planner.roadmap
+    i, j = rm.index(np.stack([g, h]))
+    if i < 0 or j < 0 or rm.components[i] != rm.components[j]:
+        return None
+    p = rm.path(int(i), np.array([j]))
+    return None if p is None else rm.grasps[p]
 
 
 def _join(parts: list[np.ndarray]) -> np.ndarray:

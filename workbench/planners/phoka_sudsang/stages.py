@@ -26,6 +26,7 @@ from workbench.planners.phoka_sudsang.experiments import (
     sample_grasps,
 )
 from workbench.planners.phoka_sudsang.forceclosure import ForceClosure
+from workbench.planners.phoka_sudsang.linking import Extension
 from workbench.planners.phoka_sudsang.switching import (
     FingerPlanner,
     build_planner,
@@ -52,8 +53,12 @@ class FingerRun:
 
 
 def run_pipeline(db: str, obj, contact: ContactParams, params: ClusterParams, samples: int, picks: int,
-                 queries: int, progress: bool = False) -> FingerRun:
-    """All stages against a store: contacts, roadmap, then (when `queries` or `picks`) Tables II and III."""
+                 queries: int, progress: bool = False, persistent: bool = True) -> FingerRun:
+    """All stages against a store: contacts, roadmap, then (when `queries` or `picks`) Tables II and III.
+
+    `persistent` (the paper's Algorithm 3): queries update R for good; the updates are stored with the queries and
+    applied whenever the roadmap is loaded again, so later runs reuse them. False: each query forgets its update.
+    """
 
     if samples < 2 and (queries or picks):
         raise WorkbenchError(f"--samples {samples} is too few; give at least 2 sampled grasps for queries")
@@ -64,23 +69,27 @@ def run_pipeline(db: str, obj, contact: ContactParams, params: ClusterParams, sa
         idobject = put_object(store, obj)
         idc, contacts, ids = contacts_stage(store, idobject, obj, contact)
         idr, planner, reused = roadmap_stage(store, idobject, idc, contacts, ids, params, progress=progress)
+        planner.persistent = persistent
         stats, idq, reused_q = None, None, False
         if queries or picks:
-            def compute() -> LocalStats:
+            def compute() -> tuple[LocalStats, list[Extension]]:
                 s = sample_grasps(planner.tester, samples, seed=params.seed)
                 st = local_planning_stats(planner, s, picks=picks, seed=params.seed, progress=progress)
+                before = len(planner.updates)
                 st.queries = random_queries(planner, s, queries, seed=params.seed, progress=progress)
-                return st
+                return st, planner.updates[before:]
 
-            idq, stats, reused_q = queries_stage(
-                store, idobject, idr, ids, {"samples": samples, "picks": picks, "queries": queries, "seed": params.seed}, compute)
+            key = {"samples": samples, "picks": picks, "queries": queries, "seed": params.seed,
+                   "algorithm3": "update" if persistent else "one-off"}
+            idq, stats, reused_q = queries_stage(store, idobject, idr, ids, key, compute)
     return FingerRun(obj.name, idobject, idc, idr, idq, planner, ids, stats, (reused, reused_q))
 
 
 def tables(run: FingerRun) -> dict:
     """Tables I-III as plain numbers."""
-    rm, st = run.planner.roadmap, run.stats
+    rm, st = run.planner.base, run.stats
     out = {"table1": {"vertex": len(rm), "edges": int(len(rm.edges)), "cc": int(rm.ncomponents),
+                      "vertex_updated": len(run.planner.roadmap), "updates": len(run.planner.updates),
                       "seconds_clustering": run.planner.times.get("clustering"),
                       "seconds_roadmap": run.planner.times.get("roadmap")}}
     if st is not None:
@@ -119,16 +128,17 @@ def roadmap_stage(store: Store, idobject: int, idcontacts: int, contacts: Contac
 
 
 def queries_stage(store: Store, idobject: int, idroadmap: int, ids: ContactIds, params: dict,
-                  compute: Callable[[], LocalStats]) -> tuple[int, LocalStats, bool]:
-    """Local-planning stats and queries for a roadmap (Tables II and III); `compute()` returns a LocalStats.
+                  compute: Callable[[], tuple[LocalStats, list[Extension]]]) -> tuple[int, LocalStats, bool]:
+    """Local-planning stats and queries for a roadmap (Tables II and III); `compute()` returns a LocalStats and the
+    persistent Algorithm 3 updates of R its queries made (stored with them).
 
     `params` (samples, picks, queries, seed) identify the run together with the roadmap's paramset.
     """
     key = {**params, "roadmap": idroadmap}
     pid = store.find_paramset("fingers.queries", key, idobject)
     if pid is None:
-        stats = compute()
-        pid = fstore.save_queries(store, idobject, idroadmap, key, ids, stats)
+        stats, updates = compute()
+        pid = fstore.save_queries(store, idobject, idroadmap, key, ids, stats, updates)
         return pid, stats, False
     return pid, fstore.load_queries(store, pid, ids), True
 
@@ -137,4 +147,7 @@ def load_planner(store: Store, pid: int, contacts: ContactSet, ids: ContactIds, 
     """Rebuild the planner of roadmap paramset `pid` from its rows (no clustering or force closure recomputed)."""
     clustering, roadmap, times = fstore.load_roadmap(store, pid, ids, len(contacts))
     tester = ForceClosure(contacts.points, contacts.normals, params.friction, ref=contacts.com, length=contacts.radius)
-    return FingerPlanner(contacts, clustering, tester, roadmap, times=times)
+    planner = FingerPlanner(contacts, clustering, tester, roadmap, times=times)
+    for ext in fstore.load_updates(store, pid, ids):      # persistent Algorithm 3 updates of earlier queries
+        planner.apply(ext)
+    return planner

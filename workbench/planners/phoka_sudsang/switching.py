@@ -156,17 +156,43 @@ class Roadmap:
 
 @dataclass
 class FingerPlanner:
-    """Everything Section III-D needs: T_O (contacts), clusters (T_O labels, T_R, E), the tester and R."""
+    """Everything Section III-D needs: T_O (contacts), clusters (T_O labels, T_R, E), the tester and R.
+
+    `persistent` (the paper's reading, default): Algorithm 3 in a query updates R for good ("Update R by adding L
+    and linking L to R"): T_G joins the representatives and L joins R, so later queries reuse them; `updates`
+    lists every update in order and `extra_reps` the contacts it made representatives. `base` is R as Section
+    III-C builds it (Table I). With `persistent=False` each query extends a copy of R and forgets it (the one-off
+    variant, kept for comparison)."""
 
     contacts: ContactSet
     clustering: Clustering
     tester: ForceClosure
     roadmap: Roadmap
     times: dict[str, float] = field(default_factory=dict)
+    persistent: bool = True
+    extra_reps: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    updates: list = field(default_factory=list)
+    base: Roadmap | None = None
+
+    def __post_init__(self) -> None:
+        if self.base is None:
+            self.base = self.roadmap
 
     @property
     def n(self) -> int:
         return len(self.contacts)
+
+    @property
+    def representatives(self) -> np.ndarray:
+        """T_R: the clusters' representatives and the contacts Algorithm 3 added, ascending."""
+        return np.union1d(self.clustering.reps, self.extra_reps).astype(np.int64)
+
+    def apply(self, ext) -> None:
+        """Add an Algorithm 3 extension (`linking.Extension`: its T_G and new vertices) to T_R and R for good."""
+        self.extra_reps = np.union1d(self.extra_reps, ext.tg).astype(np.int64)
+        if len(ext.grasps):
+            self.roadmap = Roadmap.from_grasps(np.vstack([self.roadmap.grasps, ext.grasps]), self.n)
+        self.updates.append(ext)
 
     def check_grasp(self, grasp: np.ndarray | list[int], what: str = "grasp") -> np.ndarray:
         """A valid grasp as ascending indices, or a FingerPlanningError naming what is wrong."""

@@ -33,8 +33,16 @@ from tqdm import tqdm
 from workbench.errors import WorkbenchError
 from workbench.geometry.collision import bvh, collide_at_poses, object_collider
 from workbench.geometry.objects import ObjectModel
-from workbench.planners.tournassoud.features import (Features, Raster, face_overlap, features, grid_for, plane_basis,
-                                                     rasterise, segment_spans)
+from workbench.planners.tournassoud.features import (
+    Features,
+    Raster,
+    face_overlap,
+    features,
+    grid_for,
+    plane_basis,
+    rasterise,
+    segment_spans,
+)
 from workbench.robots.gripper import Gripper
 
 KINDS = ("face/face", "face/edge", "face/vertex")

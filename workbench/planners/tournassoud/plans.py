@@ -27,7 +27,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.errors import PlanningError
-from workbench.planners.tournassoud.chaining import NoSequence, Sequence, grasp_query, placement_query
+from workbench.planners.tournassoud.chaining import (
+    NoSequence,
+    Sequence,
+    grasp_query,
+    placement_query,
+)
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable
 from workbench.planners.wan_harada.plans import Plan, PlanStep

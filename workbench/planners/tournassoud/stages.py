@@ -18,19 +18,29 @@ import numpy as np
 
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import ObjectModel
-from workbench.validation import PlanValidator, validator_from_rows
 from workbench.grasping.placements import PlacementParams, stable_placements
-from workbench.planners.tournassoud.classes import ClassParams, GraspClass, grasp_classes
-from workbench.planners.tournassoud.table import GraspPlacementTable, TableParams, build_table, table_frame, grid
+from workbench.planners.tournassoud.classes import (
+    ClassParams,
+    GraspClass,
+    grasp_classes,
+)
+from workbench.planners.tournassoud.table import (
+    GraspPlacementTable,
+    TableParams,
+    build_table,
+    grid,
+    table_frame,
+)
 from workbench.planners.wan_harada.stages import get_object
-from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.collider import Scene
+from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import IKOptions
 from workbench.robots.model import Robot, RobotSpec, get_robot, robot_from_spec
 from workbench.store import Store
 from workbench.store import tournassoud as sql
 from workbench.store.objects import gripper_row, object_row, put_gripper, put_object
 from workbench.store.robots import StoredScene, put_robot, robot_row
+from workbench.validation import PlanValidator, validator_from_rows
 
 CLASSES = "tournassoud.classes"
 TABLE = "tournassoud.table"

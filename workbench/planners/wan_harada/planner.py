@@ -23,7 +23,7 @@ from workbench.planners.wan_harada.query import (
 )
 from workbench.planners.wan_harada.roadmap import Roadmap, _failure
 from workbench.planners.wan_harada.search import SearchResult, search
-from workbench.robots.ik import retract
+from workbench.robots.ik import KINDS, WORLDA, retract
 from workbench.validation import PlanValidator, ValidationReport, validator_from_rows
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -42,13 +42,13 @@ class Planner:
 
     def __init__(self, roadmap: Roadmap, free: dict[str, np.ndarray], ftg: dict[str, np.ndarray], obj: ObjectModel,
                  robot: Robot, scene: Scene, handx: float, worldz: float, ids: dict[str, int], ik_opts: IKOptions | None = None,
-                 grid: dict[str, np.ndarray] | None = None):
+                 grid: dict[str, np.ndarray] | None = None, worlda: float = WORLDA):
         self.roadmap, self.free, self.ftg = roadmap, free, ftg
         self.grid = grid
         self.rows: dict = {}
         self._validator: PlanValidator | None = None
         self.object, self.robot, self.scene = obj, robot, scene
-        self.handx, self.worldz = float(handx), float(worldz)
+        self.handx, self.worldz, self.worlda = float(handx), float(worldz), float(worlda)
         self.ids = dict(ids)
         self.ik_opts = ik_opts
         self._ik: GripIK | None = None
@@ -63,8 +63,10 @@ class Planner:
 
             rm = self.roadmap
             seeds_q = rm.joints.reshape(-1, rm.joints.shape[-1]) if rm.joints.size else np.zeros((0, self.robot.nq))
-            seeds_tcp = retract(rm.tcp, self.handx, self.worldz).reshape(-1, 4, 4) if rm.n_nodes else np.zeros((0, 4, 4))
-            self._ik = GripIK(self.robot, self.scene, self.object.mesh, self.handx, self.worldz, seeds_q, seeds_tcp, self.ik_opts)
+            seeds_tcp = (retract(rm.tcp, self.handx, self.worldz, self.worlda).reshape(-1, 4, 4) if rm.n_nodes
+                         else np.zeros((0, 4, 4)))
+            self._ik = GripIK(self.robot, self.scene, self.object.mesh, self.handx, self.worldz, seeds_q, seeds_tcp, self.ik_opts,
+                              worlda=self.worlda)
         return self._ik
 
     def placement_ids(self) -> list[int]:
@@ -105,7 +107,7 @@ class Planner:
         n = len(rows)
         return Side(label=label, query=query, pose=pose, grasp=grasp, tcp=tcp, jawwidth=np.asarray(self.ftg["jawwidth"])[rows],
                     rindex=self.roadmap.grasp_index(grasp), state=np.zeros(n, dtype=np.int8),
-                    joints=np.full((n, 3, self.robot.nq), np.nan), prior=self.prior(query, grasp))
+                    joints=np.full((n, len(KINDS), self.robot.nq), np.nan), prior=self.prior(query, grasp))
 
     def prior(self, query: PoseQuery, grasp: np.ndarray, k: int = 4) -> np.ndarray:
         """For each grasp at a query pose, the share of the `k` nearest grid placements of the same stable placement
@@ -166,7 +168,8 @@ class Planner:
             if side.n_feasible == 0:
                 raise _failure(
                     "unreachable", f"{side.label} pose ({side.query.text()}) is not reachable by {self.robot.name}: none of its {len(side.grasp)} grasps "
-                    f"has IK at the grasp and both retractions (handx {self.handx:g} m, worldz {self.worldz:g} m) without collision; "
+                    f"has IK at the grasp, both retractions and both lifts (handx {self.handx:g} m, worldz {self.worldz:g} m, "
+                    f"worlda {self.worlda:g} m) without collision; "
                     f"move it closer to the robot or choose another placement")
         a, b = self.attach(s), self.attach(g)
         raise _failure(

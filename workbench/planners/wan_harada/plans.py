@@ -4,10 +4,17 @@ A plan with k regrasps has 2k + 2 steps: `pick` at the start pose with the first
 `transfer` (carry the object with the current grasp to a placement on the table at a position and yaw, put it
 down and release it) and a `regrasp` (grasp it again at that placement with another grasp and lift it); and
 `place` at the goal pose with the last grasp. Every step carries the object pose in the world, the grasp (TCP in
-the object frame and in the world), the jaw width and three joint configurations: `approach` (the TCP backed
-off by `handx` along its approach axis), `grasp`, and `retract` (backed off and raised by `worldz`), the
-paper's ikret retractions. The hand moves retract -> approach -> grasp to take or put down the object and back
-the same way; the motion between steps (transit and transfer paths) is not planned, as in the paper.
+the object frame and in the world), the jaw width and five joint configurations, one per pose of the `ik` table
+(the paper's ikret retractions): `q_approach` (handx: the TCP backed off along its approach axis), `q_grasp`,
+`q_retract` (handxworldz: backed off, then raised by `worldz`), `q_worlda` (the grasp raised by `worlda` along
+world z: the held part lifted straight off the table) and `q_worldaworldz` (raised by `worldz` more).
+
+`PlanStep.waypoints()` orders them, as the reference implementation moves (the part only ever moves vertically
+while it is near the table, whatever the grasp's approach direction):
+- taking the part (pick, regrasp): handxworldz -> handx -> grasp (open) -> grasp (close) -> worlda -> worldaworldz;
+- putting it down (transfer, place): worldaworldz -> worlda -> grasp (holding, lowered straight down) -> grasp
+  (open) -> handx (backed off along the TCP's -z) -> handxworldz.
+The motion between steps (transit and transfer paths) is not planned here, as in the paper.
 """
 
 from __future__ import annotations
@@ -22,16 +29,28 @@ import pyarrow as pa
 
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.search import Route, SearchResult
+from workbench.robots.ik import WORLDA
 
 KINDS = ("pick", "transfer", "regrasp", "place")
+TAKE = ("pick", "regrasp")  # steps that close the hand on the resting part and lift it; the others put it down
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """One configuration of a step: the `ik` pose it reaches (robots.ik.KINDS name), the joint vector, and whether the
+    hand holds the part there (closed on it; the part moves with the hand)."""
+
+    name: str
+    q: np.ndarray
+    holding: bool
 
 
 @dataclass
 class PlanStep:
     """One step: kind, grasp id, the stable placement and where it is (position, yaw), object pose (4, 4) in the world,
     TCP pose (4, 4) in the world at the grasp, grasp (4, 4) TCP in the object frame, jaw width, and joint vectors
-    for approach, grasp and retract (robot.joint_names order). `idtabletopgrips` is the roadmap row (None at the
-    start and goal poses)."""
+    for the five `ik` poses (robot.joint_names order; see `waypoints`). `idtabletopgrips` is the roadmap row (None at
+    the start and goal poses)."""
 
     kind: str
     idfreeairgrip: int
@@ -47,6 +66,8 @@ class PlanStep:
     q_retract: np.ndarray
     idtabletopgrips: int | None = None
     idtabletopplacements: int | None = None
+    q_worlda: np.ndarray | None = None
+    q_worldaworldz: np.ndarray | None = None
 
     def as_dict(self) -> dict[str, Any]:
         out = {"kind": self.kind, "idfreeairgrip": int(self.idfreeairgrip), "idfreetabletopplacement": int(self.idfreetabletopplacement),
@@ -54,7 +75,8 @@ class PlanStep:
                "idtabletopplacements": None if self.idtabletopplacements is None else int(self.idtabletopplacements),
                "position": _list(self.position), "yaw": float(self.yaw), "object_pose": _list(self.object_pose),
                "tcp": _list(self.tcp), "grasp": _list(self.grasp), "jawwidth": float(self.jawwidth),
-               "q_approach": _list(self.q_approach), "q_grasp": _list(self.q_grasp), "q_retract": _list(self.q_retract)}
+               "q_approach": _list(self.q_approach), "q_grasp": _list(self.q_grasp), "q_retract": _list(self.q_retract),
+               "q_worlda": _list(self.q_worlda), "q_worldaworldz": _list(self.q_worldaworldz)}
         return out
 
     @classmethod
@@ -63,10 +85,23 @@ class PlanStep:
         return cls(kind=d["kind"], idfreeairgrip=int(d["idfreeairgrip"]), idfreetabletopplacement=int(d["idfreetabletopplacement"]),
                    position=arr("position", (3,)), yaw=float(d["yaw"]), object_pose=arr("object_pose", (4, 4)), tcp=arr("tcp", (4, 4)),
                    grasp=arr("grasp", (4, 4)), jawwidth=float(d["jawwidth"]), q_approach=arr("q_approach"), q_grasp=arr("q_grasp"),
-                   q_retract=arr("q_retract"), idtabletopgrips=d.get("idtabletopgrips"), idtabletopplacements=d.get("idtabletopplacements"))
+                   q_retract=arr("q_retract"), idtabletopgrips=d.get("idtabletopgrips"), idtabletopplacements=d.get("idtabletopplacements"),
+                   q_worlda=arr("q_worlda") if d.get("q_worlda") is not None else None,
+                   q_worldaworldz=arr("q_worldaworldz") if d.get("q_worldaworldz") is not None else None)
 
     def configurations(self) -> dict[str, np.ndarray]:
-        return {"approach": self.q_approach, "grasp": self.q_grasp, "retract": self.q_retract}
+        return {"approach": self.q_approach, "grasp": self.q_grasp, "retract": self.q_retract,
+                "worlda": self.q_worlda, "worldaworldz": self.q_worldaworldz}
+
+    def waypoints(self) -> list[Waypoint]:
+        """The step's configurations in the order the hand visits them (module docstring): a pick or regrasp closes
+        on the resting part, then lifts it straight up; a transfer or place lowers it straight down, opens, then
+        backs off along the TCP's -z. The grasp appears twice: before and after the hand closes (or opens)."""
+        empty = [Waypoint("handxworldz", self.q_retract, False), Waypoint("handx", self.q_approach, False),
+                 Waypoint("grasp", self.q_grasp, False)]
+        held = [Waypoint("grasp", self.q_grasp, True), Waypoint("worlda", self.q_worlda, True),
+                Waypoint("worldaworldz", self.q_worldaworldz, True)]
+        return empty + held if self.kind in TAKE else held[::-1] + empty[::-1]
 
 
 @dataclass
@@ -85,6 +120,7 @@ class Plan:
     handx: float
     worldz: float
     rank: int = 0
+    worlda: float = WORLDA
     timings: dict = field(default_factory=dict)
     ids: dict = field(default_factory=dict)
 
@@ -104,7 +140,7 @@ class Plan:
     def as_dict(self) -> dict[str, Any]:
         return {"object": self.object, "robot": self.robot, "joint_names": list(self.joint_names),
                 "start": self.start.as_dict(), "goal": self.goal.as_dict(), "start_pose": _list(self.start_pose),
-                "goal_pose": _list(self.goal_pose), "handx": self.handx, "worldz": self.worldz, "rank": self.rank,
+                "goal_pose": _list(self.goal_pose), "handx": self.handx, "worldz": self.worldz, "worlda": self.worlda, "rank": self.rank,
                 "regrasps": self.regrasps, "transfers": self.transfers, "timings": {k: float(v) for k, v in self.timings.items()},
                 "ids": {k: int(v) for k, v in self.ids.items()}, "steps": [s.as_dict() for s in self.steps]}
 
@@ -115,6 +151,7 @@ class Plan:
                    start_pose=np.asarray(d["start_pose"], dtype=np.float64).reshape(4, 4),
                    goal_pose=np.asarray(d["goal_pose"], dtype=np.float64).reshape(4, 4),
                    steps=[PlanStep.from_dict(s) for s in d["steps"]], handx=float(d["handx"]), worldz=float(d["worldz"]),
+                   worlda=float(d.get("worlda", WORLDA)),
                    rank=int(d.get("rank", 0)), timings=dict(d.get("timings", {})), ids=dict(d.get("ids", {})))
 
     def to_json(self, path: str | Path | None = None) -> str:
@@ -150,7 +187,7 @@ class Plan:
 
 
 def _list(a: Any) -> Any:
-    return np.asarray(a, dtype=np.float64).tolist()
+    return None if a is None else np.asarray(a, dtype=np.float64).tolist()
 
 
 def inverse_pose(m: np.ndarray) -> np.ndarray:
@@ -167,7 +204,8 @@ def step_from_side(kind: str, side, k: int) -> PlanStep:
     return PlanStep(kind=kind, idfreeairgrip=int(side.grasp[k]), idfreetabletopplacement=int(side.query.idfreetabletopplacement),
                     position=np.array([side.query.x, side.query.y, 0.0]), yaw=float(side.query.yaw), object_pose=side.pose.copy(),
                     tcp=side.tcp[k].copy(), grasp=inverse_pose(side.pose) @ side.tcp[k], jawwidth=float(side.jawwidth[k]),
-                    q_approach=q[1].copy(), q_grasp=q[0].copy(), q_retract=q[2].copy())
+                    q_approach=q[1].copy(), q_grasp=q[0].copy(), q_retract=q[2].copy(), q_worlda=q[3].copy(),
+                    q_worldaworldz=q[4].copy())
 
 
 def step_from_node(kind: str, roadmap, a: int) -> PlanStep:
@@ -176,8 +214,8 @@ def step_from_node(kind: str, roadmap, a: int) -> PlanStep:
     return PlanStep(kind=kind, idfreeairgrip=int(roadmap.idfreeairgrip[a]), idfreetabletopplacement=int(roadmap.idfreetabletopplacement[a]),
                     position=roadmap.position[a].copy(), yaw=float(roadmap.yaw[a]), object_pose=roadmap.placement[a].copy(),
                     tcp=roadmap.tcp[a].copy(), grasp=inverse_pose(roadmap.placement[a]) @ roadmap.tcp[a], jawwidth=float(roadmap.jawwidth[a]),
-                    q_approach=q[1].copy(), q_grasp=q[0].copy(), q_retract=q[2].copy(),
-                    idtabletopgrips=int(roadmap.idtabletopgrips[a]), idtabletopplacements=int(roadmap.idtabletopplacements[a]))
+                    q_approach=q[1].copy(), q_grasp=q[0].copy(), q_retract=q[2].copy(), q_worlda=q[3].copy(),
+                    q_worldaworldz=q[4].copy(), idtabletopgrips=int(roadmap.idtabletopgrips[a]), idtabletopplacements=int(roadmap.idtabletopplacements[a]))
 
 
 def make_plan(planner, result: SearchResult, route: Route, rank: int = 0) -> Plan:
@@ -189,7 +227,7 @@ def make_plan(planner, result: SearchResult, route: Route, rank: int = 0) -> Pla
     steps.append(step_from_side("place", result.goal, route.goal_grip))
     return Plan(object=planner.object.name, robot=planner.robot.name, joint_names=list(planner.robot.joint_names),
                 start=result.start.query, goal=result.goal.query, start_pose=result.start.pose.copy(), goal_pose=result.goal.pose.copy(),
-                steps=steps, handx=planner.handx, worldz=planner.worldz, rank=rank, timings=dict(result.timings), ids=dict(planner.ids))
+                steps=steps, handx=planner.handx, worldz=planner.worldz, worlda=planner.worlda, rank=rank, timings=dict(result.timings), ids=dict(planner.ids))
 
 
 def plan_rows(plan: Plan) -> tuple[dict, dict]:
@@ -212,5 +250,8 @@ def plan_rows(plan: Plan) -> tuple[dict, dict]:
              "jawwidth": np.array([x.jawwidth for x in s]),
              "jnt_approach": pa.array([x.q_approach.tolist() for x in s], type=pa.list_(pa.float64())),
              "jnt_grasp": pa.array([x.q_grasp.tolist() for x in s], type=pa.list_(pa.float64())),
-             "jnt_retract": pa.array([x.q_retract.tolist() for x in s], type=pa.list_(pa.float64()))}
+             "jnt_retract": pa.array([x.q_retract.tolist() for x in s], type=pa.list_(pa.float64())),
+             "jnt_worlda": pa.array([None if x.q_worlda is None else x.q_worlda.tolist() for x in s], type=pa.list_(pa.float64())),
+             "jnt_worldaworldz": pa.array([None if x.q_worldaworldz is None else x.q_worldaworldz.tolist() for x in s],
+                                         type=pa.list_(pa.float64()))}
     return row, steps

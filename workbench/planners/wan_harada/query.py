@@ -2,7 +2,7 @@
 
 A start or goal pose is a stable placement at a position and a yaw that need not be on the grid (`PoseQuery`,
 or a 4x4 object pose matched to its placement). Its grips are the placement's free tabletop grips moved to the
-pose; each needs IK at the grasp and both retractions without arm-table or arm-object collision, as the
+pose; each needs IK at the grasp, both retractions and both lifts without arm-table or arm-object collision, as the
 precomputation does (`GripIK`, on the precomputation's `robots.ik.IKSolver`). `Side` holds one end's grips and
 their IK state.
 """
@@ -19,7 +19,14 @@ from scipy.spatial import cKDTree
 from workbench.errors import PlanningError
 from workbench.planners.wan_harada.roadmap import _failure
 from workbench.planners.wan_harada.tabletop import yaw
-from workbench.robots.ik import IKOptions, IKSolver, retract
+from workbench.robots.ik import (
+    KINDS,
+    WORLDA,
+    IKOptions,
+    IKSolver,
+    held_placements,
+    retract,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
     import trimesh
@@ -109,19 +116,20 @@ def match_pose(pose: np.ndarray, free_ids: np.ndarray, free_poses: np.ndarray, l
 
 
 class GripIK:
-    """IK with retractions (grasp, handx, handxworldz) for grips at start and goal poses (Section IV's ik columns),
+    """IK at the five poses of `robots.ik.KINDS` (grasp, handx, handxworldz, worlda, worldaworldz) for grips at start
+    and goal poses (Section IV's ik columns; the held object moves with the hand at the lifts),
     with the precomputation's solver (`robots.ik.IKSolver`: same seed library, collider and pre-filter).
 
     Tier 1 solves every pose from the stored roadmap solution whose TCP pose is nearest (k-d tree over position
     and weighted rotation), capped at `tier1_iters` iterations (most poses converge in a few); tier 2 retries the
     rest from all their other seeds at once (second-nearest stored solution, the grasp's own solution for the
-    retractions, the solver's library seeds). A grip is feasible when all three poses are."""
+    retractions, the solver's library seeds). A grip is feasible when all five poses are."""
 
     def __init__(self, robot: Robot, scene: Scene, obj_mesh: trimesh.Trimesh | None, handx: float, worldz: float,
                  seed_q: np.ndarray, seed_tcp: np.ndarray, opts: IKOptions | None = None, rho: float = 0.1,
-                 tier1_iters: int = 15):
+                 tier1_iters: int = 15, worlda: float = WORLDA):
         self.robot, self.scene = robot, scene
-        self.handx, self.worldz = float(handx), float(worldz)
+        self.handx, self.worldz, self.worlda = float(handx), float(worldz), float(worlda)
         self.opts = opts or IKOptions()
         self.tier1_iters = min(int(tier1_iters), self.opts.iters_warm)
         self.rho = rho
@@ -144,27 +152,28 @@ class GripIK:
         return np.concatenate([poses[:, :3, 3], self.rho * poses[:, :3, :3].reshape(len(poses), 9)], axis=1)
 
     def targets(self, tcp: np.ndarray) -> np.ndarray:
-        """(n, 3, 4, 4) grasp, handx and handxworldz TCP poses."""
-        return retract(np.asarray(tcp, dtype=np.float64).reshape(-1, 4, 4), self.handx, self.worldz)
+        """(n, 5, 4, 4) TCP poses of the KINDS."""
+        return retract(np.asarray(tcp, dtype=np.float64).reshape(-1, 4, 4), self.handx, self.worldz, self.worlda)
 
     def solve(self, tcp: np.ndarray, placements: np.ndarray, known: np.ndarray | None = None, warm: bool = True,
               fallback: bool = True) -> tuple[np.ndarray, np.ndarray]:
-        """Feasible (n,) and joints (n, 3, nq) for TCP poses (n, 4, 4) of grips of the object at `placements` (n, 4, 4).
+        """Feasible (n,) and joints (n, 5, nq) for TCP poses (n, 4, 4) of grips of the object at `placements` (n, 4, 4).
 
-        `known` (n, 3, nq) holds poses already solved (NaN elsewhere), e.g. by tier 1. Joints are returned for every
+        `known` (n, 5, nq) holds poses already solved (NaN elsewhere), e.g. by tier 1. Joints are returned for every
         solved pose, also of infeasible grips (NaN where unsolved)."""
         o, robot, solver = self.opts, self.robot, self.solver
-        n = len(tcp)
-        q_out = np.full((n * 3, robot.nq), np.nan)
+        n, nk = len(tcp), len(KINDS)
+        q_out = np.full((n * nk, robot.nq), np.nan)
         if known is not None:
-            q_out[:] = np.asarray(known, dtype=np.float64).reshape(n * 3, robot.nq)
+            q_out[:] = np.asarray(known, dtype=np.float64).reshape(n * nk, robot.nq)
         good = np.isfinite(q_out).all(axis=1)
         if n == 0:
-            return np.zeros(0, dtype=bool), q_out.reshape(0, 3, robot.nq)
-        flat = self.targets(tcp).reshape(n * 3, 4, 4)  # row = grip * 3 + kind
-        place = np.repeat(np.asarray(placements, dtype=np.float64).reshape(-1, 4, 4), 3, axis=0)
+            return np.zeros(0, dtype=bool), q_out.reshape(0, nk, robot.nq)
+        targets = self.targets(tcp)
+        flat = targets.reshape(n * nk, 4, 4)  # row = grip * nk + kind
+        place = held_placements(targets, np.asarray(placements, dtype=np.float64).reshape(-1, 4, 4)).reshape(n * nk, 4, 4)
         pre = np.asarray(solver.prefilter(flat), dtype=bool)
-        alive = np.repeat(pre.reshape(n, 3).all(axis=1), 3)  # a grip needs all three poses
+        alive = np.repeat(pre.reshape(n, nk).all(axis=1), nk)  # a grip needs all five poses
 
         near = None
         rows = np.flatnonzero(alive & ~good)
@@ -183,7 +192,7 @@ class GripIK:
                 if near2 is not None and near2.shape[1] > 1:  # the nearest stored solution was tier 1's seed
                     seeds.append(self.seed_q[near2[:, 1]])
                     owner.append(np.arange(len(rows2)))
-                kind = rows2 % 3
+                kind = rows2 % nk
                 own = (kind > 0) & good[rows2 - kind]
                 if own.any():
                     seeds.append(q_out[rows2[own] - kind[own]])
@@ -198,8 +207,8 @@ class GripIK:
                     hit = np.flatnonzero(ok)
                     win = hit[np.unique(owner[hit], return_index=True)[1]]
                     q_out[rows2[owner[win]]], good[rows2[owner[win]]] = q[win], True
-        feas = good.reshape(n, 3).all(axis=1) & alive.reshape(n, 3)[:, 0]
-        return feas, q_out.reshape(n, 3, robot.nq)
+        feas = good.reshape(n, nk).all(axis=1) & alive.reshape(n, nk)[:, 0]
+        return feas, q_out.reshape(n, nk, robot.nq)
 
 
 @dataclass

@@ -1,7 +1,8 @@
 """The regrasp graph of Wan & Harada (Section V, "Building the graph").
 
-The nodes are the tabletop grips that are IK-feasible for a robot at the grasp and both retractions (the `ik`
-table's flags). Two nodes sharing `idfreeairgrip` are joined by a transfer edge (carry the object from one
+The nodes are the tabletop grips that are IK-feasible for a robot at all five poses of the `ik` table (the grasp,
+the two retractions of the empty hand, handx and handx + worldz, and the two lifts of the held object, worlda and
+worlda + worldz), as in the paper's reference implementation. Two nodes sharing `idfreeairgrip` are joined by a transfer edge (carry the object from one
 placement to another with one grasp); two nodes sharing `idtabletopplacements` by a transit edge (release and
 regrasp at one placement). Both relations are cliques, so the graph is kept as two groupings of the node arrays
 (nodes sorted by grasp and by placement, CSR style) plus the grasp graph H (G x G, scipy.sparse): grasps g, g' are
@@ -45,7 +46,7 @@ class Roadmap:
 
     Node arrays (N rows, one per feasible tabletop grip): idtabletopgrips, idtabletopplacements, idfreeairgrip,
     idfreetabletopplacement, tcp (N, 4, 4) TCP in the world, placement (N, 4, 4) object in the world, position
-    (N, 3), yaw (N,), jawwidth (N,), joints (N, 3, nq) for grasp, handx, handxworldz (NaN when not loaded).
+    (N, 3), yaw (N,), jawwidth (N,), joints (N, 5, nq) for the five poses of `robots.ik.KINDS` (NaN when not loaded).
     Groupings: grasp_ids (G,) and node_grasp (N,) index into them; place_ids (T,) and node_place (N,).
     `adjacency` is the grasp graph H (G, G); `dist` its all-pairs breadth-first distance (UNREACHED when
     unconnected); `component` labels the nodes' connected components of the transfer + transit graph.
@@ -126,14 +127,15 @@ def build_roadmap(rows: dict[str, np.ndarray], feasible: np.ndarray | None = Non
 
     `rows` follows `load_tabletop_grips` (idtabletopgrips, idtabletopplacements, idfreeairgrip, rotmat,
     placement_rotmat, tabletopposition, idfreetabletopplacement, jawwidth) plus optional `angle` (radians) and
-    `joints` (N, 3, nq); `feasible` (N,) or (N, 3) selects the nodes (all three flags when (N, 3))."""
+    `joints` (N, K, nq); `feasible` (N,) or (N, K) selects the nodes (all K flags when (N, K): the five poses of
+    `robots.ik.KINDS`, as the paper's reference implementation requires)."""
     t0 = time.perf_counter()
     n_all = len(rows["idtabletopgrips"])
     keep = np.ones(n_all, dtype=bool) if feasible is None else np.asarray(feasible, dtype=bool)
     if keep.ndim == 2:
         keep = keep.all(axis=1)
     if keep.shape != (n_all,):
-        raise PlanningError(f"feasibility mask has shape {keep.shape}, expected ({n_all},) or ({n_all}, 3)")
+        raise PlanningError(f"feasibility mask has shape {keep.shape}, expected ({n_all},) or ({n_all}, 5)")
     idx = np.flatnonzero(keep)
     take = lambda name, default=None: (np.asarray(rows[name])[idx] if name in rows else default)  # noqa: E731
     tcp = np.asarray(rows["rotmat"], dtype=np.float64).reshape(-1, 4, 4)[idx]
@@ -144,7 +146,7 @@ def build_roadmap(rows: dict[str, np.ndarray], feasible: np.ndarray | None = Non
         yaw_ = np.full(len(idx), np.nan)
     joints = take("joints")
     if joints is None:
-        joints = np.full((len(idx), 3, 0), np.nan)
+        joints = np.full((len(idx), 5, 0), np.nan)
     g_ids, node_grasp = np.unique(take("idfreeairgrip").astype(np.int64), return_inverse=True)
     p_ids, node_place = np.unique(take("idtabletopplacements").astype(np.int64), return_inverse=True)
     node_grasp, node_place = node_grasp.ravel().astype(np.int64), node_place.ravel().astype(np.int64)
@@ -188,7 +190,7 @@ def build_roadmap(rows: dict[str, np.ndarray], feasible: np.ndarray | None = Non
 
 
 def grid_index(rows: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
-    """Every tabletop grip's IK feasibility (all three flags) keyed by (tabletop placement index, free-air grasp id),
+    """Every tabletop grip's IK feasibility (all five flags) keyed by (tabletop placement index, free-air grasp id),
     with each tabletop placement's stable placement, position and yaw (for `Planner.prior`)."""
     tp, first, inv = np.unique(np.asarray(rows["idtabletopplacements"]), return_index=True, return_inverse=True)
     grasp = np.asarray(rows["idfreeairgrip"], dtype=np.int64)

@@ -33,7 +33,7 @@ from workbench.planners.wan_harada.tabletop import (
 )
 from workbench.robots.collider import Collider, Scene, default_scene
 from workbench.robots.gripper import Gripper, franka_hand
-from workbench.robots.ik import IKOptions, iter_ik
+from workbench.robots.ik import WORLDA, IKOptions, iter_ik
 from workbench.robots.model import ROBOTS, Robot, RobotSpec, builtin_robot, get_robot
 from workbench.store import Store
 from workbench.store import robots as robot_sql
@@ -50,6 +50,7 @@ from workbench.store.placements import (
     save_placements,
     save_tabletop,
     tabletop_counts,
+    tabletop_grasp_count,
 )
 from workbench.store.robots import ik_runs, ikret_row, robot_row, scene_row
 
@@ -103,6 +104,9 @@ class PlacementsResult:
     n_tabletop_placements: int
     n_tabletop_grips: int
     timings: dict
+    n_usable_grasps: int = 0
+    n_roadmap_grasps: int = 0
+    grasps_label: str = "all grasps"
 
 
 def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, grasp_pid: int, gripper: Gripper,
@@ -144,7 +148,9 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
         n_tp, n_tg = tabletop_counts(store, tt_pid)
         return PlacementsResult(idplacements=pl_pid, idtabletop=tt_pid, reused=reused, placements=stored,
                                 n_free_grips=np.bincount(fp_index, minlength=len(stored["stability"])),
-                                n_tabletop_placements=int(n_tp), n_tabletop_grips=int(n_tg), timings=timings)
+                                n_tabletop_placements=int(n_tp), n_tabletop_grips=int(n_tg), timings=timings,
+                                n_usable_grasps=len(np.unique(ftg["idfreeairgrip"])),
+                                n_roadmap_grasps=tabletop_grasp_count(store, tt_pid), grasps_label=tparams.grasps_label())
     finally:
         if not isinstance(db, Store):
             store.close()
@@ -173,7 +179,7 @@ class PlannerCache:
 
 def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int, handx: float | None = None, worldz: float | None = None,
                  idtabletop: int | None = None, idscene: int | None = None, cache: PlannerCache | None = None,
-                 gripper: Gripper | None = None) -> Planner:
+                 gripper: Gripper | None = None, worlda: float | None = None) -> Planner:
     """The regrasp graph of `object_name` for `robot_name` (a stored robot name or idrobot) from a store (path or
     Store), built from the latest tabletop parameter set and the IK run with the most rows (or the one with these
     retractions or this scene); with a `cache`, a planner already loaded for the same inputs is returned.
@@ -190,6 +196,8 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
                 sorted(ik_runs(store, idtabletop=tt, idrobot=rrow["idrobot"]), key=lambda r: (-r["rows"], -r["last"]))]
         if handx is not None or worldz is not None:
             runs = [r for r in runs if _ret_match(ikret_row(store, r[1]), handx, worldz)]
+        if worlda is not None:
+            runs = [r for r in runs if abs(ikret_row(store, r[1])["worlda"] - worlda) < 1e-9]
         if idscene is not None:
             runs = [r for r in runs if r[0] == int(idscene)]
         if not runs:
@@ -212,9 +220,10 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
         ftg = load_free_tabletop_grips(store, pl)
         stored = scene_row(store, idscene)
         scene, opts = stored.scene, stored.ik
-        hx, wz = ikret_row(store, idikret)
+        ret = ikret_row(store, idikret)
         ids = {"idobject": oid, "idrobot": rrow["idrobot"], "idscene": idscene, "idikret": idikret, "idtabletop": tt, "idplacements": pl}
-        planner = Planner(roadmap, free, ftg, obj, robot, scene, hx, wz, ids, opts, grid=grid_index(rows))
+        planner = Planner(roadmap, free, ftg, obj, robot, scene, ret["handx"], ret["worldz"], ids, opts, grid=grid_index(rows),
+                          worlda=ret["worlda"])
         roadmap.key = key
         _, orow = object_row(store, object_name)
         gid = rrow["idgripper"]
@@ -229,8 +238,8 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
             store.close()
 
 
-def _ret_match(ret: tuple[float, float], handx: float | None, worldz: float | None) -> bool:
-    return (handx is None or abs(ret[0] - handx) < 1e-9) and (worldz is None or abs(ret[1] - worldz) < 1e-9)
+def _ret_match(ret: dict[str, float], handx: float | None, worldz: float | None) -> bool:
+    return (handx is None or abs(ret["handx"] - handx) < 1e-9) and (worldz is None or abs(ret["worldz"] - worldz) < 1e-9)
 
 
 def _robot_from_row(row: dict, gripper: Gripper | None = None) -> Robot:
@@ -271,17 +280,18 @@ class BuildResult:
 
 
 def ensure_ik_rows(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
-                   workers: int | None = None, progress: bool = True) -> tuple[dict, bool]:
+                   workers: int | None = None, progress: bool = True, worlda: float = WORLDA) -> tuple[dict, bool]:
     """IK feasibility of the tabletop grips for a robot (Section IV's ik and ikret tables), computed or reused by the
     IK stage's runner (`stages.ensure_ik`); returns the run's ids and whether it was reused."""
 
-    run = ensure_ik(store, idobject, obj, idtabletop, robot_name, handx=handx, worldz=worldz, workers=workers, progress=progress)
+    run = ensure_ik(store, idobject, obj, idtabletop, robot_name, handx=handx, worldz=worldz, workers=workers, progress=progress,
+                    worlda=worlda)
     return {"idrobot": run.idrobot, "idscene": run.idscene, "idikret": run.idikret}, run.reused
 
 
 def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pparams: PlacementParams = PlacementParams(),
               tparams: TabletopParams = TabletopParams(), handx: float = HANDX, worldz: float = WORLDZ,
-              workers: int | None = None, progress: bool = True) -> BuildResult:
+              workers: int | None = None, progress: bool = True, worlda: float = WORLDA) -> BuildResult:
     """Grasps, placements, tabletop grips, IK and the regrasp graph of `obj` (an ObjectModel) for `robot_name` in the
     store `db` (path or Store), each stage reused when stored with the same inputs and parameters."""
 
@@ -296,13 +306,15 @@ def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pp
         p = ensure_placements(store, g.idobject, obj, g.idparamset, hand, pparams, tparams)
         out.timings["placements"], out.reused["placements"] = time.perf_counter() - t0, p.reused
         out.counts.update(placements=len(p.placements["stability"]), tabletop_placements=p.n_tabletop_placements,
-                          tabletop_grips=p.n_tabletop_grips)
+                          tabletop_grips=p.n_tabletop_grips, usable_grasps=p.n_usable_grasps, roadmap_grasps=p.n_roadmap_grasps,
+                          grasps_label=p.grasps_label)
         t0 = time.perf_counter()
-        ik_ids, reused = ensure_ik_rows(store, g.idobject, obj, p.idtabletop, robot_name, handx, worldz, workers, progress)
+        ik_ids, reused = ensure_ik_rows(store, g.idobject, obj, p.idtabletop, robot_name, handx, worldz, workers, progress,
+                                        worlda=worlda)
         out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, reused
         t0 = time.perf_counter()
         planner = load_planner(store, obj.name, ik_ids["idrobot"], handx, worldz, idtabletop=p.idtabletop,
-                               idscene=ik_ids["idscene"])
+                               idscene=ik_ids["idscene"], worlda=worlda)
         out.timings["graph"] = time.perf_counter() - t0
         out.counts.update({f"graph_{k}": v for k, v in planner.roadmap.summary().items()})
         out.counts["placement_ids"] = planner.placement_ids()
@@ -341,8 +353,9 @@ def scene_params(robot: Robot, scene: Scene, opts: IKOptions) -> dict:
 
 def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx: float = HANDX, worldz: float = WORLDZ,
            opts: IKOptions = IKOptions(), workers: int | None = None, progress: bool = True,
-           idtabletop: int | None = None) -> IKRun:
-    """Compute (or reuse) the `ik` rows of every tabletop grip of `obj_name` for `robot` (Section IV)."""
+           idtabletop: int | None = None, worlda: float = WORLDA) -> IKRun:
+    """Compute (or reuse) the `ik` rows of every tabletop grip of `obj_name` for `robot` at the five poses of
+    `robots.ik.KINDS` (Section IV; `worlda` lifts the held object straight up)."""
 
     t0 = time.perf_counter()
     scene = scene or default_scene(robot.name)
@@ -354,7 +367,7 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
     grips = load_tabletop_grips(store, oid, idtabletop)
     pid = int(np.asarray(grips["idparamset"])) if "idparamset" in grips else int(idtabletop if idtabletop is not None else -1)
     ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
-    rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz)
+    rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz, worlda)
     done = robot_sql.stored_grips(store, rid, sid, kid)
 
     def skip(ix: np.ndarray) -> bool:
@@ -362,7 +375,8 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
 
     computed = 0
     arrays = {k: v for k, v in grips.items() if isinstance(v, np.ndarray) and v.shape[:1] == ids.shape}
-    for ix, feas, joints in iter_ik(robot, arrays, scene, handx, worldz, obj.mesh, opts, workers, skip=skip, progress=progress):
+    for ix, feas, joints in iter_ik(robot, arrays, scene, handx, worldz, obj.mesh, opts, workers, skip=skip, progress=progress,
+                                    worlda=worlda):
         todo = ~np.isin(ids[ix], done)
         computed += robot_sql.insert_ik(store, rid, sid, kid, ids[ix][todo], feas[todo], joints[todo])
     counts = robot_sql.run_counts(store, rid, sid, kid, pid)
@@ -370,9 +384,10 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
 
 
 def ensure_ik(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
-              workers: int | None = None, progress: bool = True) -> IKRun:
+              workers: int | None = None, progress: bool = True, worlda: float = WORLDA) -> IKRun:
     """`run_ik` for a built-in robot (or URDF path) by name, with the signature `workbench build` expects."""
-    return run_ik(store, obj.name, get_robot(robot_name), None, handx, worldz, IKOptions(), workers, progress, idtabletop)
+    return run_ik(store, obj.name, get_robot(robot_name), None, handx, worldz, IKOptions(), workers, progress, idtabletop,
+                  worlda=worlda)
 
 
 DEMO_GRID = TabletopParams(x_min=0.35, x_max=0.65, nx=5, y_min=-0.2, y_max=0.2, ny=3, angles=8, max_grasps=60)

@@ -3,9 +3,11 @@
 Each free placement is displaced to every grid position and rotated about world z by every value of the
 `angle` table; every free tabletop grip of that placement follows it into the world. The world frame is the
 table frame here (table top z = 0). Table I uses 21 positions and 8 rotations (168 tabletop placements per free
-placement); Fig. 7 shows 91 positions. `max_grasps` caps the free-air grasps carried into the roadmap, picked
-spread out over the object (farthest-point order, preferring grasps usable in more placements, and keeping a few
-for every placement), so a dense grasp set still gives a roadmap of tens of thousands of grips that IK can process.
+placement); Fig. 7 shows 91 positions. Every free tabletop grip enters the roadmap by default, as in Table I
+(#-tpg = 168 x the sum of #-fpg). `max_grasps` is an explicit option for a quick look: it caps the free-air grasps
+carried into the roadmap, picked spread out over the object (farthest-point order, preferring grasps usable in
+more placements, and keeping a few for every placement); every command and benchmark names it in its output
+(`TabletopParams.grasps_label`).
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from workbench.errors import WorkbenchError
 @dataclass(frozen=True)
 class TabletopParams:
     """Table grid (metres, world frame): x from x_min to x_max in nx steps, y likewise; `angles` rotations about
-    z in [0, 2 pi); `max_grasps` free-air grasps carried into the roadmap (None: all)."""
+    z in [0, 2 pi); `max_grasps` free-air grasps carried into the roadmap (None, the default: all, as the paper)."""
 
     x_min: float = 0.35
     x_max: float = 0.65
@@ -29,7 +31,7 @@ class TabletopParams:
     y_max: float = 0.20
     ny: int = 3
     angles: int = 8
-    max_grasps: int | None = 80
+    max_grasps: int | None = None
 
     def __post_init__(self) -> None:
         if self.nx < 1 or self.ny < 1 or self.angles < 1 or (self.max_grasps is not None and self.max_grasps < 1):
@@ -49,6 +51,10 @@ class TabletopParams:
 
     def as_dict(self) -> dict:
         return asdict(self)
+
+    def grasps_label(self) -> str:
+        """How many free-air grasps enter the roadmap, for every printed output."""
+        return "all grasps" if self.max_grasps is None else f"grasps capped at {self.max_grasps} (--max-grasps)"
 
 
 def paper_grid() -> TabletopParams:
