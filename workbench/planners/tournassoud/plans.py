@@ -39,7 +39,7 @@ from workbench.planners.wan_harada.plans import Plan, PlanStep
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
 from workbench.robots.collider import Scene
-from workbench.robots.ik import IKOptions, IKSolver, retract
+from workbench.robots.ik import WORLDA, IKOptions, IKSolver, held_placements, retract
 from workbench.robots.model import Robot
 
 
@@ -51,7 +51,7 @@ class Conjunction:
     placement: tuple[int, int]
     object_pose: np.ndarray
     tcp: np.ndarray
-    q: np.ndarray  # (3, n): grasp, approach, retract
+    q: np.ndarray  # (5, n): grasp, approach (handx), retract (handxworldz), worlda, worldaworldz
     phi: float = 0.0  # the placement's angle (the sample's, or the query's own at its start and goal)
 
 
@@ -60,8 +60,9 @@ class Realiser:
     closed form for spherical-wrist arms (every branch tried as a seed), its Levenberg-Marquardt tiers from library
     seeds otherwise; its collider rejects arm or hand against the table and arm against the object."""
 
-    def __init__(self, robot: Robot, scene: Scene, obj_mesh, handx: float = 0.05, worldz: float = 0.05, seed: int = 0):
-        self.robot, self.handx, self.worldz = robot, handx, worldz
+    def __init__(self, robot: Robot, scene: Scene, obj_mesh, handx: float = 0.05, worldz: float = 0.05, seed: int = 0,
+                 worlda: float = WORLDA):
+        self.robot, self.handx, self.worldz, self.worlda = robot, handx, worldz, worlda
         self.closed = not spherical_wrist_reason(robot)
         self.opts = IKOptions(closed_form=self.closed, library=8192, seed=seed)
         self.solver = IKSolver(robot, scene, self.opts, obj_mesh)
@@ -79,20 +80,23 @@ class Realiser:
         return cand
 
     def configurations(self, object_pose: np.ndarray, tcp: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray | None:
-        """(3, n) grasp/approach/retract joint vectors, or None when no seed gives all three collision-free."""
-        poses = retract(tcp[None], self.handx, self.worldz)[0]  # (3, 4, 4)
-        place = object_pose[None]
+        """(5, n) joint vectors at the roadmap planner's five poses (grasp, handx, handxworldz, worlda, worldaworldz;
+        the object held at the two lifts), or None when no seed gives all five collision-free."""
+        poses = retract(tcp[None], self.handx, self.worldz, self.worlda)[0]  # (5, 4, 4)
+        place = held_placements(poses[None], object_pose[None])[0]  # (5, 4, 4): lifted with the hand at the lifts
         o = self.opts
         for q0 in self.seeds(poses[0], q_prev):
-            qg, ok = self.solver.solve(poses[:1], place, q0[None], o.iters_seed)
+            qg, ok = self.solver.solve(poses[:1], place[:1], q0[None], o.iters_seed)
             if not ok[0]:
                 continue
-            qa, oka = self.solver.solve(poses[1:2], place, qg, o.iters_warm)
-            if not oka[0]:
-                continue
-            qr, okr = self.solver.solve(poses[2:3], place, qa, o.iters_warm)
-            if okr[0]:
-                return np.stack([qg[0], qa[0], qr[0]])
+            out = [qg[0]]
+            for k, start in ((1, 0), (2, 1), (3, 0), (4, 3)):  # each from its neighbour on the way
+                q, okk = self.solver.solve(poses[k:k + 1], place[k:k + 1], out[start][None], o.iters_warm)
+                if not okk[0]:
+                    break
+                out.append(q[0])
+            if len(out) == 5:
+                return np.stack(out)
         return None
 
 
@@ -146,11 +150,12 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
     hx, hy = table.frame[0, 3], table.frame[1, 3]
 
     def step(kind: str, cj: Conjunction, theta: float | None = None) -> PlanStep:
-        (c, t), (j, f) = cj.grasp, cj.placement
+        (c, t), (j, _) = cj.grasp, cj.placement
         g = np.linalg.solve(cj.object_pose, cj.tcp)
         return PlanStep(kind=kind, idfreeairgrip=int(c * t_n + t), idfreetabletopplacement=int(j), position=np.array([hx, hy, 0.0]),
                         yaw=float(cj.phi), object_pose=cj.object_pose, tcp=cj.tcp, grasp=g,
-                        jawwidth=float(classes[c].opening), q_approach=cj.q[1], q_grasp=cj.q[0], q_retract=cj.q[2])
+                        jawwidth=float(classes[c].opening), q_approach=cj.q[1], q_grasp=cj.q[0], q_retract=cj.q[2],
+                        q_worlda=cj.q[3], q_worldaworldz=cj.q[4])
 
     if seq.kind == "placement":
         kinds = ["pick"] + ["transfer", "regrasp"] * ((len(conj) - 2) // 2) + ["place"]
