@@ -298,18 +298,20 @@ class IKSolver:
         return np.where(ok[:, None], q, np.nan), ok
 
     def _chunk_closed(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """`chunk` with the closed form: the grasp takes its first collision-free branch, handx and handxworldz the
-        branch nearest to the grasp's (or to each other's when the grasp has none)."""
-        c, n = len(targets), self.robot.nq
-        feas = np.zeros((c, 3), dtype=bool)
-        joints = np.full((c, 3, n), np.nan)
-        q, ok = self._closed(targets[:, 0], placements, np.zeros((c, n)))
+        """`chunk` with the closed form: the grasp takes its first collision-free branch, every other pose the branch
+        nearest to its neighbour's on the way (handx from the grasp, handxworldz from handx, worlda from the grasp,
+        worldaworldz from worlda; from the grasp's when the neighbour has none). The object is held at the lifts."""
+        c, nk, n = len(targets), targets.shape[1], self.robot.nq
+        place = held_placements(targets, placements)  # (C, K, 4, 4)
+        feas = np.zeros((c, nk), dtype=bool)
+        joints = np.full((c, nk, n), np.nan)
+        q, ok = self._closed(targets[:, 0], place[:, 0], np.zeros((c, n)))
         feas[:, 0], joints[:, 0] = ok, q
-        ref = np.where(ok[:, None], q, 0.0)
-        for k in (1, 2):
-            q, ok = self._closed(targets[:, k], placements, ref)
+        grasp_ref = np.where(ok[:, None], q, 0.0)
+        for k, prev in ((1, 0), (2, 1), (3, 0), (4, 3))[: nk - 1]:
+            ref = np.where(feas[:, prev, None], np.nan_to_num(joints[:, prev]), grasp_ref)
+            q, ok = self._closed(targets[:, k], place[:, k], ref)
             feas[:, k], joints[:, k] = ok, q
-            ref = np.where(feas[:, :1] | ~ok[:, None], ref, q)
         return feas, joints
 
     def library_seeds(self, targets: np.ndarray) -> np.ndarray:
