@@ -1,29 +1,38 @@
 # The two commands a newcomer needs: `make demo` and `make test`. Both build .venv from nothing.
+# `make demo` installs only the runtime dependencies; `make test` adds the test extras (pytest, nbmake, MuJoCo,
+# playwright, nbstripout) on top, each behind its own stamp so one never reinstalls the other.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
-STAMP := $(VENV)/.installed
+RUNTIME := $(VENV)/.installed-runtime
+TESTDEPS := $(VENV)/.installed-test
+# JupyterLab refuses to start as root without --allow-root; a user never needs it.
+LAB_ROOT := $(if $(filter 0,$(shell id -u)),--allow-root,)
 
 .PHONY: venv demo test lab bench clean
 
-$(STAMP): pyproject.toml
+$(RUNTIME): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e .
+	touch $(RUNTIME)
+
+$(TESTDEPS): $(RUNTIME) pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
-	touch $(STAMP)
+	touch $(TESTDEPS)
 
-venv: $(STAMP)
+venv: $(RUNTIME)
 
-demo: $(STAMP)
+demo: $(RUNTIME)
 	$(BIN)/workbench demo --out build/demo
 
-test: $(STAMP)
+test: $(TESTDEPS)
 	$(BIN)/python -m pytest -q -p no:cacheprovider --nbmake tests notebooks
 
-lab: $(STAMP)
-	$(BIN)/jupyter lab notebooks/
+lab: $(RUNTIME)
+	$(BIN)/jupyter lab $(LAB_ROOT) notebooks/
 
-bench: $(STAMP)
+bench: $(RUNTIME)
 	$(BIN)/workbench bench grasps
 	$(BIN)/workbench bench placements
 	$(BIN)/workbench bench ik
