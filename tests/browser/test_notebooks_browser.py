@@ -1,0 +1,388 @@
+"""The notebooks as a person sees them: JupyterLab in headless Chromium, Run All, look, move a widget.
+
+Starts JupyterLab on 127.0.0.1 (a free port, a random token) over a copy of `notebooks/` (the repository's files are
+never saved into), opens every notebook, runs all its cells and waits for the kernel. Then, per notebook:
+no cell shows an error (error outputs, tracebacks, "Error displaying widget") and the browser console logs no
+error; every meshcat view draws a canvas that is not blank; moving one widget changes its view or its numbers.
+Finally a `plan.html` written by `workbench demo` must animate (two screenshots a moment apart differ).
+Screenshots go to `build/screenshots/` for a person to look at.
+
+Needs Chromium (`apt-get install chromium`; playwright's own browser download is not used) and the test extras
+(playwright). Without them the module skips with one line saying what is missing.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import secrets
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+SHOTS = ROOT / "build" / "screenshots"
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update", "--disable-sync"]
+MIN_DRAWN = 0.01  # a view is blank below this drawn share (see drawn_share)
+RUN_TIMEOUT = 240.0  # seconds one notebook may take to run all its cells on a busy 2-core machine
+# Console messages that are not the workbench's: JupyterLab asking the network for news/updates (blocked in CI).
+BENIGN_CONSOLE = re.compile(r"lab/api/news|update check|favicon|GPU stall due to ReadPixels")
+
+
+def find_chromium() -> str | None:
+    for name in (os.environ.get("WORKBENCH_CHROMIUM"), "chromium", "chromium-browser", "google-chrome"):
+        if name and (path := shutil.which(name)):
+            return path
+    return None
+
+
+CHROMIUM = find_chromium()
+try:
+    from playwright.sync_api import sync_playwright
+except ImportError:  # pragma: no cover - depends on the install
+    sync_playwright = None
+
+pytestmark = [
+    pytest.mark.skipif(CHROMIUM is None, reason="no Chromium found (apt-get install chromium): browser test skipped"),
+    pytest.mark.skipif(sync_playwright is None, reason="playwright is not installed (pip install -e '.[test]'): "
+                                                      "browser test skipped"),
+]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class Lab:
+    url: str
+    token: str
+    root: Path
+    proc: subprocess.Popen
+
+    def api(self, path: str, method: str = "GET") -> object:
+        req = urllib.request.Request(f"{self.url}api/{path}", method=method,
+                                     headers={"Authorization": f"token {self.token}"})
+        with urllib.request.urlopen(req, timeout=10) as r:
+            body = r.read()
+        return json.loads(body) if body else None
+
+
+    def shutdown_kernels(self) -> None:
+        """Stop every kernel (each notebook's kernel holds a meshcat server and its scenes)."""
+        try:
+            for k in self.api("kernels"):
+                self.api(f"kernels/{k['id']}", method="DELETE")
+        except OSError:
+            pass
+
+
+def write_lab_settings(settings: Path) -> None:
+    """Every cell kept in the page (no virtual scrolling), no autosave into the copies, no news pop-ups."""
+    (settings / "@jupyterlab/notebook-extension").mkdir(parents=True, exist_ok=True)
+    (settings / "@jupyterlab/notebook-extension/tracker.jupyterlab-settings").write_text(
+        json.dumps({"windowingMode": "none"}))
+    (settings / "@jupyterlab/docmanager-extension").mkdir(parents=True, exist_ok=True)
+    (settings / "@jupyterlab/docmanager-extension/plugin.jupyterlab-settings").write_text(json.dumps({"autosave": False}))
+    (settings / "@jupyterlab/apputils-extension").mkdir(parents=True, exist_ok=True)
+    (settings / "@jupyterlab/apputils-extension/notification.jupyterlab-settings").write_text(
+        json.dumps({"fetchNews": "false", "checkForUpdates": False}))
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory) -> Lab:
+    root = tmp_path_factory.mktemp("lab")
+    shutil.copytree(ROOT / "notebooks", root / "notebooks", ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
+    write_lab_settings(root / "settings")
+    port, token = free_port(), secrets.token_hex(16)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])),
+               JUPYTERLAB_SETTINGS_DIR=str(root / "settings"), JUPYTERLAB_WORKSPACES_DIR=str(root / "workspaces"))
+    cmd = [sys.executable, "-m", "jupyter", "lab", "--no-browser", "--ip=127.0.0.1", f"--port={port}",
+           "--ServerApp.port_retries=0", f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}",
+           "--LabApp.news_url=", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate"]
+    if os.geteuid() == 0:
+        cmd.append("--allow-root")
+    log = open(root / "jupyter.log", "w")
+    proc = subprocess.Popen(cmd, cwd=root, env=env, stdout=log, stderr=subprocess.STDOUT)
+    server = Lab(f"http://127.0.0.1:{port}/", token, root, proc)
+    deadline = time.monotonic() + 90
+    while True:
+        if proc.poll() is not None:
+            pytest.fail(f"JupyterLab exited with status {proc.returncode}: {(root / 'jupyter.log').read_text()[-2000:]}")
+        try:
+            server.api("status")
+            break
+        except OSError:
+            if time.monotonic() > deadline:
+                proc.kill()
+                pytest.fail(f"JupyterLab did not answer on port {port}: {(root / 'jupyter.log').read_text()[-2000:]}")
+            time.sleep(0.5)
+    yield server
+    server.shutdown_kernels()
+    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signal.SIGINT)  # JupyterLab asks to confirm a single ^C
+    try:
+        proc.wait(30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
+    log.close()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    with sync_playwright() as p:
+        b = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS)
+        yield b
+        b.close()
+
+
+class Console:
+    """Errors the page (any frame) reports: console.error and uncaught exceptions."""
+
+    def __init__(self, page):
+        self.errors: list[str] = []
+        page.on("console", self._console)
+        page.on("pageerror", lambda exc: self.errors.append(f"uncaught: {exc}"))
+
+    def _console(self, msg) -> None:
+        if msg.type == "error" and not BENIGN_CONSOLE.search(msg.text):
+            self.errors.append(f"console.error: {msg.text}")
+
+
+# --- images -------------------------------------------------------------------------------------------------------
+
+def image(png: bytes) -> np.ndarray:
+    from io import BytesIO
+
+    from PIL import Image
+
+    return np.asarray(Image.open(BytesIO(png)).convert("RGB"), dtype=np.int16)
+
+
+def drawn_share(img: np.ndarray) -> float:
+    """Share of the view covered by drawn things: pixels away from their row's background colour (meshcat's
+    background is a vertical gradient), after an erosion that removes thin lines (the grid, the axes); the
+    "Open Controls" bar at the top is left out. An empty meshcat scene scores about 0.003."""
+    from scipy import ndimage
+
+    img = img[24:]
+    off = np.abs(img - np.median(img, axis=1, keepdims=True)).max(axis=2) > 30
+    return float(ndimage.binary_erosion(off, np.ones((7, 7))).mean())
+
+
+def changed_pixels(a: np.ndarray, b: np.ndarray) -> int:
+    if a.shape != b.shape:
+        return a.size
+    return int((np.abs(a - b).max(axis=2) > 24).sum())
+
+
+# --- JupyterLab driving ---------------------------------------------------------------------------------------------
+
+def prompts(page) -> list[str]:
+    return page.eval_on_selector_all(".jp-CodeCell .jp-InputArea-prompt", "els => els.map(e => e.textContent.trim())")
+
+
+def kernel_status(page) -> str:
+    return page.evaluate("() => document.querySelector('.jp-Notebook-ExecutionIndicator')?.dataset.status || ''")
+
+
+def wait_idle(page, timeout: float = 60.0) -> None:
+    """Wait until the kernel is idle and no cell is queued or running."""
+    deadline = time.monotonic() + timeout
+    page.wait_for_timeout(300)
+    while time.monotonic() < deadline:
+        if kernel_status(page) == "idle" and not any("*" in p for p in prompts(page)):
+            return
+        page.wait_for_timeout(250)
+    raise AssertionError(f"kernel still busy after {timeout:.0f} s (status {kernel_status(page)!r})")
+
+
+def shown_errors(page) -> list[str]:
+    """Errors a person would see in the outputs: tracebacks and widgets that failed to display."""
+    texts = page.eval_on_selector_all(".jp-OutputArea-output", "els => els.map(e => e.innerText)")
+    bad = re.compile(r"Traceback \(most recent call last\)|Error displaying widget|model not found|\w+Error: ")
+    return [t.strip()[:400] for t in texts if bad.search(t)]
+
+
+def run_all(page, console: Console, name: str) -> None:
+    page.locator(".jp-Notebook").first.wait_for(timeout=60_000)
+    wait_idle(page, 120.0)
+    if page.locator("#jp-left-stack").is_visible():  # the file browser takes width the notebook can use
+        page.locator("li.lm-TabBar-tab.lm-mod-current[data-id='filebrowser']").click()
+    for _ in range(5):  # the first click can land before the kernel's session is connected: then nothing runs
+        page.locator(".lm-MenuBar-itemLabel", has_text=re.compile(r"^Run$")).click()
+        page.get_by_role("menuitem", name="Run All Cells", exact=True).click()
+        page.wait_for_timeout(5000)
+        if any(p != "[ ]:" for p in prompts(page)):
+            break
+    deadline = time.monotonic() + RUN_TIMEOUT
+    while time.monotonic() < deadline:
+        page.wait_for_timeout(1000)
+        errors = shown_errors(page)
+        assert not errors, f"{name}: a cell shows an error:\n" + "\n---\n".join(errors)
+        ps = prompts(page)
+        if ps and all(re.fullmatch(r"\[\d+\]:", p) for p in ps) and kernel_status(page) == "idle":
+            return
+    raise AssertionError(f"{name}: cells not all run after {RUN_TIMEOUT:.0f} s: prompts {prompts(page)}")
+
+
+def views(page):
+    """meshcat views in the outputs (iframes holding a meshcat viewer)."""
+    return page.locator(".jp-OutputArea-output iframe")
+
+
+def view_image(frame_el, timeout: float = 30.0) -> np.ndarray:
+    """A screenshot of one view once its canvas has drawn something coloured (or the last one at the timeout)."""
+    frame_el.scroll_into_view_if_needed()
+    frame_el.content_frame.locator("canvas").first.wait_for(timeout=timeout * 1000)
+    deadline = time.monotonic() + timeout
+    while True:
+        img = image(frame_el.screenshot())
+        if drawn_share(img) > MIN_DRAWN or time.monotonic() > deadline:
+            return img
+        frame_el.page.wait_for_timeout(500)
+
+
+def numbers(page) -> list[str]:
+    """What the widgets report: every HTML/label widget's and printed output's text, without slider readouts."""
+    return page.eval_on_selector_all(".jp-OutputArea-output .widget-html, .jp-OutputArea-output .widget-label-basic",
+                                     "els => els.map(e => e.innerText)")
+
+
+def slider(page, label: str):
+    """The ipywidgets slider whose description starts with `label`."""
+    box = page.locator(".widget-slider", has=page.locator(".widget-label", has_text=re.compile("^" + re.escape(label))))
+    return box.first
+
+
+def move_slider(page, label: str, steps: int = 1) -> None:
+    handle = slider(page, label).locator(".noUi-handle").first
+    handle.scroll_into_view_if_needed()
+    handle.focus()
+    for _ in range(steps):
+        handle.press("ArrowRight")
+
+
+def pick_option(page, label: str, index: int = 1) -> None:
+    box = page.locator(".widget-dropdown", has=page.locator(".widget-label", has_text=re.compile("^" + re.escape(label))))
+    box.first.locator("select").select_option(index=index)
+
+
+# One move per notebook: something a person would try first. Notebooks not listed get the first slider moved.
+MOVES = {
+    "01": lambda page: move_slider(page, "facet", 3),
+    "02": lambda page: move_slider(page, "placement"),
+    "03": lambda page: move_slider(page, "feasible grip"),
+    "04": lambda page: pick_option(page, "animate", 1),
+    "05": lambda page: move_slider(page, "switch"),
+}
+
+
+def default_move(page) -> None:
+    handle = page.locator(".jp-OutputArea-output .noUi-handle").first
+    handle.scroll_into_view_if_needed()
+    handle.focus()
+    handle.press("ArrowRight")
+
+
+def check_notebook(browser, lab: Lab, path: Path) -> None:
+    name, stem = path.name, path.stem
+    context = browser.new_context(viewport={"width": 1400, "height": 1000})
+    page = context.new_page()
+    console = Console(page)
+    try:
+        # a workspace of its own: only this notebook open (JupyterLab would reopen the previous tabs)
+        page.goto(f"{lab.url}lab/workspaces/{stem}/tree/notebooks/{name}?reset&token={lab.token}")
+        run_all(page, console, name)
+        page.wait_for_timeout(1000)
+        assert not shown_errors(page), f"{name}: a cell shows an error: {shown_errors(page)}"
+
+        frames = views(page)
+        before = []
+        for i in range(frames.count()):
+            img = view_image(frames.nth(i))
+            before.append(img)
+            frames.nth(i).screenshot(path=SHOTS / f"{stem}_view{i}.png")
+            assert drawn_share(img) > MIN_DRAWN, f"{name}: meshcat view {i} is blank"
+        for i, out in enumerate(page.locator(".jp-OutputArea-output:has(.jupyter-widgets)").all()):
+            out.scroll_into_view_if_needed()
+            out.screenshot(path=SHOTS / f"{stem}_widgets{i}.png")
+
+        text_before = numbers(page)
+        move = MOVES.get(stem[:2])
+        if move is None and page.locator(".jp-OutputArea-output .noUi-handle").count() == 0:
+            print(f"{name}: no slider to move")
+        else:
+            (move or default_move)(page)
+            wait_idle(page, 120.0)
+            deadline = time.monotonic() + 20
+            changed = False
+            while not changed and time.monotonic() < deadline:
+                page.wait_for_timeout(500)
+                after = [image(frames.nth(i).screenshot()) for i in range(frames.count())]
+                moved = [changed_pixels(a, b) for a, b in zip(before, after)]
+                changed = any(m > 200 for m in moved) or numbers(page) != text_before
+            for i in range(frames.count()):
+                frames.nth(i).screenshot(path=SHOTS / f"{stem}_view{i}_moved.png")
+            assert changed, f"{name}: moving a widget changed neither a view nor a number"
+        assert not shown_errors(page), f"{name}: a cell shows an error after the move: {shown_errors(page)}"
+        assert not console.errors, f"{name}: browser console errors:\n" + "\n".join(console.errors[:10])
+    finally:
+        page.screenshot(path=SHOTS / f"{stem}_page.png")
+        context.close()
+        lab.shutdown_kernels()
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=lambda p: p.name)
+def test_notebook_in_browser(browser, lab, path):
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    check_notebook(browser, lab, path)
+
+
+@pytest.fixture(scope="module")
+def plan_html(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("demo")
+    exe = Path(sys.executable).parent / "workbench"
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "workbench.cli"]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    run = subprocess.run(cmd + ["demo", "--out", str(out)], env=env, capture_output=True, text=True)
+    assert run.returncode == 0, f"workbench demo failed: {run.stdout[-1500:]}{run.stderr[-1500:]}"
+    assert (out / "plan.html").is_file(), f"workbench demo wrote no plan.html in {out}"
+    return out / "plan.html"
+
+
+def test_plan_html_animates(browser, plan_html):
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    context = browser.new_context(viewport={"width": 1000, "height": 700})
+    page = context.new_page()
+    console = Console(page)
+    try:
+        page.goto(plan_html.as_uri())
+        page.wait_for_selector("canvas", timeout=60_000)
+        first = image(page.screenshot(path=SHOTS / "plan_html_0.png"))
+        deadline = time.monotonic() + 30
+        while drawn_share(first) < MIN_DRAWN and time.monotonic() < deadline:
+            page.wait_for_timeout(500)
+            first = image(page.screenshot(path=SHOTS / "plan_html_0.png"))
+        assert drawn_share(first) > MIN_DRAWN, "plan.html shows a blank scene"
+        page.wait_for_timeout(1500)
+        second = image(page.screenshot(path=SHOTS / "plan_html_1.png"))
+        assert changed_pixels(first, second) > 200, "plan.html does not animate: two screenshots 1.5 s apart match"
+        assert not console.errors, "plan.html console errors:\n" + "\n".join(console.errors[:10])
+    finally:
+        context.close()
