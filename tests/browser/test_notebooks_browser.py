@@ -85,8 +85,8 @@ class Lab:
     def shutdown_kernels(self) -> None:
         """Stop every kernel (each notebook's kernel holds a meshcat server and its scenes)."""
         try:
-            for k in self.api("kernels"):
-                self.api(f"kernels/{k['id']}", method="DELETE")
+            for k in self.api("sessions"):
+                self.api(f"sessions/{k['id']}", method="DELETE")
         except OSError:
             pass
 
@@ -224,7 +224,11 @@ def run_all(page, console: Console, name: str) -> None:
     wait_idle(page, 120.0)
     if page.locator("#jp-left-stack").is_visible():  # the file browser takes width the notebook can use
         page.locator("li.lm-TabBar-tab.lm-mod-current[data-id='filebrowser']").click()
+    dialog = page.locator(".jp-Dialog", has_text="Select Kernel")
     for _ in range(5):  # the first click can land before the kernel's session is connected: then nothing runs
+        if dialog.is_visible():  # JupyterLab sometimes asks, on a fresh workspace, though the kernelspec is known
+            dialog.get_by_role("button", name="Select", exact=True).click()
+            wait_idle(page, 60.0)
         page.locator(".lm-MenuBar-itemLabel", has_text=re.compile(r"^Run$")).click()
         page.get_by_role("menuitem", name="Run All Cells", exact=True).click()
         page.wait_for_timeout(5000)
