@@ -95,7 +95,7 @@ def write_lab_settings(settings: Path) -> None:
     """Every cell kept in the page (no virtual scrolling), no autosave into the copies, no news pop-ups."""
     (settings / "@jupyterlab/notebook-extension").mkdir(parents=True, exist_ok=True)
     (settings / "@jupyterlab/notebook-extension/tracker.jupyterlab-settings").write_text(
-        json.dumps({"windowingMode": "none"}))
+        json.dumps({"windowingMode": "none", "autoStartDefaultKernel": True}))
     (settings / "@jupyterlab/docmanager-extension").mkdir(parents=True, exist_ok=True)
     (settings / "@jupyterlab/docmanager-extension/plugin.jupyterlab-settings").write_text(json.dumps({"autosave": False}))
     (settings / "@jupyterlab/apputils-extension").mkdir(parents=True, exist_ok=True)
@@ -225,23 +225,31 @@ def run_all(page, console: Console, name: str) -> None:
     if page.locator("#jp-left-stack").is_visible():  # the file browser takes width the notebook can use
         page.locator("li.lm-TabBar-tab.lm-mod-current[data-id='filebrowser']").click()
     dialog = page.locator(".jp-Dialog", has_text="Select Kernel")
-    for _ in range(5):  # the first click can land before the kernel's session is connected: then nothing runs
+
+    def click_run_all() -> None:
         if dialog.is_visible():  # JupyterLab sometimes asks, on a fresh workspace, though the kernelspec is known
-            dialog.get_by_role("button", name="Select", exact=True).click()
+            dialog.locator(".jp-mod-accept").click()
             wait_idle(page, 60.0)
         page.locator(".lm-MenuBar-itemLabel", has_text=re.compile(r"^Run$")).click()
         page.get_by_role("menuitem", name="Run All Cells", exact=True).click()
-        page.wait_for_timeout(5000)
-        if any(p != "[ ]:" for p in prompts(page)):
-            break
+
+    click_run_all()
+    clicks, settled = 1, 0
     deadline = time.monotonic() + RUN_TIMEOUT
     while time.monotonic() < deadline:
         page.wait_for_timeout(1000)
         errors = shown_errors(page)
         assert not errors, f"{name}: a cell shows an error:\n" + "\n---\n".join(errors)
         ps = prompts(page)
-        if ps and all(re.fullmatch(r"\[\d+\]:", p) for p in ps) and kernel_status(page) == "idle":
+        idle = kernel_status(page) == "idle" and not any("*" in p for p in ps)
+        if ps and all(re.fullmatch(r"\[\d+\]:", p) for p in ps) and idle:
             return
+        settled = settled + 1 if idle else 0
+        # A Run All sent while the kernel was still connecting can run only the first cells: send it again
+        # (every notebook runs top to bottom again without harm).
+        if settled >= 5 and clicks < 4:
+            click_run_all()
+            clicks, settled = clicks + 1, 0
     raise AssertionError(f"{name}: cells not all run after {RUN_TIMEOUT:.0f} s: prompts {prompts(page)}")
 
 
@@ -289,7 +297,7 @@ def pick_option(page, label: str, index: int = 1) -> None:
 
 # One move per notebook: something a person would try first. Notebooks not listed get the first slider moved.
 MOVES = {
-    "01": lambda page: move_slider(page, "facet", 3),
+    "01": lambda page: move_slider(page, "highlighted facet", 3),
     "02": lambda page: move_slider(page, "placement"),
     "03": lambda page: move_slider(page, "feasible grip"),
     "04": lambda page: pick_option(page, "animate", 1),

@@ -6,7 +6,12 @@ file that opens in a browser without a running server; `grasp_scene` is a ready-
 
 from __future__ import annotations
 
+import contextlib
+import html
+import io
+import json
 from pathlib import Path
+from urllib.parse import urlparse
 
 import meshcat
 import meshcat.geometry as g
@@ -18,13 +23,64 @@ from workbench.geometry.objects import ObjectModel
 from workbench.robots.gripper import Gripper
 
 GREEN, RED, GREY, BLUE, ORANGE, WHITE = 0x33AA55, 0xDD3333, 0xB0B0B0, 0x3366DD, 0xFF9922, 0xFFFFFF
+HIGHLIGHT = 0xFF00CC  # not in the tab20 palette the facets use
 
 
 def new_scene() -> meshcat.Visualizer:
-    """A meshcat visualizer with its own server (closed with the kernel); starts empty."""
-    vis = meshcat.Visualizer()
+    """A meshcat visualizer with its own server (bound to 127.0.0.1, closed with the kernel); starts empty.
+    meshcat's "You can open the visualizer ..." line is not printed: `view(vis)` shows the scene."""
+    with contextlib.redirect_stdout(io.StringIO()):
+        vis = meshcat.Visualizer()
     vis.delete()
     return vis
+
+
+# The page shown in a notebook output: meshcat's viewer script and websocket reached through the Jupyter server
+# (jupyter-server-proxy's /proxy/PORT/), so a JupyterLab opened from another machine shows the scene while the
+# kernel's meshcat server stays bound to 127.0.0.1. Outside JupyterLab (no page config) it connects directly.
+_VIEW_PAGE = """<!DOCTYPE html><html><head><meta charset="utf-8"><style>body{margin:0}#pane{width:100vw;height:100vh;
+overflow:hidden}</style></head><body><div id="pane"></div><script>
+(function () {
+  var port = PORT, base = null, loc = window.location;
+  try {
+    var cfg = parent.document.getElementById("jupyter-config-data");
+    if (cfg) { base = JSON.parse(cfg.textContent).baseUrl || "/"; loc = parent.location; }
+  } catch (e) {}
+  var http = base !== null ? base + "proxy/" + port + "/" : "http://127.0.0.1:" + port + "/";
+  var ws = base !== null ? (loc.protocol === "https:" ? "wss://" : "ws://") + loc.host + http : "ws://127.0.0.1:" + port + "/";
+  var script = document.createElement("script");
+  script.src = http + "static/main.min.js";
+  script.onload = function () {
+    window.viewer = new MeshCat.Viewer(document.getElementById("pane"));
+    window.viewer.connect(ws);
+  };
+  script.onerror = function () {
+    document.body.innerHTML = "<p style='font-family:sans-serif;padding:1em'>The 3D view cannot reach the kernel's " +
+      "meshcat server: " + http + " (is jupyter-server-proxy installed and enabled?)</p>";
+  };
+  document.head.appendChild(script);
+})();
+</script></body></html>"""
+
+
+def view(vis: meshcat.Visualizer, height: int = 460):
+    """The live scene as a notebook output (an IPython HTML object): works on a remote JupyterLab through the Jupyter
+    server's proxy; the meshcat server itself listens on 127.0.0.1 only."""
+    from IPython.display import HTML
+
+    port = urlparse(vis.url()).port
+    page = _VIEW_PAGE.replace("PORT", json.dumps(int(port)))
+    return HTML(f'<iframe srcdoc="{html.escape(page, quote=True)}" class="workbench-view" '
+                f'style="width:100%;height:{int(height)}px;border:1px solid #ddd;resize:vertical"></iframe>')
+
+
+def legend(items: list[tuple[int, str]], title: str = "") -> str:
+    """A colour key as HTML: one swatch and label per (0xRRGGBB, label)."""
+    chips = "".join(f"<span style='display:inline-block;margin-right:14px;white-space:nowrap'><span style='display:inline-block;"
+                    f"width:12px;height:12px;margin-right:5px;vertical-align:-1px;border:1px solid #555;"
+                    f"background:#{int(c):06x}'></span>{html.escape(label)}</span>" for c, label in items)
+    head = f"<b>{html.escape(title)}</b> " if title else ""
+    return f"<div style='line-height:1.8'>{head}{chips}</div>"
 
 
 def palette(n: int, seed: int = 0) -> np.ndarray:
@@ -144,11 +200,21 @@ def show_frame(vis: meshcat.Visualizer, path: str, pose: np.ndarray, length: flo
 
 
 def frame_camera(vis: meshcat.Visualizer, center: np.ndarray, radius: float) -> None:
-    """Aim the default camera at `center` from about 3 radii away (meshcat's camera frame is y-up)."""
+    """Aim the default camera at `center` so a sphere of `radius` fills the view (meshcat's 75 degree vertical field
+    of view; its camera frame is y-up), seen from the front right and above."""
     c = np.asarray(center, dtype=np.float64)
     vis["/Cameras/default"].set_transform(tf.translation_matrix(c))
-    d = 3.0 * max(float(radius), 0.01)
-    vis["/Cameras/default/rotated/<object>"].set_property("position", [0.8 * d, 0.6 * d, 0.8 * d])
+    d = 1.5 * max(float(radius), 1e-3) / np.sin(np.radians(37.5))
+    direction = np.array([0.75, 0.55, 0.65])  # x, y-up, z of meshcat's rotated camera frame
+    pos = d * direction / np.linalg.norm(direction)
+    vis["/Cameras/default/rotated/<object>"].set_property("position", pos.tolist())
+
+
+def frame_points(vis: meshcat.Visualizer, points: np.ndarray) -> None:
+    """Frame the camera on everything in `points` (vertices, positions): their bounding sphere fills the view."""
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    frame_camera(vis, (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2)
 
 
 def static_html(vis: meshcat.Visualizer, out: str | Path) -> Path:
@@ -166,7 +232,7 @@ def grasp_scene(obj: ObjectModel, gripper: Gripper, poses: np.ndarray, widths: n
     show_mesh(vis, "object", obj.mesh, color=GREY)
     show_points(vis, "com", obj.com[None], color=0xFF0000, size=0.006)
     show_grippers(vis, "grasps", gripper, poses, widths, colors=GREEN, opacity=0.25, limit=limit)
-    frame_camera(vis, obj.mesh.bounds.mean(axis=0), float(obj.mesh.scale) + 0.1)
+    frame_points(vis, obj.mesh.bounds)
     return static_html(vis, out)
 
 

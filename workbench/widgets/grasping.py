@@ -4,6 +4,7 @@ these classes only read widgets, call the library and draw with `workbench.viewe
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 
 import ipywidgets as W
@@ -32,28 +33,34 @@ class GraspExplorer:
         self.base = params  # parameters without a widget (merge_angle, parallel_angle, com_max, seed, ...) stay as given
         self.vis = vis if vis is not None else viz.new_scene()
         self.plan: GraspPlan | None = None
-        self.tau = W.FloatSlider(value=np.degrees(params.tau), min=2, max=45, step=1, description="tau (deg)")
+        label = {"style": {"description_width": "initial"}, "layout": W.Layout(width="430px")}
+        self.tau = W.FloatSlider(value=np.degrees(params.tau), min=2, max=45, step=1,
+                                 description="segmentation threshold τ (deg)", **label)
         self.method = W.ToggleButtons(options=[("over-segmentation", "over"), ("conventional", "conventional")],
                                       value=params.segmentation)
         self.density = W.FloatLogSlider(value=params.density or 8.0 / params.neighbour_radius**2, base=10, min=3, max=6,
-                                        description="samples/m²")
+                                        description="sampling density (samples/m²)", **label)
         self.dist = W.FloatRangeSlider(value=(params.dist_min * 1e3, params.dist_max * 1e3), min=0, max=50, step=0.5,
-                                       description="boundary (mm)")
-        self.radius = W.FloatSlider(value=params.neighbour_radius * 1e3, min=0, max=30, step=0.5, description="nbr r (mm)")
-        self.rotations = W.IntSlider(value=params.rotations, min=1, max=24, description="rotations")
-        self.facet = W.IntSlider(value=0, min=0, max=0, description="facet")
-        self.layers = {name: W.Checkbox(value=on, description=name, indent=False) for name, on in (
-            ("facets", True), ("all samples", False), ("after neighbour filter", False), ("after distance filter", True),
-            ("contact pairs", True), ("collided hands", False), ("free hands", True))}
+                                       description="distance to facet boundary (mm)", **label)
+        self.radius = W.FloatSlider(value=params.neighbour_radius * 1e3, min=0, max=30, step=0.5,
+                                    description="near-neighbour radius (mm)", **label)
+        self.rotations = W.IntSlider(value=params.rotations, min=1, max=24, description="hand rotations per pair", **label)
+        self.facet = W.IntSlider(value=0, min=0, max=0, description="highlighted facet", **label)
+        self.hands = W.IntSlider(value=3, min=0, max=max_hands, description="free hands drawn", **label)
+        self.layers = {name: W.Checkbox(value=on, description=name, indent=False, layout=W.Layout(width="auto", margin="0 14px 0 0"))
+                       for name, on in (("facets", True), ("all samples", False), ("after neighbour filter", False),
+                                        ("after distance filter", True), ("contact pairs", True), ("collided hands", False))}
         self.button = W.Button(description="plan grasps", button_style="primary")
         self.counts = W.HTML()
+        self.key = W.HTML()
         self.button.on_click(lambda _: self.run())
         self.facet.observe(lambda _: self.draw_facet(), names="value")
+        self.hands.observe(lambda _: self.draw(), names="value")
         for box in self.layers.values():
             box.observe(lambda _: self.draw(), names="value")
         self.widget = W.VBox([W.HBox([self.tau, self.method]), W.HBox([self.density, self.radius]),
                               W.HBox([self.dist, self.rotations]), W.HBox(list(self.layers.values())),
-                              W.HBox([self.button, self.facet]), self.counts])
+                              W.HBox([self.button, self.facet, self.hands]), self.key, self.counts])
 
     def params(self) -> GraspParams:
         """The given parameters with the widgets' values; the others are kept."""
@@ -97,24 +104,35 @@ class GraspExplorer:
             viz.show_segments(vis, "grasps/pairs/level1", p.point0[dead], p.point1[dead], viz.RED)
         if on["collided hands"]:
             viz.show_grippers(vis, "grasps/hands/collided", self.gripper, plan.candidate_poses[~plan.candidate_free],
-                              p.width[plan.candidate_pair[~plan.candidate_free]], viz.RED, 0.15, self.max_hands // 2)
-        if on["free hands"]:
-            g = plan.grasps
-            viz.show_grippers(vis, "grasps/hands/free", self.gripper, g.poses, g.jawwidth, viz.GREEN, 0.3, self.max_hands)
+                              p.width[plan.candidate_pair[~plan.candidate_free]], viz.RED, 0.12, self.hands.value)
+        g = plan.grasps
+        shown = min(self.hands.value, len(g.poses))
+        if shown:  # a few hands, evenly picked, light and translucent: the part stays visible
+            viz.show_grippers(vis, "grasps/hands/free", self.gripper, g.poses, g.jawwidth, viz.GREEN, 0.12, shown)
         self.draw_facet()
-        viz.frame_camera(vis, mesh.bounds.mean(axis=0), float(mesh.scale) + 0.1)
+        viz.frame_points(vis, mesh.bounds)
+        self.key.value = viz.legend(
+            [(viz.HIGHLIGHT, f"facet {self.facet.value} (slider)"), (viz.GREEN, "its samples kept / contact pairs kept"),
+             (viz.WHITE, "its samples removed by the distance filter"), (viz.RED, "pairs removed by the swept-pad check"),
+             (viz.BLUE, "samples after the neighbour filter"),
+             (0x88CC99, f"free hands: {shown} drawn of {len(g.poses):,}")],
+            "colour key:") + "<small>other facets: one colour each (over-segmentation) on the part</small>"
 
     def draw_facet(self) -> None:
-        """One facet in orange with its samples: kept by the distance filter (green) or removed (white)."""
+        """The slider's facet in magenta, lifted off the surface, with its samples: kept by the distance filter
+        (green) or removed (white)."""
         plan = self.plan
         if plan is None or len(plan.facets) == 0:
             return
         f = self.facet.value
         tris = plan.facets.triangles_of(f)
         sub = trimesh.Trimesh(self.obj.mesh.vertices, self.obj.mesh.faces[tris], process=False)
-        normal = plan.facets.normals[f]
-        viz.show_mesh(self.vis, "grasps/facet/mesh", sub.copy().apply_translation(1e-4 * normal), color=viz.ORANGE)
+        lift = 0.004 * float(self.obj.mesh.scale) * np.asarray(plan.facets.normals[f])
+        viz.show_mesh(self.vis, "grasps/facet/mesh", sub.copy().apply_translation(lift), color=viz.HIGHLIGHT)
         s = plan.samples
         mine = s.pair_facet == f
-        viz.show_points(self.vis, "grasps/facet/kept", s.points[s.pair_sample[mine & s.pair_ok]], viz.GREEN, 0.005)
-        viz.show_points(self.vis, "grasps/facet/removed", s.points[s.pair_sample[mine & ~s.pair_ok]], viz.WHITE, 0.005)
+        size = 0.02 * float(self.obj.mesh.scale)
+        viz.show_points(self.vis, "grasps/facet/kept", s.points[s.pair_sample[mine & s.pair_ok]] + 2 * lift, viz.GREEN, size)
+        viz.show_points(self.vis, "grasps/facet/removed", s.points[s.pair_sample[mine & ~s.pair_ok]] + 2 * lift, viz.WHITE, size)
+        if self.key.value:
+            self.key.value = re.sub(r"facet \d+ \(slider\)", f"facet {f} (slider)", self.key.value)
