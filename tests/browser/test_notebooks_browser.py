@@ -298,7 +298,7 @@ def pick_option(page, label: str, index: int = 1) -> None:
 # One move per notebook: something a person would try first. Notebooks not listed get the first slider moved.
 MOVES = {
     "01": lambda page: move_slider(page, "highlighted facet", 3),
-    "02": lambda page: move_slider(page, "placement"),
+    "02": lambda page: move_slider(page, "selected placement"),
     "03": lambda page: move_slider(page, "feasible grip"),
     "04": lambda page: pick_option(page, "animate", 1),
     "05": lambda page: move_slider(page, "switch"),

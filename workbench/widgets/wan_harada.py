@@ -27,7 +27,8 @@ from workbench.robots.gripper import Gripper
 from workbench.robots.ik import KINDS
 from workbench.robots.model import Robot
 from workbench.viewer import scenes as viz
-from workbench.viewer.robot import RobotView
+from workbench.viewer.robot import FEASIBLE_ALL, FEASIBLE_GRASP, INFEASIBLE, RobotView
+from workbench.viewer.robot import show_roadmap as show_ik_roadmap
 from workbench.viewer.scenes import frame_camera, new_scene, show_mesh, table_mesh
 from workbench.viewer.wan_harada import scene_table, show_plan, show_roadmap
 from workbench.widgets.grasping import counts_table
@@ -147,23 +148,35 @@ class RegraspExplorer:
 
 class IKBrowser:
     """The robot at the feasible tabletop grips: a slider over them, a choice of grasp / handx / handxworldz, and the
-    object at the grip's placement. `widget` holds the ipywidgets."""
+    object at the grip's placement. `widget` holds the ipywidgets; `set_rows` switches robot and rows in place."""
 
     def __init__(self, vis: meshcat.Visualizer, robot: Robot, rows: dict[str, np.ndarray], obj_mesh, kind: str = "visual"):
-        import ipywidgets as w
-
-
-        self.vis, self.robot, self.rows, self.mesh = vis, robot, rows, obj_mesh
-        self.view = RobotView(vis, robot, "robot", kind)
-        self.feasible = np.flatnonzero(np.asarray(rows["feasible"])[:, 0])
-        self.slider = w.IntSlider(min=0, max=max(len(self.feasible) - 1, 0), value=0, description="feasible grip",
-                                  continuous_update=False, layout=w.Layout(width="520px"))
-        self.kind = w.ToggleButtons(options=list(KINDS), value="grasp")
-        self.label = w.HTML()
+        self.vis, self.kind_meshes = vis, kind
+        self.slider = W.IntSlider(min=0, max=0, value=0, description="feasible grip", continuous_update=False,
+                                  style={"description_width": "initial"}, layout=W.Layout(width="520px"))
+        self.kind = W.ToggleButtons(options=list(KINDS), value="grasp")
+        self.label = W.HTML()
+        self.key = W.HTML(viz.legend([(FEASIBLE_ALL, "feasible at all five poses"),
+                                      (FEASIBLE_GRASP, "grasp only"), (INFEASIBLE, "grasp out of reach or in collision"),
+                                      (0x4477CC, "the part at the grip's placement"), (0xC8A878, "table")],
+                                     "colour key (points: tabletop grips' TCPs):"))
         self.slider.observe(lambda _: self.update(), names="value")
         self.kind.observe(lambda _: self.update(), names="value")
-        self.widget = w.VBox([w.HBox([self.slider, self.kind]), self.label])
-        self._show_mesh = show_mesh
+        self.widget = W.VBox([W.HBox([self.slider, self.kind]), self.key, self.label])
+        self.view = None
+        self.set_rows(robot, rows, obj_mesh)
+
+    def set_rows(self, robot: Robot, rows: dict[str, np.ndarray], obj_mesh) -> None:
+        """Show another robot's (or object's) IK rows: the roadmap points, the robot, the camera framed on both."""
+        self.robot, self.rows, self.mesh = robot, rows, obj_mesh
+        self.vis["robot"].delete()
+        self.view = RobotView(self.vis, robot, "robot", self.kind_meshes)
+        show_ik_roadmap(self.vis, rows)
+        self.feasible = np.flatnonzero(np.asarray(rows["feasible"])[:, 0])
+        self.slider.value = 0
+        self.slider.max = max(len(self.feasible) - 1, 0)
+        tcp = np.asarray(rows["rotmat"])[:, :3, 3]
+        viz.frame_points(self.vis, np.vstack([tcp, robot.base[:3, 3][None]]))
         self.update()
 
     def update(self) -> int | None:
@@ -178,9 +191,10 @@ class IKBrowser:
         if not ok:
             q = self.rows["joints"][i, 0]
         self.view.show(q, float(self.rows["jawwidth"][i]) if k == 0 else None)
-        self._show_mesh(self.vis, "object", self.mesh, color=0x4477CC, pose=self.rows["placement_rotmat"][i])
-        self.label.value = (f"tabletop grip {int(self.rows['idtabletopgrips'][i])}, free-air grasp {int(self.rows['idfreeairgrip'][i])}, "
-                            f"position {np.round(self.rows['tabletopposition'][i][:2], 3).tolist()} m; {self.kind.value}: "
+        show_mesh(self.vis, "object", self.mesh, color=0x4477CC, pose=self.rows["placement_rotmat"][i])
+        self.label.value = (f"{self.robot.name}: tabletop grip {int(self.rows['idtabletopgrips'][i])}, free-air grasp "
+                            f"{int(self.rows['idfreeairgrip'][i])}, position "
+                            f"{np.round(self.rows['tabletopposition'][i][:2], 3).tolist()} m; {self.kind.value}: "
                             f"{'feasible' if ok else 'infeasible (showing the grasp)'}; q = {np.round(q, 3).tolist()}")
         return i
 
@@ -188,6 +202,7 @@ class IKBrowser:
 def plot_feasibility(rows: dict[str, np.ndarray], title: str = ""):
     """Feasible counts per placement (tabletop placement's free placement and angle) and per grid position."""
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     f = np.asarray(rows["feasible"], dtype=bool)
     fig, ax = plt.subplots(1, 2, figsize=(11, 3.6))
@@ -204,8 +219,9 @@ def plot_feasibility(rows: dict[str, np.ndarray], title: str = ""):
     ax[0].bar(np.arange(n), total, color="#dddddd", label="tabletop grips")
     ax[0].bar(np.arange(n), grasp, color="#e8b400", label="IK feasible (grasp)")
     ax[0].bar(np.arange(n), both, color="#33aa55", label="at all five poses (retractions, lifts)")
-    ax[0].set(xlabel="placement x rotation", ylabel="grips", title="per placement and angle (summed over positions)")
-    ax[0].legend(fontsize=8)
+    ax[0].set(xlabel="placement x rotation (group)", ylabel="grips", title="per placement and angle (summed over positions)")
+    ax[0].xaxis.set_major_locator(MaxNLocator(integer=True))  # groups are whole numbers
+    ax[0].legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.22), ncol=3, frameon=False)
     xs, ix = np.unique(pos[:, 0], return_inverse=True)
     ys, iy = np.unique(pos[:, 1], return_inverse=True)
     cnt = np.zeros((len(xs), len(ys)))
@@ -234,19 +250,23 @@ class PlacementExplorer:
         self.vis = vis if vis is not None else viz.new_scene()
         self.base, self.base_grid = params, tabletop  # parameters without a widget stay as given
         t = tabletop
-        self.stability = W.FloatSlider(value=params.min_stability, min=0, max=1.5, step=0.01, description="min stability")
-        self.angles = W.IntSlider(value=t.angles, min=1, max=16, description="rotations")
-        self.nx = W.IntSlider(value=t.nx, min=1, max=15, description="grid x")
-        self.ny = W.IntSlider(value=t.ny, min=1, max=15, description="grid y")
-        self.which = W.IntSlider(value=0, min=0, max=0, description="placement")
+        label = {"style": {"description_width": "initial"}, "layout": W.Layout(width="400px")}
+        self.stability = W.FloatSlider(value=params.min_stability, min=0, max=1.5, step=0.01,
+                                       description="minimum stability (margin / COM height)", **label)
+        self.angles = W.IntSlider(value=t.angles, min=1, max=16, description="rotations per position", **label)
+        self.nx = W.IntSlider(value=t.nx, min=1, max=15, description="table grid positions along x", **label)
+        self.ny = W.IntSlider(value=t.ny, min=1, max=15, description="table grid positions along y", **label)
+        self.which = W.IntSlider(value=0, min=0, max=0, description="selected placement", **label)
+        self.hands = W.IntSlider(value=min(8, max_hands), min=0, max=max_hands, description="grips drawn", **label)
         self.roadmap = W.Checkbox(value=True, description="whole tabletop roadmap", indent=False)
+        self.key = W.HTML()
         self.info = W.HTML()
         for w in (self.stability,):
             w.observe(lambda _: self.run(), names="value")
-        for w in (self.angles, self.nx, self.ny, self.which, self.roadmap):
+        for w in (self.angles, self.nx, self.ny, self.which, self.hands, self.roadmap):
             w.observe(lambda _: self.draw(), names="value")
-        self.widget = W.VBox([W.HBox([self.stability, self.which]), W.HBox([self.nx, self.ny, self.angles]),
-                              self.roadmap, self.info])
+        self.widget = W.VBox([W.HBox([self.stability, self.which]), W.HBox([self.nx, self.ny]),
+                              W.HBox([self.angles, self.hands]), self.roadmap, self.key, self.info])
         self.placements = None
 
     def grid(self) -> TabletopParams:
@@ -284,8 +304,10 @@ class PlacementExplorer:
         ring = pl.supports[k] + show_at[:3, 3] + [0, 0, 1e-4]
         viz.show_segments(vis, "placements/selected/support", ring, np.roll(ring, -1, axis=0), viz.RED)
         grips = show_at @ pl.poses[k] @ self.grasp_poses
-        viz.show_grippers(vis, "placements/selected/grips", self.gripper, grips, self.grasp_widths,
-                          np.where(self.ok[k], viz.GREEN, viz.RED), 0.25, self.max_hands)
+        shown = min(self.hands.value, len(grips))
+        if shown:
+            viz.show_grippers(vis, "placements/selected/grips", self.gripper, grips, self.grasp_widths,
+                              np.where(self.ok[k], viz.GREEN, viz.RED), 0.15, shown)
         if self.roadmap.value:
             hull = self.obj.mesh.convex_hull
             colors = viz.palette(len(pl))
@@ -293,7 +315,14 @@ class PlacementExplorer:
                 parts = [hull.copy().apply_transform(m) for m in tt.poses[tt.placement == p]]
                 viz.show_mesh(vis, f"placements/roadmap/{p}", trimesh.util.concatenate(parts), color=int(colors[p]),
                               opacity=1.0 if p == k else 0.15)
-        viz.frame_camera(vis, np.array([(grid.x_min + grid.x_max) / 2 - 0.1, 0.0, 0.0]), 0.3)
+        corners = np.array([[grid.x_min, grid.y_min, 0.0], [grid.x_max, grid.y_max, 0.0]])
+        viz.frame_points(vis, np.vstack([corners, trimesh.transform_points(self.obj.mesh.bounds, pose)]))
+        self.key.value = viz.legend(
+            [(0xE0C040, f"placement {k} beside the table"), (viz.RED, "its support polygon"),
+             (viz.GREEN, "grips kept above the table"), (viz.RED, "grips hitting the table"),
+             (0x8B6B4A, "table")], "colour key:") + \
+            f"<small>{shown} of {len(grips):,} grips drawn; on the table, the roadmap: every placement's convex hull " \
+            f"at each grid position and rotation, one colour per placement, the selected one opaque</small>"
         counts["selected stability"] = f"{pl.stability[k]:.3f}"
         counts["selected grips kept / collided"] = f"{int(self.ok[k].sum())} / {int((~self.ok[k]).sum())}"
         self.info.value = counts_table(counts, "placements and the tabletop roadmap")
