@@ -10,6 +10,8 @@ as ghosts, intermediate placements as faint outlines.
 
 from __future__ import annotations
 
+import html
+import json
 from pathlib import Path
 
 import meshcat
@@ -20,7 +22,7 @@ import trimesh
 from workbench.planners.wan_harada.plans import inverse_pose
 from workbench.viewer.robot import RobotView
 from workbench.viewer.scenes import (
-    frame_camera,
+    frame_points,
     new_scene,
     palette,
     show_mesh,
@@ -33,7 +35,7 @@ OBJECT_COLOR, START_COLOR, GOAL_COLOR, TABLE_COLOR = 0xE0A030, 0xF0D040, 0x3366D
 
 def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int = 5, jaw_open: float = 0.08) -> list[dict]:
     """The animation as a list of frames: joint vector `q`, jaw opening, whether the object is held, its pose when
-    resting, and the grasp (TCP in the object frame) when held."""
+    resting, the grasp (TCP in the object frame) when held, and the plan step playing (-1 before the first)."""
     out: list[dict] = []
     steps = plan.steps
     if not steps:
@@ -43,12 +45,13 @@ def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int
 
     def line(q0: np.ndarray, q1: np.ndarray, n: int, jaw: float) -> None:
         for t in np.linspace(0.0, 1.0, n + 1)[1:]:
-            out.append({"q": (1 - t) * q0 + t * q1, "jaw": jaw, "held": held, "rest": rest, "grasp": grasp})
+            out.append({"q": (1 - t) * q0 + t * q1, "jaw": jaw, "held": held, "rest": rest, "grasp": grasp, "step": k})
 
-    out.append({"q": q, "jaw": jaw_open, "held": False, "rest": rest, "grasp": grasp})
-    for s in steps:  # the step's waypoints in order (PlanStep.waypoints): the part only moves vertically near the table
+    k = -1  # the plan step playing, recorded in every frame
+    out.append({"q": q, "jaw": jaw_open, "held": False, "rest": rest, "grasp": grasp, "step": k})
+    for k, s in enumerate(steps):  # waypoints in order (PlanStep.waypoints): the part moves vertically near the table
         wps = s.waypoints()
-        for k, wp in enumerate(wps):
+        for n_wp, wp in enumerate(wps):
             qw = np.asarray(wp.q, dtype=np.float64)
             if wp.holding != held:  # the hand closes on the part (or opens) at the grasp configuration
                 if wp.holding:
@@ -58,9 +61,9 @@ def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int
                     held, rest = False, np.asarray(s.object_pose, dtype=np.float64)
                     jaws = np.linspace(s.jawwidth, jaw_open, frames_jaw)
                 for w in jaws:
-                    out.append({"q": qw, "jaw": float(w), "held": held, "rest": rest, "grasp": grasp})
+                    out.append({"q": qw, "jaw": float(w), "held": held, "rest": rest, "grasp": grasp, "step": k})
                 continue
-            line(q, qw, frames_move if k == 0 else frames_line, s.jawwidth if held else jaw_open)
+            line(q, qw, frames_move if n_wp == 0 else frames_line, s.jawwidth if held else jaw_open)
             q = qw
     return out
 
@@ -100,6 +103,13 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
     return anim
 
 
+def frame_plan(vis: meshcat.Visualizer, plan, robot) -> None:
+    """Camera on the robot's base and every pose the part takes (start, placements, goal), with the arm's height."""
+    pts = [plan.start_pose[:3, 3], plan.goal_pose[:3, 3], robot.base[:3, 3], robot.base[:3, 3] + [0, 0, 0.8]]
+    pts += [np.asarray(s.object_pose)[:3, 3] for s in plan.steps]
+    frame_points(vis, np.array(pts))
+
+
 def scene_table(planner) -> tuple:
     """(table_min, table_max, thickness) of the planner's scene."""
     s = planner.scene
@@ -112,17 +122,37 @@ def plan_scene(plan, planner, out: str | Path | None = None, vis: meshcat.Visual
     (returns its path), else the visualizer is returned. `kind`: the robot's collision meshes (a file of a few MB)
     or its visual meshes (nicer, about 15 MB for the Panda)."""
     if vis is None:
-        import contextlib
-        import io
-
-        with contextlib.redirect_stdout(io.StringIO()):  # meshcat prints its (temporary) server's URL
-            vis = new_scene()
+        vis = new_scene()
     show_plan(vis, plan, planner.robot, planner.object.mesh, scene_table(planner), kind=kind)
-    pts = np.array([plan.start_pose[:3, 3], plan.goal_pose[:3, 3], planner.robot.base[:3, 3]])
-    frame_camera(vis, pts.mean(axis=0) + [0, 0, 0.15], 0.3)
+    frame_plan(vis, plan, planner.robot)
     if out is None:
         return vis
-    return static_html(vis, out)
+    path = static_html(vis, out)
+    frames = keyframes(plan, jaw_open=planner.robot.gripper.jaw_max)
+    page = path.read_text()
+    path.write_text(page.replace("</body>", plan_overlay(plan, [f["step"] for f in frames]) + "</body>", 1))
+    return path
+
+
+def plan_overlay(plan, frame_steps: list[int], fps: int = 30) -> str:
+    """HTML for a static plan page: a colour key (top left) and a caption naming the step playing (bottom), read
+    from the meshcat animation's clock (`viewer.animator`)."""
+    legend = "".join(f"<span style='margin-right:12px;white-space:nowrap'><span style='display:inline-block;width:11px;"
+                     f"height:11px;margin-right:4px;border:1px solid #555;background:#{c:06x}'></span>{t}</span>"
+                     for c, t in ((OBJECT_COLOR, "the part"), (START_COLOR, "start pose"), (GOAL_COLOR, "goal pose"),
+                                  (0x999999, "intermediate placements"), (TABLE_COLOR, "table")))
+    captions = ["start: the part at its start pose, the robot at its first retract configuration"] + [
+        f"step {i + 1} of {len(plan.steps)}: {' '.join(line.split('. ', 1)[-1].split())}"
+        for i, line in enumerate(plan.lines()[:len(plan.steps)])]
+    data = json.dumps({"steps": [s + 1 for s in frame_steps], "captions": captions, "fps": fps})
+    box = "position:fixed;left:0;background:rgba(255,255,255,.88);font:14px sans-serif;padding:6px 12px;z-index:10"
+    return (f"<div id='wb-legend' style='{box};top:0'>{legend}</div>"
+            f"<div id='wb-caption' style='{box};bottom:0;right:0;font-size:15px'>{html.escape(captions[0])}</div>"
+            "<script>(function () { var d = " + data + ", el = document.getElementById('wb-caption');"
+            " function tick() { var a = window.viewer && viewer.animator && viewer.animator.actions[0];"
+            " var f = a ? Math.min(Math.floor(a.time * d.fps + 1e-6), d.steps.length - 1) : 0;"
+            " var t = d.captions[d.steps[Math.max(f, 0)]]; if (el.textContent !== t) el.textContent = t;"
+            " requestAnimationFrame(tick); } tick(); })();</script>")
 
 
 def show_roadmap(vis: meshcat.Visualizer, planner, result=None, path: str = "roadmap", limit: int = 20000) -> dict:

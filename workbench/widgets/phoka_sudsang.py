@@ -36,20 +36,27 @@ class FingersExplorer:
         self.result: QueryResult | None = None
         self._grasps: np.ndarray | None = None
         n = len(self.contacts)
-        self.k = W.IntSlider(value=min(params.k, n), min=4, max=min(120, n), description="clusters k")
-        self.mu = W.FloatSlider(value=params.mu, min=0.05, max=1.0, step=0.05, description="friction μ")
-        self.sides = W.IntSlider(value=params.sides, min=3, max=16, description="pyramid m")
-        self.seed = W.IntText(value=params.seed, description="seed")
+        label = {"style": {"description_width": "initial"}, "layout": W.Layout(width="380px")}
+        self.k = W.IntSlider(value=min(params.k, n), min=4, max=min(120, n), description="clusters k", **label)
+        self.mu = W.FloatSlider(value=params.mu, min=0.05, max=1.0, step=0.05, description="friction coefficient μ", **label)
+        self.sides = W.IntSlider(value=params.sides, min=3, max=16, description="friction pyramid sides m", **label)
+        self.seed = W.IntText(value=params.seed, description="seed", style={"description_width": "initial"},
+                              layout=W.Layout(width="160px"))
         self.build_button = W.Button(description="build roadmap", button_style="primary")
         self.query_button = W.Button(description="random query")
-        self.step = W.IntSlider(value=0, min=0, max=0, description="switch")
+        self.step = W.IntSlider(value=0, min=0, max=0, description="switch", **label)
+        self.key = W.HTML(viz.legend([(vf.FINGER, "finger on a contact"), (vf.PLACED, "finger just placed"),
+                                      (vf.LIFTED, "finger just lifted (off the surface)"),
+                                      (vf.FREE, "fifth finger waiting above the part"), (vf.REP, "cluster representatives")],
+                                     "colour key:") + "<small>faces: one colour per cluster</small>")
         self.info = W.HTML()
         self.step_info = W.HTML()
         self.build_button.on_click(lambda _: self.build())
         self.query_button.on_click(lambda _: self.run_query())
         self.step.observe(lambda _: self.show_step(self.step.value), names="value")
         self.widget = W.VBox([W.HBox([self.k, self.mu]), W.HBox([self.sides, self.seed]),
-                              W.HBox([self.build_button, self.query_button, self.step]), self.info, self.step_info])
+                              W.HBox([self.build_button, self.query_button, self.step]), self.key, self.info,
+                              self.step_info])
 
     def params(self) -> ClusterParams:
         return ClusterParams(k=self.k.value, mu=self.mu.value, sides=self.sides.value, seed=self.seed.value)
@@ -68,7 +75,7 @@ class FingersExplorer:
                            f"clustering {self.planner.times['clustering']:.2f} s, roadmap {self.planner.times['roadmap']:.2f} s")
         self.vis["fingers"].delete()
         vf.show_clusters(self.vis, "fingers/clusters", self.contacts, cl.labels, cl.reps)
-        viz.frame_camera(self.vis, self.contacts.com, self.contacts.radius)
+        viz.frame_points(self.vis, self.contacts.mesh.bounds)
         self.step.max, self.step.value = 0, 0
         return self.planner
 

@@ -29,8 +29,17 @@ from workbench.robots.model import Robot
 from workbench.viewer import scenes as viz
 from workbench.viewer.robot import FEASIBLE_ALL, FEASIBLE_GRASP, INFEASIBLE, RobotView
 from workbench.viewer.robot import show_roadmap as show_ik_roadmap
-from workbench.viewer.scenes import frame_camera, new_scene, show_mesh, table_mesh
-from workbench.viewer.wan_harada import scene_table, show_plan, show_roadmap
+from workbench.viewer.scenes import legend, new_scene, show_mesh, table_mesh
+from workbench.viewer.wan_harada import (
+    GOAL_COLOR,
+    OBJECT_COLOR,
+    START_COLOR,
+    TABLE_COLOR,
+    frame_plan,
+    scene_table,
+    show_plan,
+    show_roadmap,
+)
 from workbench.widgets.grasping import counts_table
 
 
@@ -44,26 +53,38 @@ class RegraspExplorer:
         self.db, self.objects, self.tparams, self.build = Path(db), dict(objects), tparams, build
         self.vis = vis if vis is not None else new_scene()
         self.planner, self.plans, self.result = None, [], None
-        self.object = W.Dropdown(options=list(self.objects), description="object")
+        names = list(self.objects)
+        self.object = W.Dropdown(options=names, value="tube" if "tube" in names else names[0], description="object")
         self.robot = W.Dropdown(options=list(robots), description="robot")
         self.load_button = W.Button(description="build / load graph", button_style="info")
+        wide = {"style": {"description_width": "initial"}}
         self.ends = {}
         for label in ("start", "goal"):
-            self.ends[label] = (W.Dropdown(options=[], description=f"{label} pl."),
-                                W.FloatSlider(value=0.5, min=0.3, max=0.7, step=0.005, description="x (m)"),
-                                W.FloatSlider(value=0.0, min=-0.25, max=0.25, step=0.005, description="y (m)"),
-                                W.FloatSlider(value=0.0, min=-np.pi, max=np.pi, step=0.01, description="yaw (rad)"))
-        self.alternatives = W.IntSlider(value=2, min=0, max=5, description="alternatives")
+            self.ends[label] = (W.Dropdown(options=[], description=f"{label} placement", layout=W.Layout(width="200px"), **wide),
+                                W.FloatSlider(value=0.5, min=0.3, max=0.7, step=0.005, description="x (m)",
+                                              layout=W.Layout(width="300px"), **wide),
+                                W.FloatSlider(value=0.0, min=-0.25, max=0.25, step=0.005, description="y (m)",
+                                              layout=W.Layout(width="300px"), **wide),
+                                W.FloatSlider(value=0.0, min=-np.pi, max=np.pi, step=0.01, description="yaw (rad)",
+                                              layout=W.Layout(width="320px"), **wide))
+        self.alternatives = W.IntSlider(value=2, min=0, max=5, description="alternative plans", layout=W.Layout(width="300px"), **wide)
         self.full = W.Checkbox(value=False, description="evaluate every start/goal grip (not lazy)", indent=False)
+        self.nodes = W.Checkbox(value=False, description="show the graph's nodes", indent=False)
         self.plan_button = W.Button(description="search", button_style="primary")
-        self.which = W.Dropdown(options=[], description="animate")
+        self.which = W.Dropdown(options=[], description="animate", layout=W.Layout(width="300px"), **wide)
+        self.key = W.HTML(legend([(OBJECT_COLOR, "the part (animated)"), (START_COLOR, "start pose"),
+                                  (GOAL_COLOR, "goal pose"), (0x999999, "intermediate placements"), (TABLE_COLOR, "table")],
+                                 "colour key:") + "<small>graph nodes (when shown): dots at their TCPs, one grey shade per "
+                          "component; yellow: nodes the start attaches to, blue: the goal's</small>")
         self.info = W.HTML()
         self.load_button.on_click(lambda _: self.load())
         self.plan_button.on_click(lambda _: self.run())
         self.which.observe(lambda _: self.animate(), names="value")
+        self.nodes.observe(lambda _: self.vis["roadmap"].set_property("visible", bool(self.nodes.value)), names="value")
         rows = [W.HBox(list(self.ends[k])) for k in ("start", "goal")]
         self.widget = W.VBox([W.HBox([self.object, self.robot, self.load_button]), *rows,
-                              W.HBox([self.alternatives, self.full, self.plan_button, self.which]), self.info])
+                              W.HBox([self.alternatives, self.full, self.plan_button]),
+                              W.HBox([self.which, self.nodes]), self.key, self.info])
 
     def load(self):  # -> regrasp.Planner
         """Build (or reuse) the store's stages for the chosen object and robot and load the regrasp graph."""
@@ -116,8 +137,8 @@ class RegraspExplorer:
         self.vis.delete()
         show_plan(self.vis, plan, self.planner.robot, self.planner.object.mesh, scene_table(self.planner))
         attach = show_roadmap(self.vis, self.planner, self.result)
-        pts = np.array([plan.start_pose[:3, 3], plan.goal_pose[:3, 3]])
-        frame_camera(self.vis, pts.mean(axis=0) + [0, 0, 0.15], 0.3)
+        self.vis["roadmap"].set_property("visible", bool(self.nodes.value))  # node clouds hide the part: off by default
+        frame_plan(self.vis, plan, self.planner.robot)
         self.info.value = self.graph_html(attach) + self.plan_html(plan)
 
     def graph_html(self, attach: dict | None = None) -> str:
@@ -135,7 +156,9 @@ class RegraspExplorer:
                 a = attach[label]
                 rows[f"{label}: grips evaluated / feasible / all"] = f"{side.n_evaluated} / {side.n_feasible} / {len(side.grasp)}"
                 rows[f"{label}: attached nodes (transfer edges)"] = f"{len(a['nodes']):,}"
-                rows[f"{label}: components reached"] = ", ".join(map(str, a["components"])) or "none"
+                comps = list(a["components"])
+                rows[f"{label}: components reached"] = (f"{len(comps)} (component id {', '.join(map(str, comps))})"
+                                                        if comps else "0")
             html += counts_table(rows, "where start and goal attach")
         return html
 
