@@ -461,8 +461,9 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
     if pool is not None and pool.key != (robot.spec.digest, scene, opts, _mesh_key(obj_mesh)):
         raise RobotError("the IK pool was made for another robot, scene, options or object; make a new one")
     own_pool = None
+    # erased on a terminal; ended with a newline when piped, so the summary printed next starts its own line
     bar = tqdm(total=int(sum(e - s for s, e in todo)), desc=f"ik {robot.name}", unit="grip", disable=not progress,
-               leave=False, file=sys.stderr)
+               leave=not sys.stderr.isatty(), file=sys.stderr)
     try:
         if workers == 1 and pool is None:
             solver = solver or IKSolver(robot, scene, opts, obj_mesh)

@@ -462,11 +462,14 @@ class ForceClosure:
         local = combinations_array(len(ids), 4)
         cand = ids[local[table.may_span(local)]]
         if progress:
+            import sys
+
             from tqdm import tqdm
 
             out = np.zeros(len(cand), dtype=bool)
             step = 32768
-            for s in tqdm(range(0, len(cand), step), desc="force closure", unit="batch", leave=False):
+            for s in tqdm(range(0, len(cand), step), desc="force closure", unit="batch",
+                          leave=not sys.stderr.isatty(), file=sys.stderr):
                 out[s:s + step] = self._inside(cand[s:s + step])
         else:
             out = self._inside(cand)

@@ -254,6 +254,8 @@ class _NoBar:
 def _bar(progress: bool, total: int, desc: str):
     if not progress:
         return _NoBar()
+    import sys
+
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, leave=False)
+    return tqdm(total=total, desc=desc, leave=not sys.stderr.isatty(), file=sys.stderr)  # a newline when piped
