@@ -324,6 +324,9 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
         page.wait_for_timeout(1000)
         assert not shown_errors(page), f"{name}: a cell shows an error: {shown_errors(page)}"
 
+        outputs = " ".join(page.eval_on_selector_all(".jp-OutputArea-output", "els => els.map(e => e.innerText)"))
+        assert "You can open the visualizer" not in outputs, f"{name}: meshcat's server banner is printed"
+
         frames = views(page)
         before = []
         for i in range(frames.count()):
@@ -392,6 +395,8 @@ def test_plan_html_animates(browser, plan_html):
             page.wait_for_timeout(500)
             first = image(page.screenshot(path=SHOTS / "plan_html_0.png"))
         assert drawn_share(first) > MIN_DRAWN, "plan.html shows a blank scene"
+        caption = page.locator("#wb-caption")
+        assert re.match(r"(start|step \d+ of \d+): ", caption.inner_text()), "plan.html has no caption for the step playing"
         page.wait_for_timeout(1500)
         second = image(page.screenshot(path=SHOTS / "plan_html_1.png"))
         assert changed_pixels(first, second) > 200, "plan.html does not animate: two screenshots 1.5 s apart match"
