@@ -215,13 +215,17 @@ def wait_idle(page, timeout: float = 60.0) -> None:
 def shown_errors(page) -> list[str]:
     """Errors a person would see in the outputs: tracebacks and widgets that failed to display."""
     texts = page.eval_on_selector_all(".jp-OutputArea-output", "els => els.map(e => e.innerText)")
-    bad = re.compile(r"Traceback \(most recent call last\)|Error displaying widget|model not found|\w+Error: ")
+    bad = re.compile(r"Traceback \(most recent call last\)|Error displaying widget|model not found|\w+(Error|Warning): ")
     return [t.strip()[:400] for t in texts if bad.search(t)]
 
 
 def run_all(page, console: Console, name: str) -> None:
     page.locator(".jp-Notebook").first.wait_for(timeout=60_000)
     wait_idle(page, 120.0)
+    # the widget manager registers with the kernel shortly after it reports idle; widgets displayed before then
+    # show "model not found"
+    page.locator(".jp-StatusBar-TextItem", has_text=re.compile(r"\| Idle")).first.wait_for(timeout=60_000)
+    page.wait_for_timeout(3000)
     if page.locator("#jp-left-stack").is_visible():  # the file browser takes width the notebook can use
         page.locator("li.lm-TabBar-tab.lm-mod-current[data-id='filebrowser']").click()
     dialog = page.locator(".jp-Dialog", has_text="Select Kernel")
@@ -290,9 +294,8 @@ def move_slider(page, label: str, steps: int = 1) -> None:
         handle.press("ArrowRight")
 
 
-def pick_option(page, label: str, index: int = 1) -> None:
-    box = page.locator(".widget-dropdown", has=page.locator(".widget-label", has_text=re.compile("^" + re.escape(label))))
-    box.first.locator("select").select_option(index=index)
+def click(page, text: str) -> None:
+    page.locator(".jp-OutputArea-output button", has_text=re.compile("^" + re.escape(text) + "$")).first.click()
 
 
 # One move per notebook: something a person would try first. Notebooks not listed get the first slider moved.
@@ -300,16 +303,25 @@ MOVES = {
     "01": lambda page: move_slider(page, "highlighted facet", 3),
     "02": lambda page: move_slider(page, "selected placement"),
     "03": lambda page: move_slider(page, "feasible grip"),
-    "04": lambda page: pick_option(page, "animate", 1),
+    "04": lambda page: (move_slider(page, "x (m)", 4), click(page, "search")),  # the view animates anyway: numbers
     "05": lambda page: move_slider(page, "switch"),
 }
 
 
-def default_move(page) -> None:
-    handle = page.locator(".jp-OutputArea-output .noUi-handle").first
-    handle.scroll_into_view_if_needed()
-    handle.focus()
-    handle.press("ArrowRight")
+def default_move(page) -> bool:
+    """Notebooks without a listed move: nudge the first slider, else pick another entry of the first dropdown
+    with a choice. False when the notebook has neither."""
+    handle = page.locator(".jp-OutputArea-output .noUi-handle")
+    if handle.count():
+        handle.first.scroll_into_view_if_needed()
+        handle.first.focus()
+        handle.first.press("ArrowRight")
+        return True
+    for select in page.locator(".jp-OutputArea-output .widget-dropdown select").all():
+        if select.locator("option").count() > 1:
+            select.select_option(index=1)
+            return True
+    return False
 
 
 def check_notebook(browser, lab: Lab, path: Path) -> None:
@@ -340,10 +352,11 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
 
         text_before = numbers(page)
         move = MOVES.get(stem[:2])
-        if move is None and page.locator(".jp-OutputArea-output .noUi-handle").count() == 0:
-            print(f"{name}: no slider to move")
+        if move is not None:
+            move(page)
+        if move is None and not default_move(page):
+            print(f"{name}: no slider or dropdown to move")
         else:
-            (move or default_move)(page)
             wait_idle(page, 120.0)
             deadline = time.monotonic() + 20
             changed = False

@@ -70,8 +70,8 @@ def view(vis: meshcat.Visualizer, height: int = 460):
 
     port = urlparse(vis.url()).port
     page = _VIEW_PAGE.replace("PORT", json.dumps(int(port)))
-    return HTML(f'<iframe srcdoc="{html.escape(page, quote=True)}" class="workbench-view" '
-                f'style="width:100%;height:{int(height)}px;border:1px solid #ddd;resize:vertical"></iframe>')
+    return HTML(f'<div class="workbench-view"><iframe srcdoc="{html.escape(page, quote=True)}" '
+                f'style="width:100%;height:{int(height)}px;border:1px solid #ddd;resize:vertical"></iframe></div>')
 
 
 def legend(items: list[tuple[int, str]], title: str = "") -> str:
