@@ -204,7 +204,7 @@ def frame_camera(vis: meshcat.Visualizer, center: np.ndarray, radius: float) -> 
     of view; its camera frame is y-up), seen from the front right and above."""
     c = np.asarray(center, dtype=np.float64)
     vis["/Cameras/default"].set_transform(tf.translation_matrix(c))
-    d = 1.5 * max(float(radius), 1e-3) / np.sin(np.radians(37.5))
+    d = 1.1 * max(float(radius), 1e-3) / np.sin(np.radians(37.5))
     direction = np.array([0.75, 0.55, 0.65])  # x, y-up, z of meshcat's rotated camera frame
     pos = d * direction / np.linalg.norm(direction)
     vis["/Cameras/default/rotated/<object>"].set_property("position", pos.tolist())

@@ -97,6 +97,12 @@ class RegraspExplorer:
         for label in ("start", "goal"):
             self.ends[label][0].options = ids
         self.ends["goal"][0].value = ids[-1]
+        # framed now, before a view of the scene opens (a view replays the camera it finds; later moves may not apply)
+        (x0, y0), (x1, y1), _ = scene_table(self.planner)
+        if self.tparams is not None:
+            x0, x1, y0, y1 = self.tparams.x_min, self.tparams.x_max, self.tparams.y_min, self.tparams.y_max
+        base = self.planner.robot.base[:3, 3]
+        viz.frame_points(self.vis, np.array([base, base + [0, 0, 0.6], [x0, y0, 0], [x1, y1, 0]]))
         self.info.value = self.graph_html()
         return self.planner
 
