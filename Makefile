@@ -30,7 +30,7 @@ test: $(TESTDEPS)
 	$(BIN)/python -m pytest -q -p no:cacheprovider --nbmake tests notebooks
 
 lab: $(RUNTIME)
-	$(BIN)/jupyter lab $(LAB_ROOT) notebooks/
+	$(BIN)/jupyter lab $(LAB_ROOT) --ContentsManager.pre_save_hook=workbench.widgets.saving.strip_widget_views notebooks/
 
 bench: $(RUNTIME)
 	$(BIN)/workbench bench grasps

@@ -113,7 +113,8 @@ def lab(tmp_path_factory) -> Lab:
                JUPYTERLAB_SETTINGS_DIR=str(root / "settings"), JUPYTERLAB_WORKSPACES_DIR=str(root / "workspaces"))
     cmd = [sys.executable, "-m", "jupyter", "lab", "--no-browser", "--ip=127.0.0.1", f"--port={port}",
            "--ServerApp.port_retries=0", f"--IdentityProvider.token={token}", f"--ServerApp.root_dir={root}",
-           "--LabApp.news_url=", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate"]
+           "--LabApp.news_url=", "--LabApp.check_for_updates_class=jupyterlab.NeverCheckForUpdate",
+           "--ContentsManager.pre_save_hook=workbench.widgets.saving.strip_widget_views"]  # as `make lab` does
     if os.geteuid() == 0:
         cmd.append("--allow-root")
     log = open(root / "jupyter.log", "w")

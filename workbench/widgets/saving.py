@@ -1,0 +1,23 @@
+"""A Jupyter server save hook: notebooks are saved without widget views and widget state.
+
+A saved widget view points at a model that lives only in the kernel that made it; reopened later, JupyterLab shows
+"Error displaying widget: model not found". `make lab` starts JupyterLab with
+`--ContentsManager.pre_save_hook=workbench.widgets.saving.strip_widget_views`, so autosave keeps every other output
+(text, plots, the 3D views' HTML) and drops only those.
+"""
+
+from __future__ import annotations
+
+WIDGET_VIEW = "application/vnd.jupyter.widget-view+json"
+
+
+def strip_widget_views(model: dict, **kwargs) -> dict:
+    """Remove widget-view outputs and saved widget state from a notebook model about to be saved (in place)."""
+    if model.get("type") != "notebook" or not isinstance(model.get("content"), dict):
+        return model
+    nb = model["content"]
+    nb.get("metadata", {}).pop("widgets", None)
+    for cell in nb.get("cells", []):
+        if cell.get("cell_type") == "code":
+            cell["outputs"] = [o for o in cell.get("outputs", []) if WIDGET_VIEW not in o.get("data", {})]
+    return model
