@@ -104,7 +104,23 @@ def write_lab_settings(settings: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def lab(tmp_path_factory) -> Lab:
+def demo(tmp_path_factory):
+    """`workbench demo` started in the background (it runs while the notebooks are driven; plan_html waits)."""
+    out = tmp_path_factory.mktemp("demo")
+    exe = Path(sys.executable).parent / "workbench"
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "workbench.cli"]
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
+    with open(out / "demo.log", "w") as log:  # a file, not a pipe: a full pipe would stall the demo
+        proc = subprocess.Popen(cmd + ["demo", "--out", str(out), "--workers", "1"], env=env, stdout=log,
+                                stderr=subprocess.STDOUT)
+        yield proc, out
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+
+
+@pytest.fixture(scope="module")
+def lab(tmp_path_factory, demo) -> Lab:
     root = tmp_path_factory.mktemp("lab")
     shutil.copytree(ROOT / "notebooks", root / "notebooks", ignore=shutil.ignore_patterns(".ipynb_checkpoints"))
     write_lab_settings(root / "settings")
@@ -384,13 +400,10 @@ def test_notebook_in_browser(browser, lab, path):
 
 
 @pytest.fixture(scope="module")
-def plan_html(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("demo")
-    exe = Path(sys.executable).parent / "workbench"
-    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "workbench.cli"]
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")])))
-    run = subprocess.run(cmd + ["demo", "--out", str(out)], env=env, capture_output=True, text=True)
-    assert run.returncode == 0, f"workbench demo failed: {run.stdout[-1500:]}{run.stderr[-1500:]}"
+def plan_html(demo) -> Path:
+    proc, out = demo
+    proc.wait(timeout=600)
+    assert proc.returncode == 0, f"workbench demo failed: {(out / 'demo.log').read_text()[-2000:]}"
     assert (out / "plan.html").is_file(), f"workbench demo wrote no plan.html in {out}"
     return out / "plan.html"
 

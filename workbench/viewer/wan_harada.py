@@ -105,7 +105,7 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
 
 def frame_plan(vis: meshcat.Visualizer, plan, robot) -> None:
     """Camera on the robot's base and every pose the part takes (start, placements, goal), with the arm's height."""
-    pts = [plan.start_pose[:3, 3], plan.goal_pose[:3, 3], robot.base[:3, 3], robot.base[:3, 3] + [0, 0, 0.8]]
+    pts = [plan.start_pose[:3, 3], plan.goal_pose[:3, 3], robot.base[:3, 3], robot.base[:3, 3] + [0, 0, 0.4]]
     pts += [np.asarray(s.object_pose)[:3, 3] for s in plan.steps]
     frame_points(vis, np.array(pts))
 
