@@ -18,6 +18,7 @@ import meshcat.geometry as g
 import meshcat.transformations as tf
 import numpy as np
 import trimesh
+from IPython.display import HTML
 
 from workbench.geometry.objects import ObjectModel
 from workbench.robots.gripper import Gripper
@@ -63,11 +64,9 @@ overflow:hidden}</style></head><body><div id="pane"></div><script>
 </script></body></html>"""
 
 
-def view(vis: meshcat.Visualizer, height: int = 460):
+def view(vis: meshcat.Visualizer, height: int = 460) -> HTML:
     """The live scene as a notebook output (an IPython HTML object): works on a remote JupyterLab through the Jupyter
     server's proxy; the meshcat server itself listens on 127.0.0.1 only."""
-    from IPython.display import HTML
-
     port = urlparse(vis.url()).port
     page = _VIEW_PAGE.replace("PORT", json.dumps(int(port)))
     return HTML(f'<div class="workbench-view"><iframe srcdoc="{html.escape(page, quote=True)}" '
