@@ -346,6 +346,8 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
     context = browser.new_context(viewport={"width": 1400, "height": 1000})
     page = context.new_page()
     console = Console(page)
+    sockets: list[str] = []
+    page.on("websocket", lambda ws: sockets.append(ws.url))
     try:
         # a workspace of its own: only this notebook open (JupyterLab would reopen the previous tabs)
         page.goto(f"{lab.url}lab/workspaces/{stem}/tree/notebooks/{name}?reset&token={lab.token}")
@@ -363,6 +365,9 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
             before.append(img)
             frames.nth(i).screenshot(path=SHOTS / f"{stem}_view{i}.png")
             assert drawn_share(img) > MIN_DRAWN, f"{name}: meshcat view {i} is blank"
+        if frames.count():  # the views reach meshcat through the Jupyter server, as from another machine
+            proxied = [u for u in sockets if "/proxy/" in u]
+            assert proxied, f"{name}: no view connected through the Jupyter server's proxy (sockets: {sockets})"
         for i, out in enumerate(page.locator(".jp-OutputArea-output:has(.jupyter-widgets)").all()):
             out.scroll_into_view_if_needed()
             out.screenshot(path=SHOTS / f"{stem}_widgets{i}.png")
