@@ -55,6 +55,9 @@ class TableExplorer:
         r = self.run
         self.cls.options = [(f"G{i} {c.kind} ({c.opening * 1000:.0f} mm)", i) for i, c in enumerate(r.classes)]
         self.place.options = [(f"P{j}", j) for j in range(len(r.table.placements))]
+        for box in (self.cls, self.place):  # the view opens on the first class and placement, not empty
+            if box.value is None and box.options:
+                box.index = 0
         fig = table_figure(r.table, r.classes)
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=90, bbox_inches="tight")
@@ -74,6 +77,9 @@ class TableExplorer:
         c = r.classes[i]
         show_class(self.vis, r.obj.mesh, c, r.gripper, th, pose=np.array([[1, 0, 0, 0.0], [0, 1, 0, -0.3], [0, 0, 1, 0.2], [0, 0, 0, 1]]))
         legal = show_conjunction(self.vis, r.obj.mesh, r.table, r.classes, i, r.gripper, j, th, ph)
+        size = float(r.obj.mesh.scale)  # camera on the part beside the table and the part at the table point
+        x, y = self.params.table_point
+        viewer.frame_points(self.vis, np.array([[0, -0.3, 0.2], [x, y, 0.0]]) + [[-size, -size, -size], [size, size, size]])
         self.info.value = (f"G{i}: {c.kind}, opening {c.opening * 1000:.1f} mm, e = {c.eccentricity * 1000:.1f} mm, legal theta "
                            f"{np.degrees(c.legal_range):.0f} deg; (theta, phi) in Q_{i}{j}: <b>{'yes' if legal else 'no'}</b>")
         return legal
