@@ -1,0 +1,382 @@
+"""The catalogue's driver: schedules units on a Dask cluster, resumes by digest, is the single store writer (issue 15).
+
+Units: one per part (grasps, placements, tabletop grips; Wan & Harada Sections III-IV), one per chunk of a part's
+tabletop grips and robot (IK with retractions, Section IV), one per part and robot (the regrasp graph's size,
+Section V). Workers return Arrow tables; the driver writes each finished unit and its `catalog_unit` row in one
+transaction through the stage writers of `workbench.store`, so a unit is stored whole or not at all. Units whose
+digest is stored are skipped, so a re-run after a crash computes only the rest. A task on a worker that dies is
+rescheduled by the Dask scheduler on another worker; a unit that raises (a broken mesh) is recorded as failed with
+its one-line reason and the others go on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+import pyarrow as pa
+
+from ..errors import RobotError, WorkbenchError
+from ..grasps import GraspParams
+from ..gripper import franka_hand
+from ..kinematics import Collider, IKOptions, check_poses, chunk_bounds, default_scene, neighbour_order
+from ..placements import PlacementParams
+from ..robots import Robot, get_robot
+from ..store import Store
+from ..store import catalog as sql
+from ..store.grasps import load_grasps, save_grasps
+from ..store.objects import get_object, put_object
+from ..store.placements import (load_free_tabletop_grips, load_placements, load_tabletop_grips, save_placements,
+                                save_tabletop)
+from ..store.plans import roadmap_rows
+from ..store.robots import insert_ik, prepare_run, stored_grips
+from ..tabletop import TabletopParams
+from .units import graph_unit, ik_unit, part_from_tables, part_unit, table_arrays
+
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
+HANDX, WORLDZ = 0.05, 0.10
+
+
+class CatalogError(WorkbenchError):
+    """Bad input to `workbench catalog` (no parts, unknown robot, bad chunk size)."""
+
+
+@dataclass(frozen=True)
+class CatalogParams:
+    """Every parameter of a catalogue build; `ik_chunk` tabletop grips per IK unit (a multiple of `ik.lane`, so the
+    rows equal those of a serial run whatever the chunk)."""
+
+    grasps: GraspParams = GraspParams()
+    placements: PlacementParams = PlacementParams()
+    tabletop: TabletopParams = TabletopParams()
+    ik: IKOptions = IKOptions()
+    handx: float = HANDX
+    worldz: float = WORLDZ
+    ik_chunk: int = 1024
+    scale: float | None = None
+    units: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.ik_chunk < 1 or self.ik_chunk % max(1, self.ik.lane):
+            raise CatalogError(f"IK chunk must be a positive multiple of the IK lane ({self.ik.lane}), got {self.ik_chunk}")
+        for label, v in (("handx", self.handx), ("worldz", self.worldz)):
+            if not (np.isfinite(v) and v >= 0):
+                raise CatalogError(f"--{label} must be a distance >= 0 m, got {v}")
+
+    def part_dict(self) -> dict:
+        return {"grasps": self.grasps.as_dict(), "placements": self.placements.as_dict(), "tabletop": self.tabletop.as_dict(),
+                "scale": self.scale, "units": self.units}
+
+
+@dataclass
+class CatalogResult:
+    """What a build did: the summary rows (parts x robots), failures, units computed and skipped, seconds of wall
+    time, of worker compute per unit kind and of driver writes, and rows written."""
+
+    rows: list[dict]
+    failures: list[dict]
+    computed: dict = field(default_factory=lambda: {"part": 0, "ik": 0, "graph": 0})
+    skipped: int = 0
+    wall: float = 0.0
+    compute: dict = field(default_factory=lambda: {"part": 0.0, "ik": 0.0, "graph": 0.0})
+    write_seconds: float = 0.0
+    rows_written: int = 0
+    workers: int = 0
+    dashboard: str = ""
+
+
+def collect_parts(paths: Sequence[str | Path]) -> list[Path]:
+    """Mesh files given directly or found (not recursively) in the given folders, sorted within each folder."""
+    out: list[Path] = []
+    for p in map(Path, paths):
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in MESH_SUFFIXES and q.is_file())
+            if not found:
+                raise CatalogError(f"folder {p} holds no mesh files ({', '.join(MESH_SUFFIXES)})")
+            out.extend(found)
+        else:
+            out.append(p)  # a missing or broken file is reported as that part's failure
+    if not out:
+        raise CatalogError("no parts given: pass mesh files or folders of them")
+    stems = [p.stem for p in out]
+    dup = sorted({s for s in stems if stems.count(s) > 1})
+    if dup:
+        raise CatalogError(f"several parts are named {', '.join(dup)} (the file name is the part's name); rename them")
+    return out
+
+
+def parse_robots(text: str | Sequence[str]) -> dict[str, Robot]:
+    """Robots by name from 'panda,ur5' (built-in names or URDF paths are handled by `get_robot`)."""
+    names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
+    if not names:
+        raise CatalogError("--robots needs at least one robot name, e.g. panda,ur5")
+    robots = {}
+    for n in names:
+        robot = get_robot(n)
+        hit = Collider(robot, default_scene(robot.name), None).fixed_parts_hit_table()
+        if hit:
+            raise RobotError(f"the fixed links ({', '.join(hit[:3])}) of robot {robot.name!r} cut into the default table")
+        robots[robot.name] = robot
+    return robots
+
+
+def _digest(*parts: object) -> str:
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+
+def _file_digest(path: Path) -> str:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return "unreadable"
+
+
+def one_line(exc: BaseException) -> str:
+    """A failure's one-line reason: the message of a WorkbenchError, else the exception type and first line."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if isinstance(exc, WorkbenchError):
+        return text
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+class _Build:
+    """The state of one build: the store, the client, what is stored, what runs."""
+
+    def __init__(self, store: Store, client, robots: dict[str, Robot], params: CatalogParams, progress: bool,
+                 on_unit: Callable[[str, dict], None] | None):
+        from distributed import as_completed
+        from tqdm.auto import tqdm
+
+        self.store, self.client, self.robots, self.params = store, client, robots, params
+        self.on_unit = on_unit
+        self.done = sql.done_units(store)
+        self.pending: dict = {}  # future -> unit dict
+        self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not stored yet
+        self.runs: dict[tuple[str, str], dict] = {}
+        self.ac = as_completed()
+        self.result = CatalogResult(rows=[], failures=[])
+        self.bar = tqdm(total=0, desc="catalog", unit="unit", disable=not progress, dynamic_ncols=True)
+        self.hand = franka_hand()
+
+    # -- scheduling --------------------------------------------------------------------------------------------
+    def _count(self, n: int = 1) -> None:
+        self.bar.total += n
+        self.bar.refresh()
+
+    def _skip(self) -> None:
+        self.result.skipped += 1
+        self._count()
+        self.bar.update(1)
+
+    def _submit(self, unit: dict, fn, *args) -> None:
+        key = f"{unit['kind']}-{unit['part']}-{unit.get('robot') or ''}-{unit.get('chunk') or 0}-{unit['digest'][:12]}"
+        fut = self.client.submit(fn, *args, key=key, pure=False)
+        self.pending[fut] = unit
+        self.ac.add(fut)
+        self._count()
+
+    def submit_part(self, path: Path) -> None:
+        p = self.params
+        digest = _digest("part", _file_digest(path), path.stem, p.part_dict())
+        unit = {"digest": digest, "kind": "part", "part": path.stem, "source": str(path)}
+        if digest in self.done:
+            self._skip()
+            self.schedule_robots(self.done[digest])
+            return
+        self._submit(unit, part_unit, str(path), path.stem, p.scale, p.units, p.grasps, p.placements, p.tabletop)
+
+    def schedule_robots(self, part: dict) -> None:
+        """IK chunk units of a stored part for every robot (and the graph units of runs already complete)."""
+        from ..commands.ik import scene_params
+
+        p = self.params
+        grips = load_tabletop_grips(self.store, part["idobject"], part["idtabletop"])
+        _, obj = get_object(self.store, part["part"])
+        n = len(grips["idtabletopgrips"])
+        order = neighbour_order(grips)
+        poses = check_poses(grips["rotmat"])
+        places = check_poses(grips["placement_rotmat"], "object placement")
+        ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
+        verts, faces = np.asarray(obj.mesh.vertices, dtype=np.float64), np.asarray(obj.mesh.faces, dtype=np.int64)
+        for name, robot in self.robots.items():
+            scene = default_scene(robot.name)
+            sp = scene_params(robot, scene, p.ik)
+            rid, sid, kid = prepare_run(self.store, robot, sp, p.handx, p.worldz)
+            run = {"part": part["part"], "robot": name, "idobject": part["idobject"], "idtabletop": part["idtabletop"],
+                   "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "idrobot": rid, "idscene": sid,
+                   "idikret": kid, "source": part.get("source"),
+                   "base": _digest(part["digest"], robot.spec.digest, sp, p.handx, p.worldz, p.ik_chunk)}
+            run["stored"] = stored_grips(self.store, rid, sid, kid)
+            self.runs[(part["part"], name)] = run
+            left = 0
+            for k, (s, e) in enumerate(chunk_bounds(n, p.ik_chunk)):
+                unit = {**_unit_ids(run), "kind": "ik", "chunk": k, "digest": _digest(run["base"], "ik", k, n)}
+                if unit["digest"] in self.done:
+                    self._skip()
+                    continue
+                ix = order[s:e]
+                left += 1
+                self._submit(unit, ik_unit, robot.spec, scene, p.ik, p.handx, p.worldz, obj.digest, verts, faces,
+                             ids[ix], poses[ix], places[ix])
+            self.left[(part["part"], name)] = left
+            if left == 0:
+                self.schedule_graph(run)
+
+    def schedule_graph(self, run: dict) -> None:
+        unit = {**_unit_ids(run), "kind": "graph", "digest": _digest(run["base"], "graph")}
+        if unit["digest"] in self.done:
+            self._skip()
+            return
+        rows = roadmap_rows(self.store, run["idtabletop"], run["idrobot"], run["idscene"], run["idikret"], 0)
+        feasible = rows.pop("feasible")
+        rows.pop("joints")
+        self._submit(unit, graph_unit, rows, feasible)
+
+    # -- writing -------------------------------------------------------------------------------------------------
+    def write(self, unit: dict, tables) -> None:
+        t0 = time.perf_counter()
+        kind = unit["kind"]
+        if kind == "part":
+            self.write_part(unit, tables)
+        elif kind == "ik":
+            self.write_ik(unit, tables)
+        else:
+            self.write_graph(unit, tables)
+        dt = time.perf_counter() - t0
+        self.result.write_seconds += dt
+        self.result.rows_written += int(unit.get("nrows") or 0)
+        self.result.computed[kind] += 1
+        self.result.compute[kind] += float(unit.get("seconds") or 0.0)
+        self.bar.update(1)
+        if self.result.write_seconds > 0:
+            self.bar.set_postfix_str(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written", refresh=False)
+        if self.on_unit is not None:
+            self.on_unit(kind, unit)
+
+    def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> None:
+        res = part_from_tables(tables)
+        p = self.params
+        unit.update(seconds=sum(res.seconds.values()), worker=tables["meta"].column("worker")[0].as_py())
+        with sql.unit_transaction(self.store, unit):
+            oid = put_object(self.store, res.obj)
+            gid, _ = save_grasps(self.store, oid, self.hand, p.grasps, res.grasps)
+            grasps = load_grasps(self.store, oid, gid)
+            pid = save_placements(self.store, oid, gid, p.placements, res.placements, grasps, res.ftg)
+            fp_ids = load_placements(self.store, pid)["idfreetabletopplacement"]
+            ftg = load_free_tabletop_grips(self.store, pid)
+            tid = save_tabletop(self.store, oid, pid, p.tabletop, res.tabletop, ftg, fp_ids)
+            tt = res.tabletop
+            counts = {"grasps": len(res.grasps), "placements": len(res.placements), "free_tabletop_grips": len(res.ftg[0]),
+                      "tabletop_placements": len(tt.placement), "tabletop_grips": len(tt.grip_tp),
+                      "seconds": res.seconds}
+            unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts,
+                        nrows=1 + len(res.grasps) + len(res.placements) + len(res.ftg[0]) + len(tt.placement) + len(tt.grip_tp))
+        self.done[unit["digest"]] = unit
+        self.schedule_robots(unit)
+
+    def write_ik(self, unit: dict, table: pa.Table) -> None:
+        cols = table_arrays(table)
+        meta = table.schema.metadata or {}
+        run = self.runs[(unit["part"], unit["robot"])]
+        ids, feas, joints = cols["idtabletopgrips"], cols["feasible"], cols["joints"]
+        todo = ~np.isin(ids, run["stored"])  # rows a `workbench ik` run already stored are kept, not duplicated
+        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode())
+        with sql.unit_transaction(self.store, unit):
+            n = insert_ik(self.store, unit["idrobot"], unit["idscene"], unit["idikret"], ids[todo], feas[todo], joints[todo])
+            unit.update(nrows=n, counts={"grips": int(len(ids)), "feasible": int(feas[:, 0].sum()),
+                                         "feasible_all": int(feas.all(axis=1).sum())})
+        key = (unit["part"], unit["robot"])
+        self.left[key] -= 1
+        if self.left[key] == 0:
+            self.schedule_graph(run)
+
+    def write_graph(self, unit: dict, table: pa.Table) -> None:
+        meta = table.schema.metadata or {}
+        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode())
+        with sql.unit_transaction(self.store, unit):
+            unit.update(counts={k: v[0] for k, v in table.to_pydict().items()}, nrows=0)
+
+    def fail(self, unit: dict, exc: BaseException) -> None:
+        reason = one_line(exc)
+        sql.record_failure(self.store, unit, reason)
+        self.bar.update(1)
+        if unit["kind"] == "ik":  # the part's other chunks go on; its graph waits for a re-run
+            self.left[(unit["part"], unit["robot"])] = -1
+
+    # -- the loop ------------------------------------------------------------------------------------------------
+    def run(self, parts: Sequence[Path]) -> None:
+        for path in parts:
+            self.submit_part(path)
+        for fut in self.ac:
+            unit = self.pending.pop(fut)
+            if fut.status == "error" or fut.status == "cancelled":
+                exc = fut.exception() if fut.status == "error" else RuntimeError("task cancelled")
+                self.fail(unit, exc)
+                continue
+            try:
+                self.write(unit, fut.result())
+            except WorkbenchError as exc:  # the part's rows conflict with the store (e.g. same name, other mesh)
+                self.fail(unit, exc)
+            fut.release()
+        self.bar.close()
+
+
+def _unit_ids(run: dict) -> dict:
+    return {k: run[k] for k in ("part", "robot", "source", "idobject", "idgrasps", "idplacements", "idtabletop", "idrobot",
+                                "idscene", "idikret")}
+
+
+def build_catalog(parts: Sequence[str | Path], robots: str | Sequence[str], db: str | Path, client,
+                  params: CatalogParams = CatalogParams(), progress: bool = True,
+                  on_unit: Callable[[str, dict], None] | None = None) -> CatalogResult:
+    """Build (or finish) the catalogue of `parts` x `robots` in the store `db` on the Dask `client`; returns the
+    summary. Stored units are skipped; each finished unit is written in one transaction."""
+    paths = collect_parts(parts)
+    robot_models = parse_robots(robots)
+    t0 = time.perf_counter()
+    with Store(db) as store:
+        sql.ensure_catalog_tables(store)
+        build = _Build(store, client, robot_models, params, progress, on_unit)
+        try:
+            build.run(paths)
+        finally:
+            for fut in list(build.pending):
+                fut.cancel()
+        res = build.result
+        res.wall = time.perf_counter() - t0
+        res.rows = sql.summary(store)
+        res.failures = sql.failures(store)
+    res.workers = len(client.scheduler_info().get("workers", {}))
+    res.dashboard = client.dashboard_link or ""
+    return res
+
+
+def report(db: str | Path) -> tuple[list[dict], list[dict]]:
+    """The stored catalogue's summary rows and failures (for `workbench catalog report`)."""
+    with Store(db, read_only=True) as store:
+        try:
+            return sql.summary(store), sql.failures(store)
+        except Exception as exc:
+            if "catalog_unit" in str(exc):
+                raise CatalogError(f"store {db} holds no catalogue; build one with `workbench catalog build`") from None
+            raise
+
+
+SUMMARY_HEADERS = ("part", "robot", "grasps", "placements", "tabletop grips", "IK-feasible", "components", "time s")
+
+
+def summary_table(rows: list[dict]) -> list[tuple]:
+    """Rows for printing: part, robot, grasps, placements, tabletop grips, share of grips feasible with both
+    retractions, graph components, seconds of worker time (part stages + the robot's IK and graph)."""
+    out = []
+    for r in rows:
+        share = f"{r['ik_feasible'] / r['tabletop_grips']:.1%}" if r["tabletop_grips"] and r["robot"] else "-"
+        comps = r["graph"].get("components", "-") if r["robot"] else "-"
+        t = (r["part_seconds"] or 0.0) + (r["ik_seconds"] or 0.0) + (r["graph_seconds"] or 0.0)
+        out.append((r["part"], r["robot"] or "-", r["grasps"], r["placements"], r["tabletop_grips"], share, comps, round(t, 2)))
+    return out
