@@ -24,6 +24,7 @@ import pyarrow as pa
 from ..errors import RobotError, WorkbenchError
 from ..grasps import GraspParams
 from ..gripper import franka_hand
+from ..objects import ObjectModel
 from ..kinematics import Collider, IKOptions, check_poses, chunk_bounds, default_scene, neighbour_order
 from ..placements import PlacementParams
 from ..robots import Robot, get_robot
@@ -86,24 +87,27 @@ class CatalogResult:
     compute: dict = field(default_factory=lambda: {"part": 0.0, "ik": 0.0, "graph": 0.0})
     write_seconds: float = 0.0
     rows_written: int = 0
+    batches: int = 0
     workers: int = 0
     dashboard: str = ""
 
 
-def collect_parts(paths: Sequence[str | Path]) -> list[Path]:
-    """Mesh files given directly or found (not recursively) in the given folders, sorted within each folder."""
-    out: list[Path] = []
-    for p in map(Path, paths):
+def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> list[tuple[Path, float | None]]:
+    """(mesh file, scale or None) for mesh files given directly or found (not recursively) in the given folders,
+    sorted within each folder; an entry may be a (path, scale) pair to override the build's scale for it."""
+    out: list[tuple[Path, float | None]] = []
+    for item in paths:
+        p, scale = (Path(item[0]), float(item[1])) if isinstance(item, tuple) else (Path(item), None)
         if p.is_dir():
             found = sorted(q for q in p.iterdir() if q.suffix.lower() in MESH_SUFFIXES and q.is_file())
             if not found:
                 raise CatalogError(f"folder {p} holds no mesh files ({', '.join(MESH_SUFFIXES)})")
-            out.extend(found)
+            out.extend((q, scale) for q in found)
         else:
-            out.append(p)  # a missing or broken file is reported as that part's failure
+            out.append((p, scale))  # a missing or broken file is reported as that part's failure
     if not out:
         raise CatalogError("no parts given: pass mesh files or folders of them")
-    stems = [p.stem for p in out]
+    stems = [p.stem for p, _ in out]
     dup = sorted({s for s in stems if stems.count(s) > 1})
     if dup:
         raise CatalogError(f"several parts are named {', '.join(dup)} (the file name is the part's name); rename them")
@@ -180,23 +184,26 @@ class _Build:
         self.ac.add(fut)
         self._count()
 
-    def submit_part(self, path: Path) -> None:
+    def submit_part(self, path: Path, scale: float | None) -> None:
         p = self.params
-        digest = _digest("part", _file_digest(path), path.stem, p.part_dict())
+        units = p.units if scale is None else None
+        scale = p.scale if scale is None else scale
+        digest = _digest("part", _file_digest(path), path.stem, {**p.part_dict(), "scale": scale, "units": units})
         unit = {"digest": digest, "kind": "part", "part": path.stem, "source": str(path)}
         if digest in self.done:
             self._skip()
             self.schedule_robots(self.done[digest])
             return
-        self._submit(unit, part_unit, str(path), path.stem, p.scale, p.units, p.grasps, p.placements, p.tabletop)
+        self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop)
 
-    def schedule_robots(self, part: dict) -> None:
+    def schedule_robots(self, part: dict, obj: ObjectModel | None = None) -> None:
         """IK chunk units of a stored part for every robot (and the graph units of runs already complete)."""
         from ..commands.ik import scene_params
 
         p = self.params
         grips = load_tabletop_grips(self.store, part["idobject"], part["idtabletop"])
-        _, obj = get_object(self.store, part["part"])
+        if obj is None:
+            _, obj = get_object(self.store, part["part"])
         n = len(grips["idtabletopgrips"])
         order = neighbour_order(grips)
         poses = check_poses(grips["rotmat"])
@@ -238,30 +245,25 @@ class _Build:
         self._submit(unit, graph_unit, rows, feasible)
 
     # -- writing -------------------------------------------------------------------------------------------------
-    def write(self, unit: dict, tables) -> None:
-        t0 = time.perf_counter()
+    def write_rows(self, unit: dict, result) -> Callable[[], None]:
+        """Write one unit's rows and its catalog_unit row (joining the caller's transaction); returns what to do once
+        committed (schedule the units that depend on it)."""
         kind = unit["kind"]
+        meta = (result["meta"] if kind == "part" else result).schema.metadata or {}
+        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode())
         if kind == "part":
-            self.write_part(unit, tables)
-        elif kind == "ik":
-            self.write_ik(unit, tables)
-        else:
-            self.write_graph(unit, tables)
-        dt = time.perf_counter() - t0
-        self.result.write_seconds += dt
-        self.result.rows_written += int(unit.get("nrows") or 0)
-        self.result.computed[kind] += 1
-        self.result.compute[kind] += float(unit.get("seconds") or 0.0)
-        self.bar.update(1)
-        if self.result.write_seconds > 0:
-            self.bar.set_postfix_str(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written", refresh=False)
-        if self.on_unit is not None:
-            self.on_unit(kind, unit)
+            return self.write_part(unit, result)
+        if kind == "ik":
+            return self.write_ik(unit, result)
+        with sql.unit_transaction(self.store, unit):
+            unit.update(counts={k: v[0] for k, v in result.to_pydict().items()}, nrows=0)
+        return lambda: None
 
-    def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> None:
+    def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> Callable[[], None]:
         res = part_from_tables(tables)
         p = self.params
-        unit.update(seconds=sum(res.seconds.values()), worker=tables["meta"].column("worker")[0].as_py())
+        unit["seconds"] = sum(res.seconds.values())
+        unit["worker"] = tables["meta"].column("worker")[0].as_py()
         with sql.unit_transaction(self.store, unit):
             oid = put_object(self.store, res.obj)
             gid, _ = save_grasps(self.store, oid, self.hand, p.grasps, res.grasps)
@@ -276,30 +278,57 @@ class _Build:
                       "seconds": res.seconds}
             unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts,
                         nrows=1 + len(res.grasps) + len(res.placements) + len(res.ftg[0]) + len(tt.placement) + len(tt.grip_tp))
-        self.done[unit["digest"]] = unit
-        self.schedule_robots(unit)
 
-    def write_ik(self, unit: dict, table: pa.Table) -> None:
+        def after() -> None:
+            self.done[unit["digest"]] = unit
+            self.schedule_robots(unit, res.obj)  # the mesh as stored (its digest is the stored one)
+        return after
+
+    def write_ik(self, unit: dict, table: pa.Table) -> Callable[[], None]:
         cols = table_arrays(table)
-        meta = table.schema.metadata or {}
         run = self.runs[(unit["part"], unit["robot"])]
         ids, feas, joints = cols["idtabletopgrips"], cols["feasible"], cols["joints"]
         todo = ~np.isin(ids, run["stored"])  # rows a `workbench ik` run already stored are kept, not duplicated
-        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode())
         with sql.unit_transaction(self.store, unit):
             n = insert_ik(self.store, unit["idrobot"], unit["idscene"], unit["idikret"], ids[todo], feas[todo], joints[todo])
             unit.update(nrows=n, counts={"grips": int(len(ids)), "feasible": int(feas[:, 0].sum()),
                                          "feasible_all": int(feas.all(axis=1).sum())})
-        key = (unit["part"], unit["robot"])
-        self.left[key] -= 1
-        if self.left[key] == 0:
-            self.schedule_graph(run)
 
-    def write_graph(self, unit: dict, table: pa.Table) -> None:
-        meta = table.schema.metadata or {}
-        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode())
-        with sql.unit_transaction(self.store, unit):
-            unit.update(counts={k: v[0] for k, v in table.to_pydict().items()}, nrows=0)
+        def after() -> None:
+            key = (unit["part"], unit["robot"])
+            self.left[key] -= 1
+            if self.left[key] == 0:
+                self.schedule_graph(run)
+        return after
+
+    def write_batch(self, items: list[tuple[object, dict]]) -> None:
+        """Write the units that finished together in one transaction (each unit whole, so the commit's cost is
+        shared when the writer falls behind); if one of them cannot be written, write them one by one."""
+        t0 = time.perf_counter()
+        try:
+            with self.store.transaction():
+                after = [self.write_rows(unit, fut.result()) for fut, unit in items]
+        except WorkbenchError as exc:  # the part's rows conflict with the store (e.g. same name, other mesh)
+            if len(items) > 1:
+                for item in items:
+                    self.write_batch([item])
+                return
+            self.fail(items[0][1], exc)
+            return
+        for (fut, unit), then in zip(items, after):
+            then()
+            fut.release()
+            kind = unit["kind"]
+            self.result.rows_written += int(unit.get("nrows") or 0)
+            self.result.computed[kind] += 1
+            self.result.compute[kind] += float(unit.get("seconds") or 0.0)
+            self.bar.update(1)
+            if self.on_unit is not None:
+                self.on_unit(kind, unit)
+        self.result.write_seconds += time.perf_counter() - t0
+        self.result.batches += 1
+        if self.result.write_seconds > 0:
+            self.bar.set_postfix_str(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written", refresh=False)
 
     def fail(self, unit: dict, exc: BaseException) -> None:
         reason = one_line(exc)
@@ -309,20 +338,20 @@ class _Build:
             self.left[(unit["part"], unit["robot"])] = -1
 
     # -- the loop ------------------------------------------------------------------------------------------------
-    def run(self, parts: Sequence[Path]) -> None:
-        for path in parts:
-            self.submit_part(path)
-        for fut in self.ac:
-            unit = self.pending.pop(fut)
-            if fut.status == "error" or fut.status == "cancelled":
-                exc = fut.exception() if fut.status == "error" else RuntimeError("task cancelled")
-                self.fail(unit, exc)
-                continue
-            try:
-                self.write(unit, fut.result())
-            except WorkbenchError as exc:  # the part's rows conflict with the store (e.g. same name, other mesh)
-                self.fail(unit, exc)
-            fut.release()
+    def run(self, parts: Sequence[tuple[Path, float | None]]) -> None:
+        for path, scale in parts:
+            self.submit_part(path, scale)
+        for batch in self.ac.batches():
+            items = []
+            for fut in batch:
+                unit = self.pending.pop(fut)
+                if fut.status in ("error", "cancelled"):
+                    self.fail(unit, fut.exception() if fut.status == "error" else RuntimeError("task cancelled"))
+                    fut.release()
+                else:
+                    items.append((fut, unit))
+            if items:
+                self.write_batch(items)
         self.bar.close()
 
 
@@ -331,7 +360,7 @@ def _unit_ids(run: dict) -> dict:
                                 "idscene", "idikret")}
 
 
-def build_catalog(parts: Sequence[str | Path], robots: str | Sequence[str], db: str | Path, client,
+def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]], robots: str | Sequence[str], db: str | Path, client,
                   params: CatalogParams = CatalogParams(), progress: bool = True,
                   on_unit: Callable[[str, dict], None] | None = None) -> CatalogResult:
     """Build (or finish) the catalogue of `parts` x `robots` in the store `db` on the Dask `client`; returns the
