@@ -15,7 +15,11 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from . import print_table
+from workbench.benchmarks import print_table
+from workbench.catalog.cluster import cluster_client
+from workbench.catalog.driver import CatalogParams, build_catalog
+from workbench.planners.wan_harada.tabletop import TabletopParams
+from workbench.resources import bundled_objects, paper_objects
 
 SATURATION_TARGET = 64
 
@@ -30,8 +34,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def bench_parts(which: str) -> list[tuple[Path, float]]:
     """(mesh, scale to metres) of the bundled parts and of the paper's parts (millimetres)."""
-    from ..resources import bundled_objects, paper_objects
-
     parts: list[tuple[Path, float]] = []
     if which in ("all", "bundled"):
         parts += [(p, 1.0) for p in bundled_objects().values()]
@@ -41,10 +43,6 @@ def bench_parts(which: str) -> list[tuple[Path, float]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..catalog.cluster import cluster_client
-    from ..catalog.driver import CatalogParams, build_catalog
-    from ..tabletop import TabletopParams
-
     parts = bench_parts(args.objects)
     tparams = TabletopParams() if args.full else TabletopParams(nx=3, ny=3, angles=4, max_grasps=40)
     params = CatalogParams(tabletop=tparams, ik_chunk=args.ik_chunk)

@@ -7,7 +7,7 @@ import os
 from contextlib import contextmanager
 from typing import Iterator
 
-from ..errors import WorkbenchError
+from workbench.errors import WorkbenchError
 
 
 class ClusterError(WorkbenchError):

@@ -21,23 +21,17 @@ from typing import Callable, Sequence
 import numpy as np
 import pyarrow as pa
 
-from ..errors import RobotError, WorkbenchError
-from ..grasps import GraspParams
-from ..gripper import franka_hand
-from ..objects import ObjectModel
-from ..kinematics import Collider, IKOptions, check_poses, chunk_bounds, default_scene, neighbour_order
-from ..placements import PlacementParams
-from ..robots import Robot, get_robot
-from ..store import Store
-from ..store import catalog as sql
-from ..store.grasps import load_grasps, save_grasps
-from ..store.objects import get_object, put_object
-from ..store.placements import (load_free_tabletop_grips, load_placements, load_tabletop_grips, save_placements,
-                                save_tabletop)
-from ..store.plans import roadmap_rows
-from ..store.robots import insert_ik, prepare_run, stored_grips
-from ..tabletop import TabletopParams
-from .units import graph_unit, ik_unit, part_from_tables, part_unit, table_arrays
+from workbench.catalog import stages
+from workbench.catalog.units import graph_unit, ik_unit, part_from_tables, part_unit, table_arrays
+from workbench.errors import RobotError, WorkbenchError
+from workbench.geometry.objects import ObjectModel
+from workbench.grasping.grasps import GraspParams
+from workbench.grasping.placements import PlacementParams
+from workbench.planners.wan_harada.tabletop import TabletopParams
+from workbench.robots.collider import Collider, default_scene
+from workbench.robots.gripper import franka_hand
+from workbench.robots.ik import IKOptions, check_poses, chunk_bounds, neighbour_order
+from workbench.robots.model import Robot, get_robot
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
 HANDX, WORLDZ = 0.05, 0.10
@@ -151,14 +145,14 @@ def one_line(exc: BaseException) -> str:
 class _Build:
     """The state of one build: the store, the client, what is stored, what runs."""
 
-    def __init__(self, store: Store, client, robots: dict[str, Robot], params: CatalogParams, progress: bool,
+    def __init__(self, store, client, robots: dict[str, Robot], params: CatalogParams, progress: bool,
                  on_unit: Callable[[str, dict], None] | None):
         from distributed import as_completed
         from tqdm.auto import tqdm
 
         self.store, self.client, self.robots, self.params = store, client, robots, params
         self.on_unit = on_unit
-        self.done = sql.done_units(store)
+        self.done = stages.done_units(store)
         self.pending: dict = {}  # future -> unit dict
         self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not stored yet
         self.runs: dict[tuple[str, str], dict] = {}
@@ -198,12 +192,8 @@ class _Build:
 
     def schedule_robots(self, part: dict, obj: ObjectModel | None = None) -> None:
         """IK chunk units of a stored part for every robot (and the graph units of runs already complete)."""
-        from ..commands.ik import scene_params
-
         p = self.params
-        grips = load_tabletop_grips(self.store, part["idobject"], part["idtabletop"])
-        if obj is None:
-            _, obj = get_object(self.store, part["part"])
+        grips, obj = stages.part_grips(self.store, part, obj)
         n = len(grips["idtabletopgrips"])
         order = neighbour_order(grips)
         poses = check_poses(grips["rotmat"])
@@ -212,13 +202,12 @@ class _Build:
         verts, faces = np.asarray(obj.mesh.vertices, dtype=np.float64), np.asarray(obj.mesh.faces, dtype=np.int64)
         for name, robot in self.robots.items():
             scene = default_scene(robot.name)
-            sp = scene_params(robot, scene, p.ik)
-            rid, sid, kid = prepare_run(self.store, robot, sp, p.handx, p.worldz)
+            ids_run, stored = stages.ik_run(self.store, robot, scene, p.ik, p.handx, p.worldz)
             run = {"part": part["part"], "robot": name, "idobject": part["idobject"], "idtabletop": part["idtabletop"],
-                   "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "idrobot": rid, "idscene": sid,
-                   "idikret": kid, "source": part.get("source"),
-                   "base": _digest(part["digest"], robot.spec.digest, sp, p.handx, p.worldz, p.ik_chunk)}
-            run["stored"] = stored_grips(self.store, rid, sid, kid)
+                   "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "source": part.get("source"),
+                   "idrobot": ids_run["idrobot"], "idscene": ids_run["idscene"], "idikret": ids_run["idikret"],
+                   "stored": stored, "base": _digest(part["digest"], robot.spec.digest, ids_run["scene_params"], p.handx,
+                                                     p.worldz, p.ik_chunk)}
             self.runs[(part["part"], name)] = run
             left = 0
             for k, (s, e) in enumerate(chunk_bounds(n, p.ik_chunk)):
@@ -239,9 +228,7 @@ class _Build:
         if unit["digest"] in self.done:
             self._skip()
             return
-        rows = roadmap_rows(self.store, run["idtabletop"], run["idrobot"], run["idscene"], run["idikret"], 0)
-        feasible = rows.pop("feasible")
-        rows.pop("joints")
+        rows, feasible = stages.graph_inputs(self.store, run)
         self._submit(unit, graph_unit, rows, feasible)
 
     # -- writing -------------------------------------------------------------------------------------------------
@@ -255,8 +242,7 @@ class _Build:
             return self.write_part(unit, result)
         if kind == "ik":
             return self.write_ik(unit, result)
-        with sql.unit_transaction(self.store, unit):
-            unit.update(counts={k: v[0] for k, v in result.to_pydict().items()}, nrows=0)
+        stages.write_graph(self.store, unit, {k: v[0] for k, v in result.to_pydict().items()})
         return lambda: None
 
     def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> Callable[[], None]:
@@ -264,20 +250,7 @@ class _Build:
         p = self.params
         unit["seconds"] = sum(res.seconds.values())
         unit["worker"] = tables["meta"].column("worker")[0].as_py()
-        with sql.unit_transaction(self.store, unit):
-            oid = put_object(self.store, res.obj)
-            gid, _ = save_grasps(self.store, oid, self.hand, p.grasps, res.grasps)
-            grasps = load_grasps(self.store, oid, gid)
-            pid = save_placements(self.store, oid, gid, p.placements, res.placements, grasps, res.ftg)
-            fp_ids = load_placements(self.store, pid)["idfreetabletopplacement"]
-            ftg = load_free_tabletop_grips(self.store, pid)
-            tid = save_tabletop(self.store, oid, pid, p.tabletop, res.tabletop, ftg, fp_ids)
-            tt = res.tabletop
-            counts = {"grasps": len(res.grasps), "placements": len(res.placements), "free_tabletop_grips": len(res.ftg[0]),
-                      "tabletop_placements": len(tt.placement), "tabletop_grips": len(tt.grip_tp),
-                      "seconds": res.seconds}
-            unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts,
-                        nrows=1 + len(res.grasps) + len(res.placements) + len(res.ftg[0]) + len(tt.placement) + len(tt.grip_tp))
+        stages.write_part(self.store, unit, res, self.hand, p.grasps, p.placements, p.tabletop)
 
         def after() -> None:
             self.done[unit["digest"]] = unit
@@ -288,11 +261,7 @@ class _Build:
         cols = table_arrays(table)
         run = self.runs[(unit["part"], unit["robot"])]
         ids, feas, joints = cols["idtabletopgrips"], cols["feasible"], cols["joints"]
-        todo = ~np.isin(ids, run["stored"])  # rows a `workbench ik` run already stored are kept, not duplicated
-        with sql.unit_transaction(self.store, unit):
-            n = insert_ik(self.store, unit["idrobot"], unit["idscene"], unit["idikret"], ids[todo], feas[todo], joints[todo])
-            unit.update(nrows=n, counts={"grips": int(len(ids)), "feasible": int(feas[:, 0].sum()),
-                                         "feasible_all": int(feas.all(axis=1).sum())})
+        stages.write_ik(self.store, unit, ids, feas, joints, run["stored"])
 
         def after() -> None:
             key = (unit["part"], unit["robot"])
@@ -306,7 +275,7 @@ class _Build:
         shared when the writer falls behind); if one of them cannot be written, write them one by one."""
         t0 = time.perf_counter()
         try:
-            with self.store.transaction():
+            with stages.batch(self.store):
                 after = [self.write_rows(unit, fut.result()) for fut, unit in items]
         except WorkbenchError as exc:  # the part's rows conflict with the store (e.g. same name, other mesh)
             if len(items) > 1:
@@ -332,7 +301,7 @@ class _Build:
 
     def fail(self, unit: dict, exc: BaseException) -> None:
         reason = one_line(exc)
-        sql.record_failure(self.store, unit, reason)
+        stages.record_failure(self.store, unit, reason)
         self.bar.update(1)
         if unit["kind"] == "ik":  # the part's other chunks go on; its graph waits for a re-run
             self.left[(unit["part"], unit["robot"])] = -1
@@ -368,8 +337,7 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]], robots
     paths = collect_parts(parts)
     robot_models = parse_robots(robots)
     t0 = time.perf_counter()
-    with Store(db) as store:
-        sql.ensure_catalog_tables(store)
+    with stages.open_store(db) as store:
         build = _Build(store, client, robot_models, params, progress, on_unit)
         try:
             build.run(paths)
@@ -378,8 +346,8 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]], robots
                 fut.cancel()
         res = build.result
         res.wall = time.perf_counter() - t0
-        res.rows = sql.summary(store)
-        res.failures = sql.failures(store)
+        res.rows = stages.summary(store)
+        res.failures = stages.failures(store)
     res.workers = len(client.scheduler_info().get("workers", {}))
     res.dashboard = client.dashboard_link or ""
     return res
@@ -387,13 +355,8 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]], robots
 
 def report(db: str | Path) -> tuple[list[dict], list[dict]]:
     """The stored catalogue's summary rows and failures (for `workbench catalog report`)."""
-    with Store(db, read_only=True) as store:
-        try:
-            return sql.summary(store), sql.failures(store)
-        except Exception as exc:
-            if "catalog_unit" in str(exc):
-                raise CatalogError(f"store {db} holds no catalogue; build one with `workbench catalog build`") from None
-            raise
+    with stages.open_store(db, read_only=True) as store:
+        return stages.summary(store), stages.failures(store)
 
 
 SUMMARY_HEADERS = ("part", "robot", "grasps", "placements", "tabletop grips", "IK-feasible", "components", "time s")

@@ -21,14 +21,15 @@ import numpy as np
 import pyarrow as pa
 import trimesh
 
-from ..grasps import GraspParams, GraspSet, plan_grasps
-from ..gripper import franka_hand
-from ..kinematics import IKOptions, Scene, _Solver, retract
-from ..objects import ObjectModel, load_object
-from ..placements import PlacementParams, Placements, free_tabletop_grips, stable_placements
-from ..regrasp import build_roadmap
-from ..robots import RobotSpec
-from ..tabletop import Tabletop, TabletopParams, select_grasps, tabletop
+from workbench.geometry.objects import ObjectModel, load_object
+from workbench.grasping.grasps import GraspParams, GraspSet, plan_grasps
+from workbench.grasping.placements import PlacementParams, Placements, free_tabletop_grips, stable_placements
+from workbench.planners.wan_harada.roadmap import build_roadmap
+from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams, roadmap_grips, tabletop
+from workbench.robots.collider import Scene
+from workbench.robots.gripper import franka_hand
+from workbench.robots.ik import IKOptions, IKSolver, retract
+from workbench.robots.model import RobotSpec, robot_from_spec
 
 SHAPE_KEY = b"shape"
 
@@ -100,21 +101,11 @@ def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams
     placements = stable_placements(obj, pparams)
     p_idx, g_idx, poses = free_tabletop_grips(placements, grasps.poses, hand, pparams)
     t2 = time.perf_counter()
-    keep = tabletop_keep(len(placements), p_idx, g_idx, grasps.poses, tparams)
+    keep = roadmap_grips(len(placements), p_idx, g_idx, grasps.poses, tparams)
     tt = tabletop(placements.poses, p_idx, poses, keep, tparams)
     t3 = time.perf_counter()
     return PartResult(obj, grasps, placements, (p_idx, g_idx, poses), keep, tt,
                       {"grasps": t1 - t0, "placements": t2 - t1, "tabletop": t3 - t2})
-
-
-def tabletop_keep(n_placements: int, p_idx: np.ndarray, g_idx: np.ndarray, grasp_poses: np.ndarray,
-                  tparams: TabletopParams) -> np.ndarray:
-    """Which free tabletop grips enter the roadmap: those of the `max_grasps` grasps `select_grasps` picks."""
-    grasp_ids = np.unique(g_idx)
-    usable = np.zeros((n_placements, len(grasp_ids)), dtype=bool)
-    usable[p_idx, np.searchsorted(grasp_ids, g_idx)] = True
-    chosen = grasp_ids[select_grasps(grasp_poses[grasp_ids], usable, tparams.max_grasps)]
-    return np.isin(g_idx, chosen)
 
 
 def part_unit(path: str, name: str, scale: float | None, units: str | None, gparams: GraspParams,
@@ -181,14 +172,14 @@ class SolverCache:
 
     def __init__(self, size: int = 4):
         self.size = size
-        self.solvers: dict[tuple, _Solver] = {}
+        self.solvers: dict[tuple, IKSolver] = {}
 
-    def get(self, spec: RobotSpec, scene: Scene, opts: IKOptions, mesh_digest: str, mesh: trimesh.Trimesh | None) -> _Solver:
+    def get(self, spec: RobotSpec, scene: Scene, opts: IKOptions, mesh_digest: str, mesh: trimesh.Trimesh | None) -> IKSolver:
         key = (spec.digest, scene, opts, mesh_digest)
         if key not in self.solvers:
             if len(self.solvers) >= self.size:
                 self.solvers.pop(next(iter(self.solvers)))
-            self.solvers[key] = _Solver(spec, scene, opts, mesh)
+            self.solvers[key] = IKSolver(robot_from_spec(spec), scene, opts, mesh)
         return self.solvers[key]
 
 

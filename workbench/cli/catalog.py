@@ -6,16 +6,20 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 
-from ..kinematics import IKOptions
+from workbench.benchmarks import print_table
+from workbench.catalog.cluster import cluster_client, dashboard_link
+from workbench.catalog.driver import (SUMMARY_HEADERS, CatalogParams, build_catalog, collect_parts, parse_robots, report,
+                                      summary_table)
+from workbench.cli.grasps import add_grasp_arguments, grasp_params
+from workbench.cli.placements import add_placement_arguments, placement_params
+from workbench.robots.ik import IKOptions
 
 HANDX, WORLDZ = 0.05, 0.10
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    from .grasps import add_grasp_arguments
-    from .placements import add_placement_arguments
-
     parser = sub.add_parser("catalog", help="build a parts x robots catalogue on a Dask cluster, or print one")
     inner = parser.add_subparsers(dest="action", required=True, parser_class=type(parser))
     b = inner.add_parser("build", help="compute every part's stages and every robot's IK on a local or existing cluster")
@@ -43,13 +47,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     r.set_defaults(func=run_report)
 
 
-def catalog_params(args: argparse.Namespace):
-    from dataclasses import replace
-
-    from ..catalog.driver import CatalogParams
-    from .grasps import grasp_params
-    from .placements import placement_params
-
+def catalog_params(args: argparse.Namespace) -> CatalogParams:
     pparams, tparams = placement_params(args)
     ik = replace(IKOptions(), library=args.ik_library, seeds=args.ik_seeds)
     return CatalogParams(grasps=grasp_params(args), placements=pparams, tabletop=tparams, ik=ik, handx=args.handx,
@@ -57,9 +55,6 @@ def catalog_params(args: argparse.Namespace):
 
 
 def run_build(args: argparse.Namespace) -> int:
-    from ..catalog.cluster import cluster_client, dashboard_link
-    from ..catalog.driver import build_catalog, collect_parts, parse_robots
-
     params = catalog_params(args)
     collect_parts(args.parts)  # bad input fails before a cluster starts
     parse_robots(args.robots)
@@ -76,8 +71,6 @@ def run_build(args: argparse.Namespace) -> int:
 
 
 def run_report(args: argparse.Namespace) -> int:
-    from ..catalog.driver import report
-
     rows, failures = report(args.db)
     print_summary(rows, failures)
     return 0
@@ -85,9 +78,6 @@ def run_report(args: argparse.Namespace) -> int:
 
 def print_summary(rows: list[dict], failures: list[dict]) -> None:
     """The parts x robots table, then one line per failed part or unit, or a warning when nothing is stored."""
-    from ..benchmarks import print_table
-    from ..catalog.driver import SUMMARY_HEADERS, summary_table
-
     if rows:
         print_table(SUMMARY_HEADERS, summary_table(rows))
     else:

@@ -20,7 +20,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from . import Store
+from workbench.store import Store
 
 CATALOG_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS catalog_unit (
@@ -57,6 +57,11 @@ def ensure_catalog_tables(store: Store) -> None:
     with store.transaction():
         for ddl in CATALOG_TABLES:
             store.run(ddl)
+
+
+def has_catalog(store: Store) -> bool:
+    """Whether the store holds a catalogue (its catalog_unit table)."""
+    return store.one("SELECT count(*) FROM information_schema.tables WHERE table_name = 'catalog_unit'")[0] > 0
 
 
 def done_units(store: Store) -> dict[str, dict[str, Any]]:

@@ -15,22 +15,21 @@ import pytest
 
 from workbench.catalog.cluster import cluster_client
 from workbench.catalog.driver import CatalogParams, build_catalog
-from workbench.commands.ik import run_ik
-from workbench.gripper import franka_hand
-from workbench.kinematics import IKOptions
-from workbench.objects import load_object
-from workbench.pipeline import ensure_grasps, ensure_placements
+from workbench.geometry.objects import load_object
+from workbench.planners.wan_harada.stages import ensure_grasps, ensure_placements, run_ik
+from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.resources import bundled_objects
-from workbench.robots import get_robot
+from workbench.robots.gripper import franka_hand
+from workbench.robots.ik import IKOptions
+from workbench.robots.model import get_robot
 from workbench.store import Store
 from workbench.store.catalog import ik_vectors
-from workbench.tabletop import TabletopParams
 
 ROBOTS = ("panda", "ur5")
 PARAMS = CatalogParams(tabletop=TabletopParams(x_min=0.4, x_max=0.6, nx=2, y_min=0.0, y_max=0.0, ny=1, angles=2,
                                                max_grasps=10),
                        ik=IKOptions(library=2048, seeds=2), ik_chunk=32)
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
