@@ -3,6 +3,8 @@ a worker killed by PID or a driver killed mid-run loses and duplicates nothing, 
 
 from __future__ import annotations
 
+import contextlib
+import io
 import os
 import signal
 import subprocess
@@ -15,6 +17,7 @@ import pytest
 
 from workbench.catalog.cluster import cluster_client
 from workbench.catalog.driver import CatalogParams, build_catalog
+from workbench.cli.main import main
 from workbench.geometry.objects import load_object
 from workbench.planners.wan_harada.stages import ensure_grasps, ensure_placements, run_ik
 from workbench.planners.wan_harada.tabletop import TabletopParams
@@ -161,3 +164,29 @@ def test_driver_killed_then_rerun_finishes(parts, serial, tmp_path):
     assert out.returncode == 0, out.stderr[-2000:]
     assert f"{stored} skipped" in out.stdout
     _same(_rows(db), serial)
+    rep = subprocess.run([sys.executable, "-m", "workbench.cli", "catalog", "report", "--db", str(db)], capture_output=True,
+                         text=True, env=env, timeout=120)
+    assert rep.returncode == 0, rep.stderr
+    lines = [line.split() for line in rep.stdout.splitlines()]
+    shown = {(w[0], w[1]): w for w in lines if len(w) == 8 and w[1] in ROBOTS}
+    assert set(shown) == {(p.stem, r) for p in parts[:-1] for r in ROBOTS}
+    for (part, robot), w in shown.items():  # tabletop grips and the feasible share, as stored
+        feas = serial[part, robot]
+        assert int(w[4].replace(",", "")) == len(feas) and w[5] == f"{feas.all(axis=1).mean():.1%}"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--robots", "nosuchrobot"], "nosuchrobot"),
+    (["--robots", "panda", "--ik-chunk", "30"], "multiple of the IK lane"),
+    (["--robots", "panda", "--workers", "0"], "--workers must be at least 1"),
+])
+def test_bad_input_is_one_line_and_status_2(parts, tmp_path, args, message):
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["catalog", "build", str(parts[0]), "--db", str(tmp_path / "x.duckdb"), *args])
+    assert code == 2 and message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1, err.getvalue()
+
+
+def test_report_of_a_store_without_catalogue(tmp_path):
+    Store(tmp_path / "plain.duckdb").close()
+    assert main(["catalog", "report", "--db", str(tmp_path / "plain.duckdb")]) == 2

@@ -36,7 +36,7 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, das
         finally:
             client.close()
         return
-    n = workers or os.cpu_count() or 1
+    n = (os.cpu_count() or 1) if workers is None else int(workers)
     if n < 1:
         raise ClusterError(f"--workers must be at least 1, got {workers}")
     with dask.config.set({"distributed.worker.multiprocessing-method": "spawn"}):
