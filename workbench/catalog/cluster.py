@@ -51,6 +51,12 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, das
 
 
 def dashboard_link(client) -> str:
-    """The dashboard's address, or a note when the scheduler runs none."""
+    """The dashboard's address, with a note when the scheduler serves none or bokeh is missing for its pages."""
+    import importlib.util
+
+    if "dashboard" not in client.scheduler_info().get("services", {}):
+        return "none (the scheduler runs without a dashboard)"
     link = client.dashboard_link
-    return link or "(no dashboard: install bokeh>=3.1)"
+    if importlib.util.find_spec("bokeh") is None:
+        return f"{link} (its pages need bokeh>=3.1: pip install bokeh)"
+    return link
