@@ -66,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
                      round(worker_s / r.write_seconds, 1) if r.write_seconds else "-", len(r.failures)))
     print_table(("workers", "units", "wall s", "speed-up", "worker s", "driver s", "driver share", "rows", "rows/s written",
                  "saturates at", "failed"), rows)
+    print_table(("workers", "write transactions", "decode s", "rows s", "commit s", "schedule s"),
+                [(w, r.batches, *(round(r.driver[k], 2) for k in ("decode", "rows", "commit", "schedule")))
+                 for w, r in runs.items()], title="driver time (all of it on finished units)")
     kinds = []
     for kind in ("part", "ik", "graph"):
         k = base.computed[kind]

@@ -27,6 +27,7 @@ from workbench.errors import RobotError, WorkbenchError
 from workbench.geometry.objects import ObjectModel
 from workbench.grasping.grasps import GraspParams
 from workbench.grasping.placements import PlacementParams
+from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.robots.collider import Collider, default_scene
 from workbench.robots.gripper import franka_hand
@@ -34,7 +35,6 @@ from workbench.robots.ik import IKOptions, check_poses, chunk_bounds, neighbour_
 from workbench.robots.model import Robot, get_robot
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
-HANDX, WORLDZ = 0.05, 0.10
 
 
 class CatalogError(WorkbenchError):
@@ -71,7 +71,9 @@ class CatalogParams:
 @dataclass
 class CatalogResult:
     """What a build did: the summary rows (parts x robots), failures, units computed and skipped, seconds of wall
-    time, of worker compute per unit kind and of driver writes, and rows written."""
+    time, of worker compute per unit kind and of the driver's work on finished units (`write_seconds`, split in
+    `driver`: decoding the Arrow results, writing rows, committing, scheduling the units that depend on them), rows
+    written and write transactions (`batches`)."""
 
     rows: list[dict]
     failures: list[dict]
@@ -82,6 +84,7 @@ class CatalogResult:
     write_seconds: float = 0.0
     rows_written: int = 0
     batches: int = 0
+    driver: dict = field(default_factory=lambda: {"decode": 0.0, "rows": 0.0, "commit": 0.0, "schedule": 0.0})
     workers: int = 0
     dashboard: str = ""
 
@@ -173,6 +176,7 @@ class _Build:
 
     def _submit(self, unit: dict, fn, *args) -> None:
         key = f"{unit['kind']}-{unit['part']}-{unit.get('robot') or ''}-{unit.get('chunk') or 0}-{unit['digest'][:12]}"
+        # pure=False: a retry after a crash must not reuse a result the cluster still holds under the same key
         fut = self.client.submit(fn, *args, key=key, pure=False)
         self.pending[fut] = unit
         self.ac.add(fut)
@@ -182,7 +186,8 @@ class _Build:
         p = self.params
         units = p.units if scale is None else None
         scale = p.scale if scale is None else scale
-        digest = _digest("part", _file_digest(path), path.stem, {**p.part_dict(), "scale": scale, "units": units})
+        digest = _digest("part", _file_digest(path), path.stem, self.hand.digest,
+                         {**p.part_dict(), "scale": scale, "units": units})
         unit = {"digest": digest, "kind": "part", "part": path.stem, "source": str(path)}
         if digest in self.done:
             self._skip()
@@ -246,7 +251,9 @@ class _Build:
         return lambda: None
 
     def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> Callable[[], None]:
+        t0 = time.perf_counter()
         res = part_from_tables(tables)
+        self.result.driver["decode"] += time.perf_counter() - t0
         p = self.params
         unit["seconds"] = sum(res.seconds.values())
         unit["worker"] = tables["meta"].column("worker")[0].as_py()
@@ -258,7 +265,9 @@ class _Build:
         return after
 
     def write_ik(self, unit: dict, table: pa.Table) -> Callable[[], None]:
+        t0 = time.perf_counter()
         cols = table_arrays(table)
+        self.result.driver["decode"] += time.perf_counter() - t0
         run = self.runs[(unit["part"], unit["robot"])]
         ids, feas, joints = cols["idtabletopgrips"], cols["feasible"], cols["joints"]
         stages.write_ik(self.store, unit, ids, feas, joints, run["stored"])
@@ -273,10 +282,11 @@ class _Build:
     def write_batch(self, items: list[tuple[object, dict]]) -> None:
         """Write the units that finished together in one transaction (each unit whole, so the commit's cost is
         shared when the writer falls behind); if one of them cannot be written, write them one by one."""
-        t0 = time.perf_counter()
+        t0, decode = time.perf_counter(), self.result.driver["decode"]
         try:
             with stages.batch(self.store):
                 after = [self.write_rows(unit, fut.result()) for fut, unit in items]
+                t1 = time.perf_counter()
         except WorkbenchError as exc:  # the part's rows conflict with the store (e.g. same name, other mesh)
             if len(items) > 1:
                 for item in items:
@@ -284,8 +294,12 @@ class _Build:
                 return
             self.fail(items[0][1], exc)
             return
+        t2 = time.perf_counter()
         for (fut, unit), then in zip(items, after):
-            then()
+            try:
+                then()
+            except WorkbenchError as exc:  # e.g. a part whose tabletop grips are not rigid poses: its IK cannot start
+                self.fail({**unit, "kind": "ik", "digest": unit["digest"] + "-schedule"}, exc)
             fut.release()
             kind = unit["kind"]
             self.result.rows_written += int(unit.get("nrows") or 0)
@@ -294,7 +308,12 @@ class _Build:
             self.bar.update(1)
             if self.on_unit is not None:
                 self.on_unit(kind, unit)
-        self.result.write_seconds += time.perf_counter() - t0
+        t3 = time.perf_counter()
+        d = self.result.driver
+        d["rows"] += (t1 - t0) - (d["decode"] - decode)
+        d["commit"] += t2 - t1
+        d["schedule"] += t3 - t2
+        self.result.write_seconds += t3 - t0
         self.result.batches += 1
         if self.result.write_seconds > 0:
             self.bar.set_postfix_str(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written", refresh=False)

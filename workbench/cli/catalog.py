@@ -14,9 +14,8 @@ from workbench.catalog.driver import (SUMMARY_HEADERS, CatalogParams, build_cata
                                       summary_table)
 from workbench.cli.grasps import add_grasp_arguments, grasp_params
 from workbench.cli.placements import add_placement_arguments, placement_params
+from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.robots.ik import IKOptions
-
-HANDX, WORLDZ = 0.05, 0.10
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -82,6 +81,15 @@ def print_summary(rows: list[dict], failures: list[dict]) -> None:
         print_table(SUMMARY_HEADERS, summary_table(rows))
     else:
         print("warning: the catalogue holds no finished part yet", file=sys.stderr)
+    empty = set()
+    for r in rows:
+        if (not r["grasps"] or not r["tabletop_grips"]) and r["part"] not in empty:
+            empty.add(r["part"])
+            what = "free-air grasps" if not r["grasps"] else "tabletop grips (no stable placement keeps a grasp)"
+            print(f"warning: {r['part']} has no {what}; check its size and units", file=sys.stderr)
+        elif r["part"] not in empty and r["robot"] and r["ik_rows"] and not r["ik_feasible"]:
+            print(f"warning: no tabletop grip of {r['part']} is IK-feasible for {r['robot']} with both retractions",
+                  file=sys.stderr)
     for f in failures:
         what = f["part"] if not f["robot"] else f"{f['part']} x {f['robot']} ({f['kind']})"
         print(f"failed: {what} ({f['source']}): {f['error']}")
