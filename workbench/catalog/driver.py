@@ -159,7 +159,7 @@ class _Build:
         self.pending: dict = {}  # future -> unit dict
         self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not stored yet
         self.runs: dict[tuple[str, str], dict] = {}
-        self.ac = as_completed()
+        self.ac = as_completed(with_results=True, raise_errors=False)  # results fetched in the background
         self.result = CatalogResult(rows=[], failures=[])
         self.bar = tqdm(total=0, desc="catalog", unit="unit", disable=not progress, dynamic_ncols=True)
         self.hand = franka_hand()
@@ -279,13 +279,13 @@ class _Build:
                 self.schedule_graph(run)
         return after
 
-    def write_batch(self, items: list[tuple[object, dict]]) -> None:
+    def write_batch(self, items: list[tuple[object, dict, object]]) -> None:
         """Write the units that finished together in one transaction (each unit whole, so the commit's cost is
         shared when the writer falls behind); if one of them cannot be written, write them one by one."""
         t0, decode = time.perf_counter(), self.result.driver["decode"]
         try:
             with stages.batch(self.store):
-                after = [self.write_rows(unit, fut.result()) for fut, unit in items]
+                after = [self.write_rows(unit, result) for _, unit, result in items]
                 t1 = time.perf_counter()
         except WorkbenchError as exc:  # the part's rows conflict with the store (e.g. same name, other mesh)
             if len(items) > 1:
@@ -293,9 +293,10 @@ class _Build:
                     self.write_batch([item])
                 return
             self.fail(items[0][1], exc)
+            items[0][0].release()
             return
         t2 = time.perf_counter()
-        for (fut, unit), then in zip(items, after):
+        for (fut, unit, _), then in zip(items, after):
             try:
                 then()
             except WorkbenchError as exc:  # e.g. a part whose tabletop grips are not rigid poses: its IK cannot start
@@ -331,13 +332,13 @@ class _Build:
             self.submit_part(path, scale)
         for batch in self.ac.batches():
             items = []
-            for fut in batch:
+            for fut, result in batch:
                 unit = self.pending.pop(fut)
-                if fut.status in ("error", "cancelled"):
-                    self.fail(unit, fut.exception() if fut.status == "error" else RuntimeError("task cancelled"))
+                if fut.status == "error" or isinstance(result, BaseException):
+                    self.fail(unit, result[1] if isinstance(result, tuple) else result)
                     fut.release()
                 else:
-                    items.append((fut, unit))
+                    items.append((fut, unit, result))
             if items:
                 self.write_batch(items)
         self.bar.close()
