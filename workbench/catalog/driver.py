@@ -287,7 +287,7 @@ class _Build:
             with stages.batch(self.store):
                 after = [self.write_rows(unit, result) for _, unit, result in items]
                 t1 = time.perf_counter()
-        except WorkbenchError as exc:  # the part's rows conflict with the store (e.g. same name, other mesh)
+        except Exception as exc:  # noqa: BLE001 - one part's rows that cannot be stored must not stop the others
             if len(items) > 1:
                 for item in items:
                     self.write_batch([item])

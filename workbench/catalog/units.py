@@ -47,7 +47,7 @@ def arrays_table(columns: dict[str, np.ndarray]) -> pa.Table:
             col = pa.array(arr)
             meta = None
         else:
-            flat = np.ascontiguousarray(arr.reshape(len(arr), -1))
+            flat = np.ascontiguousarray(arr.reshape(len(arr), int(np.prod(arr.shape[1:]))))
             col = pa.FixedSizeListArray.from_arrays(pa.array(flat.ravel()), flat.shape[1])
             meta = {SHAPE_KEY: json.dumps(list(arr.shape[1:])).encode()}
         arrays.append(col)

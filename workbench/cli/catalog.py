@@ -85,7 +85,8 @@ def print_summary(rows: list[dict], failures: list[dict]) -> None:
     for r in rows:
         if (not r["grasps"] or not r["tabletop_grips"]) and r["part"] not in empty:
             empty.add(r["part"])
-            what = "free-air grasps" if not r["grasps"] else "tabletop grips (no stable placement keeps a grasp)"
+            what = ("free-air grasps" if not r["grasps"] else "stable placements" if not r["placements"]
+                    else "tabletop grips (no stable placement keeps a grasp clear of the table)")
             print(f"warning: {r['part']} has no {what}; check its size and units", file=sys.stderr)
         elif r["part"] not in empty and r["robot"] and r["ik_rows"] and not r["ik_feasible"]:
             print(f"warning: no tabletop grip of {r['part']} is IK-feasible for {r['robot']} with both retractions",
