@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import trimesh
 
 from workbench.catalog.cluster import cluster_client
 from workbench.catalog.driver import CatalogParams, build_catalog
@@ -190,3 +191,14 @@ def test_bad_input_is_one_line_and_status_2(parts, tmp_path, args, message):
 def test_report_of_a_store_without_catalogue(tmp_path):
     Store(tmp_path / "plain.duckdb").close()
     assert main(["catalog", "report", "--db", str(tmp_path / "plain.duckdb")]) == 2
+
+
+def test_part_without_grasps_is_stored_with_zero_counts(client, tmp_path):
+    """A 0.3 m cube is wider than the Franka hand's 80 mm jaw: zero grasps, stable placements, no grips, no error."""
+    path = tmp_path / "bigcube.stl"
+    trimesh.creation.box((0.3, 0.3, 0.3)).export(path)
+    res = build_catalog([path], "panda", tmp_path / "z.duckdb", client, PARAMS, progress=False)
+    assert res.failures == []
+    (row,) = res.rows
+    assert (row["part"], row["robot"], row["grasps"], row["tabletop_grips"], row["ik_rows"]) == ("bigcube", "panda", 0, 0, 0)
+    assert row["placements"] == 6 and row["graph"]["nodes"] == 0
