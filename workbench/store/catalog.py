@@ -113,19 +113,21 @@ def failures(store: Store) -> list[dict[str, Any]]:
 
 
 def summary(store: Store) -> list[dict[str, Any]]:
-    """One row per stored (part, robot) of the catalogue, from the stage tables themselves: free-air grasps, stable
+    """One row per stored (part, robot) of the catalogue (the newest build of each), from the stage tables themselves: free-air grasps, stable
     placements, tabletop grips, IK rows and the share feasible with both retractions, graph components and nodes
     (from the graph unit), and seconds of worker time for the part's stages and the robot's IK and graph."""
     sql = """
-    WITH part AS (
+    WITH part AS (  -- the newest part unit of each part name (a store may hold builds with other parameters)
         SELECT part, idobject, idgrasps, idplacements, idtabletop, seconds FROM catalog_unit
-        WHERE kind = 'part' AND status = 'done'),
-    robot AS (
-        SELECT part, robot, min(idrobot) AS idrobot, min(idscene) AS idscene, min(idikret) AS idikret,
+        WHERE kind = 'part' AND status = 'done' QUALIFY row_number() OVER (PARTITION BY part ORDER BY created DESC) = 1),
+    robot AS (  -- per part, tabletop set and robot: the newest IK run (robot, scene, retractions)
+        SELECT part, robot, idtabletop, idrobot, idscene, idikret,
                sum(seconds) FILTER (WHERE kind = 'ik') AS ik_seconds,
                sum(seconds) FILTER (WHERE kind = 'graph') AS graph_seconds,
                max(counts) FILTER (WHERE kind = 'graph') AS graph
-        FROM catalog_unit WHERE kind IN ('ik', 'graph') AND status = 'done' GROUP BY part, robot)
+        FROM catalog_unit WHERE kind IN ('ik', 'graph') AND status = 'done'
+        GROUP BY part, robot, idtabletop, idrobot, idscene, idikret
+        QUALIFY row_number() OVER (PARTITION BY part, robot, idtabletop ORDER BY max(created) DESC) = 1)
     SELECT p.part, r.robot,
         (SELECT count(*) FROM freeairgrip f WHERE f.idparamset = p.idgrasps) AS grasps,
         (SELECT count(*) FROM freetabletopplacement f WHERE f.idparamset = p.idplacements) AS placements,
@@ -139,7 +141,7 @@ def summary(store: Store) -> list[dict[str, Any]]:
             AND k.idscene = r.idscene AND k.idikret = r.idikret
             AND k.feasibility AND k.feasibility_handx AND k.feasibility_handxworldz) AS ik_feasible,
         r.graph, p.seconds AS part_seconds, r.ik_seconds, r.graph_seconds
-    FROM part p LEFT JOIN robot r USING (part) ORDER BY p.part, r.robot"""
+    FROM part p LEFT JOIN robot r ON r.part = p.part AND r.idtabletop = p.idtabletop ORDER BY p.part, r.robot"""
     keys = ("part", "robot", "grasps", "placements", "tabletop_grips", "ik_rows", "ik_feasible", "graph",
             "part_seconds", "ik_seconds", "graph_seconds")
     out = []
