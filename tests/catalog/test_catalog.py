@@ -180,6 +180,7 @@ def test_driver_killed_then_rerun_finishes(parts, serial, tmp_path):
     (["--robots", "nosuchrobot"], "nosuchrobot"),
     (["--robots", "panda", "--ik-chunk", "30"], "multiple of the IK lane"),
     (["--robots", "panda", "--workers", "0"], "--workers must be at least 1"),
+    (["--robots", "panda", "--scale", "-1"], "scale must be a positive"),
 ])
 def test_bad_input_is_one_line_and_status_2(parts, tmp_path, args, message):
     err = io.StringIO()

@@ -24,7 +24,7 @@ import pyarrow as pa
 from workbench.catalog import stages
 from workbench.catalog.units import graph_unit, ik_unit, part_from_tables, part_unit, table_arrays
 from workbench.errors import RobotError, WorkbenchError
-from workbench.geometry.objects import ObjectModel
+from workbench.geometry.objects import ObjectModel, resolve_scale
 from workbench.grasping.grasps import GraspParams
 from workbench.grasping.placements import PlacementParams
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ
@@ -62,6 +62,7 @@ class CatalogParams:
         for label, v in (("handx", self.handx), ("worldz", self.worldz)):
             if not (np.isfinite(v) and v >= 0):
                 raise CatalogError(f"--{label} must be a distance >= 0 m, got {v}")
+        resolve_scale(self.scale, self.units)  # a bad scale or unit is refused before any part is loaded
 
     def part_dict(self) -> dict:
         return {"grasps": self.grasps.as_dict(), "placements": self.placements.as_dict(), "tabletop": self.tabletop.as_dict(),
