@@ -27,7 +27,7 @@ from workbench.grasping.placements import PlacementParams, Placements, free_tabl
 from workbench.planners.wan_harada.roadmap import build_roadmap
 from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams, roadmap_grips, tabletop
 from workbench.robots.collider import Scene
-from workbench.robots.gripper import franka_hand
+from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import IKOptions, IKSolver, retract
 from workbench.robots.model import RobotSpec, robot_from_spec
 
@@ -91,10 +91,11 @@ class PartResult:
     seconds: dict
 
 
-def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams, tparams: TabletopParams) -> PartResult:
+def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams, tparams: TabletopParams,
+                hand: Gripper | None = None) -> PartResult:
     """Grasps (Section III), stable placements, free tabletop grips and the tabletop grid (Section IV) of one part;
     the grasps carried into the roadmap are chosen as `workbench build` chooses them."""
-    hand = franka_hand()
+    hand = hand or franka_hand()
     t0 = time.perf_counter()
     grasps = plan_grasps(obj, hand, gparams).grasps
     t1 = time.perf_counter()
@@ -113,7 +114,7 @@ def part_unit(path: str, name: str, scale: float | None, units: str | None, gpar
     """The worker's task for one part: `part_stages` of the mesh at `path`, returned as Arrow tables."""
     t0 = time.perf_counter()
     obj = load_object(path, scale=scale, units=units, name=name)
-    res = part_stages(obj, gparams, pparams, tparams)
+    res = part_stages(obj, gparams, pparams, tparams, worker_state().hand())
     res.seconds["load"] = time.perf_counter() - t0 - sum(res.seconds.values())
     return part_tables(res)
 
@@ -183,18 +184,32 @@ class SolverCache:
         return self.solvers[key]
 
 
-def worker_solvers() -> SolverCache:
-    """The `SolverCache` of this Dask worker (created on first use), or a fresh one outside a worker."""
+class WorkerState:
+    """What a worker process keeps between units: the Franka hand (loading its URDF and meshes takes a second or
+    two) and the IK solvers."""
+
+    def __init__(self) -> None:
+        self.solvers = SolverCache()
+        self._hand: Gripper | None = None
+
+    def hand(self) -> Gripper:
+        if self._hand is None:
+            self._hand = franka_hand()
+        return self._hand
+
+
+def worker_state() -> WorkerState:
+    """The `WorkerState` of this Dask worker (created on first use), or a fresh one outside a worker."""
     try:
         from distributed import get_worker
 
         w = get_worker()
     except ValueError:
-        return SolverCache()
-    cache = getattr(w, "workbench_solvers", None)
-    if cache is None:
-        cache = w.workbench_solvers = SolverCache()
-    return cache
+        return WorkerState()
+    state = getattr(w, "workbench_state", None)
+    if state is None:
+        state = w.workbench_state = WorkerState()
+    return state
 
 
 def worker_name() -> str:
@@ -213,7 +228,7 @@ def ik_unit(spec: RobotSpec, scene: Scene, opts: IKOptions, handx: float, worldz
     handxworldz poses: a table of idtabletopgrips, feasible (C, 3) and joints (C, 3, nq), NaN where infeasible."""
     t0 = time.perf_counter()
     mesh = trimesh.Trimesh(vertices, faces, process=False) if opts.collide else None
-    solver = (cache or worker_solvers()).get(spec, scene, opts, mesh_digest, mesh)
+    solver = (cache or worker_state().solvers).get(spec, scene, opts, mesh_digest, mesh)
     feas, joints = solver.chunk(retract(poses, handx, worldz), placements)
     table = arrays_table({"idtabletopgrips": np.asarray(grip_ids, dtype=np.int64), "feasible": feas, "joints": joints})
     return table.replace_schema_metadata({b"seconds": str(time.perf_counter() - t0).encode(), b"worker": worker_name().encode()})
