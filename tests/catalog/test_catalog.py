@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -64,8 +65,8 @@ def _rows(db: Path) -> dict:
 
 
 @pytest.fixture(scope="module")
-def serial(parts, tmp_path_factory) -> dict:
-    """The rows of a serial build through the stage runners `workbench build` uses, one part and robot at a time."""
+def serial_db(parts, tmp_path_factory) -> Path:
+    """A serial build through the stage runners `workbench build` uses, one part and robot at a time."""
     db = tmp_path_factory.mktemp("serial") / "serial.duckdb"
     hand = franka_hand()
     p = PARAMS
@@ -77,7 +78,12 @@ def serial(parts, tmp_path_factory) -> dict:
             for robot in ROBOTS:
                 run_ik(store, obj.name, get_robot(robot), None, p.handx, p.worldz, IKOptions(library=2048, seeds=2),
                        workers=1, progress=False, idtabletop=pl.idtabletop)
-    return _rows(db)
+    return db
+
+
+@pytest.fixture(scope="module")
+def serial(serial_db) -> dict:
+    return _rows(serial_db)
 
 
 @pytest.fixture(scope="module")
@@ -203,3 +209,14 @@ def test_part_without_grasps_is_stored_with_zero_counts(client, tmp_path):
     (row,) = res.rows
     assert (row["part"], row["robot"], row["grasps"], row["tabletop_grips"], row["ik_rows"]) == ("bigcube", "panda", 0, 0, 0)
     assert row["placements"] == 6 and row["graph"]["nodes"] == 0
+
+
+def test_catalog_over_a_serial_store_duplicates_nothing(parts, serial, serial_db, client, tmp_path):
+    """Parts and IK rows stored by `workbench build` are reused: the catalogue adds its unit rows and no stage row."""
+    db = tmp_path / "both.duckdb"
+    shutil.copy(serial_db, db)
+    res = build_catalog(parts[:-1], ",".join(ROBOTS), db, client, PARAMS, progress=False)
+    assert res.failures == [] and res.computed["part"] == 3 and res.computed["ik"] > 0
+    assert res.rows_written == 0  # every stage row and IK row was there already
+    _same(_rows(db), serial)
+    assert all(r["ik_rows"] == r["tabletop_grips"] > 0 for r in res.rows)

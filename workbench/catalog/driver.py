@@ -160,6 +160,7 @@ class _Build:
         self.pending: dict = {}  # future -> unit dict
         self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not stored yet
         self.runs: dict[tuple[str, str], dict] = {}
+        self.ik_runs: dict[str, dict] = {}  # robot name -> its run's ids in this store
         self.ac = as_completed(with_results=True, raise_errors=False)  # results fetched in the background
         self.result = CatalogResult(rows=[], failures=[])
         self.bar = tqdm(total=0, desc="catalog", unit="unit", disable=not progress, dynamic_ncols=True)
@@ -208,7 +209,10 @@ class _Build:
         verts, faces = np.asarray(obj.mesh.vertices, dtype=np.float64), np.asarray(obj.mesh.faces, dtype=np.int64)
         for name, robot in self.robots.items():
             scene = default_scene(robot.name)
-            ids_run, stored = stages.ik_run(self.store, robot, scene, p.ik, p.handx, p.worldz)
+            if name not in self.ik_runs:  # robot, scene and ikret rows: once per build
+                self.ik_runs[name] = stages.ik_run(self.store, robot, scene, p.ik, p.handx, p.worldz)
+            ids_run = self.ik_runs[name]
+            stored = stages.stored_ik(self.store, ids_run, part["idtabletop"])
             run = {"part": part["part"], "robot": name, "idobject": part["idobject"], "idtabletop": part["idtabletop"],
                    "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "source": part.get("source"),
                    "idrobot": ids_run["idrobot"], "idscene": ids_run["idscene"], "idikret": ids_run["idikret"],

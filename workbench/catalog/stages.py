@@ -28,9 +28,9 @@ from workbench.store import Store
 from workbench.store import catalog as sql
 from workbench.store.grasps import load_grasps, save_grasps
 from workbench.store.objects import put_object
-from workbench.store.placements import (load_free_tabletop_grips, load_placements, load_tabletop_grips, save_placements,
-                                        save_tabletop)
-from workbench.store.robots import insert_ik, prepare_run, stored_grips
+from workbench.store.placements import (find_placements, find_tabletop, load_free_tabletop_grips, load_placements,
+                                        load_tabletop_grips, save_placements, save_tabletop)
+from workbench.store.robots import insert_ik, prepare_run
 from workbench.store.wan_harada import roadmap_rows
 
 done_units = sql.done_units
@@ -60,20 +60,24 @@ def batch(store: Store) -> Iterator[None]:
 
 def write_part(store: Store, unit: dict, res: PartResult, hand: Gripper, gparams: GraspParams, pparams: PlacementParams,
                tparams: TabletopParams) -> None:
-    """A part unit's rows (Sections III-IV) and its catalog_unit row; fills the unit's ids, counts and row count."""
+    """A part unit's rows (Sections III-IV) and its catalog_unit row; fills the unit's ids, counts and the number of
+    stage rows written (stages already stored with the same parameters, by `workbench build` say, are reused)."""
+    tt = res.tabletop
     with sql.unit_transaction(store, unit):
         oid = put_object(store, res.obj)
-        gid, _ = save_grasps(store, oid, hand, gparams, res.grasps)
+        gid, had_grasps = save_grasps(store, oid, hand, gparams, res.grasps)
         grasps = load_grasps(store, oid, gid)
+        had_placements = find_placements(store, oid, gid, pparams) is not None  # stored by `workbench build`
         pid = save_placements(store, oid, gid, pparams, res.placements, grasps, res.ftg)
         fp_ids = load_placements(store, pid)["idfreetabletopplacement"]
         ftg = load_free_tabletop_grips(store, pid)
-        tid = save_tabletop(store, oid, pid, tparams, res.tabletop, ftg, fp_ids)
-        tt = res.tabletop
+        had_tabletop = find_tabletop(store, oid, pid, tparams) is not None
+        tid = save_tabletop(store, oid, pid, tparams, tt, ftg, fp_ids)
         counts = {"grasps": len(res.grasps), "placements": len(res.placements), "free_tabletop_grips": len(res.ftg[0]),
                   "tabletop_placements": len(tt.placement), "tabletop_grips": len(tt.grip_tp), "seconds": res.seconds}
-        unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts,
-                    nrows=1 + len(res.grasps) + len(res.placements) + len(res.ftg[0]) + len(tt.placement) + len(tt.grip_tp))
+        nrows = ((0 if had_grasps else len(res.grasps)) + (0 if had_placements else len(res.placements) + len(res.ftg[0]))
+                 + (0 if had_tabletop else len(tt.placement) + len(tt.grip_tp)))
+        unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts, nrows=nrows)
 
 
 def part_grips(store: Store, part: dict, obj: ObjectModel | None = None) -> tuple[dict[str, np.ndarray], ObjectModel]:
@@ -84,11 +88,16 @@ def part_grips(store: Store, part: dict, obj: ObjectModel | None = None) -> tupl
     return grips, obj
 
 
-def ik_run(store: Store, robot: Robot, scene: Scene, opts: IKOptions, handx: float, worldz: float) -> tuple[dict, np.ndarray]:
-    """The robot, scene and ikret rows of an IK run (created if new) and the grips it already has rows for."""
+def ik_run(store: Store, robot: Robot, scene: Scene, opts: IKOptions, handx: float, worldz: float) -> dict:
+    """The robot, scene and ikret rows of an IK run (created if new): idrobot, idscene, idikret, scene_params."""
     params = scene_params(robot, scene, opts)
     rid, sid, kid = prepare_run(store, robot, params, handx, worldz)
-    return {"idrobot": rid, "idscene": sid, "idikret": kid, "scene_params": params}, stored_grips(store, rid, sid, kid)
+    return {"idrobot": rid, "idscene": sid, "idikret": kid, "scene_params": params}
+
+
+def stored_ik(store: Store, run: dict, idtabletop: int) -> np.ndarray:
+    """The tabletop grips of a part (its tabletop parameter set) that already have `ik` rows for the run."""
+    return sql.stored_part_grips(store, run["idrobot"], run["idscene"], run["idikret"], idtabletop)
 
 
 def write_ik(store: Store, unit: dict, grip_ids: np.ndarray, feasible: np.ndarray, joints: np.ndarray,
@@ -97,7 +106,8 @@ def write_ik(store: Store, unit: dict, grip_ids: np.ndarray, feasible: np.ndarra
     the same run keep their rows (nothing is duplicated)."""
     todo = ~np.isin(grip_ids, stored)
     with sql.unit_transaction(store, unit):
-        n = insert_ik(store, unit["idrobot"], unit["idscene"], unit["idikret"], grip_ids[todo], feasible[todo], joints[todo])
+        n = insert_ik(store, unit["idrobot"], unit["idscene"], unit["idikret"], grip_ids[todo], feasible[todo],
+                      joints[todo]) if todo.any() else 0
         unit.update(nrows=n, counts={"grips": int(len(grip_ids)), "feasible": int(feasible[:, 0].sum()),
                                      "feasible_all": int(feasible.all(axis=1).sum())})
 

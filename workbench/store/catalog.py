@@ -159,6 +159,15 @@ def unit_times(store: Store) -> list[dict[str, Any]]:
     return [dict(zip(("kind", "part", "robot", "seconds", "write_seconds", "nrows"), r)) for r in rows]
 
 
+def stored_part_grips(store: Store, idrobot: int, idscene: int, idikret: int, idtabletop: int) -> np.ndarray:
+    """The idtabletopgrips of one tabletop parameter set that already have an `ik` row for this run (sorted)."""
+    out = store.query_arrays(
+        "SELECT k.idtabletopgrips FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements t "
+        "USING (idtabletopplacements) WHERE t.idparamset = ? AND k.idrobot = ? AND k.idscene = ? AND k.idikret = ? "
+        "ORDER BY k.idtabletopgrips", [idtabletop, idrobot, idscene, idikret])
+    return np.asarray(out["idtabletopgrips"], dtype=np.int64)
+
+
 def ik_vectors(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int) -> np.ndarray:
     """The (N, 3) feasibility flags of a run over a tabletop parameter set, ordered by idtabletopgrips."""
     out = store.query_arrays(
