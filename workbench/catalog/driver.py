@@ -31,7 +31,7 @@ from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.robots.collider import Collider, default_scene
 from workbench.robots.gripper import franka_hand
-from workbench.robots.ik import IKOptions, check_poses, chunk_bounds, neighbour_order
+from workbench.robots.ik import WORLDA, IKOptions, check_poses, chunk_bounds, neighbour_order
 from workbench.robots.model import Robot, get_robot
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
@@ -52,6 +52,7 @@ class CatalogParams:
     ik: IKOptions = IKOptions()
     handx: float = HANDX
     worldz: float = WORLDZ
+    worlda: float = WORLDA
     ik_chunk: int = 1024
     scale: float | None = None
     units: str | None = None
@@ -59,7 +60,7 @@ class CatalogParams:
     def __post_init__(self) -> None:
         if self.ik_chunk < 1 or self.ik_chunk % max(1, self.ik.lane):
             raise CatalogError(f"IK chunk must be a positive multiple of the IK lane ({self.ik.lane}), got {self.ik_chunk}")
-        for label, v in (("handx", self.handx), ("worldz", self.worldz)):
+        for label, v in (("handx", self.handx), ("worldz", self.worldz), ("worlda", self.worlda)):
             if not (np.isfinite(v) and v >= 0):
                 raise CatalogError(f"--{label} must be a distance >= 0 m, got {v}")
         resolve_scale(self.scale, self.units)  # a bad scale or unit is refused before any part is loaded
@@ -210,14 +211,14 @@ class _Build:
         for name, robot in self.robots.items():
             scene = default_scene(robot.name)
             if name not in self.ik_runs:  # robot, scene and ikret rows: once per build
-                self.ik_runs[name] = stages.ik_run(self.store, robot, scene, p.ik, p.handx, p.worldz)
+                self.ik_runs[name] = stages.ik_run(self.store, robot, scene, p.ik, p.handx, p.worldz, p.worlda)
             ids_run = self.ik_runs[name]
             stored = stages.stored_ik(self.store, ids_run, part["idtabletop"])
             run = {"part": part["part"], "robot": name, "idobject": part["idobject"], "idtabletop": part["idtabletop"],
                    "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "source": part.get("source"),
                    "idrobot": ids_run["idrobot"], "idscene": ids_run["idscene"], "idikret": ids_run["idikret"],
                    "stored": stored, "base": _digest(part["digest"], robot.spec.digest, ids_run["scene_params"], p.handx,
-                                                     p.worldz, p.ik_chunk)}
+                                                     p.worldz, p.worlda, p.ik_chunk)}
             self.runs[(part["part"], name)] = run
             left = 0
             for k, (s, e) in enumerate(chunk_bounds(n, p.ik_chunk)):
@@ -227,8 +228,8 @@ class _Build:
                     continue
                 ix = order[s:e]
                 left += 1
-                self._submit(unit, ik_unit, robot.spec, scene, p.ik, p.handx, p.worldz, obj.digest, verts, faces,
-                             ids[ix], poses[ix], places[ix])
+                self._submit(unit, ik_unit, robot.spec, scene, p.ik, p.handx, p.worldz, p.worlda, obj.digest, verts,
+                             faces, ids[ix], poses[ix], places[ix])
             self.left[(part["part"], name)] = left
             if left == 0:
                 self.schedule_graph(run)
@@ -388,8 +389,8 @@ SUMMARY_HEADERS = ("part", "robot", "grasps", "placements", "tabletop grips", "I
 
 
 def summary_table(rows: list[dict]) -> list[tuple]:
-    """Rows for printing: part, robot, grasps, placements, tabletop grips, share of grips feasible with both
-    retractions, graph components, seconds of worker time (part stages + the robot's IK and graph)."""
+    """Rows for printing: part, robot, grasps, placements, tabletop grips, share of grips feasible at all five IK
+    poses, graph components, seconds of worker time (part stages + the robot's IK and graph)."""
     out = []
     for r in rows:
         share = f"{r['ik_feasible'] / r['tabletop_grips']:.1%}" if r["tabletop_grips"] and r["robot"] else "-"

@@ -88,10 +88,10 @@ def part_grips(store: Store, part: dict, obj: ObjectModel | None = None) -> tupl
     return grips, obj
 
 
-def ik_run(store: Store, robot: Robot, scene: Scene, opts: IKOptions, handx: float, worldz: float) -> dict:
+def ik_run(store: Store, robot: Robot, scene: Scene, opts: IKOptions, handx: float, worldz: float, worlda: float) -> dict:
     """The robot, scene and ikret rows of an IK run (created if new): idrobot, idscene, idikret, scene_params."""
     params = scene_params(robot, scene, opts)
-    rid, sid, kid = prepare_run(store, robot, params, handx, worldz)
+    rid, sid, kid = prepare_run(store, robot, params, handx, worldz, worlda)
     return {"idrobot": rid, "idscene": sid, "idikret": kid, "scene_params": params}
 
 

@@ -25,7 +25,7 @@ from workbench.geometry.objects import ObjectModel, load_object
 from workbench.grasping.grasps import GraspParams, GraspSet, plan_grasps
 from workbench.grasping.placements import PlacementParams, Placements, free_tabletop_grips, stable_placements
 from workbench.planners.wan_harada.roadmap import build_roadmap
-from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams, roadmap_grips, tabletop
+from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams, plan_tabletop
 from workbench.robots.collider import Scene
 from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import IKOptions, IKSolver, retract
@@ -86,7 +86,6 @@ class PartResult:
     grasps: GraspSet
     placements: Placements
     ftg: tuple[np.ndarray, np.ndarray, np.ndarray]
-    keep: np.ndarray
     tabletop: Tabletop
     seconds: dict
 
@@ -102,10 +101,9 @@ def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams
     placements = stable_placements(obj, pparams)
     p_idx, g_idx, poses = free_tabletop_grips(placements, grasps.poses, hand, pparams)
     t2 = time.perf_counter()
-    keep = roadmap_grips(len(placements), p_idx, g_idx, grasps.poses, tparams)
-    tt = tabletop(placements.poses, p_idx, poses, keep, tparams)
+    tt = plan_tabletop(placements.poses, p_idx, g_idx, poses, grasps.poses, tparams)
     t3 = time.perf_counter()
-    return PartResult(obj, grasps, placements, (p_idx, g_idx, poses), keep, tt,
+    return PartResult(obj, grasps, placements, (p_idx, g_idx, poses), tt,
                       {"grasps": t1 - t0, "placements": t2 - t1, "tabletop": t3 - t2})
 
 
@@ -135,7 +133,7 @@ def part_tables(res: PartResult) -> dict[str, pa.Table]:
         "com": arrays_table({"com": np.asarray(o.com, dtype=np.float64)[None]}),
         "grasps": arrays_table({f.name: getattr(res.grasps, f.name) for f in fields(GraspSet)}),
         "placements": place,
-        "ftg": arrays_table({"placement": res.ftg[0], "grasp": res.ftg[1], "poses": res.ftg[2], "keep": res.keep}),
+        "ftg": arrays_table({"placement": res.ftg[0], "grasp": res.ftg[1], "poses": res.ftg[2]}),
         "tabletop_placements": arrays_table({"placement": tt.placement, "angle": tt.angle, "position": tt.position,
                                              "poses": tt.poses, "moves": tt.moves}),
         "tabletop_grips": arrays_table({"grip_tp": tt.grip_tp, "grip_ftg": tt.grip_ftg, "grip_poses": tt.grip_poses}),
@@ -160,7 +158,7 @@ def part_from_tables(tables: dict[str, pa.Table]) -> PartResult:
     tt = Tabletop(placement=tp["placement"], angle=tp["angle"], position=tp["position"], poses=tp["poses"], moves=tp["moves"],
                   grip_tp=tg["grip_tp"], grip_ftg=tg["grip_ftg"], grip_poses=tg["grip_poses"])
     meta = tables["meta"].to_pydict()
-    return PartResult(obj, GraspSet(**g), placements, (f["placement"], f["grasp"], f["poses"]), f["keep"], tt,
+    return PartResult(obj, GraspSet(**g), placements, (f["placement"], f["grasp"], f["poses"]), tt,
                       dict(zip(meta["stage"], meta["seconds"])))
 
 
@@ -221,15 +219,16 @@ def worker_name() -> str:
         return f"local pid {os.getpid()}"
 
 
-def ik_unit(spec: RobotSpec, scene: Scene, opts: IKOptions, handx: float, worldz: float, mesh_digest: str,
-            vertices: np.ndarray, faces: np.ndarray, grip_ids: np.ndarray, poses: np.ndarray, placements: np.ndarray,
-            cache: SolverCache | None = None) -> pa.Table:
-    """IK feasibility of one chunk of tabletop grips (given in `neighbour_order`) at the grasp, handx and
-    handxworldz poses: a table of idtabletopgrips, feasible (C, 3) and joints (C, 3, nq), NaN where infeasible."""
+def ik_unit(spec: RobotSpec, scene: Scene, opts: IKOptions, handx: float, worldz: float, worlda: float,
+            mesh_digest: str, vertices: np.ndarray, faces: np.ndarray, grip_ids: np.ndarray, poses: np.ndarray,
+            placements: np.ndarray, cache: SolverCache | None = None) -> pa.Table:
+    """IK feasibility of one chunk of tabletop grips (given in `neighbour_order`) at the five poses of
+    `robots.ik.KINDS` (grasp, handx, handxworldz, worlda, worldaworldz): a table of idtabletopgrips, feasible (C, 5)
+    and joints (C, 5, nq), NaN where infeasible."""
     t0 = time.perf_counter()
     mesh = trimesh.Trimesh(vertices, faces, process=False) if opts.collide else None
     solver = (cache or worker_state().solvers).get(spec, scene, opts, mesh_digest, mesh)
-    feas, joints = solver.chunk(retract(poses, handx, worldz), placements)
+    feas, joints = solver.chunk(retract(poses, handx, worldz, worlda), placements)
     table = arrays_table({"idtabletopgrips": np.asarray(grip_ids, dtype=np.int64), "feasible": feas, "joints": joints})
     return table.replace_schema_metadata({b"seconds": str(time.perf_counter() - t0).encode(), b"worker": worker_name().encode()})
 

@@ -15,7 +15,7 @@ from workbench.catalog.driver import (SUMMARY_HEADERS, CatalogParams, build_cata
 from workbench.cli.grasps import add_grasp_arguments, grasp_params
 from workbench.cli.placements import add_placement_arguments, placement_params
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ
-from workbench.robots.ik import IKOptions
+from workbench.robots.ik import WORLDA, IKOptions
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,6 +33,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     unit.add_argument("--units", choices=["m", "cm", "mm", "in"], default=None, help="the files' unit")
     b.add_argument("--handx", type=float, default=HANDX, help=f"retraction along the approach axis (m, default {HANDX})")
     b.add_argument("--worldz", type=float, default=WORLDZ, help=f"retraction up along world z (m, default {WORLDZ})")
+    b.add_argument("--worlda", type=float, default=WORLDA, help=f"lift of the held object straight up (m, default {WORLDA})")
     o = IKOptions()
     b.add_argument("--ik-chunk", type=int, default=1024, help=f"tabletop grips per IK unit (a multiple of {o.lane})")
     b.add_argument("--ik-library", type=int, default=o.library, help="IK seed library size")
@@ -50,7 +51,7 @@ def catalog_params(args: argparse.Namespace) -> CatalogParams:
     pparams, tparams = placement_params(args)
     ik = replace(IKOptions(), library=args.ik_library, seeds=args.ik_seeds)
     return CatalogParams(grasps=grasp_params(args), placements=pparams, tabletop=tparams, ik=ik, handx=args.handx,
-                         worldz=args.worldz, ik_chunk=args.ik_chunk, scale=args.scale, units=args.units)
+                         worldz=args.worldz, worlda=args.worlda, ik_chunk=args.ik_chunk, scale=args.scale, units=args.units)
 
 
 def run_build(args: argparse.Namespace) -> int:
@@ -89,7 +90,7 @@ def print_summary(rows: list[dict], failures: list[dict]) -> None:
                     else "tabletop grips (no stable placement keeps a grasp clear of the table)")
             print(f"warning: {r['part']} has no {what}; check its size and units", file=sys.stderr)
         elif r["part"] not in empty and r["robot"] and r["ik_rows"] and not r["ik_feasible"]:
-            print(f"warning: no tabletop grip of {r['part']} is IK-feasible for {r['robot']} with both retractions",
+            print(f"warning: no tabletop grip of {r['part']} is IK-feasible for {r['robot']} at all five poses",
                   file=sys.stderr)
     for f in failures:
         what = f["part"] if not f["robot"] else f"{f['part']} x {f['robot']} ({f['kind']})"

@@ -21,6 +21,7 @@ from typing import Any, Iterator
 import numpy as np
 
 from workbench.store import Store
+from workbench.store.robots import ALL_FEASIBLE, FEASIBILITY
 
 CATALOG_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS catalog_unit (
@@ -114,9 +115,9 @@ def failures(store: Store) -> list[dict[str, Any]]:
 
 def summary(store: Store) -> list[dict[str, Any]]:
     """One row per stored (part, robot) of the catalogue (the newest build of each), from the stage tables themselves: free-air grasps, stable
-    placements, tabletop grips, IK rows and the share feasible with both retractions, graph components and nodes
+    placements, tabletop grips, IK rows and how many are feasible at all five poses (grasp, retractions, lifts), graph components and nodes
     (from the graph unit), and seconds of worker time for the part's stages and the robot's IK and graph."""
-    sql = """
+    sql = f"""
     WITH part AS (  -- the newest part unit of each part name (a store may hold builds with other parameters)
         SELECT part, idobject, idgrasps, idplacements, idtabletop, seconds FROM catalog_unit
         WHERE kind = 'part' AND status = 'done' QUALIFY row_number() OVER (PARTITION BY part ORDER BY created DESC) = 1),
@@ -139,7 +140,7 @@ def summary(store: Store) -> list[dict[str, Any]]:
         (SELECT count(*) FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements t
             USING (idtabletopplacements) WHERE t.idparamset = p.idtabletop AND k.idrobot = r.idrobot
             AND k.idscene = r.idscene AND k.idikret = r.idikret
-            AND k.feasibility AND k.feasibility_handx AND k.feasibility_handxworldz) AS ik_feasible,
+            AND {ALL_FEASIBLE}) AS ik_feasible,
         r.graph, p.seconds AS part_seconds, r.ik_seconds, r.graph_seconds
     FROM part p LEFT JOIN robot r ON r.part = p.part AND r.idtabletop = p.idtabletop ORDER BY p.part, r.robot"""
     keys = ("part", "robot", "grasps", "placements", "tabletop_grips", "ik_rows", "ik_feasible", "graph",
@@ -169,14 +170,13 @@ def stored_part_grips(store: Store, idrobot: int, idscene: int, idikret: int, id
 
 
 def ik_vectors(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int) -> np.ndarray:
-    """The (N, 3) feasibility flags of a run over a tabletop parameter set, ordered by idtabletopgrips."""
+    """The (N, 5) feasibility flags (`FEASIBILITY` order) of a run over a tabletop parameter set, by idtabletopgrips."""
     out = store.query_arrays(
-        "SELECT k.feasibility, k.feasibility_handx, k.feasibility_handxworldz FROM ik k JOIN tabletopgrips g "
+        f"SELECT {', '.join('k.' + c for c in FEASIBILITY)} FROM ik k JOIN tabletopgrips g "
         "USING (idtabletopgrips) JOIN tabletopplacements t USING (idtabletopplacements) WHERE t.idparamset = ? "
         "AND k.idrobot = ? AND k.idscene = ? AND k.idikret = ? ORDER BY k.idtabletopgrips",
         [idtabletop, idrobot, idscene, idikret])
-    return np.stack([np.asarray(out[c], dtype=bool) for c in ("feasibility", "feasibility_handx", "feasibility_handxworldz")],
-                    axis=1).reshape(-1, 3)
+    return np.stack([np.asarray(out[c], dtype=bool) for c in FEASIBILITY], axis=1).reshape(-1, len(FEASIBILITY))
 
 
 def _plain(value: Any) -> Any:

@@ -91,18 +91,6 @@ def select_grasps(grasp_poses: np.ndarray, usable: np.ndarray, count: int | None
     return cand[chosen]
 
 
-def roadmap_grips(n_placements: int, ftg_placement: np.ndarray, ftg_grasp: np.ndarray, grasp_poses: np.ndarray,
-                  params: TabletopParams) -> np.ndarray:
-    """(F,) which free tabletop grips enter the roadmap: those of the about `max_grasps` grasps `select_grasps`
-    picks. ftg_placement/ftg_grasp: each free tabletop grip's placement and grasp index (grasp indices in the
-    order of the stored ids); grasp_poses: (G, 4, 4) TCP poses in the object frame."""
-    grasp_ids = np.unique(ftg_grasp)
-    usable = np.zeros((n_placements, len(grasp_ids)), dtype=bool)
-    usable[ftg_placement, np.searchsorted(grasp_ids, ftg_grasp)] = True
-    chosen = grasp_ids[select_grasps(grasp_poses[grasp_ids], usable, params.max_grasps)]
-    return np.isin(ftg_grasp, chosen)
-
-
 def yaw(theta: float | np.ndarray) -> np.ndarray:
     """Rotation(s) about world z as 4x4 transforms."""
     t = np.atleast_1d(np.asarray(theta, dtype=np.float64))
