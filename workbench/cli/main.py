@@ -12,7 +12,7 @@ import sys
 
 from workbench.errors import WorkbenchError
 
-COMMANDS = ("grasps", "placements", "ik", "build", "plan", "fingers", "gptable", "gpplan", "demo", "bench")
+COMMANDS = ("grasps", "placements", "ik", "build", "catalog", "plan", "fingers", "gptable", "gpplan", "demo", "bench")
 
 
 class _Parser(argparse.ArgumentParser):

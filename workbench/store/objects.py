@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pyarrow as pa
 
 from workbench.errors import StoreError
 from workbench.geometry.objects import ObjectModel
@@ -20,12 +21,20 @@ def put_object(store: Store, obj: ObjectModel) -> int:
         return int(row[0])
     with store.transaction():
         oid = store.next_id("object", "idobject")
-        store.run(
-            "INSERT INTO object (idobject, name, digest, source, scale, com, com_method, ntriangles, vertices, faces) "
-            "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-            [oid, obj.name, obj.digest, obj.source, obj.scale, obj.com.tolist(), obj.com_method, obj.n_triangles,
-             obj.mesh.vertices.tolist(), obj.mesh.faces.tolist()])
+        store.insert("object", {  # the mesh through Arrow: binding a large mesh as Python lists takes seconds
+            "idobject": np.array([oid], dtype=np.int64), "name": np.array([obj.name], dtype=object),
+            "digest": np.array([obj.digest], dtype=object), "source": np.array([obj.source], dtype=object),
+            "scale": np.array([obj.scale], dtype=np.float64), "com": np.asarray(obj.com, dtype=np.float64)[None],
+            "com_method": np.array([obj.com_method], dtype=object), "ntriangles": np.array([obj.n_triangles], dtype=np.int64),
+            "vertices": _one_row_of_triples(np.asarray(obj.mesh.vertices, dtype=np.float64)),
+            "faces": _one_row_of_triples(np.asarray(obj.mesh.faces, dtype=np.int32))})
     return oid
+
+
+def _one_row_of_triples(arr: np.ndarray) -> pa.Array:
+    """An (N, 3) array as one row of a list-of-triples column (DOUBLE[3][] or INTEGER[3][])."""
+    triples = pa.FixedSizeListArray.from_arrays(pa.array(np.ascontiguousarray(arr).ravel()), 3)
+    return pa.ListArray.from_arrays(pa.array([0, len(arr)], type=pa.int32()), triples)
 
 
 def object_id(store: Store, name: str) -> int:

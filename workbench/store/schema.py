@@ -31,6 +31,8 @@ Extra tables
 - gripper(idgripper, name, urdf, jaw_min, jaw_max, digest, collision_vertices, collision_faces): the collision mesh
   (hand body and both fingers at full opening, in the TCP frame) lets checkers rebuild the hand without the library.
 - scene(idscene, name, table_pose, table_size, ...): where the table sits in the world for IK.
+- catalog_unit(digest, kind, part, robot, chunk, ids, status, error, counts, seconds, ...): the units of a
+  `workbench catalog` build, created by `store.catalog` in catalogue stores (documented there).
 """
 
 from __future__ import annotations

@@ -1,0 +1,222 @@
+"""`workbench catalog` on a real Dask LocalCluster and a real DuckDB file (issue 15): the rows equal a serial build's,
+a worker killed by PID or a driver killed mid-run loses and duplicates nothing, a broken part is reported."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from workbench.catalog.cluster import cluster_client
+from workbench.catalog.driver import CatalogParams, build_catalog
+from workbench.cli.main import main
+from workbench.geometry.objects import load_object
+from workbench.planners.wan_harada.stages import ensure_grasps, ensure_placements, run_ik
+from workbench.planners.wan_harada.tabletop import TabletopParams
+from workbench.resources import bundled_objects
+from workbench.robots.gripper import franka_hand
+from workbench.robots.ik import IKOptions
+from workbench.robots.model import get_robot
+from workbench.store import Store
+from workbench.store.catalog import ik_vectors
+
+ROBOTS = ("panda", "ur5")
+PARAMS = CatalogParams(tabletop=TabletopParams(x_min=0.4, x_max=0.6, nx=2, y_min=0.0, y_max=0.0, ny=1, angles=2,
+                                               max_grasps=10),
+                       ik=IKOptions(library=2048, seeds=2), ik_chunk=32)
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def parts(tmp_path_factory) -> list[Path]:
+    b = bundled_objects()
+    broken = tmp_path_factory.mktemp("parts") / "broken.stl"
+    broken.write_text("solid broken\nendsolid broken\n")
+    return [b["planebody"], b["bracket"], b["tube"], broken]
+
+
+def _rows(db: Path) -> dict:
+    """Per part: counts of grasps, placements, tabletop grips; per (part, robot): the (N, 3) feasibility ordered by
+    tabletop grip, and the number of ik rows (to catch duplicates)."""
+    out = {}
+    with Store(db, read_only=True) as s:
+        for name, oid in s.run("SELECT name, idobject FROM object ORDER BY name"):
+            g = s.one("SELECT count(*) FROM freeairgrip WHERE idobject = ?", [oid])[0]
+            p = s.one("SELECT count(*) FROM freetabletopplacement WHERE idobject = ?", [oid])[0]
+            tt, tg = s.one("SELECT max(p.idparamset), count(*) FROM tabletopgrips g JOIN tabletopplacements p "
+                           "USING (idtabletopplacements) JOIN freetabletopplacement f USING (idfreetabletopplacement) "
+                           "WHERE f.idobject = ?", [oid])
+            out[name] = (g, p, tg)
+            for rid, robot in s.run("SELECT idrobot, name FROM robot ORDER BY name"):
+                for sid, kid in s.run("SELECT DISTINCT idscene, idikret FROM ik WHERE idrobot = ?", [rid]):
+                    out[name, robot] = ik_vectors(s, tt, rid, sid, kid)
+        out["ik rows"] = s.one("SELECT count(*), count(DISTINCT (idrobot, idtabletopgrips, idscene, idikret)) FROM ik")
+    return out
+
+
+@pytest.fixture(scope="module")
+def serial_db(parts, tmp_path_factory) -> Path:
+    """A serial build through the stage runners `workbench build` uses, one part and robot at a time."""
+    db = tmp_path_factory.mktemp("serial") / "serial.duckdb"
+    hand = franka_hand()
+    p = PARAMS
+    with Store(db) as store:
+        for path in parts[:-1]:
+            obj = load_object(path)
+            g = ensure_grasps(store, obj, hand, p.grasps)
+            pl = ensure_placements(store, g.idobject, obj, g.idparamset, hand, p.placements, p.tabletop)
+            for robot in ROBOTS:
+                run_ik(store, obj.name, get_robot(robot), None, p.handx, p.worldz, IKOptions(library=2048, seeds=2),
+                       workers=1, progress=False, idtabletop=pl.idtabletop)
+    return db
+
+
+@pytest.fixture(scope="module")
+def serial(serial_db) -> dict:
+    return _rows(serial_db)
+
+
+@pytest.fixture(scope="module")
+def client():
+    with cluster_client(workers=2) as c:
+        yield c
+
+
+def _same(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys()
+    for k in a:
+        if isinstance(a[k], np.ndarray):
+            assert a[k].shape == b[k].shape and a[k].shape[0] > 0, k
+            assert np.array_equal(a[k], b[k]), f"feasibility of {k} differs in {int((a[k] != b[k]).sum())} entries"
+        else:
+            assert a[k] == b[k], k
+
+
+def test_cluster_build_equals_serial_and_reports_broken_part(parts, serial, client, tmp_path):
+    db = tmp_path / "catalog.duckdb"
+    res = build_catalog(parts, ",".join(ROBOTS), db, client, PARAMS, progress=False)
+    assert res.workers == 2 and res.dashboard.startswith("http://127.0.0.1:")
+    rows = _rows(db)
+    _same(rows, serial)
+    assert rows["ik rows"][0] == rows["ik rows"][1] == sum(len(v) for k, v in rows.items() if isinstance(k, tuple))
+    assert [(f["part"], f["kind"]) for f in res.failures] == [("broken", "part")]
+    assert "holds no triangle mesh" in res.failures[0]["error"] and "\n" not in res.failures[0]["error"]
+    assert {(r["part"], r["robot"]) for r in res.rows} == {(p.stem, r) for p in parts[:-1] for r in ROBOTS}
+    for r in res.rows:  # the summary comes from the stage tables; every grip has its IK row
+        assert r["ik_rows"] == r["tabletop_grips"] == serial[r["part"]][2] > 0
+        assert r["ik_feasible"] == int(serial[r["part"], r["robot"]].all(axis=1).sum())
+        assert r["graph"]["components"] >= 1 and r["graph"]["grips"] == r["tabletop_grips"]
+    again = build_catalog(parts, ",".join(ROBOTS), db, client, PARAMS, progress=False)
+    assert sum(again.computed.values()) == 0 and again.skipped == sum(res.computed.values())
+    _same(_rows(db), serial)
+
+
+def test_worker_killed_mid_run_loses_nothing(parts, serial, client, tmp_path):
+    pids = list(client.run(os.getpid).values())
+    killed = []
+
+    def kill_one(kind: str, unit: dict) -> None:
+        busy = client.processing()  # kill a worker that is running a task right now
+        if kind == "ik" and not killed:
+            addr = next((a for a, keys in busy.items() if keys), None)
+            if addr is not None:
+                pid = client.run(os.getpid, workers=[addr])[addr]
+                os.kill(pid, signal.SIGKILL)
+                killed.append(pid)
+
+    res = build_catalog(parts[:-1], ",".join(ROBOTS), tmp_path / "c.duckdb", client, PARAMS, progress=False,
+                        on_unit=kill_one)
+    assert killed and killed[0] in pids
+    assert res.failures == []
+    _same(_rows(tmp_path / "c.duckdb"), serial)
+    client.wait_for_workers(2, timeout=60)  # the nanny restarted it
+    assert killed[0] not in client.run(os.getpid).values()
+
+
+def test_driver_killed_then_rerun_finishes(parts, serial, tmp_path):
+    db = tmp_path / "d.duckdb"
+    cmd = [sys.executable, "-m", "workbench.cli", "catalog", "build", *map(str, parts[:-1]), "--robots", ",".join(ROBOTS),
+           "--db", str(db), "--workers", "1", "--x", "0.4,0.6,2", "--y", "0,0,1", "--angles", "2", "--max-grasps", "10", "--ik-library", "2048",
+           "--ik-seeds", "2", "--ik-chunk", "32"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    err = tmp_path / "stderr"
+    with open(err, "w") as fh:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=fh, env=env, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None:
+            bar = err.read_text().replace("\r", "\n").splitlines()
+            done = [int(line.split("|")[2].split("/")[0]) for line in bar if line.startswith("catalog:") and line.count("|") >= 2]
+            if done and done[-1] >= 6:
+                break
+            time.sleep(0.2)
+        assert proc.poll() is None, "the build finished before it could be killed"
+    finally:
+        os.kill(proc.pid, signal.SIGKILL)  # the driver only; its worker processes exit when it is gone
+        proc.wait()
+    with Store(db, read_only=True) as s:
+        stored = s.one("SELECT count(*) FROM catalog_unit WHERE status = 'done'")[0]
+    assert stored >= 6
+    out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert f"{stored} skipped" in out.stdout
+    _same(_rows(db), serial)
+    rep = subprocess.run([sys.executable, "-m", "workbench.cli", "catalog", "report", "--db", str(db)], capture_output=True,
+                         text=True, env=env, timeout=120)
+    assert rep.returncode == 0, rep.stderr
+    lines = [line.split() for line in rep.stdout.splitlines()]
+    shown = {(w[0], w[1]): w for w in lines if len(w) == 8 and w[1] in ROBOTS}
+    assert set(shown) == {(p.stem, r) for p in parts[:-1] for r in ROBOTS}
+    for (part, robot), w in shown.items():  # tabletop grips and the feasible share, as stored
+        feas = serial[part, robot]
+        assert int(w[4].replace(",", "")) == len(feas) and w[5] == f"{feas.all(axis=1).mean():.1%}"
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--robots", "nosuchrobot"], "nosuchrobot"),
+    (["--robots", "panda", "--ik-chunk", "30"], "multiple of the IK lane"),
+    (["--robots", "panda", "--workers", "0"], "--workers must be at least 1"),
+    (["--robots", "panda", "--scale", "-1"], "scale must be a positive"),
+])
+def test_bad_input_is_one_line_and_status_2(parts, tmp_path, args, message):
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["catalog", "build", str(parts[0]), "--db", str(tmp_path / "x.duckdb"), *args])
+    assert code == 2 and message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1, err.getvalue()
+
+
+def test_report_of_a_store_without_catalogue(tmp_path):
+    Store(tmp_path / "plain.duckdb").close()
+    assert main(["catalog", "report", "--db", str(tmp_path / "plain.duckdb")]) == 2
+
+
+def test_part_without_grasps_is_stored_with_zero_counts(client, tmp_path):
+    """A 0.3 m cube is wider than the Franka hand's 80 mm jaw: zero grasps, stable placements, no grips, no error."""
+    path = tmp_path / "bigcube.stl"
+    trimesh.creation.box((0.3, 0.3, 0.3)).export(path)
+    res = build_catalog([path], "panda", tmp_path / "z.duckdb", client, PARAMS, progress=False)
+    assert res.failures == []
+    (row,) = res.rows
+    assert (row["part"], row["robot"], row["grasps"], row["tabletop_grips"], row["ik_rows"]) == ("bigcube", "panda", 0, 0, 0)
+    assert row["placements"] == 6 and row["graph"]["nodes"] == 0
+
+
+def test_catalog_over_a_serial_store_duplicates_nothing(parts, serial, serial_db, client, tmp_path):
+    """Parts and IK rows stored by `workbench build` are reused: the catalogue adds its unit rows and no stage row."""
+    db = tmp_path / "both.duckdb"
+    shutil.copy(serial_db, db)
+    res = build_catalog(parts[:-1], ",".join(ROBOTS), db, client, PARAMS, progress=False)
+    assert res.failures == [] and res.computed["part"] == 3 and res.computed["ik"] > 0
+    assert res.rows_written == 0  # every stage row and IK row was there already
+    _same(_rows(db), serial)
+    assert all(r["ik_rows"] == r["tabletop_grips"] > 0 for r in res.rows)

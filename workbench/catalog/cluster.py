@@ -1,0 +1,62 @@
+"""Dask clusters for the catalogue: a local cluster of worker processes bound to localhost, or an existing scheduler
+(several machines, Slurm/PBS through dask-jobqueue)."""
+
+from __future__ import annotations
+
+import os
+from contextlib import contextmanager
+from typing import Iterator
+
+from workbench.errors import WorkbenchError
+
+
+class ClusterError(WorkbenchError):
+    """The Dask cluster could not be started or reached."""
+
+
+@contextmanager
+def cluster_client(workers: int | None = None, scheduler: str | None = None, dashboard: bool = True,
+                   quiet: bool = True) -> Iterator["distributed.Client"]:  # noqa: F821
+    """A `distributed.Client` on a new `LocalCluster` of `workers` single-threaded worker processes (default: all
+    cores) on 127.0.0.1, or on the scheduler at `scheduler` (tcp://host:8786); closed (and the cluster shut down) on
+    exit. Worker processes start with the `spawn` method, so nothing is forked from a threaded process."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None and workers is not None:
+        raise ClusterError("give either --workers (a local cluster) or --scheduler (an existing one), not both")
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise ClusterError(f"no Dask scheduler answers at {scheduler} ({type(exc).__name__}); start one with "
+                               f"`dask scheduler` or check the address") from None
+        try:
+            yield client
+        finally:
+            client.close()
+        return
+    n = (os.cpu_count() or 1) if workers is None else int(workers)
+    if n < 1:
+        raise ClusterError(f"--workers must be at least 1, got {workers}")
+    with dask.config.set({"distributed.worker.multiprocessing-method": "spawn"}):
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                               dashboard_address="127.0.0.1:0" if dashboard else None, silence_logs=50 if quiet else 20)
+        client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+            cluster.close()
+
+
+def dashboard_link(client) -> str:
+    """The dashboard's address, with a note when the scheduler serves none or bokeh is missing for its pages."""
+    import importlib.util
+
+    if "dashboard" not in client.scheduler_info().get("services", {}):
+        return "none (the scheduler runs without a dashboard)"
+    link = client.dashboard_link
+    if importlib.util.find_spec("bokeh") is None:
+        return f"{link} (its pages need bokeh>=3.1: pip install bokeh)"
+    return link

@@ -1,0 +1,400 @@
+"""The catalogue's driver: schedules units on a Dask cluster, resumes by digest, is the single store writer (issue 15).
+
+Units: one per part (grasps, placements, tabletop grips; Wan & Harada Sections III-IV), one per chunk of a part's
+tabletop grips and robot (IK with retractions, Section IV), one per part and robot (the regrasp graph's size,
+Section V). Workers return Arrow tables; the driver writes each finished unit and its `catalog_unit` row in one
+transaction through the stage writers of `workbench.store`, so a unit is stored whole or not at all. Units whose
+digest is stored are skipped, so a re-run after a crash computes only the rest. A task on a worker that dies is
+rescheduled by the Dask scheduler on another worker; a unit that raises (a broken mesh) is recorded as failed with
+its one-line reason and the others go on.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+import pyarrow as pa
+
+from workbench.catalog import stages
+from workbench.catalog.units import graph_unit, ik_unit, part_from_tables, part_unit, table_arrays
+from workbench.errors import RobotError, WorkbenchError
+from workbench.geometry.objects import ObjectModel, resolve_scale
+from workbench.grasping.grasps import GraspParams
+from workbench.grasping.placements import PlacementParams
+from workbench.planners.wan_harada.stages import HANDX, WORLDZ
+from workbench.planners.wan_harada.tabletop import TabletopParams
+from workbench.robots.collider import Collider, default_scene
+from workbench.robots.gripper import franka_hand
+from workbench.robots.ik import WORLDA, IKOptions, check_poses, chunk_bounds, neighbour_order
+from workbench.robots.model import Robot, get_robot
+
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
+
+
+class CatalogError(WorkbenchError):
+    """Bad input to `workbench catalog` (no parts, unknown robot, bad chunk size)."""
+
+
+@dataclass(frozen=True)
+class CatalogParams:
+    """Every parameter of a catalogue build; `ik_chunk` tabletop grips per IK unit (a multiple of `ik.lane`, so the
+    rows equal those of a serial run whatever the chunk)."""
+
+    grasps: GraspParams = GraspParams()
+    placements: PlacementParams = PlacementParams()
+    tabletop: TabletopParams = TabletopParams()
+    ik: IKOptions = IKOptions()
+    handx: float = HANDX
+    worldz: float = WORLDZ
+    worlda: float = WORLDA
+    ik_chunk: int = 1024
+    scale: float | None = None
+    units: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.ik_chunk < 1 or self.ik_chunk % max(1, self.ik.lane):
+            raise CatalogError(f"IK chunk must be a positive multiple of the IK lane ({self.ik.lane}), got {self.ik_chunk}")
+        for label, v in (("handx", self.handx), ("worldz", self.worldz), ("worlda", self.worlda)):
+            if not (np.isfinite(v) and v >= 0):
+                raise CatalogError(f"--{label} must be a distance >= 0 m, got {v}")
+        resolve_scale(self.scale, self.units)  # a bad scale or unit is refused before any part is loaded
+
+    def part_dict(self) -> dict:
+        return {"grasps": self.grasps.as_dict(), "placements": self.placements.as_dict(), "tabletop": self.tabletop.as_dict(),
+                "scale": self.scale, "units": self.units}
+
+
+@dataclass
+class CatalogResult:
+    """What a build did: the summary rows (parts x robots), failures, units computed and skipped, seconds of wall
+    time, of worker compute per unit kind and of the driver's work on finished units (`write_seconds`, split in
+    `driver`: decoding the Arrow results, writing rows, committing, scheduling the units that depend on them), rows
+    written and write transactions (`batches`)."""
+
+    rows: list[dict]
+    failures: list[dict]
+    computed: dict = field(default_factory=lambda: {"part": 0, "ik": 0, "graph": 0})
+    skipped: int = 0
+    wall: float = 0.0
+    compute: dict = field(default_factory=lambda: {"part": 0.0, "ik": 0.0, "graph": 0.0})
+    write_seconds: float = 0.0
+    rows_written: int = 0
+    batches: int = 0
+    driver: dict = field(default_factory=lambda: {"decode": 0.0, "rows": 0.0, "commit": 0.0, "schedule": 0.0})
+    workers: int = 0
+    dashboard: str = ""
+
+
+def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> list[tuple[Path, float | None]]:
+    """(mesh file, scale or None) for mesh files given directly or found (not recursively) in the given folders,
+    sorted within each folder; an entry may be a (path, scale) pair to override the build's scale for it."""
+    out: list[tuple[Path, float | None]] = []
+    for item in paths:
+        p, scale = (Path(item[0]), float(item[1])) if isinstance(item, tuple) else (Path(item), None)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() in MESH_SUFFIXES and q.is_file())
+            if not found:
+                raise CatalogError(f"folder {p} holds no mesh files ({', '.join(MESH_SUFFIXES)})")
+            out.extend((q, scale) for q in found)
+        else:
+            out.append((p, scale))  # a missing or broken file is reported as that part's failure
+    if not out:
+        raise CatalogError("no parts given: pass mesh files or folders of them")
+    stems = [p.stem for p, _ in out]
+    dup = sorted({s for s in stems if stems.count(s) > 1})
+    if dup:
+        raise CatalogError(f"several parts are named {', '.join(dup)} (the file name is the part's name); rename them")
+    return out
+
+
+def parse_robots(text: str | Sequence[str]) -> dict[str, Robot]:
+    """Robots by name from 'panda,ur5' (built-in names or URDF paths are handled by `get_robot`)."""
+    names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
+    if not names:
+        raise CatalogError("--robots needs at least one robot name, e.g. panda,ur5")
+    robots = {}
+    for n in names:
+        robot = get_robot(n)
+        hit = Collider(robot, default_scene(robot.name), None).fixed_parts_hit_table()
+        if hit:
+            raise RobotError(f"the fixed links ({', '.join(hit[:3])}) of robot {robot.name!r} cut into the default table")
+        robots[robot.name] = robot
+    return robots
+
+
+def _digest(*parts: object) -> str:
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:32]
+
+
+def _file_digest(path: Path) -> str:
+    try:
+        return hashlib.sha256(path.read_bytes()).hexdigest()
+    except OSError:
+        return "unreadable"
+
+
+def one_line(exc: BaseException) -> str:
+    """A failure's one-line reason: the message of a WorkbenchError, else the exception type and first line."""
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    if isinstance(exc, WorkbenchError):
+        return text
+    return f"{type(exc).__name__}: {text}" if text else type(exc).__name__
+
+
+class _Build:
+    """The state of one build: the store, the client, what is stored, what runs."""
+
+    def __init__(self, store, client, robots: dict[str, Robot], params: CatalogParams, progress: bool,
+                 on_unit: Callable[[str, dict], None] | None):
+        from distributed import as_completed
+        from tqdm.auto import tqdm
+
+        self.store, self.client, self.robots, self.params = store, client, robots, params
+        self.on_unit = on_unit
+        self.done = stages.done_units(store)
+        self.pending: dict = {}  # future -> unit dict
+        self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not stored yet
+        self.runs: dict[tuple[str, str], dict] = {}
+        self.ik_runs: dict[str, dict] = {}  # robot name -> its run's ids in this store
+        self.ac = as_completed(with_results=True, raise_errors=False)  # results fetched in the background
+        self.result = CatalogResult(rows=[], failures=[])
+        self.bar = tqdm(total=0, desc="catalog", unit="unit", disable=not progress, dynamic_ncols=True)
+        self.hand = franka_hand()
+
+    # -- scheduling --------------------------------------------------------------------------------------------
+    def _count(self, n: int = 1) -> None:
+        self.bar.total += n
+        self.bar.refresh()
+
+    def _skip(self) -> None:
+        self.result.skipped += 1
+        self._count()
+        self.bar.update(1)
+
+    def _submit(self, unit: dict, fn, *args) -> None:
+        key = f"{unit['kind']}-{unit['part']}-{unit.get('robot') or ''}-{unit.get('chunk') or 0}-{unit['digest'][:12]}"
+        # pure=False: a retry after a crash must not reuse a result the cluster still holds under the same key
+        fut = self.client.submit(fn, *args, key=key, pure=False)
+        self.pending[fut] = unit
+        self.ac.add(fut)
+        self._count()
+
+    def submit_part(self, path: Path, scale: float | None) -> None:
+        p = self.params
+        units = p.units if scale is None else None
+        scale = p.scale if scale is None else scale
+        digest = _digest("part", _file_digest(path), path.stem, self.hand.digest,
+                         {**p.part_dict(), "scale": scale, "units": units})
+        unit = {"digest": digest, "kind": "part", "part": path.stem, "source": str(path)}
+        if digest in self.done:
+            self._skip()
+            self.schedule_robots(self.done[digest])
+            return
+        self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop)
+
+    def schedule_robots(self, part: dict, obj: ObjectModel | None = None) -> None:
+        """IK chunk units of a stored part for every robot (and the graph units of runs already complete)."""
+        p = self.params
+        grips, obj = stages.part_grips(self.store, part, obj)
+        n = len(grips["idtabletopgrips"])
+        order = neighbour_order(grips)
+        poses = check_poses(grips["rotmat"])
+        places = check_poses(grips["placement_rotmat"], "object placement")
+        ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
+        verts, faces = np.asarray(obj.mesh.vertices, dtype=np.float64), np.asarray(obj.mesh.faces, dtype=np.int64)
+        for name, robot in self.robots.items():
+            scene = default_scene(robot.name)
+            if name not in self.ik_runs:  # robot, scene and ikret rows: once per build
+                self.ik_runs[name] = stages.ik_run(self.store, robot, scene, p.ik, p.handx, p.worldz, p.worlda)
+            ids_run = self.ik_runs[name]
+            stored = stages.stored_ik(self.store, ids_run, part["idtabletop"])
+            run = {"part": part["part"], "robot": name, "idobject": part["idobject"], "idtabletop": part["idtabletop"],
+                   "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "source": part.get("source"),
+                   "idrobot": ids_run["idrobot"], "idscene": ids_run["idscene"], "idikret": ids_run["idikret"],
+                   "stored": stored, "base": _digest(part["digest"], robot.spec.digest, ids_run["scene_params"], p.handx,
+                                                     p.worldz, p.worlda, p.ik_chunk)}
+            self.runs[(part["part"], name)] = run
+            left = 0
+            for k, (s, e) in enumerate(chunk_bounds(n, p.ik_chunk)):
+                unit = {**_unit_ids(run), "kind": "ik", "chunk": k, "digest": _digest(run["base"], "ik", k, n)}
+                if unit["digest"] in self.done:
+                    self._skip()
+                    continue
+                ix = order[s:e]
+                left += 1
+                self._submit(unit, ik_unit, robot.spec, scene, p.ik, p.handx, p.worldz, p.worlda, obj.digest, verts,
+                             faces, ids[ix], poses[ix], places[ix])
+            self.left[(part["part"], name)] = left
+            if left == 0:
+                self.schedule_graph(run)
+
+    def schedule_graph(self, run: dict) -> None:
+        unit = {**_unit_ids(run), "kind": "graph", "digest": _digest(run["base"], "graph")}
+        if unit["digest"] in self.done:
+            self._skip()
+            return
+        rows, feasible = stages.graph_inputs(self.store, run)
+        self._submit(unit, graph_unit, rows, feasible)
+
+    # -- writing -------------------------------------------------------------------------------------------------
+    def write_rows(self, unit: dict, result) -> Callable[[], None]:
+        """Write one unit's rows and its catalog_unit row (joining the caller's transaction); returns what to do once
+        committed (schedule the units that depend on it)."""
+        kind = unit["kind"]
+        meta = (result["meta"] if kind == "part" else result).schema.metadata or {}
+        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode())
+        if kind == "part":
+            return self.write_part(unit, result)
+        if kind == "ik":
+            return self.write_ik(unit, result)
+        stages.write_graph(self.store, unit, {k: v[0] for k, v in result.to_pydict().items()})
+        return lambda: None
+
+    def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> Callable[[], None]:
+        t0 = time.perf_counter()
+        res = part_from_tables(tables)
+        self.result.driver["decode"] += time.perf_counter() - t0
+        p = self.params
+        unit["seconds"] = sum(res.seconds.values())
+        unit["worker"] = tables["meta"].column("worker")[0].as_py()
+        stages.write_part(self.store, unit, res, self.hand, p.grasps, p.placements, p.tabletop)
+
+        def after() -> None:
+            self.done[unit["digest"]] = unit
+            self.schedule_robots(unit, res.obj)  # the mesh as stored (its digest is the stored one)
+        return after
+
+    def write_ik(self, unit: dict, table: pa.Table) -> Callable[[], None]:
+        t0 = time.perf_counter()
+        cols = table_arrays(table)
+        self.result.driver["decode"] += time.perf_counter() - t0
+        run = self.runs[(unit["part"], unit["robot"])]
+        ids, feas, joints = cols["idtabletopgrips"], cols["feasible"], cols["joints"]
+        stages.write_ik(self.store, unit, ids, feas, joints, run["stored"])
+
+        def after() -> None:
+            key = (unit["part"], unit["robot"])
+            self.left[key] -= 1
+            if self.left[key] == 0:
+                self.schedule_graph(run)
+        return after
+
+    def write_batch(self, items: list[tuple[object, dict, object]]) -> None:
+        """Write the units that finished together in one transaction (each unit whole, so the commit's cost is
+        shared when the writer falls behind); if one of them cannot be written, write them one by one."""
+        t0, decode = time.perf_counter(), self.result.driver["decode"]
+        try:
+            with stages.batch(self.store):
+                after = [self.write_rows(unit, result) for _, unit, result in items]
+                t1 = time.perf_counter()
+        except Exception as exc:  # noqa: BLE001 - one part's rows that cannot be stored must not stop the others
+            if len(items) > 1:
+                for item in items:
+                    self.write_batch([item])
+                return
+            self.fail(items[0][1], exc)
+            items[0][0].release()
+            return
+        t2 = time.perf_counter()
+        for (fut, unit, _), then in zip(items, after):
+            try:
+                then()
+            except WorkbenchError as exc:  # e.g. a part whose tabletop grips are not rigid poses: its IK cannot start
+                self.fail({**unit, "kind": "ik", "digest": unit["digest"] + "-schedule"}, exc)
+            fut.release()
+            kind = unit["kind"]
+            self.result.rows_written += int(unit.get("nrows") or 0)
+            self.result.computed[kind] += 1
+            self.result.compute[kind] += float(unit.get("seconds") or 0.0)
+            self.bar.update(1)
+            if self.on_unit is not None:
+                self.on_unit(kind, unit)
+        t3 = time.perf_counter()
+        d = self.result.driver
+        d["rows"] += (t1 - t0) - (d["decode"] - decode)
+        d["commit"] += t2 - t1
+        d["schedule"] += t3 - t2
+        self.result.write_seconds += t3 - t0
+        self.result.batches += 1
+        if self.result.write_seconds > 0:
+            self.bar.set_postfix_str(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written", refresh=False)
+
+    def fail(self, unit: dict, exc: BaseException) -> None:
+        reason = one_line(exc)
+        stages.record_failure(self.store, unit, reason)
+        self.bar.update(1)
+        if unit["kind"] == "ik":  # the part's other chunks go on; its graph waits for a re-run
+            self.left[(unit["part"], unit["robot"])] = -1
+
+    # -- the loop ------------------------------------------------------------------------------------------------
+    def run(self, parts: Sequence[tuple[Path, float | None]]) -> None:
+        for path, scale in parts:
+            self.submit_part(path, scale)
+        for batch in self.ac.batches():
+            items = []
+            for fut, result in batch:
+                unit = self.pending.pop(fut)
+                if fut.status == "error" or isinstance(result, BaseException):
+                    self.fail(unit, result[1] if isinstance(result, tuple) else result)
+                    fut.release()
+                else:
+                    items.append((fut, unit, result))
+            if items:
+                self.write_batch(items)
+        self.bar.close()
+
+
+def _unit_ids(run: dict) -> dict:
+    return {k: run[k] for k in ("part", "robot", "source", "idobject", "idgrasps", "idplacements", "idtabletop", "idrobot",
+                                "idscene", "idikret")}
+
+
+def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]], robots: str | Sequence[str], db: str | Path, client,
+                  params: CatalogParams = CatalogParams(), progress: bool = True,
+                  on_unit: Callable[[str, dict], None] | None = None) -> CatalogResult:
+    """Build (or finish) the catalogue of `parts` x `robots` in the store `db` on the Dask `client`; returns the
+    summary. Stored units are skipped; each finished unit is written in one transaction."""
+    paths = collect_parts(parts)
+    robot_models = parse_robots(robots)
+    t0 = time.perf_counter()
+    with stages.open_store(db) as store:
+        build = _Build(store, client, robot_models, params, progress, on_unit)
+        try:
+            build.run(paths)
+        finally:
+            for fut in list(build.pending):
+                fut.cancel()
+        res = build.result
+        res.wall = time.perf_counter() - t0
+        res.rows = stages.summary(store)
+        res.failures = stages.failures(store)
+    res.workers = len(client.scheduler_info().get("workers", {}))
+    res.dashboard = client.dashboard_link or ""
+    return res
+
+
+def report(db: str | Path) -> tuple[list[dict], list[dict]]:
+    """The stored catalogue's summary rows and failures (for `workbench catalog report`)."""
+    with stages.open_store(db, read_only=True) as store:
+        return stages.summary(store), stages.failures(store)
+
+
+SUMMARY_HEADERS = ("part", "robot", "grasps", "placements", "tabletop grips", "IK-feasible", "components", "time s")
+
+
+def summary_table(rows: list[dict]) -> list[tuple]:
+    """Rows for printing: part, robot, grasps, placements, tabletop grips, share of grips feasible at all five IK
+    poses, graph components, seconds of worker time (part stages + the robot's IK and graph)."""
+    out = []
+    for r in rows:
+        share = f"{r['ik_feasible'] / r['tabletop_grips']:.1%}" if r["tabletop_grips"] and r["robot"] else "-"
+        comps = r["graph"].get("components", "-") if r["robot"] else "-"
+        t = (r["part_seconds"] or 0.0) + (r["ik_seconds"] or 0.0) + (r["graph_seconds"] or 0.0)
+        out.append((r["part"], r["robot"] or "-", r["grasps"], r["placements"], r["tabletop_grips"], share, comps, round(t, 2)))
+    return out

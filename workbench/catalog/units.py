@@ -1,0 +1,242 @@
+"""Units of work of a catalogue, run on Dask workers: pure functions from inputs to Arrow tables (issue 15).
+
+- `part_unit`: load a mesh, plan free-air grasps (Wan & Harada Section III), stable placements, free tabletop
+  grips and the tabletop grid (Section IV); returns the result dataclasses as Arrow tables (`part_tables`).
+- `ik_unit`: IK feasibility with retractions of one chunk of a part's tabletop grips for a robot (Section IV's
+  ik table); the chunk is a slice of the grips in `neighbour_order`, so its rows equal those of a serial run.
+- `graph_unit`: the size and connected components of the regrasp graph (Section V) from the grips and their IK.
+
+Workers never touch the store. The IK solver (robot, seed library, collision models) is built once per worker
+process and kept in an explicit `SolverCache` keyed on a digest of every input.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass, fields
+
+import numpy as np
+import pyarrow as pa
+import trimesh
+
+from workbench.geometry.objects import ObjectModel, load_object
+from workbench.grasping.grasps import GraspParams, GraspSet, plan_grasps
+from workbench.grasping.placements import PlacementParams, Placements, free_tabletop_grips, stable_placements
+from workbench.planners.wan_harada.roadmap import build_roadmap
+from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams, plan_tabletop
+from workbench.robots.collider import Scene
+from workbench.robots.gripper import Gripper, franka_hand
+from workbench.robots.ik import IKOptions, IKSolver, retract
+from workbench.robots.model import RobotSpec, robot_from_spec
+
+SHAPE_KEY = b"shape"
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# numpy <-> Arrow: (N, ...) arrays become fixed-size list columns carrying their row shape in the field metadata.
+
+
+def arrays_table(columns: dict[str, np.ndarray]) -> pa.Table:
+    """An Arrow table of equal-length numpy columns; (N, a, b, ...) arrays keep their row shape."""
+    arrays, names, fields_ = [], [], []
+    for name, value in columns.items():
+        arr = np.asarray(value)
+        if arr.ndim == 1:
+            col = pa.array(arr)
+            meta = None
+        else:
+            flat = np.ascontiguousarray(arr.reshape(len(arr), int(np.prod(arr.shape[1:]))))
+            col = pa.FixedSizeListArray.from_arrays(pa.array(flat.ravel()), flat.shape[1])
+            meta = {SHAPE_KEY: json.dumps(list(arr.shape[1:])).encode()}
+        arrays.append(col)
+        names.append(name)
+        fields_.append(pa.field(name, col.type, metadata=meta))
+    return pa.Table.from_arrays(arrays, schema=pa.schema(fields_))
+
+
+def table_arrays(table: pa.Table) -> dict[str, np.ndarray]:
+    """The inverse of `arrays_table`."""
+    out = {}
+    for field in table.schema:
+        col = table.column(field.name).combine_chunks()
+        if field.metadata and SHAPE_KEY in field.metadata:
+            shape = json.loads(field.metadata[SHAPE_KEY])
+            out[field.name] = col.flatten().to_numpy(zero_copy_only=False).reshape(len(col), *shape)
+        else:
+            out[field.name] = col.to_numpy(zero_copy_only=False)
+    return out
+
+
+def _ragged(points: list[np.ndarray]) -> pa.Array:
+    """(k_i, 3) arrays as a list<double> column of flattened rows."""
+    return pa.array([np.asarray(p, dtype=np.float64).ravel() for p in points], type=pa.list_(pa.float64()))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The part unit.
+
+
+@dataclass
+class PartResult:
+    """A part's stages as the result dataclasses (what the driver hands to the store's stage writers)."""
+
+    obj: ObjectModel
+    grasps: GraspSet
+    placements: Placements
+    ftg: tuple[np.ndarray, np.ndarray, np.ndarray]
+    tabletop: Tabletop
+    seconds: dict
+
+
+def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams, tparams: TabletopParams,
+                hand: Gripper | None = None) -> PartResult:
+    """Grasps (Section III), stable placements, free tabletop grips and the tabletop grid (Section IV) of one part;
+    the grasps carried into the roadmap are chosen as `workbench build` chooses them."""
+    hand = hand or franka_hand()
+    t0 = time.perf_counter()
+    grasps = plan_grasps(obj, hand, gparams).grasps
+    t1 = time.perf_counter()
+    placements = stable_placements(obj, pparams)
+    p_idx, g_idx, poses = free_tabletop_grips(placements, grasps.poses, hand, pparams)
+    t2 = time.perf_counter()
+    tt = plan_tabletop(placements.poses, p_idx, g_idx, poses, grasps.poses, tparams)
+    t3 = time.perf_counter()
+    return PartResult(obj, grasps, placements, (p_idx, g_idx, poses), tt,
+                      {"grasps": t1 - t0, "placements": t2 - t1, "tabletop": t3 - t2})
+
+
+def part_unit(path: str, name: str, scale: float | None, units: str | None, gparams: GraspParams,
+              pparams: PlacementParams, tparams: TabletopParams) -> dict[str, pa.Table]:
+    """The worker's task for one part: `part_stages` of the mesh at `path`, returned as Arrow tables."""
+    t0 = time.perf_counter()
+    obj = load_object(path, scale=scale, units=units, name=name)
+    res = part_stages(obj, gparams, pparams, tparams, worker_state().hand())
+    res.seconds["load"] = time.perf_counter() - t0 - sum(res.seconds.values())
+    return part_tables(res)
+
+
+def part_tables(res: PartResult) -> dict[str, pa.Table]:
+    """A `PartResult` as Arrow tables: object (1 row), grasps, placements, ftg, tabletop placements and grips, meta."""
+    o = res.obj
+    obj = pa.table({"name": [o.name], "source": [o.source], "digest": [o.digest], "scale": [float(o.scale)],
+                    "com_method": [o.com_method]})
+    pl = res.placements
+    place = arrays_table({"poses": pl.poses, "stability": pl.stability, "normals": pl.normals})
+    place = place.append_column("supports", _ragged(pl.supports))
+    tt = res.tabletop
+    return {
+        "object": obj,
+        "mesh_vertices": arrays_table({"v": np.asarray(o.mesh.vertices, dtype=np.float64)}),
+        "mesh_faces": arrays_table({"f": np.asarray(o.mesh.faces, dtype=np.int64)}),
+        "com": arrays_table({"com": np.asarray(o.com, dtype=np.float64)[None]}),
+        "grasps": arrays_table({f.name: getattr(res.grasps, f.name) for f in fields(GraspSet)}),
+        "placements": place,
+        "ftg": arrays_table({"placement": res.ftg[0], "grasp": res.ftg[1], "poses": res.ftg[2]}),
+        "tabletop_placements": arrays_table({"placement": tt.placement, "angle": tt.angle, "position": tt.position,
+                                             "poses": tt.poses, "moves": tt.moves}),
+        "tabletop_grips": arrays_table({"grip_tp": tt.grip_tp, "grip_ftg": tt.grip_ftg, "grip_poses": tt.grip_poses}),
+        "meta": pa.table({"stage": list(res.seconds), "seconds": list(res.seconds.values()),
+                          "worker": [worker_name()] * len(res.seconds)}),
+    }
+
+
+def part_from_tables(tables: dict[str, pa.Table]) -> PartResult:
+    """The inverse of `part_tables` (on the driver)."""
+    o = tables["object"].to_pylist()[0]
+    mesh = trimesh.Trimesh(table_arrays(tables["mesh_vertices"])["v"], table_arrays(tables["mesh_faces"])["f"], process=False)
+    obj = ObjectModel(name=o["name"], mesh=mesh, com=table_arrays(tables["com"])["com"][0], com_method=o["com_method"],
+                      scale=o["scale"], source=o["source"], digest=o["digest"])
+    g = table_arrays(tables["grasps"])
+    p = table_arrays(tables["placements"].drop_columns(["supports"]))
+    supports = [np.asarray(s, dtype=np.float64).reshape(-1, 3) for s in tables["placements"].column("supports").to_pylist()]
+    placements = Placements(poses=p["poses"], stability=p["stability"], supports=supports, normals=p["normals"],
+                            rejected_poses=np.zeros((0, 4, 4)), rejected_stability=np.zeros(0))
+    f = table_arrays(tables["ftg"])
+    tp, tg = table_arrays(tables["tabletop_placements"]), table_arrays(tables["tabletop_grips"])
+    tt = Tabletop(placement=tp["placement"], angle=tp["angle"], position=tp["position"], poses=tp["poses"], moves=tp["moves"],
+                  grip_tp=tg["grip_tp"], grip_ftg=tg["grip_ftg"], grip_poses=tg["grip_poses"])
+    meta = tables["meta"].to_pydict()
+    return PartResult(obj, GraspSet(**g), placements, (f["placement"], f["grasp"], f["poses"]), tt,
+                      dict(zip(meta["stage"], meta["seconds"])))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The IK unit.
+
+
+class SolverCache:
+    """IK solvers of one worker process keyed on (robot digest, scene, options, mesh digest); keeps the latest few."""
+
+    def __init__(self, size: int = 4):
+        self.size = size
+        self.solvers: dict[tuple, IKSolver] = {}
+
+    def get(self, spec: RobotSpec, scene: Scene, opts: IKOptions, mesh_digest: str, mesh: trimesh.Trimesh | None) -> IKSolver:
+        key = (spec.digest, scene, opts, mesh_digest)
+        if key not in self.solvers:
+            if len(self.solvers) >= self.size:
+                self.solvers.pop(next(iter(self.solvers)))
+            self.solvers[key] = IKSolver(robot_from_spec(spec), scene, opts, mesh)
+        return self.solvers[key]
+
+
+class WorkerState:
+    """What a worker process keeps between units: the Franka hand (loading its URDF and meshes takes a second or
+    two) and the IK solvers."""
+
+    def __init__(self) -> None:
+        self.solvers = SolverCache()
+        self._hand: Gripper | None = None
+
+    def hand(self) -> Gripper:
+        if self._hand is None:
+            self._hand = franka_hand()
+        return self._hand
+
+
+def worker_state() -> WorkerState:
+    """The `WorkerState` of this Dask worker (created on first use), or a fresh one outside a worker."""
+    try:
+        from distributed import get_worker
+
+        w = get_worker()
+    except ValueError:
+        return WorkerState()
+    state = getattr(w, "workbench_state", None)
+    if state is None:
+        state = w.workbench_state = WorkerState()
+    return state
+
+
+def worker_name() -> str:
+    try:
+        from distributed import get_worker
+
+        return f"{get_worker().address} pid {os.getpid()}"
+    except ValueError:
+        return f"local pid {os.getpid()}"
+
+
+def ik_unit(spec: RobotSpec, scene: Scene, opts: IKOptions, handx: float, worldz: float, worlda: float,
+            mesh_digest: str, vertices: np.ndarray, faces: np.ndarray, grip_ids: np.ndarray, poses: np.ndarray,
+            placements: np.ndarray, cache: SolverCache | None = None) -> pa.Table:
+    """IK feasibility of one chunk of tabletop grips (given in `neighbour_order`) at the five poses of
+    `robots.ik.KINDS` (grasp, handx, handxworldz, worlda, worldaworldz): a table of idtabletopgrips, feasible (C, 5)
+    and joints (C, 5, nq), NaN where infeasible."""
+    t0 = time.perf_counter()
+    mesh = trimesh.Trimesh(vertices, faces, process=False) if opts.collide else None
+    solver = (cache or worker_state().solvers).get(spec, scene, opts, mesh_digest, mesh)
+    feas, joints = solver.chunk(retract(poses, handx, worldz, worlda), placements)
+    table = arrays_table({"idtabletopgrips": np.asarray(grip_ids, dtype=np.int64), "feasible": feas, "joints": joints})
+    return table.replace_schema_metadata({b"seconds": str(time.perf_counter() - t0).encode(), b"worker": worker_name().encode()})
+
+
+def graph_unit(rows: dict[str, np.ndarray], feasible: np.ndarray) -> pa.Table:
+    """The regrasp graph's sizes (Section V): grips, nodes, transfer and transit edges, grasps, placements,
+    components, largest component; one row."""
+    t0 = time.perf_counter()
+    s = build_roadmap(rows, feasible).summary()
+    table = pa.table({k: [int(v)] for k, v in s.items()})
+    return table.replace_schema_metadata({b"seconds": str(time.perf_counter() - t0).encode(), b"worker": worker_name().encode()})

@@ -1,0 +1,97 @@
+"""`workbench catalog build PARTS... --robots panda,ur5 --db DB`: grasps, placements, tabletop grips and IK of many
+parts for several robots on a Dask cluster (Wan & Harada's fully off-line stages, Sections III-V; issue 15), and
+`workbench catalog report --db DB` to print the stored catalogue again."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+
+from workbench.benchmarks import print_table
+from workbench.catalog.cluster import cluster_client, dashboard_link
+from workbench.catalog.driver import (SUMMARY_HEADERS, CatalogParams, build_catalog, collect_parts, parse_robots, report,
+                                      summary_table)
+from workbench.cli.grasps import add_grasp_arguments, grasp_params
+from workbench.cli.placements import add_placement_arguments, placement_params
+from workbench.planners.wan_harada.stages import HANDX, WORLDZ
+from workbench.robots.ik import WORLDA, IKOptions
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    parser = sub.add_parser("catalog", help="build a parts x robots catalogue on a Dask cluster, or print one")
+    inner = parser.add_subparsers(dest="action", required=True, parser_class=type(parser))
+    b = inner.add_parser("build", help="compute every part's stages and every robot's IK on a local or existing cluster")
+    b.add_argument("parts", nargs="+", help="mesh files (STL, OBJ, PLY) or folders of them; the file name names the part")
+    b.add_argument("--robots", required=True, help="comma-separated robots: panda, ur5, talos")
+    b.add_argument("--db", required=True, help="DuckDB store file (created when missing; a re-run resumes)")
+    where = b.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None, help="worker processes of a local cluster (default: all cores)")
+    where.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler, e.g. tcp://host:8786")
+    unit = b.add_mutually_exclusive_group()
+    unit.add_argument("--scale", type=float, default=None, help="factor from the files' units to metres (e.g. 0.001)")
+    unit.add_argument("--units", choices=["m", "cm", "mm", "in"], default=None, help="the files' unit")
+    b.add_argument("--handx", type=float, default=HANDX, help=f"retraction along the approach axis (m, default {HANDX})")
+    b.add_argument("--worldz", type=float, default=WORLDZ, help=f"retraction up along world z (m, default {WORLDZ})")
+    b.add_argument("--worlda", type=float, default=WORLDA, help=f"lift of the held object straight up (m, default {WORLDA})")
+    o = IKOptions()
+    b.add_argument("--ik-chunk", type=int, default=1024, help=f"tabletop grips per IK unit (a multiple of {o.lane})")
+    b.add_argument("--ik-library", type=int, default=o.library, help="IK seed library size")
+    b.add_argument("--ik-seeds", type=int, default=o.seeds, help="library seeds tried after the warm start")
+    b.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_placement_arguments(b)
+    add_grasp_arguments(b)
+    b.set_defaults(func=run_build)
+    r = inner.add_parser("report", help="print the summary table of a stored catalogue")
+    r.add_argument("--db", required=True, help="DuckDB store file")
+    r.set_defaults(func=run_report)
+
+
+def catalog_params(args: argparse.Namespace) -> CatalogParams:
+    pparams, tparams = placement_params(args)
+    ik = replace(IKOptions(), library=args.ik_library, seeds=args.ik_seeds)
+    return CatalogParams(grasps=grasp_params(args), placements=pparams, tabletop=tparams, ik=ik, handx=args.handx,
+                         worldz=args.worldz, worlda=args.worlda, ik_chunk=args.ik_chunk, scale=args.scale, units=args.units)
+
+
+def run_build(args: argparse.Namespace) -> int:
+    params = catalog_params(args)
+    collect_parts(args.parts)  # bad input fails before a cluster starts
+    parse_robots(args.robots)
+    with cluster_client(workers=args.workers, scheduler=args.scheduler) as client:
+        n = len(client.scheduler_info().get("workers", {}))
+        print(f"dask: {n} worker(s) at {client.scheduler.address}; dashboard {dashboard_link(client)}", file=sys.stderr)
+        res = build_catalog(args.parts, args.robots, args.db, client, params, progress=not args.no_progress)
+    print_summary(res.rows, res.failures)
+    write_share = f", writing {res.write_seconds / res.wall:.0%} of it" if res.wall > 0 else ""
+    print(f"{sum(res.computed.values())} units computed ({res.computed['part']} part, {res.computed['ik']} IK, "
+          f"{res.computed['graph']} graph), {res.skipped} skipped (already stored), {len(res.failures)} failed; "
+          f"{res.rows_written:,} rows written in {res.wall:.1f} s on {res.workers} worker(s){write_share}; store {args.db}")
+    return 0
+
+
+def run_report(args: argparse.Namespace) -> int:
+    rows, failures = report(args.db)
+    print_summary(rows, failures)
+    return 0
+
+
+def print_summary(rows: list[dict], failures: list[dict]) -> None:
+    """The parts x robots table, then one line per failed part or unit, or a warning when nothing is stored."""
+    if rows:
+        print_table(SUMMARY_HEADERS, summary_table(rows))
+    else:
+        print("warning: the catalogue holds no finished part yet", file=sys.stderr)
+    empty = set()
+    for r in rows:
+        if (not r["grasps"] or not r["tabletop_grips"]) and r["part"] not in empty:
+            empty.add(r["part"])
+            what = ("free-air grasps" if not r["grasps"] else "stable placements" if not r["placements"]
+                    else "tabletop grips (no stable placement keeps a grasp clear of the table)")
+            print(f"warning: {r['part']} has no {what}; check its size and units", file=sys.stderr)
+        elif r["part"] not in empty and r["robot"] and r["ik_rows"] and not r["ik_feasible"]:
+            print(f"warning: no tabletop grip of {r['part']} is IK-feasible for {r['robot']} at all five poses",
+                  file=sys.stderr)
+    for f in failures:
+        what = f["part"] if not f["robot"] else f"{f['part']} x {f['robot']} ({f['kind']})"
+        print(f"failed: {what} ({f['source']}): {f['error']}")
