@@ -38,6 +38,8 @@ bench: $(RUNTIME)
 	$(BIN)/workbench bench ik
 	$(BIN)/workbench bench regrasp
 	$(BIN)/workbench bench fingers
+	$(BIN)/workbench bench gptable
+	$(BIN)/workbench bench catalog
 
 clean:
 	rm -rf build .pytest_cache
