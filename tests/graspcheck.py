@@ -115,6 +115,9 @@ def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction:
     pad_half = (hx, hz)
     poses, widths = np.asarray(poses), np.asarray(widths)
     G = len(poses)
+    if G == 0:
+        z = np.zeros(0, dtype=bool)
+        return Verdict(surface=z, normal=z, cone=z, pads=z, penetration=np.zeros(0))
     pts = np.vstack([c0, c1])
     nrm = np.vstack([n0, n1])
     _, dist, _ = trimesh.proximity.closest_point(mesh, pts)

@@ -1,0 +1,92 @@
+"""Objects users bring (issue 10): organic, scanned, open and bumpy meshes made procedurally (tests/organic.py).
+
+Every object narrower than the gripper's opening in some direction gets at least 20 grasps, and every grasp checked
+passes the independent check of tests/graspcheck.py (trimesh closest points, coal via pinocchio, not python-fcl).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from graspcheck import check_grasps
+from organic import ORGANIC, min_width
+from workbench.geometry.objects import from_trimesh
+from workbench.grasping.grasps import GraspParams, plan_grasps
+from workbench.grasping.placements import PlacementParams, stable_placements
+
+CHECKED = 40  # grasps per object given to the independent check, spread over the whole set
+
+
+@pytest.fixture(scope="module")
+def organic_objects():
+    import warnings
+
+    from workbench.geometry.objects import MeshWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", MeshWarning)
+        return {name: from_trimesh(make(), name) for name, make in ORGANIC.items()}
+
+
+def test_organic_set_spans_the_brief():
+    """300 to 5,000 triangles, some open, every object narrower than the Franka hand's opening somewhere."""
+    meshes = {name: make() for name, make in ORGANIC.items()}
+    sizes = [len(m.faces) for m in meshes.values()]
+    assert min(sizes) >= 300 and max(sizes) <= 5000
+    assert sum(not m.is_watertight for m in meshes.values()) >= 2
+    assert all(min_width(m) < 0.08 for m in meshes.values())
+
+
+@pytest.mark.parametrize("name", sorted(ORGANIC))
+def test_graspable_organic_objects_get_20_independently_valid_grasps(organic_objects, hand, name):
+    obj = organic_objects[name]
+    params = GraspParams()
+    plan = plan_grasps(obj, hand, params)
+    g = plan.grasps
+    assert len(g) >= 20, f"{name}: {plan.counts}"
+    pick = np.unique(np.linspace(0, len(g) - 1, CHECKED).astype(int))
+    v = check_grasps(obj.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick], g.normal0[pick],
+                     g.normal1[pick], params.friction)
+    bad = np.flatnonzero(~v.ok)
+    assert len(bad) == 0, (f"{name}: {len(bad)} of {len(pick)} grasps fail: surface {(~v.surface).sum()}, normal "
+                           f"{(~v.normal).sum()}, cone {(~v.cone).sum()}, pads {(~v.pads).sum()}, deepest "
+                           f"{v.penetration.max() * 1e3:.2f} mm")
+    # the store's conventions: TCP y along the jaw (contact0 on +y), z the approach, a proper rotation
+    rot = g.poses[:, :3, :3]
+    assert np.allclose(rot @ rot.transpose(0, 2, 1), np.eye(3), atol=1e-9)
+    assert np.allclose(np.linalg.det(rot), 1.0)
+    assert (np.einsum("gj,gj->g", g.contact0 - g.contact1, g.poses[:, :3, 1]) > 0).all()
+
+
+def test_pad_contacts_on_a_box_are_the_paper_pairs(box, hand):
+    """On flat facets the first touches are the sampled point and its projection (Wan & Harada's contact pair)."""
+    g = plan_grasps(box, hand, GraspParams()).grasps
+    y = g.poses[:, :3, 1]
+    d = g.contact0 - g.contact1
+    # both contacts on the TCP's y axis, the TCP midway, the opening their distance
+    assert np.allclose(np.cross(d, y), 0, atol=1e-9)
+    assert np.allclose(g.poses[:, :3, 3], 0.5 * (g.contact0 + g.contact1), atol=1e-9)
+    assert np.allclose(np.linalg.norm(d, axis=1), g.jawwidth, atol=1e-9)
+
+
+def test_noisy_flat_base_is_a_stable_placement(organic_objects):
+    """A scan flat only to about 0.1 mm rests on its base; its stability matches an independent support polygon."""
+    from scipy.spatial import ConvexHull
+
+    obj = organic_objects["flat_scan"]
+    v = obj.mesh.vertices
+    base = v[v[:, 2] <= v[:, 2].min() + 5e-4]
+    hull = ConvexHull(base[:, :2])
+    c = obj.com
+    expect = np.min(-(hull.equations[:, :2] @ c[:2] + hull.equations[:, 2])) / (c[2] - v[:, 2].min())
+    assert expect > 0.5
+    pl = stable_placements(obj, PlacementParams())
+    down = np.einsum("pij,j->pi", pl.poses[:, :3, :3], obj.mesh.vertices[np.argmin(v[:, 2])] * 0 + [0, 0, -1.0])
+    on_base = np.flatnonzero(down[:, 2] < -0.999)  # the object's -z points down: resting on its base
+    assert len(on_base) == 1
+    assert pl.stability[on_base[0]] == pytest.approx(expect, rel=0.03)
+    # the exact-coplanarity rule (no tolerance) misses it
+    exact = stable_placements(obj, PlacementParams(coplanar_distance=1e-9, coplanar_angle=1e-9))
+    down = np.einsum("pij,j->pi", exact.poses[:, :3, :3], [0, 0, -1.0])
+    assert not (down[:, 2] < -0.999).any() or exact.stability[down[:, 2] < -0.999].max() < 0.5 * expect
