@@ -72,11 +72,11 @@ def axis_frames(origins: np.ndarray, axes: np.ndarray, angles: np.ndarray) -> np
     return poses.reshape(-1, 4, 4)
 
 
-def _near_axis(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, radius: float,
-               budget: int = 2_000_000) -> tuple[np.ndarray, np.ndarray]:
+def _near_axis_tri(tri: np.ndarray, origins: np.ndarray, axes: np.ndarray, radius: float,
+                   budget: int = 2_000_000) -> tuple[np.ndarray, np.ndarray]:
     """(axis, triangle) pairs whose triangle may reach within `radius` of the axis line (broad phase)."""
-    centre = mesh.triangles_center
-    reach = np.linalg.norm(mesh.triangles - centre[:, None, :], axis=2).max(axis=1) + radius
+    centre = tri.mean(axis=1)
+    reach = np.linalg.norm(tri - centre[:, None, :], axis=2).max(axis=1) + radius
     ks, ts = [], []
     step = max(1, budget // max(len(centre), 1))
     for a in range(0, len(origins), step):
@@ -101,66 +101,20 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
         return _touches(mesh, origins, frames, angles, gripper, tie)
 
 
-def _touches(mesh, origins, frames, angles, gripper, tie) -> Touches:
+def _touches(mesh, origins, frames, angles, gripper, tie, budget=1_500_000) -> Touches:
     na = len(angles)
     H = len(frames)
     cx, cz, hx, hz = pad_rectangle(gripper)
     radius = float(np.hypot(abs(cx) + hx, abs(cz) + hz))
     fr0 = frames.reshape(-1, na, 4, 4)[:, 0]
-    k, t = _near_axis(mesh, origins, fr0[:, :3, 1], radius)
     tri = mesh.triangles
     fn = np.asarray(mesh.face_normals)
     flip = not mesh.is_watertight
-    # per (axis, triangle): heights along the axis and coordinates on the rotation-0 frame's z (a) and x (b)
-    rel = tri[t] - origins[k][:, None, :]
-    ly = np.einsum("pvj,pj->pv", rel, fr0[k, :3, 1])
-    ca = np.einsum("pvj,pj->pv", rel, fr0[k, :3, 2])
-    cb = np.einsum("pvj,pj->pv", rel, fr0[k, :3, 0])
-    ny = np.einsum("pj,pj->p", fn[t], fr0[k, :3, 1])
-    # heights where the axis itself crosses each triangle: true surface points inside every rotation's footprint
-    hx_axis = _axis_heights(cb, ly, ca, -cx, -cz)
-    a_max = np.full(len(origins), -np.inf)
-    a_min = np.full(len(origins), np.inf)
-    np.maximum.at(a_max, k, np.where(np.isfinite(hx_axis), hx_axis, -np.inf))
-    np.minimum.at(a_min, k, np.where(np.isfinite(hx_axis), hx_axis, np.inf))
-    # an axis whose own crossings are farther apart than the jaw opens cannot be grasped at any rotation
-    live = (a_max - a_min <= gripper.jaw_max + tie) | ~np.isfinite(a_max - a_min)
-    sel = live[k]
-    k, t, ly, ca, cb, ny = k[sel], t[sel], ly[sel], ca[sel], cb[sel], ny[sel]
     rows: dict[int, list] = {1: [], -1: []}
-    for j, ang in enumerate(angles):
-        c, s = np.cos(ang), np.sin(ang)
-        # frame j: z = c z0 - s w and x = c w + s z0, where rotation 0 has x = w and z = z0
-        lz = c * ca - s * cb - cz
-        lx = c * cb + s * ca - cx
-        ok = (_min3(lx) <= hx) & (_max3(lx) >= -hx) & (_min3(lz) <= hz) & (_max3(lz) >= -hz)
-        p = np.flatnonzero(ok)
-        if len(p) == 0:
-            continue
-        h = k[p] * na + j
-        x3, y3, z3 = lx[p], ly[p], lz[p]
-        # bounds from vertices inside the rectangle: rows that cannot reach them are skipped
-        inside = (np.abs(x3) <= hx) & (np.abs(z3) <= hz)
-        vmax = _max3(np.where(inside, y3, -np.inf))
-        vmin = _min3(np.where(inside, y3, np.inf))
-        lo = np.maximum(_segment_max(h, vmax)[h], a_max[k[p]])
-        hi = np.minimum(-_segment_max(h, -vmin)[h], a_min[k[p]])
-        need = (_max3(y3) >= lo - tie) | (_min3(y3) <= hi + tie)
-        if STATS is not None:
-            STATS.append((len(k), len(p), int(need.sum())))
-        q = p[need]
-        h, x3, y3, z3 = h[need], x3[need], y3[need], z3[need]
-        px, pz, py, valid = _candidates(x3, y3, z3, hx, hz, -cx, -cz)
-        r = np.arange(len(q))
-        for side in (1, -1):
-            score = np.where(valid, side * py, -np.inf)
-            top = score.max(axis=1)
-            near = valid & (score >= top[:, None] - tie)
-            d2 = np.where(near, (px + cx) ** 2 + (pz + cz) ** 2, np.inf)
-            m = d2.argmin(axis=1)
-            align = np.abs(ny[q]) if flip else side * ny[q]
-            keep = np.isfinite(top) & (top >= _segment_max(h, top)[h] - tie)
-            rows[side].append(np.column_stack([h, t[q], top, px[r, m] + cx, py[r, m], pz[r, m] + cz, d2[r, m], align])[keep])
+    # axes in chunks: at most about `budget` (axis, triangle) pairs at a time, so memory stays bounded
+    step = max(1, budget // max(len(tri), 1))
+    for a0 in range(0, len(origins), step):
+        _rows(tri, fn, flip, origins[a0:a0 + step], fr0[a0:a0 + step], a0, angles, gripper, tie, rows)
     hit = np.ones(H, dtype=bool)
     res = {}
     for side in (1, -1):
@@ -194,6 +148,64 @@ def _touches(mesh, origins, frames, angles, gripper, tie) -> Touches:
     width = np.where(hit, res[1][0] - res[-1][0], np.inf)
     return Touches(poses=poses, width=width, hit=hit, point0=res[1][1], normal0=res[1][2], tri0=res[1][3],
                    point1=res[-1][1], normal1=res[-1][2], tri1=res[-1][3])
+
+
+def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows) -> None:
+    """Candidate first-touch rows (pose, triangle, height, local point, distance to the axis, alignment) of a chunk of
+    axes, appended to `rows[side]`; only rows within `tie` of their pose's best in this chunk are kept."""
+    na = len(angles)
+    cx, cz, hx, hz = pad_rectangle(gripper)
+    radius = float(np.hypot(abs(cx) + hx, abs(cz) + hz))
+    k, t = _near_axis_tri(tri, origins, fr0[:, :3, 1], radius)
+    # per (axis, triangle): heights along the axis and coordinates on the rotation-0 frame's z (a) and x (b)
+    rel = tri[t] - origins[k][:, None, :]
+    ly = np.einsum("pvj,pj->pv", rel, fr0[k, :3, 1])
+    ca = np.einsum("pvj,pj->pv", rel, fr0[k, :3, 2])
+    cb = np.einsum("pvj,pj->pv", rel, fr0[k, :3, 0])
+    ny = np.einsum("pj,pj->p", fn[t], fr0[k, :3, 1])
+    # heights where the axis itself crosses each triangle: true surface points inside every rotation's footprint
+    hx_axis = _axis_heights(cb, ly, ca, -cx, -cz)
+    a_max = np.full(len(origins), -np.inf)
+    a_min = np.full(len(origins), np.inf)
+    np.maximum.at(a_max, k, np.where(np.isfinite(hx_axis), hx_axis, -np.inf))
+    np.minimum.at(a_min, k, np.where(np.isfinite(hx_axis), hx_axis, np.inf))
+    # an axis whose own crossings are farther apart than the jaw opens cannot be grasped at any rotation
+    live = (a_max - a_min <= gripper.jaw_max + tie) | ~np.isfinite(a_max - a_min)
+    sel = live[k]
+    k, t, ly, ca, cb, ny = k[sel], t[sel], ly[sel], ca[sel], cb[sel], ny[sel]
+    for j, ang in enumerate(angles):
+        c, s = np.cos(ang), np.sin(ang)
+        # frame j: z = c z0 - s w and x = c w + s z0, where rotation 0 has x = w and z = z0
+        lz = c * ca - s * cb - cz
+        lx = c * cb + s * ca - cx
+        ok = (_min3(lx) <= hx) & (_max3(lx) >= -hx) & (_min3(lz) <= hz) & (_max3(lz) >= -hz)
+        p = np.flatnonzero(ok)
+        if len(p) == 0:
+            continue
+        h = (k[p] + offset) * na + j
+        x3, y3, z3 = lx[p], ly[p], lz[p]
+        # bounds from vertices inside the rectangle: rows that cannot reach them are skipped
+        inside = (np.abs(x3) <= hx) & (np.abs(z3) <= hz)
+        vmax = _max3(np.where(inside, y3, -np.inf))
+        vmin = _min3(np.where(inside, y3, np.inf))
+        lo = np.maximum(_segment_max(h, vmax)[h], a_max[k[p]])
+        hi = np.minimum(-_segment_max(h, -vmin)[h], a_min[k[p]])
+        need = (_max3(y3) >= lo - tie) | (_min3(y3) <= hi + tie)
+        if STATS is not None:
+            STATS.append((len(k), len(p), int(need.sum())))
+        q = p[need]
+        h, x3, y3, z3 = h[need], x3[need], y3[need], z3[need]
+        px, pz, py, valid = _candidates(x3, y3, z3, hx, hz, -cx, -cz)
+        r = np.arange(len(q))
+        for side in (1, -1):
+            score = np.where(valid, side * py, -np.inf)
+            top = score.max(axis=1)
+            near = valid & (score >= top[:, None] - tie)
+            d2 = np.where(near, (px + cx) ** 2 + (pz + cz) ** 2, np.inf)
+            m = d2.argmin(axis=1)
+            align = np.abs(ny[q]) if flip else side * ny[q]
+            keep = np.isfinite(top) & (top >= _segment_max(h, top)[h] - tie)
+            rows[side].append(np.column_stack([h, t[q], top, px[r, m] + cx, py[r, m], pz[r, m] + cz, d2[r, m], align])[keep])
 
 
 STATS: list | None = None

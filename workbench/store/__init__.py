@@ -201,7 +201,7 @@ def to_arrow(value: Any) -> pa.Array:
     arr = np.asarray(value)
     if arr.ndim == 1 or arr.dtype == object:
         return pa.array(arr if arr.dtype != object else list(arr))
-    flat = np.ascontiguousarray(arr.reshape(len(arr), -1))
+    flat = np.ascontiguousarray(arr.reshape(len(arr), int(np.prod(arr.shape[1:]))))  # also for zero rows
     return pa.FixedSizeListArray.from_arrays(pa.array(flat.ravel()), flat.shape[1])
 
 
