@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from graspcheck import check_grasps
-from organic import ORGANIC, min_width
+from workbench.benchmarks.graspcheck import check_grasps
+from workbench.benchmarks.organic import ORGANIC, min_width
 from workbench.geometry.objects import from_trimesh
 from workbench.grasping.grasps import GraspParams, plan_grasps
 from workbench.grasping.placements import PlacementParams, stable_placements

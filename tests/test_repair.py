@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from organic import blob, holed
+from workbench.benchmarks.organic import blob, holed
 from workbench.errors import MeshError
 from workbench.geometry.objects import from_arrays, load_object
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from .gripper import Gripper
+from workbench.robots.gripper import Gripper
 
 
 @dataclass(frozen=True)
@@ -191,8 +191,6 @@ def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows) -> No
         lo = np.maximum(_segment_max(h, vmax)[h], a_max[k[p]])
         hi = np.minimum(-_segment_max(h, -vmin)[h], a_min[k[p]])
         need = (_max3(y3) >= lo - tie) | (_min3(y3) <= hi + tie)
-        if STATS is not None:
-            STATS.append((len(k), len(p), int(need.sum())))
         q = p[need]
         h, x3, y3, z3 = h[need], x3[need], y3[need], z3[need]
         px, pz, py, valid = _candidates(x3, y3, z3, hx, hz, -cx, -cz)
@@ -206,9 +204,6 @@ def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows) -> No
             align = np.abs(ny[q]) if flip else side * ny[q]
             keep = np.isfinite(top) & (top >= _segment_max(h, top)[h] - tie)
             rows[side].append(np.column_stack([h, t[q], top, px[r, m] + cx, py[r, m], pz[r, m] + cz, d2[r, m], align])[keep])
-
-
-STATS: list | None = None
 
 
 def _axis_heights(lx, ly, lz, ax, az) -> np.ndarray:
@@ -286,91 +281,3 @@ def _candidates(lx, ly, lz, hx, hz, ax, az):
         col += 1
     py = np.where(valid, py, 0.0)
     return px, pz, py, valid
-
-
-def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, tolerance: float = 5e-4) -> np.ndarray:
-    """Level 2 at the grasp's opening: does any finger box of either finger, with the pads `widths` apart and every
-    box shrunk by `tolerance` on each side, intersect the object (CONVENTIONS.md: hand body and both fingers at the
-    grasp's opening)? The body does not move with the fingers; it is tested at full opening."""
-    import fcl
-
-    out = np.zeros(len(poses), dtype=bool)
-    req = fcl.CollisionRequest()
-    boxes = [(ext, pose) for ext, pose in gripper.finger_poses(0.0)]
-    objs = [fcl.CollisionObject(fcl.Box(*np.maximum(ext - 2 * tolerance, 1e-6))) for ext, _ in boxes]
-    side = np.array([1.0 if pose[1, 3] > 0 else -1.0 for _, pose in boxes])
-    for k in range(len(poses)):
-        P = poses[k]
-        for b, (obj, (_, local)) in enumerate(zip(objs, boxes)):
-            L = local.copy()
-            L[1, 3] += side[b] * widths[k] / 2
-            W = P @ L
-            obj.setTransform(fcl.Transform(W[:3, :3], W[:3, 3]))
-            if fcl.collide(obj, target, req, fcl.CollisionResult()) > 0:
-                out[k] = True
-                break
-    return out
-
-
-def plan_with_pads(obj, gripper: Gripper, params, friction: float = 0.3, tolerance: float = 5e-4,
-                   adaptive_dist: bool = True, on_facet: bool = False):
-    """Prototype: the paper's facets and samples, the pad contact model, level 2 at full and at grasp opening."""
-    import time
-
-    from .collision import bvh, collide_at_poses, object_collider
-    from .sampling import distribute, sample_count
-    from .segmentation import segment
-
-    mesh = obj.mesh
-    tm = {}
-    t0 = time.perf_counter()
-    facets = segment(mesh, params.tau, params.segmentation, params.merge_angle)
-    tm["segmentation"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    samples = distribute(mesh, facets, sample_count(mesh, params.density, params.neighbour_radius),
-                         params.neighbour_radius, 0.0 if adaptive_dist else params.dist_min, params.dist_max, params.seed)
-    ok = samples.pair_ok.copy()
-    if adaptive_dist:
-        per = np.zeros(len(facets))
-        seg = np.linalg.norm(facets.edges[:, 1] - facets.edges[:, 0], axis=1)
-        fe = np.repeat(np.arange(len(facets)), np.diff(facets.edge_ptr))
-        np.add.at(per, fe, seg)
-        inr = 2 * facets.areas / np.maximum(per, 1e-300)
-        dmin = np.minimum(params.dist_min, 0.5 * inr[samples.pair_facet])
-        ok &= samples.pair_dist >= dmin
-    tm["sampling"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    sel = np.flatnonzero(ok)
-    origins = samples.points[samples.pair_sample[sel]]
-    axes = facets.normals[samples.pair_facet[sel]]
-    angles = 2 * np.pi * np.arange(params.rotations) / params.rotations
-    T = first_touches(mesh, origins, axes, angles, gripper)
-    tm["touches"] = time.perf_counter() - t0
-    y = T.poses[:, :3, 1]
-    cosf = np.cos(np.arctan(friction))
-    width_ok = T.hit & (T.width <= gripper.jaw_max) & (T.width >= gripper.jaw_min)
-    cone_ok = width_ok & (np.einsum("ij,ij->i", T.normal0, y) >= cosf) & (np.einsum("ij,ij->i", T.normal1, -y) >= cosf)
-    if on_facet:
-        fid, tid = facets.membership()
-        keys = np.sort(fid * len(mesh.faces) + tid)
-        f_of = np.repeat(samples.pair_facet[sel], len(angles))
-        q = f_of * len(mesh.faces) + np.maximum(T.tri0, 0)
-        pos = np.searchsorted(keys, q).clip(0, len(keys) - 1)
-        cone_ok &= keys[pos] == q
-    com_ok = cone_ok & (np.linalg.norm(0.5 * (T.point0 + T.point1) - obj.com, axis=1) <= params.com_max)
-    t0 = time.perf_counter()
-    target = object_collider(mesh)
-    idx = np.flatnonzero(com_ok)
-    free_open = np.zeros(len(T), dtype=bool)
-    free_open[idx] = ~collide_at_poses(bvh(gripper.collision_mesh()), T.poses[idx], target)
-    tm["hand_open"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    idx = np.flatnonzero(free_open)
-    free = np.zeros(len(T), dtype=bool)
-    free[idx] = ~fingers_collide(gripper, T.poses[idx], T.width[idx], target, tolerance)
-    tm["fingers"] = time.perf_counter() - t0
-    counts = dict(triangles=len(mesh.faces), facets=len(facets), samples=len(samples.points),
-                  neighbour=int(samples.kept.sum()), facet_samples=len(samples.pair_facet), distance=int(ok.sum()),
-                  hand_poses=len(T), touched=int(T.hit.sum()), width=int(width_ok.sum()), cone=int(cone_ok.sum()),
-                  com=int(com_ok.sum()), hand_open=int(free_open.sum()), grasps=int(free.sum()))
-    return T, free, counts, tm

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from .errors import MeshError
+from workbench.errors import MeshError
 
 
 def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: float = 0.01,
