@@ -1,8 +1,9 @@
 """Safe mesh repair for the meshes users bring (issue 10): scans, exports with flipped faces, open meshes.
 
 Only repairs that cannot change the intended shape are made, and each is reported in one line:
-merge duplicate vertices, drop degenerate and duplicate faces, make the winding consistent and the normals point
-outward, fill small holes (loops of at most `hole_edges` edges and `hole_size` across, fanned from their centroid).
+merge duplicate vertices (reported for indexed meshes; an STL's per-face corners are merged silently), drop degenerate and duplicate faces, make the winding consistent and the normals point
+outward, fill small holes (loops of at most `hole_edges` edges and `hole_size` across, fanned from their centroid;
+trimesh.repair.fill_holes fills any three- or four-sided hole whatever its size, so a missing lid would be closed).
 A file holding several separate bodies is reduced to its largest body when the others are small debris (together
 under `debris` of its area); bodies that touch or overlap one another (a part built from pieces) stay together;
 otherwise the mesh is refused, naming the bodies, since which one is meant cannot be guessed.
@@ -21,9 +22,12 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
     """The repaired mesh and one line per repair made (empty when nothing was needed)."""
     notes: list[str] = []
     nv = len(mesh.vertices)
+    # an STL stores every face's own corners: merging them is loading, not repairing; an indexed mesh (OBJ, PLY)
+    # that repeats vertices has seams, and merging those is a repair worth reporting
+    indexed = len(np.unique(mesh.faces)) < 3 * len(mesh.faces)
     mesh = mesh.copy()
     mesh.merge_vertices()
-    if len(mesh.vertices) < nv:
+    if indexed and len(mesh.vertices) < nv:
         notes.append(f"merged {nv - len(mesh.vertices)} duplicate vertices")
     faces = mesh.faces
     areas = mesh.area_faces
@@ -33,7 +37,7 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
         raise MeshError(f"{label} has only degenerate (zero-area) faces")
     if degenerate.any():
         mesh.update_faces(~degenerate)
-        notes.append(f"dropped {int(degenerate.sum())} degenerate faces")
+        notes.append(f"removed {int(degenerate.sum())} degenerate faces")
     nf = len(mesh.faces)
     mesh.update_faces(mesh.unique_faces())
     if len(mesh.faces) < nf:
@@ -44,14 +48,13 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
         notes.append(body_note)
     if not mesh.is_watertight:
         before = len(mesh.faces)
-        trimesh.repair.fill_holes(mesh)
         filled = _fill_loops(mesh, hole_edges, hole_size)
-        if len(mesh.faces) > before:
-            notes.append(f"filled {filled} small holes with {len(mesh.faces) - before} faces" if filled
-                         else f"filled small holes with {len(mesh.faces) - before} faces")
+        if filled:
+            notes.append(f"filled {filled} small holes (at most {hole_size * 1e3:.3g} mm across) with "
+                         f"{len(mesh.faces) - before} faces")
     if not mesh.is_winding_consistent:
-        trimesh.repair.fix_winding(mesh)
-        notes.append("made the face winding consistent")
+        trimesh.repair.fix_normals(mesh)  # consistent winding, and outward when closed
+        notes.append("faces were not consistently oriented; re-oriented them")
     if mesh.is_watertight and mesh.volume < 0:
         mesh.invert()
         notes.append("turned the normals outward (the mesh was inside out)")

@@ -26,7 +26,7 @@ def test_flipped_faces_and_inside_out_mesh_are_reoriented():
     obj = _load(trimesh.Trimesh(good.vertices, faces, process=False), "flipped")
     assert obj.mesh.is_winding_consistent and obj.mesh.volume > 0
     assert obj.com_method == "volume" and np.allclose(obj.com, good.center_mass, atol=1e-9)
-    assert any("winding" in r for r in obj.repairs)
+    assert any("re-oriented" in r for r in obj.repairs)
     inside_out = _load(trimesh.Trimesh(good.vertices, good.faces[:, ::-1], process=False), "inside_out")
     assert inside_out.mesh.volume > 0 and any("outward" in r for r in inside_out.repairs)
 
