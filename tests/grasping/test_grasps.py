@@ -165,16 +165,21 @@ def test_planning_is_deterministic(box, hand):
     assert not (len(c) == len(a) and np.array_equal(c.poses, a.poses))
 
 
-def test_counts_are_monotone(box_plan):
+def test_counts_are_monotone(box, hand, box_plan):
     c = box_plan.counts
     assert c["samples"] >= c["samples_neighbour"]
     assert c["facet_samples"] >= c["facet_samples_distance"]
-    assert c["contact_pairs"] >= c["pairs_width"] >= c["pairs_com"] >= c["pairs_level1"]
-    assert c["hand_poses"] == c["pairs_level1"] * box_plan.params.rotations >= c["grasps"]
+    # the pad model: one hand pose per kept facet sample and rotation, then width, cone, centre of mass, level 2
+    assert c["hand_poses"] == c["facet_samples_distance"] * box_plan.params.rotations
+    assert c["hand_poses"] >= c["pads_width"] >= c["pads_cone"] >= c["pads_com"] >= c["hand_open"] >= c["grasps"]
+    paper = plan_grasps(box, hand, GraspParams(contact_model="paper")).counts
+    assert paper["contact_pairs"] >= paper["pairs_width"] >= paper["pairs_com"] >= paper["pairs_level1"]
+    assert paper["hand_poses"] == paper["pairs_level1"] * box_plan.params.rotations >= paper["hand_open"] >= paper["grasps"]
 
 
 @pytest.mark.parametrize("bad", [dict(tau=0.0), dict(tau=2.0), dict(rotations=0), dict(dist_min=0.03, dist_max=0.02),
-                                 dict(com_max=-1.0), dict(density=0.0)])
+                                 dict(com_max=-1.0), dict(density=0.0), dict(contact_model="magic"),
+                                 dict(friction=-0.1), dict(finger_clearance=-1e-3), dict(lengths="elastic")])
 def test_bad_parameters_are_refused(bad):
     with pytest.raises(WorkbenchError):
         GraspParams(**bad)
