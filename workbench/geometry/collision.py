@@ -98,6 +98,7 @@ def cylinders_collide(radius: float, lengths: np.ndarray, rotations: np.ndarray,
     for k in np.flatnonzero(~skip if skip is not None else np.ones(len(lengths), dtype=bool)):
         cyl = fcl.CollisionObject(fcl.Cylinder(radius, float(lengths[k])), fcl.Transform(rotations[k], centres[k]))
         out[k] = collide(cyl, target)
+    return out
 
 
 def boxes_collide(extents: np.ndarray, poses: np.ndarray, target: fcl.CollisionObject) -> np.ndarray:

@@ -27,21 +27,12 @@ import numpy as np
 import trimesh
 
 from workbench.errors import WorkbenchError
-<<<<<<< HEAD
-from workbench.geometry.collision import (
-    bvh,
-    collide_at_poses,
-    cylinders_collide,
-    object_collider,
-)
-=======
-from workbench.geometry.collision import boxes_collide, bvh, collide_at_poses, object_collider
->>>>>>> daee67d (Layout: pad contact model in grasping/pads.py and grasps.py, boxes_collide, chunked boundary distances, coplanar supports in placements, mesh repair at load, organic set and independent grasp check in benchmarks)
+from workbench.geometry.collision import boxes_collide, bvh, collide_at_poses, cylinders_collide, object_collider
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
-from workbench.robots.gripper import Gripper
 from workbench.grasping.pads import axis_frames, first_touches
+from workbench.robots.gripper import Gripper
 
 
 @dataclass(frozen=True)
@@ -400,8 +391,8 @@ def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: 
 
 
 def grasp_poses(point0: np.ndarray, point1: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """TCP poses (P * A, 4, 4): origin at the pair's midpoint, y toward point0, approach z rotated by each angle
-    about y (pair-major order)."""
+    """TCP poses (P * A, 4, 4): origin at the pair's midpoint, y toward point0, approach z = the reference z0
+    rotated by +angle about y (right-handed; the stored `freeairgrip.rotation`), pair-major order."""
     poses = axis_frames(0.5 * (point0 + point1), point0 - point1, angles)
     return poses
 
@@ -435,7 +426,6 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     return out
 
 
-# (count key, what removed the last candidate and what to try), in pipeline order
 def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Gripper) -> str | None:
     """Which stage removed the last candidate, and what to try; None when grasps remain (issue 10)."""
     if counts.get("grasps", 0) > 0:

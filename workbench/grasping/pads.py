@@ -55,15 +55,15 @@ def pad_rectangle(gripper: Gripper) -> tuple[float, float, float, float]:
 
 
 def axis_frames(origins: np.ndarray, axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
-    """TCP frames (K * A, 4, 4): origin on the axis, y along it, approach z at each angle about y from a
-    deterministic reference (the world axis least aligned with y), axis-major."""
+    """TCP frames (K * A, 4, 4): origin on the axis, y along it, approach z = the reference z0 (the world axis least
+    aligned with y, made perpendicular) rotated by +angle about y (right-handed, the stored rotation), axis-major."""
     y = axes / np.linalg.norm(axes, axis=1, keepdims=True)
     ref = np.eye(3)[np.argmin(np.abs(y), axis=1)]
     z0 = ref - np.einsum("ij,ij->i", ref, y)[:, None] * y
     z0 /= np.linalg.norm(z0, axis=1, keepdims=True)
-    w = np.cross(y, z0)
+    x0 = np.cross(y, z0)
     c, s = np.cos(angles)[None, :, None], np.sin(angles)[None, :, None]
-    z = c * z0[:, None, :] - s * w[:, None, :]
+    z = c * z0[:, None, :] + s * x0[:, None, :]  # R_y(angle) z0 = cos z0 + sin (y x z0)
     yy = np.broadcast_to(y[:, None, :], z.shape)
     poses = np.zeros((len(y), len(angles), 4, 4))
     poses[..., :3, 0], poses[..., :3, 1], poses[..., :3, 2] = np.cross(yy, z), yy, z
@@ -175,9 +175,9 @@ def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows) -> No
     k, t, ly, ca, cb, ny = k[sel], t[sel], ly[sel], ca[sel], cb[sel], ny[sel]
     for j, ang in enumerate(angles):
         c, s = np.cos(ang), np.sin(ang)
-        # frame j: z = c z0 - s w and x = c w + s z0, where rotation 0 has x = w and z = z0
-        lz = c * ca - s * cb - cz
-        lx = c * cb + s * ca - cx
+        # frame j: z = c z0 + s x0 and x = y x z = c x0 - s z0, where rotation 0 has x = x0 and z = z0
+        lz = c * ca + s * cb - cz
+        lx = c * cb - s * ca - cx
         ok = (_min3(lx) <= hx) & (_max3(lx) >= -hx) & (_min3(lz) <= hz) & (_max3(lz) >= -hz)
         p = np.flatnonzero(ok)
         if len(p) == 0:
