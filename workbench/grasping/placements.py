@@ -85,24 +85,24 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     """Stable placements of `obj` on its convex-hull faces (Section IV, freetabletopplacement).
 
     Hull faces coplanar within the tolerance are merged (`supports.coplanar_groups`); each group is a candidate
-    resting with its area-weighted normal down. Its support polygon is the hull of the vertices within
-    `coplanar_distance` of the table and its stability margin / height (Section VI); candidates below
+    resting with its area-weighted normal down. Its support polygon is the hull of the group's vertices and its
+    stability margin / height (Section VI); candidates below
     `min_stability` are rejected.
     """
     hull = obj.mesh.convex_hull
     verts = np.asarray(hull.vertices)
-    _, normals = coplanar_groups(hull, params.coplanar_distance, params.coplanar_angle)
+    groups, normals = coplanar_groups(hull, params.coplanar_distance, params.coplanar_angle)
     threshold = max(params.min_stability, 1e-9)
     # candidates that cannot reach the threshold are scored 0 without building their support polygon
-    stability = stabilities(verts, obj.com, normals, params.coplanar_distance, floor=0.9 * threshold)
+    stability = stabilities(hull, obj.com, groups, normals, floor=0.9 * threshold)
     ok = stability >= threshold
     idx = np.flatnonzero(ok)[np.argsort(-stability[ok], kind="stable")]
     poses, supports = [], []
     for i in idx:
         pose = rest_pose(normals[i], obj.com, verts)
-        placed = verts @ pose[:3, :3].T + pose[:3, 3]
+        placed = verts[np.unique(hull.faces[groups[i]])] @ pose[:3, :3].T + pose[:3, 3]
         poses.append(pose)
-        supports.append(_polygon(placed[placed[:, 2] <= params.coplanar_distance][:, :2]))
+        supports.append(_polygon(placed[:, :2]))
     rejected = np.flatnonzero(~ok)
     rejected_poses = np.array([rest_pose(normals[i], obj.com, verts) for i in rejected[:64]]).reshape(-1, 4, 4)
     return Placements(poses=np.array(poses).reshape(-1, 4, 4), stability=stability[idx], supports=supports,
