@@ -435,8 +435,9 @@ def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Grip
         ("facets", "the mesh has no facets"),
         ("samples_neighbour", "the surface got no samples; raise --density"),
         ("facet_samples_distance",
-         f"facets are smaller than twice the {lengths['dist_min'] * 1e3:.3g} mm boundary distance; lower --dist-min "
-         f"or raise --tau"),
+         f"no sample lies {lengths['dist_min'] * 1e3:.3g}-{lengths['dist_max'] * 1e3:.3g} mm from its facet's boundary "
+         f"(a facet narrower than twice the minimum asks half its inradius); lower --dist-min, raise --dist-max or "
+         f"raise --tau"),
         ("contact_pairs", f"no sample has a parallel facet opposite it (within {np.degrees(params.parallel_angle):.3g} "
                           f"degrees); raise --parallel-deg or use --contact-model pads"),
         ("pairs_width", f"every facet pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
