@@ -92,3 +92,41 @@ def test_noisy_flat_base_is_a_stable_placement(organic_objects):
     exact = stable_placements(obj, PlacementParams(coplanar_distance=1e-9, coplanar_angle=1e-9))
     down = np.einsum("pij,j->pi", exact.poses[:, :3, :3], [0, 0, -1.0])
     assert not (down[:, 2] < -0.999).any() or exact.stability[down[:, 2] < -0.999].max() < 0.5 * expect
+
+
+# objects that rest stably and go through placements, IK and a plan (a blob, a scan with holes, the studded brick,
+# the flat-bottomed scan); min_regrasps 0 accepts a plan that needs no regrasp
+PIPELINE = ["ellipsoid", "scan_holes", "stud_brick", "flat_scan"]
+
+
+@pytest.mark.parametrize("name", PIPELINE)
+def test_organic_objects_go_through_placements_ik_and_a_plan(organic_objects, tmp_path, name):
+    from workbench.errors import PlanningError
+    from workbench.planners.wan_harada.query import PoseQuery
+    from workbench.planners.wan_harada.stages import build_all, load_planner
+    from workbench.planners.wan_harada.tabletop import TabletopParams
+
+    grid = TabletopParams(x_min=0.4, x_max=0.6, nx=2, y_min=-0.15, y_max=0.15, ny=2, angles=4, max_grasps=12)
+    obj = organic_objects[name]
+    db = tmp_path / "organic.duckdb"
+    res = build_all(db, obj, "panda", tparams=grid, workers=1, progress=False)
+    assert res.empty is None, res.empty
+    assert res.counts["grasps"] >= 20 and res.counts["placements"] >= 1 and res.counts["tabletop_grips"] > 0
+    assert res.counts["graph_nodes"] > 0
+    planner = load_planner(db, obj.name, "panda")
+    # start and goal on the grid's own positions and angles: the first pair the planner solves
+    spots = [(x, y, a) for x in (0.4, 0.6) for y in (-0.15, 0.15) for a in np.arange(4) * np.pi / 2]
+    best, tried = None, []
+    for pid in planner.placement_ids():
+        for a, b in zip(spots, spots[5:] + spots[:5]):
+            try:
+                best = planner.plan(PoseQuery(int(pid), *a), PoseQuery(int(pid), *b), alternatives=0)[0]
+                break
+            except PlanningError as exc:
+                tried.append(str(exc))
+        if best is not None:
+            break
+    assert best is not None, tried[:3]
+    assert best.steps[0].kind == "pick" and best.steps[-1].kind == "place"
+    for s in best.steps:
+        assert np.allclose(s.object_pose @ s.grasp, s.tcp, atol=1e-9)
