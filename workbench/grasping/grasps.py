@@ -49,7 +49,8 @@ class GraspParams:
     (CONVENTIONS.md) or "paper". friction: friction coefficient of the pads (0.3, a 16.7-degree cone, conservative
     for rubber pads; None: tan(parallel_angle), the paper's antiparallel tolerance as a cone). finger_clearance: how far the hand and fingers at the grasp's opening may reach into the
     object (0.5 mm). lengths: "adaptive" (scaled with the part) or "fixed". reference_size: the part size at which
-    the fixed lengths apply unscaled (60 mm).
+    the fixed lengths apply unscaled (60 mm). axis_angle: the pad model tries one jaw axis per sample and group of
+    facet normals within this angle (None: tau/2; 0: every facet sample, see `distinct_axes`).
     """
 
     tau: float = float(np.radians(18.0))
@@ -68,6 +69,7 @@ class GraspParams:
     finger_clearance: float = 5e-4
     lengths: str = "adaptive"
     reference_size: float = 0.06
+    axis_angle: float | None = None
 
     def __post_init__(self) -> None:
         checks = {
@@ -83,6 +85,7 @@ class GraspParams:
             "finger_clearance": self.finger_clearance >= 0,
             "lengths": self.lengths in ("adaptive", "fixed"),
             "reference_size": self.reference_size > 0,
+            "axis_angle": self.axis_angle is None or 0 <= self.axis_angle < np.pi,
         }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
@@ -260,6 +263,10 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     mesh = obj.mesh
     t0 = time.perf_counter()
     sel = np.flatnonzero(samples.pair_ok)
+    merge = params.tau / 2 if params.axis_angle is None else params.axis_angle
+    sel = sel[distinct_axes(samples.pair_sample[sel], facets.normals[samples.pair_facet[sel]],
+                            facets.areas[samples.pair_facet[sel]], merge)]
+    counts["axes"] = int(len(sel))
     angles = 2 * np.pi * np.arange(params.rotations) / params.rotations
     touch = first_touches(mesh, samples.points[samples.pair_sample[sel]], facets.normals[samples.pair_facet[sel]],
                           angles, gripper)
@@ -284,6 +291,33 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                    pads=False)
     rot = np.tile(angles, n // max(len(angles), 1))
     return pairs, touch.poses[live], live, rot[live], free
+
+
+def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, angle: float) -> np.ndarray:
+    """Mask of the jaw axes to try: per sample, the facets holding it, largest first, each kept when its normal is more
+    than `angle` from every axis already kept for that sample (0 keeps every facet sample).
+
+    Overlapping facets of the over-segmentation give one sample several facet normals a few degrees apart; their
+    pads close on the same first touches, so the paper's pairing keeps one pair per sample and opposite triangle.
+    Here the same is done before closing the pads, which is what costs.
+    """
+    keep = np.ones(len(sample), dtype=bool)
+    if angle <= 0 or len(sample) == 0:
+        return keep
+    order = np.lexsort((-areas, sample))
+    cos_a = np.cos(angle)
+    bounds = np.flatnonzero(np.r_[True, sample[order][1:] != sample[order][:-1], True])
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        if b - a == 1:
+            continue
+        idx = order[a:b]
+        kept: list[int] = []
+        for i in idx:
+            if kept and (normals[kept] @ normals[i]).max() >= cos_a:
+                keep[i] = False
+            else:
+                kept.append(i)
+    return keep
 
 
 def _facet_of(facets: Facets, tri: np.ndarray, direction: np.ndarray) -> np.ndarray:
@@ -438,6 +472,7 @@ def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Grip
          f"no sample lies {lengths['dist_min'] * 1e3:.3g}-{lengths['dist_max'] * 1e3:.3g} mm from its facet's boundary "
          f"(a facet narrower than twice the minimum asks half its inradius); lower --dist-min, raise --dist-max or "
          f"raise --tau"),
+        ("axes", "no jaw axis to try"),
         ("contact_pairs", f"no sample has a parallel facet opposite it (within {np.degrees(params.parallel_angle):.3g} "
                           f"degrees); raise --parallel-deg or use --contact-model pads"),
         ("pairs_width", f"every facet pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
