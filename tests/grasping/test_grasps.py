@@ -224,3 +224,34 @@ def test_stored_rotation_is_the_right_handed_angle_about_the_jaw_axis(box, hand)
     angle = np.arctan2(np.einsum("ij,ij->i", np.cross(z0, z), y), np.einsum("ij,ij->i", z0, z))
     diff = np.angle(np.exp(1j * (angle - g.rotation)))
     assert np.abs(diff).max() < 1e-9
+
+
+def test_fingers_at_the_grasps_opening_are_checked(hand):
+    """A plate with a flange 30 mm behind its edge: the open hand straddles the flange, but fingers closed on the
+    10 mm plate would cut into it. Those poses are removed by level 2 at the grasp's opening, and every kept grasp
+    passes the independent check (coal via pinocchio, fingers at the grasp's opening)."""
+    from workbench.benchmarks.graspcheck import check_grasps
+
+    plate = trimesh.creation.box((0.06, 0.010, 0.05))
+    flange = trimesh.creation.box((0.06, 0.05, 0.006))
+    flange.apply_translation([0, 0, -0.025 - 0.030])  # 30 mm below the plate's lower edge... along -z
+    stem = trimesh.creation.box((0.06, 0.010, 0.032))
+    stem.apply_translation([0, 0, -0.025 - 0.014])
+    part = from_trimesh(trimesh.util.concatenate([plate, stem, flange]), "flanged_plate")
+    plan = plan_grasps(part, hand, GraspParams())
+    c = plan.counts
+    assert c["hand_open"] > c["grasps"] > 0, c  # some poses fail only with the fingers at the grasp's opening
+    g = plan.grasps
+    pick = np.unique(np.linspace(0, len(g) - 1, 40).astype(int))
+    v = check_grasps(part.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick], g.normal0[pick],
+                     g.normal1[pick], plan.params.friction_coefficient)
+    assert v.ok.all(), (v.penetration.max(), (~v.surface).sum(), (~v.cone).sum(), (~v.pads).sum())
+
+
+def test_pad_model_keeps_the_paper_pairs_on_the_papers_tube(tube_paper, hand):
+    """Under the same segmentation and fixed lengths, the pad model finds at least 90% as many grasps as the paper's
+    pairing (its pads close onto the same flat-facet pairs, and more where the paper's rotation-invariant level-1
+    cylinder is conservative); the counts are printed by `workbench bench grasps`."""
+    paper = plan_grasps(tube_paper, hand, GraspParams(contact_model="paper", lengths="fixed"))
+    pads = plan_grasps(tube_paper, hand, GraspParams(lengths="fixed"))
+    assert len(pads.grasps) >= 0.9 * len(paper.grasps) > 0

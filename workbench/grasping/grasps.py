@@ -359,7 +359,10 @@ def _paper(obj, gripper, params, lengths, facets, samples, margin, counts, timin
     cand_pair = np.repeat(live, params.rotations)
     cand_rot = np.tile(angles, len(live))
     counts["hand_poses"] = int(len(poses))
-    free = _level2(gripper, poses, pairs.width[cand_pair], target, params.finger_clearance, counts, timings)
+    # the pads themselves are level 1's (their swept cylinders stop short of a tilted facet, where a flat pad
+    # at the contact would dig in by its rim): the other finger boxes are tested at the grasp's opening
+    free = _level2(gripper, poses, pairs.width[cand_pair], target, params.finger_clearance, counts, timings,
+                   pads=False)
     return pairs, poses, cand_pair, cand_rot, free
 
 
