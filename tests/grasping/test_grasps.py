@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import textwrap
+
 import numpy as np
 import pytest
 import trimesh
@@ -255,3 +259,25 @@ def test_pad_model_keeps_the_paper_pairs_on_the_papers_tube(tube_paper, hand):
     paper = plan_grasps(tube_paper, hand, GraspParams(contact_model="paper", lengths="fixed"))
     pads = plan_grasps(tube_paper, hand, GraspParams(lengths="fixed"))
     assert len(pads.grasps) >= 0.9 * len(paper.grasps) > 0
+
+
+def test_literal_over_segmentation_runs_on_the_bracket_within_4_gib():
+    """Every triangle a seed (merge_angle 0, the paper's "repeatedly examining all triangle meshes"): the facets and
+    the boundary distances of every (facet, sample) pair fit in 4 GiB (distances in bounded chunks)."""
+    code = textwrap.dedent("""
+        import resource, warnings
+        resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
+        warnings.simplefilter("ignore")
+        from workbench.geometry.facets import segment
+        from workbench.geometry.objects import load_object
+        from workbench.geometry.sampling import distribute, sample_count
+        from workbench.resources import bundled_objects
+        mesh = load_object(bundled_objects()["bracket"]).mesh
+        facets = segment(mesh, merge_angle=0.0)
+        s = distribute(mesh, facets, sample_count(mesh, None, 0.01), 0.01, 0.002, 0.02, 0)
+        print(len(mesh.faces), len(facets), len(s.pair_facet), int(s.pair_ok.sum()))
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    tri, facets, pairs, kept = map(int, out.stdout.split())
+    assert facets > 2000 and pairs > 10 * facets // 100 and kept > 0
