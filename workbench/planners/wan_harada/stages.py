@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from workbench.errors import PlanningError, RobotError
+from workbench.errors import PlanningError, RobotError, StoreError
 from workbench.geometry.objects import ObjectModel, from_arrays
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.grasping.placements import (
@@ -453,13 +453,16 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -
     """The first stage of `object_name`'s latest stored runs that kept nothing, as "stage: why; what to try", or None
     when every stage (grasps, placements, free tabletop grips, tabletop grips, and IK for `robot_name`) has rows."""
     oid, _ = get_object(store, object_name)
-    grasps = load_grasps(store, oid)
+    try:
+        grasps = load_grasps(store, oid)
+    except StoreError:  # no grasp stage run (tabletop grips given otherwise): nothing is empty
+        grasps = {"jawwidth": [None]}
     if len(grasps["jawwidth"]) == 0:
         return (f"grasps: {object_name} has no free-air grasp; `workbench grasps` names the filter that removed the last "
                 f"candidate")
     try:
         tt = latest_tabletop_paramset(store, oid)
-    except Exception:  # no placements run yet: nothing empty so far
+    except StoreError:  # no placements run yet: nothing empty so far
         return None
     pl = sql.placements_of_tabletop(store, tt)
     free = load_placements(store, pl)
