@@ -35,16 +35,18 @@ def _paper(args: argparse.Namespace) -> int:
     for label, row, obj in bench_objects(args.objects):
         conv = plan_grasps(obj, hand, GraspParams(segmentation="conventional"))
         t, plan = median_time(lambda: plan_grasps(obj, hand, GraspParams()), args.repeats)
-        paper_model = plan_grasps(obj, hand, GraspParams(contact_model="paper"))
+        fixed = plan_grasps(obj, hand, GraspParams(lengths="fixed"))
+        today = plan_grasps(obj, hand, GraspParams(contact_model="paper", lengths="fixed"))
         c = plan.counts
         paper = TABLE_I.get(row)
         rows.append([label, c["triangles"], conv.counts["facets"], c["facets"], c["samples"], c["samples_neighbour"],
                      c["facet_samples_distance"], c["hand_poses"], c["pads_com"], len(conv.grasps), c["grasps"],
-                     len(paper_model.grasps), t, paper[1] if paper else "-", paper[2] if paper else "-"])
+                     len(fixed.grasps), len(today.grasps), t, paper[1] if paper else "-", paper[2] if paper else "-"])
     print_table(["object", "#-tri", "facets conv", "facets over", "samples", "after nbr", "after dist", "hand poses",
-                 "pads ok", "#-fg conv", "#-fg", "#-fg paper pairs", "t-fg s", "paper #-fg", "paper t-fg s"], rows,
-                title=f"Grasp planning, Franka hand, over-segmentation, pad contact model (median of {args.repeats} "
-                      f"runs; '#-fg paper pairs': the paper's contact pairs and swept cylinders; Table I beside)")
+                 "pads ok", "#-fg conv", "#-fg", "#-fg fixed", "#-fg paper pairs", "t-fg s", "paper #-fg", "paper t-fg s"],
+                rows, title=f"Grasp planning, Franka hand, over-segmentation, pad contact model, lengths scaled with the part "
+                            f"(median of {args.repeats} runs; '#-fg fixed': fixed lengths; '#-fg paper pairs': the paper's "
+                            f"contact pairs and swept cylinders with fixed lengths, the model before issue 10; Table I beside)")
     return 0
 
 
