@@ -71,32 +71,32 @@ def test_pad_contacts_on_a_box_are_the_paper_pairs(box, hand):
 
 
 def test_noisy_flat_base_is_a_stable_placement(organic_objects):
-    """A scan flat only to about 0.1 mm rests on its base; its stability matches an independent support polygon."""
+    """A scan flat only to about 0.1 mm rests on its base; its stability matches an independent support polygon of
+    the placed mesh (every vertex within 0.1 mm of the table, the plan validator's tolerance)."""
     from scipy.spatial import ConvexHull
 
     obj = organic_objects["flat_scan"]
-    v = obj.mesh.vertices
-    base = v[v[:, 2] <= v[:, 2].min() + 5e-4]
-    hull = ConvexHull(base[:, :2])
-    c = obj.com
-    expect = np.min(-(hull.equations[:, :2] @ c[:2] + hull.equations[:, 2])) / (c[2] - v[:, 2].min())
-    assert expect > 0.5
     pl = stable_placements(obj, PlacementParams())
     down = np.einsum("pij,j->pi", pl.poses[:, :3, :3], [0, 0, -1.0])
     on_base = np.flatnonzero(down[:, 2] < -0.999)  # the object's -z points down: resting on its base
     assert len(on_base) == 1
-    # the placement's polygon is its coplanar hull faces' vertices; the check's is every vertex within 0.5 mm of the
-    # base, which adds rim vertices standing 0.1-0.2 mm proud on steep faces: a few per cent wider
-    assert pl.stability[on_base[0]] == pytest.approx(expect, rel=0.1)
-    # the exact-coplanarity rule (no tolerance) misses it
+    pose = pl.poses[on_base[0]]
+    v = obj.mesh.vertices @ pose[:3, :3].T + pose[:3, 3]
+    c = pose[:3, :3] @ obj.com + pose[:3, 3]
+    assert abs(v[:, 2].min()) < 1e-9
+    hull = ConvexHull(v[v[:, 2] <= 1e-4][:, :2])
+    expect = np.min(-(hull.equations[:, :2] @ c[:2] + hull.equations[:, 2])) / c[2]
+    assert expect > 0.5
+    assert pl.stability[on_base[0]] == pytest.approx(expect, rel=0.03)
+    # the exact-coplanarity rule (no tolerance) misses it: its hull faces are a degree or so apart
     exact = stable_placements(obj, PlacementParams(coplanar_distance=1e-9, coplanar_angle=1e-9))
     down = np.einsum("pij,j->pi", exact.poses[:, :3, :3], [0, 0, -1.0])
     assert not (down[:, 2] < -0.999).any() or exact.stability[down[:, 2] < -0.999].max() < 0.5 * expect
 
 
-# objects that rest stably and go through placements, IK and a plan (a blob, a scan with holes, the studded brick,
-# the flat-bottomed scan); min_regrasps 0 accepts a plan that needs no regrasp
-PIPELINE = ["ellipsoid", "scan_holes", "stud_brick", "flat_scan"]
+# objects that rest stably and go through placements, IK and a plan (the cup, a scan with holes, the studded brick,
+# the flat-bottomed scan; an ellipsoid rolls: no stable placement)
+PIPELINE = ["cup", "scan_holes", "stud_brick", "flat_scan"]
 
 
 @pytest.mark.parametrize("name", PIPELINE)

@@ -18,7 +18,7 @@ from scipy.spatial import ConvexHull
 
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import ObjectModel
-from workbench.geometry.supports import coplanar_groups, stabilities
+from workbench.geometry.supports import coplanar_groups, stabilities, support_stability
 from workbench.robots.gripper import Gripper
 
 
@@ -26,16 +26,19 @@ from workbench.robots.gripper import Gripper
 class PlacementParams:
     """min_stability: smallest accepted stability (distance to the support boundary over centre-of-mass height;
     0.1 is a tilt of 5.7 degrees). clearance: how far above the table (m) the hand must stay. coplanar_distance,
-    coplanar_angle: hull faces within 0.5 mm of a support's plane and 1 degree of its normal merge into it, and the
-    hull vertices within coplanar_distance of the table form its support polygon."""
+    coplanar_angle: hull faces within 0.5 mm of a support's plane and 1 degree of its normal merge into one candidate
+    support. support_tolerance: once settled, the hull vertices within 0.1 mm of the table form the support polygon
+    (the plan validator's flatness tolerance)."""
 
     min_stability: float = 0.1
     clearance: float = 0.002
     coplanar_distance: float = 5e-4
     coplanar_angle: float = float(np.radians(1.0))
+    support_tolerance: float = 1e-4
 
     def __post_init__(self) -> None:
         if not (self.min_stability >= 0 and self.clearance >= 0 and self.coplanar_distance >= 0
+                and self.support_tolerance >= 0
                 and 0 <= self.coplanar_angle < np.pi / 2):
             raise WorkbenchError(f"placement parameters must be non-negative, got {self}")
 
@@ -85,9 +88,10 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     """Stable placements of `obj` on its convex-hull faces (Section IV, freetabletopplacement).
 
     Hull faces coplanar within the tolerance are merged (`supports.coplanar_groups`); each group is a candidate
-    resting with its area-weighted normal down. Its support polygon is the hull of the group's vertices and its
-    stability margin / height (Section VI); candidates below
-    `min_stability` are rejected.
+    resting with its area-weighted normal down, scored first on the group's own vertices. A candidate that can reach
+    `min_stability` is then settled: the object rests with that normal down, its support polygon is the hull of the
+    hull vertices within `support_tolerance` (0.1 mm, the plan validator's flatness tolerance) of the table, and its
+    stability is margin / height on that polygon (Section VI).
     """
     hull = obj.mesh.convex_hull
     verts = np.asarray(hull.vertices)
@@ -95,19 +99,22 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     threshold = max(params.min_stability, 1e-9)
     # candidates that cannot reach the threshold are scored 0 without building their support polygon
     stability = stabilities(hull, obj.com, groups, normals, floor=0.9 * threshold)
-    ok = stability >= threshold
-    idx = np.flatnonzero(ok)[np.argsort(-stability[ok], kind="stable")]
-    poses, supports = [], []
-    for i in idx:
+    poses, supports = {}, {}
+    for i in np.flatnonzero(stability >= 0.9 * threshold):
         pose = rest_pose(normals[i], obj.com, verts)
-        placed = verts[np.unique(hull.faces[groups[i]])] @ pose[:3, :3].T + pose[:3, 3]
-        poses.append(pose)
-        supports.append(_polygon(placed[:, :2]))
+        placed = verts @ pose[:3, :3].T + pose[:3, 3]
+        contact = placed[placed[:, 2] <= params.support_tolerance][:, :2]
+        height = float((pose[:3, :3] @ obj.com + pose[:3, 3])[2])
+        stability[i] = support_stability(np.column_stack([contact, np.zeros(len(contact))]),
+                                         np.array([0.0, 0.0, height]), np.array([0.0, 0.0, -1.0]))
+        poses[i], supports[i] = pose, _polygon(contact)
+    ok = (stability >= threshold) & np.isin(np.arange(len(groups)), list(poses))
+    idx = np.flatnonzero(ok)[np.argsort(-stability[ok], kind="stable")]
     rejected = np.flatnonzero(~ok)
     rejected_poses = np.array([rest_pose(normals[i], obj.com, verts) for i in rejected[:64]]).reshape(-1, 4, 4)
-    return Placements(poses=np.array(poses).reshape(-1, 4, 4), stability=stability[idx], supports=supports,
-                      normals=normals[idx].reshape(-1, 3), rejected_poses=rejected_poses,
-                      rejected_stability=stability[rejected])
+    return Placements(poses=np.array([poses[i] for i in idx]).reshape(-1, 4, 4), stability=stability[idx],
+                      supports=[supports[i] for i in idx], normals=normals[idx].reshape(-1, 3),
+                      rejected_poses=rejected_poses, rejected_stability=stability[rejected])
 
 
 def _polygon(points2d: np.ndarray) -> np.ndarray:
