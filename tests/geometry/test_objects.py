@@ -231,7 +231,9 @@ def test_open_mesh_is_accepted_with_area_weighted_centre_of_mass(tmp_path):
 def test_inside_out_mesh_is_turned_outward(tmp_path):
     closed = box()
     path = write_obj(tmp_path / "inverted.obj", closed.vertices, closed.faces[:, ::-1])
-    obj = load_quietly(path)
+    with pytest.warns(MeshWarning, match="normals outward"):
+        obj = load_object(path)
+    assert obj.repairs == ("turned the normals outward (the mesh was inside out)",)
     assert obj.mesh.volume == pytest.approx(np.prod(BOX), rel=1e-9) and obj.com_method == "volume"
     np.testing.assert_allclose(obj.com, BOX_CENTRE, atol=1e-12)
 

@@ -1,32 +1,80 @@
-"""Grasp planning (Section III) beside Table I's #-fg and t-fg."""
+"""Grasp planning (Section III) beside Table I's #-fg and t-fg, and on the organic set (issue 10)."""
 
 from __future__ import annotations
 
 import argparse
+import time
+
+import numpy as np
 
 from workbench.benchmarks import median_time, print_table
+from workbench.benchmarks.graspcheck import check_grasps
+from workbench.benchmarks.organic import ORGANIC, min_width
 from workbench.benchmarks.paper import TABLE_I, bench_objects
+from workbench.geometry.objects import from_trimesh
 from workbench.grasping.grasps import GraspParams, plan_grasps
 from workbench.robots.gripper import franka_hand
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=3, help="runs per object (the median is printed)")
-    parser.add_argument("--objects", choices=["all", "bundled", "paper"], default="all")
+    parser.add_argument("--set", dest="set", choices=["paper", "organic"], default="paper",
+                        help="paper: the bundled and paper objects beside Table I; organic: procedural scans, blobs, "
+                             "tori, cups and a studded brick")
+    parser.add_argument("--objects", choices=["all", "bundled", "paper"], default="all", help="with --set paper")
+    parser.add_argument("--checked", type=int, default=100, help="grasps per object given to the independent check")
 
 
 def run(args: argparse.Namespace) -> int:
+    return _organic(args) if args.set == "organic" else _paper(args)
+
+
+def _paper(args: argparse.Namespace) -> int:
     hand = franka_hand()
     rows = []
     for label, row, obj in bench_objects(args.objects):
         conv = plan_grasps(obj, hand, GraspParams(segmentation="conventional"))
         t, plan = median_time(lambda: plan_grasps(obj, hand, GraspParams()), args.repeats)
+        fixed = plan_grasps(obj, hand, GraspParams(lengths="fixed"))
+        today = plan_grasps(obj, hand, GraspParams(contact_model="paper", lengths="fixed"))
         c = plan.counts
         paper = TABLE_I.get(row)
         rows.append([label, c["triangles"], conv.counts["facets"], c["facets"], c["samples"], c["samples_neighbour"],
-                     c["facet_samples_distance"], c["contact_pairs"], c["pairs_level1"], len(conv.grasps), c["grasps"],
-                     t, paper[1] if paper else "-", paper[2] if paper else "-"])
-    print_table(["object", "#-tri", "facets conv", "facets over", "samples", "after nbr", "after dist", "pairs",
-                 "pairs L1", "#-fg conv", "#-fg", "t-fg s", "paper #-fg", "paper t-fg s"], rows,
-                title=f"Grasp planning, Franka hand, over-segmentation (median of {args.repeats} runs; Table I beside)")
+                     c["facet_samples_distance"], c["hand_poses"], c["pads_com"], len(conv.grasps), c["grasps"],
+                     len(fixed.grasps), len(today.grasps), t, paper[1] if paper else "-", paper[2] if paper else "-"])
+    print_table(["object", "#-tri", "facets conv", "facets over", "samples", "after nbr", "after dist", "hand poses",
+                 "pads ok", "#-fg conv", "#-fg", "#-fg fixed", "#-fg paper pairs", "t-fg s", "paper #-fg", "paper t-fg s"],
+                rows, title=f"Grasp planning, Franka hand, over-segmentation, pad contact model, lengths scaled with the part "
+                            f"(median of {args.repeats} runs; '#-fg fixed': fixed lengths; '#-fg paper pairs': the paper's "
+                            f"contact pairs and swept cylinders with fixed lengths, the model before issue 10; Table I beside)")
+    return 0
+
+
+def _organic(args: argparse.Namespace) -> int:
+    hand = franka_hand()
+    rows = []
+    for name, make in ORGANIC.items():
+        mesh = make()
+        obj = from_trimesh(mesh, name)
+        params = GraspParams()
+        times = []
+        for _ in range(max(1, args.repeats)):
+            t0 = time.perf_counter()
+            plan = plan_grasps(obj, hand, params)
+            times.append(time.perf_counter() - t0)
+        g = plan.grasps
+        pick = np.unique(np.linspace(0, len(g) - 1, min(len(g), args.checked)).astype(int)) if len(g) else np.zeros(0, int)
+        v = check_grasps(obj.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick],
+                         g.normal0[pick], g.normal1[pick], params.friction_coefficient)
+        graspable = min_width(mesh) < hand.jaw_max
+        tm = plan.timings
+        rows.append([name, len(mesh.faces), "yes" if mesh.is_watertight else "no", min_width(mesh) * 1e3,
+                     "yes" if graspable else "no", len(g), tm.get("segmentation", 0.0), tm.get("sampling", 0.0),
+                     tm.get("pads", 0.0), tm.get("level2", 0.0), tm.get("fingers", 0.0), sorted(times)[len(times) // 2],
+                     f"{int(v.ok.sum())}/{len(pick)}", f"{100.0 * v.ok.mean():.0f}%" if len(pick) else "-"])
+    print_table(["object", "#-tri", "closed", "min width mm", "graspable", "grasps", "t seg s", "t sample s", "t pads s",
+                 "t hand s", "t fingers s", "t total s", "checked ok", "valid"], rows,
+                title=f"Organic set, Franka hand, pad contact model (median of {args.repeats} runs; up to {args.checked} "
+                      f"grasps per object checked independently: trimesh closest points, coal via pinocchio). Targets: "
+                      f">= 20 valid grasps on every graspable object, 100% valid, <= 1 s per 5,000 triangles")
     return 0

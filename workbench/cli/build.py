@@ -7,6 +7,7 @@ import argparse
 import time
 from pathlib import Path
 
+from workbench.cli import warn
 from workbench.cli.grasps import add_grasp_arguments, add_object_arguments, grasp_params
 from workbench.cli.placements import (
     add_placement_arguments,
@@ -52,6 +53,12 @@ def run(args: argparse.Namespace) -> int:
 def print_build(res: BuildResult, db, seconds: float) -> None:
     c, t, r = res.counts, res.timings, res.reused
     verb = lambda k: "reused" if r.get(k) else "computed"  # noqa: E731
+    if res.empty is not None:
+        print(f"{res.name}: {c['grasps']} free-air grasps ({verb('grasps')}, {t['grasps']:.1f} s); {c['placements']} stable "
+              f"placements, {c['tabletop_placements']:,} tabletop placements, {c['tabletop_grips']:,} tabletop grips; "
+              f"IK for {res.robot} ({verb('ik')}, {t['ik']:.1f} s); store {Path(db).resolve()} in {seconds:.1f} s")
+        warn(f"no regrasp graph for {res.name}; stage {res.empty}")
+        return
     print(f"{res.name}: {c['grasps']} free-air grasps ({verb('grasps')}, {t['grasps']:.1f} s); {c['placements']} stable placements, "
           f"{c['tabletop_placements']:,} tabletop placements, {c['tabletop_grips']:,} tabletop grips ({verb('placements')}, "
           f"{t['placements']:.1f} s); {roadmap_grasps_line(c['grasps_label'], c['roadmap_grasps'], c['usable_grasps'])}")

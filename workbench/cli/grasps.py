@@ -7,8 +7,9 @@ import time
 
 import numpy as np
 
+from workbench.cli import warn
 from workbench.geometry.objects import load_object
-from workbench.grasping.grasps import GraspParams
+from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.planners.wan_harada.stages import ensure_grasps
 from workbench.robots.gripper import franka_hand
 from workbench.viewer.scenes import grasp_scene
@@ -36,13 +37,24 @@ def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--com-max", type=float, default=d.com_max, help="max distance of the contact centre to the centre of mass (m)")
     parser.add_argument("--rotations", type=int, default=d.rotations, help="hand rotations about the contact axis")
     parser.add_argument("--seed", type=int, default=d.seed)
+    parser.add_argument("--contact-model", choices=["pads", "paper"], default=d.contact_model,
+                        help="pads: each pad closes until it first touches (CONVENTIONS.md); paper: parallel facet pairs "
+                             "and swept cylinders")
+    parser.add_argument("--friction", type=float, default=d.friction, help="pad friction coefficient (the cone of the pad model)")
+    parser.add_argument("--finger-clearance", type=float, default=d.finger_clearance,
+                        help="how far hand and fingers at the grasp's opening may reach into the object (m)")
+    parser.add_argument("--fixed-lengths", action="store_true",
+                        help="use --neighbour-radius, --dist-min/max and --com-max as given instead of scaling them "
+                             f"with the part (size sqrt(area / 6) over {d.reference_size * 1e3:.0f} mm)")
 
 
 def grasp_params(args: argparse.Namespace) -> GraspParams:
     return GraspParams(tau=float(np.radians(args.tau_deg)), segmentation=args.segmentation, density=args.density,
                        neighbour_radius=args.neighbour_radius, dist_min=args.dist_min, dist_max=args.dist_max,
                        parallel_angle=float(np.radians(args.parallel_deg)), com_max=args.com_max,
-                       rotations=args.rotations, seed=args.seed)
+                       rotations=args.rotations, seed=args.seed, contact_model=args.contact_model,
+                       friction=args.friction, finger_clearance=args.finger_clearance,
+                       lengths="fixed" if args.fixed_lengths else "adaptive")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -63,15 +75,34 @@ def run(args: argparse.Namespace) -> int:
     dt = time.perf_counter() - t0
     verb = "reused" if result.reused else "stored"
     print(f"{obj.name}: {obj.n_triangles} triangles, centre of mass {np.round(obj.com, 4).tolist()} m ({obj.com_method})")
+    for note in obj.repairs:
+        print(f"repaired: {note}")
     if result.plan is not None:
-        c = result.plan.counts
-        print(f"facets {c['facets']}, samples {c['samples']} -> {c['samples_neighbour']} after neighbour filter, "
-              f"{c['facet_samples']} facet samples -> {c['facet_samples_distance']} after distance filter")
-        print(f"contact pairs {c['contact_pairs']} -> {c['pairs_width']} jaw -> {c['pairs_com']} com -> {c['pairs_level1']} level 1; "
-              f"hand poses {c['hand_poses']} -> {c['grasps']} level 2")
+        print(grasp_counts(result.plan))
     print(f"{verb} {result.count} free-air grasps in {args.db} (parameter set {result.idparamset}) in {dt:.2f} s")
+    if result.count == 0:
+        reason = result.plan.empty_reason if result.plan is not None else \
+            plan_grasps(obj, franka_hand(), params).empty_reason
+        warn(f"no grasp of {obj.name}; stage {reason}")
     if args.html:
 
         path = grasp_scene(obj, franka_hand(), result.poses, result.widths, args.html)
         print(f"scene: {path}")
     return 0
+
+
+def grasp_counts(plan: GraspPlan) -> str:
+    """The candidates left after every stage, in order, and the lengths used (scaled with the part or fixed)."""
+    c, L = plan.counts, plan.lengths
+    head = (f"facets {c['facets']}, samples {c['samples']} -> {c['samples_neighbour']} neighbour filter -> "
+            f"{c['facet_samples_distance']} of {c['facet_samples']} facet samples after the boundary distance")
+    if "pads_width" in c:
+        body = (f"hand poses {c['hand_poses']} -> {c['pads_width']} opening fits -> {c['pads_cone']} friction cone -> "
+                f"{c['pads_com']} near the centre of mass -> {c['hand_open']} open hand free -> {c['grasps']} fingers free")
+    else:
+        body = (f"contact pairs {c['contact_pairs']} -> {c['pairs_width']} jaw -> {c['pairs_com']} com -> "
+                f"{c['pairs_level1']} level 1; hand poses {c['hand_poses']} -> {c['hand_open']} open hand free -> "
+                f"{c['grasps']} fingers free")
+    lengths = (f"lengths x{L['scale']:.2f}: neighbour radius {L['neighbour_radius'] * 1e3:.3g} mm, boundary distance "
+               f"{L['dist_min'] * 1e3:.3g}-{L['dist_max'] * 1e3:.3g} mm, centre-of-mass distance {L['com_max'] * 1e3:.3g} mm")
+    return f"{head}\n{body}\n{lengths}"

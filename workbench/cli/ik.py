@@ -14,7 +14,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from workbench.errors import RobotError
-from workbench.planners.wan_harada.stages import run_ik
+from workbench.cli import warn
+from workbench.planners.wan_harada.stages import empty_stage, run_ik
 from workbench.robots.collider import Scene, default_scene
 from workbench.robots.ik import WORLDA, IKOptions
 from workbench.robots.model import ROBOTS, get_robot, pose_xyz_yaw
@@ -83,4 +84,8 @@ def main(args: argparse.Namespace) -> int:
     print(f"ik {robot.name}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "
           f"at all five poses (retractions and lifts) {run.feasible_all:,}; robot {run.idrobot}, scene {run.idscene}, ikret {run.idikret}; "
           f"{run.seconds:.1f} s")
+    with Store(args.db) as store:
+        reason = empty_stage(store, args.object, robot.name)
+    if reason:
+        warn(f"no reachable tabletop grip of {args.object}; stage {reason}")
     return 0

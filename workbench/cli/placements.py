@@ -7,7 +7,8 @@ import argparse
 import time
 
 from workbench.grasping.placements import PlacementParams
-from workbench.planners.wan_harada.stages import ensure_placements, get_object
+from workbench.cli import warn
+from workbench.planners.wan_harada.stages import empty_stage, ensure_placements, get_object
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.robots.gripper import franka_hand
 from workbench.store import Store
@@ -56,7 +57,10 @@ def run(args: argparse.Namespace) -> int:
     with Store(args.db) as store:
         oid, obj = get_object(store, args.object)
         result = ensure_placements(store, oid, obj, latest_grasp_paramset(store, oid), franka_hand(), pparams, tparams)
+        reason = empty_stage(store, args.object)
     print_placements(args.object, result, time.perf_counter() - t0)
+    if reason:
+        warn(f"no tabletop grip of {args.object}; stage {reason}")
     return 0
 
 

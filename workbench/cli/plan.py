@@ -10,7 +10,8 @@ from pathlib import Path
 
 from workbench.errors import PlanningError
 from workbench.planners.wan_harada.query import parse_pose
-from workbench.planners.wan_harada.stages import load_planner, save_plans
+from workbench.cli import warn
+from workbench.planners.wan_harada.stages import empty_stage, load_planner, save_plans
 from workbench.store import Store
 from workbench.viewer.wan_harada import plan_scene
 
@@ -43,6 +44,10 @@ def run(args: argparse.Namespace) -> int:
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
     with Store(args.db) as store:
+        reason = empty_stage(store, args.object, args.robot)
+        if reason:
+            warn(f"no plan for {args.object}: nothing to plan with; stage {reason}")
+            return 0
         t0 = time.perf_counter()
         planner = load_planner(store, args.object, args.robot, args.handx, args.worldz)
         t_load = time.perf_counter() - t0

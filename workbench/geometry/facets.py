@@ -154,12 +154,26 @@ def _build(mesh: trimesh.Trimesh, method: str, tau: float, facet_tris: list[np.n
                   areas=areas, seeds=seeds, edge_ptr=edge_ptr, edges=edges)
 
 
-def distance_to_boundary(facets: Facets, facet_ids: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Distance from each point to the boundary of its facet, measured in the facet's plane (Section III, distance filter)."""
+def distance_to_boundary(facets: Facets, facet_ids: np.ndarray, points: np.ndarray, budget: int = 2_000_000) -> np.ndarray:
+    """Distance from each point to the boundary of its facet, measured in the facet's plane (Section III, distance
+    filter). Points go in chunks of at most `budget` (point, boundary edge) rows, so memory stays bounded when facets
+    overlap heavily (the literal over-segmentation)."""
     facet_ids = np.asarray(facet_ids, dtype=np.int64)
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     out = np.full(len(facet_ids), np.inf)
     counts = facets.edge_ptr[facet_ids + 1] - facets.edge_ptr[facet_ids]
+    cum = np.cumsum(counts)
+    start = 0
+    while start < len(facet_ids):
+        base = cum[start - 1] if start else 0
+        stop = max(int(np.searchsorted(cum, base + budget, side="right")), start + 1)
+        out[start:stop] = _distance_chunk(facets, facet_ids[start:stop], points[start:stop], counts[start:stop])
+        start = stop
+    return out
+
+
+def _distance_chunk(facets: Facets, facet_ids: np.ndarray, points: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    out = np.full(len(facet_ids), np.inf)
     has = counts > 0
     if not has.any():
         return out

@@ -11,6 +11,7 @@ import numpy as np
 import trimesh
 
 from workbench.errors import MeshError
+from workbench.geometry.repair import repair
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254}
 MAX_EXTENT = 2.0
@@ -26,7 +27,8 @@ class ObjectModel:
     """A rigid object in its own frame, in metres.
 
     `com_method` is "volume" for a watertight mesh and "area" otherwise; `digest` identifies the
-    scaled geometry, so stored results can be reused for the same mesh and scale.
+    scaled geometry, so stored results can be reused for the same mesh and scale; `repairs` says what was repaired
+    at load, one line each (geometry/repair.py).
     """
 
     name: str
@@ -36,6 +38,7 @@ class ObjectModel:
     scale: float
     source: str = ""
     digest: str = field(default="")
+    repairs: tuple[str, ...] = ()
 
     @property
     def n_triangles(self) -> int:
@@ -89,7 +92,8 @@ def from_trimesh(mesh: trimesh.Trimesh, name: str, scale: float = 1.0) -> Object
 
 
 def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str, source: str) -> ObjectModel:
-    """Validate vertex and face arrays, scale to metres, drop degenerate faces, compute the centre of mass."""
+    """Validate vertex and face arrays, scale to metres, repair what is safe to repair (geometry/repair.py), compute
+    the centre of mass."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     label = source if source != "<memory>" else f"mesh {name!r}"
@@ -102,27 +106,15 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         raise MeshError(f"{label} has {bad} vertices with NaN or infinite coordinates; repair the file")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshError(f"{label} has faces that index missing vertices; repair the file")
-    mesh = trimesh.Trimesh(vertices * scale, faces, process=True, validate=False)
-    areas = mesh.area_faces
-    repeated = (mesh.faces[:, 0] == mesh.faces[:, 1]) | (mesh.faces[:, 1] == mesh.faces[:, 2]) | (mesh.faces[:, 0] == mesh.faces[:, 2])
-    degenerate = repeated | (areas <= 1e-14 * max(1.0, float(areas.max(initial=0.0))))
-    if degenerate.all():
-        raise MeshError(f"{label} has only degenerate (zero-area) faces")
-    if degenerate.any():
-        warnings.warn(f"{label}: removed {int(degenerate.sum())} degenerate faces", MeshWarning, stacklevel=3)
-        mesh.update_faces(~degenerate)
-        mesh.remove_unreferenced_vertices()
+    mesh = trimesh.Trimesh(vertices * scale, faces, process=False, validate=False)
+    mesh, repairs = repair(mesh, label)
+    for note in repairs:
+        warnings.warn(f"{label}: {note}", MeshWarning, stacklevel=3)
     extent = float(mesh.extents.max())
     if extent > MAX_EXTENT or extent < MIN_EXTENT:
         hint = _scale_hint(extent)
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
                         f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {hint}")
-    if mesh.is_watertight and not mesh.is_winding_consistent:
-        # a closed mesh with some faces flipped: its signed volume and centre of mass would be wrong
-        warnings.warn(f"{label}: faces were not consistently oriented; re-oriented them", MeshWarning, stacklevel=3)
-        trimesh.repair.fix_normals(mesh)
-    if mesh.is_watertight and mesh.volume < 0:
-        mesh.invert()
     if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0:
         com, method = np.asarray(mesh.center_mass, dtype=np.float64), "volume"
     else:
@@ -130,7 +122,8 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         com = (mesh.triangles_center * mesh.area_faces[:, None]).sum(0) / mesh.area
         method = "area"
     digest = hashlib.sha256(np.ascontiguousarray(mesh.vertices).tobytes() + np.ascontiguousarray(mesh.faces).tobytes()).hexdigest()[:16]
-    return ObjectModel(name=name, mesh=mesh, com=com, com_method=method, scale=scale, source=source, digest=digest)
+    return ObjectModel(name=name, mesh=mesh, com=com, com_method=method, scale=scale, source=source, digest=digest,
+                       repairs=tuple(repairs))
 
 
 def _scale_hint(extent: float) -> str:

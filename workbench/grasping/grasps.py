@@ -1,11 +1,21 @@
-"""Parallel-jaw grasp planning on over-segmented facets (Wan & Harada, Section III).
+"""Parallel-jaw grasp planning on over-segmented facets (Wan & Harada, Section III) with the pad contact model.
 
-Pipeline: segment the mesh into facets, sample the surface once and distribute the samples to facets
-(distance and near-neighbour filters), project each sample along its facet's inverse normal to the far
-side of the object to find contact pairs on parallel facets, keep jaw widths the gripper reaches and pairs
-near the centre of mass (resistance to gravity torque), then two levels of collision detection with
-python-fcl: level 1, the finger pads' swept volumes as cylinders (rotation invariant, once per pair);
-level 2, the whole hand with both fingers fully open at every sampled rotation about the contact axis.
+Pipeline: segment the mesh into facets, sample the surface once and distribute the samples to facets (near-neighbour
+and boundary-distance filters), then for every kept (facet, sample) the jaw axis through the sample along the
+facet's normal at `rotations` hand rotations about it. Contacts follow CONVENTIONS.md (Gripper): each pad closes
+along the axis until its rectangle first touches the object (`pads.first_touches`); a grasp is kept when both contact
+normals lie within the friction cone, the opening fits the gripper, the contacts' centre is near the centre of mass
+(resistance to gravity torque), the hand at full opening clears the object (level 2 of the paper) and the hand and
+both fingers at the grasp's opening do not intersect it (within `finger_clearance`).
+
+`contact_model="paper"` keeps the paper's own pairing, measured beside the default: project the sample along the
+inverse facet normal to a parallel facet, then level 1 (the pads' swept cylinders, rotation invariant) and level 2.
+
+Lengths scale with the part (the paper: sampling density, stability and torque strategies "are adaptive to varying
+model geometry"). The part's size is the side of the cube of the same surface area, sqrt(area / 6); the neighbour
+radius, the boundary distances and the centre-of-mass distance are their fixed values times size / reference_size
+(60 mm, between the paper's tube and tail, so those parts keep about the fixed values). `lengths="fixed"` uses the
+fixed values as given.
 """
 
 from __future__ import annotations
@@ -17,15 +27,11 @@ import numpy as np
 import trimesh
 
 from workbench.errors import WorkbenchError
-from workbench.geometry.collision import (
-    bvh,
-    collide_at_poses,
-    cylinders_collide,
-    object_collider,
-)
+from workbench.geometry.collision import boxes_collide, bvh, collide_at_poses, cylinders_collide, object_collider
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
+from workbench.grasping.pads import axis_frames, first_touches
 from workbench.robots.gripper import Gripper
 
 
@@ -34,11 +40,17 @@ class GraspParams:
     """Parameters of grasp planning (SI units, angles in radians).
 
     tau: facet normal threshold (18 degrees, as the paper's code). segmentation: "over" or "conventional".
-    merge_angle: over-segmentation seed skip angle (None: tau/2). density: samples per m^2 (None: 8 per
-    neighbour_radius^2). neighbour_radius: near-neighbour filter radius (10 mm). dist_min, dist_max: distance
-    filter to the facet boundary (2 to 20 mm). parallel_angle: largest deviation from antiparallel facet normals
-    (10 degrees). com_max: largest distance from the contact pair's centre to the centre of mass (50 mm).
-    rotations: hand rotations about the contact axis (8). seed: sampling seed.
+    merge_angle: over-segmentation seed skip angle (None: tau/2; 0 examines every triangle, the paper's literal
+    reading). density: samples per m^2 (None: 8 per neighbour_radius^2). neighbour_radius: near-neighbour filter
+    radius (10 mm). dist_min, dist_max: distance filter to the facet boundary (2 to 20 mm; a facet narrower than the
+    margin gets half its own inradius, see `boundary_margin`). parallel_angle: the paper model's largest deviation
+    from antiparallel facet normals (10 degrees). com_max: largest distance from the contacts' centre to the centre of
+    mass (50 mm). rotations: hand rotations about the jaw axis (8). seed: sampling seed. contact_model: "pads"
+    (CONVENTIONS.md) or "paper". friction: friction coefficient of the pads (0.3, a 16.7-degree cone, conservative
+    for rubber pads; None: tan(parallel_angle), the paper's antiparallel tolerance as a cone). finger_clearance: how far the hand and fingers at the grasp's opening may reach into the
+    object (0.5 mm). lengths: "adaptive" (scaled with the part) or "fixed". reference_size: the part size at which
+    the fixed lengths apply unscaled (60 mm). axis_angle: the pad model tries one jaw axis per sample and group of
+    facet normals within this angle (None: tau/2; 0: every facet sample, see `distinct_axes`).
     """
 
     tau: float = float(np.radians(18.0))
@@ -52,6 +64,12 @@ class GraspParams:
     com_max: float = 0.050
     rotations: int = 8
     seed: int = 0
+    contact_model: str = "pads"
+    friction: float | None = 0.3
+    finger_clearance: float = 5e-4
+    lengths: str = "adaptive"
+    reference_size: float = 0.06
+    axis_angle: float | None = None
 
     def __post_init__(self) -> None:
         checks = {
@@ -62,6 +80,12 @@ class GraspParams:
             "com_max": self.com_max > 0,
             "rotations": self.rotations >= 1,
             "density": self.density is None or self.density > 0,
+            "contact_model": self.contact_model in ("pads", "paper"),
+            "friction": self.friction is None or self.friction >= 0,
+            "finger_clearance": self.finger_clearance >= 0,
+            "lengths": self.lengths in ("adaptive", "fixed"),
+            "reference_size": self.reference_size > 0,
+            "axis_angle": self.axis_angle is None or 0 <= self.axis_angle < np.pi,
         }
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
@@ -70,13 +94,30 @@ class GraspParams:
     def as_dict(self) -> dict:
         return asdict(self)
 
+    @property
+    def friction_coefficient(self) -> float:
+        return float(np.tan(self.parallel_angle)) if self.friction is None else float(self.friction)
+
+    def scaled(self, mesh: trimesh.Trimesh) -> dict[str, float]:
+        """The lengths used on `mesh`: neighbour_radius, dist_min, dist_max, com_max, and the factor applied."""
+        s = 1.0 if self.lengths == "fixed" else part_size(mesh) / self.reference_size
+        return {"scale": s, "neighbour_radius": self.neighbour_radius * s, "dist_min": self.dist_min * s,
+                "dist_max": self.dist_max * s, "com_max": self.com_max * s}
+
+
+def part_size(mesh: trimesh.Trimesh) -> float:
+    """The side of the cube with the same surface area: a size that does not depend on the mesh's orientation."""
+    return float(np.sqrt(mesh.area / 6.0))
+
 
 @dataclass(frozen=True)
 class ContactPairs:
     """Candidate contact pairs (one row each) and the filter each passed.
 
-    point0/normal0 on the sampled facet (left finger, +y of the TCP), point1/normal1 its projection on the
-    parallel facet; normals are outward. Masks: `width_ok`, `com_ok`, `level1_ok` (cumulative).
+    point0/normal0 on the left finger's side (+y of the TCP), point1/normal1 on the right's; normals are outward.
+    With the pad model a row is one hand pose (axis and rotation) and its first touches. Masks (cumulative):
+    `width_ok`, `com_ok` (after the friction cone with the pad model), `level1_ok` (pads touch inside the cone with
+    the pad model; the swept cylinders are free with the paper model).
     """
 
     sample: np.ndarray
@@ -98,7 +139,7 @@ class ContactPairs:
 @dataclass(frozen=True)
 class GraspSet:
     """Collision-free grasps: contacts, outward normals, TCP poses in the object frame (G, 4, 4), jaw widths,
-    facet ids, contact-pair ids and the rotation about the contact axis."""
+    facet ids, contact-pair ids and the rotation about the jaw axis."""
 
     contact0: np.ndarray
     contact1: np.ndarray
@@ -117,7 +158,10 @@ class GraspSet:
 
 @dataclass
 class GraspPlan:
-    """Everything grasp planning computed, for the store, the notebook and the benchmark."""
+    """Everything grasp planning computed, for the store, the notebook and the benchmark.
+
+    `counts` holds the candidates left after every stage in order; `empty_reason` names the stage that removed the
+    last candidate and what to try (None when there are grasps)."""
 
     params: GraspParams
     facets: Facets
@@ -129,21 +173,174 @@ class GraspPlan:
     grasps: GraspSet
     counts: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    lengths: dict = field(default_factory=dict)
+    empty_reason: str | None = None
+
+
+def boundary_margin(facets: Facets, dist_min: float) -> np.ndarray:
+    """The boundary distance each facet asks of its samples: `dist_min`, or half the facet's inradius when smaller.
+
+    The paper drops samples near a facet's boundary because a contact there may slip off the facet. On a scan the
+    over-segmented facets are a few millimetres wide and a fixed margin removes nearly every sample, though the
+    surface continues smoothly past the boundary. Half the facet's inradius (estimated as 2 area / perimeter) still
+    keeps each sample well inside its facet, and with the pad model the contact is where the pad first touches, not
+    the sample, so the margin only has to keep the jaw axis on the facet.
+    """
+    seg = np.linalg.norm(facets.edges[:, 1] - facets.edges[:, 0], axis=1)
+    perimeter = np.bincount(np.repeat(np.arange(len(facets)), np.diff(facets.edge_ptr)), weights=seg,
+                            minlength=len(facets))
+    inradius = np.where(perimeter > 0, 2 * facets.areas / np.maximum(perimeter, 1e-300), np.inf)
+    return np.minimum(dist_min, 0.5 * inradius)
 
 
 def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspParams()) -> GraspPlan:
-    """Plan collision-free parallel-jaw grasps of `obj` (Section III)."""
+    """Plan collision-free parallel-jaw grasps of `obj` (Section III; contacts per CONVENTIONS.md, Gripper)."""
     mesh = obj.mesh
+    lengths = params.scaled(mesh)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     facets = segment(mesh, params.tau, params.segmentation, params.merge_angle)
     timings["segmentation"] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    samples = distribute(mesh, facets, sample_count(mesh, params.density, params.neighbour_radius),
-                         params.neighbour_radius, params.dist_min, params.dist_max, params.seed)
+    radius = lengths["neighbour_radius"]
+    density = params.density if params.density is not None else 8.0 / max(radius, 1e-9) ** 2
+    samples = distribute(mesh, facets, sample_count(mesh, density, radius), radius, 0.0, lengths["dist_max"], params.seed)
+    margin = boundary_margin(facets, lengths["dist_min"])
+    samples = Samples(**{**samples.__dict__, "pair_ok": samples.pair_ok & (samples.pair_dist >= margin[samples.pair_facet])})
     timings["sampling"] = time.perf_counter() - t0
+    counts = {
+        "triangles": int(len(mesh.faces)),
+        "facets": int(len(facets)),
+        "samples": int(len(samples.points)),
+        "samples_neighbour": int(samples.kept.sum()),
+        "facet_samples": int(len(samples.pair_facet)),
+        "facet_samples_distance": int(samples.pair_ok.sum()),
+    }
+    if params.contact_model == "pads":
+        pairs, poses, cand_pair, cand_rot, free = _pads(obj, gripper, params, lengths, facets, samples, counts, timings)
+    else:
+        pairs, poses, cand_pair, cand_rot, free = _paper(obj, gripper, params, lengths, facets, samples, margin,
+                                                         counts, timings)
+    g = cand_pair[free]
+    grasps = GraspSet(contact0=pairs.point0[g], contact1=pairs.point1[g], normal0=pairs.normal0[g],
+                      normal1=pairs.normal1[g], poses=poses[free], jawwidth=pairs.width[g], facet0=pairs.facet0[g],
+                      facet1=pairs.facet1[g], pair=g, rotation=cand_rot[free])
+    counts["grasps"] = int(len(grasps))
+    return GraspPlan(params=params, facets=facets, samples=samples, pairs=pairs, candidate_poses=poses,
+                     candidate_pair=cand_pair, candidate_free=free, grasps=grasps, counts=counts, timings=timings,
+                     lengths=lengths, empty_reason=empty_reason(counts, params, lengths, gripper))
+
+
+def _level2(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, clearance: float,
+            counts: dict, timings: dict, pads: bool = True) -> np.ndarray:
+    """Level 2: the hand at full opening at each pose, then the fingers at the grasp's opening (CONVENTIONS.md)."""
     t0 = time.perf_counter()
-    pairs = contact_pairs(mesh, facets, samples, obj.com, gripper, params)
+    free = ~collide_at_poses(bvh(gripper.collision_mesh()), poses, target)
+    counts["hand_open"] = int(free.sum())
+    timings["level2"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    idx = np.flatnonzero(free)
+    free[idx] = ~fingers_collide(gripper, poses[idx], widths[idx], target, clearance, pads)
+    timings["fingers"] = time.perf_counter() - t0
+    return free
+
+
+def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, clearance: float,
+                    pads: bool = True) -> np.ndarray:
+    """Do the finger boxes of both fingers at each grasp's opening, shrunk by `clearance` on every side, intersect
+    the object? (The body does not move with the fingers: it is tested at full opening.) `pads=False` skips the pad
+    boxes, for grasps whose pads closed onto their first touches and so cannot overlap the object."""
+    boxes = [b for k, b in enumerate(gripper.finger_poses(0.0)) if pads or k // 2 != gripper.pad]
+    extents = np.array([np.maximum(ext - 2 * clearance, 1e-6) for ext, _ in boxes])
+    local = np.array([pose for _, pose in boxes])
+    side = np.sign(local[:, 1, 3])
+    placed = np.repeat(local[None], len(poses), axis=0)
+    placed[:, :, 1, 3] += side[None, :] * np.asarray(widths)[:, None] / 2
+    return boxes_collide(extents, np.einsum("gij,gbjk->gbik", poses, placed), target)
+
+
+def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
+    mesh = obj.mesh
+    t0 = time.perf_counter()
+    sel = np.flatnonzero(samples.pair_ok)
+    merge = params.tau / 2 if params.axis_angle is None else params.axis_angle
+    sel = sel[distinct_axes(samples.pair_sample[sel], facets.normals[samples.pair_facet[sel]],
+                            facets.areas[samples.pair_facet[sel]], merge)]
+    counts["axes"] = int(len(sel))
+    angles = 2 * np.pi * np.arange(params.rotations) / params.rotations
+    touch = first_touches(mesh, samples.points[samples.pair_sample[sel]], facets.normals[samples.pair_facet[sel]],
+                          angles, gripper)
+    timings["pads"] = time.perf_counter() - t0
+    y = touch.poses[:, :3, 1]
+    cos_f = np.cos(np.arctan(params.friction_coefficient))
+    width_ok = touch.hit & (touch.width <= gripper.jaw_max) & (touch.width >= gripper.jaw_min)
+    cone = (np.einsum("ij,ij->i", touch.normal0, y) >= cos_f) & (np.einsum("ij,ij->i", touch.normal1, -y) >= cos_f)
+    cone_ok = width_ok & cone
+    com_ok = cone_ok & (np.linalg.norm(0.5 * (touch.point0 + touch.point1) - obj.com, axis=1) <= lengths["com_max"])
+    counts.update(hand_poses=int(len(touch)), pads_width=int(width_ok.sum()), pads_cone=int(cone_ok.sum()),
+                  pads_com=int(com_ok.sum()))
+    n = len(touch)
+    pairs = ContactPairs(sample=np.repeat(samples.pair_sample[sel], len(angles)),
+                         facet0=np.repeat(samples.pair_facet[sel], len(angles)),
+                         facet1=_facet_of(facets, touch.tri1, -y), point0=touch.point0, point1=touch.point1,
+                         normal0=touch.normal0, normal1=touch.normal1, width=touch.width, width_ok=width_ok,
+                         com_ok=com_ok, level1_ok=com_ok)
+    live = np.flatnonzero(com_ok)
+    target = object_collider(mesh)
+    free = _level2(gripper, touch.poses[live], touch.width[live], target, params.finger_clearance, counts, timings,
+                   pads=False)
+    rot = np.tile(angles, n // max(len(angles), 1))
+    return pairs, touch.poses[live], live, rot[live], free
+
+
+def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, angle: float) -> np.ndarray:
+    """Mask of the jaw axes to try: per sample, the facets holding it, largest first, each kept when its normal is more
+    than `angle` from every axis already kept for that sample (0 keeps every facet sample).
+
+    Overlapping facets of the over-segmentation give one sample several facet normals a few degrees apart; their
+    pads close on the same first touches, so the paper's pairing keeps one pair per sample and opposite triangle.
+    Here the same is done before closing the pads, which is what costs.
+    """
+    keep = np.ones(len(sample), dtype=bool)
+    if angle <= 0 or len(sample) == 0:
+        return keep
+    order = np.lexsort((-areas, sample))
+    cos_a = np.cos(angle)
+    bounds = np.flatnonzero(np.r_[True, sample[order][1:] != sample[order][:-1], True])
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        if b - a == 1:
+            continue
+        idx = order[a:b]
+        kept: list[int] = []
+        for i in idx:
+            if kept and (normals[kept] @ normals[i]).max() >= cos_a:
+                keep[i] = False
+            else:
+                kept.append(i)
+    return keep
+
+
+def _facet_of(facets: Facets, tri: np.ndarray, direction: np.ndarray) -> np.ndarray:
+    """For each triangle, the facet holding it whose normal best follows `direction` (-1 for none)."""
+    fid, tid = facets.membership()
+    out = np.full(len(tri), -1, dtype=np.int64)
+    lo = np.searchsorted(tid, tri, side="left")
+    hi = np.searchsorted(tid, tri, side="right")
+    cnt = hi - lo
+    row = np.repeat(np.arange(len(tri)), cnt)
+    cand = fid[np.repeat(lo - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())]
+    score = np.einsum("ij,ij->i", facets.normals[cand], direction[row])
+    order = np.lexsort((-score, row))
+    row, cand = row[order], cand[order]
+    first = np.r_[True, row[1:] != row[:-1]] if len(row) else np.zeros(0, dtype=bool)
+    out[row[first]] = cand[first]
+    return out
+
+
+def _paper(obj, gripper, params, lengths, facets, samples, margin, counts, timings):
+    mesh = obj.mesh
+    t0 = time.perf_counter()
+    pairs = contact_pairs(mesh, facets, samples, obj.com, gripper, params, margin, lengths["com_max"])
     timings["contact_pairs"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     target = object_collider(mesh)
@@ -154,41 +351,29 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
                                       pairs.normal1[idx])
     pairs = ContactPairs(**{**pairs.__dict__, "level1_ok": level1})
     timings["level1"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
+    counts.update(contact_pairs=int(len(pairs)), pairs_width=int(pairs.width_ok.sum()),
+                  pairs_com=int((pairs.width_ok & pairs.com_ok).sum()), pairs_level1=int(level1.sum()))
     live = np.flatnonzero(level1)
     angles = 2 * np.pi * np.arange(params.rotations) / params.rotations
     poses = grasp_poses(pairs.point0[live], pairs.point1[live], angles)
     cand_pair = np.repeat(live, params.rotations)
     cand_rot = np.tile(angles, len(live))
-    free = ~collide_at_poses(bvh(gripper.collision_mesh()), poses, target)
-    timings["level2"] = time.perf_counter() - t0
-    g = cand_pair[free]
-    grasps = GraspSet(contact0=pairs.point0[g], contact1=pairs.point1[g], normal0=pairs.normal0[g], normal1=pairs.normal1[g],
-                      poses=poses[free], jawwidth=pairs.width[g], facet0=pairs.facet0[g], facet1=pairs.facet1[g],
-                      pair=g, rotation=cand_rot[free])
-    counts = {
-        "triangles": int(len(mesh.faces)),
-        "facets": int(len(facets)),
-        "samples": int(len(samples.points)),
-        "samples_neighbour": int(samples.kept.sum()),
-        "facet_samples": int(len(samples.pair_facet)),
-        "facet_samples_distance": int(samples.pair_ok.sum()),
-        "contact_pairs": int(len(pairs)),
-        "pairs_width": int(pairs.width_ok.sum()),
-        "pairs_com": int((pairs.width_ok & pairs.com_ok).sum()),
-        "pairs_level1": int(level1.sum()),
-        "hand_poses": int(len(poses)),
-        "grasps": int(len(grasps)),
-    }
-    return GraspPlan(params=params, facets=facets, samples=samples, pairs=pairs, candidate_poses=poses,
-                     candidate_pair=cand_pair, candidate_free=free, grasps=grasps, counts=counts, timings=timings)
+    counts["hand_poses"] = int(len(poses))
+    # the pads themselves are level 1's (their swept cylinders stop short of a tilted facet, where a flat pad
+    # at the contact would dig in by its rim): the other finger boxes are tested at the grasp's opening
+    free = _level2(gripper, poses, pairs.width[cand_pair], target, params.finger_clearance, counts, timings,
+                   pads=False)
+    return pairs, poses, cand_pair, cand_rot, free
 
 
 def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: np.ndarray, gripper: Gripper,
-                  params: GraspParams) -> ContactPairs:
-    """Project every filtered (facet, sample) along the facet's inverse normal; where the ray leaves the object
-    inside a parallel facet (normals antiparallel within `parallel_angle`, at least dist_min from its boundary),
-    the sample and the exit point form a contact pair (Section III, "Parallel facets")."""
+                  params: GraspParams, margin: np.ndarray | None = None, com_max: float | None = None) -> ContactPairs:
+    """The paper's pairing: project every filtered (facet, sample) along the facet's inverse normal; where the ray
+    leaves the object inside a parallel facet (normals antiparallel within `parallel_angle`, at least that facet's
+    boundary margin from its boundary), the sample and the exit point form a contact pair (Section III, "Parallel
+    facets")."""
+    margin = np.full(len(facets), params.dist_min) if margin is None else margin
+    com_max = params.com_max if com_max is None else com_max
     sel = np.flatnonzero(samples.pair_ok)
     fa = samples.pair_facet[sel]
     sa = samples.pair_sample[sel]
@@ -220,7 +405,7 @@ def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: 
     anti = -np.einsum("ij,ij->i", facets.normals[fb], na[ray[hit]])
     good = anti >= np.cos(params.parallel_angle)
     hit, fb, anti = hit[good], fb[good], anti[good]
-    inner = distance_to_boundary(facets, fb, locs[hit]) >= params.dist_min
+    inner = distance_to_boundary(facets, fb, locs[hit]) >= margin[fb]
     hit, fb, anti = hit[inner], fb[inner], anti[inner]
     # best opposite facet per hit, then one pair per (sample, hit triangle): the most antiparallel
     order = np.lexsort((-anti, hit))
@@ -236,41 +421,22 @@ def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: 
     p0, p1 = p[r], locs[hit]
     width = np.linalg.norm(p0 - p1, axis=1)
     width_ok = (width >= gripper.jaw_min) & (width <= gripper.jaw_max)
-    com_ok = np.linalg.norm(0.5 * (p0 + p1) - com, axis=1) <= params.com_max
+    com_ok = np.linalg.norm(0.5 * (p0 + p1) - com, axis=1) <= com_max
     return ContactPairs(sample=sa[r], facet0=fa[r], facet1=fb, point0=p0, point1=p1, normal0=na[r],
                         normal1=facets.normals[fb], width=width, width_ok=width_ok, com_ok=com_ok,
                         level1_ok=np.zeros(len(r), dtype=bool))
 
 
-def contact_frames(point0: np.ndarray, point1: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Unit contact axis y (from point1 to point0), a reference approach z0 perpendicular to it, and x0 = y x z0."""
-    y = point0 - point1
-    y = y / np.linalg.norm(y, axis=1, keepdims=True)
-    # reference: the world axis least aligned with y, made perpendicular (deterministic)
-    ref = np.eye(3)[np.argmin(np.abs(y), axis=1)]
-    z0 = ref - np.einsum("ij,ij->i", ref, y)[:, None] * y
-    z0 /= np.linalg.norm(z0, axis=1, keepdims=True)
-    return y, z0, np.cross(y, z0)
-
-
 def grasp_poses(point0: np.ndarray, point1: np.ndarray, angles: np.ndarray) -> np.ndarray:
     """TCP poses (P * A, 4, 4): origin at the pair's midpoint, y toward point0, approach z = the reference z0
     rotated by +angle about y (right-handed; the stored `freeairgrip.rotation`), pair-major order."""
-    y, z0, x0 = contact_frames(point0, point1)
-    c, s = np.cos(angles)[None, :, None], np.sin(angles)[None, :, None]
-    z = c * z0[:, None, :] + s * x0[:, None, :]  # R_y(angle) z0 = cos z0 + sin (y x z0)
-    yy = np.broadcast_to(y[:, None, :], z.shape)
-    x = np.cross(yy, z)
-    poses = np.zeros((len(y), len(angles), 4, 4))
-    poses[..., :3, 0], poses[..., :3, 1], poses[..., :3, 2] = x, yy, z
-    poses[..., :3, 3] = (0.5 * (point0 + point1))[:, None, :]
-    poses[..., 3, 3] = 1.0
-    return poses.reshape(-1, 4, 4)
+    poses = axis_frames(0.5 * (point0 + point1), point0 - point1, angles)
+    return poses
 
 
 def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray, target,
                        normal0: np.ndarray | None = None, normal1: np.ndarray | None = None) -> np.ndarray:
-    """Level 1: does either pad's swept cylinder (from full opening down to its contact) hit the object?
+    """The paper's level 1: does either pad's swept cylinder (from full opening down to its contact) hit the object?
 
     Each cylinder stops 0.5 mm short of its contact plus r * tan(tilt), where tilt is the angle between that
     side's facet normal and the jaw axis: a flat pad closing on a facet tilted within the antiparallel tolerance
@@ -279,7 +445,8 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     out = np.zeros(len(point0), dtype=bool)
     if len(point0) == 0:
         return out
-    y, z0, _ = contact_frames(point0, point1)
+    frames = axis_frames(np.zeros_like(point0), point0 - point1, np.zeros(1))
+    y, z0 = frames[:, :3, 1], frames[:, :3, 2]
     width = np.linalg.norm(point0 - point1, axis=1)
     radius, y_near, y_far = gripper.pad_sweep(width)
     mid = 0.5 * (point0 + point1)
@@ -294,3 +461,37 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
         centre = mid + axis * (0.5 * (near + y_far))[:, None]
         out |= cylinders_collide(radius, y_far - near, rot, centre, target, skip=out)
     return out
+
+
+def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Gripper) -> str | None:
+    """Which stage removed the last candidate, and what to try; None when grasps remain (issue 10)."""
+    if counts.get("grasps", 0) > 0:
+        return None
+    mu = params.friction_coefficient
+    stages = [
+        ("facets", "the mesh has no facets"),
+        ("samples_neighbour", "the surface got no samples; raise --density"),
+        ("facet_samples_distance",
+         f"no sample lies {lengths['dist_min'] * 1e3:.3g}-{lengths['dist_max'] * 1e3:.3g} mm from its facet's boundary "
+         f"(a facet narrower than twice the minimum asks half its inradius); lower --dist-min, raise --dist-max or "
+         f"raise --tau"),
+        ("axes", "no jaw axis to try"),
+        ("contact_pairs", f"no sample has a parallel facet opposite it (within {np.degrees(params.parallel_angle):.3g} "
+                          f"degrees); raise --parallel-deg or use --contact-model pads"),
+        ("pairs_width", f"every facet pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
+        ("pads_width", f"every contact pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
+        ("pads_cone", f"no pad contact has both normals within the friction cone (friction {mu:.2g}, "
+                      f"{np.degrees(np.arctan(mu)):.3g} degrees); raise --friction"),
+        ("pairs_com", f"every contact pair is more than {lengths['com_max'] * 1e3:.3g} mm from the centre of mass; "
+                      f"raise --com-max"),
+        ("pads_com", f"every grasp centre is more than {lengths['com_max'] * 1e3:.3g} mm from the centre of mass; "
+                     f"raise --com-max"),
+        ("pairs_level1", "the pads' swept volumes hit the object at every contact pair; use --contact-model pads"),
+        ("hand_open", "the open hand collides with the object at every grasp pose; raise --rotations"),
+        ("grasps", f"the fingers at the grasp's opening hit the object at every remaining pose; raise "
+                   f"--finger-clearance (now {params.finger_clearance * 1e3:.3g} mm)"),
+    ]
+    for key, text in stages:
+        if key in counts and counts[key] == 0:
+            return f"{key}: {text}"
+    return "no grasp"

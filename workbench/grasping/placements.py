@@ -1,6 +1,7 @@
 """Stable placements on a table and the grasps that survive them (Wan & Harada, Sections IV and VI).
 
-Candidate supports are the faces of the object's convex hull, coplanar hull triangles merged. The object
+Candidate supports are the faces of the object's convex hull, hull triangles merged when coplanar within a
+tolerance (0.5 mm and 1 degree: a scanned base is flat only to a tolerance; geometry/supports.py). The object
 rests on a face; it is stable when the centre of mass projects inside the support polygon, and its stability
 is the distance from that projection to the polygon's boundary divided by the height of the centre of mass
 (Section VI, "Experiences"), i.e. the tangent of the tilt it can take before tipping. Free-air grasps are
@@ -17,19 +18,28 @@ from scipy.spatial import ConvexHull
 
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import ObjectModel
+from workbench.geometry.supports import coplanar_groups, stabilities, support_stability
 from workbench.robots.gripper import Gripper
 
 
 @dataclass(frozen=True)
 class PlacementParams:
     """min_stability: smallest accepted stability (distance to the support boundary over centre-of-mass height;
-    0.1 is a tilt of 5.7 degrees). clearance: how far above the table (m) the hand must stay."""
+    0.1 is a tilt of 5.7 degrees). clearance: how far above the table (m) the hand must stay. coplanar_distance,
+    coplanar_angle: hull faces within 0.5 mm of a support's plane and 1 degree of its normal merge into one candidate
+    support. support_tolerance: once settled, the hull vertices within 0.1 mm of the table form the support polygon
+    (the plan validator's flatness tolerance)."""
 
     min_stability: float = 0.1
     clearance: float = 0.002
+    coplanar_distance: float = 5e-4
+    coplanar_angle: float = float(np.radians(1.0))
+    support_tolerance: float = 1e-4
 
     def __post_init__(self) -> None:
-        if not self.min_stability >= 0 or not self.clearance >= 0:
+        if not (self.min_stability >= 0 and self.clearance >= 0 and self.coplanar_distance >= 0
+                and self.support_tolerance >= 0
+                and 0 <= self.coplanar_angle < np.pi / 2):
             raise WorkbenchError(f"placement parameters must be non-negative, got {self}")
 
     def as_dict(self) -> dict:
@@ -40,7 +50,8 @@ class PlacementParams:
 class Placements:
     """Stable placements: object poses in the table frame (P, 4, 4) with the centre of mass above the origin and
     the lowest point on z = 0; stability values; support polygons (in the table frame, z = 0); the outward normal
-    of the supporting hull face in the object frame. `rejected_stability` keeps every unstable candidate's value and `rejected_poses` the first 64 poses."""
+    of the supporting hull face in the object frame. `rejected_stability` keeps every unstable candidate's value (0 for
+    those that cannot reach 0.9 of the threshold, scored without a polygon) and `rejected_poses` the first 64 poses."""
 
     poses: np.ndarray
     stability: np.ndarray
@@ -76,47 +87,27 @@ def rest_pose(normal: np.ndarray, com: np.ndarray, vertices: np.ndarray) -> np.n
 def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParams()) -> Placements:
     """Stable placements of `obj` on its convex-hull faces (Section IV, freetabletopplacement).
 
-    Every candidate is first scored against its own (merged) face polygon, all at once; the candidates that can
-    reach the threshold are then settled exactly: the object rests with that face's area-weighted normal down, the
-    support polygon is the hull of all vertices touching the table, and stability = margin / height.
+    Hull faces coplanar within the tolerance are merged (`supports.coplanar_groups`); each group is a candidate
+    resting with its area-weighted normal down, scored first on the group's own vertices. A candidate that can reach
+    `min_stability` is then settled: the object rests with that normal down, its support polygon is the hull of the
+    hull vertices within `support_tolerance` (0.1 mm, the plan validator's flatness tolerance) of the table, and its
+    stability is margin / height on that polygon (Section VI).
     """
     hull = obj.mesh.convex_hull
     verts = np.asarray(hull.vertices)
-    faces = np.asarray(hull.faces)
-    in_facet = np.zeros(len(faces), dtype=bool)
-    groups = [np.asarray(f) for f in hull.facets]
-    for f in groups:
-        in_facet[f] = True
-    lone = np.flatnonzero(~in_facet)
-    groups += [np.array([f]) for f in lone]
-    group_of = np.concatenate(groups)
-    owner_face = np.repeat(np.arange(len(groups)), [len(g) for g in groups])
-    normals = np.zeros((len(groups), 3))
-    np.add.at(normals, owner_face, hull.face_normals[group_of] * hull.area_faces[group_of, None])
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    # quick score of every candidate: the centre of mass's projection against the face's own boundary edges
-    edges = [np.asarray(b) for b in hull.facets_boundary] + [faces[f][[[0, 1], [1, 2], [2, 0]]] for f in lone]
-    owner = np.repeat(np.arange(len(edges)), [len(e) for e in edges])
-    e = np.vstack(edges)
-    a, b = verts[e[:, 0]], verts[e[:, 1]]
-    inward = np.cross(normals[owner], b - a)
-    inward /= np.linalg.norm(inward, axis=1, keepdims=True).clip(1e-300)
-    centre = np.array([verts[x].reshape(-1, 3).mean(axis=0) for x in edges])
-    inward *= np.sign(np.einsum("ij,ij->i", centre[owner] - a, inward))[:, None]
-    margin = np.minimum.reduceat(np.einsum("ij,ij->i", obj.com - a, inward),
-                                 np.concatenate([[0], np.cumsum([len(x) for x in edges])[:-1]]))
-    height = np.einsum("ij,ij->i", centre - obj.com, normals)
-    quick = np.where(height > 0, margin / np.maximum(height, 1e-300), 0.0)
+    groups, normals = coplanar_groups(hull, params.coplanar_distance, params.coplanar_angle)
     threshold = max(params.min_stability, 1e-9)
-    stability = quick.copy()
-    tol = 1e-6 + 1e-4 * float(obj.mesh.scale)
+    # candidates that cannot reach the threshold are scored 0 without building their support polygon
+    stability = stabilities(hull, obj.com, groups, normals, floor=0.9 * threshold)
     poses, supports = {}, {}
-    for i in np.flatnonzero(quick >= 0.8 * threshold):
+    for i in np.flatnonzero(stability >= 0.9 * threshold):
         pose = rest_pose(normals[i], obj.com, verts)
         placed = verts @ pose[:3, :3].T + pose[:3, 3]
-        contact = placed[placed[:, 2] <= tol][:, :2]
+        contact = placed[placed[:, 2] <= params.support_tolerance][:, :2]
+        height = float((pose[:3, :3] @ obj.com + pose[:3, 3])[2])
+        stability[i] = support_stability(np.column_stack([contact, np.zeros(len(contact))]),
+                                         np.array([0.0, 0.0, height]), np.array([0.0, 0.0, -1.0]))
         poses[i], supports[i] = pose, _polygon(contact)
-        stability[i] = _inside_margin(contact) / float((pose[:3, :3] @ obj.com + pose[:3, 3])[2])
     ok = (stability >= threshold) & np.isin(np.arange(len(groups)), list(poses))
     idx = np.flatnonzero(ok)[np.argsort(-stability[ok], kind="stable")]
     rejected = np.flatnonzero(~ok)
@@ -136,18 +127,6 @@ def _polygon(points2d: np.ndarray) -> np.ndarray:
         except Exception:  # collinear contacts: a segment, no area
             pass
     return np.column_stack([points2d, np.zeros(len(points2d))])
-
-
-def _inside_margin(points2d: np.ndarray) -> float:
-    """Distance from the origin (the centre of mass's projection) to the boundary of the contacts' convex hull;
-    negative when the origin is outside, zero when the support has no area."""
-    if len(points2d) < 3:
-        return 0.0
-    try:
-        h = ConvexHull(points2d)
-    except Exception:  # collinear contacts
-        return 0.0
-    return float(np.min(-h.equations[:, 2]))  # equations: unit n.x + d <= 0 inside
 
 
 def grips_above_table(placement_poses: np.ndarray, grasp_poses: np.ndarray, gripper: Gripper,

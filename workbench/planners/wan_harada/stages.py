@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from workbench.errors import PlanningError, RobotError
+from workbench.errors import PlanningError, RobotError, StoreError
 from workbench.geometry.objects import ObjectModel, from_arrays
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.grasping.placements import (
@@ -277,6 +277,7 @@ class BuildResult:
     reused: dict = field(default_factory=dict)
     counts: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    empty: str | None = None  # the stage that kept nothing, with what to try (no graph then)
 
 
 def ensure_ik_rows(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
@@ -312,6 +313,10 @@ def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pp
         ik_ids, reused = ensure_ik_rows(store, g.idobject, obj, p.idtabletop, robot_name, handx, worldz, workers, progress,
                                         worlda=worlda)
         out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, reused
+        out.empty = g.plan.empty_reason if g.plan is not None and g.count == 0 else empty_stage(store, obj.name, robot_name)
+        if out.empty is not None:  # zero is a result: no graph to build, the stage that emptied is named
+            out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **ik_ids}
+            return out
         t0 = time.perf_counter()
         planner = load_planner(store, obj.name, ik_ids["idrobot"], handx, worldz, idtabletop=p.idtabletop,
                                idscene=ik_ids["idscene"], worlda=worlda)
@@ -438,3 +443,45 @@ def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
                       name=name, source=row["source"])
     return oid, ObjectModel(name=name, mesh=obj.mesh, com=np.asarray(row["com"], dtype=np.float64),
                             com_method=row["com_method"], scale=row["scale"], source=row["source"], digest=obj.digest)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Zero results (issue 10): which stage stored no rows, and what to try.
+
+
+def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -> str | None:
+    """The first stage of `object_name`'s latest stored runs that kept nothing, as "stage: why; what to try", or None
+    when every stage (grasps, placements, free tabletop grips, tabletop grips, and IK for `robot_name`) has rows."""
+    oid, _ = get_object(store, object_name)
+    try:
+        grasps = load_grasps(store, oid)
+    except StoreError:  # no grasp stage run (tabletop grips given otherwise): nothing is empty
+        grasps = {"jawwidth": [None]}
+    if len(grasps["jawwidth"]) == 0:
+        return (f"grasps: {object_name} has no free-air grasp; `workbench grasps` names the filter that removed the last "
+                f"candidate")
+    try:
+        tt = latest_tabletop_paramset(store, oid)
+    except StoreError:  # no placements run yet: nothing empty so far
+        return None
+    pl = sql.placements_of_tabletop(store, tt)
+    free = load_placements(store, pl)
+    if len(free["stability"]) == 0:
+        return "placements: no convex-hull face holds the centre of mass stably; lower --min-stability"
+    if len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]) == 0:
+        return ("free tabletop grips: every grasp puts the hand into the table at every stable placement; lower "
+                "--clearance or plan more grasps")
+    if tabletop_counts(store, tt)[1] == 0:
+        return "tabletop grips: no grasp is kept on the tabletop grid; raise --max-grasps or widen the grid"
+    if robot_name is not None:
+        runs = [r for r in ik_runs(store, idtabletop=tt) if r["robot"] == robot_name]
+        if runs and max(r["feasible_all"] for r in runs) == 0:
+            return (f"ik: no tabletop grip is reachable by {robot_name} with its retractions; move the grid (--x, --y) "
+                    f"toward the robot")
+    return None
+
+
+def grasp_reason(store: Store, object_name: str, gripper: Gripper, params: GraspParams) -> str | None:
+    """Why the stored grasp set of these parameters is empty (re-planned: the store keeps rows, not the filters)."""
+    _, obj = get_object(store, object_name)
+    return plan_grasps(obj, gripper, params).empty_reason

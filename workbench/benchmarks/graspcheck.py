@@ -1,0 +1,149 @@
+"""An independent check of parallel-jaw grasps (issue 10), written without the planner's code or collision library.
+
+For each grasp (TCP pose in the object frame, opening, contacts and outward contact normals):
+- both contacts lie on the object's surface within 0.5 mm (trimesh's exact closest point);
+- each stored normal is the normal of a triangle within 0.5 mm of its contact (either side on an open mesh);
+- both normals lie within the friction cone of the jaw axis (the TCP's y);
+- the contacts are where the pads are: at +/- half the opening along y, inside the pad rectangles;
+- the Franka hand's collision geometry, loaded by pinocchio from example-robot-data's panda.urdf and placed with
+  its TCP frame at the grasp with the fingers at the grasp's opening (and at full opening), does not penetrate the
+  object by more than 1 mm, measured with coal (not python-fcl, which the planner uses).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+
+import coal
+import numpy as np
+import pinocchio as pin
+import trimesh
+
+from workbench.resources import erd_robots, erd_share
+
+
+@dataclass
+class Verdict:
+    surface: np.ndarray
+    normal: np.ndarray
+    cone: np.ndarray
+    pads: np.ndarray
+    penetration: np.ndarray  # deepest penetration (m) at the grasp's opening or at full opening
+
+    @property
+    def ok(self) -> np.ndarray:
+        return self.surface & self.normal & self.cone & self.pads & (self.penetration <= 1e-3)
+
+
+@lru_cache(maxsize=1)
+def franka_geometry():
+    """[(coal geometry, placement in the TCP frame as a function of the finger opening)] of the Franka hand."""
+    urdf = str(erd_robots() / "panda_description" / "urdf" / "panda.urdf")
+    model = pin.buildModelFromUrdf(urdf)
+    geom = pin.buildGeomFromUrdf(model, urdf, pin.COLLISION, package_dirs=[str(erd_share())])
+    keep = {"panda_hand", "panda_leftfinger", "panda_rightfinger"}
+    parts = []
+    for go in geom.geometryObjects:
+        if model.frames[go.parentFrame].name in keep:
+            g = go.geometry
+            if isinstance(g, coal.BVHModelBase):  # the hand body mesh: its convex hull (the mesh is convex)
+                g.buildConvexRepresentation(False)
+                g = g.convex
+            parts.append((go, g))
+    return model, geom, parts
+
+
+def hand_placements(opening: float) -> list[tuple[coal.CollisionGeometry, np.ndarray]]:
+    """Every hand collision geometry and its pose in the TCP frame with the pads `opening` apart."""
+    model, geom, parts = franka_geometry()
+    data = model.createData()
+    q = pin.neutral(model)
+    for name in ("panda_finger_joint1", "panda_finger_joint2"):
+        jid = model.getJointId(name)
+        q[model.joints[jid].idx_q] = opening / 2
+    pin.forwardKinematics(model, data, q)
+    pin.updateFramePlacements(model, data)
+    tcp_inv = data.oMf[model.getFrameId("panda_hand_tcp")].inverse()
+    out = []
+    for go, g in parts:
+        # geometry pose = joint placement * local placement
+        M = tcp_inv * data.oMi[go.parentJoint] * go.placement
+        out.append((g, M.homogeneous))
+    return out
+
+
+def _object_bvh(mesh: trimesh.Trimesh) -> coal.BVHModelOBBRSS:
+    m = coal.BVHModelOBBRSS()
+    m.beginModel(len(mesh.faces), len(mesh.vertices))
+    m.addVertices(np.asarray(mesh.vertices, dtype=np.float64))
+    m.addTriangles(np.asarray(mesh.faces, dtype=np.int64))
+    m.endModel()
+    return m
+
+
+def max_penetration(mesh: trimesh.Trimesh, poses: np.ndarray, openings: np.ndarray) -> np.ndarray:
+    """Deepest penetration (m, 0 when free) of the Franka hand at each TCP pose and opening into the object."""
+    obj = _object_bvh(mesh)
+    ident = coal.Transform3s()
+    out = np.zeros(len(poses))
+    for k, (pose, w) in enumerate(zip(poses, openings)):
+        for g, local in hand_placements(float(w)):
+            M = pose @ local
+            req = coal.CollisionRequest()
+            req.enable_contact = True
+            req.num_max_contacts = 200
+            res = coal.CollisionResult()
+            if coal.collide(obj, ident, g, coal.Transform3s(M[:3, :3], M[:3, 3]), req, res):
+                depth = max(c.penetration_depth for c in res.getContacts())
+                out[k] = max(out[k], abs(depth))
+    return out
+
+
+def pad_face() -> tuple[float, float, float]:
+    """(half size x, half size z, centre z) of the pad's contact face in the TCP frame: the finger box reaching
+    farthest along the approach, from the URDF."""
+    boxes = [(np.asarray(g.halfSide), M) for g, M in hand_placements(0.04) if isinstance(g, coal.Box) and M[1, 3] > 0]
+    half, M = max(boxes, key=lambda b: b[1][2, 3] + b[0][2])
+    ext = np.abs(M[:3, :3]) @ half
+    return float(ext[0]), float(ext[2]), float(M[2, 3])
+
+
+def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction: float, jaw_max: float = 0.08) -> Verdict:
+    """The independent verdict on each grasp (see the module docstring)."""
+    hx, hz, pad_z = pad_face()
+    pad_half = (hx, hz)
+    poses, widths = np.asarray(poses), np.asarray(widths)
+    G = len(poses)
+    if G == 0:
+        z = np.zeros(0, dtype=bool)
+        return Verdict(surface=z, normal=z, cone=z, pads=z, penetration=np.zeros(0))
+    pts = np.vstack([c0, c1])
+    nrm = np.vstack([n0, n1])
+    _, dist, _ = trimesh.proximity.closest_point(mesh, pts)
+    surface = (dist <= 5e-4).reshape(2, G).all(axis=0)
+    # stored normal = the normal of some triangle within 0.5 mm (brute force over every triangle)
+    tris = mesh.triangles
+    fn = mesh.face_normals
+    normal_ok = np.zeros(2 * G, dtype=bool)
+    open_mesh = not mesh.is_watertight
+    for i, (p, n) in enumerate(zip(pts, nrm)):
+        cp = trimesh.triangles.closest_point(tris, np.repeat(p[None], len(tris), axis=0))
+        near = np.linalg.norm(cp - p, axis=1) <= 5e-4
+        cos = fn[near] @ n
+        if open_mesh:
+            cos = np.abs(cos)
+        normal_ok[i] = bool((cos >= np.cos(np.radians(1.0))).any())
+    normal_ok = normal_ok.reshape(2, G).all(axis=0)
+    y = poses[:, :3, 1]
+    cosf = np.cos(np.arctan(friction))
+    cone = (np.einsum("ij,ij->i", n0, y) >= cosf - 1e-9) & (np.einsum("ij,ij->i", n1, -y) >= cosf - 1e-9)
+    inv = np.linalg.inv(poses)
+    pads = np.ones(G, dtype=bool)
+    for c, side in ((c0, 1), (c1, -1)):
+        local = np.einsum("gij,gj->gi", inv[:, :3, :3], c) + inv[:, :3, 3]
+        pads &= np.abs(local[:, 1] - side * widths / 2) <= 1e-5
+        pads &= (np.abs(local[:, 0]) <= pad_half[0] + 1e-6) & (np.abs(local[:, 2] - pad_z) <= pad_half[1] + 1e-6)
+    pads &= (widths >= 0) & (widths <= jaw_max + 1e-9)
+    pen = np.maximum(max_penetration(mesh, poses, widths), max_penetration(mesh, poses, np.full(G, jaw_max)))
+    return Verdict(surface=surface, normal=normal_ok, cone=cone, pads=pads, penetration=pen)
