@@ -46,7 +46,7 @@ class MotionOptions:
     resolution: float = ONE_DEGREE
     tcp_step: float = 0.005
     budget: float = 1.0
-    shortcuts: int = 40
+    shortcuts: int = 20
     seed: int = 0
     table_tol: float = 1e-3
     max_jump: float = 0.2
@@ -104,12 +104,17 @@ class MotionChecker:
         moving = [k for k, p in enumerate(parts) if p.joint > 0]
         gripper = [k for k, p in enumerate(parts) if p.link in (GRIPPER_HAND, GRIPPER_FINGERS)]
         arm_all = [k for k, p in enumerate(parts) if p.link not in (GRIPPER_HAND, GRIPPER_FINGERS)]
-        self.pairs: dict[str, list[int]] = {"table": [], "rest": [], "held": []}
+        self.pairs: dict[str, list[int]] = {"self": [], "table": [], "rest": [], "held": []}
 
         def add(a: int, b: int, group: str) -> None:
             self.pairs[group].append(len(gm.collisionPairs))
             gm.addCollisionPair(pin.CollisionPair(min(a, b), max(a, b)))
 
+        checked = {frozenset(p) for p in self.self_collision.allowed.checked}
+        for i, a in enumerate(parts):  # self-collision pairs in the same model: one C++ call per configuration
+            for j in range(i + 1, len(parts)):
+                if a.link != parts[j].link and frozenset((a.link, parts[j].link)) in checked:
+                    add(i, j, "self")
         for k in moving:
             add(k, self.k_table, "table")
         if obj_mesh is not None:
@@ -123,6 +128,9 @@ class MotionChecker:
         self.gd = pin.GeometryData(gm)
         self.data = robot.model.createData()
         self.names = [p.name for p in parts] + ["table", "table", "object", "object"]
+        self._lo, self._hi = robot.lower - 1e-9, robot.upper + 1e-9
+        # broad phase (dynamic AABB tree) over the same model: it honours the active pairs of `gd`
+        self.broad = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(robot.model, gm, self.gd)
         self.mode = "free"
         self._apply()
 
@@ -131,7 +139,7 @@ class MotionChecker:
     def _apply(self) -> None:
         gd = self.gd
         for group, ks in self.pairs.items():
-            on = group == "table" or (group == "rest" and self.mode == "resting") or (group == "held" and self.mode == "holding")
+            on = group in ("self", "table") or (group == "rest" and self.mode == "resting") or (group == "held" and self.mode == "holding")
             for k in ks:
                 gd.activateCollisionPair(k) if on else gd.deactivateCollisionPair(k)
 
@@ -165,11 +173,16 @@ class MotionChecker:
     def valid(self, q: np.ndarray) -> bool:
         """Whether one joint vector is within limits and collision-free (self, table, object)."""
         q = np.asarray(q, dtype=np.float64)
-        if not self.in_limits(q)[0]:
+        if (q < self._lo).any() or (q > self._hi).any():
             return False
-        if pin.computeCollisions(self.robot.model, self.data, self.gm, self.gd, q, True):
+        return not pin.computeCollisions(self.robot.model, self.data, self.broad, q, True)
+
+    def valid_narrow(self, q: np.ndarray) -> bool:
+        """`valid` without the broad phase (every active pair through the narrow phase), for cross-checks."""
+        q = np.asarray(q, dtype=np.float64)
+        if (q < self._lo).any() or (q > self._hi).any():
             return False
-        return not self.self_collision.collides(q)[0]
+        return not pin.computeCollisions(self.robot.model, self.data, self.gm, self.gd, q, True)
 
     def valid_many(self, q: np.ndarray) -> np.ndarray:
         """(B,) validity of joint vectors (B, n)."""
@@ -179,7 +192,7 @@ class MotionChecker:
     def why(self, q: np.ndarray) -> list[str]:
         """What collides at one joint vector (for messages)."""
         q = np.asarray(q, dtype=np.float64)
-        out = [f"{a} hits {b}" for a, b in self.self_collision.colliding(q)]
+        out = []
         pin.computeCollisions(self.robot.model, self.data, self.gm, self.gd, q, False)
         for cp, r, act in zip(self.gm.collisionPairs, self.gd.collisionResults, self.gd.activeCollisionPairs):
             if act and r.isCollision():
@@ -227,32 +240,66 @@ def _bisection_order(n: int) -> list[int]:
 # Straight TCP lines.
 
 
+def _line_targets(robot: Robot, q_from: np.ndarray, target: np.ndarray, tcp_step: float) -> np.ndarray:
+    """TCP poses (world) from FK(q_from) to `target` on the straight line (rotation by slerp), at most `tcp_step` and
+    1 degree apart, the start excluded, the target included."""
+    _, _, r, t = forward(robot, q_from[None])
+    r0, t0 = r[0], t[0]
+    r1, t1 = np.asarray(target)[:3, :3], np.asarray(target)[:3, 3]
+    dist = float(np.linalg.norm(t1 - t0))
+    ang = float(Rotation.from_matrix(r0.T @ r1).magnitude())
+    n = max(1, int(math.ceil(max(dist / tcp_step, ang / ONE_DEGREE) - 1e-9)))
+    s = np.linspace(0.0, 1.0, n + 1)[1:]
+    out = np.tile(np.eye(4), (n, 1, 1))
+    out[:, :3, :3] = Slerp([0.0, 1.0], Rotation.from_matrix(np.stack([r0, r1])))(s).as_matrix()
+    out[:, :3, 3] = t0 + s[:, None] * (t1 - t0)
+    return out
+
+
+def tcp_line_to(robot: Robot, checker: MotionChecker, q_from: np.ndarray, target: np.ndarray, iters: int = 40) -> np.ndarray | None:
+    """The joint path (K, n) from q_from moving the TCP on the straight line to the pose `target` (world), solved by
+    IK at samples at most `tcp_step` and 1 degree apart (all seeded from q_from in one batch; where that jumps
+    branches, sample by sample from the previous solution). None when IK fails, a joint jumps more than
+    `max_jump`, or a piece is not collision-free at the resolution."""
+    o = checker.opts
+    q_from = np.asarray(q_from, dtype=np.float64)
+    targets = _line_targets(robot, q_from, target, o.tcp_step)
+    q, ok = solve_ik(robot, targets, np.repeat(q_from[None], len(targets), axis=0), iters, 1e-4, 1e-3)
+    path = np.vstack([q_from, q])
+    if not ok.all() or np.abs(np.diff(path, axis=0)).max() > o.max_jump:
+        prev, rows = q_from, [q_from]
+        for tgt in targets:
+            qi, oki = solve_ik(robot, tgt[None], prev[None], iters, 1e-4, 1e-3)
+            if not oki[0]:
+                return None
+            prev = qi[0]
+            rows.append(prev)
+        path = np.array(rows)
+        if np.abs(np.diff(path, axis=0)).max() > o.max_jump:
+            return None
+    if not checker.path_free(path):
+        return None
+    return path
+
+
 def tcp_line(robot: Robot, checker: MotionChecker, q_from: np.ndarray, q_to: np.ndarray, iters: int = 40) -> np.ndarray | None:
-    """The joint path (K, n) moving the TCP on the straight line (and rotation slerp) from FK(q_from) to FK(q_to),
-    solved by IK at samples at most `tcp_step` and 1 degree apart, seeded along the joint line, ending at q_to.
-    None when IK fails, a joint jumps (another branch), or a piece of the path is not collision-free."""
+    """The straight TCP line from FK(q_from) to FK(q_to) that ends at q_to itself (seeded along the joint line);
+    None when IK fails, the solution ends elsewhere (another IK branch), jumps, or collides."""
     o = checker.opts
     q_from, q_to = np.asarray(q_from, dtype=np.float64), np.asarray(q_to, dtype=np.float64)
-    _, _, r, t = forward(robot, np.stack([q_from, q_to]))
-    dist = float(np.linalg.norm(t[1] - t[0]))
-    ang = float(Rotation.from_matrix(r[0].T @ r[1]).magnitude())
-    n = max(1, int(math.ceil(max(dist / o.tcp_step, ang / ONE_DEGREE) - 1e-9)))
-    s = np.linspace(0.0, 1.0, n + 1)
-    if n > 1:
-        slerp = Slerp([0.0, 1.0], Rotation.from_matrix(r))
-        targets = np.tile(np.eye(4), (n - 1, 1, 1))
-        targets[:, :3, :3] = slerp(s[1:-1]).as_matrix()
-        targets[:, :3, 3] = t[0] + s[1:-1, None] * (t[1] - t[0])
-        seeds = q_from + s[1:-1, None] * (q_to - q_from)
-        q, ok = solve_ik(robot, targets, seeds, iters, 1e-4, 1e-3)
+    _, _, r, t = forward(robot, q_to[None])
+    target = np.eye(4)
+    target[:3, :3], target[:3, 3] = r[0], t[0]
+    targets = _line_targets(robot, q_from, target, o.tcp_step)[:-1]
+    if len(targets):
+        s = np.linspace(0.0, 1.0, len(targets) + 2)[1:-1, None]
+        q, ok = solve_ik(robot, targets, q_from + s * (q_to - q_from), iters, 1e-4, 1e-3)
         if not ok.all():
             return None
         path = np.vstack([q_from, q, q_to])
     else:
         path = np.stack([q_from, q_to])
-    if np.abs(np.diff(path, axis=0)).max() > o.max_jump:
-        return None
-    if not checker.path_free(path):
+    if np.abs(np.diff(path, axis=0)).max() > o.max_jump or not checker.path_free(path):
         return None
     return path
 

@@ -17,8 +17,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .motion import MotionChecker, joint_motion, tcp_line
-from .timing import TimedSegment, Trajectory, check_limits, time_line, time_spline, time_stops
+from ..kinematics import forward
+from .motion import MotionChecker, joint_motion, tcp_line_to
+from .timing import TimedSegment, Trajectory, check_limits, reversed_trajectory, time_line, time_spline, time_stops
 
 GRIPPER_SECONDS = 0.5
 """How long the jaw takes to close or open (the arm rests)."""
@@ -27,8 +28,9 @@ GRIPPER_SECONDS = 0.5
 @dataclass
 class Move:
     """One motion to plan: kind, caption, plan step index, start and end joint vectors, whether the object is held,
-    the object's resting pose (world) or its grasp (TCP in the object frame), the jaw width after the move, and how
-    it is planned: `tcp` (straight TCP line), `joint` (straight joint line, else RRT-Connect) or `dwell`."""
+    the object's resting pose (world) or its grasp (TCP in the object frame), the jaw width during the move, and how
+    it is planned: `path` (a given, already checked joint path, e.g. a straight TCP line), `joint` (straight joint
+    line, else RRT-Connect) or `dwell` (the jaw moves, the arm rests)."""
 
     kind: str
     caption: str
@@ -40,37 +42,91 @@ class Move:
     grasp: np.ndarray | None
     jaw: float
     how: str
+    path: np.ndarray | None = None
 
 
-def moves_of_steps(steps, jaw_open: float) -> list[Move]:
+@dataclass
+class StepLines:
+    """Consistent waypoints of one step (one IK branch along the straight TCP lines): retract, approach, grasp joint
+    vectors and the joint paths retract -> approach and approach -> grasp; `anchor` names the stored configuration
+    they were continued from."""
+
+    q_retract: np.ndarray
+    q_approach: np.ndarray
+    q_grasp: np.ndarray
+    down: list[np.ndarray]
+    anchor: str
+
+
+def _modes(step) -> tuple[tuple[bool, np.ndarray], tuple[bool, np.ndarray]]:
+    """(holding, pose-or-grasp) before and after the jaw acts at this step."""
+    pose, grasp = np.asarray(step.object_pose, dtype=np.float64), np.asarray(step.grasp, dtype=np.float64)
+    taking = step.kind in ("pick", "regrasp")
+    empty, held = (False, pose), (True, grasp)
+    return (empty, held) if taking else (held, empty)
+
+
+def _mode(checker: MotionChecker, mode: tuple[bool, np.ndarray]) -> None:
+    checker.set_holding(mode[1]) if mode[0] else checker.set_resting(mode[1])
+
+
+def step_lines(checker: MotionChecker, step) -> StepLines | None:
+    """The step's retract -> approach -> grasp waypoints on one IK branch: the stored configurations may come from
+    different branches (the IK rows solve each pose on its own), so the lines are continued by IK from one stored
+    configuration (the grasp, else the approach, else the retract) to the other two poses. Every line is checked in
+    both the state before the jaw acts (object resting, or held) and after. None when no anchor works."""
+    robot = checker.robot
+    qs = [np.asarray(step.q_retract, dtype=np.float64), np.asarray(step.q_approach, dtype=np.float64),
+          np.asarray(step.q_grasp, dtype=np.float64)]
+    _, _, r, t = forward(robot, np.stack(qs))
+    poses = np.tile(np.eye(4), (3, 1, 1))
+    poses[:, :3, :3], poses[:, :3, 3] = r, t
+    before, after = _modes(step)
+    for anchor in (2, 1, 0):
+        chain: dict[int, np.ndarray] = {anchor: qs[anchor]}
+        paths: dict[tuple[int, int], np.ndarray] = {}
+        ok = True
+        for a, b in [(i, i - 1) for i in range(anchor, 0, -1)] + [(i, i + 1) for i in range(anchor, 2)]:
+            _mode(checker, before)
+            p = tcp_line_to(robot, checker, chain[a], poses[b])
+            if p is None:
+                ok = False
+                break
+            _mode(checker, after)
+            if not checker.path_free(p):
+                ok = False
+                break
+            chain[b] = p[-1]
+            paths[(min(a, b), max(a, b))] = p if a < b else p[::-1].copy()
+        if ok:
+            return StepLines(chain[0], chain[1], chain[2], [paths[(0, 1)], paths[(1, 2)]], ("retract", "approach", "grasp")[anchor])
+    return None
+
+
+def moves_of_steps(steps, lines: list[StepLines], jaw_open: float) -> list[Move]:
     """Today's waypoint scheme: at every step the hand goes retract -> approach -> grasp along straight TCP lines,
     closes (pick, regrasp) or opens (transfer, place), and comes back grasp -> approach -> retract; a transfer (held)
     or a transit (empty, the object where it was released) joins one step's retract to the next's."""
     out: list[Move] = []
-    for i, s in enumerate(steps):
+    for i, (s, ln) in enumerate(zip(steps, lines)):
         taking = s.kind in ("pick", "regrasp")
         caption = {"pick": "pick", "regrasp": "regrasp", "transfer": "release", "place": "place"}[s.kind]
-        pose, grasp = np.asarray(s.object_pose, dtype=np.float64), np.asarray(s.grasp, dtype=np.float64)
-        before_jaw = jaw_open if taking else float(s.jawwidth)
-        after_jaw = float(s.jawwidth) if taking else jaw_open
+        (h0, x0), (h1, x1) = _modes(s)
+        jaw0 = jaw_open if taking else float(s.jawwidth)
+        jaw1 = float(s.jawwidth) if taking else jaw_open
 
-        def mv(kind, a, b, holding, jaw, how):
-            out.append(Move(kind, caption, i, np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64), holding,
-                            None if holding else pose, grasp if holding else None, jaw, how))
+        def mv(kind, path, holding, x, jaw, how="path"):
+            out.append(Move(kind, caption, i, path[0].copy(), path[-1].copy(), holding, None if holding else x,
+                            x if holding else None, jaw, how, path))
 
-        mv("approach", s.q_retract, s.q_approach, not taking, before_jaw, "tcp")
-        mv("approach", s.q_approach, s.q_grasp, not taking, before_jaw, "tcp")
-        mv("gripper", s.q_grasp, s.q_grasp, taking, after_jaw, "dwell")
-        mv("retract", s.q_grasp, s.q_approach, taking, after_jaw, "tcp")
-        mv("retract", s.q_approach, s.q_retract, taking, after_jaw, "tcp")
+        mv("approach", ln.down[0], h0, x0, jaw0)
+        mv("approach", ln.down[1], h0, x0, jaw0)
+        mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), h1, x1, jaw1, "dwell")
+        mv("retract", ln.down[1][::-1].copy(), h1, x1, jaw1)
+        mv("retract", ln.down[0][::-1].copy(), h1, x1, jaw1)
         if i + 1 < len(steps):
-            nxt = steps[i + 1]
-            if taking:
-                out.append(Move("transfer", "transfer", i, np.asarray(s.q_retract, dtype=np.float64),
-                                np.asarray(nxt.q_retract, dtype=np.float64), True, None, grasp, after_jaw, "joint"))
-            else:
-                out.append(Move("transit", "regrasp", i, np.asarray(s.q_retract, dtype=np.float64),
-                                np.asarray(nxt.q_retract, dtype=np.float64), False, pose, None, after_jaw, "joint"))
+            out.append(Move("transfer" if taking else "transit", "transfer" if taking else "regrasp", i, ln.q_retract.copy(),
+                            lines[i + 1].q_retract.copy(), h1, None if h1 else x1, x1 if h1 else None, jaw1, "joint"))
     return out
 
 
@@ -85,6 +141,7 @@ class MotionResult:
     seconds: float = 0.0
     rrt: int = 0
     stats: dict = field(default_factory=dict)
+    blame: tuple = ()
 
     @property
     def ok(self) -> bool:
@@ -121,6 +178,7 @@ def solve_moves(checker: MotionChecker, moves: list[Move], vlim: np.ndarray, ali
     segments: list[TimedSegment] = []
     t0, rrt = 0.0, 0
     methods: dict[str, int] = {}
+    timed: dict[tuple, Trajectory] = {}
     for k, m in enumerate(moves):
         _set(checker, m)
         if m.how == "dwell":
@@ -129,12 +187,18 @@ def solve_moves(checker: MotionChecker, moves: list[Move], vlim: np.ndarray, ali
                                     time.perf_counter() - t_start, rrt, methods)
             traj = Trajectory(np.array([0.0, GRIPPER_SECONDS]), np.stack([m.q_from, m.q_from]), np.zeros((2, robot.nq)))
             method = "dwell"
-        elif m.how == "tcp":
-            path = tcp_line(robot, checker, m.q_from, m.q_to)
-            if path is None:
-                return MotionResult(segments, k, f"{m.caption}: no collision-free straight TCP line for the {m.kind}",
-                                    time.perf_counter() - t_start, rrt, methods)
-            traj, method = _timed(checker, path, vlim, alim), "tcp-line"
+        elif m.how == "path":
+            key = (m.path[0].tobytes(), m.path[-1].tobytes(), len(m.path))
+            back = (m.path[-1].tobytes(), m.path[0].tobytes(), len(m.path))
+            if back in timed:
+                traj = reversed_trajectory(timed[back])  # the way down played backwards
+                if not _knots_ok(checker, traj):
+                    traj = _timed(checker, m.path, vlim, alim)
+            else:
+                traj = _timed(checker, m.path, vlim, alim)
+            if traj is not None:
+                timed[key] = traj
+            method = "tcp-line"
         else:
             jp = joint_motion(checker, m.q_from, m.q_to, seed=seed + k)
             if jp is None:
@@ -159,3 +223,27 @@ def _timed(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.
         return traj
     traj = time_stops(path, vlim, alim)
     return traj if _knots_ok(checker, traj) else None
+
+
+def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarray | float, seed: int | None = None
+                ) -> tuple[MotionResult, list[StepLines | None]]:
+    """The timed motion of a whole plan (issue 12): consistent straight TCP lines at every step, then the moves in
+    order. On failure `result.blame` is ("step", i) when step i's lines fail (its grip is unusable) or ("edge", i, i+1)
+    when the transfer or transit from step i to step i+1 fails; the lines found so far are returned too."""
+    t0 = time.perf_counter()
+    lines: list[StepLines | None] = []
+    for i, s in enumerate(steps):
+        ln = step_lines(checker, s)
+        lines.append(ln)
+        if ln is None:
+            res = MotionResult([], None, f"step {i + 1} ({s.kind}): no collision-free straight TCP lines between its retract, "
+                               f"approach and grasp poses on one IK branch", time.perf_counter() - t0)
+            res.failed, res.blame = -1, ("step", i)
+            return res, lines
+    moves = moves_of_steps(steps, lines, checker.robot.gripper.jaw_max)
+    res = solve_moves(checker, moves, vlim, alim, seed)
+    res.seconds = time.perf_counter() - t0
+    if not res.ok:
+        m = moves[res.failed]
+        res.blame = ("edge", m.step, m.step + 1) if m.how == "joint" else ("step", m.step)
+    return res, lines

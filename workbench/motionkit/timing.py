@@ -139,8 +139,9 @@ def densify(path: np.ndarray, spacing: float) -> np.ndarray:
 
 
 def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, spacing: float = 0.05,
-                max_step: float = ONE_DEGREE, gridpoints: int = 200) -> Trajectory:
-    """TOPP-RA along a natural cubic spline through the (densified) path vertices, rest to rest."""
+                max_step: float = ONE_DEGREE, gridpoints: int = 60) -> Trajectory:
+    """TOPP-RA along a natural cubic spline through the (densified) path vertices, rest to rest; on `gridpoints`
+    grid points first, on five times as many when the knots break a limit between grid points."""
     import toppra as ta
     import toppra.algorithm as algo
     import toppra.constraint as constraint
@@ -162,18 +163,28 @@ def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, spacing: f
     cons = [constraint.JointVelocityConstraint(np.stack([-v, v], axis=1)),
             constraint.JointAccelerationConstraint(np.stack([-a, a], axis=1),
                                                    discretization_scheme=constraint.DiscretizationType.Interpolation)]
-    inst = algo.TOPPRA(cons, geo, parametrizer="ParametrizeConstAccel", gridpt_min_nb_points=gridpoints)
-    traj = inst.compute_trajectory(0.0, 0.0)
-    if traj is None:
-        raise PlanningError("TOPP-RA found no time parametrisation of a path; check the velocity and acceleration limits")
-    dur = float(traj.duration)
-    coarse = np.linspace(0.0, dur, 200)
-    vpeak = float(np.abs(traj(coarse, 1)).max()) * 1.2 + 1e-9
-    t = _knot_times(dur, vpeak, max_step)
-    q, qd = np.asarray(traj(t)), np.asarray(traj(t, 1))
-    q[0], q[-1] = path[0], path[-1]
-    qd[0], qd[-1] = 0.0, 0.0
-    return Trajectory(t, q, qd)
+    out = None
+    for grid in (gridpoints, 5 * gridpoints):
+        inst = algo.TOPPRA(cons, geo, parametrizer="ParametrizeConstAccel", gridpt_min_nb_points=grid)
+        traj = inst.compute_trajectory(0.0, 0.0)
+        if traj is None:
+            raise PlanningError("TOPP-RA found no time parametrisation of a path; check the velocity and acceleration limits")
+        dur = float(traj.duration)
+        coarse = np.linspace(0.0, dur, 100)
+        vpeak = float(np.abs(traj(coarse, 1)).max()) * 1.2 + 1e-9
+        t = _knot_times(dur, vpeak, max_step)
+        q, qd = np.asarray(traj(t)), np.asarray(traj(t, 1))
+        q[0], q[-1] = path[0], path[-1]
+        qd[0], qd[-1] = 0.0, 0.0
+        out = Trajectory(t, q, qd)
+        if not within_limits(out, -np.inf, np.inf, vlim, alim) and np.abs(np.diff(q, axis=0)).max() <= max_step + 1e-12:
+            break
+    return out
+
+
+def reversed_trajectory(traj: Trajectory) -> Trajectory:
+    """The same motion played backwards (rest to rest, so within the same limits)."""
+    return Trajectory(traj.t[-1] - traj.t[::-1], traj.q[::-1].copy(), -traj.qd[::-1])
 
 
 def within_limits(traj: Trajectory, lower: np.ndarray, upper: np.ndarray, vlim: np.ndarray, alim: np.ndarray,
