@@ -253,14 +253,15 @@ class SelfCollision:
         _add_pairs(self.gm, self.parts, self.allowed.checked)
         self.gd = pin.GeometryData(self.gm)
         self.data = robot.model.createData()
+        self.broad = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(robot.model, self.gm, self.gd)
 
     def collides(self, q: np.ndarray) -> np.ndarray:
         """(B,) True where the arm or gripper collides with itself, for joint vectors q (B, n) or (n,)."""
         q = np.atleast_2d(np.asarray(q, dtype=np.float64))
         out = np.zeros(len(q), dtype=bool)
-        m, d, gm, gd = self.robot.model, self.data, self.gm, self.gd
+        m, d, broad = self.robot.model, self.data, self.broad
         for i, qi in enumerate(q):
-            out[i] = pin.computeCollisions(m, d, gm, gd, qi, True)
+            out[i] = pin.computeCollisions(m, d, broad, qi, True)
         return out
 
     def colliding(self, q: np.ndarray) -> list[tuple[str, str]]:
