@@ -19,7 +19,8 @@ import numpy as np
 
 from ..kinematics import forward
 from .motion import MotionChecker, joint_motion, tcp_line_to
-from .timing import TimedSegment, Trajectory, check_limits, reversed_trajectory, time_line, time_spline, time_stops
+from .timing import (TimedSegment, Trajectory, check_limits, reversed_trajectory, time_line, time_spline, time_stops,
+                     within_limits)
 
 GRIPPER_SECONDS = 0.5
 """How long the jaw takes to close or open (the arm rests)."""
@@ -219,7 +220,7 @@ def _timed(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.
     if len(path) == 2:
         return time_line(path[0], path[1], vlim, alim)
     traj = time_spline(path, vlim, alim)
-    if _knots_ok(checker, traj) and (traj.q >= checker.robot.lower - 1e-9).all() and (traj.q <= checker.robot.upper + 1e-9).all():
+    if not within_limits(traj, checker.robot.lower, checker.robot.upper, vlim, alim) and _knots_ok(checker, traj):
         return traj
     traj = time_stops(path, vlim, alim)
     return traj if _knots_ok(checker, traj) else None

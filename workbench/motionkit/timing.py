@@ -188,17 +188,18 @@ def reversed_trajectory(traj: Trajectory) -> Trajectory:
 
 
 def within_limits(traj: Trajectory, lower: np.ndarray, upper: np.ndarray, vlim: np.ndarray, alim: np.ndarray,
-                  tol: float = 1e-6) -> list[str]:
-    """Which limits the knots break (position, velocity, acceleration from knot velocities), empty when none."""
+                  tol: float = 1e-6, slack: float = 0.0) -> list[str]:
+    """Which limits the knots break (position, velocity, acceleration from knot velocities, each allowed `slack`
+    relative excess), empty when none."""
     out = []
     if ((traj.q < lower - tol) | (traj.q > upper + tol)).any():
         out.append("position")
-    if (np.abs(traj.qd) > vlim * (1 + 1e-3) + tol).any():
+    if (np.abs(traj.qd) > vlim * (1 + slack) + tol).any():
         out.append("velocity")
     if len(traj.t) > 1:
         dt = np.diff(traj.t)[:, None]
         acc = np.diff(traj.qd, axis=0) / np.where(dt > 0, dt, 1.0)
-        if (np.abs(acc) > alim * (1 + 2e-2) + tol).any():
+        if (np.abs(acc) > alim * (1 + slack) + tol).any():
             out.append("acceleration")
     return out
 

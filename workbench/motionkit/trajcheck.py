@@ -208,9 +208,11 @@ class TrajectoryValidator:
                 acc = np.diff(qd, axis=0) / dt
                 if (np.abs(acc) > self.alim * 1.02 + 1e-9).any():
                     errs.append(f"{tag}: joint accelerations above the limits (max {float((np.abs(acc) / self.alim).max()):.3f} of the limit)")
-                drift = np.abs(np.diff(q, axis=0) - 0.5 * (qd[1:] + qd[:-1]) * dt).max()
-                if drift > 0.1 * ONE_DEGREE:
-                    errs.append(f"{tag}: positions and velocities disagree ({math.degrees(drift):.2f} deg between knots)")
+                # trapezoid rule: with |acceleration| <= a, |dq - (v0 + v1) dt / 2| <= a dt^2 / 4 (twice that allowed)
+                drift = np.abs(np.diff(q, axis=0) - 0.5 * (qd[1:] + qd[:-1]) * dt) - 0.5 * self.alim * dt ** 2
+                if drift.max() > 1e-4:
+                    errs.append(f"{tag}: positions and velocities disagree (by {math.degrees(drift.max()):.2f} deg more than the "
+                                f"acceleration limit allows between knots)")
                 step = np.abs(np.diff(q, axis=0)).max(axis=1)
                 far = step > ONE_DEGREE + 1e-9
                 if far.any():
@@ -244,3 +246,18 @@ class TrajectoryValidator:
         if holding:
             errs.append("the trajectory ends with the object still in the hand")
         return errs, knots
+
+
+def trajectory_validator_for(planner, acc: np.ndarray | float, allowed: list[tuple[str, str]] | None = None) -> TrajectoryValidator:
+    """The trajectory validator of a planner's store rows (robot URDF, scene, object) and gripper; `allowed`: the
+    robot row's allowed self-collision link pairs (data; computed from the SRDF or by sampling when not given)."""
+    from ..validate import validator_for
+
+    pv = validator_for(planner)
+    g = planner.robot.gripper
+    fingers = trimesh.util.concatenate([trimesh.creation.box(extents=e, transform=p) for e, p in g.finger_poses(g.jaw_max)])
+    if allowed is None:
+        from .selfcollision import allowed_pairs
+
+        allowed = list(allowed_pairs(planner.robot).allowed)
+    return TrajectoryValidator(pv, g.body, fingers, allowed, acc, urdf=planner.rows["robot"]["urdf"])

@@ -1,0 +1,153 @@
+"""Executable regrasp plans on the demo store (issue 12): motions found and timed, checked by the independent
+trajectory validator; the old straight-interpolation demo plan is rejected; the held part never goes under the
+table; same seed, same trajectory."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from workbench.benchmarks.regrasp import random_pairs
+from workbench.commands.demo import DEMO_GRID, choose_task
+from workbench.errors import PlanningError
+from workbench.motionkit.anim import timed_frames
+from workbench.motionkit.execute import ExecOptions, plan_executable
+from workbench.motionkit.timing import TimedSegment, Trajectory, time_line, within_limits
+from workbench.motionkit.trajcheck import trajectory_validator_for
+from workbench.plans import Plan
+from workbench.regrasp import load_planner
+
+FIXTURE = Path(__file__).parent / "data" / "demo_plan_straight.json"
+ACC = 3.0
+
+
+@pytest.fixture(scope="module")
+def planner(tmp_path_factory):
+    from workbench.commands.build import build_all
+    from workbench.objects import load_object
+    from workbench.resources import bundled_objects
+
+    db = tmp_path_factory.mktemp("motion") / "regrasp.duckdb"
+    build_all(db, load_object(bundled_objects()["tube"]), "panda", tparams=DEMO_GRID, workers=2)
+    return load_planner(db, "tube", "panda")
+
+
+@pytest.fixture(scope="module")
+def validator(planner):
+    return trajectory_validator_for(planner, ACC)
+
+
+@pytest.fixture(scope="module")
+def demo_result(planner):
+    start, goal = choose_task(planner, 0)
+    return plan_executable(planner, start, goal, ExecOptions(acc=ACC))
+
+
+class FK:
+    """Pinocchio on the stored URDF text: TCP pose of a joint vector (independent of the planner's kinematics)."""
+
+    def __init__(self, planner):
+        row = planner.rows["robot"]
+        self.model = pin.buildModelFromXML(row["urdf"])
+        self.data = self.model.createData()
+        self.frame = self.model.getFrameId(row["tip_frame"])
+        self.idx = [self.model.joints[self.model.getJointId(j)].idx_q for j in row["joint_names"]]
+        self.base, self.mount = np.asarray(row["base"]).reshape(4, 4), np.asarray(row["mount"]).reshape(4, 4)
+
+    def __call__(self, q):
+        full = pin.neutral(self.model)
+        full[self.idx] = q
+        pin.framesForwardKinematics(self.model, self.data, full)
+        return self.base @ np.asarray(self.data.oMf[self.frame].homogeneous) @ self.mount
+
+
+def _straight_segments(plan: Plan, vlim) -> list[TimedSegment]:
+    """The motion today's demo animation showed: straight joint interpolation between the stored waypoints."""
+    segs, t0 = [], 0.0
+
+    def add(kind, step, a, b, holding):
+        nonlocal t0
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        tr = time_line(a, b, vlim, ACC) if np.abs(a - b).max() > 0 else Trajectory(np.array([0.0, 0.5]), np.stack([a, a]), np.zeros((2, len(a))))
+        segs.append(TimedSegment(kind, plan.steps[step].kind, step, holding, t0, tr))
+        t0 += tr.duration
+
+    for i, s in enumerate(plan.steps):
+        taking = s.kind in ("pick", "regrasp")
+        add("approach", i, s.q_retract, s.q_approach, not taking)
+        add("approach", i, s.q_approach, s.q_grasp, not taking)
+        add("gripper", i, s.q_grasp, s.q_grasp, taking)
+        add("retract", i, s.q_grasp, s.q_approach, taking)
+        add("retract", i, s.q_approach, s.q_retract, taking)
+        if i + 1 < len(plan.steps):
+            add("transfer" if taking else "transit", i, s.q_retract, plan.steps[i + 1].q_retract, taking)
+    return segs
+
+
+def test_old_demo_plan_is_rejected(planner, validator):
+    plan = Plan.from_dict(json.loads(FIXTURE.read_text())["plan"])
+    errors, knots = validator.check(plan, _straight_segments(plan, np.asarray(planner.robot.model.velocityLimit)))
+    assert knots > 100 and errors
+    text = " | ".join(errors)
+    assert "below the table" in text or "hits the table" in text or "hits the object" in text
+
+
+def test_demo_plan_is_executable_and_validates(planner, validator, demo_result):
+    res = demo_result
+    plan, motion = res.plan, res.motion
+    assert motion.ok and plan.regrasps >= 1
+    errors, knots = validator.check(plan, motion.segments)
+    assert errors == [], errors
+    assert knots > 200
+    kinds = {s.kind for s in motion.segments}
+    assert {"approach", "retract", "gripper", "transfer"} <= kinds
+    vlim = np.asarray(planner.robot.model.velocityLimit)
+    for s in motion.segments:
+        assert within_limits(s.traj, planner.robot.lower, planner.robot.upper, vlim, np.full(7, ACC)) == []
+    # the animation data (real speed, 30 fps) never shows the part under the table
+    fk = FK(planner)
+    frames = timed_frames(plan, motion.segments, fk, fps=30.0)
+    assert abs(frames[-1]["t"] - motion.duration) < 1 / 30 + 1e-9
+    verts = np.asarray(planner.object.mesh.vertices)
+    low = min(float((verts @ f["object"][:3, :3].T + f["object"][:3, 3])[:, 2].min()) for f in frames)
+    assert low > -1e-3
+    assert {f["caption"] for f in frames} >= {"pick", "transfer", "release", "regrasp", "place"}
+    # the plan's waypoints are the ones the motion goes through
+    grip = [s for s in motion.segments if s.kind == "gripper"]
+    assert len(grip) == len(plan.steps)
+    for s, step in zip(grip, plan.steps):
+        assert np.allclose(s.traj.q[0], step.q_grasp)
+
+
+def test_same_seed_same_trajectory(planner, demo_result):
+    start, goal = choose_task(planner, 0)
+    again = plan_executable(planner, start, goal, ExecOptions(acc=ACC))
+    a, b = demo_result.motion.segments, again.motion.segments
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        assert x.kind == y.kind and np.array_equal(x.traj.t, y.traj.t) and np.array_equal(x.traj.q, y.traj.q)
+
+
+def test_held_part_never_under_the_table(planner, validator):
+    fk = FK(planner)
+    verts = np.asarray(planner.object.mesh.vertices)
+    done = 0
+    for start, goal in random_pairs(planner.placement_ids(), DEMO_GRID, 6, 3):
+        try:
+            res = plan_executable(planner, start, goal, ExecOptions(acc=ACC))
+        except PlanningError:
+            continue
+        done += 1
+        for seg in res.motion.segments:
+            if not seg.holding:
+                continue
+            grasp_inv = np.linalg.inv(res.plan.steps[seg.step].grasp)
+            for q in seg.traj.q:
+                obj = fk(q) @ grasp_inv
+                assert float((verts @ obj[:3, :3].T + obj[:3, 3])[:, 2].min()) > -1e-3
+        assert validator.check(res.plan, res.motion.segments)[0] == []
+    assert done >= 3
