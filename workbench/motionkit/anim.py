@@ -84,3 +84,44 @@ def caption_png(lines: list[tuple[str, int | None]], width: int = 900, line_heig
     buf = io.BytesIO()
     img.save(buf, format="PNG")
     return buf.getvalue()
+
+
+def _panel_pose(anchor: np.ndarray, facing: np.ndarray) -> np.ndarray:
+    """A pose whose +z points along `facing` (horizontal), +y up (world z), at `anchor`."""
+    z = np.array([facing[0], facing[1], 0.0])
+    z /= max(np.linalg.norm(z), 1e-12)
+    y = np.array([0.0, 0.0, 1.0])
+    x = np.cross(y, z)
+    out = np.eye(4)
+    out[:3, 0], out[:3, 1], out[:3, 2], out[:3, 3] = x, y, z, anchor
+    return out
+
+
+def add_overlays(vis, anim, frames: list[dict], path: str, anchor: np.ndarray, facing: np.ndarray,
+                 key: list[tuple[str, int | None]], width: float = 0.36) -> None:
+    """Caption panels (one per step name, shown while a frame belongs to that step) and a colour-key panel, as thin
+    textured boxes standing at `anchor` and facing the camera direction `facing` (meshcat draws no text)."""
+    import meshcat.geometry as g
+
+    pose = _panel_pose(np.asarray(anchor, dtype=np.float64), np.asarray(facing, dtype=np.float64))
+    hidden = pose.copy()
+    hidden[2, 3] -= 100.0
+
+    def panel(name: str, png: bytes, px: tuple[int, int], at: np.ndarray) -> None:
+        h = width * px[1] / px[0]
+        tex = g.ImageTexture(image=g.PngImage(png))
+        vis[f"{path}/{name}"].set_object(g.Box([width, h, 1e-4]), g.MeshBasicMaterial(map=tex, transparent=True))
+        vis[f"{path}/{name}"].set_transform(at)
+
+    key_png = caption_png(key, width=560)
+    key_at = pose.copy()
+    key_at[:3, 3] -= pose[:3, 0] * (width * 0.62)  # beside the caption
+    key_at[2, 3] -= 0.04
+    panel("key", key_png, (560, 56 * len(key) + 16), key_at)
+    used = [c for c in CAPTIONS if any(f["caption"] == c for f in frames)]
+    for c in used:
+        panel(f"caption_{c}", caption_png([(CAPTION_TEXT[c], None)]), (900, 72), hidden)
+    for i, fr in enumerate(frames):
+        with anim.at_frame(vis, i) as f:
+            for c in used:
+                f[f"{path}/caption_{c}"].set_transform(pose if fr["caption"] == c else hidden)
