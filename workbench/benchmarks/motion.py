@@ -18,7 +18,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import print_table
+from workbench.benchmarks import print_table
+from workbench.benchmarks.regrasp import random_pairs
+from workbench.errors import PlanningError, WorkbenchError
+from workbench.geometry.objects import load_object
+from workbench.planners.wan_harada.motions import ExecOptions, plan_executable
+from workbench.planners.wan_harada.stages import DEMO_GRID, build_all, load_planner
+from workbench.resources import bundled_objects
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -36,11 +42,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def bench_motion(planner, pairs: list[tuple], acc: float, max_removed: int, validate: bool = True) -> dict:
     """Per pair: searched (a route exists), executable, removals, motion planning seconds, trajectory duration,
     validator rejections."""
-    from ..errors import PlanningError
-    from ..motionkit.execute import ExecOptions, plan_executable
-    from ..motionkit.trajcheck import trajectory_validator_for
-
-    validator = trajectory_validator_for(planner, acc) if validate else None
+    validator = planner.trajectory_validator(acc) if validate else None
     out = {"searched": 0, "executable": 0, "removed": [], "seconds": [], "duration": [], "invalid": 0, "exhausted": 0}
     opts = ExecOptions(acc=acc, max_removed=max_removed)
     for start, goal in pairs:
@@ -62,15 +64,6 @@ def bench_motion(planner, pairs: list[tuple], acc: float, max_removed: int, vali
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..commands.build import build_all
-    from ..commands.demo import DEMO_GRID
-    from ..errors import WorkbenchError
-    from ..objects import load_object
-    from ..regrasp import load_planner
-    from ..resources import bundled_objects
-    from ..store import Store
-    from .regrasp import random_pairs
-
     objs = bundled_objects()
     names = [n.strip() for n in args.objects.split(",") if n.strip()]
     unknown = [n for n in names if n not in objs]
@@ -87,8 +80,7 @@ def run(args: argparse.Namespace) -> int:
             t0 = time.perf_counter()
             build_all(db, obj, robot, tparams=DEMO_GRID, workers=args.workers)
             t_build = time.perf_counter() - t0
-            with Store(db) as store:
-                planner = load_planner(store, obj.name, robot)
+            planner = load_planner(db, obj.name, robot)
             pairs = random_pairs(planner.placement_ids(), DEMO_GRID, args.pairs, args.seed)
             bench_motion(planner, pairs[:1], args.acc, args.max_removed, False)  # warm-up (imports, caches), not counted
             r = bench_motion(planner, pairs, args.acc, args.max_removed, not args.no_validate)

@@ -35,6 +35,7 @@ from workbench.robots.collider import Collider, Scene, default_scene
 from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import IKOptions, iter_ik
 from workbench.robots.model import ROBOTS, Robot, RobotSpec, builtin_robot, get_robot
+from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
 from workbench.store import Store
 from workbench.store import robots as robot_sql
 from workbench.store import wan_harada as sql
@@ -220,6 +221,8 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
         gid = rrow["idgripper"]
         planner.rows = {"robot": rrow, "scene": stored, "object": orow,  # raw store rows, for the independent validator
                         "gripper": gripper_row(store, gid) if gid is not None else None}
+        planner.allowed = (AllowedPairs.from_json(rrow["allowed_pairs"]) if rrow.get("allowed_pairs")
+                           else allowed_pairs(robot))  # self-collision pairs of the robot row (older stores: computed)
         planner.ik.solver  # build the IK solver and its seed library now, not during the first query
         if cache is not None:
             cache.put(key, planner)
@@ -354,7 +357,8 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
     grips = load_tabletop_grips(store, oid, idtabletop)
     pid = int(np.asarray(grips["idparamset"])) if "idparamset" in grips else int(idtabletop if idtabletop is not None else -1)
     ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
-    rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz)
+    rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz,
+                                          allowed_pairs(robot).to_json())
     done = robot_sql.stored_grips(store, rid, sid, kid)
 
     def skip(ix: np.ndarray) -> bool:
@@ -405,7 +409,8 @@ def choose_task(planner, seed: int = 0, tries: int = 40, grid: TabletopParams = 
 
 
 def save_plan(store: Store, plan: Plan) -> int:
-    """Store a plan and its steps (tables `plan`, `planstep`) in one transaction; returns idplan."""
+    """Store a plan, its steps and its timed motions (tables `plan`, `planstep`, `plansegment`) in one transaction;
+    returns idplan."""
     return sql.save_plan(store, *plan_rows(plan))
 
 

@@ -29,10 +29,11 @@ import pinocchio as pin
 import trimesh
 from scipy.spatial.transform import Rotation, Slerp
 
-from ..errors import PlanningError
-from ..kinematics import Scene, forward, solve_ik
-from ..robots import Robot
-from .selfcollision import GRIPPER_FINGERS, GRIPPER_HAND, AllowedPairs, SelfCollision, coal_mesh, robot_parts
+from workbench.errors import PlanningError
+from workbench.robots.chain import forward, solve_ik
+from workbench.robots.collider import Scene
+from workbench.robots.model import Robot
+from workbench.robots.selfcollision import GRIPPER_FINGERS, GRIPPER_HAND, AllowedPairs, SelfCollision, coal_mesh, robot_parts
 
 ONE_DEGREE = math.radians(1.0)
 

@@ -10,8 +10,8 @@ import pinocchio as pin
 import pytest
 import trimesh
 
-from workbench.motionkit.selfcollision import AllowedPairs, SelfCollision, allowed_pairs, srdf_for
-from workbench.robots import builtin_robot
+from workbench.robots.selfcollision import AllowedPairs, SelfCollision, allowed_pairs, srdf_for
+from workbench.robots.model import builtin_robot
 
 HOME = np.array([0.0, -0.785398, 0.0, -2.35619, 0.0, 1.5707, 0.785398])  # the Panda SRDF's "default" state
 FOLDED = np.array([0.0, 1.0, 0.0, -3.0, 0.0, 0.5, 0.785])  # shoulder forward, elbow fully bent: the hand in the base

@@ -8,19 +8,30 @@ order; the first move that fails is returned so the search can remove what it us
 
 Other waypoint schemes (lift straight up after closing, lower straight down before opening) are other move lists
 over the same machinery.
+
+Executable plans (`plan_executable`), as wrs does for the graph: the best route is searched and its motions
+planned; when a motion fails, the roadmap node (or start / goal grip) it used is removed with its edges and the
+graph searched again, up to `max_removed` times. A plan says how many it removed; a query that runs out of
+alternatives says so in one line.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 
-from ..kinematics import forward
-from .motion import MotionChecker, joint_motion, tcp_line_to
-from .timing import (TimedSegment, Trajectory, check_limits, reversed_trajectory, time_line, time_spline, time_stops,
-                     within_limits)
+from workbench.errors import PlanningError
+from workbench.planners.wan_harada.plans import make_plan
+from workbench.planners.wan_harada.roadmap import build_roadmap
+from workbench.planners.wan_harada.search import search
+from workbench.robots.chain import forward
+from workbench.robots.motion import MotionChecker, MotionOptions, joint_motion, tcp_line_to
+from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
+from workbench.robots.timing import (TimedSegment, Trajectory, check_limits, reversed_trajectory, time_line, time_spline,
+                                     time_stops, within_limits)
 
 GRIPPER_SECONDS = 0.5
 """How long the jaw takes to close or open (the arm rests)."""
@@ -248,3 +259,149 @@ def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarra
         m = moves[res.failed]
         res.blame = ("edge", m.step, m.step + 1) if m.how == "joint" else ("step", m.step)
     return res, lines
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Search again when a motion fails (as wrs does).
+
+
+DEFAULT_ACC = 3.0
+"""Default joint acceleration limit (rad/s^2, m/s^2 for prismatic joints): URDFs carry no acceleration limits."""
+
+
+@dataclass(frozen=True)
+class ExecOptions:
+    """Motion settings of a query: acceleration limit (scalar or per joint), how many failing nodes or grips may be
+    removed before giving up, and the motion planner's options (resolution, RRT-Connect budget, seed)."""
+
+    acc: float | tuple[float, ...] = DEFAULT_ACC
+    max_removed: int = 10
+    motion: MotionOptions = field(default_factory=MotionOptions)
+
+
+def motion_checker(planner, allowed: AllowedPairs | None = None, opts: MotionOptions = MotionOptions()) -> MotionChecker:
+    """The planner's motion checker (robot, table, object), built once per planner and options and kept on it."""
+    key = (opts, None if allowed is None else allowed.to_json())
+    cached = getattr(planner, "_motion_checker", None)
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    checker = MotionChecker(planner.robot, planner.scene, planner.object.mesh, allowed or allowed_pairs(planner.robot), opts)
+    planner._motion_checker = (key, checker)
+    return checker
+
+
+def _node_rows(rm) -> dict[str, np.ndarray]:
+    return {"idtabletopgrips": rm.idtabletopgrips, "idtabletopplacements": rm.idtabletopplacements,
+            "idfreeairgrip": rm.idfreeairgrip, "rotmat": rm.tcp, "placement_rotmat": rm.placement,
+            "tabletopposition": rm.position, "idfreetabletopplacement": rm.idfreetabletopplacement,
+            "jawwidth": rm.jawwidth, "angle": rm.yaw, "joints": rm.joints}
+
+
+@dataclass
+class ExecResult:
+    """The executable plan (its `segments` set), its motion result, how many nodes or grips were removed, the motion
+    planning seconds summed over attempts, the reason of every failed attempt, how many searches ran, and
+    executable alternatives (next best routes whose motions were all found)."""
+
+    plan: object | None
+    motion: MotionResult | None
+    removed: int
+    seconds: float
+    failures: list[str]
+    searched: int
+    alternatives: list = field(default_factory=list)
+    result: object = None
+
+
+def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), allowed: AllowedPairs | None = None,
+                    alternatives: int = 0) -> ExecResult:
+    """The fewest-regrasp plan whose motions are all found (see the module docstring), and up to `alternatives` next
+    best executable plans. Raises the search's PlanningError when start or goal is unreachable or unconnected;
+    PlanningError(reason "exhausted") when every alternative failed or `max_removed` removals did not help."""
+    allowed = allowed if allowed is not None else getattr(planner, "allowed", None)
+    checker = motion_checker(planner, allowed, opts.motion)
+    robot = planner.robot
+    vlim = np.asarray(robot.model.velocityLimit, dtype=np.float64)
+    s_side, g_side = planner.side(start, "start"), planner.side(goal, "goal")
+    full = planner.roadmap
+    rm, keep = full, np.ones(full.n_nodes, dtype=bool)
+    removed, seconds, failures, searched = 0, 0.0, [], 0
+    while True:
+        s_side.rindex, g_side.rindex = rm.grasp_index(s_side.grasp), rm.grasp_index(g_side.grasp)
+        result = search(rm, s_side, g_side, planner.evaluate, 0, True)
+        searched += 1
+        if not result.routes:
+            if removed == 0:
+                planner.explain(result)
+            err = PlanningError(f"no executable plan from {s_side.query.text()} to {goal_text(g_side)}: the graph ran out of "
+                                f"alternatives after removing {removed} node(s) or grip(s) whose motions failed "
+                                f"(last: {failures[-1] if failures else 'none'})")
+            err.reason = "exhausted"
+            raise err
+        route = result.routes[0]
+        view = SimpleNamespace(roadmap=rm, object=planner.object, robot=robot, handx=planner.handx, worldz=planner.worldz,
+                               ids=planner.ids)
+        plan = make_plan(view, result, route, 0)
+        t0 = time.perf_counter()
+        motion, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed)
+        seconds += time.perf_counter() - t0
+        if motion.ok:
+            _attach(plan, motion, lines, removed, seconds, opts.acc, robot.nq)
+            out = ExecResult(plan, motion, removed, seconds, failures, searched, result=result)
+            if alternatives > 0:
+                more = search(rm, s_side, g_side, planner.evaluate, alternatives, True)
+                for r in more.routes:
+                    if (r.start_grip, r.goal_grip, r.regrasps) == (route.start_grip, route.goal_grip, route.regrasps):
+                        continue
+                    alt = make_plan(view, more, r, len(out.alternatives) + 1)
+                    t1 = time.perf_counter()
+                    m, ls = plan_motion(checker, alt.steps, vlim, opts.acc, opts.motion.seed)
+                    if m.ok:
+                        _attach(alt, m, ls, removed, time.perf_counter() - t1, opts.acc, robot.nq)
+                        out.alternatives.append(alt)
+                    if len(out.alternatives) >= alternatives:
+                        break
+            return out
+        failures.append(motion.reason)
+        if removed >= opts.max_removed:
+            err = PlanningError(f"no executable plan from {s_side.query.text()} to {goal_text(g_side)} after removing "
+                                f"{removed} node(s) or grip(s) (limit --max-removed {opts.max_removed}); last failure: {motion.reason}")
+            err.reason = "exhausted"
+            raise err
+        # what the failing motion used: the step's node or grip, or for a transfer / transit the next step's
+        i = motion.blame[1] if motion.blame[0] == "step" else motion.blame[2]
+        nodes = _step_nodes(route, len(plan.steps))
+        kind, idx = nodes[i]
+        if kind == "start":
+            s_side.state[idx] = -1
+        elif kind == "goal":
+            g_side.state[idx] = -1
+        else:
+            gone = np.flatnonzero(full.idtabletopgrips == rm.idtabletopgrips[idx])
+            keep[gone] = False
+            rm = build_roadmap(_node_rows(full), keep)
+        removed += 1
+
+
+def _attach(plan, motion: MotionResult, lines: list[StepLines], removed: int, seconds: float, acc, nq: int) -> None:
+    """Put the motions on the plan: waypoints on the IK branch the motions use, segments, removals, limits, time."""
+    for step, ln in zip(plan.steps, lines):
+        step.q_retract, step.q_approach, step.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp
+    plan.segments = motion.segments
+    plan.removed = removed
+    plan.acc = np.broadcast_to(np.asarray(acc, dtype=np.float64), (nq,)).tolist()
+    plan.timings["motion"] = seconds
+
+
+def goal_text(side) -> str:
+    return side.query.text()
+
+
+def _step_nodes(route, n_steps: int) -> list[tuple[str, int]]:
+    """Per plan step: ("start", grip), ("node", roadmap node) or ("goal", grip)."""
+    out = [("start", route.start_grip)]
+    for a, b in route.regrasps:
+        out += [("node", a), ("node", b)]
+    out.append(("goal", route.goal_grip))
+    assert len(out) == n_steps
+    return out

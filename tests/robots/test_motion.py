@@ -11,11 +11,12 @@ import pinocchio as pin
 import pytest
 import trimesh
 
-from workbench.kinematics import default_scene
-from workbench.motionkit.motion import MotionChecker, MotionOptions, joint_motion, tcp_line
-from workbench.motionkit.timing import (TimedSegment, Trajectory, resample, time_line, time_spline, time_stops, to_csv,
+from workbench.robots.chain import solve_ik
+from workbench.robots.collider import default_scene
+from workbench.robots.model import builtin_robot
+from workbench.robots.motion import MotionChecker, MotionOptions, joint_motion, tcp_line
+from workbench.robots.timing import (TimedSegment, Trajectory, resample, time_line, time_spline, time_stops, to_csv,
                                         to_json, within_limits)
-from workbench.robots import builtin_robot
 
 # Two Panda configurations holding a box above the table whose straight joint line takes the hand under the table top.
 QA = np.array([0.75, 1.51, -0.35, -0.21, 0.0, 1.59, 0.7])
@@ -91,7 +92,6 @@ def test_tcp_line_is_straight(panda, checker):
     ta = ind.tcp_pose(qa)
     target = ta.copy()
     target[2, 3] -= 0.08  # straight down 8 cm
-    from workbench.kinematics import solve_ik
     qb, ok = solve_ik(panda, target[None], qa[None], 100)
     assert ok[0]
     path = tcp_line(panda, checker, qa, qb[0])

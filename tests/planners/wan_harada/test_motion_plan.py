@@ -12,14 +12,14 @@ import pinocchio as pin
 import pytest
 
 from workbench.benchmarks.regrasp import random_pairs
-from workbench.commands.demo import DEMO_GRID, choose_task
 from workbench.errors import PlanningError
-from workbench.motionkit.anim import timed_frames
-from workbench.motionkit.execute import ExecOptions, plan_executable
-from workbench.motionkit.timing import TimedSegment, Trajectory, time_line, within_limits
-from workbench.motionkit.trajcheck import trajectory_validator_for
-from workbench.plans import Plan
-from workbench.regrasp import load_planner
+from workbench.geometry.objects import load_object
+from workbench.planners.wan_harada.motions import ExecOptions, plan_executable
+from workbench.planners.wan_harada.plans import Plan
+from workbench.planners.wan_harada.stages import DEMO_GRID, build_all, choose_task, load_planner
+from workbench.resources import bundled_objects
+from workbench.robots.timing import TimedSegment, Trajectory, time_line, within_limits
+from workbench.viewer.wan_harada import timed_frames
 
 FIXTURE = Path(__file__).parent / "data" / "demo_plan_straight.json"
 ACC = 3.0
@@ -27,10 +27,6 @@ ACC = 3.0
 
 @pytest.fixture(scope="module")
 def planner(tmp_path_factory):
-    from workbench.commands.build import build_all
-    from workbench.objects import load_object
-    from workbench.resources import bundled_objects
-
     db = tmp_path_factory.mktemp("motion") / "regrasp.duckdb"
     build_all(db, load_object(bundled_objects()["tube"]), "panda", tparams=DEMO_GRID, workers=2)
     return load_planner(db, "tube", "panda")
@@ -38,7 +34,7 @@ def planner(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def validator(planner):
-    return trajectory_validator_for(planner, ACC)
+    return planner.trajectory_validator(ACC)
 
 
 @pytest.fixture(scope="module")

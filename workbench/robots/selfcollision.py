@@ -30,8 +30,8 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
-from ..errors import RobotError
-from ..robots import Robot
+from workbench.errors import RobotError
+from workbench.robots.model import Robot
 
 GRIPPER_HAND = "gripper_hand"
 GRIPPER_FINGERS = "gripper_fingers"

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import PlanningError
+from workbench.errors import PlanningError
 
 ONE_DEGREE = math.radians(1.0)
 LIMIT_MARGIN = 0.97  # TOPP-RA enforces limits at grid points only; aim slightly below them
