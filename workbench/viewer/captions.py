@@ -21,7 +21,7 @@ def caption_png(lines: list[tuple[str, int | None]], width: int = 900, line_heig
     from PIL import Image, ImageDraw, ImageFont
 
     height = line_height * len(lines) + 16
-    img = Image.new("RGBA", (width, height), (255, 255, 255, 235))
+    img = Image.new("RGBA", (width, height), (255, 255, 255, 255))
     draw = ImageDraw.Draw(img)
     try:
         font = ImageFont.load_default(size=int(line_height * 0.62))
@@ -52,7 +52,7 @@ def _panel_pose(anchor: np.ndarray, facing: np.ndarray) -> np.ndarray:
 
 
 def add_overlays(vis, anim, frames: list[dict], path: str, anchor: np.ndarray, facing: np.ndarray,
-                 key: list[tuple[str, int | None]], width: float = 0.36) -> None:
+                 key: list[tuple[str, int | None]], width: float = 0.6) -> None:
     """Caption panels (one per step name, shown while a frame belongs to that step) and a colour-key panel, as thin
     textured boxes standing at `anchor` and facing the camera direction `facing` (meshcat draws no text)."""
     import meshcat.geometry as g
@@ -61,20 +61,19 @@ def add_overlays(vis, anim, frames: list[dict], path: str, anchor: np.ndarray, f
     hidden = pose.copy()
     hidden[2, 3] -= 100.0
 
-    def panel(name: str, png: bytes, px: tuple[int, int], at: np.ndarray) -> None:
-        h = width * px[1] / px[0]
+    def panel(name: str, png: bytes, px: tuple[int, int], at: np.ndarray, w: float) -> None:
+        h = w * px[1] / px[0]
         tex = g.ImageTexture(image=g.PngImage(png))
-        vis[f"{path}/{name}"].set_object(g.Box([width, h, 1e-4]), g.MeshBasicMaterial(map=tex, transparent=True))
+        vis[f"{path}/{name}"].set_object(g.Box([w, h, 1e-4]), g.MeshBasicMaterial(map=tex, transparent=False))
         vis[f"{path}/{name}"].set_transform(at)
 
-    key_png = caption_png(key, width=560)
+    key_png = caption_png(key, width=420)
     key_at = pose.copy()
-    key_at[:3, 3] -= pose[:3, 0] * (width * 0.62)  # beside the caption
-    key_at[2, 3] -= 0.04
-    panel("key", key_png, (560, 56 * len(key) + 16), key_at)
+    key_at[:3, 3] -= pose[:3, 0] * (0.5 * width + 0.15) + pose[:3, 1] * 0.12  # below left of the caption
+    panel("key", key_png, (420, 56 * len(key) + 16), key_at, 0.25)
     used = [c for c in CAPTIONS if any(f["caption"] == c for f in frames)]
     for c in used:
-        panel(f"caption_{c}", caption_png([(CAPTION_TEXT[c], None)]), (900, 72), hidden)
+        panel(f"caption_{c}", caption_png([(CAPTION_TEXT[c], None)], width=820), (820, 72), hidden, width)
     for i, fr in enumerate(frames):
         with anim.at_frame(vis, i) as f:
             for c in used:

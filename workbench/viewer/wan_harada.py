@@ -138,7 +138,7 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
         centre = 0.5 * (plan.start_pose[:3, 3] + plan.goal_pose[:3, 3])
         key = [("part", OBJECT_COLOR), ("start pose", START_COLOR), ("goal pose", GOAL_COLOR),
                ("put down to regrasp", 0x999999), ("table", TABLE_COLOR)]
-        add_overlays(vis, anim, frames, f"{path}/captions", centre + CAMERA_DIR * -0.25 + [0.0, 0.0, 0.45], CAMERA_DIR, key)
+        add_overlays(vis, anim, frames, f"{path}/captions", centre + CAMERA_DIR * -0.3 + [0.0, 0.0, 0.62], CAMERA_DIR, key)
     for i, fr in enumerate(frames):
         poses = view.poses(fr["q"], fr["jaw"])
         obj_pose = fr["object"]
