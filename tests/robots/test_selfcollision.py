@@ -115,3 +115,21 @@ def test_sampled_pairs_without_srdf_are_deterministic(panda):
     assert set(a.allowed.values()) <= {"rigid", "adjacent", "never", "always"}
     # the folded pose still self-collides with sampled pairs
     assert SelfCollision(panda, a).collides(FOLDED)[0]
+
+
+def test_a_self_colliding_ik_solution_is_not_feasible(panda):
+    """The IK solver rejects a converged solution that self-collides (table and object checks off to isolate it)."""
+    from workbench.robots.collider import default_scene
+    from workbench.robots.ik import IKOptions, IKSolver
+
+    target = panda.tcp_pose(FOLDED)[None]
+    place = np.eye(4)[None]
+    on = IKSolver(panda, default_scene("panda"), IKOptions(collide=False, library=64))
+    off = IKSolver(panda, default_scene("panda"), IKOptions(collide=False, self_collide=False, library=64))
+    q, ok = off.solve(target, place, FOLDED[None], 30)
+    assert ok[0] and np.abs(q[0] - FOLDED).max() < 1e-3  # IK converges to the folded configuration
+    _, ok = on.solve(target, place, FOLDED[None], 30)
+    assert not ok[0]
+    home = panda.tcp_pose(HOME)[None]
+    _, ok = on.solve(home, place, HOME[None], 30)
+    assert ok[0]

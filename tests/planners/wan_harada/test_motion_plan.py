@@ -147,3 +147,33 @@ def test_held_part_never_under_the_table(planner, validator):
                 assert float((verts @ obj[:3, :3].T + obj[:3, 3])[:, 2].min()) > -1e-3
         assert validator.check(res.plan, res.motion.segments)[0] == []
     assert done >= 3
+
+
+def test_plan_with_motions_round_trips_json_and_store(planner, demo_result, tmp_path):
+    from workbench.planners.wan_harada.stages import save_plan
+    from workbench.store import Store
+    from workbench.store.wan_harada import load_plan_segments
+
+    plan = demo_result.plan
+    back = Plan.from_json(plan.to_json())
+    assert len(back.segments) == len(plan.segments) and np.isclose(back.duration, plan.duration)
+    assert np.array_equal(back.segments[5].traj.q, plan.segments[5].traj.q)
+    db = Path(planner.roadmap.key[0])
+    with Store(db) as store:
+        pid = save_plan(store, plan)
+        table = load_plan_segments(store, pid).to_pydict()
+    assert table["kind"] == [s.kind for s in plan.segments]
+    k = 5
+    q = np.asarray(table["q"][k]).reshape(len(table["t"][k]), -1)
+    assert np.array_equal(q, plan.segments[k].traj.q) and np.isclose(table["t0"][k], plan.segments[k].t0)
+
+
+def test_planner_plan_returns_executable_validated_plans(planner):
+    start, goal = choose_task(planner, 0)
+    plans = planner.plan(start, goal, alternatives=1)
+    assert plans and all(p.segments for p in plans)
+    for p in plans:
+        assert planner.validate(p, require_motion=True).ok
+    bare = planner.plan(start, goal, alternatives=0, motion=False)[0]
+    rep = planner.validate(bare, require_motion=True)
+    assert not rep.ok and "no timed motions" in rep.errors[-1]
