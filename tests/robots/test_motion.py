@@ -14,7 +14,7 @@ import trimesh
 from workbench.robots.chain import solve_ik
 from workbench.robots.collider import default_scene
 from workbench.robots.model import builtin_robot
-from workbench.robots.motion import MotionChecker, MotionOptions, joint_motion, tcp_line
+from workbench.robots.motion import MotionChecker, joint_motion, tcp_line
 from workbench.robots.timing import (TimedSegment, Trajectory, resample, time_line, time_spline, time_stops, to_csv,
                                         to_json, within_limits)
 

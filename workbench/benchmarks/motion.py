@@ -13,18 +13,14 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import time
-from pathlib import Path
 
 import numpy as np
 
 from workbench.benchmarks import print_table
-from workbench.benchmarks.regrasp import random_pairs
+from workbench.benchmarks.regrasp import built_planners, random_pairs
 from workbench.errors import PlanningError, WorkbenchError
-from workbench.geometry.objects import load_object
 from workbench.planners.wan_harada.motions import ExecOptions, plan_executable
-from workbench.planners.wan_harada.stages import DEMO_GRID, build_all, load_planner
-from workbench.resources import bundled_objects
+from workbench.planners.wan_harada.stages import DEMO_GRID
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -64,32 +60,19 @@ def bench_motion(planner, pairs: list[tuple], acc: float, max_removed: int, vali
 
 
 def run(args: argparse.Namespace) -> int:
-    objs = bundled_objects()
-    names = [n.strip() for n in args.objects.split(",") if n.strip()]
-    unknown = [n for n in names if n not in objs]
-    if unknown:
-        raise WorkbenchError(f"unknown bundled objects {unknown}; use some of {', '.join(objs)}")
     if args.pairs < 1 or args.acc <= 0 or args.max_removed < 0:
         raise WorkbenchError(f"--pairs must be >= 1, --acc > 0 and --max-removed >= 0 (got {args.pairs}, {args.acc}, {args.max_removed})")
-    folder = Path(args.dir)
     rows = []
-    for name in names:
-        obj = load_object(objs[name])
-        db = folder / f"{name}.duckdb"
-        for robot in [r.strip() for r in args.robots.split(",") if r.strip()]:
-            t0 = time.perf_counter()
-            build_all(db, obj, robot, tparams=DEMO_GRID, workers=args.workers)
-            t_build = time.perf_counter() - t0
-            planner = load_planner(db, obj.name, robot)
-            pairs = random_pairs(planner.placement_ids(), DEMO_GRID, args.pairs, args.seed)
-            bench_motion(planner, pairs[:1], args.acc, args.max_removed, False)  # warm-up (imports, caches), not counted
-            r = bench_motion(planner, pairs, args.acc, args.max_removed, not args.no_validate)
-            sec, dur, rem = r["seconds"], r["duration"], r["removed"]
-            share = f"{100.0 * r['executable'] / r['searched']:.0f}% ({r['executable']}/{r['searched']})" if r["searched"] else "-"
-            rows.append([name, robot, len(pairs), share, sum(rem) if rem else 0, max(rem) if rem else 0,
-                         statistics.median(sec) if sec else "-", float(np.percentile(sec, 95)) if sec else "-",
-                         statistics.median(dur) if dur else "-", max(dur) if dur else "-", r["exhausted"],
-                         "-" if args.no_validate else r["invalid"], round(t_build, 1)])
+    for name, robot, planner, t_build in built_planners(args.objects, args.robots, args.dir, DEMO_GRID, args.workers):
+        pairs = random_pairs(planner.placement_ids(), DEMO_GRID, args.pairs, args.seed)
+        bench_motion(planner, pairs[:1], args.acc, args.max_removed, False)  # warm-up (imports, caches), not counted
+        r = bench_motion(planner, pairs, args.acc, args.max_removed, not args.no_validate)
+        sec, dur, rem = r["seconds"], r["duration"], r["removed"]
+        share = f"{100.0 * r['executable'] / r['searched']:.0f}% ({r['executable']}/{r['searched']})" if r["searched"] else "-"
+        rows.append([name, robot, len(pairs), share, sum(rem) if rem else 0, max(rem) if rem else 0,
+                     statistics.median(sec) if sec else "-", float(np.percentile(sec, 95)) if sec else "-",
+                     statistics.median(dur) if dur else "-", max(dur) if dur else "-", r["exhausted"],
+                     "-" if args.no_validate else r["invalid"], round(t_build, 1)])
     print_table(["object", "robot", "pairs", "executable", "removed", "max rm", "motion med s", "motion p95 s", "traj med s",
                  "traj max s", "exhausted", "invalid", "store s"], rows,
                 title=f"Motion planning of searched plans: {args.pairs} random start/goal pairs per object and robot (seed {args.seed}), "

@@ -27,7 +27,6 @@ from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.stages import build_all, load_planner
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.resources import bundled_objects
-from workbench.store import Store
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -78,39 +77,41 @@ def bench_pairs(planner, pairs: list[tuple], alternatives: int = 2) -> dict:
     return {"gs": gs, "nr": nr, **counts}
 
 
-def run(args: argparse.Namespace) -> int:
-
+def built_planners(objects: str, robots: str, folder: str | Path, grid: TabletopParams, workers: int | None):
+    """(object name, robot, planner, build seconds) for each comma-separated bundled object and robot: the store
+    `folder/<object>.duckdb` is built once (its stages reused on later runs) and its planner loaded."""
     objs = bundled_objects()
-    names = [n.strip() for n in args.objects.split(",") if n.strip()]
+    names = [n.strip() for n in objects.split(",") if n.strip()]
     unknown = [n for n in names if n not in objs]
     if unknown:
-
         raise WorkbenchError(f"unknown bundled objects {unknown}; use some of {', '.join(objs)}")
-    grid = TabletopParams()
-    folder = Path(args.dir)
-    rows = []
     for name in names:
         obj = load_object(objs[name])
-        db = folder / f"{name}.duckdb"
-        for robot in [r.strip() for r in args.robots.split(",") if r.strip()]:
+        db = Path(folder) / f"{name}.duckdb"
+        for robot in [r.strip() for r in robots.split(",") if r.strip()]:
             t0 = time.perf_counter()
-            build_all(db, obj, robot, tparams=grid, workers=args.workers)
+            build_all(db, obj, robot, tparams=grid, workers=workers)
             t_build = time.perf_counter() - t0
-            with Store(db) as store:
-                planner = load_planner(store, obj.name, robot)
-                ids = planner.placement_ids()
-                pairs = random_pairs(ids, grid, args.pairs, args.seed)
-                bench_pairs(planner, pairs[:1], args.alternatives)  # warm-up (caches), not counted
-                out = bench_pairs(planner, pairs, args.alternatives)
-            row = BUNDLED_ROW.get(name, "-")
-            paper = TABLE_I.get(row)
-            gs, nr = out["gs"], out["nr"]
-            rows.append([name, row, robot, planner.roadmap.n_grips, planner.roadmap.n_nodes,
-                         statistics.median(gs) * 1000 if gs else "-", max(gs) * 1000 if gs else "-",
-                         statistics.median(nr) if nr else "-", max(nr) if nr else "-", f"{out['solved']}/{len(pairs)}",
-                         out["nogrip"], out["unreachable"], out["unconnected"], out["invalid"],
-                         f"{paper[10]:g} / {paper[11]:g}" if paper else "-", f"{paper[12]} / {paper[13]}" if paper else "-",
-                         round(t_build, 1)])
+            yield name, robot, load_planner(db, obj.name, robot), t_build
+
+
+def run(args: argparse.Namespace) -> int:
+    grid = TabletopParams()
+    rows = []
+    for name, robot, planner, t_build in built_planners(args.objects, args.robots, args.dir, grid, args.workers):
+        ids = planner.placement_ids()
+        pairs = random_pairs(ids, grid, args.pairs, args.seed)
+        bench_pairs(planner, pairs[:1], args.alternatives)  # warm-up (caches), not counted
+        out = bench_pairs(planner, pairs, args.alternatives)
+        row = BUNDLED_ROW.get(name, "-")
+        paper = TABLE_I.get(row)
+        gs, nr = out["gs"], out["nr"]
+        rows.append([name, row, robot, planner.roadmap.n_grips, planner.roadmap.n_nodes,
+                     statistics.median(gs) * 1000 if gs else "-", max(gs) * 1000 if gs else "-",
+                     statistics.median(nr) if nr else "-", max(nr) if nr else "-", f"{out['solved']}/{len(pairs)}",
+                     out["nogrip"], out["unreachable"], out["unconnected"], out["invalid"],
+                     f"{paper[10]:g} / {paper[11]:g}" if paper else "-", f"{paper[12]} / {paper[13]}" if paper else "-",
+                     round(t_build, 1)])
     print_table(["object", "T-I", "robot", "#-tpg", "nodes", "gs med ms", "gs max ms", "nr med", "nr max", "solved", "no grip",
                  "unreach", "unconn", "invalid", "paper gs n/h s", "paper nr n/h", "store s"], rows,
                 title=f"Regrasp search (Table I right half): {args.pairs} random start/goal pairs per object and robot (seed {args.seed}), "
