@@ -115,6 +115,25 @@ def step_lines(checker: MotionChecker, step) -> StepLines | None:
     return None
 
 
+def unwrap_lines(robot, lines: StepLines, near: np.ndarray) -> StepLines:
+    """The same waypoints and lines with every revolute joint turned by the whole turns (2 pi k, the same poses and
+    collisions) that bring its retract configuration nearest to `near`, within the joint limits: a joint whose range
+    exceeds a turn (a UR's) otherwise makes transfers between equivalent configurations needlessly long or hard."""
+    allq = np.vstack([lines.q_retract, lines.q_approach, lines.q_grasp, *lines.down])
+    lo, hi = allq.min(axis=0), allq.max(axis=0)
+    shift = np.zeros(robot.nq)
+    for j in np.flatnonzero(~np.asarray(robot.chain_prismatic)):
+        k = np.arange(-3, 4)
+        ok = (lo[j] + 2 * np.pi * k >= robot.lower[j] - 1e-12) & (hi[j] + 2 * np.pi * k <= robot.upper[j] + 1e-12)
+        if ok.sum() > 1:
+            cand = k[ok]
+            shift[j] = 2 * np.pi * cand[np.argmin(np.abs(lines.q_retract[j] + 2 * np.pi * cand - near[j]))]
+    if not shift.any():
+        return lines
+    return StepLines(lines.q_retract + shift, lines.q_approach + shift, lines.q_grasp + shift, [d + shift for d in lines.down],
+                     lines.anchor)
+
+
 def moves_of_steps(steps, lines: list[StepLines], jaw_open: float) -> list[Move]:
     """Today's waypoint scheme: at every step the hand goes retract -> approach -> grasp along straight TCP lines,
     closes (pick, regrasp) or opens (transfer, place), and comes back grasp -> approach -> retract; a transfer (held)
@@ -252,6 +271,8 @@ def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarra
                                f"approach and grasp poses on one IK branch", time.perf_counter() - t0)
             res.failed, res.blame = -1, ("step", i)
             return res, lines
+    for i in range(1, len(lines)):
+        lines[i] = unwrap_lines(checker.robot, lines[i], lines[i - 1].q_retract)
     moves = moves_of_steps(steps, lines, checker.robot.gripper.jaw_max)
     res = solve_moves(checker, moves, vlim, alim, seed)
     res.seconds = time.perf_counter() - t0
