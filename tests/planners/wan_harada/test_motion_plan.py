@@ -177,3 +177,22 @@ def test_planner_plan_returns_executable_validated_plans(planner):
     bare = planner.plan(start, goal, alternatives=0, motion=False)[0]
     rep = planner.validate(bare, require_motion=True)
     assert not rep.ok and "no timed motions" in rep.errors[-1]
+
+
+def test_unwrapping_whole_turns_keeps_poses_and_limits():
+    from workbench.planners.wan_harada.motions import StepLines, unwrap_lines
+    from workbench.robots.model import builtin_robot
+
+    ur5 = builtin_robot("ur5")
+    rng = np.random.default_rng(2)
+    q = rng.uniform(-0.1, 0.1, size=(3, 6))
+    lines = StepLines(q[0], q[1], q[2], [np.stack([q[0], q[1]]), np.stack([q[1], q[2]])], "grasp")
+    near = q[0] + np.array([2 * np.pi, 0, 0, -2 * np.pi, 0, 0])  # the same pose, two joints a turn away
+    out = unwrap_lines(ur5, lines, near)
+    assert np.allclose(out.q_retract, near)
+    for a, b in ((out.q_retract, q[0]), (out.q_grasp, q[2])):
+        assert np.allclose(ur5.tcp_pose(a), ur5.tcp_pose(b), atol=1e-9)
+        assert (a >= ur5.lower).all() and (a <= ur5.upper).all()
+    # a turn that would leave the limits is not taken
+    far = lines.q_retract + np.array([4 * np.pi, 0, 0, 0, 0, 0])
+    assert np.isclose(unwrap_lines(ur5, lines, far).q_retract[0], q[0, 0] + 2 * np.pi)
