@@ -186,6 +186,7 @@ def test_unwrapping_whole_turns_keeps_poses_and_limits():
     ur5 = builtin_robot("ur5")
     rng = np.random.default_rng(2)
     q = rng.uniform(-0.1, 0.1, size=(3, 6))
+    q[:, 0], q[:, 3] = -np.abs(q[:, 0]), np.abs(q[:, 3])  # room for a turn up (joint 1) and down (joint 4)
     lines = StepLines(q[0], q[1], q[2], [np.stack([q[0], q[1]]), np.stack([q[1], q[2]])], "grasp")
     near = q[0] + np.array([2 * np.pi, 0, 0, -2 * np.pi, 0, 0])  # the same pose, two joints a turn away
     out = unwrap_lines(ur5, lines, near)
