@@ -242,6 +242,13 @@ class ReachFilter:
         return ok.reshape(p.shape[:-1])
 
 
+def converge(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, opts: IKOptions = IKOptions()) -> tuple[np.ndarray, np.ndarray]:
+    """The solver's numeric core without collision checks, for callers that check their own (straight TCP lines
+    checked against the table, the object and the arm itself): joint vectors (M, n) from seeds `q0` for TCP poses
+    (M, 4, 4) and whether each converged within `opts`' tolerances and the joint limits."""
+    return solve_ik(robot, targets, q0, iters, opts.tol_pos, opts.tol_rot)
+
+
 class IKSolver:
     """One robot's IK engine for a scene and an object (Section IV): the robot, its seed library, its collider
     (arm and gripper against the table, arm against the object) and the reachability pre-filter, built once.

@@ -30,8 +30,9 @@ import trimesh
 from scipy.spatial.transform import Rotation, Slerp
 
 from workbench.errors import PlanningError
-from workbench.robots.chain import forward, solve_ik
+from workbench.robots.chain import forward
 from workbench.robots.collider import Scene
+from workbench.robots.ik import converge
 from workbench.robots.model import Robot
 from workbench.robots.selfcollision import GRIPPER_FINGERS, GRIPPER_HAND, AllowedPairs, SelfCollision, coal_mesh, robot_parts
 
@@ -265,12 +266,12 @@ def tcp_line_to(robot: Robot, checker: MotionChecker, q_from: np.ndarray, target
     o = checker.opts
     q_from = np.asarray(q_from, dtype=np.float64)
     targets = _line_targets(robot, q_from, target, o.tcp_step)
-    q, ok = solve_ik(robot, targets, np.repeat(q_from[None], len(targets), axis=0), iters, 1e-4, 1e-3)
+    q, ok = converge(robot, targets, np.repeat(q_from[None], len(targets), axis=0), iters)
     path = np.vstack([q_from, q])
     if not ok.all() or np.abs(np.diff(path, axis=0)).max() > o.max_jump:
         prev, rows = q_from, [q_from]
         for tgt in targets:
-            qi, oki = solve_ik(robot, tgt[None], prev[None], iters, 1e-4, 1e-3)
+            qi, oki = converge(robot, tgt[None], prev[None], iters)
             if not oki[0]:
                 return None
             prev = qi[0]
@@ -294,7 +295,7 @@ def tcp_line(robot: Robot, checker: MotionChecker, q_from: np.ndarray, q_to: np.
     targets = _line_targets(robot, q_from, target, o.tcp_step)[:-1]
     if len(targets):
         s = np.linspace(0.0, 1.0, len(targets) + 2)[1:-1, None]
-        q, ok = solve_ik(robot, targets, q_from + s * (q_to - q_from), iters, 1e-4, 1e-3)
+        q, ok = converge(robot, targets, q_from + s * (q_to - q_from), iters)
         if not ok.all():
             return None
         path = np.vstack([q_from, q, q_to])

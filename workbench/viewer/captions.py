@@ -17,26 +17,29 @@ CAPTION_TEXT = {"pick": "pick: grasp the part at its start pose", "transfer": "t
 
 
 def caption_png(lines: list[tuple[str, int | None]], width: int = 900, line_height: int = 56) -> bytes:
-    """A PNG with lines of text, each with an optional colour swatch (0xRRGGBB) before it, on a white panel."""
-    from PIL import Image, ImageDraw, ImageFont
+    """A PNG with lines of text, each with an optional colour swatch (0xRRGGBB) before it, on a white panel
+    (rendered with matplotlib's Agg backend)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+    from matplotlib.patches import Rectangle
 
     height = line_height * len(lines) + 16
-    img = Image.new("RGBA", (width, height), (255, 255, 255, 255))
-    draw = ImageDraw.Draw(img)
-    try:
-        font = ImageFont.load_default(size=int(line_height * 0.62))
-    except TypeError:  # older Pillow: fixed-size bitmap font
-        font = ImageFont.load_default()
+    dpi = 100
+    fig = Figure(figsize=(width / dpi, height / dpi), dpi=dpi, facecolor="white")
+    FigureCanvasAgg(fig)
+    ax = fig.add_axes((0, 0, 1, 1))
+    ax.set_xlim(0, width)
+    ax.set_ylim(height, 0)
+    ax.axis("off")
     for i, (text, color) in enumerate(lines):
-        y = 8 + i * line_height
-        x = 12
+        y, x = 8 + i * line_height, 12
         if color is not None:
-            rgb = ((color >> 16) & 255, (color >> 8) & 255, color & 255, 255)
-            draw.rectangle([x, y + 8, x + line_height - 16, y + line_height - 8], fill=rgb, outline=(60, 60, 60, 255))
+            rgb = (((color >> 16) & 255) / 255, ((color >> 8) & 255) / 255, (color & 255) / 255)
+            ax.add_patch(Rectangle((x, y + 8), line_height - 16, line_height - 16, facecolor=rgb, edgecolor="0.25"))
             x += line_height
-        draw.text((x, y + 6), text, fill=(20, 20, 20, 255), font=font)
+        ax.text(x, y + line_height / 2, text, va="center", ha="left", fontsize=line_height * 0.42 * 72 / dpi, color="0.08")
     buf = io.BytesIO()
-    img.save(buf, format="PNG")
+    fig.savefig(buf, format="png", dpi=dpi, facecolor="white")
     return buf.getvalue()
 
 
