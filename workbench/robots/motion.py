@@ -8,9 +8,9 @@ Collision model (`MotionChecker`, pinocchio + coal on the URDF's collision geome
 - self-collision of the arm and the planning gripper (`SelfCollision`, allowed pairs from the SRDF or sampled);
 - the arm's moving links and the gripper against the table slab (the robot's fixed base stands on it);
 - empty hand: the arm and the gripper (fingers at full opening) against the object where it rests;
-- holding: the object, attached to the TCP with its grasp, against the table (whose top is lowered by
-  `table_tol`: a placed object touches z = 0), against the arm's links and the robot's fixed parts. The gripper's
-  own parts hold it rigidly and are not checked against it.
+- holding: the object, attached to the TCP with its grasp, never below the table top's plane (z = 0 lowered by
+  `table_tol`, since a placed object touches it; beside the table too), against the arm's links and the robot's
+  fixed parts. The gripper's own parts hold it rigidly and are not checked against it.
 
 Resolution (CONVENTIONS.md): a joint-space segment is checked at samples at most `resolution` (1 degree) apart in
 every joint; a TCP line is solved by IK at samples at most `tcp_step` (5 mm) and 1 degree of TCP rotation apart,
@@ -37,6 +37,7 @@ from workbench.robots.model import Robot
 from workbench.robots.selfcollision import GRIPPER_FINGERS, GRIPPER_HAND, AllowedPairs, SelfCollision, coal_mesh, robot_parts
 
 ONE_DEGREE = math.radians(1.0)
+FLOOR_SIZE, FLOOR_DEPTH = 20.0, 1.0  # the slab below the table top's plane that a held object must not enter (m)
 
 
 @dataclass(frozen=True)
@@ -93,10 +94,11 @@ class MotionChecker:
         table = np.eye(4)
         table[:3, 3] = 0.5 * (tmin + tmax)
         self.k_table = gm.addGeometryObject(pin.GeometryObject("table", 0, _se3(base_inv @ table), coal.Box(*(tmax - tmin))))
+        # the held object never goes below the table top's plane (beyond the tolerance), on the table or beside it
         low = table.copy()
-        low[2, 3] -= opts.table_tol / 2
+        low[2, 3] = -opts.table_tol - 0.5 * FLOOR_DEPTH
         self.k_table_low = gm.addGeometryObject(pin.GeometryObject(
-            "table_below_tolerance", 0, _se3(base_inv @ low), coal.Box(tmax[0] - tmin[0], tmax[1] - tmin[1], scene.table_thickness - opts.table_tol)))
+            "below_table_top", 0, _se3(base_inv @ low), coal.Box(FLOOR_SIZE, FLOOR_SIZE, FLOOR_DEPTH)))
         self.base_inv = base_inv
         self.k_rest = self.k_held = None
         if obj_mesh is not None:
