@@ -28,6 +28,7 @@ bench: $(STAMP)
 	$(BIN)/workbench bench placements
 	$(BIN)/workbench bench ik
 	$(BIN)/workbench bench regrasp
+	$(BIN)/workbench bench motion
 	$(BIN)/workbench bench fingers
 
 clean:
