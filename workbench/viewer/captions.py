@@ -37,7 +37,7 @@ def caption_png(lines: list[tuple[str, int | None]], width: int = 900, line_heig
             rgb = (((color >> 16) & 255) / 255, ((color >> 8) & 255) / 255, (color & 255) / 255)
             ax.add_patch(Rectangle((x, y + 8), line_height - 16, line_height - 16, facecolor=rgb, edgecolor="0.25"))
             x += line_height
-        ax.text(x, y + line_height / 2, text, va="center", ha="left", fontsize=line_height * 0.42 * 72 / dpi, color="0.08")
+        ax.text(x, y + line_height / 2, text, va="center", ha="left", fontsize=line_height * 0.6 * 72 / dpi, color="0.08")
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=dpi, facecolor="white")
     return buf.getvalue()
@@ -70,10 +70,10 @@ def add_overlays(vis, anim, frames: list[dict], path: str, anchor: np.ndarray, f
         vis[f"{path}/{name}"].set_object(g.Box([w, h, 1e-4]), g.MeshBasicMaterial(map=tex, transparent=False))
         vis[f"{path}/{name}"].set_transform(at)
 
-    key_png = caption_png(key, width=420)
+    key_png = caption_png(key, width=480)
     key_at = pose.copy()
     key_at[:3, 3] -= pose[:3, 0] * (0.5 * width + 0.15) + pose[:3, 1] * 0.12  # below left of the caption
-    panel("key", key_png, (420, 56 * len(key) + 16), key_at, 0.25)
+    panel("key", key_png, (480, 56 * len(key) + 16), key_at, 0.28)
     used = [c for c in CAPTIONS if any(f["caption"] == c for f in frames)]
     for c in used:
         panel(f"caption_{c}", caption_png([(CAPTION_TEXT[c], None)], width=820), (820, 72), hidden, width)
