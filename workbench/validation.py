@@ -21,7 +21,8 @@ accelerations (the plan's limits, from knot velocity differences) within limits,
 velocities; no self-collision of the arm and gripper (the gripper's body and fingers apart, the allowed link pairs
 of the robot row, extended with the links joined by one URDF joint and links that never move relative to each
 other); arm, gripper and held object clear of the table (the held object may touch it within 1 mm); with an empty
-hand, arm and gripper clear of the object where it rests; the object is held exactly between a pick / regrasp and
+hand, arm and gripper clear of the object where it rests (the fingers may touch it on the segments that reach or
+leave the step's grasp pose, as CONVENTIONS.md allows); the object is held exactly between a pick / regrasp and
 the next transfer / place; the jaw acts at the step's grasp pose. The only planner output it takes as data is the
 robot row's allowed pairs.
 """
@@ -408,8 +409,10 @@ class TrajectoryValidator:
     def _hit(self, a, b) -> bool:
         return self.fcl.collide(a, b, self.request, self.fcl.CollisionResult())
 
-    def problems(self, q: np.ndarray, holding: bool, object_pose: np.ndarray | None, grasp: np.ndarray | None) -> list[str]:
-        """What is wrong at one configuration (empty when nothing)."""
+    def problems(self, q: np.ndarray, holding: bool, object_pose: np.ndarray | None, grasp: np.ndarray | None,
+                 fingers: bool = True) -> list[str]:
+        """What is wrong at one configuration (empty when nothing); with `fingers` False the fingers may touch the
+        resting object (on the way to or from the grasp)."""
         pv = self.pv
         out = []
         tcp = self._place(q)
@@ -436,7 +439,7 @@ class TrajectoryValidator:
         elif object_pose is not None:
             obj.setTransform(self.fcl.Transform(object_pose[:3, :3], object_pose[:3, 3]))
             for lk, j, o in objs:
-                if j != 0 and self._hit(o, obj):
+                if j != 0 and (fingers or lk != self.GRIPPER_FINGERS) and self._hit(o, obj):
                     out.append(f"{lk} hits the object")
         return out
 
@@ -503,9 +506,12 @@ class TrajectoryValidator:
                             f"{'held' if holding else 'resting'} there")
             pose = np.asarray(s.object_pose, dtype=np.float64)
             grasp = np.asarray(s.grasp, dtype=np.float64)
+            # the fingers may touch the resting part on the segment that reaches or leaves the step's grasp pose
+            at_grasp = seg.kind in ("approach", "retract", "gripper") and min(
+                float(np.linalg.norm(self._place(q[e])[:3, 3] - np.asarray(s.tcp)[:3, 3])) for e in (0, -1)) <= pv.tol_pos
             for k, x in enumerate(q):
                 knots += 1
-                p = self.problems(x, holding, None if holding else pose, grasp if holding else None)
+                p = self.problems(x, holding, None if holding else pose, grasp if holding else None, not at_grasp)
                 if p:
                     errs.append(f"{tag} at t = {seg.t0 + t[k] - t[0]:.2f} s: {'; '.join(sorted(set(p)))}")
                     break

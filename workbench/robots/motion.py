@@ -7,7 +7,8 @@ when it is free, else OMPL's RRT-Connect within a time budget, then shortcutting
 Collision model (`MotionChecker`, pinocchio + coal on the URDF's collision geometry, `selfcollision.robot_parts`):
 - self-collision of the arm and the planning gripper (`SelfCollision`, allowed pairs from the SRDF or sampled);
 - the arm's moving links and the gripper against the table slab (the robot's fixed base stands on it);
-- empty hand: the arm and the gripper (fingers at full opening) against the object where it rests;
+- empty hand: the arm and the gripper (fingers at full opening) against the object where it rests, the fingers
+  excepted on the line between the approach and the grasp (CONVENTIONS.md: the fingers at the grasp);
 - holding: the object, attached to the TCP with its grasp, never below the table top's plane (z = 0 lowered by
   `table_tol`, since a placed object touches it; beside the table too), against the arm's links and the robot's
   fixed parts. The gripper's own parts hold it rigidly and are not checked against it.
@@ -108,7 +109,7 @@ class MotionChecker:
         moving = [k for k, p in enumerate(parts) if p.joint > 0]
         gripper = [k for k, p in enumerate(parts) if p.link in (GRIPPER_HAND, GRIPPER_FINGERS)]
         arm_all = [k for k, p in enumerate(parts) if p.link not in (GRIPPER_HAND, GRIPPER_FINGERS)]
-        self.pairs: dict[str, list[int]] = {"self": [], "table": [], "rest": [], "held": []}
+        self.pairs: dict[str, list[int]] = {"self": [], "table": [], "rest": [], "rest_fingers": [], "held": []}
 
         def add(a: int, b: int, group: str) -> None:
             self.pairs[group].append(len(gm.collisionPairs))
@@ -123,7 +124,7 @@ class MotionChecker:
             add(k, self.k_table, "table")
         if obj_mesh is not None:
             for k in moving:
-                add(k, self.k_rest, "rest")
+                add(k, self.k_rest, "rest_fingers" if parts[k].link == GRIPPER_FINGERS else "rest")
             add(self.k_held, self.k_table_low, "held")
             for k in arm_all:
                 add(k, self.k_held, "held")
@@ -135,7 +136,7 @@ class MotionChecker:
         self._lo, self._hi = robot.lower - 1e-9, robot.upper + 1e-9
         # broad phase (dynamic AABB tree) over the same model: it honours the active pairs of `gd`
         self.broad = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(robot.model, gm, self.gd)
-        self.mode = "free"
+        self.mode, self.fingers = "free", True
         self._apply()
 
     # -- state -----------------------------------------------------------------------------------------------------
@@ -143,7 +144,8 @@ class MotionChecker:
     def _apply(self) -> None:
         gd = self.gd
         for group, ks in self.pairs.items():
-            on = group in ("self", "table") or (group == "rest" and self.mode == "resting") or (group == "held" and self.mode == "holding")
+            on = (group in ("self", "table") or (group == "rest" and self.mode == "resting")
+                  or (group == "rest_fingers" and self.mode == "resting" and self.fingers) or (group == "held" and self.mode == "holding"))
             for k in ks:
                 gd.activateCollisionPair(k) if on else gd.deactivateCollisionPair(k)
 
@@ -152,12 +154,13 @@ class MotionChecker:
         self.mode = "free"
         self._apply()
 
-    def set_resting(self, pose: np.ndarray) -> None:
-        """Empty hand, the object resting at `pose` (world)."""
+    def set_resting(self, pose: np.ndarray, fingers: bool = True) -> None:
+        """Empty hand, the object resting at `pose` (world); with `fingers` False the fingers may touch it (the line
+        between the approach and the grasp: CONVENTIONS.md allows the fingers' contact at the grasp)."""
         if self.k_rest is None:
             return self.set_free()
         self.gm.geometryObjects[self.k_rest].placement = _se3(self.base_inv @ np.asarray(pose, dtype=np.float64))
-        self.mode = "resting"
+        self.mode, self.fingers = "resting", bool(fingers)
         self._apply()
 
     def set_holding(self, grasp: np.ndarray) -> None:

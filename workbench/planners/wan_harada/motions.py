@@ -42,7 +42,8 @@ class Move:
     """One motion to plan: kind, caption, plan step index, start and end joint vectors, whether the object is held,
     the object's resting pose (world) or its grasp (TCP in the object frame), the jaw width during the move, and how
     it is planned: `path` (a given, already checked joint path, e.g. a straight TCP line), `joint` (straight joint
-    line, else RRT-Connect) or `dwell` (the jaw moves, the arm rests)."""
+    line, else RRT-Connect) or `dwell` (the jaw moves, the arm rests); `at_grasp`: the move ends or starts at the
+    grasp, where the fingers may touch the resting object."""
 
     kind: str
     caption: str
@@ -55,6 +56,7 @@ class Move:
     jaw: float
     how: str
     path: np.ndarray | None = None
+    at_grasp: bool = False
 
 
 @dataclass
@@ -78,8 +80,8 @@ def _modes(step) -> tuple[tuple[bool, np.ndarray], tuple[bool, np.ndarray]]:
     return (empty, held) if taking else (held, empty)
 
 
-def _mode(checker: MotionChecker, mode: tuple[bool, np.ndarray]) -> None:
-    checker.set_holding(mode[1]) if mode[0] else checker.set_resting(mode[1])
+def _mode(checker: MotionChecker, mode: tuple[bool, np.ndarray], fingers: bool = True) -> None:
+    checker.set_holding(mode[1]) if mode[0] else checker.set_resting(mode[1], fingers)
 
 
 def step_lines(checker: MotionChecker, step) -> StepLines | None:
@@ -99,12 +101,13 @@ def step_lines(checker: MotionChecker, step) -> StepLines | None:
         paths: dict[tuple[int, int], np.ndarray] = {}
         ok = True
         for a, b in [(i, i - 1) for i in range(anchor, 0, -1)] + [(i, i + 1) for i in range(anchor, 2)]:
-            _mode(checker, before)
+            fingers = 2 not in (a, b)  # the fingers may touch the resting object between the approach and the grasp
+            _mode(checker, before, fingers)
             p = tcp_line_to(robot, checker, chain[a], poses[b])
             if p is None:
                 ok = False
                 break
-            _mode(checker, after)
+            _mode(checker, after, fingers)
             if not checker.path_free(p):
                 ok = False
                 break
@@ -146,14 +149,14 @@ def moves_of_steps(steps, lines: list[StepLines], jaw_open: float) -> list[Move]
         jaw0 = jaw_open if taking else float(s.jawwidth)
         jaw1 = float(s.jawwidth) if taking else jaw_open
 
-        def mv(kind, path, holding, x, jaw, how="path"):
+        def mv(kind, path, holding, x, jaw, how="path", at_grasp=False):
             out.append(Move(kind, caption, i, path[0].copy(), path[-1].copy(), holding, None if holding else x,
-                            x if holding else None, jaw, how, path))
+                            x if holding else None, jaw, how, path, at_grasp))
 
         mv("approach", ln.down[0], h0, x0, jaw0)
-        mv("approach", ln.down[1], h0, x0, jaw0)
-        mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), h1, x1, jaw1, "dwell")
-        mv("retract", ln.down[1][::-1].copy(), h1, x1, jaw1)
+        mv("approach", ln.down[1], h0, x0, jaw0, at_grasp=True)
+        mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), h1, x1, jaw1, "dwell", at_grasp=True)
+        mv("retract", ln.down[1][::-1].copy(), h1, x1, jaw1, at_grasp=True)
         mv("retract", ln.down[0][::-1].copy(), h1, x1, jaw1)
         if i + 1 < len(steps):
             out.append(Move("transfer" if taking else "transit", "transfer" if taking else "regrasp", i, ln.q_retract.copy(),
@@ -187,7 +190,7 @@ def _set(checker: MotionChecker, m: Move) -> None:
     if m.holding:
         checker.set_holding(m.grasp)
     elif m.object_pose is not None:
-        checker.set_resting(m.object_pose)
+        checker.set_resting(m.object_pose, fingers=not m.at_grasp)
     else:
         checker.set_free()
 
