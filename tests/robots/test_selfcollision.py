@@ -118,14 +118,15 @@ def test_sampled_pairs_without_srdf_are_deterministic(panda):
 
 
 def test_a_self_colliding_ik_solution_is_not_feasible(panda):
-    """The IK solver rejects a converged solution that self-collides (table and object checks off to isolate it)."""
+    """The IK solver with self_collide (as the roadmap's IK stage runs it) rejects a converged solution that
+    self-collides; the same solver without it accepts it (the folded pose clears the table)."""
     from workbench.robots.collider import default_scene
     from workbench.robots.ik import IKOptions, IKSolver
 
     target = panda.tcp_pose(FOLDED)[None]
     place = np.eye(4)[None]
-    on = IKSolver(panda, default_scene("panda"), IKOptions(collide=False, library=64))
-    off = IKSolver(panda, default_scene("panda"), IKOptions(collide=False, self_collide=False, library=64))
+    on = IKSolver(panda, default_scene("panda"), IKOptions(self_collide=True, library=64))
+    off = IKSolver(panda, default_scene("panda"), IKOptions(self_collide=False, library=64))
     q, ok = off.solve(target, place, FOLDED[None], 30)
     assert ok[0] and np.abs(q[0] - FOLDED).max() < 1e-3  # IK converges to the folded configuration
     _, ok = on.solve(target, place, FOLDED[None], 30)

@@ -75,7 +75,8 @@ def main(args: argparse.Namespace) -> int:
                       table_thickness=scene.table_thickness if args.table_thickness is None else args.table_thickness,
                       workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
     with Store(args.db) as store:
-        run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, IKOptions(closed_form=args.closed_form), args.workers,
+        opts = IKOptions(closed_form=args.closed_form, self_collide=True)
+        run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, opts, args.workers,
                      progress=not args.no_progress, idtabletop=args.tabletop)
     what = "reused" if run.reused else f"computed {run.computed:,}"
     print(f"ik {robot.name}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "

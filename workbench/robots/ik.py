@@ -54,8 +54,9 @@ class IKOptions:
     from a library seed; seeds: library seeds tried after the warm start, picked among the seed_pool nearest
     library poses at least seed_spread rad apart; library: size of the seed
     library; chunk: grips per parallel task (resume unit); lane: grips per warm-start lane; seed: RNG seed;
-    collide: reject arm/gripper-table and arm-object collisions; self_collide: reject self-colliding solutions (the
-    arm and the planning gripper, `robots.selfcollision`, allowed pairs from the SRDF or sampled);
+    collide: reject arm/gripper-table and arm-object collisions; self_collide (with collide): reject self-colliding
+    solutions (the arm and the planning gripper, `robots.selfcollision`, allowed pairs from the SRDF or sampled; the
+    roadmap planner's IK stage turns it on);
     closed_form: solve with the closed form of spherical-wrist arms (`workbench.robots.analytic`, all 8 branches,
     Tournassoud et al. 1987 Section 5.2) instead of Levenberg-Marquardt; the seeds then only pick the nearest branch."""
 
@@ -72,7 +73,7 @@ class IKOptions:
     seed: int = 0
     collide: bool = True
     closed_form: bool = False
-    self_collide: bool = True
+    self_collide: bool = False
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -260,7 +261,7 @@ class IKSolver:
     def __init__(self, robot: Robot, scene: Scene, opts: IKOptions = IKOptions(), obj_mesh: trimesh.Trimesh | None = None):
         self.robot, self.scene, self.opts = robot, scene, opts
         self.collider = Collider(robot, scene, obj_mesh) if opts.collide else None
-        self.self_collision = SelfCollision(robot) if opts.self_collide else None
+        self.self_collision = SelfCollision(robot) if opts.collide and opts.self_collide else None
         self.analytic = analytic_ik(robot) if opts.closed_form else None
         self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)

@@ -96,6 +96,8 @@ def test_demo_plan_is_executable_and_validates(planner, validator, demo_result):
     res = demo_result
     plan, motion = res.plan, res.motion
     assert motion.ok and plan.regrasps >= 1
+    assert planner.ik_opts.self_collide and planner.ik.solver.self_collision is not None  # IK rows and queries
+    assert planner.rows["robot"]["allowed_pairs"]  # the allowed pairs are stored with the robot row
     errors, knots = validator.check(plan, motion.segments)
     assert errors == [], errors
     assert knots > 200

@@ -343,7 +343,7 @@ def scene_params(robot: Robot, scene: Scene, opts: IKOptions) -> dict:
 
 
 def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx: float = HANDX, worldz: float = WORLDZ,
-           opts: IKOptions = IKOptions(), workers: int | None = None, progress: bool = True,
+           opts: IKOptions = IKOptions(self_collide=True), workers: int | None = None, progress: bool = True,
            idtabletop: int | None = None) -> IKRun:
     """Compute (or reuse) the `ik` rows of every tabletop grip of `obj_name` for `robot` (Section IV)."""
 
@@ -376,7 +376,8 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
 def ensure_ik(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
               workers: int | None = None, progress: bool = True) -> IKRun:
     """`run_ik` for a built-in robot (or URDF path) by name, with the signature `workbench build` expects."""
-    return run_ik(store, obj.name, get_robot(robot_name), None, handx, worldz, IKOptions(), workers, progress, idtabletop)
+    return run_ik(store, obj.name, get_robot(robot_name), None, handx, worldz, IKOptions(self_collide=True), workers, progress,
+                  idtabletop)
 
 
 DEMO_GRID = TabletopParams(x_min=0.35, x_max=0.65, nx=5, y_min=-0.2, y_max=0.2, ny=3, angles=8, max_grasps=60)
