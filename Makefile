@@ -37,6 +37,7 @@ bench: $(RUNTIME)
 	$(BIN)/workbench bench placements
 	$(BIN)/workbench bench ik
 	$(BIN)/workbench bench regrasp
+	$(BIN)/workbench bench motion
 	$(BIN)/workbench bench fingers
 	$(BIN)/workbench bench gptable
 	$(BIN)/workbench bench catalog

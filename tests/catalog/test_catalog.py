@@ -21,7 +21,11 @@ from workbench.catalog.cluster import cluster_client
 from workbench.catalog.driver import CatalogParams, build_catalog
 from workbench.cli.main import main
 from workbench.geometry.objects import load_object
-from workbench.planners.wan_harada.stages import ensure_grasps, ensure_placements, run_ik
+from workbench.planners.wan_harada.stages import (
+    ensure_grasps,
+    ensure_placements,
+    run_ik,
+)
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.resources import bundled_objects
 from workbench.robots.gripper import franka_hand

@@ -113,6 +113,24 @@ def paper_task_objects(spec: str) -> list[tuple[str, str, object]]:
     return out
 
 
+def built_planners(objects: str, robots: str, folder: str | Path, grid: TabletopParams, workers: int | None):
+    """(object name, robot, planner, build seconds) for each comma-separated bundled object and robot: the store
+    `folder/<object>.duckdb` is built once (its stages reused on later runs) and its planner loaded."""
+    objs = bundled_objects()
+    names = [n.strip() for n in objects.split(",") if n.strip()]
+    unknown = [n for n in names if n not in objs]
+    if unknown:
+        raise WorkbenchError(f"unknown bundled objects {unknown}; use some of {', '.join(objs)}")
+    for name in names:
+        obj = load_object(objs[name])
+        db = Path(folder) / f"{name}.duckdb"
+        for robot in [r.strip() for r in robots.split(",") if r.strip()]:
+            t0 = time.perf_counter()
+            build_all(db, obj, robot, tparams=grid, workers=workers)
+            t_build = time.perf_counter() - t0
+            yield name, robot, load_planner(db, obj.name, robot), t_build
+
+
 def run(args: argparse.Namespace) -> int:
     grid = TabletopParams(max_grasps=args.max_grasps or None)
     folder = Path(args.dir)

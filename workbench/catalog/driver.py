@@ -22,7 +22,13 @@ import numpy as np
 import pyarrow as pa
 
 from workbench.catalog import stages
-from workbench.catalog.units import graph_unit, ik_unit, part_from_tables, part_unit, table_arrays
+from workbench.catalog.units import (
+    graph_unit,
+    ik_unit,
+    part_from_tables,
+    part_unit,
+    table_arrays,
+)
 from workbench.errors import RobotError, WorkbenchError
 from workbench.geometry.objects import ObjectModel, resolve_scale
 from workbench.grasping.grasps import GraspParams
@@ -31,7 +37,13 @@ from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.robots.collider import Collider, default_scene
 from workbench.robots.gripper import franka_hand
-from workbench.robots.ik import WORLDA, IKOptions, check_poses, chunk_bounds, neighbour_order
+from workbench.robots.ik import (
+    WORLDA,
+    IKOptions,
+    check_poses,
+    chunk_bounds,
+    neighbour_order,
+)
 from workbench.robots.model import Robot, get_robot
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")

@@ -28,8 +28,15 @@ from workbench.store import Store
 from workbench.store import catalog as sql
 from workbench.store.grasps import load_grasps, save_grasps
 from workbench.store.objects import put_object
-from workbench.store.placements import (find_placements, find_tabletop, load_free_tabletop_grips, load_placements,
-                                        load_tabletop_grips, save_placements, save_tabletop)
+from workbench.store.placements import (
+    find_placements,
+    find_tabletop,
+    load_free_tabletop_grips,
+    load_placements,
+    load_tabletop_grips,
+    save_placements,
+    save_tabletop,
+)
 from workbench.store.robots import insert_ik, prepare_run
 from workbench.store.wan_harada import roadmap_rows
 

@@ -23,9 +23,18 @@ import trimesh
 
 from workbench.geometry.objects import ObjectModel, load_object
 from workbench.grasping.grasps import GraspParams, GraspSet, plan_grasps
-from workbench.grasping.placements import PlacementParams, Placements, free_tabletop_grips, stable_placements
+from workbench.grasping.placements import (
+    PlacementParams,
+    Placements,
+    free_tabletop_grips,
+    stable_placements,
+)
 from workbench.planners.wan_harada.roadmap import build_roadmap
-from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams, plan_tabletop
+from workbench.planners.wan_harada.tabletop import (
+    Tabletop,
+    TabletopParams,
+    plan_tabletop,
+)
 from workbench.robots.collider import Scene
 from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import IKOptions, IKSolver, retract

@@ -10,8 +10,15 @@ from dataclasses import replace
 
 from workbench.benchmarks import print_table
 from workbench.catalog.cluster import cluster_client, dashboard_link
-from workbench.catalog.driver import (SUMMARY_HEADERS, CatalogParams, build_catalog, collect_parts, parse_robots, report,
-                                      summary_table)
+from workbench.catalog.driver import (
+    SUMMARY_HEADERS,
+    CatalogParams,
+    build_catalog,
+    collect_parts,
+    parse_robots,
+    report,
+    summary_table,
+)
 from workbench.cli.grasps import add_grasp_arguments, grasp_params
 from workbench.cli.placements import add_placement_arguments, placement_params
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ

@@ -9,7 +9,7 @@ import time
 from pathlib import Path
 
 from workbench.cli.build import build_all, print_build
-from workbench.cli.plan import print_plan, report_graph, write_json
+from workbench.cli.plan import print_plan, report_graph, write_json, write_trajectory
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import load_object
 from workbench.planners.wan_harada.stages import (
@@ -53,13 +53,16 @@ def run(args: argparse.Namespace) -> int:
         plans = planner.plan(start, goal, alternatives=2)
         best = plans[0]
         print_plan(best)
-        rep = planner.validate(best)
+        rep = planner.validate(best, require_motion=True)
         rep.raise_if_failed()
         print(f"validation: ok ({rep.checks} checks: FK from the URDF, joint limits, arm/gripper-table and arm-object collisions, "
-              f"stable placements, constant grasp along transfers, object at the goal)")
+              f"stable placements, constant grasp along transfers, object at the goal; every knot of the timed trajectory: "
+              f"position, velocity and acceleration limits, self-collision, arm, hand and part against the table, arm and "
+              f"hand against the resting part)")
 
         save_plan(store, best)
     write_json(plans, out / "plan.json")
+    print(f"trajectory for a controller: {write_trajectory(best, out / 'trajectory.csv').resolve()}")
     html = plan_scene(best, planner, out / "plan.html")
     print(f"plan: {(out / 'plan.json').resolve()}")
     print(f"open in a browser: {Path(html).resolve()}")

@@ -13,8 +13,8 @@ import argparse
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from workbench.errors import RobotError
 from workbench.cli import warn
+from workbench.errors import RobotError
 from workbench.planners.wan_harada.stages import empty_stage, run_ik
 from workbench.robots.collider import Scene, default_scene
 from workbench.robots.ik import WORLDA, IKOptions
@@ -78,8 +78,9 @@ def main(args: argparse.Namespace) -> int:
                       table_thickness=scene.table_thickness if args.table_thickness is None else args.table_thickness,
                       workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
     with Store(args.db) as store:
-        run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, IKOptions(closed_form=args.closed_form),
-                     args.workers, progress=not args.no_progress, idtabletop=args.tabletop, worlda=args.worlda)
+        opts = IKOptions(closed_form=args.closed_form, self_collide=True)
+        run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, opts, args.workers,
+                     progress=not args.no_progress, idtabletop=args.tabletop, worlda=args.worlda)
     what = "reused" if run.reused else f"computed {run.computed:,}"
     print(f"ik {robot.name}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "
           f"at all five poses (retractions and lifts) {run.feasible_all:,}; robot {run.idrobot}, scene {run.idscene}, ikret {run.idikret}; "

@@ -6,9 +6,13 @@ from __future__ import annotations
 import argparse
 import time
 
-from workbench.grasping.placements import PlacementParams
 from workbench.cli import warn
-from workbench.planners.wan_harada.stages import empty_stage, ensure_placements, get_object
+from workbench.grasping.placements import PlacementParams
+from workbench.planners.wan_harada.stages import (
+    empty_stage,
+    ensure_placements,
+    get_object,
+)
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.robots.gripper import franka_hand
 from workbench.store import Store

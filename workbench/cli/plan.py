@@ -1,17 +1,22 @@
 """`workbench plan --db DB --object NAME --robot ROBOT --start P,X,Y,YAW --goal P,X,Y,YAW`: connect a start and a goal
-pose to the regrasp graph, search it, print and write the plan (Wan & Harada, Section V)."""
+pose to the regrasp graph, search it, plan and time its motions, print and write the plan (Wan & Harada, Section V;
+issue 12). Yaw in degrees on the command line, radians in the library."""
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
 
-from workbench.errors import PlanningError
-from workbench.planners.wan_harada.query import parse_pose
 from workbench.cli import warn
+from workbench.errors import PlanningError
+from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
+from workbench.planners.wan_harada.query import parse_pose
 from workbench.planners.wan_harada.stages import empty_stage, load_planner, save_plans
+from workbench.robots.motion import MotionOptions
+from workbench.robots.timing import to_csv, to_json
 from workbench.store import Store
 from workbench.viewer.wan_harada import plan_scene
 
@@ -19,12 +24,15 @@ from workbench.viewer.wan_harada import plan_scene
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("plan", help="plan regrasps from a start to a goal pose on the table",
                             description="Poses are PLACEMENT,X,Y,YAW: a stable placement id (idfreetabletopplacement), "
-                                        "x and y in metres on the table (top at z = 0), yaw in radians about z.")
+                                        "x and y in metres on the table (top at z = 0), yaw in degrees about z (within "
+                                        "[-360, 360]). Every plan comes with its motions: straight TCP lines to take and put "
+                                        "down the part, collision-free joint-space transfers and transits (straight, else "
+                                        "RRT-Connect), timed under the URDF's velocity limits and --acc.")
     parser.add_argument("--db", required=True, help="DuckDB store file (built with `workbench build`)")
     parser.add_argument("--object", required=True, help="object name in the store")
     parser.add_argument("--robot", required=True, help="robot name in the store (panda, ur5, talos)")
-    parser.add_argument("--start", required=True, metavar="P,X,Y,YAW", help="start pose, e.g. 1,0.45,-0.1,0.0")
-    parser.add_argument("--goal", required=True, metavar="P,X,Y,YAW", help="goal pose, e.g. 3,0.55,0.1,1.57")
+    parser.add_argument("--start", required=True, metavar="P,X,Y,YAW", help="start pose, yaw in degrees, e.g. 1,0.45,-0.1,0")
+    parser.add_argument("--goal", required=True, metavar="P,X,Y,YAW", help="goal pose, yaw in degrees, e.g. 3,0.55,0.1,90")
     parser.add_argument("--alternatives", type=int, default=2, help="next best plans to list (default 2)")
     parser.add_argument("--handx", type=float, default=None, help="use the IK run with this handx retraction (m)")
     parser.add_argument("--worldz", type=float, default=None, help="use the IK run with this worldz retraction (m)")
@@ -33,14 +41,24 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--meshes", choices=["collision", "visual"], default="collision",
                         help="robot meshes in the HTML: collision (small file, default) or visual (nicer, larger)")
     parser.add_argument("--no-save", action="store_true", help="do not store the plans in the store's plan tables")
+    parser.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
+    parser.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
+    parser.add_argument("--max-removed", type=int, default=10,
+                        help="roadmap nodes or grips whose motions fail to remove before giving up (default 10)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
+    parser.add_argument("--trajectory", default=None, metavar="OUT",
+                        help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot) or OUT.json")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
 
-    start, goal = parse_pose(args.start, "--start"), parse_pose(args.goal, "--goal")
+    start, goal = parse_pose(args.start, "--start", degrees=True), parse_pose(args.goal, "--goal", degrees=True)
     if args.alternatives < 0:
         raise PlanningError(f"--alternatives must be >= 0, got {args.alternatives}")
+    opts = exec_options(args)
+    if args.trajectory and Path(args.trajectory).suffix.lower() not in (".csv", ".json"):
+        raise PlanningError(f"--trajectory {args.trajectory!r} must end in .csv or .json")
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
     with Store(args.db) as store:
@@ -51,13 +69,16 @@ def run(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         planner = load_planner(store, args.object, args.robot, args.handx, args.worldz)
         t_load = time.perf_counter() - t0
-        plans = planner.plan(start, goal, alternatives=args.alternatives)
+        plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
         report_graph(planner, t_load)
         best = plans[0]
         print_plan(best)
         for p in plans[1:]:
-            print(f"alternative {p.rank}: {p.regrasps} regrasp(s), {p.transfers} transfer(s), grasps {' -> '.join(map(str, p.grasps))}")
-        print("validation: every listed plan passes (FK from the URDF, limits, collisions, stability, grasp, goal)")
+            print(f"alternative {p.rank}: {p.regrasps} regrasp(s), {p.transfers} transfer(s), grasps {' -> '.join(map(str, p.grasps))}, "
+                  f"trajectory {p.duration:.1f} s")
+        print("validation: every listed plan passes (FK from the URDF, limits, collisions, stability, grasp, goal; its timed "
+              "trajectory at every knot: position, velocity and acceleration limits, self-collision, arm, hand and part "
+              "against the table, arm and hand against the resting part)")
         if not args.no_save:
 
             ids = save_plans(store, plans)
@@ -65,6 +86,8 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         write_json(plans, args.json)
         print(f"json: {Path(args.json).resolve()}")
+    if args.trajectory:
+        print(f"trajectory: {write_trajectory(best, args.trajectory).resolve()}")
     if args.html:
 
         print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes)).resolve()}")
@@ -78,13 +101,43 @@ def report_graph(planner, t_load: float) -> None:
           f"{s['placements']} placements, {s['components']} component(s); ready in {t_load:.2f} s")
 
 
+def exec_options(args: argparse.Namespace) -> ExecOptions:
+    """Motion settings from --acc, --budget, --max-removed and --seed (one-line errors on bad values)."""
+    if not (args.acc > 0 and math.isfinite(args.acc)):
+        raise PlanningError(f"--acc must be a finite acceleration > 0 rad/s^2, got {args.acc}")
+    if not (args.budget > 0 and math.isfinite(args.budget)):
+        raise PlanningError(f"--budget must be > 0 s, got {args.budget}")
+    if args.max_removed < 0:
+        raise PlanningError(f"--max-removed must be >= 0, got {args.max_removed}")
+    return ExecOptions(acc=args.acc, max_removed=args.max_removed, motion=MotionOptions(budget=args.budget, seed=args.seed))
+
+
+def write_trajectory(plan, out: str | Path) -> Path:
+    """The plan's timed trajectory for replay: CSV (one row per knot) or JSON (per segment), by the file's suffix."""
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    text = to_csv(plan.segments, plan.joint_names) if out.suffix.lower() == ".csv" else to_json(plan.segments, plan.joint_names)
+    out.write_text(text)
+    return out
+
+
 def print_plan(plan) -> None:
-    print(f"start {plan.start.text()} -> goal {plan.goal.text()}")
+    print(f"start {plan.start.text_degrees()} -> goal {plan.goal.text_degrees()} (PLACEMENT,X,Y,YAW in m and degrees)")
     for line in plan.lines():
         print("  " + line)
     t = plan.timings
     print(f"{plan.regrasps} regrasp(s), {plan.transfers} transfer(s); time to connect {t.get('connect', 0) * 1000:.1f} ms, "
           f"search {t.get('search', 0) * 1000:.1f} ms")
+    if plan.segments:
+        methods = {}
+        for s in plan.segments:
+            methods[s.method] = methods.get(s.method, 0) + 1
+        names = {"tcp-line": "straight TCP lines", "line": "straight joint lines", "rrtconnect": "RRT-Connect paths",
+                 "dwell": "jaw actions"}
+        parts = ", ".join(f"{n} {names.get(k, k)}" for k, n in sorted(methods.items()))
+        print(f"motions: {len(plan.segments)} segments ({parts}); trajectory {plan.duration:.1f} s at "
+              f"acceleration limit {max(plan.acc) if plan.acc else DEFAULT_ACC:g} rad/s^2; planned in {t.get('motion', 0):.2f} s; "
+              f"{plan.removed} roadmap node(s) or grip(s) removed because their motions failed")
 
 
 def write_json(plans, out: str | Path) -> Path:

@@ -27,7 +27,13 @@ import numpy as np
 import trimesh
 
 from workbench.errors import WorkbenchError
-from workbench.geometry.collision import boxes_collide, bvh, collide_at_poses, cylinders_collide, object_collider
+from workbench.geometry.collision import (
+    boxes_collide,
+    bvh,
+    collide_at_poses,
+    cylinders_collide,
+    object_collider,
+)
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count

@@ -105,7 +105,6 @@ def _touches(mesh, origins, frames, angles, gripper, tie, budget=1_500_000) -> T
     na = len(angles)
     H = len(frames)
     cx, cz, hx, hz = pad_rectangle(gripper)
-    radius = float(np.hypot(abs(cx) + hx, abs(cz) + hz))
     fr0 = frames.reshape(-1, na, 4, 4)[:, 0]
     tri = mesh.triangles
     fn = np.asarray(mesh.face_normals)

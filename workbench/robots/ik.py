@@ -8,7 +8,9 @@ the object held (the object lifted straight off the table), and `worldaworldz`, 
 A pose is feasible when IK converges (position within `tol_pos`, orientation within `tol_rot`) inside the joint
 limits and the arm and the gripper at that configuration do not collide with the table, nor the arm with the
 object, which rests on its placement for the first three poses and moves with the hand for the lifts (python-fcl
-on the URDF's collision geometry; the gripper's contact with the object is the grasp planner's business).
+on the URDF's collision geometry; the gripper's contact with the object is the grasp planner's business); nor the arm and gripper
+with themselves when `self_collide` (issue 12: `robots.selfcollision`, pinocchio + coal, allowed pairs from the
+SRDF or sampled).
 
 Speed (Section VI, Table I's t-tpgik): a reachability pre-filter (`ReachFilter`: distance from the
 shoulder, also over a humanoid's waist, and the workspace box); grips sorted so neighbours are the same
@@ -43,6 +45,7 @@ from workbench.robots.analytic import solve as analytic_solve
 from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
 from workbench.robots.model import Robot, RobotSpec, robot_from_spec
+from workbench.robots.selfcollision import SelfCollision
 
 KINDS = ("grasp", "handx", "handxworldz", "worlda", "worldaworldz")
 HELD = np.array([False, False, False, True, True])  # kinds at which the object moves with the hand
@@ -56,7 +59,10 @@ class IKOptions:
     tol_pos (m) and tol_rot (rad): convergence; iters_warm/iters_seed: LM iterations from a warm start and
     from a library seed; seeds: library seeds tried after the warm start, picked among the seed_pool nearest
     library poses at least seed_spread rad apart; library: size of the seed
-    library; chunk: grips per parallel task (resume unit); lane: grips per warm-start lane; seed: RNG seed.
+    library; chunk: grips per parallel task (resume unit); lane: grips per warm-start lane; seed: RNG seed;
+    collide: reject arm/gripper-table and arm-object collisions; self_collide (with collide): reject self-colliding
+    solutions (the arm and the planning gripper, `robots.selfcollision`, allowed pairs from the SRDF or sampled; the
+    roadmap planner's IK stage turns it on);
     closed_form: solve with the closed form of spherical-wrist arms (`workbench.robots.analytic`, all 8 branches,
     Tournassoud et al. 1987 Section 5.2) instead of Levenberg-Marquardt; the seeds then only pick the nearest branch."""
 
@@ -73,6 +79,7 @@ class IKOptions:
     seed: int = 0
     collide: bool = True
     closed_form: bool = False
+    self_collide: bool = False
 
     def as_dict(self) -> dict:
         d = asdict(self)
@@ -257,6 +264,13 @@ class ReachFilter:
         return ok.reshape(p.shape[:-1])
 
 
+def converge(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, opts: IKOptions = IKOptions()) -> tuple[np.ndarray, np.ndarray]:
+    """The solver's numeric core without collision checks, for callers that check their own (straight TCP lines
+    checked against the table, the object and the arm itself): joint vectors (M, n) from seeds `q0` for TCP poses
+    (M, 4, 4) and whether each converged within `opts`' tolerances and the joint limits."""
+    return solve_ik(robot, targets, q0, iters, opts.tol_pos, opts.tol_rot)
+
+
 class IKSolver:
     """One robot's IK engine for a scene and an object (Section IV): the robot, its seed library, its collider
     (arm and gripper against the table, arm against the object) and the reachability pre-filter, built once.
@@ -268,6 +282,7 @@ class IKSolver:
     def __init__(self, robot: Robot, scene: Scene, opts: IKOptions = IKOptions(), obj_mesh: trimesh.Trimesh | None = None):
         self.robot, self.scene, self.opts = robot, scene, opts
         self.collider = Collider(robot, scene, obj_mesh) if opts.collide else None
+        self.self_collision = SelfCollision(robot) if opts.collide and opts.self_collide else None
         self.analytic = analytic_ik(robot) if opts.closed_form else None
         self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)
@@ -283,6 +298,9 @@ class IKSolver:
         if self.collider is not None and ok.any():
             sel = np.flatnonzero(ok)
             ok[sel[self.collider.collides_q(q[sel], placements[sel])]] = False
+        if self.self_collision is not None and ok.any():
+            sel = np.flatnonzero(ok)
+            ok[sel[self.self_collision.collides(q[sel])]] = False
         return q, ok
 
     def _closed(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -292,6 +310,10 @@ class IKSolver:
         if self.collider is not None and valid.any():
             r, b = np.nonzero(valid)
             hit = self.collider.collides_q(joints[r, b], placements[r])
+            valid[r[hit], b[hit]] = False
+        if self.self_collision is not None and valid.any():
+            r, b = np.nonzero(valid)
+            hit = self.self_collision.collides(joints[r, b])
             valid[r[hit], b[hit]] = False
         ref = np.where(np.isfinite(q0), q0, 0.0) if q0 is not None else np.zeros((m, n))
         q, ok = nearest_branch(joints, valid, ref, self.robot.lower, self.robot.upper)

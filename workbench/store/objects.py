@@ -58,26 +58,30 @@ def object_row(store: Store, name: str) -> tuple[int, dict]:
 def put_gripper(store: Store, gripper: Gripper) -> int:
     """Store a gripper (reused when its geometry is already stored) and return its id."""
     digest = gripper.digest
-    row = store.one("SELECT idgripper FROM gripper WHERE digest = ?", [digest])
+    row = store.one("SELECT idgripper, body_faces FROM gripper WHERE digest = ?", [digest])
+    body_faces = len(gripper.body.faces)  # collision_mesh() puts the body first, then the finger boxes
     if row is not None:
+        if row[1] is None:  # a row written before body_faces existed
+            store.run("UPDATE gripper SET body_faces = ? WHERE idgripper = ?", [body_faces, int(row[0])])
         return int(row[0])
     mesh = gripper.collision_mesh()
     with store.transaction():
         gid = store.next_id("gripper", "idgripper")
-        store.run("INSERT INTO gripper (idgripper, name, urdf, jaw_min, jaw_max, digest, collision_vertices, collision_faces) "
-                  "VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
+        store.run("INSERT INTO gripper (idgripper, name, urdf, jaw_min, jaw_max, digest, collision_vertices, collision_faces, "
+                  "body_faces) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?)",
                   [gid, gripper.name, gripper.urdf, gripper.jaw_min, gripper.jaw_max, digest, mesh.vertices.tolist(),
-                   mesh.faces.tolist()])
+                   mesh.faces.tolist(), body_faces])
     return gid
 
 
 def gripper_row(store: Store, idgripper: int) -> dict:
     """A stored gripper: name, jaw range, digest and its collision mesh at full opening (vertices, faces)."""
-    row = store.one("SELECT name, jaw_min, jaw_max, digest, collision_vertices, collision_faces FROM gripper "
+    row = store.one("SELECT name, jaw_min, jaw_max, digest, collision_vertices, collision_faces, body_faces FROM gripper "
                     "WHERE idgripper = ?", [idgripper])
     if row is None:
         raise StoreError(f"store {store.path} has no gripper {idgripper}")
-    name, lo, hi, digest, verts, faces = row
+    name, lo, hi, digest, verts, faces, body_faces = row
     return {"idgripper": int(idgripper), "name": name, "jaw_min": lo, "jaw_max": hi, "digest": digest,
             "collision_vertices": None if verts is None else np.asarray(verts, dtype=np.float64),
-            "collision_faces": None if faces is None else np.asarray(faces, dtype=np.int64)}
+            "collision_faces": None if faces is None else np.asarray(faces, dtype=np.int64),
+            "body_faces": None if body_faces is None else int(body_faces)}

@@ -33,11 +33,14 @@ from workbench.store import Store, from_arrow
 from workbench.store.objects import put_gripper
 
 
-def put_robot(store: Store, robot: Robot) -> int:
-    """The id of the robot's row (created if new); call inside a transaction."""
+def put_robot(store: Store, robot: Robot, allowed_pairs: str | None = None) -> int:
+    """The id of the robot's row (created if new; `allowed_pairs` JSON stored when given and missing); call inside a
+    transaction."""
     digest = robot.spec.digest
-    row = store.one("SELECT idrobot FROM robot WHERE digest = ?", [digest])
+    row = store.one("SELECT idrobot, allowed_pairs FROM robot WHERE digest = ?", [digest])
     if row is not None:
+        if row[1] is None and allowed_pairs is not None:
+            store.run("UPDATE robot SET allowed_pairs = ? WHERE idrobot = ?", [allowed_pairs, int(row[0])])
         return int(row[0])
     name = robot.name
     if store.one("SELECT idrobot FROM robot WHERE name = ?", [name]) is not None:
@@ -45,12 +48,12 @@ def put_robot(store: Store, robot: Robot) -> int:
     rid = store.next_id("robot", "idrobot")
     gid = put_gripper(store, robot.gripper)
     store.run("INSERT INTO robot (idrobot, name, urdf, tcp_frame, tip_frame, mount, base, joint_names, locked, "
-              "drop_geometry, digest, package_dirs, idgripper) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+              "drop_geometry, digest, package_dirs, idgripper, allowed_pairs) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
               [rid, name, robot.spec.urdf, robot.spec.tcp_frame, robot.spec.tip_frame, robot.mount.ravel().tolist(),
                robot.base.ravel().tolist(), list(robot.joint_names),
                json.dumps({k: float(v) for k, v in robot.spec.locked}, sort_keys=True), list(robot.spec.drop_geometry),
                digest, list(robot.spec.package_dirs) + ([str(Path(robot.spec.urdf_path).parent)] if robot.spec.urdf_path else []),
-               gid])
+               gid, allowed_pairs])
     return rid
 
 
@@ -83,10 +86,12 @@ def put_ikret(store: Store, handx: float, worldz: float, worlda: float) -> int:
 
 
 def prepare_run(store: Store, robot: Robot, scene_params: dict[str, Any], handx: float, worldz: float,
-                worlda: float) -> tuple[int, int, int]:
-    """Robot, scene and ikret rows of one IK run in one transaction: (idrobot, idscene, idikret)."""
+                worlda: float, allowed_pairs: str | None = None) -> tuple[int, int, int]:
+    """Robot (with its allowed self-collision pairs, JSON), scene and ikret rows of one IK run in one transaction:
+    (idrobot, idscene, idikret)."""
     with store.transaction():
-        return put_robot(store, robot), put_scene(store, scene_params), put_ikret(store, handx, worldz, worlda)
+        return (put_robot(store, robot, allowed_pairs), put_scene(store, scene_params),
+                put_ikret(store, handx, worldz, worlda))
 
 
 def stored_grips(store: Store, idrobot: int, idscene: int, idikret: int) -> np.ndarray:
@@ -147,20 +152,20 @@ def ikret_row(store: Store, idikret: int) -> dict[str, float]:
 
 def robot_row(store: Store, robot: int | str) -> dict[str, Any]:
     """The stored robot with this id (int) or name: urdf, tcp_frame, tip_frame, mount (4, 4), base (4, 4),
-    joint_names, locked ({joint: value}), drop_geometry, digest; a StoreError naming the stored robots if none."""
+    joint_names, locked ({joint: value}), drop_geometry, digest, allowed_pairs (JSON or None); a StoreError naming the stored robots if none."""
     by_id = isinstance(robot, (int, np.integer))
     row = store.one("SELECT idrobot, name, urdf, tcp_frame, tip_frame, mount, base, joint_names, locked, drop_geometry, "
-                    f"digest, package_dirs, idgripper FROM robot WHERE {'idrobot' if by_id else 'name'} = ?",
+                    f"digest, package_dirs, idgripper, allowed_pairs FROM robot WHERE {'idrobot' if by_id else 'name'} = ?",
                     [int(robot) if by_id else robot])
     if row is None:
         names = [r[0] for r in store.run("SELECT name FROM robot ORDER BY name")]
         raise StoreError(f"store {store.path} has no robot {robot!r} (it has: {', '.join(names) or 'none'}); "
                          f"run `workbench ik --robot NAME` or `workbench build --robot NAME` first")
-    rid, name, urdf, tcp, tip, mount, base, joints, locked, drop, digest, dirs, gid = row
+    rid, name, urdf, tcp, tip, mount, base, joints, locked, drop, digest, dirs, gid, allowed = row
     return {"idrobot": int(rid), "name": name, "urdf": urdf, "tcp_frame": tcp, "tip_frame": tip,
             "mount": np.asarray(mount, dtype=np.float64).reshape(4, 4), "base": np.asarray(base, dtype=np.float64).reshape(4, 4),
             "joint_names": list(joints), "locked": json.loads(locked), "drop_geometry": list(drop), "digest": digest,
-            "package_dirs": list(dirs or []), "idgripper": None if gid is None else int(gid)}
+            "package_dirs": list(dirs or []), "idgripper": None if gid is None else int(gid), "allowed_pairs": allowed}
 
 
 @dataclass(frozen=True)

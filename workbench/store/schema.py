@@ -10,6 +10,8 @@ Paper tables
   tip_frame, mount (tip to TCP), base (base pose in the world), joint_names (order of stored joint vectors),
   locked (JSON {joint: value} for URDF joints outside joint_names that are not at 0, e.g. a humanoid's other arm
   tucked away) and drop_geometry (link-name prefixes whose collision geometry is replaced by the planning gripper).
+  Extra: allowed_pairs (JSON: the link pairs exempt from self-collision checks, with their reason: rigid,
+  adjacent, srdf, never, always; the planning gripper is the links gripper_hand and gripper_fingers).
 - freeairgrip: grasps in the object frame; rotmat is the TCP pose in the object frame.
   Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y).
 - freetabletopplacement: rotmat is the object in the table frame, centre of mass above the origin, lowest
@@ -28,8 +30,9 @@ Paper tables
 Extra tables
 - paramset(idparamset, stage, digest, params, idobject, created): every stage run's parameters (JSON) and
   the inputs they apply to; a stage's rows reference it, and a re-run with the same digest reuses them.
-- gripper(idgripper, name, urdf, jaw_min, jaw_max, digest, collision_vertices, collision_faces): the collision mesh
-  (hand body and both fingers at full opening, in the TCP frame) lets checkers rebuild the hand without the library.
+- gripper(idgripper, name, urdf, jaw_min, jaw_max, digest, collision_vertices, collision_faces, body_faces): the
+  collision mesh (hand body and both fingers at full opening, in the TCP frame) lets checkers rebuild the hand
+  without the library; its first body_faces faces are the hand body, the rest the fingers.
 - scene(idscene, name, table_pose, table_size, ...): where the table sits in the world for IK.
 - catalog_unit(digest, kind, part, robot, chunk, ids, status, error, counts, seconds, ...): the units of a
   `workbench catalog` build, created by `store.catalog` in catalogue stores (documented there).
@@ -179,6 +182,13 @@ ALL_TABLES: tuple[str, ...] = CORE_TABLES
 # its rank among the alternatives; regrasp and transfer counts; time to connect and search), its steps in order
 # (kind pick / transfer / regrasp / place, the grasp, the object pose and the TCP pose in the world, the roadmap
 # rows when the step is on the grid, joint vectors for approach (handx), grasp and retract (handx + worldz)).
+# Motions (issue 12; CONVENTIONS.md, Plans and motions): plan.duration (s, the whole timed trajectory),
+# plan.removed (roadmap nodes or start/goal grips removed because their motions failed before this plan was found),
+# plan.t_motion (s spent planning and timing motions), plan.acc (the acceleration limits used, rad/s^2 per joint);
+# plansegment: one row per motion in order (seq): kind (approach, retract, transit, transfer, gripper), caption (the
+# step it serves: pick, transfer, release, regrasp, place), step (planstep seq), holding (object in the hand), t0 (s
+# from the plan's start), duration (s), method (tcp-line, line, rrtconnect, dwell), jaw (m) and its knots: t (s from
+# the segment's start), q and qd (row-major K x n, robot.joint_names order, rad and rad/s).
 PLAN_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS plan (
         idplan BIGINT PRIMARY KEY,
@@ -216,6 +226,23 @@ PLAN_TABLES: tuple[str, ...] = (
         jnt_retract DOUBLE[] NOT NULL,
         jnt_worlda DOUBLE[],
         jnt_worldaworldz DOUBLE[],
+        UNIQUE (idplan, seq)
+    )""",
+    """CREATE TABLE IF NOT EXISTS plansegment (
+        idplansegment BIGINT PRIMARY KEY,
+        idplan BIGINT NOT NULL REFERENCES plan(idplan),
+        seq INTEGER NOT NULL,
+        kind VARCHAR NOT NULL,
+        caption VARCHAR NOT NULL,
+        step INTEGER NOT NULL,
+        holding BOOLEAN NOT NULL,
+        t0 DOUBLE NOT NULL,
+        duration DOUBLE NOT NULL,
+        method VARCHAR NOT NULL,
+        jaw DOUBLE NOT NULL,
+        t DOUBLE[] NOT NULL,
+        q DOUBLE[] NOT NULL,
+        qd DOUBLE[] NOT NULL,
         UNIQUE (idplan, seq)
     )""",
 )
@@ -374,4 +401,10 @@ MIGRATIONS: tuple[str, ...] = (
     "UPDATE ikret SET worlda = 0.05 WHERE worlda IS NULL",
     "ALTER TABLE planstep ADD COLUMN IF NOT EXISTS jnt_worlda DOUBLE[]",
     "ALTER TABLE planstep ADD COLUMN IF NOT EXISTS jnt_worldaworldz DOUBLE[]",
+    "ALTER TABLE gripper ADD COLUMN IF NOT EXISTS body_faces INTEGER",
+    "ALTER TABLE robot ADD COLUMN IF NOT EXISTS allowed_pairs VARCHAR",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS duration DOUBLE",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS removed INTEGER",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS t_motion DOUBLE",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS acc DOUBLE[]",
 )

@@ -70,8 +70,9 @@ def placements_of_tabletop(store: Store, idtabletop: int) -> int:
 # Plans.
 
 
-def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray]) -> int:
-    """Store one plan (columns of `plan`) and its steps (columns of `planstep`, arrays) in one transaction; returns idplan."""
+def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray], segments: dict[str, np.ndarray] | None = None) -> int:
+    """Store one plan (columns of `plan`), its steps (columns of `planstep`, arrays) and its timed motions (columns
+    of `plansegment`) in one transaction; returns idplan."""
     with store.transaction():
         pid = store.next_id("plan", "idplan")
         cols = ["idplan", *plan.keys()]
@@ -79,6 +80,10 @@ def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray]) 
         n = len(steps["seq"])
         store.insert("planstep", {"idplanstep": store.new_ids("planstep", n),
                                   "idplan": np.full(n, pid, dtype=np.int64), **steps})
+        m = len(segments["seq"]) if segments else 0
+        if m:
+            store.insert("plansegment", {"idplansegment": store.new_ids("plansegment", m),
+                                         "idplan": np.full(m, pid, dtype=np.int64), **segments})
     return pid
 
 
@@ -92,3 +97,6 @@ def load_plan_rows(store: Store, idplan: int) -> tuple[dict[str, Any], dict[str,
     return plan, steps
 
 
+def load_plan_segments(store: Store, idplan: int):
+    """A stored plan's timed motions (`plansegment` rows in order, an Arrow table; q and qd row-major K x n)."""
+    return store.con.sql("SELECT * FROM plansegment WHERE idplan = ? ORDER BY seq", params=[idplan]).to_arrow_table()

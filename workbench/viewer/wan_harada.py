@@ -2,10 +2,12 @@
 Figs. 11-12), exported as static HTML that opens without a server.
 
 The robot and the planning gripper (at the step's jaw opening) are drawn by `workbench.viewer.robot.RobotView`
-from the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper. Each step
-plays: move to the retract configuration, retract -> approach -> grasp, close or open the jaw, grasp -> approach
--> retract; the object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue) poses stay
-as ghosts, intermediate placements as faint outlines.
+from the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper.
+A plan with motions (issue 12) plays its timed trajectory at its real speed (`timed_frames`: frames at `fps` per
+second of plan time), with a caption naming the current step (pick, transfer, release, regrasp, place) and a colour
+key; a plan without motions plays its waypoints joined by straight joint lines (`keyframes`, not a motion a robot
+could execute). The object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue) poses
+stay as ghosts, intermediate placements as faint outlines.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ import numpy as np
 import trimesh
 
 from workbench.planners.wan_harada.plans import inverse_pose
+from workbench.robots.timing import TimedSegment
+from workbench.viewer.captions import add_overlays
 from workbench.viewer.robot import RobotView
 from workbench.viewer.scenes import (
     frame_points,
@@ -31,6 +35,8 @@ from workbench.viewer.scenes import (
 )
 
 OBJECT_COLOR, START_COLOR, GOAL_COLOR, TABLE_COLOR = 0xE0A030, 0xF0D040, 0x3366DD, 0x8B6B4A
+CAMERA_DIR = np.array([0.8, -0.8, 0.0]) / np.hypot(0.8, 0.8)
+"""Horizontal direction from the scene toward `frame_camera`'s default camera (captions face it)."""
 
 
 def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int = 5, jaw_open: float = 0.08) -> list[dict]:
@@ -68,6 +74,41 @@ def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int
     return out
 
 
+def timed_frames(plan, segments: list[TimedSegment], tcp_pose, fps: float = 30.0, jaw_open: float = 0.08) -> list[dict]:
+    """Frames of a timed plan at `fps` frames per second of plan time (a player at `fps` plays the motion at its real
+    speed): t, q, jaw, held, object (4x4 world pose), caption (the step: pick, transfer, release, regrasp, place) and
+    segment index. `tcp_pose(q)` gives the TCP pose in the world (the robot's forward kinematics)."""
+    if not segments:
+        return []
+    total = segments[-1].t0 + segments[-1].duration
+    times = np.arange(0.0, total + 0.5 / fps, 1.0 / fps)
+    times[-1] = min(times[-1], total)
+    out = []
+    k = 0
+    jaw_before = jaw_open
+    for t in times:
+        while k + 1 < len(segments) and t > segments[k].t0 + segments[k].duration + 1e-9:
+            if segments[k].kind == "gripper":
+                jaw_before = segments[k].jaw
+            k += 1
+        seg = segments[k]
+        local = min(max(t - seg.t0, 0.0), seg.duration)
+        q = seg.traj.sample(np.array([local]))[0][0]
+        if seg.kind == "gripper":
+            f = local / seg.duration if seg.duration > 0 else 1.0
+            jaw = (1 - f) * jaw_before + f * seg.jaw
+        else:
+            jaw = seg.jaw
+        step = plan.steps[seg.step]
+        if seg.holding:
+            obj = tcp_pose(q) @ inverse_pose(np.asarray(step.grasp, dtype=np.float64))
+        else:
+            obj = np.asarray(step.object_pose, dtype=np.float64)
+        out.append({"t": float(t), "q": q, "jaw": float(jaw), "held": bool(seg.holding), "object": obj, "caption": seg.caption,
+                    "segment": k})
+    return out
+
+
 def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30,
               path: str = "plan", kind: str = "visual") -> manim.Animation:
     """Draw the plan's scene under `path` and attach its animation to `vis` (looped). The robot and the planning
@@ -86,12 +127,21 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
         show_mesh(vis, f"{path}/placements/{i}", obj_mesh, color=0x999999, opacity=0.15, pose=s.object_pose)
     show_mesh(vis, f"{path}/object", obj_mesh, color=OBJECT_COLOR)
     view = RobotView(vis, robot, f"{path}/robot", kind)
-    frames = keyframes(plan, jaw_open=robot.gripper.jaw_max)
+    if plan.segments:
+        frames = timed_frames(plan, plan.segments, robot.tcp_pose, fps, jaw_open=robot.gripper.jaw_max)
+    else:
+        frames = keyframes(plan, jaw_open=robot.gripper.jaw_max)
+        for fr in frames:
+            fr["object"] = robot.tcp_pose(fr["q"]) @ inverse_pose(fr["grasp"]) if fr["held"] else fr["rest"]
     anim = manim.Animation(default_framerate=fps)
+    if plan.segments:
+        centre = 0.5 * (plan.start_pose[:3, 3] + plan.goal_pose[:3, 3])
+        key = [("part", OBJECT_COLOR), ("start pose", START_COLOR), ("goal pose", GOAL_COLOR),
+               ("put down to regrasp", 0x999999), ("table", TABLE_COLOR)]
+        add_overlays(vis, anim, frames, f"{path}/captions", centre + CAMERA_DIR * -0.3 + [0.0, 0.0, 0.62], CAMERA_DIR, key)
     for i, fr in enumerate(frames):
         poses = view.poses(fr["q"], fr["jaw"])
-        tcp = robot.tcp_pose(fr["q"])
-        obj_pose = tcp @ inverse_pose(fr["grasp"]) if fr["held"] else fr["rest"]
+        obj_pose = fr["object"]
         with anim.at_frame(vis, i) as f:
             for name, m in poses.items():
                 f[name].set_transform(m)

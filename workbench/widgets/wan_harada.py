@@ -171,8 +171,11 @@ class RegraspExplorer:
     def plan_html(self, plan) -> str:
         t = plan.timings
         lines = "<br>".join(plan.lines())
+        motion = (f"; motions planned in {t.get('motion', 0):.2f} s: {len(plan.segments)} timed segments, trajectory "
+                  f"{plan.duration:.1f} s (the animation plays it at real speed), {plan.removed} node(s) or grip(s) removed"
+                  if plan.segments else "")
         return (f"<p><b>{plan.regrasps} regrasp(s), {plan.transfers} transfer(s)</b>; connect {t.get('connect', 0) * 1e3:.1f} ms, "
-                f"search {t.get('search', 0) * 1e3:.1f} ms</p><pre>{lines}</pre>")
+                f"search {t.get('search', 0) * 1e3:.1f} ms{motion}</p><pre>{lines}</pre>")
 
 
 class IKBrowser:

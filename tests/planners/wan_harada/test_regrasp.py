@@ -320,3 +320,11 @@ def test_unconnected_start_and_goal_get_their_message(planner):
         pytest.skip(f"this pair is not reachable: {exc}")
     with pytest.raises(PlanningError, match="not connected in the regrasp graph"):
         cut.plan(start, goal)
+
+
+def test_command_line_yaw_is_in_degrees_and_bounded():
+    q = parse_pose("1,0.5,0.1,90", "--goal", degrees=True)
+    assert np.isclose(q.yaw, np.pi / 2) and q.text_degrees() == "1,0.5,0.1,90"
+    assert np.isclose(parse_pose("1,0.5,0.1,1.5708").yaw, 1.5708)  # the library takes radians
+    with pytest.raises(PlanningError, match=r"outside \[-360, 360\]"):
+        parse_pose("3,0.55,-0.1,400", "--goal", degrees=True)

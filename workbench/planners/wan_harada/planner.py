@@ -11,6 +11,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from workbench.errors import PlanningError
+from workbench.planners.wan_harada.motions import (
+    DEFAULT_ACC,
+    ExecOptions,
+    ExecResult,
+    plan_executable,
+)
 from workbench.planners.wan_harada.plans import make_plan
 from workbench.planners.wan_harada.query import (
     GripIK,
@@ -24,7 +30,14 @@ from workbench.planners.wan_harada.query import (
 from workbench.planners.wan_harada.roadmap import Roadmap, _failure
 from workbench.planners.wan_harada.search import SearchResult, search
 from workbench.robots.ik import KINDS, WORLDA, retract
-from workbench.validation import PlanValidator, ValidationReport, validator_from_rows
+from workbench.robots.selfcollision import AllowedPairs
+from workbench.validation import (
+    PlanValidator,
+    TrajectoryValidator,
+    ValidationReport,
+    trajectory_validator_from_rows,
+    validator_from_rows,
+)
 
 if TYPE_CHECKING:  # pragma: no cover
 
@@ -47,6 +60,9 @@ class Planner:
         self.grid = grid
         self.rows: dict = {}
         self._validator: PlanValidator | None = None
+        self._trajectory_validators: dict = {}
+        self.allowed: AllowedPairs | None = None  # self-collision pairs of the robot row (set by load_planner)
+        self.last_motion: ExecResult | None = None
         self.object, self.robot, self.scene = obj, robot, scene
         self.handx, self.worldz, self.worlda = float(handx), float(worldz), float(worlda)
         self.ids = dict(ids)
@@ -196,26 +212,48 @@ class Planner:
             self._validator = validator_from_rows(self.rows, free)
         return self._validator
 
-    def validate(self, plan: Plan) -> ValidationReport:
-        """Check one plan with the independent validator (see `workbench.validation`)."""
-        return self.validator.check(plan)
+    def trajectory_validator(self, acc) -> TrajectoryValidator:
+        """The independent trajectory validator of this planner's store rows for acceleration limits `acc`."""
+        key = tuple(np.broadcast_to(np.asarray(acc, dtype=np.float64), (self.robot.nq,)).tolist())
+        if key not in self._trajectory_validators:
+            self._trajectory_validators[key] = trajectory_validator_from_rows(self.rows, self.validator, np.array(key))
+        return self._trajectory_validators[key]
 
-    def plan(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True, validate: bool = True) -> list[Plan]:
-        """The best plan and up to `alternatives` next best (Section V), each checked by `workbench.validate` when
-        `validate` (a plan that fails is dropped; PlanningError when none passes)."""
+    def validate(self, plan: Plan, require_motion: bool = False) -> ValidationReport:
+        """Check one plan with the independent validator (see `workbench.validation`): its waypoints, and its timed
+        trajectory when it has one (required with `require_motion`: a plan is executable only with its motions)."""
+        report = self.validator.check(plan)
+        if plan.segments:
+            errors, knots = self.trajectory_validator(plan.acc or DEFAULT_ACC).check(plan, plan.segments)
+            report = ValidationReport(report.ok and not errors, report.errors + errors, report.checks + knots)
+        elif require_motion:
+            report = ValidationReport(False, report.errors + ["the plan has no timed motions"], report.checks + 1)
+        return report
 
-        result = self.search(start, goal, alternatives, lazy)
-        plans = [make_plan(self, result, r, rank) for rank, r in enumerate(result.routes)]
+    def plan(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True, validate: bool = True,
+             motion: bool = True, exec_opts: ExecOptions | None = None) -> list[Plan]:
+        """The best plan and up to `alternatives` next best (Section V), each checked by `workbench.validation` when
+        `validate` (a plan that fails is dropped; PlanningError when none passes). With `motion` (the default) the
+        plans are executable: their motions are planned and timed, failing nodes or grips removed and the graph
+        searched again (`motions.plan_executable`); `last_motion` keeps the outcome."""
+
+        if motion:
+            res = plan_executable(self, start, goal, exec_opts or ExecOptions(), alternatives=alternatives)
+            self.last_motion = res
+            result = res.result
+            plans = [res.plan, *res.alternatives]
+        else:
+            result = self.search(start, goal, alternatives, lazy)
+            plans = [make_plan(self, result, r, rank) for rank, r in enumerate(result.routes)]
         if validate:
 
             if not self.rows:
                 raise PlanningError("this planner has no store rows to validate its plans against; build it with "
                                     "load_planner, or pass validate=False")
-            checker = self.validator
-            reports = [checker.check(p) for p in plans]
+            reports = [self.validate(p, require_motion=motion) for p in plans]
             good = [p for p, rep in zip(plans, reports) if rep.ok]
             if not good:
-                raise PlanningError(f"the plan found from {result.start.query.text()} to {result.goal.query.text()} fails validation: "
+                raise PlanningError(f"the plan found from {plans[0].start.text()} to {plans[0].goal.text()} fails validation: "
                                     f"{reports[0].errors[0]}; report this with the store")
             for rank, p in enumerate(good):
                 p.rank = rank

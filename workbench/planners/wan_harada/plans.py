@@ -14,7 +14,12 @@ while it is near the table, whatever the grasp's approach direction):
 - taking the part (pick, regrasp): handxworldz -> handx -> grasp (open) -> grasp (close) -> worlda -> worldaworldz;
 - putting it down (transfer, place): worldaworldz -> worlda -> grasp (holding, lowered straight down) -> grasp
   (open) -> handx (backed off along the TCP's -z) -> handxworldz.
-The motion between steps (transit and transfer paths) is not planned here, as in the paper.
+
+A plan is executable only with its motions (issue 12; CONVENTIONS.md, Plans and motions): `segments` are its
+timed motions in order (`robots.timing.TimedSegment`: kind, the step it serves, whether the object is held, start
+time, knots t / q / qd), planned by `planners.wan_harada.motions`; `removed` counts the roadmap nodes or query
+grips removed because their motions failed, `acc` the acceleration limits used. The JSON carries them under
+"motion"; the store in the `plansegment` table.
 """
 
 from __future__ import annotations
@@ -30,6 +35,7 @@ import pyarrow as pa
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.search import Route, SearchResult
 from workbench.robots.ik import WORLDA
+from workbench.robots.timing import TimedSegment
 
 KINDS = ("pick", "transfer", "regrasp", "place")
 TAKE = ("pick", "regrasp")  # steps that close the hand on the resting part and lift it; the others put it down
@@ -107,7 +113,8 @@ class PlanStep:
 @dataclass
 class Plan:
     """A regrasp plan for one object and robot from a start to a goal pose (Section V); `rank` 0 is the best of a
-    search, higher ranks its alternatives. `timings` holds the search's connect and search times (s)."""
+    search, higher ranks its alternatives. `timings` holds the search's connect and search times and the motion
+    planning time (s); `segments`, `removed` and `acc` its timed motions (see the module docstring)."""
 
     object: str
     robot: str
@@ -123,6 +130,14 @@ class Plan:
     worlda: float = WORLDA
     timings: dict = field(default_factory=dict)
     ids: dict = field(default_factory=dict)
+    segments: list[TimedSegment] = field(default_factory=list)
+    removed: int = 0
+    acc: list[float] = field(default_factory=list)
+
+    @property
+    def duration(self) -> float:
+        """Length of the timed trajectory (s); 0 without motions."""
+        return (self.segments[-1].t0 + self.segments[-1].duration) if self.segments else 0.0
 
     @property
     def regrasps(self) -> int:
@@ -142,7 +157,9 @@ class Plan:
                 "start": self.start.as_dict(), "goal": self.goal.as_dict(), "start_pose": _list(self.start_pose),
                 "goal_pose": _list(self.goal_pose), "handx": self.handx, "worldz": self.worldz, "worlda": self.worlda, "rank": self.rank,
                 "regrasps": self.regrasps, "transfers": self.transfers, "timings": {k: float(v) for k, v in self.timings.items()},
-                "ids": {k: int(v) for k, v in self.ids.items()}, "steps": [s.as_dict() for s in self.steps]}
+                "ids": {k: int(v) for k, v in self.ids.items()}, "steps": [s.as_dict() for s in self.steps],
+                "motion": {"duration": self.duration, "removed": self.removed, "acc": [float(a) for a in self.acc],
+                           "segments": [s.as_dict() for s in self.segments]}}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Plan":
@@ -152,7 +169,9 @@ class Plan:
                    goal_pose=np.asarray(d["goal_pose"], dtype=np.float64).reshape(4, 4),
                    steps=[PlanStep.from_dict(s) for s in d["steps"]], handx=float(d["handx"]), worldz=float(d["worldz"]),
                    worlda=float(d.get("worlda", WORLDA)),
-                   rank=int(d.get("rank", 0)), timings=dict(d.get("timings", {})), ids=dict(d.get("ids", {})))
+                   rank=int(d.get("rank", 0)), timings=dict(d.get("timings", {})), ids=dict(d.get("ids", {})),
+                   segments=[TimedSegment.from_dict(s) for s in (d.get("motion") or {}).get("segments", [])],
+                   removed=int((d.get("motion") or {}).get("removed", 0)), acc=list((d.get("motion") or {}).get("acc", [])))
 
     def to_json(self, path: str | Path | None = None) -> str:
         """The plan as JSON (written to `path` when given)."""
@@ -182,8 +201,10 @@ class Plan:
     def summary(self) -> str:
         t = self.timings
         gs = t.get("connect", 0.0) + t.get("search", 0.0)
+        motion = (f"; motions {t.get('motion', 0.0):.2f} s, trajectory {self.duration:.1f} s, {self.removed} removed"
+                  if self.segments else "; no motions")
         return (f"{self.object} with {self.robot}: {self.regrasps} regrasp(s), {self.transfers} transfer(s), {len(self.steps)} steps; "
-                f"connect {t.get('connect', 0.0) * 1000:.1f} ms + search {t.get('search', 0.0) * 1000:.1f} ms = {gs * 1000:.1f} ms")
+                f"connect {t.get('connect', 0.0) * 1000:.1f} ms + search {t.get('search', 0.0) * 1000:.1f} ms = {gs * 1000:.1f} ms{motion}")
 
 
 def _list(a: Any) -> Any:
@@ -230,15 +251,17 @@ def make_plan(planner, result: SearchResult, route: Route, rank: int = 0) -> Pla
                 steps=steps, handx=planner.handx, worldz=planner.worldz, worlda=planner.worlda, rank=rank, timings=dict(result.timings), ids=dict(planner.ids))
 
 
-def plan_rows(plan: Plan) -> tuple[dict, dict]:
-    """The `plan` row and the `planstep` columns of a plan (written by `stages.save_plan`)."""
+def plan_rows(plan: Plan) -> tuple[dict, dict, dict]:
+    """The `plan` row, the `planstep` columns and the `plansegment` columns of a plan (written by `stages.save_plan`)."""
 
     ids = plan.ids
     row = {"idobject": ids["idobject"], "idrobot": ids["idrobot"], "idscene": ids["idscene"], "idikret": ids["idikret"],
            "idtabletop": ids["idtabletop"], "start_placement": plan.start.idfreetabletopplacement,
            "start_xyyaw": [plan.start.x, plan.start.y, plan.start.yaw], "goal_placement": plan.goal.idfreetabletopplacement,
            "goal_xyyaw": [plan.goal.x, plan.goal.y, plan.goal.yaw], "rank": plan.rank, "regrasps": plan.regrasps,
-           "transfers": plan.transfers, "t_connect": plan.timings.get("connect"), "t_search": plan.timings.get("search")}
+           "transfers": plan.transfers, "t_connect": plan.timings.get("connect"), "t_search": plan.timings.get("search"),
+           "duration": plan.duration if plan.segments else None, "removed": plan.removed,
+           "t_motion": plan.timings.get("motion"), "acc": [float(a) for a in plan.acc] or None}
     s = plan.steps
 
     steps = {"seq": np.arange(len(s), dtype=np.int32), "kind": np.array([x.kind for x in s], dtype=object),
@@ -254,4 +277,12 @@ def plan_rows(plan: Plan) -> tuple[dict, dict]:
              "jnt_worlda": pa.array([None if x.q_worlda is None else x.q_worlda.tolist() for x in s], type=pa.list_(pa.float64())),
              "jnt_worldaworldz": pa.array([None if x.q_worldaworldz is None else x.q_worldaworldz.tolist() for x in s],
                                          type=pa.list_(pa.float64()))}
-    return row, steps
+    g = plan.segments
+    flat = lambda a: pa.array([np.asarray(a(x), dtype=np.float64).ravel().tolist() for x in g], type=pa.list_(pa.float64()))  # noqa: E731
+    segments = {"seq": np.arange(len(g), dtype=np.int32), "kind": np.array([x.kind for x in g], dtype=object),
+                "caption": np.array([x.caption for x in g], dtype=object), "step": np.array([x.step for x in g], dtype=np.int32),
+                "holding": np.array([x.holding for x in g], dtype=bool), "t0": np.array([x.t0 for x in g], dtype=np.float64),
+                "duration": np.array([x.duration for x in g], dtype=np.float64),
+                "method": np.array([x.method for x in g], dtype=object), "jaw": np.array([x.jaw for x in g], dtype=np.float64),
+                "t": flat(lambda x: x.traj.t), "q": flat(lambda x: x.traj.q), "qd": flat(lambda x: x.traj.qd)}
+    return row, steps, segments

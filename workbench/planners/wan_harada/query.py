@@ -59,20 +59,31 @@ class PoseQuery:
     def text(self) -> str:
         return f"{self.idfreetabletopplacement},{self.x:g},{self.y:g},{self.yaw:g}"
 
+    def text_degrees(self) -> str:
+        """`PLACEMENT,X,Y,YAW` with the yaw in degrees, as the command line takes it."""
+        return f"{self.idfreetabletopplacement},{self.x:g},{self.y:g},{math.degrees(self.yaw):.6g}"
+
     def as_dict(self) -> dict:
         return {"placement": self.idfreetabletopplacement, "x": self.x, "y": self.y, "yaw": self.yaw}
 
 
-def parse_pose(text: str, label: str = "pose") -> PoseQuery:
-    """`PLACEMENT,X,Y,YAW` (placement id, metres, metres, radians) as a PoseQuery; PlanningError on bad input."""
+def parse_pose(text: str, label: str = "pose", degrees: bool = False) -> PoseQuery:
+    """`PLACEMENT,X,Y,YAW` (placement id, metres, metres, radians; degrees with `degrees`, as on the command line,
+    where a yaw outside [-360, 360] is refused) as a PoseQuery (yaw in radians); PlanningError on bad input."""
+    unit = "deg" if degrees else "rad"
+    example = "1,0.5,0.1,45" if degrees else "1,0.5,0.1,0.785"
     parts = [p.strip() for p in str(text).split(",")]
     if len(parts) != 4:
-        raise PlanningError(f"{label} {text!r} must be PLACEMENT,X,Y,YAW (placement id, x and y in m, yaw in rad), e.g. 1,0.5,0.1,0.785")
+        raise PlanningError(f"{label} {text!r} must be PLACEMENT,X,Y,YAW (placement id, x and y in m, yaw in {unit}), e.g. {example}")
     try:
         pid = int(parts[0])
         x, y, yaw = (float(v) for v in parts[1:])
     except ValueError:
-        raise PlanningError(f"{label} {text!r}: PLACEMENT must be an integer id and X, Y, YAW numbers (m, m, rad)") from None
+        raise PlanningError(f"{label} {text!r}: PLACEMENT must be an integer id and X, Y, YAW numbers (m, m, {unit})") from None
+    if degrees:
+        if math.isfinite(yaw) and abs(yaw) > 360:
+            raise PlanningError(f"{label} {text!r}: yaw {yaw:g} deg is outside [-360, 360]; give the yaw in degrees, e.g. {example}")
+        yaw = math.radians(yaw)
     return check_query(PoseQuery(pid, x, y, yaw), label)
 
 

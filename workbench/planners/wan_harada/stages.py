@@ -35,6 +35,7 @@ from workbench.robots.collider import Collider, Scene, default_scene
 from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import WORLDA, IKOptions, iter_ik
 from workbench.robots.model import ROBOTS, Robot, RobotSpec, builtin_robot, get_robot
+from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
 from workbench.store import Store
 from workbench.store import robots as robot_sql
 from workbench.store import wan_harada as sql
@@ -229,6 +230,8 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
         gid = rrow["idgripper"]
         planner.rows = {"robot": rrow, "scene": stored, "object": orow,  # raw store rows, for the independent validator
                         "gripper": gripper_row(store, gid) if gid is not None else None}
+        planner.allowed = (AllowedPairs.from_json(rrow["allowed_pairs"]) if rrow.get("allowed_pairs")
+                           else allowed_pairs(robot))  # self-collision pairs of the robot row (older stores: computed)
         planner.ik.solver  # build the IK solver and its seed library now, not during the first query
         if cache is not None:
             cache.put(key, planner)
@@ -357,10 +360,10 @@ def scene_params(robot: Robot, scene: Scene, opts: IKOptions) -> dict:
 
 
 def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx: float = HANDX, worldz: float = WORLDZ,
-           opts: IKOptions = IKOptions(), workers: int | None = None, progress: bool = True,
+           opts: IKOptions = IKOptions(self_collide=True), workers: int | None = None, progress: bool = True,
            idtabletop: int | None = None, worlda: float = WORLDA) -> IKRun:
     """Compute (or reuse) the `ik` rows of every tabletop grip of `obj_name` for `robot` at the five poses of
-    `robots.ik.KINDS` (Section IV; `worlda` lifts the held object straight up)."""
+    `robots.ik.KINDS` (Section IV; `worlda` lifts the held object straight up), rejecting self-colliding solutions."""
 
     t0 = time.perf_counter()
     scene = scene or default_scene(robot.name)
@@ -372,7 +375,8 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
     grips = load_tabletop_grips(store, oid, idtabletop)
     pid = int(np.asarray(grips["idparamset"])) if "idparamset" in grips else int(idtabletop if idtabletop is not None else -1)
     ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
-    rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz, worlda)
+    rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz, worlda,
+                                          allowed_pairs(robot).to_json())
     done = robot_sql.stored_grips(store, rid, sid, kid)
 
     def skip(ix: np.ndarray) -> bool:
@@ -391,8 +395,8 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
 def ensure_ik(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
               workers: int | None = None, progress: bool = True, worlda: float = WORLDA) -> IKRun:
     """`run_ik` for a built-in robot (or URDF path) by name, with the signature `workbench build` expects."""
-    return run_ik(store, obj.name, get_robot(robot_name), None, handx, worldz, IKOptions(), workers, progress, idtabletop,
-                  worlda=worlda)
+    return run_ik(store, obj.name, get_robot(robot_name), None, handx, worldz, IKOptions(self_collide=True), workers, progress,
+                  idtabletop, worlda=worlda)
 
 
 DEMO_GRID = TabletopParams(x_min=0.35, x_max=0.65, nx=5, y_min=-0.2, y_max=0.2, ny=3, angles=8, max_grasps=60)
@@ -425,7 +429,8 @@ def choose_task(planner, seed: int = 0, tries: int = 40, grid: TabletopParams = 
 
 
 def save_plan(store: Store, plan: Plan) -> int:
-    """Store a plan and its steps (tables `plan`, `planstep`) in one transaction; returns idplan."""
+    """Store a plan, its steps and its timed motions (tables `plan`, `planstep`, `plansegment`) in one transaction;
+    returns idplan."""
     return sql.save_plan(store, *plan_rows(plan))
 
 

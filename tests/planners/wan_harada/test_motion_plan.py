@@ -1,0 +1,207 @@
+"""Executable regrasp plans on the demo store (issue 12): motions found and timed, checked by the independent
+trajectory validator; the old straight-interpolation demo plan is rejected; the held part never goes under the
+table; same seed, same trajectory."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from workbench.benchmarks.regrasp import random_pairs
+from workbench.errors import PlanningError
+from workbench.geometry.objects import load_object
+from workbench.planners.wan_harada.motions import ExecOptions, plan_executable
+from workbench.planners.wan_harada.plans import Plan
+from workbench.planners.wan_harada.stages import (
+    DEMO_GRID,
+    build_all,
+    choose_task,
+    load_planner,
+)
+from workbench.resources import bundled_objects
+from workbench.robots.timing import TimedSegment, Trajectory, time_line, within_limits
+from workbench.viewer.wan_harada import timed_frames
+
+FIXTURE = Path(__file__).parent / "data" / "demo_plan_straight.json"
+ACC = 3.0
+
+
+@pytest.fixture(scope="module")
+def planner(tmp_path_factory):
+    db = tmp_path_factory.mktemp("motion") / "regrasp.duckdb"
+    build_all(db, load_object(bundled_objects()["tube"]), "panda", tparams=DEMO_GRID, workers=2)
+    return load_planner(db, "tube", "panda")
+
+
+@pytest.fixture(scope="module")
+def validator(planner):
+    return planner.trajectory_validator(ACC)
+
+
+@pytest.fixture(scope="module")
+def demo_result(planner):
+    start, goal = choose_task(planner, 0)
+    return plan_executable(planner, start, goal, ExecOptions(acc=ACC))
+
+
+class FK:
+    """Pinocchio on the stored URDF text: TCP pose of a joint vector (independent of the planner's kinematics)."""
+
+    def __init__(self, planner):
+        row = planner.rows["robot"]
+        self.model = pin.buildModelFromXML(row["urdf"])
+        self.data = self.model.createData()
+        self.frame = self.model.getFrameId(row["tip_frame"])
+        self.idx = [self.model.joints[self.model.getJointId(j)].idx_q for j in row["joint_names"]]
+        self.base, self.mount = np.asarray(row["base"]).reshape(4, 4), np.asarray(row["mount"]).reshape(4, 4)
+
+    def __call__(self, q):
+        full = pin.neutral(self.model)
+        full[self.idx] = q
+        pin.framesForwardKinematics(self.model, self.data, full)
+        return self.base @ np.asarray(self.data.oMf[self.frame].homogeneous) @ self.mount
+
+
+def _straight_segments(plan: Plan, vlim) -> list[TimedSegment]:
+    """The motion today's demo animation showed: straight joint interpolation between the stored waypoints."""
+    segs, t0 = [], 0.0
+
+    def add(kind, step, a, b, holding):
+        nonlocal t0
+        a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+        tr = time_line(a, b, vlim, ACC) if np.abs(a - b).max() > 0 else Trajectory(np.array([0.0, 0.5]), np.stack([a, a]), np.zeros((2, len(a))))
+        segs.append(TimedSegment(kind, plan.steps[step].kind, step, holding, t0, tr))
+        t0 += tr.duration
+
+    for i, s in enumerate(plan.steps):
+        taking = s.kind in ("pick", "regrasp")
+        add("approach", i, s.q_retract, s.q_approach, not taking)
+        add("approach", i, s.q_approach, s.q_grasp, not taking)
+        add("gripper", i, s.q_grasp, s.q_grasp, taking)
+        add("retract", i, s.q_grasp, s.q_approach, taking)
+        add("retract", i, s.q_approach, s.q_retract, taking)
+        if i + 1 < len(plan.steps):
+            add("transfer" if taking else "transit", i, s.q_retract, plan.steps[i + 1].q_retract, taking)
+    return segs
+
+
+def test_old_demo_plan_is_rejected(planner, validator):
+    plan = Plan.from_dict(json.loads(FIXTURE.read_text())["plan"])
+    errors, knots = validator.check(plan, _straight_segments(plan, np.asarray(planner.robot.model.velocityLimit)))
+    assert knots > 100 and errors
+    text = " | ".join(errors)
+    assert "below the table" in text or "hits the table" in text or "hits the object" in text
+
+
+def test_demo_plan_is_executable_and_validates(planner, validator, demo_result):
+    res = demo_result
+    plan, motion = res.plan, res.motion
+    assert motion.ok and plan.regrasps >= 1
+    assert planner.ik_opts.self_collide and planner.ik.solver.self_collision is not None  # IK rows and queries
+    assert planner.rows["robot"]["allowed_pairs"]  # the allowed pairs are stored with the robot row
+    errors, knots = validator.check(plan, motion.segments)
+    assert errors == [], errors
+    assert knots > 200
+    kinds = {s.kind for s in motion.segments}
+    assert {"approach", "retract", "gripper", "transfer"} <= kinds
+    vlim = np.asarray(planner.robot.model.velocityLimit)
+    for s in motion.segments:
+        assert within_limits(s.traj, planner.robot.lower, planner.robot.upper, vlim, np.full(7, ACC)) == []
+    # the animation data (real speed, 30 fps) never shows the part under the table
+    fk = FK(planner)
+    frames = timed_frames(plan, motion.segments, fk, fps=30.0)
+    assert abs(frames[-1]["t"] - motion.duration) < 1 / 30 + 1e-9
+    verts = np.asarray(planner.object.mesh.vertices)
+    low = min(float((verts @ f["object"][:3, :3].T + f["object"][:3, 3])[:, 2].min()) for f in frames)
+    assert low > -1e-3
+    assert {f["caption"] for f in frames} >= {"pick", "transfer", "release", "regrasp", "place"}
+    # the plan's waypoints are the ones the motion goes through
+    grip = [s for s in motion.segments if s.kind == "gripper"]
+    assert len(grip) == len(plan.steps)
+    for s, step in zip(grip, plan.steps):
+        assert np.allclose(s.traj.q[0], step.q_grasp)
+
+
+def test_same_seed_same_trajectory(planner, demo_result):
+    start, goal = choose_task(planner, 0)
+    again = plan_executable(planner, start, goal, ExecOptions(acc=ACC))
+    a, b = demo_result.motion.segments, again.motion.segments
+    assert len(a) == len(b)
+    for x, y in zip(a, b):
+        assert x.kind == y.kind and np.array_equal(x.traj.t, y.traj.t) and np.array_equal(x.traj.q, y.traj.q)
+
+
+def test_held_part_never_under_the_table(planner, validator):
+    fk = FK(planner)
+    verts = np.asarray(planner.object.mesh.vertices)
+    done = 0
+    for start, goal in random_pairs(planner.placement_ids(), DEMO_GRID, 6, 3):
+        try:
+            res = plan_executable(planner, start, goal, ExecOptions(acc=ACC))
+        except PlanningError:
+            continue
+        done += 1
+        for seg in res.motion.segments:
+            if not seg.holding:
+                continue
+            grasp_inv = np.linalg.inv(res.plan.steps[seg.step].grasp)
+            for q in seg.traj.q:
+                obj = fk(q) @ grasp_inv
+                assert float((verts @ obj[:3, :3].T + obj[:3, 3])[:, 2].min()) > -1e-3
+        assert validator.check(res.plan, res.motion.segments)[0] == []
+    assert done >= 3
+
+
+def test_plan_with_motions_round_trips_json_and_store(planner, demo_result, tmp_path):
+    from workbench.planners.wan_harada.stages import save_plan
+    from workbench.store import Store
+    from workbench.store.wan_harada import load_plan_segments
+
+    plan = demo_result.plan
+    back = Plan.from_json(plan.to_json())
+    assert len(back.segments) == len(plan.segments) and np.isclose(back.duration, plan.duration)
+    assert np.array_equal(back.segments[5].traj.q, plan.segments[5].traj.q)
+    db = Path(planner.roadmap.key[0])
+    with Store(db) as store:
+        pid = save_plan(store, plan)
+        table = load_plan_segments(store, pid).to_pydict()
+    assert table["kind"] == [s.kind for s in plan.segments]
+    k = 5
+    q = np.asarray(table["q"][k]).reshape(len(table["t"][k]), -1)
+    assert np.array_equal(q, plan.segments[k].traj.q) and np.isclose(table["t0"][k], plan.segments[k].t0)
+
+
+def test_planner_plan_returns_executable_validated_plans(planner):
+    start, goal = choose_task(planner, 0)
+    plans = planner.plan(start, goal, alternatives=1)
+    assert plans and all(p.segments for p in plans)
+    for p in plans:
+        assert planner.validate(p, require_motion=True).ok
+    bare = planner.plan(start, goal, alternatives=0, motion=False)[0]
+    rep = planner.validate(bare, require_motion=True)
+    assert not rep.ok and "no timed motions" in rep.errors[-1]
+
+
+def test_unwrapping_whole_turns_keeps_poses_and_limits():
+    from workbench.planners.wan_harada.motions import StepLines, unwrap_lines
+    from workbench.robots.model import builtin_robot
+
+    ur5 = builtin_robot("ur5")
+    rng = np.random.default_rng(2)
+    q = rng.uniform(-0.1, 0.1, size=(3, 6))
+    q[:, 0], q[:, 3] = -np.abs(q[:, 0]), np.abs(q[:, 3])  # room for a turn up (joint 1) and down (joint 4)
+    lines = StepLines(q[0], q[1], q[2], [np.stack([q[0], q[1]]), np.stack([q[1], q[2]])], "grasp", q[2].copy(), q[2].copy(),
+                      [np.stack([q[2], q[2]]), np.stack([q[2], q[2]])])
+    near = q[0] + np.array([2 * np.pi, 0, 0, -2 * np.pi, 0, 0])  # the same pose, two joints a turn away
+    out = unwrap_lines(ur5, lines, lines.q_retract, near)
+    assert np.allclose(out.q_retract, near)
+    for a, b in ((out.q_retract, q[0]), (out.q_grasp, q[2])):
+        assert np.allclose(ur5.tcp_pose(a), ur5.tcp_pose(b), atol=1e-9)
+        assert (a >= ur5.lower).all() and (a <= ur5.upper).all()
+    # a turn that would leave the limits is not taken
+    far = lines.q_retract + np.array([4 * np.pi, 0, 0, 0, 0, 0])
+    assert np.isclose(unwrap_lines(ur5, lines, lines.q_retract, far).q_retract[0], q[0, 0] + 2 * np.pi)
