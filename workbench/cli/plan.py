@@ -10,9 +10,14 @@ from pathlib import Path
 
 from workbench.errors import PlanningError
 from workbench.planners.wan_harada.query import parse_pose
-from workbench.planners.wan_harada.stages import load_planner, save_plans
+from workbench.cli.ik import RETRACT
+from workbench.params import cli_bound, parse_number
+from workbench.planners.wan_harada.stages import load_planner, save_plans, stored_plan
 from workbench.store import Store
 from workbench.viewer.wan_harada import plan_scene
+
+
+ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -24,9 +29,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--robot", required=True, help="robot name in the store (panda, ur5, talos)")
     parser.add_argument("--start", required=True, metavar="P,X,Y,YAW", help="start pose, e.g. 1,0.45,-0.1,0.0")
     parser.add_argument("--goal", required=True, metavar="P,X,Y,YAW", help="goal pose, e.g. 3,0.55,0.1,1.57")
-    parser.add_argument("--alternatives", type=int, default=2, help="next best plans to list (default 2)")
-    parser.add_argument("--handx", type=float, default=None, help="use the IK run with this handx retraction (m)")
-    parser.add_argument("--worldz", type=float, default=None, help="use the IK run with this worldz retraction (m)")
+    parser.add_argument("--alternatives", type=parse_number(ALTERNATIVES, "--alternatives", 2), default=2, metavar="N",
+                        help=f"next best plans to list ({ALTERNATIVES.describe(True)}; default 2)")
+    parser.add_argument("--handx", type=parse_number(RETRACT, "--handx"), default=None, metavar="M",
+                        help="use the IK run with this handx retraction (m)")
+    parser.add_argument("--worldz", type=parse_number(RETRACT, "--worldz"), default=None, metavar="M",
+                        help="use the IK run with this worldz retraction (m)")
+    parser.add_argument("--allow-partial", action="store_true",
+                        help="plan on an IK stage that did not complete (killed part-way), with a warning; not stored")
     parser.add_argument("--json", default=None, metavar="OUT", help="write the plan (and its alternatives) as JSON")
     parser.add_argument("--html", default=None, metavar="OUT", help="write a meshcat animation of the plan as static HTML")
     parser.add_argument("--meshes", choices=["collision", "visual"], default="collision",
@@ -38,13 +48,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
 
     start, goal = parse_pose(args.start, "--start"), parse_pose(args.goal, "--goal")
-    if args.alternatives < 0:
-        raise PlanningError(f"--alternatives must be >= 0, got {args.alternatives}")
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
-    with Store(args.db) as store:
+    with Store(args.db, create=False) as store:
         t0 = time.perf_counter()
-        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz)
+        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial)
         t_load = time.perf_counter() - t0
         plans = planner.plan(start, goal, alternatives=args.alternatives)
         report_graph(planner, t_load)
@@ -53,8 +61,12 @@ def run(args: argparse.Namespace) -> int:
         for p in plans[1:]:
             print(f"alternative {p.rank}: {p.regrasps} regrasp(s), {p.transfers} transfer(s), grasps {' -> '.join(map(str, p.grasps))}")
         print("validation: every listed plan passes (FK from the URDF, limits, collisions, stability, grasp, goal)")
-        if not args.no_save:
-
+        known = [stored_plan(store, p) for p in plans]
+        if all(k is not None for k in known):
+            print(f"answered from the store: plan ids {known} in {args.db} (the same query; not stored again)")
+        elif getattr(planner, "partial", False):
+            print("not stored: planned on an incomplete IK stage (--allow-partial)")
+        elif not args.no_save:
             ids = save_plans(store, plans)
             print(f"stored plan ids {ids} in {args.db}")
     if args.json:

@@ -10,30 +10,24 @@ above the table.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from workbench.errors import WorkbenchError
+from workbench.errors import MeshError
 from workbench.geometry.objects import ObjectModel
+from workbench.params import Params, param
 from workbench.robots.gripper import Gripper
 
 
 @dataclass(frozen=True)
-class PlacementParams:
+class PlacementParams(Params):
     """min_stability: smallest accepted stability (distance to the support boundary over centre-of-mass height;
     0.1 is a tilt of 5.7 degrees). clearance: how far above the table (m) the hand must stay."""
 
-    min_stability: float = 0.1
-    clearance: float = 0.002
-
-    def __post_init__(self) -> None:
-        if not self.min_stability >= 0 or not self.clearance >= 0:
-            raise WorkbenchError(f"placement parameters must be non-negative, got {self}")
-
-    def as_dict(self) -> dict:
-        return asdict(self)
+    min_stability: float = param(0.1, ge=0, help="smallest stability (support margin over centre-of-mass height)")
+    clearance: float = param(0.002, ge=0, le=0.5, unit="m", help="hand clearance above the table")
 
 
 @dataclass(frozen=True)
@@ -80,6 +74,12 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     reach the threshold are then settled exactly: the object rests with that face's area-weighted normal down, the
     support polygon is the hull of all vertices touching the table, and stability = margin / height.
     """
+    pts = np.asarray(obj.mesh.vertices)
+    centred = pts - pts.mean(axis=0)
+    thickness = float(np.linalg.svd(centred, compute_uv=False)[-1]) / np.sqrt(max(len(pts), 1)) if len(pts) >= 4 else 0.0
+    if thickness <= 1e-9 * max(float(obj.mesh.scale), 1e-12):
+        raise MeshError(f"{obj.source or obj.name} is flat (every vertex lies in one plane): it has no volume to rest on the "
+                        f"table; give a mesh of a solid part (a closed surface, or a sheet with thickness)")
     hull = obj.mesh.convex_hull
     verts = np.asarray(hull.vertices)
     faces = np.asarray(hull.faces)
