@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import trimesh
 
-from workbench.errors import ParameterError, WorkbenchError
+from workbench.errors import ParameterError
 from workbench.geometry.collision import (
     bvh,
     collide_at_poses,

@@ -10,7 +10,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import trimesh
 
-from workbench.errors import RobotError
 from workbench.geometry.collision import (
     box,
     bvh,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from workbench.errors import StoreError
 from workbench.grasping.placements import PlacementParams, Placements
 from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams
 from workbench.store import Store
