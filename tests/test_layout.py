@@ -62,7 +62,7 @@ def test_the_tree_shows_the_architecture():
                    "widgets", "cli", "benchmarks"):
         assert (PACKAGE / folder / "__init__.py").exists(), folder
     flat = sorted(p.name for p in PACKAGE.glob("*.py"))
-    assert flat == ["__init__.py", "errors.py", "resources.py", "validation.py"], flat
+    assert flat == ["__init__.py", "errors.py", "params.py", "resources.py", "validation.py"], flat
 
 
 def test_no_import_cycles():

@@ -23,3 +23,15 @@ class StoreError(WorkbenchError):
 
 class PlanningError(WorkbenchError):
     """A query the planner cannot answer: unstable, unreachable or unconnected poses."""
+
+
+class ParameterError(WorkbenchError):
+    """A parameter outside its documented range, or parameters that contradict each other (workbench.params)."""
+
+
+class MemoryBudgetError(WorkbenchError):
+    """Work whose estimated memory is above the budget (workbench.params.check_memory)."""
+
+
+class PartialStageWarning(UserWarning):
+    """A consumer went on with a stage that did not complete (asked for with --allow-partial)."""

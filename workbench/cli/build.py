@@ -9,15 +9,16 @@ from pathlib import Path
 
 from workbench.cli import warn
 from workbench.cli.grasps import add_grasp_arguments, add_object_arguments, grasp_params
+from workbench.cli.ik import add_retraction_arguments
 from workbench.cli.placements import (
     add_placement_arguments,
     placement_params,
     roadmap_grasps_line,
 )
-from workbench.errors import WorkbenchError
+from workbench.errors import RobotError
 from workbench.geometry.objects import load_object
-from workbench.planners.wan_harada.stages import HANDX, WORLDZ, BuildResult, build_all
-from workbench.robots.ik import WORLDA
+from workbench.planners.wan_harada.stages import BuildResult, build_all
+from workbench.robots.model import ROBOTS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -26,11 +27,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_object_arguments(parser)
     parser.add_argument("--robot", required=True, help="robot: panda, ur5 or talos")
     parser.add_argument("--db", required=True, help="DuckDB store file (created when missing)")
-    parser.add_argument("--handx", type=float, default=HANDX, help=f"retraction along the approach axis (m, default {HANDX})")
-    parser.add_argument("--worldz", type=float, default=WORLDZ, help=f"retraction up along world z (m, default {WORLDZ})")
-    parser.add_argument("--worlda", type=float, default=WORLDA,
-                        help=f"lift of the held object straight up along world z (m, default {WORLDA})")
-    parser.add_argument("--workers", type=int, default=None, help="IK processes (default: all cores)")
+    add_retraction_arguments(parser)
     add_placement_arguments(parser)
     add_grasp_arguments(parser)
     parser.set_defaults(func=run)
@@ -38,13 +35,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
 
-    for label, v in (("--handx", args.handx), ("--worldz", args.worldz), ("--worlda", args.worlda)):
-        if not v >= 0:
-            raise WorkbenchError(f"{label} must be a distance >= 0 m, got {v}")
-    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
+    if args.robot not in ROBOTS:  # before any work; build has no --tip, so a URDF goes through `workbench ik`
+        raise RobotError(f"robot {args.robot!r} is not one of {', '.join(ROBOTS)}; build takes a built-in robot. For your own "
+                         f"URDF run `workbench grasps` and `workbench placements`, then `workbench ik` with the URDF and its tip frame")
     pparams, tparams = placement_params(args)
+    gparams = grasp_params(args)
+    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     t0 = time.perf_counter()
-    res = build_all(args.db, obj, args.robot, grasp_params(args), pparams, tparams, args.handx, args.worldz, args.workers,
+    res = build_all(args.db, obj, args.robot, gparams, pparams, tparams, args.handx, args.worldz, args.workers,
                     worlda=args.worlda)
     print_build(res, args.db, time.perf_counter() - t0)
     return 0

@@ -9,9 +9,11 @@ import time
 from pathlib import Path
 
 from workbench.cli.build import build_all, print_build
+from workbench.cli.ik import WORKERS
 from workbench.cli.plan import print_plan, report_graph, write_json, write_trajectory
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import load_object
+from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.stages import (
     DEMO_GRID,
     choose_task,
@@ -22,14 +24,18 @@ from workbench.resources import bundled_objects
 from workbench.store import Store
 from workbench.viewer.wan_harada import plan_scene
 
+SEED = cli_bound(0, 2**32 - 1, integer=True, help="seed")
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("demo", help="build a bundled object, plan a regrasp task and write the animation")
     parser.add_argument("--out", default="build/demo", help="output folder (default build/demo)")
     parser.add_argument("--object", default="tube", help="bundled object (default tube)")
     parser.add_argument("--robot", default="panda", help="robot (default panda)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the start/goal choice")
-    parser.add_argument("--workers", type=int, default=None, help="IK processes (default: all cores)")
+    parser.add_argument("--seed", type=parse_number(SEED, "--seed", 0), default=0, metavar="N",
+                        help=f"seed of the start/goal choice ({SEED.describe(True)}; default 0)")
+    parser.add_argument("--workers", type=parse_number(WORKERS, "--workers"), default=None, metavar="N",
+                        help=f"IK processes ({WORKERS.describe(True)}; default: all cores)")
     parser.set_defaults(func=run)
 
 
@@ -39,7 +45,10 @@ def run(args: argparse.Namespace) -> int:
     if args.object not in objs:
         raise WorkbenchError(f"unknown bundled object {args.object!r}; use one of {', '.join(objs)}")
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise WorkbenchError(f"--out {out} cannot be a folder ({exc.strerror}: {exc.filename}); give another --out") from None
     db = out / "regrasp.duckdb"
     t_all = time.perf_counter()
     obj = load_object(objs[args.object])

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING
 from workbench.benchmarks import print_table
 from workbench.cli.grasps import add_object_arguments
 from workbench.geometry.objects import load_object
+from workbench.params import add_param, cli_bound, parse_number
 from workbench.planners.phoka_sudsang.clustering import ClusterParams
 from workbench.planners.phoka_sudsang.contacts import ContactParams
 from workbench.planners.phoka_sudsang.stages import run_pipeline, tables
@@ -25,18 +26,20 @@ if TYPE_CHECKING:
 
 def add_finger_arguments(parser: argparse.ArgumentParser) -> None:
     """Contact, clustering and experiment parameters (Section IV's defaults)."""
-    d = ClusterParams()
-    parser.add_argument("--faces", type=int, default=ContactParams().faces,
-                        help="decimate the mesh to about this many triangles (0: keep it)")
-    parser.add_argument("--clusters", type=int, default=d.k, help="number of clusters k (= representatives)")
-    parser.add_argument("--friction", type=float, default=d.mu, help="Coulomb friction coefficient")
-    parser.add_argument("--pyramid", type=int, default=d.sides, help="sides m of the friction pyramid")
-    parser.add_argument("--torque-scale", choices=["none", "radius"], default=d.torque_scale,
+    add_param(parser, ContactParams, "faces", help="decimate the mesh to about this many triangles (0: keep it)")
+    for name in ("k", "mu", "sides"):
+        add_param(parser, ClusterParams, name)
+    parser.add_argument("--torque-scale", choices=["none", "radius"], default=ClusterParams().torque_scale,
                         help="torque arms of d(i, j): none (the paper's formula, metres) or divided by the object's radius")
-    parser.add_argument("--seed", type=int, default=d.seed, help="seed of k-means and of the sampled grasps and queries")
-    parser.add_argument("--samples", type=int, default=10000, help="sampled force-closure grasps (Table II)")
-    parser.add_argument("--picks", type=int, default=30, help="grasps picked per algorithm (Table II)")
-    parser.add_argument("--queries", type=int, default=30, help="random start/goal queries (Table III)")
+    add_param(parser, ClusterParams, "seed", help="seed of k-means and of the sampled grasps and queries")
+    for flag, default, bound in (("--samples", 10000, SAMPLES), ("--picks", 30, PICKS), ("--queries", 30, QUERIES)):
+        parser.add_argument(flag, type=parse_number(bound, flag, default), default=default, metavar="N",
+                            help=f"{bound.help} ({bound.describe(True)}; default {default})")
+
+
+SAMPLES = cli_bound(0, 1_000_000, integer=True, help="sampled force-closure grasps (Table II)")
+PICKS = cli_bound(0, 100_000, integer=True, help="grasps picked per algorithm (Table II)")
+QUERIES = cli_bound(0, 100_000, integer=True, help="random start/goal queries (Table III)")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -57,7 +60,6 @@ def run(args: argparse.Namespace) -> int:
 
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     params = ClusterParams(k=args.clusters, mu=args.friction, sides=args.pyramid, seed=args.seed, torque_scale=args.torque_scale)
-    params.friction.validate()
     t0 = time.perf_counter()
     r = run_pipeline(args.db, obj, ContactParams(faces=args.faces or None), params, args.samples, args.picks, args.queries,
                      progress=sys.stderr.isatty(), persistent=args.algorithm3 == "update")

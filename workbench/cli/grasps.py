@@ -10,48 +10,44 @@ import numpy as np
 from workbench.cli import warn
 from workbench.geometry.objects import load_object
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
+from workbench.params import add_param, cli_bound, from_cli, parse_number
 from workbench.planners.wan_harada.stages import ensure_grasps
 from workbench.robots.gripper import franka_hand
 from workbench.viewer.scenes import grasp_scene
+
+SCALE = cli_bound(0, 1e3, lo_open=True, help="the scale")
 
 
 def add_object_arguments(parser: argparse.ArgumentParser) -> None:
     """MESH, --scale/--units and --name, shared by the commands that load an object."""
     parser.add_argument("mesh", help="STL, OBJ or PLY file of the object")
     unit = parser.add_mutually_exclusive_group()
-    unit.add_argument("--scale", type=float, default=None, help="factor from the file's units to metres (e.g. 0.001)")
+    unit.add_argument("--scale", type=parse_number(SCALE, "--scale"), default=None, metavar="X",
+                      help=f"factor from the file's units to metres, e.g. 0.001 ({SCALE.describe(True)})")
     unit.add_argument("--units", choices=["m", "cm", "mm", "in"], default=None, help="the file's unit")
     parser.add_argument("--name", default=None, help="object name in the store (default: the file's stem)")
 
 
 def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
     """Grasp-planning parameters; angles in degrees, lengths in metres."""
-    d = GraspParams()
-    parser.add_argument("--tau-deg", type=float, default=float(np.degrees(d.tau)), help="facet normal threshold (degrees)")
-    parser.add_argument("--segmentation", choices=["over", "conventional"], default=d.segmentation)
-    parser.add_argument("--density", type=float, default=None, help="surface samples per square metre")
-    parser.add_argument("--neighbour-radius", type=float, default=d.neighbour_radius, help="near-neighbour filter radius (m)")
-    parser.add_argument("--dist-min", type=float, default=d.dist_min, help="min distance to the facet boundary (m)")
-    parser.add_argument("--dist-max", type=float, default=d.dist_max, help="max distance to the facet boundary (m)")
-    parser.add_argument("--parallel-deg", type=float, default=float(np.degrees(d.parallel_angle)), help="antiparallel tolerance (degrees)")
-    parser.add_argument("--com-max", type=float, default=d.com_max, help="max distance of the contact centre to the centre of mass (m)")
-    parser.add_argument("--rotations", type=int, default=d.rotations, help="hand rotations about the contact axis")
-    parser.add_argument("--seed", type=int, default=d.seed)
-    parser.add_argument("--contact-model", choices=["pads", "paper"], default=d.contact_model,
+    add_param(parser, GraspParams, "tau")
+    parser.add_argument("--segmentation", choices=["over", "conventional"], default=GraspParams().segmentation)
+    for name in ("density", "neighbour_radius", "dist_min", "dist_max", "parallel_angle", "com_max", "rotations", "seed"):
+        add_param(parser, GraspParams, name)
+    parser.add_argument("--contact-model", choices=["pads", "paper"], default=GraspParams().contact_model,
                         help="pads: each pad closes until it first touches (CONVENTIONS.md); paper: parallel facet pairs "
                              "and swept cylinders")
-    parser.add_argument("--friction", type=float, default=d.friction, help="pad friction coefficient (the cone of the pad model)")
-    parser.add_argument("--finger-clearance", type=float, default=d.finger_clearance,
-                        help="how far hand and fingers at the grasp's opening may reach into the object (m)")
+    for name in ("friction", "finger_clearance"):
+        add_param(parser, GraspParams, name)
     parser.add_argument("--fixed-lengths", action="store_true",
                         help="use --neighbour-radius, --dist-min/max and --com-max as given instead of scaling them "
-                             f"with the part (size sqrt(area / 6) over {d.reference_size * 1e3:.0f} mm)")
+                             f"with the part (size sqrt(area / 6) over {GraspParams().reference_size * 1e3:.0f} mm)")
 
 
 def grasp_params(args: argparse.Namespace) -> GraspParams:
-    return GraspParams(tau=float(np.radians(args.tau_deg)), segmentation=args.segmentation, density=args.density,
+    return GraspParams(tau=from_cli(GraspParams, "tau", args.tau_deg), segmentation=args.segmentation, density=args.density,
                        neighbour_radius=args.neighbour_radius, dist_min=args.dist_min, dist_max=args.dist_max,
-                       parallel_angle=float(np.radians(args.parallel_deg)), com_max=args.com_max,
+                       parallel_angle=from_cli(GraspParams, "parallel_angle", args.parallel_deg), com_max=args.com_max,
                        rotations=args.rotations, seed=args.seed, contact_model=args.contact_model,
                        friction=args.friction, finger_clearance=args.finger_clearance,
                        lengths="fixed" if args.fixed_lengths else "adaptive")

@@ -15,6 +15,7 @@ from scipy.spatial.transform import Rotation
 
 from workbench.cli import warn
 from workbench.errors import RobotError
+from workbench.params import add_param, cli_bound, parse_number
 from workbench.planners.wan_harada.stages import empty_stage, run_ik
 from workbench.robots.collider import Scene, default_scene
 from workbench.robots.ik import WORLDA, IKOptions
@@ -44,6 +45,24 @@ def _mount(text: str) -> np.ndarray:
     return out
 
 
+RETRACT = cli_bound(0, 1.0, unit="m", help="retraction distance")
+WORKERS = cli_bound(1, 1024, integer=True, help="IK processes")
+TABLETOP = cli_bound(1, None, integer=True, help="tabletop parameter set id")
+
+
+def add_retraction_arguments(p: argparse.ArgumentParser) -> None:
+    """--handx, --worldz, --worlda and --workers, shared by `ik` and `build`."""
+    p.add_argument("--handx", type=parse_number(RETRACT, "--handx", HANDX), default=HANDX, metavar="M",
+                   help=f"retraction along the hand ({RETRACT.describe(True)}; default {HANDX})")
+    p.add_argument("--worldz", type=parse_number(RETRACT, "--worldz", WORLDZ), default=WORLDZ, metavar="M",
+                   help=f"then up along world z ({RETRACT.describe(True)}; default {WORLDZ})")
+    p.add_argument("--worlda", type=parse_number(RETRACT, "--worlda", WORLDA), default=WORLDA, metavar="M",
+                   help=f"lift of the held object straight up along world z ({RETRACT.describe(True)}; default {WORLDA}); "
+                        f"then worldz more")
+    p.add_argument("--workers", type=parse_number(WORKERS, "--workers"), default=None, metavar="N",
+                   help=f"IK processes ({WORKERS.describe(True)}; default: all cores)")
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("ik", help="IK feasibility of every tabletop grip for a robot (paper Section IV: ik, ikret)")
     p.add_argument("--db", required=True, help="DuckDB store file")
@@ -53,13 +72,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tip", help="the arm's tip frame (required for a URDF path)")
     p.add_argument("--mount", help="tip frame to gripper TCP: x,y,z,roll,pitch,yaw (m, rad); default per robot")
     p.add_argument("--table", help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
-    p.add_argument("--table-thickness", type=float, default=None, help="table slab thickness (m)")
-    p.add_argument("--handx", type=float, default=HANDX, help=f"retraction along the hand (m, default {HANDX})")
-    p.add_argument("--worldz", type=float, default=WORLDZ, help=f"then up along world z (m, default {WORLDZ})")
-    p.add_argument("--worlda", type=float, default=WORLDA,
-                   help=f"lift of the held object straight up along world z (m, default {WORLDA}); then worldz more")
-    p.add_argument("--tabletop", type=int, default=None, help="tabletop parameter set id (default: the latest)")
-    p.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    add_param(p, Scene, "table_thickness", default=None)
+    add_retraction_arguments(p)
+    p.add_argument("--tabletop", type=parse_number(TABLETOP, "--tabletop"), default=None, metavar="ID",
+                   help="tabletop parameter set id (default: the latest)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--closed-form", action="store_true",
                    help="closed-form IK (all 8 branches) for arms with a spherical wrist, e.g. puma560, instead of the numerical solver")
@@ -77,7 +93,7 @@ def main(args: argparse.Namespace) -> int:
         scene = Scene(table_min=(t[0], t[1]), table_max=(t[2], t[3]),
                       table_thickness=scene.table_thickness if args.table_thickness is None else args.table_thickness,
                       workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
-    with Store(args.db) as store:
+    with Store(args.db, create=False) as store:
         opts = IKOptions(closed_form=args.closed_form, self_collide=True)
         run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, opts, args.workers,
                      progress=not args.no_progress, idtabletop=args.tabletop, worlda=args.worlda)

@@ -8,32 +8,72 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
+import re
 import sys
+import warnings
 
 from workbench.errors import WorkbenchError
+from workbench.params import BUDGET_ENV, parse_size
 
 COMMANDS = ("grasps", "placements", "ik", "build", "catalog", "plan", "fingers", "gptable", "gpplan", "demo", "bench")
 
 
+# A token such as -0.3,0.3,3 or -1e-3 is a value, not an option (no option of ours starts with a digit), so
+# `--y -0.3,0.3,3` parses as well as `--y=-0.3,0.3,3`.
+NEGATIVE = re.compile(r"^-\.?\d")
+
+
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE
+
     def error(self, message: str) -> None:  # one line, status 2, like WorkbenchError
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
+def _budget(text: str) -> int:
+    try:
+        return parse_size(text)
+    except WorkbenchError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(prog="workbench", description="Regrasp planning workbench.")
+    parser = _Parser(prog="workbench", description="Regrasp planning workbench. Negative values parse as they are "
+                                                   "(--y -0.3,0.3,3) or joined with = (--y=-0.3,0.3,3).")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name in COMMANDS:
         importlib.import_module(f"workbench.cli.{name}").register(sub)
+    for child in sub.choices.values():
+        child.add_argument("--memory-budget", type=_budget, default=None, metavar="SIZE",
+                           help=f"largest memory a step may plan to use, e.g. 4GiB (default: half this machine's "
+                                f"memory, or {BUDGET_ENV}); larger work is refused before it starts")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Run one command; returns its exit status (2 for bad input, argparse's refusals included)."""
+    try:
+        args = build_parser().parse_args(argv)
+    except SystemExit as exc:  # argparse: --help (0) or a refused option (2, one line already printed)
+        return exc.code if isinstance(exc.code, int) else 0
+
+    def one_line(message, category, *_args, **_kwargs) -> None:  # warnings: one line each, no source excerpt
+        print(f"workbench {args.command}: warning: {message}", file=sys.stderr)
+
+    warnings.showwarning = one_line
+    if getattr(args, "memory_budget", None):
+        os.environ[BUDGET_ENV] = str(args.memory_budget)  # inherited by worker processes
     try:
         return int(args.func(args) or 0)
     except WorkbenchError as exc:
         print(f"workbench {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except MemoryError:
+        print(f"workbench {args.command}: error: out of memory; lower the sizes of this run (grid, angles, rotations, "
+              f"density) or give --memory-budget below the free memory", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"workbench {args.command}: interrupted; the store keeps only completed stages", file=sys.stderr)

@@ -8,6 +8,7 @@ import time
 
 from workbench.cli import warn
 from workbench.grasping.placements import PlacementParams
+from workbench.params import add_param, bounds, cli_bound, parse_number
 from workbench.planners.wan_harada.stages import (
     empty_stage,
     ensure_placements,
@@ -21,23 +22,45 @@ from workbench.store.grasps import latest_grasp_paramset
 
 def add_placement_arguments(parser: argparse.ArgumentParser) -> None:
     """Stability and table-grid options (metres; the grid is in the world frame, table top at z = 0)."""
-    p, t = PlacementParams(), TabletopParams()
-    parser.add_argument("--min-stability", type=float, default=p.min_stability,
-                        help="smallest stability (support margin / centre-of-mass height)")
-    parser.add_argument("--clearance", type=float, default=p.clearance, help="hand clearance above the table (m)")
-    parser.add_argument("--x", type=_range, default=(t.x_min, t.x_max, t.nx), metavar="MIN,MAX,N", help="grid along x")
-    parser.add_argument("--y", type=_range, default=(t.y_min, t.y_max, t.ny), metavar="MIN,MAX,N", help="grid along y")
-    parser.add_argument("--angles", type=int, default=t.angles, help="rotations about z (the angle table)")
-    parser.add_argument("--max-grasps", type=int, default=0,
-                        help="cap the free-air grasps carried into the roadmap, for a quick look (default 0: all, as the paper)")
+    t = TabletopParams()
+    add_param(parser, PlacementParams, "min_stability")
+    add_param(parser, PlacementParams, "clearance")
+    for axis, lo, hi, n in (("x", t.x_min, t.x_max, t.nx), ("y", t.y_min, t.y_max, t.ny)):
+        parser.add_argument(f"--{axis}", type=_grid(axis), default=(lo, hi, n), metavar="MIN,MAX,N",
+                            help=f"grid along {axis}: MIN and MAX in [-10, 10] m, N positions in [1, 1000] "
+                                 f"(default {lo:g},{hi:g},{n}; negative values parse: --{axis} -0.3,0.3,3)")
+    add_param(parser, TabletopParams, "angles")
+    parser.add_argument("--max-grasps", type=parse_number(MAX_GRASPS, "--max-grasps"), default=0, metavar="N",
+                        help=f"cap the free-air grasps carried into the roadmap, for a quick look ({MAX_GRASPS.describe(True)}; "
+                             f"default 0: all, as the paper)")
 
 
-def _range(text: str) -> tuple[float, float, int]:
-    try:
-        lo, hi, n = text.split(",")
-        return float(lo), float(hi), int(n)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected MIN,MAX,N such as 0.35,0.65,7, got {text!r}") from None
+MAX_GRASPS = cli_bound(0, 1_000_000, integer=True, help="free-air grasps carried into the roadmap")
+
+
+def _grid(axis: str):
+    """An argparse type for MIN,MAX,N along `axis`, checked with TabletopParams' declared ranges."""
+    b = bounds(TabletopParams)
+    lo_b, hi_b, n_b = b[f"{axis}_min"][0], b[f"{axis}_max"][0], b[f"n{axis}"][0]
+
+    def parse(text: str) -> tuple[float, float, int]:
+        parts = text.split(",")
+        if len(parts) != 3:
+            raise argparse.ArgumentTypeError(f"expected MIN,MAX,N such as 0.35,0.65,7, got {text!r}")
+        try:
+            lo, hi, n = float(parts[0]), float(parts[1]), float(parts[2])
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected MIN,MAX,N numbers such as 0.35,0.65,7, got {text!r}") from None
+        for name, bound, v in (("MIN", lo_b, lo), ("MAX", hi_b, hi), ("N", n_b, n)):
+            problem = bound.problem(v)
+            if problem is not None:
+                raise argparse.ArgumentTypeError(f"{name} {v:g} in {text!r} {problem}: {bound.help} must be {bound.describe()}")
+        if lo > hi:
+            raise argparse.ArgumentTypeError(f"MIN {lo:g} is above MAX {hi:g} in {text!r}; give MIN,MAX,N with MIN <= MAX")
+        return lo, hi, int(n)
+
+    parse.__name__ = "grid"
+    return parse
 
 
 def placement_params(args: argparse.Namespace) -> tuple[PlacementParams, TabletopParams]:
@@ -58,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
     pparams, tparams = placement_params(args)
     t0 = time.perf_counter()
-    with Store(args.db) as store:
+    with Store(args.db, create=False) as store:
         oid, obj = get_object(store, args.object)
         result = ensure_placements(store, oid, obj, latest_grasp_paramset(store, oid), franka_hand(), pparams, tparams)
         reason = empty_stage(store, args.object)

@@ -11,14 +11,23 @@ import time
 from pathlib import Path
 
 from workbench.cli import warn
+from workbench.cli.ik import RETRACT
 from workbench.errors import PlanningError
+from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
 from workbench.planners.wan_harada.query import parse_pose
-from workbench.planners.wan_harada.stages import empty_stage, load_planner, save_plans
+from workbench.planners.wan_harada.stages import (
+    empty_stage,
+    load_planner,
+    save_plans,
+    stored_plan,
+)
 from workbench.robots.motion import MotionOptions
 from workbench.robots.timing import to_csv, to_json
 from workbench.store import Store
 from workbench.viewer.wan_harada import plan_scene
+
+ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -33,9 +42,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--robot", required=True, help="robot name in the store (panda, ur5, talos)")
     parser.add_argument("--start", required=True, metavar="P,X,Y,YAW", help="start pose, yaw in degrees, e.g. 1,0.45,-0.1,0")
     parser.add_argument("--goal", required=True, metavar="P,X,Y,YAW", help="goal pose, yaw in degrees, e.g. 3,0.55,0.1,90")
-    parser.add_argument("--alternatives", type=int, default=2, help="next best plans to list (default 2)")
-    parser.add_argument("--handx", type=float, default=None, help="use the IK run with this handx retraction (m)")
-    parser.add_argument("--worldz", type=float, default=None, help="use the IK run with this worldz retraction (m)")
+    parser.add_argument("--alternatives", type=parse_number(ALTERNATIVES, "--alternatives", 2), default=2, metavar="N",
+                        help=f"next best plans to list ({ALTERNATIVES.describe(True)}; default 2)")
+    parser.add_argument("--handx", type=parse_number(RETRACT, "--handx"), default=None, metavar="M",
+                        help="use the IK run with this handx retraction (m)")
+    parser.add_argument("--worldz", type=parse_number(RETRACT, "--worldz"), default=None, metavar="M",
+                        help="use the IK run with this worldz retraction (m)")
+    parser.add_argument("--allow-partial", action="store_true",
+                        help="plan on an IK stage that did not complete (killed part-way), with a warning; not stored")
     parser.add_argument("--json", default=None, metavar="OUT", help="write the plan (and its alternatives) as JSON")
     parser.add_argument("--html", default=None, metavar="OUT", help="write a meshcat animation of the plan as static HTML")
     parser.add_argument("--meshes", choices=["collision", "visual"], default="collision",
@@ -54,20 +68,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
 
     start, goal = parse_pose(args.start, "--start", degrees=True), parse_pose(args.goal, "--goal", degrees=True)
-    if args.alternatives < 0:
-        raise PlanningError(f"--alternatives must be >= 0, got {args.alternatives}")
     opts = exec_options(args)
     if args.trajectory and Path(args.trajectory).suffix.lower() not in (".csv", ".json"):
         raise PlanningError(f"--trajectory {args.trajectory!r} must end in .csv or .json")
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
-    with Store(args.db) as store:
+    with Store(args.db, create=False) as store:
         reason = empty_stage(store, args.object, args.robot)
         if reason:
             warn(f"no plan for {args.object}: nothing to plan with; stage {reason}")
             return 0
         t0 = time.perf_counter()
-        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz)
+        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial)
         t_load = time.perf_counter() - t0
         plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
         report_graph(planner, t_load)
@@ -79,8 +91,12 @@ def run(args: argparse.Namespace) -> int:
         print("validation: every listed plan passes (FK from the URDF, limits, collisions, stability, grasp, goal; its timed "
               "trajectory at every knot: position, velocity and acceleration limits, self-collision, arm, hand and part "
               "against the table, arm and hand against the resting part)")
-        if not args.no_save:
-
+        known = [stored_plan(store, p) for p in plans]
+        if all(k is not None for k in known):
+            print(f"answered from the store: plan ids {known} in {args.db} (the same query; not stored again)")
+        elif getattr(planner, "partial", False):
+            print("not stored: planned on an incomplete IK stage (--allow-partial)")
+        elif not args.no_save:
             ids = save_plans(store, plans)
             print(f"stored plan ids {ids} in {args.db}")
     if args.json:

@@ -106,13 +106,18 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         raise MeshError(f"{label} has {bad} vertices with NaN or infinite coordinates; repair the file")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshError(f"{label} has faces that index missing vertices; repair the file")
+    # size first, on the referenced vertices: merging vertices of a sub-micron part would make every face degenerate
+    extent = float(np.ptp(vertices[np.unique(faces)] * scale, axis=0).max())
+    if extent > MAX_EXTENT or (MIN_EXTENT > extent > 0):
+        raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
+                        f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {_scale_hint(extent, scale)}")
     mesh = trimesh.Trimesh(vertices * scale, faces, process=False, validate=False)
     mesh, repairs = repair(mesh, label)
     for note in repairs:
         warnings.warn(f"{label}: {note}", MeshWarning, stacklevel=3)
     extent = float(mesh.extents.max())
     if extent > MAX_EXTENT or extent < MIN_EXTENT:
-        hint = _scale_hint(extent)
+        hint = _scale_hint(extent, scale)
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
                         f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {hint}")
     if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0:
@@ -126,10 +131,16 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
                        repairs=tuple(repairs))
 
 
-def _scale_hint(extent: float) -> str:
-    for unit, factor in (("mm", 0.001), ("cm", 0.01), ("in", 0.0254)):
-        if MIN_EXTENT <= extent * factor <= MAX_EXTENT and extent > MAX_EXTENT:
-            return f"if the file is in {unit}, pass scale={factor:g} (units='{unit}')"
+def _scale_hint(extent: float, scale: float = 1.0) -> str:
+    """The unit (or scale) that makes a part `extent` m across at `scale` gripper-sized, for the error message."""
+    raw = extent / scale  # in the file's own units
+    units = (("mm", 0.001), ("cm", 0.01), ("in", 0.0254), ("m", 1.0)) if extent > MAX_EXTENT else \
+        (("m", 1.0), ("cm", 0.01), ("in", 0.0254), ("mm", 0.001))
+    for unit, factor in units:
+        if factor != scale and MIN_EXTENT <= raw * factor <= MAX_EXTENT:
+            return f"if the file is in {unit}, pass --units {unit} (scale={factor:g})"
     if extent < MIN_EXTENT:
-        return "if the file is in metres already it is too small; otherwise pass the right scale"
-    return "pass the scale that converts the file's units to metres"
+        need = MIN_EXTENT / raw
+        return (f"no unit makes it at least {MIN_EXTENT * 1000:g} mm across: it would take --scale {need:.3g} or more; "
+                f"check the file's units, or the part is too small to grip")
+    return f"it would take --scale {MAX_EXTENT / raw:.3g} or less; pass the scale that converts the file's units to metres"

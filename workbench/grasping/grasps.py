@@ -21,12 +21,12 @@ fixed values as given.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
 
-from workbench.errors import WorkbenchError
+from workbench.errors import ParameterError
 from workbench.geometry.collision import (
     boxes_collide,
     bvh,
@@ -38,11 +38,14 @@ from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
 from workbench.grasping.pads import axis_frames, first_touches
+from workbench.params import Params, check_memory, param
 from workbench.robots.gripper import Gripper
+
+DEG = 180.0 / np.pi  # radians in the library, degrees on the command line
 
 
 @dataclass(frozen=True)
-class GraspParams:
+class GraspParams(Params):
     """Parameters of grasp planning (SI units, angles in radians).
 
     tau: facet normal threshold (18 degrees, as the paper's code). segmentation: "over" or "conventional".
@@ -59,46 +62,42 @@ class GraspParams:
     facet normals within this angle (None: tau/2; 0: every facet sample, see `distinct_axes`).
     """
 
-    tau: float = float(np.radians(18.0))
+    tau: float = param(float(np.radians(18.0)), gt=0, lt=np.pi / 2, unit="rad", help="facet normal threshold",
+                       flag="--tau-deg", cli_scale=DEG, cli_unit="deg")
     segmentation: str = "over"
-    merge_angle: float | None = None
-    density: float | None = None
-    neighbour_radius: float = 0.010
-    dist_min: float = 0.002
-    dist_max: float = 0.020
-    parallel_angle: float = float(np.radians(10.0))
-    com_max: float = 0.050
-    rotations: int = 8
-    seed: int = 0
+    merge_angle: float | None = param(None, ge=0, lt=np.pi / 2, optional=True, unit="rad",
+                                      help="over-segmentation seed skip angle (0: every triangle seeds)", cli_scale=DEG,
+                                      cli_unit="deg")
+    density: float | None = param(None, gt=0, le=1e9, optional=True, unit="per m^2", help="surface samples per square metre")
+    neighbour_radius: float = param(0.010, ge=0, le=0.1, unit="m", help="near-neighbour filter radius (0: no filter)")
+    dist_min: float = param(0.002, ge=0, le=0.1, unit="m", help="min distance to the facet boundary")
+    dist_max: float = param(0.020, ge=0, le=0.5, unit="m", help="max distance to the facet boundary")
+    parallel_angle: float = param(float(np.radians(10.0)), ge=0, lt=np.pi / 2, unit="rad", help="antiparallel tolerance",
+                                  flag="--parallel-deg", cli_scale=DEG, cli_unit="deg")
+    com_max: float = param(0.050, gt=0, le=2.0, unit="m", help="max distance of the contact centre to the centre of mass")
+    rotations: int = param(8, ge=1, le=360, integer=True, help="hand rotations about the contact axis")
+    seed: int = param(0, ge=0, le=2**32 - 1, integer=True, help="sampling seed")
     contact_model: str = "pads"
-    friction: float | None = 0.3
-    finger_clearance: float = 5e-4
+    friction: float | None = param(0.3, ge=0, le=10.0, optional=True, help="pad friction coefficient (the cone of the pad model)")
+    finger_clearance: float = param(5e-4, ge=0, le=0.01, unit="m",
+                                    help="how far hand and fingers at the grasp's opening may reach into the object")
     lengths: str = "adaptive"
-    reference_size: float = 0.06
-    axis_angle: float | None = None
+    reference_size: float = param(0.06, gt=0, le=2.0, unit="m", help="part size at which the fixed lengths apply unscaled")
+    axis_angle: float | None = param(None, ge=0, lt=np.pi, optional=True, unit="rad",
+                                     help="one jaw axis per sample and group of facet normals within this angle",
+                                     cli_scale=DEG, cli_unit="deg")
 
-    def __post_init__(self) -> None:
-        checks = {
-            "tau": 0 < self.tau < np.pi / 2,
-            "neighbour_radius": self.neighbour_radius >= 0,
-            "dist_min/dist_max": 0 <= self.dist_min <= self.dist_max,
-            "parallel_angle": 0 <= self.parallel_angle < np.pi / 2,
-            "com_max": self.com_max > 0,
-            "rotations": self.rotations >= 1,
-            "density": self.density is None or self.density > 0,
-            "contact_model": self.contact_model in ("pads", "paper"),
-            "friction": self.friction is None or self.friction >= 0,
-            "finger_clearance": self.finger_clearance >= 0,
-            "lengths": self.lengths in ("adaptive", "fixed"),
-            "reference_size": self.reference_size > 0,
-            "axis_angle": self.axis_angle is None or 0 <= self.axis_angle < np.pi,
-        }
-        bad = [k for k, ok in checks.items() if not ok]
-        if bad:
-            raise WorkbenchError(f"invalid grasp parameters: {', '.join(bad)} out of range ({self})")
-
-    def as_dict(self) -> dict:
-        return asdict(self)
+    def check(self) -> None:
+        self.require(self.dist_min <= self.dist_max, ("dist_min", "dist_max"), "the distance filter needs dist_min <= dist_max")
+        self.require(self.neighbour_radius > 0 or self.density is not None, ("neighbour_radius", "density"),
+                     "radius 0 turns the neighbour filter off and leaves the default density (8 per radius^2) undefined; "
+                     "give a radius > 0 such as 0.01, or a --density")
+        if self.segmentation not in ("over", "conventional"):
+            raise ParameterError(f"segmentation {self.segmentation!r} must be 'over' or 'conventional'")
+        if self.contact_model not in ("pads", "paper"):
+            raise ParameterError(f"contact_model {self.contact_model!r} must be 'pads' or 'paper'")
+        if self.lengths not in ("adaptive", "fixed"):
+            raise ParameterError(f"lengths {self.lengths!r} must be 'adaptive' or 'fixed'")
 
     @property
     def friction_coefficient(self) -> float:
@@ -210,7 +209,12 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
     t0 = time.perf_counter()
     radius = lengths["neighbour_radius"]
     density = params.density if params.density is not None else 8.0 / max(radius, 1e-9) ** 2
-    samples = distribute(mesh, facets, sample_count(mesh, density, radius), radius, 0.0, lengths["dist_max"], params.seed)
+    n = sample_count(mesh, density, radius)
+    # the neighbour filter's pairs: n^2 pi r^2 / (2 area) for uniform samples, 16 bytes each, a few copies
+    pairs_est = n * n * np.pi * radius**2 / (2.0 * max(mesh.area, 1e-12))
+    check_memory(48.0 * pairs_est + 200.0 * n, f"sampling {n:,} points on {obj.name} ({mesh.area * 1e4:.3g} cm^2)",
+                 "lower --density or --neighbour-radius")
+    samples = distribute(mesh, facets, n, radius, 0.0, lengths["dist_max"], params.seed)
     margin = boundary_margin(facets, lengths["dist_min"])
     samples = Samples(**{**samples.__dict__, "pair_ok": samples.pair_ok & (samples.pair_dist >= margin[samples.pair_facet])})
     timings["sampling"] = time.perf_counter() - t0
@@ -360,6 +364,8 @@ def _paper(obj, gripper, params, lengths, facets, samples, margin, counts, timin
     counts.update(contact_pairs=int(len(pairs)), pairs_width=int(pairs.width_ok.sum()),
                   pairs_com=int((pairs.width_ok & pairs.com_ok).sum()), pairs_level1=int(level1.sum()))
     live = np.flatnonzero(level1)
+    check_memory(3 * 128.0 * len(live) * params.rotations,
+                 f"{len(live):,} contact pairs times {params.rotations} hand rotations", "lower --rotations or --density")
     angles = 2 * np.pi * np.arange(params.rotations) / params.rotations
     poses = grasp_poses(pairs.point0[live], pairs.point1[live], angles)
     cand_pair = np.repeat(live, params.rotations)

@@ -11,39 +11,35 @@ above the table.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial import ConvexHull
 
-from workbench.errors import WorkbenchError
+from workbench.errors import MeshError
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.supports import coplanar_groups, stabilities, support_stability
+from workbench.params import Params, param
 from workbench.robots.gripper import Gripper
 
 
 @dataclass(frozen=True)
-class PlacementParams:
+class PlacementParams(Params):
     """min_stability: smallest accepted stability (distance to the support boundary over centre-of-mass height;
     0.1 is a tilt of 5.7 degrees). clearance: how far above the table (m) the hand must stay. coplanar_distance,
     coplanar_angle: hull faces within 0.5 mm of a support's plane and 1 degree of its normal merge into one candidate
     support. support_tolerance: once settled, the hull vertices within 0.1 mm of the table form the support polygon
     (the plan validator's flatness tolerance)."""
 
-    min_stability: float = 0.1
-    clearance: float = 0.002
-    coplanar_distance: float = 5e-4
-    coplanar_angle: float = float(np.radians(1.0))
-    support_tolerance: float = 1e-4
-
-    def __post_init__(self) -> None:
-        if not (self.min_stability >= 0 and self.clearance >= 0 and self.coplanar_distance >= 0
-                and self.support_tolerance >= 0
-                and 0 <= self.coplanar_angle < np.pi / 2):
-            raise WorkbenchError(f"placement parameters must be non-negative, got {self}")
-
-    def as_dict(self) -> dict:
-        return asdict(self)
+    min_stability: float = param(0.1, ge=0, help="smallest stability (support margin over centre-of-mass height)")
+    clearance: float = param(0.002, ge=0, le=0.5, unit="m", help="hand clearance above the table")
+    coplanar_distance: float = param(5e-4, ge=0, le=0.05, unit="m",
+                                     help="convex-hull faces within this distance of a support plane merge into it")
+    coplanar_angle: float = param(float(np.radians(1.0)), ge=0, lt=np.pi / 2, unit="rad",
+                                  help="convex-hull faces within this angle of a support plane merge into it",
+                                  cli_scale=180.0 / np.pi, cli_unit="deg")
+    support_tolerance: float = param(1e-4, ge=0, le=0.01, unit="m",
+                                     help="hull vertices within this height of the table support the part")
 
 
 @dataclass(frozen=True)
@@ -93,6 +89,12 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     hull vertices within `support_tolerance` (0.1 mm, the plan validator's flatness tolerance) of the table, and its
     stability is margin / height on that polygon (Section VI).
     """
+    pts = np.asarray(obj.mesh.vertices)
+    centred = pts - pts.mean(axis=0)
+    thickness = float(np.linalg.svd(centred, compute_uv=False)[-1]) / np.sqrt(max(len(pts), 1)) if len(pts) >= 4 else 0.0
+    if thickness <= 1e-9 * max(float(obj.mesh.scale), 1e-12):
+        raise MeshError(f"{obj.source or obj.name} is flat (every vertex lies in one plane): it has no volume to rest on the "
+                        f"table; give a mesh of a solid part (a closed surface, or a sheet with thickness)")
     hull = obj.mesh.convex_hull
     verts = np.asarray(hull.vertices)
     groups, normals = coplanar_groups(hull, params.coplanar_distance, params.coplanar_angle)

@@ -10,7 +10,6 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import trimesh
 
-from workbench.errors import RobotError
 from workbench.geometry.collision import (
     box,
     bvh,
@@ -19,29 +18,28 @@ from workbench.geometry.collision import (
     pinocchio_geometry,
     set_pose,
 )
+from workbench.params import Params, param
 from workbench.robots.chain import forward
 from workbench.robots.model import Robot
 
 
 @dataclass(frozen=True)
-class Scene:
+class Scene(Params):
     """The table in the world (its top is z = 0) and the workspace box for the pre-filter, in metres.
 
     `table_min`/`table_max` are the table top's x-y corners; the slab is `table_thickness` thick.
     `workspace_min`/`workspace_max` bound the TCP position of poses worth solving."""
 
-    table_min: tuple[float, float] = (-0.3, -0.8)
-    table_max: tuple[float, float] = (1.0, 0.8)
-    table_thickness: float = 0.05
-    workspace_min: tuple[float, float, float] = (-1.5, -1.5, 0.0)
-    workspace_max: tuple[float, float, float] = (1.5, 1.5, 1.5)
+    table_min: tuple[float, float] = param((-0.3, -0.8), ge=-10, le=10, unit="m", help="table corner (x, y)", flag="--table")
+    table_max: tuple[float, float] = param((1.0, 0.8), ge=-10, le=10, unit="m", help="table corner (x, y)", flag="--table")
+    table_thickness: float = param(0.05, gt=0, le=1, unit="m", help="table slab thickness")
+    workspace_min: tuple[float, float, float] = param((-1.5, -1.5, 0.0), ge=-10, le=10, unit="m", help="workspace box corner")
+    workspace_max: tuple[float, float, float] = param((1.5, 1.5, 1.5), ge=-10, le=10, unit="m", help="workspace box corner")
 
-    def __post_init__(self) -> None:
-        vals = np.array([*self.table_min, *self.table_max, self.table_thickness, *self.workspace_min, *self.workspace_max], dtype=float)
-        if not np.isfinite(vals).all():
-            raise RobotError(f"scene has NaN or infinite values: {self}")
-        if self.table_max[0] <= self.table_min[0] or self.table_max[1] <= self.table_min[1] or self.table_thickness <= 0:
-            raise RobotError(f"scene table is empty: min {self.table_min}, max {self.table_max}, thickness {self.table_thickness}")
+    def check(self) -> None:
+        self.require(len(self.table_min) == 2 and len(self.table_max) == 2 and self.table_max[0] > self.table_min[0]
+                     and self.table_max[1] > self.table_min[1], ("table_min", "table_max"),
+                     "the table is empty; give XMIN,YMIN,XMAX,YMAX with min < max")
 
     def as_dict(self) -> dict:
         return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}

@@ -40,6 +40,7 @@ from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
 from workbench.errors import RobotError
+from workbench.params import Params, param
 from workbench.robots.analytic import analytic_ik, nearest_branch
 from workbench.robots.analytic import solve as analytic_solve
 from workbench.robots.chain import forward, solve_ik
@@ -53,7 +54,7 @@ WORLDA = 0.05  # default lift of the held object straight up (m), the paper's ik
 
 
 @dataclass(frozen=True)
-class IKOptions:
+class IKOptions(Params):
     """Solver settings (they change the rows, so they are stored with the scene).
 
     tol_pos (m) and tol_rot (rad): convergence; iters_warm/iters_seed: LM iterations from a warm start and
@@ -66,17 +67,17 @@ class IKOptions:
     closed_form: solve with the closed form of spherical-wrist arms (`workbench.robots.analytic`, all 8 branches,
     Tournassoud et al. 1987 Section 5.2) instead of Levenberg-Marquardt; the seeds then only pick the nearest branch."""
 
-    tol_pos: float = 1e-4
-    tol_rot: float = 1e-3
-    iters_warm: int = 60
-    iters_seed: int = 300
-    seeds: int = 5
-    seed_pool: int = 24
-    seed_spread: float = 1.0
-    library: int = 32768
-    chunk: int = 4096
-    lane: int = 16
-    seed: int = 0
+    tol_pos: float = param(1e-4, gt=0, le=0.01, unit="m", help="position tolerance")
+    tol_rot: float = param(1e-3, gt=0, le=0.1, unit="rad", help="rotation tolerance")
+    iters_warm: int = param(60, ge=1, le=10_000, integer=True, help="LM iterations from a warm start")
+    iters_seed: int = param(300, ge=0, le=100_000, integer=True, help="LM iterations from a library seed")
+    seeds: int = param(5, ge=0, le=1000, integer=True, help="library seeds tried after the warm start")
+    seed_pool: int = param(24, ge=1, le=100_000, integer=True, help="nearest library poses the seeds are picked from")
+    seed_spread: float = param(1.0, ge=0, le=np.pi, unit="rad", help="smallest angle between picked seeds")
+    library: int = param(32768, ge=1, le=10_000_000, integer=True, help="seed library size")
+    chunk: int = param(4096, ge=1, le=10_000_000, integer=True, help="grips per parallel task (resume unit)")
+    lane: int = param(16, ge=1, le=100_000, integer=True, help="grips per warm-start lane")
+    seed: int = param(0, ge=0, le=2**32 - 1, integer=True, help="RNG seed")
     collide: bool = True
     closed_form: bool = False
     self_collide: bool = False

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import signal
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
@@ -20,41 +22,91 @@ import numpy as np
 import pyarrow as pa
 
 from workbench.errors import StoreError
+from workbench.store.identity import (
+    APPLICATION,
+    META_TABLES,
+    SCHEMA_VERSION,
+    check_path,
+    inspect,
+    is_disk_full,
+    open_error,
+    upgrade,
+)
 from workbench.store.schema import ALL_TABLES, MIGRATIONS
+
+CONNECT_CONFIG = {"autoinstall_known_extensions": False}
+FAULT_ENV = "WORKBENCH_FAULT"  # tests only: "TABLE:N:SIGNAL" sends SIGNAL to this process after the N-th insert into TABLE
 
 
 class Store:
     """An open DuckDB store file (created with the full schema when new)."""
 
-    def __init__(self, path: str | Path, read_only: bool = False):
+    def __init__(self, path: str | Path, read_only: bool = False, create: bool = True):
+        """Open (or, unless `create` is False, create) the store at `path`: its identity and version are checked
+        before anything is written (workbench.store.identity)."""
         self.path = Path(path)
         self._depth = 0  # open transaction() levels
-        if read_only and not self.path.exists():
-            raise StoreError(f"store {self.path} does not exist; build it first (workbench build / grasps)")
-        if self.path.exists() and self.path.is_dir():
-            raise StoreError(f"store path {self.path} is a folder; give a file path such as {self.path / 'regrasp.duckdb'}")
-        if not read_only:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-        try:
-            self.con = duckdb.connect(str(self.path), read_only=read_only)
-        except duckdb.IOException as exc:
-            msg = str(exc)
-            if "lock" in msg.lower():
-                raise StoreError(f"store {self.path} is locked by another process; close it (or its notebook kernel) and retry") from None
-            if "not a valid DuckDB" in msg:
-                raise StoreError(f"store {self.path} is not a DuckDB database (damaged or another format); move it aside and rebuild") from None
-            raise StoreError(f"store {self.path} could not be opened: {msg.splitlines()[0]}") from None
-        except duckdb.Error as exc:
-            raise StoreError(f"store {self.path} could not be opened: {str(exc).splitlines()[0]}") from None
         self.read_only = read_only
-        if not read_only:
+        check_path(self.path, read_only or not create)
+        if self.path.exists():
+            self.con = self._open_checked(read_only)
+        else:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.con = self._connect(read_only=False)
+            self.identity = inspect(self.con, self.path, ALL_TABLES + META_TABLES + MIGRATIONS)
+        self._fault = _parse_fault(os.environ.get(FAULT_ENV, ""))
+        if not read_only:  # idempotent: tables added since this file was created appear
             try:
-                with self.transaction():
-                    for ddl in ALL_TABLES + MIGRATIONS:
-                        self.run(ddl)
-            except duckdb.Error as exc:
+                self._create()
+            except (StoreError, duckdb.Error) as exc:
                 self.con.close()
-                raise StoreError(f"store {self.path} has an incompatible schema ({str(exc).splitlines()[0]}); use a new file") from None
+                if isinstance(exc, duckdb.Error):
+                    raise open_error(self.path, exc) from None
+                raise
+
+    def _open_checked(self, read_only: bool) -> duckdb.DuckDBPyConnection:
+        """A connection to an existing file whose identity and version were checked first, on a read-only connection
+        (a foreign or newer file is left untouched); when this process already holds the file read-write, on that
+        configuration, still before anything is written."""
+        checked_read_only = True
+        try:
+            con = duckdb.connect(str(self.path), read_only=True, config=CONNECT_CONFIG)
+        except duckdb.Error as exc:
+            if "different configuration" not in str(exc):
+                raise open_error(self.path, exc) from None
+            con, checked_read_only = self._connect(read_only), read_only
+        try:
+            self.identity = inspect(con, self.path, ALL_TABLES + META_TABLES + MIGRATIONS)
+        except BaseException as exc:
+            con.close()
+            if isinstance(exc, duckdb.Error):
+                raise open_error(self.path, exc) from None
+            raise
+        if checked_read_only != read_only:
+            con.close()
+            con = self._connect(read_only)
+        return con
+
+    def _connect(self, read_only: bool) -> duckdb.DuckDBPyConnection:
+        try:
+            # never reach for the network: replaying a WAL that holds our DDL otherwise tries to install core_functions
+            return duckdb.connect(str(self.path), read_only=read_only, config=CONNECT_CONFIG)
+        except (duckdb.Error, OSError) as exc:
+            raise open_error(self.path, exc) from None
+
+    def _create(self) -> None:
+        """The schema and metadata of a new store, or the upgrade of an older one, in one transaction."""
+        current = self.identity.kind == "current"
+        with self.transaction():
+            for ddl in ALL_TABLES + META_TABLES + MIGRATIONS:
+                self.run(ddl)  # IF NOT EXISTS: tables added to this schema version since the file was made
+            if not current:
+                self.run("INSERT OR REPLACE INTO workbench_meta VALUES ('application', ?), ('schema_version', ?)",
+                         [APPLICATION, str(SCHEMA_VERSION)])
+            if self.identity.kind == "older":
+                upgrade(self, self.identity.version)
+        if not current:
+            self.con.execute("CHECKPOINT")  # the schema in the file itself, not only in the WAL
 
     def close(self) -> None:
         self.con.close()
@@ -67,7 +119,8 @@ class Store:
 
     @contextmanager
     def transaction(self) -> Iterator[duckdb.DuckDBPyConnection]:
-        """One stage's writes: committed together or not at all.
+        """One stage's writes: committed together or not at all. A write the disk refuses (full, damaged) becomes
+        a one-line StoreError; the store keeps what was committed before.
 
         The convention: every function that writes opens `transaction()`; one opened inside another joins the
         outermost, so a stage that calls several writers (an object, a gripper, its rows) still commits once,
@@ -83,13 +136,26 @@ class Store:
         self._depth = 1
         try:
             yield self.con
-        except BaseException:
+        except BaseException as exc:
             self._depth = 0
-            self.run("ROLLBACK")
+            try:
+                self.con.execute("ROLLBACK")
+            except duckdb.Error:
+                pass  # the failed statement already ended the transaction
+            if isinstance(exc, duckdb.Error):
+                raise self._write_error(exc) from None
             raise
         else:
             self._depth = 0
-            self.run("COMMIT")
+            try:
+                self.con.execute("COMMIT")
+            except duckdb.Error as exc:
+                raise self._write_error(exc) from None
+
+    def _write_error(self, exc: BaseException) -> BaseException:
+        if is_disk_full(exc) or isinstance(exc, (duckdb.IOException, duckdb.FatalException)):
+            return open_error(self.path, exc)
+        return exc
 
     def run(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> list[tuple]:
         """Execute one statement with bound parameters and return all its rows (DuckDB needs results finished)."""
@@ -114,16 +180,38 @@ class Store:
     def insert(self, table: str, columns: dict[str, Any]) -> int:
         """Bulk-insert columns (numpy arrays; (N, k) float arrays become DOUBLE[k]) through Arrow; returns the row count."""
         _check_name(table)
+        lengths = {len(v) for v in columns.values()}
+        if len(lengths) > 1:
+            raise StoreError(f"rows for table {table} have columns of different lengths {sorted(lengths)}")
+        if not columns or lengths == {0}:
+            return 0  # zero rows: nothing to write (and nothing to reshape)
         arrow = pa.table({name: to_arrow(v) for name, v in columns.items()})
-        if arrow.num_rows == 0:
-            return 0
         names = ", ".join(_check_name(c) for c in arrow.column_names)
         self.con.register("_wb_rows", arrow)
         try:
             self.run(f"INSERT INTO {table} ({names}) SELECT {names} FROM _wb_rows")
         finally:
             self.con.unregister("_wb_rows")
+        self._after_insert(table)
         return arrow.num_rows
+
+    def _after_insert(self, table: str) -> None:
+        """Fault injection for the test suite (WORKBENCH_FAULT): a signal inside a stage's transaction."""
+        if self._fault and self._fault[0] == table:
+            self._fault[1] -= 1
+            if self._fault[1] == 0:
+                os.kill(os.getpid(), self._fault[2])
+
+    def mark_complete(self, stage: str, runkey: str, rows: int) -> None:
+        """Record that a stage written in several transactions (IK chunks) has all its rows."""
+        with self.transaction():
+            self.run("INSERT OR REPLACE INTO stagedone (stage, runkey, rows) VALUES (?, ?, ?)", [stage, runkey, int(rows)])
+
+    def is_complete(self, stage: str, runkey: str) -> bool:
+        """Whether `mark_complete` recorded this run (stores opened read-only before their upgrade: never)."""
+        if self.identity.kind == "older":
+            return False
+        return self.one("SELECT 1 FROM stagedone WHERE stage = ? AND runkey = ?", [stage, runkey]) is not None
 
     def query_arrays(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> dict[str, np.ndarray]:
         """Run a SELECT and return each column as a numpy array; fixed-size list columns become (N, k) arrays."""
@@ -173,6 +261,13 @@ class Store:
         return None if row is None else int(row[0])
 
 
+def _parse_fault(text: str) -> list | None:
+    if not text:
+        return None
+    table, count, name = text.split(":")
+    return [table, int(count), getattr(signal, name)]
+
+
 def _digest(stage: str, params: dict[str, Any], idobject: int | None) -> str:
     text = json.dumps(params, sort_keys=True, default=_json_default)
     return hashlib.sha256(f"{stage}|{idobject}|{text}".encode()).hexdigest()[:24]
@@ -201,8 +296,9 @@ def to_arrow(value: Any) -> pa.Array:
     arr = np.asarray(value)
     if arr.ndim == 1 or arr.dtype == object:
         return pa.array(arr if arr.dtype != object else list(arr))
-    flat = np.ascontiguousarray(arr.reshape(len(arr), int(np.prod(arr.shape[1:]))))  # also when empty
-    return pa.FixedSizeListArray.from_arrays(pa.array(flat.ravel()), flat.shape[1])
+    width = int(np.prod(arr.shape[1:]))
+    flat = np.ascontiguousarray(arr.reshape(len(arr), width))
+    return pa.FixedSizeListArray.from_arrays(pa.array(flat.ravel(), type=pa.float64() if arr.dtype.kind == "f" else None), width)
 
 
 def from_arrow(column: pa.ChunkedArray) -> np.ndarray:

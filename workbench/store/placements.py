@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from workbench.errors import StoreError
 from workbench.grasping.placements import PlacementParams, Placements
 from workbench.planners.wan_harada.tabletop import Tabletop, TabletopParams
 from workbench.store import Store
@@ -130,7 +131,13 @@ def load_tabletop_grips(store: Store, idobject: int, idparamset: int | None = No
     """Tabletop grips of a tabletop parameter set as arrays (Fig. 5): idtabletopgrips, idtabletopplacements,
     idfreeairgrip, rotmat (N, 4, 4) TCP in the world, jawwidth, placement_rotmat (N, 4, 4) object in the world,
     idangle, idfreetabletopplacement, tabletopposition (N, 3)."""
-    pid = latest_tabletop_paramset(store, idobject) if idparamset is None else idparamset
+    pid = latest_tabletop_paramset(store, idobject) if idparamset is None else int(idparamset)
+    if idparamset is not None and store.one("SELECT 1 FROM paramset WHERE idparamset = ? AND stage = ? AND idobject = ?",
+                                            [pid, TABLETOP_STAGE, idobject]) is None:
+        have = [r[0] for r in store.run("SELECT idparamset FROM paramset WHERE stage = ? AND idobject = ? ORDER BY 1",
+                                        [TABLETOP_STAGE, idobject])]
+        raise StoreError(f"store {store.path} has no tabletop parameter set {pid} for object id {idobject} (it has: "
+                         f"{', '.join(map(str, have)) or 'none'}); give one of those to --tabletop, or leave it out for the latest")
     out = store.query_arrays(
         "SELECT g.idtabletopgrips, g.idtabletopplacements, g.idfreeairgrip, g.rotmat, g.jawwidth, "
         "p.rotmat AS placement_rotmat, p.idangle, p.idfreetabletopplacement, p.tabletopposition "

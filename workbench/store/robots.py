@@ -30,6 +30,7 @@ from workbench.robots.collider import Scene
 from workbench.robots.ik import IKOptions
 from workbench.robots.model import Robot
 from workbench.store import Store, from_arrow
+from workbench.store.identity import IK_STAGE, ik_runkey
 from workbench.store.objects import put_gripper
 
 
@@ -130,6 +131,27 @@ def insert_ik(store: Store, idrobot: int, idscene: int, idikret: int, grip_ids: 
             **{c: feasible[:, i] for i, c in enumerate(FEASIBILITY)},
             **{c: _joint_lists(joints[:, i], feasible[:, i]) for i, c in enumerate(JOINTS)}})
     return n
+
+
+def ik_progress(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int) -> tuple[int, int, bool]:
+    """(rows stored, tabletop grips, complete) of one IK run; complete when its completion is recorded or every grip
+    has its row (the IK stage writes chunk by chunk, so a killed run leaves some chunks)."""
+    rows = store.one("SELECT count(*) FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) "
+                     "JOIN tabletopplacements p USING (idtabletopplacements) "
+                     "WHERE k.idrobot = ? AND k.idscene = ? AND k.idikret = ? AND p.idparamset = ?",
+                     [idrobot, idscene, idikret, idtabletop])[0]
+    grips = store.one("SELECT count(*) FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) "
+                      "WHERE p.idparamset = ?", [idtabletop])[0]
+    done = store.is_complete(IK_STAGE, ik_runkey(idtabletop, idrobot, idscene, idikret)) or rows == grips
+    return int(rows), int(grips), bool(done)
+
+
+def mark_ik_complete(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int) -> bool:
+    """Record the run complete when every tabletop grip has its row; returns whether it is."""
+    rows, grips, _ = ik_progress(store, idtabletop, idrobot, idscene, idikret)
+    if rows == grips:
+        store.mark_complete(IK_STAGE, ik_runkey(idtabletop, idrobot, idscene, idikret), rows)
+    return rows == grips
 
 
 def run_counts(store: Store, idrobot: int, idscene: int, idikret: int, idtabletop: int) -> tuple[int, int]:

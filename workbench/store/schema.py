@@ -36,6 +36,13 @@ Extra tables
 - scene(idscene, name, table_pose, table_size, ...): where the table sits in the world for IK.
 - catalog_unit(digest, kind, part, robot, chunk, ids, status, error, counts, seconds, ...): the units of a
   `workbench catalog` build, created by `store.catalog` in catalogue stores (documented there).
+- workbench_meta(key, value): the store's identity, written with the schema at creation: application
+  ('regrasp-workbench') and schema_version (workbench.store.identity.SCHEMA_VERSION). A file without it is a
+  schema-1 store when its tables are ours (upgraded in place), else another program's (refused, nothing written).
+- stagedone(stage, runkey, rows, finished): completion of a stage written in several transactions (the IK stage,
+  chunk by chunk; runkey names its tabletop set, robot, scene and retractions). A stage written in one
+  transaction is complete when its paramset row exists. Consumers refuse an incomplete IK run unless asked.
+- plan rows are unique per query: a re-run of the same query finds the stored answer (store.wan_harada.find_plan).
 """
 
 from __future__ import annotations

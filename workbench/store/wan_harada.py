@@ -70,10 +70,27 @@ def placements_of_tabletop(store: Store, idtabletop: int) -> int:
 # Plans.
 
 
+QUERY_COLUMNS = ("idobject", "idrobot", "idscene", "idikret", "idtabletop", "start_placement", "goal_placement", "rank")
+
+
+def find_plan(store: Store, plan: dict[str, Any]) -> int | None:
+    """The id of a stored plan answering the same query (object, robot, scene, retractions, tabletop set, start and
+    goal placements and poses to 1e-9, rank), or None."""
+    where = " AND ".join(f"{c} = ?" for c in QUERY_COLUMNS)
+    row = store.one(f"SELECT min(idplan) FROM plan WHERE {where} AND list_distance(start_xyyaw, ?::DOUBLE[3]) < 1e-9 "
+                    f"AND list_distance(goal_xyyaw, ?::DOUBLE[3]) < 1e-9",
+                    [*(plan[c] for c in QUERY_COLUMNS), list(plan["start_xyyaw"]), list(plan["goal_xyyaw"])])
+    return None if row is None or row[0] is None else int(row[0])
+
+
 def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray], segments: dict[str, np.ndarray] | None = None) -> int:
     """Store one plan (columns of `plan`), its steps (columns of `planstep`, arrays) and its timed motions (columns
-    of `plansegment`) in one transaction; returns idplan."""
+    of `plansegment`) in one transaction; returns idplan. A plan answering a query already stored is not stored
+    again: the stored plan's id is returned."""
     with store.transaction():
+        found = find_plan(store, plan)
+        if found is not None:
+            return found
         pid = store.next_id("plan", "idplan")
         cols = ["idplan", *plan.keys()]
         store.run(f"INSERT INTO plan ({', '.join(cols)}) VALUES ({', '.join('?' for _ in cols)})", [pid, *plan.values()])

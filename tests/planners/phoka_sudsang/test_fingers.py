@@ -14,7 +14,7 @@ import trimesh
 from scipy.spatial import ConvexHull
 
 from workbench.cli.main import main
-from workbench.errors import MeshError, WorkbenchError
+from workbench.errors import MeshError, ParameterError, WorkbenchError
 from workbench.geometry.objects import from_trimesh
 from workbench.planners.phoka_sudsang.clustering import (
     ClusterParams,
@@ -101,7 +101,7 @@ def test_contacts_are_centroids_with_inward_normals_after_decimation():
 def test_bad_contact_inputs():
     with pytest.raises(MeshError, match="empty|no faces"):
         contact_points(trimesh.Trimesh())
-    with pytest.raises(MeshError, match="faces=2"):
+    with pytest.raises(ParameterError, match="faces"):
         contact_points(pebble(), ContactParams(faces=2))
 
 
@@ -150,11 +150,13 @@ def test_clustering_is_deterministic(planner):
     assert np.array_equal(again.roadmap.grasps, planner.roadmap.grasps)
 
 
-@pytest.mark.parametrize("params, match", [(ClusterParams(k=1000), "more than"), (ClusterParams(k=3), "4 representatives"),
-                                           (ClusterParams(mu=0.0), "friction"), (ClusterParams(sides=2), "pyramid")])
-def test_bad_clustering_parameters(planner, params, match):
-    with pytest.raises(WorkbenchError, match=match):
-        cluster_contacts(planner.contacts, params)
+def test_bad_clustering_parameters(planner):
+    with pytest.raises(WorkbenchError, match="more than"):
+        cluster_contacts(planner.contacts, ClusterParams(k=1000))
+    # out of their declared ranges: refused when the parameters are made, before any work
+    for kwargs, match in ((dict(k=3), "4 representatives"), (dict(mu=0.0), "friction"), (dict(sides=2), "pyramid")):
+        with pytest.raises(ParameterError, match=match):
+            ClusterParams(**kwargs)
 
 
 # ---------------------------------------------------------------------------------------------------------- roadmap

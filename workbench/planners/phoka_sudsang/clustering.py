@@ -23,6 +23,7 @@ import numpy as np
 from scipy.linalg import eigh
 
 from workbench.errors import WorkbenchError
+from workbench.params import Params, check_memory, memory_budget, param
 from workbench.planners.phoka_sudsang.contacts import ContactSet
 from workbench.planners.phoka_sudsang.forceclosure import (
     FrictionParams,
@@ -39,14 +40,15 @@ class ClusteringError(WorkbenchError):
 
 
 @dataclass(frozen=True)
-class ClusterParams:
+class ClusterParams(Params):
     """k clusters of contacts for friction `mu` and an m-sided pyramid (`sides`); `seed` for k-means."""
 
-    k: int = 50
-    mu: float = 0.3
-    sides: int = 8
-    seed: int = 0
-    n_init: int = 10
+    k: int = param(50, ge=4, le=MAX_CONTACTS, integer=True, flag="--clusters",
+                   help="number of clusters k (at least the 4 representatives a grasp needs)")
+    mu: float = param(0.3, gt=0, le=10, help="Coulomb friction coefficient", flag="--friction")
+    sides: int = param(8, ge=3, le=64, integer=True, help="sides m of the friction pyramid", flag="--pyramid")
+    seed: int = param(0, ge=0, le=2**32 - 1, integer=True, help="k-means seed")
+    n_init: int = param(10, ge=1, le=1000, integer=True, help="k-means restarts")
     torque_scale: str = "none"
 
     @property
@@ -99,8 +101,15 @@ def cone_distance(points: np.ndarray, normals: np.ndarray, mu: float, sides: int
     their inner product is (1 - |h|^2) a.b + (h.a)(h.b) and their norms sqrt(1 + |h|^2 - (h.a)^2).
     """
     p = np.asarray(points, dtype=np.float64) / length
+    n, m = len(p), int(sides)
+    # memory: the (N, m, N) projections and (N, N) results, then per block row about 5 float32 arrays of
+    # (rows, N, m, m) in each of the 2 threads; the block shrinks to fit the budget, or the work is refused
+    fixed = 12.0 * n * n * m + 24.0 * n * n
+    per_row = 2 * 5 * 4.0 * n * m * m
+    check_memory(fixed + per_row, f"the wrench-cone distances of {n} contacts with {m}-sided pyramids",
+                 "lower --pyramid or keep fewer triangles (--faces)")
+    chunk = int(max(1, min(chunk, (memory_budget() - fixed) // per_row)))
     f = friction_pyramid(normals, mu, sides)                     # (N, m, 3)
-    n, m = f.shape[:2]
     ff = f.reshape(-1, 3)
     own = np.einsum("nkc,nc->nk", f, p) / 2.0                   # f_ik . r_i / 2
     cross = (ff @ p.T).reshape(n, m, n) / 2.0                   # f_ik . r_j / 2

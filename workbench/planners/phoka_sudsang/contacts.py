@@ -15,21 +15,24 @@ from trimesh.ray.ray_util import contains_points
 
 from workbench.errors import MeshError
 from workbench.geometry.objects import ObjectModel
+from workbench.params import Params, param
 
 
 @dataclass(frozen=True)
-class ContactParams:
+class ContactParams(Params):
     """Parameters of the contact stage: `faces` is the triangle budget (None or 0 keeps the mesh as it is);
     `resolution` the grid cells along the longest side when a mesh must be remeshed before decimation."""
 
-    faces: int | None = 500
-    resolution: int = 100
+    faces: int | None = param(500, ge=0, le=200_000, integer=True, optional=True,
+                              help="triangles kept for contact points (0: keep the mesh)")
+    resolution: int = param(100, ge=8, le=2000, integer=True, help="remesh grid cells along the longest side")
+
+    def check(self) -> None:
+        self.require(not self.faces or self.faces >= 4, ("faces",),
+                     "too few triangles for contact points; use at least 4 (or 0 to keep the mesh)")
 
     def validate(self) -> "ContactParams":
-        if self.faces is not None and self.faces != 0 and self.faces < 4:
-            raise MeshError(f"faces={self.faces} is too few triangles for contact points; use at least 4 (or 0 to keep the mesh)")
-        if self.resolution < 8:
-            raise MeshError(f"remesh resolution {self.resolution} is too coarse; use at least 8 cells")
+        """Ranges are checked at construction; kept for callers that validate explicitly."""
         return self
 
 

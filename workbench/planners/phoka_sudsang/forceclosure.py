@@ -31,6 +31,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from workbench.errors import WorkbenchError
+from workbench.params import Params, param
 
 # Directions u with u.v <= SPAN_TOL for all (unit-scale) v are treated as separating.
 SPAN_TOL = 1e-12
@@ -64,17 +65,14 @@ class ForceClosureError(WorkbenchError):
 
 
 @dataclass(frozen=True)
-class FrictionParams:
+class FrictionParams(Params):
     """Coulomb friction coefficient `mu`, pyramid sides `sides` (the paper's m)."""
 
-    mu: float = 0.3
-    sides: int = 8
+    mu: float = param(0.3, gt=0, le=10, help="Coulomb friction coefficient", flag="--friction")
+    sides: int = param(8, ge=3, le=64, integer=True, help="sides m of the friction pyramid", flag="--pyramid")
 
     def validate(self) -> "FrictionParams":
-        if not np.isfinite(self.mu) or self.mu <= 0:
-            raise ForceClosureError(f"friction coefficient {self.mu!r} must be a positive number (e.g. --friction 0.5)")
-        if int(self.sides) != self.sides or self.sides < 3:
-            raise ForceClosureError(f"pyramid sides {self.sides!r} must be an integer of at least 3 (e.g. --pyramid 8)")
+        """Ranges are checked at construction; kept for callers that validate explicitly."""
         return self
 
 

@@ -78,8 +78,13 @@ def _search_updated(planner: FingerPlanner, g: np.ndarray, h: np.ndarray) -> np.
 def _join(parts: list[np.ndarray]) -> np.ndarray:
     """Concatenate grasp paths whose ends meet, dropping the repeated junctions."""
     out = [parts[0]]
+    last = parts[0][-1] if len(parts[0]) else None  # the previous non-empty part's end (a part may be one grasp)
     for p in parts[1:]:
-        out.append(p[1:] if len(p) and np.array_equal(p[0], out[-1][-1]) else p)
+        if len(p) and last is not None and np.array_equal(p[0], last):
+            p = p[1:]
+        if len(p):
+            last = p[-1]
+        out.append(p)
     return np.vstack(out)
 
 

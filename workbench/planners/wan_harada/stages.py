@@ -9,13 +9,14 @@ This is the only module of the planner that talks to the store; computations run
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from workbench.errors import PlanningError, RobotError, StoreError
+from workbench.errors import PartialStageWarning, PlanningError, RobotError, StoreError
 from workbench.geometry.objects import ObjectModel, from_arrays
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.grasping.placements import (
@@ -180,14 +181,14 @@ class PlannerCache:
 
 def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int, handx: float | None = None, worldz: float | None = None,
                  idtabletop: int | None = None, idscene: int | None = None, cache: PlannerCache | None = None,
-                 gripper: Gripper | None = None, worlda: float | None = None) -> Planner:
+                 gripper: Gripper | None = None, worlda: float | None = None, allow_partial: bool = False) -> Planner:
     """The regrasp graph of `object_name` for `robot_name` (a stored robot name or idrobot) from a store (path or
     Store), built from the latest tabletop parameter set and the IK run with the most rows (or the one with these
     retractions or this scene); with a `cache`, a planner already loaded for the same inputs is returned.
     `gripper` is the planning gripper the robot was stored with (default: the Franka hand; the stored robot
-    digest covers it)."""
+    digest covers it). An IK run killed part-way is refused unless `allow_partial` (then a PartialStageWarning)."""
 
-    store = db if isinstance(db, Store) else Store(db)
+    store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         oid, obj = get_object(store, object_name)
         tt = latest_tabletop_paramset(store, oid) if idtabletop is None else int(idtabletop)
@@ -206,6 +207,14 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
                                 f"{'' if handx is None and worldz is None else f' with handx {handx}, worldz {worldz}'}; "
                                 f"run `workbench ik --db {store.path} --object {object_name} --robot {robot_name}` first")
         idscene, idikret = runs[0][0], runs[0][1]
+        rows_done, grips, complete = robot_sql.ik_progress(store, tt, rrow["idrobot"], idscene, idikret)
+        if not complete:
+            what = (f"the IK stage of {object_name} for robot {rrow['name']} in {store.path} is incomplete ({rows_done:,} of "
+                    f"{grips:,} tabletop grips); finish it with `workbench ik --db {store.path} --object {object_name} "
+                    f"--robot {rrow['name']}` (it resumes)")
+            if not allow_partial:
+                raise PlanningError(f"{what}, or plan on the partial graph with --allow-partial")
+            warnings.warn(f"{what}; planning on the partial graph (--allow-partial)", PartialStageWarning, stacklevel=2)
         fp = sql.ik_fingerprint(store, tt, rrow["idrobot"], idscene, idikret)
         key = (str(store.path.resolve()), oid, tt, rrow["idrobot"], rrow["digest"], idscene, idikret, fp, obj.digest)
         if cache is not None and cache.get(key) is not None:
@@ -225,6 +234,7 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
         ids = {"idobject": oid, "idrobot": rrow["idrobot"], "idscene": idscene, "idikret": idikret, "idtabletop": tt, "idplacements": pl}
         planner = Planner(roadmap, free, ftg, obj, robot, scene, ret["handx"], ret["worldz"], ids, opts, grid=grid_index(rows),
                           worlda=ret["worlda"])
+        planner.partial = not complete
         roadmap.key = key
         _, orow = object_row(store, object_name)
         gid = rrow["idgripper"]
@@ -388,6 +398,7 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
                                     worlda=worlda):
         todo = ~np.isin(ids[ix], done)
         computed += robot_sql.insert_ik(store, rid, sid, kid, ids[ix][todo], feas[todo], joints[todo])
+    robot_sql.mark_ik_complete(store, pid, rid, sid, kid)
     counts = robot_sql.run_counts(store, rid, sid, kid, pid)
     return IKRun(rid, sid, kid, pid, len(ids), computed, counts[0], counts[1], time.perf_counter() - t0)
 
@@ -430,7 +441,7 @@ def choose_task(planner, seed: int = 0, tries: int = 40, grid: TabletopParams = 
 
 def save_plan(store: Store, plan: Plan) -> int:
     """Store a plan, its steps and its timed motions (tables `plan`, `planstep`, `plansegment`) in one transaction;
-    returns idplan."""
+    returns idplan (the stored plan's id when the same query was answered before: no duplicate)."""
     return sql.save_plan(store, *plan_rows(plan))
 
 
@@ -439,6 +450,11 @@ def save_plans(store: Store, plans: list[Plan]) -> list[int]:
     rows = [plan_rows(p) for p in plans]
     with store.transaction():
         return [sql.save_plan(store, *r) for r in rows]
+
+
+def stored_plan(store: Store, plan: Plan) -> int | None:
+    """The id of a stored plan answering the same query as `plan`, or None."""
+    return sql.find_plan(store, plan_rows(plan)[0])
 
 
 def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:

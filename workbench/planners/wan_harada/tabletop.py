@@ -12,32 +12,31 @@ more placements, and keeping a few for every placement); every command and bench
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 
-from workbench.errors import WorkbenchError
+from workbench.params import Params, check_memory, param
 
 
 @dataclass(frozen=True)
-class TabletopParams:
+class TabletopParams(Params):
     """Table grid (metres, world frame): x from x_min to x_max in nx steps, y likewise; `angles` rotations about
     z in [0, 2 pi); `max_grasps` free-air grasps carried into the roadmap (None, the default: all, as the paper)."""
 
-    x_min: float = 0.35
-    x_max: float = 0.65
-    nx: int = 7
-    y_min: float = -0.20
-    y_max: float = 0.20
-    ny: int = 3
-    angles: int = 8
-    max_grasps: int | None = None
+    x_min: float = param(0.35, ge=-10, le=10, unit="m", help="grid start along x", flag="--x")
+    x_max: float = param(0.65, ge=-10, le=10, unit="m", help="grid end along x", flag="--x")
+    nx: int = param(7, ge=1, le=1000, integer=True, help="grid positions along x", flag="--x")
+    y_min: float = param(-0.20, ge=-10, le=10, unit="m", help="grid start along y", flag="--y")
+    y_max: float = param(0.20, ge=-10, le=10, unit="m", help="grid end along y", flag="--y")
+    ny: int = param(3, ge=1, le=1000, integer=True, help="grid positions along y", flag="--y")
+    angles: int = param(8, ge=1, le=360, integer=True, help="rotations about z")
+    max_grasps: int | None = param(None, ge=1, le=1_000_000, integer=True, optional=True,
+                                   help="free-air grasps carried into the roadmap")
 
-    def __post_init__(self) -> None:
-        if self.nx < 1 or self.ny < 1 or self.angles < 1 or (self.max_grasps is not None and self.max_grasps < 1):
-            raise WorkbenchError(f"tabletop grid needs nx, ny, angles, max_grasps >= 1, got {self}")
-        if not (np.isfinite([self.x_min, self.x_max, self.y_min, self.y_max]).all() and self.x_min <= self.x_max and self.y_min <= self.y_max):
-            raise WorkbenchError(f"tabletop grid bounds must be finite with min <= max, got {self}")
+    def check(self) -> None:
+        self.require(self.x_min <= self.x_max, ("x_min", "x_max"), "the grid along x needs MIN <= MAX")
+        self.require(self.y_min <= self.y_max, ("y_min", "y_max"), "the grid along y needs MIN <= MAX")
 
     def positions(self) -> np.ndarray:
         """Grid positions (nx * ny, 3) on the table top, x-major."""
@@ -48,9 +47,6 @@ class TabletopParams:
 
     def angle_values(self) -> np.ndarray:
         return 2 * np.pi * np.arange(self.angles) / self.angles
-
-    def as_dict(self) -> dict:
-        return asdict(self)
 
     def grasps_label(self) -> str:
         """How many free-air grasps enter the roadmap, for every printed output."""
@@ -124,9 +120,13 @@ def tabletop(free_poses: np.ndarray, ftg_placement: np.ndarray, ftg_poses: np.nd
     free_poses: (P, 4, 4) free placements; ftg_placement: (F,) placement index of each free tabletop grip;
     ftg_poses: (F, 4, 4) their TCP poses in the table frame; ftg_keep: (F,) which grips enter the roadmap.
     """
+    n_p, n_a, n_x = len(free_poses), params.angles, params.nx * params.ny
+    n_grips = int(np.count_nonzero(ftg_keep)) * n_x * n_a
+    check_memory(600.0 * n_p * n_x * n_a + 900.0 * n_grips,
+                 f"{n_p} placements x {n_x:,} grid positions x {n_a} angles ({n_grips:,} tabletop grips)",
+                 "lower --x/--y N, --angles or --max-grasps")
     pos = params.positions()
     ang = params.angle_values()
-    n_p, n_a, n_x = len(free_poses), len(ang), len(pos)
     move = yaw(ang)[None, :, :, :].repeat(n_x, axis=0)  # (X, A, 4, 4)
     move[..., :3, 3] = pos[:, None, :]
     move = move.reshape(-1, 4, 4)  # position-major, then angle

@@ -1,0 +1,562 @@
+"""Bad inputs and faults against every command, run as a user would: a subprocess (issue 11).
+
+Refusals: exit status 2, at most three lines on stderr, no traceback, a message naming the input and what to
+do, and the store unchanged (every table's row count and content checksum, read with DuckDB directly).
+Faults: SIGKILL and Ctrl-C (SIGINT) inside each stage's transaction, two writers at once, a full disk and a store
+left by an older version: the store stays consistent and a re-run ends with the same rows as an uninterrupted
+run. One small store is built once per session and copied per test.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import duckdb
+import numpy as np
+import pytest
+import trimesh
+
+ROOT = Path(__file__).resolve().parents[1]
+CLI = [sys.executable, "-m", "workbench.cli"]
+GRID = ["--x", "0.4,0.6,2", "--y=-0.1,0.1,2", "--angles", "2", "--max-grasps", "10"]
+BUILD = ["--robot", "panda", "--workers", "1", *GRID]
+QUERY = ["--start", "1,0.4,-0.1,0", "--goal", "3,0.6,0.1,1.57"]
+FINGERS = ["--faces", "120", "--clusters", "8", "--samples", "40", "--picks", "3", "--queries", "2"]
+# clocks, and paramset.used (bumped whenever a stage reuses a set): they differ between runs that store the same rows
+VOLATILE = {"created", "finished", "used", "seconds", "seconds_clustering", "seconds_roadmap", "t_connect", "t_search"}
+
+
+# The commands run in processes forked from one server that imported the command line once (a real process per
+# case: its own exit status, stdout, stderr, signals and file-size limit), which keeps the suite fast.
+SERVER = r"""
+import json, os, resource, signal, sys, traceback
+from workbench.cli.main import main
+for line in sys.stdin:
+    req = json.loads(line)
+    pid = os.fork()
+    if pid == 0:
+        code = 1
+        try:
+            os.chdir(req["cwd"])
+            os.environ.update(req["env"])
+            if req["fsize"]:
+                signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+                resource.setrlimit(resource.RLIMIT_FSIZE, (req["fsize"], req["fsize"]))
+            sys.stdin = open(os.devnull)
+            for fd, name in ((1, "out"), (2, "err")):
+                os.dup2(os.open(req[name], os.O_WRONLY | os.O_CREAT | os.O_TRUNC), fd)
+            try:
+                code = main(req["argv"])
+            except SystemExit as exc:
+                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+            except BaseException:
+                traceback.print_exc()
+                code = 1
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    print(json.dumps(os.waitstatus_to_exitcode(status)), flush=True)
+"""
+
+
+class ForkServer:
+    """A process that imported the command line; `run` forks one child per command and returns its results."""
+
+    def __init__(self, tmp: Path):
+        self.tmp = tmp
+        self.count = 0
+        env = {**os.environ, "PYTHONPATH": str(ROOT)}
+        self.proc = subprocess.Popen([sys.executable, "-c", SERVER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     text=True, env=env)
+
+    def run(self, argv: list[str], cwd: Path, env: dict, fsize: int | None) -> subprocess.CompletedProcess:
+        self.count += 1
+        out, err = self.tmp / f"{self.count}.out", self.tmp / f"{self.count}.err"
+        req = {"argv": argv, "cwd": str(cwd), "env": env, "fsize": fsize, "out": str(out), "err": str(err)}
+        self.proc.stdin.write(json.dumps(req) + "\n")
+        self.proc.stdin.flush()
+        code = json.loads(self.proc.stdout.readline())
+        return subprocess.CompletedProcess(["workbench", *argv], code, out.read_text(), err.read_text())
+
+    def close(self) -> None:
+        self.proc.stdin.close()
+        self.proc.wait(timeout=60)
+
+
+_SERVER: list[ForkServer] = []
+
+
+@pytest.fixture(scope="session", autouse=True)
+def fork_server(tmp_path_factory):
+    server = ForkServer(tmp_path_factory.mktemp("forks"))
+    _SERVER.append(server)
+    yield server
+    _SERVER.clear()
+    server.close()
+
+
+def cli(*args, cwd: Path, env: dict | None = None, fsize: int | None = None) -> subprocess.CompletedProcess:
+    """Run `workbench ARGS` as a user would: its own process, exit status, stdout and stderr."""
+    return _SERVER[0].run([str(a) for a in args], cwd, {k: str(v) for k, v in (env or {}).items()}, fsize)
+
+
+def spawn(*args, cwd: Path) -> subprocess.Popen:
+    """`workbench ARGS` in a fresh interpreter, running concurrently."""
+    return subprocess.Popen([*CLI, *map(str, args)], cwd=cwd, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def state(db: Path) -> dict | None:
+    """{table: (rows, checksum)} of every table, read with DuckDB directly (not our code); None when absent."""
+    if not db.exists():
+        return None
+    con = duckdb.connect(str(db), read_only=True, config={"autoinstall_known_extensions": False})
+    try:
+        out = {}
+        for (table,) in con.execute("SELECT table_name FROM information_schema.tables ORDER BY table_name").fetchall():
+            cols = [c for (c,) in con.execute("SELECT column_name FROM information_schema.columns WHERE table_name = ? "
+                                              "ORDER BY ordinal_position", [table]).fetchall() if c not in VOLATILE]
+            rows = con.execute(f'SELECT count(*) FROM "{table}"').fetchone()[0]
+            row = ", ".join(f'"{c}"' for c in cols)
+            text = con.execute(f'SELECT string_agg(r, chr(10) ORDER BY r) FROM '
+                               f'(SELECT CAST(ROW({row}) AS VARCHAR) AS r FROM "{table}")').fetchone()[0]
+            out[table] = (rows, hashlib.sha256((text or "").encode()).hexdigest()[:16])
+        return out
+    finally:
+        con.close()
+
+
+def file_digest(path: Path) -> str | None:
+    return hashlib.sha256(path.read_bytes()).hexdigest() if path.is_file() else None
+
+
+def assert_refused(res: subprocess.CompletedProcess, *words: str) -> str:
+    """Exit 2, one to three lines on stderr, no traceback, the message contains every word (case-insensitive)."""
+    err = res.stderr.strip()
+    assert res.returncode == 2, f"exit {res.returncode}\nstdout: {res.stdout[-2000:]}\nstderr: {res.stderr[-3000:]}"
+    assert "Traceback" not in err, err
+    lines = err.splitlines()
+    assert 1 <= len(lines) <= 3, err
+    for w in words:
+        assert w.lower() in err.lower(), f"{w!r} not in {err!r}"
+    return err
+
+
+def assert_clean(res: subprocess.CompletedProcess) -> None:
+    """Any exit but a crash: no traceback, at most three lines of messages (progress bars aside)."""
+    assert "Traceback" not in res.stderr, res.stderr[-3000:]
+    assert res.returncode in (0, 2), f"exit {res.returncode}: {res.stderr[-2000:]}"
+    lines = [ln for ln in res.stderr.replace("\r", "\n").splitlines() if ln.strip() and "it/s]" not in ln and "/s]" not in ln]
+    assert len(lines) <= 3, res.stderr[-2000:]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Session fixtures: meshes and one built store.
+
+
+@pytest.fixture(scope="session")
+def work(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("badinput")
+    trimesh.creation.box((0.05, 0.04, 0.03)).export(d / "box.stl")
+    a = trimesh.creation.box((0.03, 0.03, 0.03))
+    b = a.copy()
+    b.apply_translation((0.12, 0, 0))
+    trimesh.util.concatenate([a, b]).export(d / "two.stl")
+    trimesh.Trimesh([[0, 0, 0], [0.03, 0, 0], [0, 0.03, 0]], [[0, 1, 2]]).export(d / "triangle.stl")
+    trimesh.creation.box((1000.0, 60.0, 60.0)).export(d / "bar_mm.stl")  # a 1 m part, in millimetres
+    trimesh.creation.box((0.0001, 0.0001, 0.0001)).export(d / "speck.stl")  # a 0.1 mm part, in metres
+    trimesh.creation.icosphere(subdivisions=3, radius=0.03).export(d / "ball.stl")
+    (d / "broken.urdf").write_text("<robot name='broken'><link name='a'/>")
+    (d / "afile").write_text("not a folder\n")
+    return d
+
+
+@pytest.fixture(scope="session")
+def built(work) -> Path:
+    """box: grasps, placements, tabletop grips and IK for panda, built once."""
+    db = work / "built.duckdb"
+    res = cli("build", work / "box.stl", "--db", db, *BUILD, cwd=work)
+    assert res.returncode == 0, res.stderr[-3000:]
+    return db
+
+
+@pytest.fixture(scope="session")
+def reference(built) -> dict:
+    return state(built)
+
+
+@pytest.fixture
+def db(built, tmp_path) -> Path:
+    out = tmp_path / "store.duckdb"
+    shutil.copy(built, out)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Kind 1: zero rows never crash the store writer.
+
+
+def test_insert_of_zero_rows_writes_nothing(tmp_path):
+    from workbench.store import Store
+
+    with Store(tmp_path / "s.duckdb") as store:
+        with store.transaction():
+            n = store.insert("freetabletopplacement", {
+                "idfreetabletopplacement": np.zeros(0, dtype=np.int64), "idobject": np.zeros(0, dtype=np.int64),
+                "idparamset": np.zeros(0, dtype=np.int64), "rotmat": np.zeros((0, 4, 4)), "stability": np.zeros(0),
+                "support": np.array([], dtype=object)})
+        assert n == 0
+        assert store.one("SELECT count(*) FROM freetabletopplacement")[0] == 0
+
+
+@pytest.mark.parametrize("mesh, extra", [
+    ("two.stl", []),  # two disjoint bodies
+    ("triangle.stl", []),  # a single triangle: an open sheet, no volume
+    ("bar_mm.stl", ["--units", "mm"]),  # a 1 m part given in mm: too wide for the jaw everywhere
+])
+def test_zero_results_never_crash(work, tmp_path, mesh, extra):
+    res = cli("build", work / mesh, *extra, "--db", tmp_path / "s.duckdb", *BUILD, cwd=work)
+    assert_clean(res)
+
+
+@pytest.mark.parametrize("option", [["--min-stability", "1e9"], ["--min-stability", "50"]])
+def test_placements_with_zero_results_never_crash(work, db, option):
+    res = cli("placements", "--db", db, "--object", "box", *GRID, *option, cwd=work)
+    assert_clean(res)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Kind 2: parameters out of range are refused before any work, naming the option and its range.
+
+BAD_PARAMETERS = [
+    ("grasps", ["--neighbour-radius", "0"], "--neighbour-radius"),
+    ("grasps", ["--neighbour-radius", "-0.01"], "--neighbour-radius"),
+    ("grasps", ["--seed", "-1"], "--seed"),
+    ("grasps", ["--density", "1e30"], "--density"),
+    ("grasps", ["--density", "0"], "--density"),
+    ("grasps", ["--density", "1e9"], "memory budget"),  # in range, but its neighbour filter would need terabytes
+    ("grasps", ["--rotations", "1000000"], "--rotations"),
+    ("grasps", ["--rotations", "0"], "--rotations"),
+    ("grasps", ["--tau-deg", "95"], "--tau-deg"),
+    ("grasps", ["--tau-deg", "nan"], "--tau-deg"),
+    ("grasps", ["--parallel-deg", "inf"], "--parallel-deg"),
+    ("grasps", ["--com-max", "-1"], "--com-max"),
+    ("grasps", ["--dist-min", "0.05", "--dist-max", "0.01"], "--dist-min"),
+    ("grasps", ["--scale", "0"], "--scale"),
+    ("grasps", ["--scale", "nan"], "--scale"),
+    ("fingers", ["--seed", "-1"], "--seed"),
+    ("fingers", ["--pyramid", "100000"], "--pyramid"),
+    ("fingers", ["--pyramid", "2"], "--pyramid"),
+    ("fingers", ["--friction", "0"], "--friction"),
+    ("fingers", ["--clusters", "0"], "--clusters"),
+    ("fingers", ["--samples", "-1"], "--samples"),
+    ("fingers", ["--queries", "-3"], "--queries"),
+    ("fingers", ["--faces", "2"], "--faces"),
+    ("placements", ["--angles", "1000000"], "--angles"),
+    ("placements", ["--angles", "0"], "--angles"),
+    ("placements", ["--x", "0.3,0.6,100000"], "--x"),
+    ("placements", ["--x", "0.6,0.3,3"], "--x"),
+    ("placements", ["--y", "a,b,c"], "--y"),
+    ("placements", ["--min-stability", "-1"], "--min-stability"),
+    ("placements", ["--clearance", "nan"], "--clearance"),
+    ("placements", ["--max-grasps", "-5"], "--max-grasps"),
+    ("ik", ["--handx", "-1"], "--handx"),
+    ("ik", ["--workers", "0"], "--workers"),
+    ("ik", ["--table-thickness", "0"], "--table-thickness"),
+    ("plan", ["--alternatives", "-1"], "--alternatives"),
+    ("plan", ["--start", "one,two"], "--start"),
+    ("build", ["--handx", "nan"], "--handx"),
+    ("build", ["--rotations", "1000000"], "--rotations"),
+    ("demo", ["--seed", "-1"], "--seed"),
+    ("demo", ["--workers", "0"], "--workers"),
+]
+
+
+def _command(cmd: str, work: Path, db: Path, extra: list[str]) -> list:
+    if cmd in ("grasps", "fingers"):
+        return [cmd, work / "box.stl", "--db", db, *extra]
+    if cmd == "build":
+        return [cmd, work / "box.stl", "--db", db, *BUILD, *extra]
+    if cmd == "placements":
+        return [cmd, "--db", db, "--object", "box", *extra]
+    if cmd == "demo":
+        return [cmd, "--out", db.parent / "demo", *extra]
+    if cmd == "ik":
+        return [cmd, "--db", db, "--object", "box", "--robot", "panda", *extra]
+    return [cmd, "--db", db, "--object", "box", "--robot", "panda", *QUERY, *extra]
+
+
+@pytest.mark.parametrize("cmd, extra, flag", BAD_PARAMETERS, ids=[f"{c}{''.join(e)}" for c, e, _ in BAD_PARAMETERS])
+def test_bad_parameter_is_refused_before_any_work(work, db, reference, cmd, extra, flag):
+    before = file_digest(db)
+    res = cli(*_command(cmd, work, db, extra), cwd=work)
+    assert_refused(res, flag)
+    assert state(db) == reference
+    assert file_digest(db) == before  # refused before the store was even opened
+
+
+def test_memory_estimate_refuses_above_the_budget(work, db, reference):
+    """A grid that fits the ranges but not the budget is refused before the work starts, naming the budget."""
+    res = cli("placements", "--db", db, "--object", "box", "--x", "0.3,0.6,1000", "--y=-0.3,0.3,1000", "--angles", "360",
+              "--max-grasps", "0", cwd=work, env={"WORKBENCH_MEMORY_BUDGET": "64MiB"})
+    assert_refused(res, "memory budget", "64.0 MiB")
+    assert state(db) == reference
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Kind 3: stores that are not ours, damaged, or in impossible places.
+
+
+def test_foreign_store_is_refused_with_nothing_written(work, tmp_path):
+    path = tmp_path / "foreign.duckdb"
+    con = duckdb.connect(str(path))
+    con.execute("CREATE TABLE object (id INTEGER, stuff VARCHAR)")
+    con.execute("INSERT INTO object VALUES (1, 'theirs')")
+    con.close()
+    before = state(path)
+    res = cli("grasps", work / "box.stl", "--db", path, cwd=work)
+    assert_refused(res, str(path.name), "not a workbench store")
+    assert state(path) == before
+
+
+def test_newer_store_is_refused_with_nothing_written(work, db, reference):
+    con = duckdb.connect(str(db))
+    con.execute("UPDATE workbench_meta SET value = '999' WHERE key = 'schema_version'")
+    con.close()
+    before = state(db)
+    for args in (["grasps", work / "box.stl", "--db", db], ["plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY]):
+        res = cli(*args, cwd=work)
+        assert_refused(res, "newer", "999")
+        assert state(db) == before
+
+
+@pytest.mark.parametrize("damage", ["truncate", "garbage"])
+def test_damaged_store_is_reported_in_one_line(work, db, damage):
+    data = db.read_bytes()
+    db.write_bytes(data[:20000] if damage == "truncate" else b"\x00garbage" * 5000)
+    before = file_digest(db)
+    res = cli("placements", "--db", db, "--object", "box", cwd=work)
+    assert_refused(res, str(db), "damaged")
+    assert "move it aside" in res.stderr or "backup" in res.stderr
+    assert file_digest(db) == before
+
+
+def test_store_path_under_a_regular_file(work):
+    res = cli("grasps", work / "box.stl", "--db", work / "afile" / "s.duckdb", cwd=work)
+    assert_refused(res, "afile", "not a folder")
+
+
+def test_demo_out_under_a_regular_file(work):
+    assert_refused(cli("demo", "--out", work / "afile" / "demo", cwd=work), "afile", "--out")
+
+
+def test_store_path_is_a_folder(work, tmp_path):
+    res = cli("grasps", work / "box.stl", "--db", tmp_path, cwd=work)
+    assert_refused(res, "folder")
+
+
+def test_reading_commands_do_not_create_a_store(work, tmp_path):
+    for args in (["placements", "--db", tmp_path / "none.duckdb", "--object", "box"],
+                 ["plan", "--db", tmp_path / "none.duckdb", "--object", "box", "--robot", "panda", *QUERY]):
+        assert_refused(cli(*args, cwd=work), "does not exist")
+        assert not (tmp_path / "none.duckdb").exists()
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Kind 4: no silent wrong answers.
+
+
+def test_unknown_tabletop_parameter_set_is_an_error(work, db, reference):
+    res = cli("ik", "--db", db, "--object", "box", "--robot", "panda", "--tabletop", "999", cwd=work)
+    assert_refused(res, "999", "tabletop")
+    assert state(db) == reference
+
+
+def _kill_ik_part_way(db: Path, keep: int = 120) -> None:
+    """The store an IK run killed after its first chunks leaves: some committed `ik` rows, no completion record."""
+    con = duckdb.connect(str(db))
+    con.execute("DELETE FROM ik WHERE idik > ?", [keep])
+    con.execute("DELETE FROM stagedone WHERE stage = 'ik'")
+    con.close()
+
+
+def test_plan_refuses_an_incomplete_ik_stage_unless_allowed(work, db, reference):
+    """IK killed part-way leaves its finished chunks; plan refuses them, or plans with a loud warning when asked;
+    a re-run of ik resumes and completes with the rows of an uninterrupted run."""
+    _kill_ik_part_way(db)
+    before = state(db)
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, cwd=work)
+    assert_refused(res, "incomplete", f"120 of {reference['tabletopgrips'][0]}", "--allow-partial", "workbench ik")
+    assert state(db) == before
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, "--allow-partial", cwd=work)
+    assert_clean(res)
+    assert "warning" in res.stderr and "incomplete" in res.stderr
+    assert state(db)["plan"] == before["plan"]  # a plan on a partial graph is not stored
+    res = cli("ik", "--db", db, "--object", "box", "--robot", "panda", "--workers", "1", cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    after = state(db)
+    assert {k: v for k, v in after.items() if k != "stagedone"} == {k: v for k, v in reference.items() if k != "stagedone"}
+    assert after["stagedone"][0] == 1
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, "--no-save", cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
+def test_plan_rerun_answers_from_the_store_without_a_duplicate(work, db):
+    first = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, cwd=work)
+    assert first.returncode == 0, first.stderr[-2000:]
+    after_first = state(db)
+    second = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, cwd=work)
+    assert second.returncode == 0, second.stderr[-2000:]
+    assert state(db) == after_first
+    assert "from the store" in second.stdout
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Kind 5: messages that lead to the fix.
+
+
+def test_speck_names_its_size_and_a_scale(work, tmp_path):
+    res = cli("grasps", work / "speck.stl", "--units", "mm", "--db", tmp_path / "s.duckdb", cwd=work)
+    err = assert_refused(res, "speck.stl", "1e-07 m", "--scale")
+    assert "degenerate" not in err
+    assert not (tmp_path / "s.duckdb").exists()
+
+
+def test_build_with_a_broken_urdf_does_not_advise_an_option_it_lacks(work, tmp_path):
+    res = cli("build", work / "box.stl", "--db", tmp_path / "s.duckdb", *BUILD[:0], "--robot", work / "broken.urdf", cwd=work)
+    err = assert_refused(res, "broken.urdf")
+    assert "--tip" not in err
+
+
+@pytest.mark.parametrize("form", [["--y", "-0.1,0.1,2"], ["--y=-0.1,0.1,2"]])
+def test_negative_ranges_parse(work, db, form):
+    res = cli("placements", "--db", db, "--object", "box", "--x", "0.4,0.6,2", *form, "--angles", "2", "--max-grasps", "10",
+              cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert "reused" in res.stdout
+
+
+def test_help_documents_ranges(work):
+    res = cli("grasps", "--help", cwd=work)
+    assert res.returncode == 0
+    assert "[1, 360]" in " ".join(res.stdout.split())  # --rotations
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Faults: each keeps the store consistent; a re-run ends with the rows of an uninterrupted run.
+
+STAGES = ["freeairgrip", "freetabletopgrip", "tabletopgrips", "ik"]
+
+
+@pytest.mark.parametrize("sig", ["SIGKILL", "SIGINT"])
+@pytest.mark.parametrize("table", STAGES)
+def test_signal_inside_each_stage(work, tmp_path, reference, table, sig):
+    db = tmp_path / "s.duckdb"
+    res = cli("build", work / "box.stl", "--db", db, *BUILD, cwd=work, env={"WORKBENCH_FAULT": f"{table}:1:{sig}"})
+    if sig == "SIGKILL":
+        assert res.returncode == -signal.SIGKILL
+    else:
+        assert res.returncode == 130 and "Traceback" not in res.stderr, res.stderr[-2000:]
+        assert "interrupted" in res.stderr
+    partial = state(db)
+    if partial is not None:
+        assert partial[table][0] == 0  # the stage's transaction was rolled back
+        for t, (rows, _) in partial.items():
+            assert rows <= reference.get(t, (rows,))[0]
+    res = cli("build", work / "box.stl", "--db", db, *BUILD, cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert state(db) == reference
+
+
+@pytest.mark.parametrize("sig", ["SIGKILL", "SIGINT"])
+def test_signal_while_storing_a_plan(work, db, sig):
+    before = state(db)
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, cwd=work,
+              env={"WORKBENCH_FAULT": f"planstep:1:{sig}"})
+    assert res.returncode in (-signal.SIGKILL, 130) and "Traceback" not in res.stderr
+    assert state(db) == before
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
+def test_signal_inside_finger_stages(work, tmp_path):
+    clean = tmp_path / "clean.duckdb"
+    assert cli("fingers", work / "ball.stl", "--db", clean, *FINGERS, cwd=work).returncode == 0
+    for table in ("fingercontact", "fingergrasp", "fingerquery"):
+        db = tmp_path / f"{table}.duckdb"
+        res = cli("fingers", work / "ball.stl", "--db", db, *FINGERS, cwd=work, env={"WORKBENCH_FAULT": f"{table}:1:SIGKILL"})
+        assert res.returncode == -signal.SIGKILL
+        assert state(db)[table][0] == 0
+        res = cli("fingers", work / "ball.stl", "--db", db, *FINGERS, cwd=work)
+        assert res.returncode == 0, res.stderr[-2000:]
+        assert state(db) == state(clean)
+
+
+def test_two_writers_at_once(work, tmp_path, reference):
+    db = tmp_path / "s.duckdb"
+    first = spawn("build", work / "box.stl", "--db", db, *BUILD, cwd=work)
+    deadline = time.monotonic() + 120
+    while not db.exists() and first.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    second = cli("build", work / "box.stl", "--db", db, *BUILD, cwd=work)
+    out, err = first.communicate(timeout=600)
+    codes = sorted([first.returncode, second.returncode])
+    assert codes in ([0, 2], [0, 0]), (first.returncode, err[-1500:], second.returncode, second.stderr[-1500:])
+    if codes == [0, 2]:
+        loser = second if second.returncode == 2 else subprocess.CompletedProcess([], 2, out, err)
+        assert_refused(loser, "locked")
+    assert state(db) == reference
+
+
+def _mount_tmpfs(path: Path, size: str) -> bool:
+    path.mkdir(parents=True, exist_ok=True)
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        return False
+    return subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)], capture_output=True,
+                          check=False).returncode == 0
+
+
+def test_full_disk(work, tmp_path, reference):
+    """A store on a small tmpfs (when root may mount one) or under a file-size limit (RLIMIT_FSIZE: writes past it
+    fail as on a full disk): refused in one line naming the store; the file is consistent and completes elsewhere."""
+    mnt = tmp_path / "small"
+    mounted = _mount_tmpfs(mnt, "256k")
+    db = mnt / "s.duckdb"
+    try:
+        res = cli("build", work / "box.stl", "--db", db, *BUILD, cwd=work, fsize=None if mounted else 256 << 10)
+        err = assert_refused(res, "s.duckdb", "disk is full")
+        moved = tmp_path / "moved"
+        moved.mkdir()
+        for f in mnt.glob("s.duckdb*"):
+            shutil.copy(f, moved / f.name)
+    finally:
+        if mounted:
+            subprocess.run(["umount", "-l", str(mnt)], capture_output=True, check=False)
+    assert "Traceback" not in err
+    res = cli("build", work / "box.stl", "--db", moved / "s.duckdb", *BUILD, cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert state(moved / "s.duckdb") == reference
+
+
+def test_store_left_by_an_older_version(work, db, reference):
+    """Schema 1 stores had no metadata and no completion records: opened, upgraded, and every stage reused."""
+    con = duckdb.connect(str(db))
+    con.execute("DROP TABLE workbench_meta")
+    con.execute("DROP TABLE stagedone")
+    con.close()
+    res = cli("build", work / "box.stl", "--db", db, *BUILD, cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert res.stdout.count("reused") >= 2
+    assert state(db) == reference
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, "--no-save", cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]

@@ -1,0 +1,182 @@
+"""Is this file our store, of which version, and is it readable? (issue 11: stores that are not ours).
+
+Every store written by this version holds `workbench_meta` (application, schema_version), written in the same
+transaction as the schema at creation. Before anything is written, `inspect` reads the file read-only and
+classifies it: new (no tables), ours at this version, ours at an older version (upgraded in one transaction),
+ours at a newer version, or another program's file (refused: nothing written). Stores of schema 1 predate the
+metadata table; they are recognised by their tables and columns. `open_error` turns DuckDB's open failures
+(lock, damage, truncation, permissions, a full disk) into one line naming the path and what to do.
+"""
+
+from __future__ import annotations
+
+import errno
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import duckdb
+
+from workbench.errors import StoreError
+
+if TYPE_CHECKING:
+    from workbench.store import Store
+
+APPLICATION = "regrasp-workbench"
+SCHEMA_VERSION = 2  # 1: no metadata, no completion records; 2: workbench_meta and stagedone
+
+META_TABLES: tuple[str, ...] = (
+    """CREATE TABLE IF NOT EXISTS workbench_meta (
+        key VARCHAR PRIMARY KEY,
+        value VARCHAR NOT NULL
+    )""",
+    # Completion of stages written in several transactions (the IK stage, chunk by chunk): one row when the
+    # last chunk is stored. Stages written in one transaction are complete when their paramset row exists.
+    """CREATE TABLE IF NOT EXISTS stagedone (
+        stage VARCHAR NOT NULL,
+        runkey VARCHAR NOT NULL,
+        rows BIGINT NOT NULL,
+        finished TIMESTAMP DEFAULT current_timestamp,
+        PRIMARY KEY (stage, runkey)
+    )""",
+)
+
+
+IK_STAGE = "ik"
+
+
+def ik_runkey(idtabletop: int, idrobot: int, idscene: int, idikret: int) -> str:
+    """The completion key of one IK run: its tabletop parameter set, robot, scene and retractions."""
+    return f"tabletop={int(idtabletop)}:robot={int(idrobot)}:scene={int(idscene)}:ikret={int(idikret)}"
+
+
+@dataclass(frozen=True)
+class Identity:
+    """What a file holds: `kind` is new, current, older or newer; `version` its schema version."""
+
+    kind: str
+    version: int
+
+
+def check_path(path: Path, must_exist: bool) -> None:
+    """Refuse paths no store can live at: a folder, a missing file to read, a folder that is a regular file."""
+    if path.is_dir():
+        raise StoreError(f"store path {path} is a folder; give a file path such as {path / 'regrasp.duckdb'}")
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise StoreError(f"store path {path}: {parent} is a file, not a folder; choose a store path inside a folder")
+            break
+    if must_exist and not path.exists():
+        raise StoreError(f"store {path} does not exist; build it first (workbench build, or workbench grasps MESH --db {path})")
+    if path.exists() and not path.is_file():
+        raise StoreError(f"store path {path} is not a regular file; give a file path")
+
+
+def open_error(path: Path, exc: BaseException) -> StoreError:
+    """One line for a file DuckDB cannot open or write: what happened and what to do."""
+    msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+    low = msg.lower()
+    if "lock" in low:
+        return StoreError(f"store {path} is locked by another process; close it (or its notebook kernel) and retry")
+    if "different configuration" in low:
+        return StoreError(f"store {path} is already open in this process in another mode (read-only or read-write); "
+                          f"use the open Store, or close it first")
+    if is_disk_full(exc):
+        return StoreError(f"store {path}: the disk is full ({msg}); free space or use a store on another disk, then re-run "
+                          f"(completed stages are kept)")
+    if "permission" in low or isinstance(exc, PermissionError):
+        return StoreError(f"store {path} cannot be written (permission denied); use a store path you can write")
+    if "not a valid duckdb" in low:
+        return StoreError(f"store {path} is damaged or not a DuckDB database; restore it from a backup, or move it aside "
+                          f"and rebuild it with `workbench build`")
+    if "could not read enough bytes" in low:
+        return StoreError(f"store {path} is damaged (truncated: shorter than its own header says); restore it from a "
+                          f"backup, or move it aside and rebuild it with `workbench build`")
+    if any(w in low for w in ("not a valid duckdb", "could not read enough bytes", "checksum", "corrupt", "serializ",
+                              "invalid", "unexpected", "magic", "failed to read", "truncat", "malformed")):
+        return StoreError(f"store {path} is damaged (truncated or corrupt: {msg[:120]}); restore it from a backup, or move "
+                          f"it aside and rebuild it with `workbench build`")
+    return StoreError(f"store {path} could not be opened ({msg[:160]}); move it aside and rebuild it, or give another path")
+
+
+def is_disk_full(exc: BaseException) -> bool:
+    if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
+        return True
+    low = str(exc).lower()
+    return "no space left" in low or "file too large" in low or "disk quota" in low
+
+
+def _columns(con: duckdb.DuckDBPyConnection) -> dict[str, set[str]]:
+    rows = con.execute("SELECT table_name, column_name FROM information_schema.columns "
+                       "WHERE table_schema = 'main' ORDER BY table_name").fetchall()
+    out: dict[str, set[str]] = {}
+    for table, column in rows:
+        out.setdefault(table, set()).add(column)
+    return out
+
+
+def reference_columns(ddl: tuple[str, ...]) -> dict[str, set[str]]:
+    """Our tables and columns, from the schema's own statements run on an in-memory database."""
+    con = duckdb.connect(":memory:")
+    try:
+        for stmt in ddl:
+            con.execute(stmt)
+        return _columns(con)
+    finally:
+        con.close()
+
+
+def inspect(con: duckdb.DuckDBPyConnection, path: Path, ddl: tuple[str, ...]) -> Identity:
+    """Classify an open file (read-only use: nothing is written); raise StoreError for foreign or newer stores."""
+    have = _columns(con)
+    if not have:
+        return Identity("new", SCHEMA_VERSION)
+    if "workbench_meta" in have:
+        meta = dict(con.execute("SELECT key, value FROM workbench_meta").fetchall())
+        if meta.get("application") != APPLICATION:
+            raise StoreError(f"store {path} is not a workbench store (its workbench_meta names {meta.get('application')!r}); "
+                             f"give a new file for --db")
+        try:
+            version = int(meta.get("schema_version", "0"))
+        except ValueError:
+            version = -1
+        if version > SCHEMA_VERSION:
+            raise StoreError(f"store {path} was written by a newer workbench (schema {meta.get('schema_version')}, this one "
+                             f"reads up to {SCHEMA_VERSION}); upgrade the workbench or give another file")
+        if version < 1:
+            raise StoreError(f"store {path} has an unknown schema version {meta.get('schema_version')!r}; give a new file")
+        return Identity("current" if version == SCHEMA_VERSION else "older", version)
+    ours = reference_columns(ddl)
+    # a schema-1 store: our core tables with our columns (extra tables, e.g. a catalogue's, are allowed)
+    core = [t for t in ("object", "paramset") if t in have]
+    clash = sorted(t for t, cols in have.items() if t in ours and not cols <= ours[t])
+    if clash or len(core) < 2:
+        foreign = sorted(t for t in have if t not in ours)
+        what = (f"table {clash[0]} with columns {', '.join(sorted(have[clash[0]])[:4])}" if clash else
+                f"tables {', '.join(foreign[:3])}" if foreign else "none of our core tables")
+        raise StoreError(f"store {path} is not a workbench store (it holds {what}); give a new file for --db")
+    return Identity("older", 1)
+
+
+def table_names(ddl: tuple[str, ...]) -> list[str]:
+    return [m.group(1) for stmt in ddl for m in [re.search(r"CREATE TABLE IF NOT EXISTS (\w+)", stmt)] if m]
+
+
+def upgrade(store: Store, version: int) -> None:
+    """Bring a store of schema `version` to the current one (inside `Store`'s opening transaction).
+
+    Schema 1 (no `workbench_meta`, no `stagedone`): every stage but IK wrote in one transaction, so its rows are
+    complete when its paramset exists; an IK run (written chunk by chunk) is recorded complete when it has a row for
+    every tabletop grip of its tabletop parameter set, and left unrecorded (incomplete) otherwise."""
+    if version < 2:
+        rows = store.run(
+            "WITH runs AS (SELECT p.idparamset AS tt, k.idrobot, k.idscene, k.idikret, count(*) AS n "
+            "FROM ik k JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements p USING (idtabletopplacements) "
+            "GROUP BY ALL), grips AS (SELECT p.idparamset AS tt, count(*) AS n FROM tabletopgrips g "
+            "JOIN tabletopplacements p USING (idtabletopplacements) GROUP BY ALL) "
+            "SELECT r.tt, r.idrobot, r.idscene, r.idikret, r.n FROM runs r JOIN grips USING (tt) WHERE r.n = grips.n")
+        for tt, robot, scene, ikret, n in rows:
+            store.run("INSERT OR REPLACE INTO stagedone (stage, runkey, rows) VALUES (?, ?, ?)",
+                      [IK_STAGE, ik_runkey(tt, robot, scene, ikret), int(n)])
