@@ -322,6 +322,7 @@ MOVES = {
     "03": lambda page: move_slider(page, "feasible grip"),
     "04": lambda page: (move_slider(page, "x (m)", 4), click(page, "search")),  # the view animates anyway: numbers
     "05": lambda page: move_slider(page, "switch"),
+    "07": lambda page: (move_slider(page, "x (m)", 4), click(page, "search")),  # the explorer of the picked part
 }
 
 

@@ -27,7 +27,14 @@ from workbench.robots.gripper import Gripper
 from workbench.robots.ik import KINDS
 from workbench.robots.model import Robot
 from workbench.viewer import scenes as viz
-from workbench.viewer.robot import FEASIBLE_ALL, FEASIBLE_GRASP, INFEASIBLE, RobotView
+from workbench.viewer.robot import (
+    FEASIBLE_ALL,
+    FEASIBLE_GRASP,
+    INFEASIBLE,
+    RobotView,
+    show_robot,
+    show_table,
+)
 from workbench.viewer.robot import show_roadmap as show_ik_roadmap
 from workbench.viewer.scenes import legend, new_scene, show_mesh, table_mesh
 from workbench.viewer.wan_harada import (
@@ -96,12 +103,16 @@ class RegraspExplorer:
         ids = self.planner.placement_ids()
         for label in ("start", "goal"):
             self.ends[label][0].options = ids
+        self.ends["start"][0].value = ids[0]
         self.ends["goal"][0].value = ids[-1]
         # framed now, before a view of the scene opens (a view replays the camera it finds; later moves may not apply)
         (x0, y0), (x1, y1), _ = scene_table(self.planner)
         if self.tparams is not None:
             x0, x1, y0, y1 = self.tparams.x_min, self.tparams.x_max, self.tparams.y_min, self.tparams.y_max
         base = self.planner.robot.base[:3, 3]
+        self.vis.delete()  # the robot and the table on open; a query replaces them with its plan
+        show_table(self.vis, self.planner.scene)
+        show_robot(self.vis, self.planner.robot, self.planner.robot.neutral())
         viz.frame_points(self.vis, np.array([base, base + [0, 0, 0.6], [x0, y0, 0], [x1, y1, 0]]))
         self.info.value = self.graph_html()
         return self.planner
