@@ -11,7 +11,7 @@ from itertools import combinations, permutations
 import networkx as nx
 import numpy as np
 import pytest
-import trimesh
+from shapes import pebble  # noqa: E402
 
 from workbench.geometry.objects import from_trimesh
 from workbench.planners.phoka_sudsang.clustering import (
@@ -35,12 +35,6 @@ from workbench.planners.phoka_sudsang.switching import build_planner, construct_
 PARAMS = ClusterParams(k=16, mu=0.5, sides=6, seed=0)
 
 
-def pebble() -> trimesh.Trimesh:
-    m = trimesh.creation.icosphere(subdivisions=2)
-    rng = np.random.default_rng(7)
-    m.vertices = m.vertices * (1 + 0.08 * rng.normal(size=(len(m.vertices), 1)))
-    m.vertices = m.vertices * np.array([0.05, 0.035, 0.025])
-    return m
 
 
 @pytest.fixture(scope="module")

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 from scipy.spatial import ConvexHull
+from shapes import pebble  # noqa: E402
 
 from workbench.cli.main import main
 from workbench.errors import MeshError, ParameterError, WorkbenchError
@@ -49,13 +50,6 @@ from workbench.store import Store
 PARAMS = ClusterParams(k=16, mu=0.5, sides=6, seed=0)
 
 
-def pebble() -> trimesh.Trimesh:
-    """An irregular convex-ish pebble of 320 triangles, 10 x 7 x 5 cm (generic geometry, seeded)."""
-    m = trimesh.creation.icosphere(subdivisions=2)
-    rng = np.random.default_rng(7)
-    m.vertices = m.vertices * (1 + 0.08 * rng.normal(size=(len(m.vertices), 1)))
-    m.vertices = m.vertices * np.array([0.05, 0.035, 0.025])
-    return m
 
 
 @pytest.fixture(scope="module")
