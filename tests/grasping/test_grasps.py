@@ -253,12 +253,22 @@ def test_fingers_at_the_grasps_opening_are_checked(hand):
 
 
 def test_pad_model_keeps_the_paper_pairs_on_the_papers_tube(tube_paper, hand):
-    """Under the same segmentation and fixed lengths, the pad model finds at least 90% as many grasps as the paper's
-    pairing (its pads close onto the same flat-facet pairs, and more where the paper's rotation-invariant level-1
-    cylinder is conservative); the counts are printed by `workbench bench grasps`."""
-    paper = plan_grasps(tube_paper, hand, GraspParams(contact_model="paper", lengths="fixed"))
-    pads = plan_grasps(tube_paper, hand, GraspParams(lengths="fixed"))
-    assert len(pads.grasps) >= 0.9 * len(paper.grasps) > 0
+    """Where the paper's pairing finds a grasp, the pad model closes onto the same pair (CONVENTIONS.md, Gripper):
+    under the same segmentation and fixed lengths, at least 90% of the paper model's grasps reappear pose for pose
+    (TCP within 1 mm and 3 degrees, opening within 0.5 mm). The contacts themselves may move along a pad resting on a
+    facet strip of the tube (a line contact: the pad model takes the touch nearest the axis). The pad model finds
+    more, where the paper's rotation-invariant level-1 cylinder rejects a pair at every rotation while the pad
+    rectangle fits at some; `workbench bench grasps` prints both counts."""
+    paper = plan_grasps(tube_paper, hand, GraspParams(contact_model="paper", lengths="fixed")).grasps
+    pads = plan_grasps(tube_paper, hand, GraspParams(lengths="fixed")).grasps
+    assert len(paper) > 100
+    # brute force over every pair of grasps: origin distance, rotation angle, opening
+    d_origin = np.linalg.norm(paper.poses[:, None, :3, 3] - pads.poses[None, :, :3, 3], axis=2)
+    cos = (np.einsum("aji,bji->ab", paper.poses[:, :3, :3], pads.poses[:, :3, :3]) - 1) / 2
+    d_width = np.abs(paper.jawwidth[:, None] - pads.jawwidth[None])
+    same = (d_origin <= 1e-3) & (cos >= np.cos(np.radians(3.0))) & (d_width <= 5e-4)
+    assert same.any(axis=1).mean() >= 0.9, same.any(axis=1).mean()
+    assert len(pads) > len(paper)
 
 
 def test_literal_over_segmentation_runs_on_the_bracket_within_4_gib():
