@@ -173,8 +173,10 @@ def test_counts_are_monotone(box, hand, box_plan):
     c = box_plan.counts
     assert c["samples"] >= c["samples_neighbour"]
     assert c["facet_samples"] >= c["facet_samples_distance"]
-    # the pad model: one hand pose per kept facet sample and rotation, then width, cone, centre of mass, level 2
-    assert c["facet_samples_distance"] >= c["axes"] and c["hand_poses"] == c["axes"] * box_plan.params.rotations
+    # the pad model: one hand pose per kept facet sample and rotation, plus the fingertip variants, then width, cone,
+    # centre of mass, level 2
+    assert c["facet_samples_distance"] >= c["axes"]
+    assert c["hand_poses"] == c["axes"] * box_plan.params.rotations + c["fingertip"]
     assert c["hand_poses"] >= c["pads_width"] >= c["pads_cone"] >= c["pads_com"] >= c["hand_open"] >= c["grasps"]
     paper = plan_grasps(box, hand, GraspParams(contact_model="paper")).counts
     assert paper["contact_pairs"] >= paper["pairs_width"] >= paper["pairs_com"] >= paper["pairs_level1"]
@@ -291,3 +293,25 @@ def test_literal_over_segmentation_runs_on_the_bracket_within_4_gib():
     assert out.returncode == 0, out.stderr[-2000:]
     tri, facets, pairs, kept = map(int, out.stdout.split())
     assert facets > 2000 and pairs > 10 * facets // 100 and kept > 0
+
+
+def test_first_touches_of_one_rotation_match_the_full_set(tube_paper, hand):
+    """Closing the pads at a single rotation gives the touches that rotation gets among all eight (the rotations are
+    applied to the rotation-0 frame, whatever the first angle asked)."""
+    from workbench.grasping.pads import first_touches
+
+    mesh = tube_paper.mesh
+    rng = np.random.default_rng(0)
+    face = rng.choice(len(mesh.faces), 30, replace=False)
+    origins, axes = mesh.triangles_center[face], mesh.face_normals[face]
+    angles = 2 * np.pi * np.arange(8) / 8
+    full = first_touches(mesh, origins, axes, angles, hand)
+    for j in (1, 3, 6):
+        one = first_touches(mesh, origins, axes, angles[j:j + 1], hand)
+        rows = np.arange(len(face)) * 8 + j
+        assert np.array_equal(one.hit, full.hit[rows])
+        hit = one.hit
+        assert hit.sum() > 10
+        assert np.allclose(one.poses[hit], full.poses[rows][hit], atol=1e-12)
+        assert np.allclose(one.point0[hit], full.point0[rows][hit], atol=1e-12)
+        assert np.allclose(one.point1[hit], full.point1[rows][hit], atol=1e-12)

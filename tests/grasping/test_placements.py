@@ -235,3 +235,33 @@ def test_grasp_cap_keeps_every_placement_in_the_roadmap():
     assert usable[2, chosen].sum() >= 4 and usable[:, chosen].any(axis=0).all()
     assert np.array_equal(chosen, select_grasps(poses, usable, 20))  # deterministic
     assert len(select_grasps(poses, usable, None)) == 295  # every usable grasp when uncapped
+
+
+def test_a_washer_lying_flat_is_gripped_from_above_by_the_fingertips(hand):
+    """A 6 mm washer lying flat: a pad centred on the rim would reach 9.5 mm below it, into the table, so without
+    fingertip grasps no grasp survives either placement. With them (GraspParams.fingertip_margin) some do, and each
+    kept grip, checked here by brute force on the gripper's collision mesh and finger boxes, stays above the table
+    with both contacts on the pads' faces and the part between them."""
+    washer = from_trimesh(trimesh.creation.annulus(r_min=0.010, r_max=0.025, height=0.006), "washer")
+    places = stable_placements(washer)
+    assert len(places) == 2  # flat on either side
+    centre_only = plan_grasps(washer, hand, GraspParams(fingertip_margin=None)).grasps
+    p, _, _ = free_tabletop_grips(places, centre_only.poses, hand)
+    assert len(centre_only) > 0 and len(p) == 0
+    plan = plan_grasps(washer, hand, GraspParams())
+    g = plan.grasps
+    assert plan.counts["fingertip"] > 0
+    p, k, world = free_tabletop_grips(places, g.poses, hand)
+    assert len(p) > 0 and set(p.tolist()) == {0, 1}
+    body = np.asarray(hand.collision_mesh().vertices)
+    for pi, gi, tcp in zip(p, k, world):
+        pts = [body] + [trimesh.creation.box(ext, pose).vertices + [0, np.sign(pose[1, 3]) * g.jawwidth[gi] / 2, 0]
+                        for ext, pose in hand.finger_poses(0.0)]
+        low = min(float((np.asarray(q) @ tcp[:3, :3].T + tcp[:3, 3])[:, 2].min()) for q in pts)
+        assert low >= 0.002 - 1e-9
+        # the contacts lie on the pads (within their rectangles) and inside the washer's 6 mm height on the table
+        for c in (g.contact0[gi], g.contact1[gi]):
+            z = (places.poses[pi] @ np.r_[c, 1.0])[2]
+            assert -1e-9 <= z <= 0.006 + 1e-9
+        # the TCP sits above the part: the hand was moved back along its approach
+        assert tcp[2, 3] > 0.006

@@ -37,8 +37,10 @@ def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--contact-model", choices=["pads", "paper"], default=GraspParams().contact_model,
                         help="pads: each pad closes until it first touches (CONVENTIONS.md); paper: parallel facet pairs "
                              "and swept cylinders")
-    for name in ("friction", "finger_clearance"):
+    for name in ("friction", "finger_clearance", "fingertip_margin"):
         add_param(parser, GraspParams, name)
+    parser.add_argument("--no-fingertip", action="store_true",
+                        help="centre-of-pad grasps only (no fingertip grasps of thin parts)")
     parser.add_argument("--fixed-lengths", action="store_true",
                         help="use --neighbour-radius, --dist-min/max and --com-max as given instead of scaling them "
                              f"with the part (size sqrt(area / 6) over {GraspParams().reference_size * 1e3:.0f} mm)")
@@ -50,6 +52,7 @@ def grasp_params(args: argparse.Namespace) -> GraspParams:
                        parallel_angle=from_cli(GraspParams, "parallel_angle", args.parallel_deg), com_max=args.com_max,
                        rotations=args.rotations, seed=args.seed, contact_model=args.contact_model,
                        friction=args.friction, finger_clearance=args.finger_clearance,
+                       fingertip_margin=None if args.no_fingertip else args.fingertip_margin,
                        lengths="fixed" if args.fixed_lengths else "adaptive")
 
 

@@ -37,7 +37,7 @@ from workbench.geometry.collision import (
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
-from workbench.grasping.pads import axis_frames, first_touches
+from workbench.grasping.pads import Touches, axis_frames, fingertip_shifts, first_touches
 from workbench.params import Params, check_memory, param
 from workbench.robots.gripper import Gripper
 
@@ -59,7 +59,10 @@ class GraspParams(Params):
     for rubber pads; None: tan(parallel_angle), the paper's antiparallel tolerance as a cone). finger_clearance: how far the hand and fingers at the grasp's opening may reach into the
     object (0.5 mm). lengths: "adaptive" (scaled with the part) or "fixed". reference_size: the part size at which
     the fixed lengths apply unscaled (60 mm). axis_angle: the pad model tries one jaw axis per sample and group of
-    facet normals within this angle (None: tau/2; 0: every facet sample, see `distinct_axes`).
+    facet normals within this angle (None: tau/2; 0: every facet sample, see `distinct_axes`). fingertip_margin:
+    with the pad model, where the fingertips would poke past the part (thin parts), the same jaw axis is also tried
+    with the hand moved back so they end this far beyond it (3 mm, beyond the placements' 2 mm table clearance;
+    `pads.fingertip_shifts`; None turns it off).
     """
 
     tau: float = param(float(np.radians(18.0)), gt=0, lt=np.pi / 2, unit="rad", help="facet normal threshold",
@@ -86,6 +89,9 @@ class GraspParams(Params):
     axis_angle: float | None = param(None, ge=0, lt=np.pi, optional=True, unit="rad",
                                      help="one jaw axis per sample and group of facet normals within this angle",
                                      cli_scale=DEG, cli_unit="deg")
+    fingertip_margin: float | None = param(0.003, ge=0, le=0.05, optional=True, unit="m",
+                                           help="fingertip grasps of thin parts: the hand moved back so the fingertips "
+                                                "end this far beyond the part")
 
     def check(self) -> None:
         self.require(self.dist_min <= self.dist_max, ("dist_min", "dist_max"), "the distance filter needs dist_min <= dist_max")
@@ -278,8 +284,15 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                             facets.areas[samples.pair_facet[sel]], merge)]
     counts["axes"] = int(len(sel))
     angles = 2 * np.pi * np.arange(params.rotations) / params.rotations
-    touch = first_touches(mesh, samples.points[samples.pair_sample[sel]], facets.normals[samples.pair_facet[sel]],
-                          angles, gripper)
+    origins = samples.points[samples.pair_sample[sel]]
+    axes = facets.normals[samples.pair_facet[sel]]
+    touch = first_touches(mesh, origins, axes, angles, gripper)
+    source = np.repeat(sel, len(angles))
+    rot = np.tile(angles, len(sel))
+    if params.fingertip_margin is not None:
+        touch, source, rot = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source, rot,
+                                                 samples, facets, angles)
+    counts["fingertip"] = int(len(touch) - len(sel) * len(angles))
     timings["pads"] = time.perf_counter() - t0
     y = touch.poses[:, :3, 1]
     cos_f = np.cos(np.arctan(params.friction_coefficient))
@@ -289,9 +302,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     com_ok = cone_ok & (np.linalg.norm(0.5 * (touch.point0 + touch.point1) - obj.com, axis=1) <= lengths["com_max"])
     counts.update(hand_poses=int(len(touch)), pads_width=int(width_ok.sum()), pads_cone=int(cone_ok.sum()),
                   pads_com=int(com_ok.sum()))
-    n = len(touch)
-    pairs = ContactPairs(sample=np.repeat(samples.pair_sample[sel], len(angles)),
-                         facet0=np.repeat(samples.pair_facet[sel], len(angles)),
+    pairs = ContactPairs(sample=samples.pair_sample[source], facet0=samples.pair_facet[source],
                          facet1=_facet_of(facets, touch.tri1, -y), point0=touch.point0, point1=touch.point1,
                          normal0=touch.normal0, normal1=touch.normal1, width=touch.width, width_ok=width_ok,
                          com_ok=com_ok, level1_ok=com_ok)
@@ -299,8 +310,30 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     target = object_collider(mesh)
     free = _level2(gripper, touch.poses[live], touch.width[live], target, params.finger_clearance, counts, timings,
                    pads=False)
-    rot = np.tile(angles, n // max(len(angles), 1))
     return pairs, touch.poses[live], live, rot[live], free
+
+
+def _fingertip_variants(mesh, gripper, margin, touch: Touches, source, rot, samples, facets, angles):
+    """`touch` extended with the fingertip variants of its hand poses that hit the part within the jaw range (the
+    same jaw axis and rotation, the TCP moved back by `pads.fingertip_shifts`), and their sources and rotations."""
+    cand = np.flatnonzero(touch.hit & (touch.width <= gripper.jaw_max))
+    if len(cand) == 0:
+        return touch, source, rot
+    d = fingertip_shifts(np.asarray(mesh.convex_hull.vertices), touch.poses[cand], gripper, margin)
+    cand, d = cand[np.isfinite(d)], d[np.isfinite(d)]
+    parts = [touch]
+    src, rots = [source], [rot]
+    j_of = np.rint(rot[cand] / (2 * np.pi) * len(angles)).astype(np.int64) % len(angles)
+    for j in np.unique(j_of):
+        c, dj = cand[j_of == j], d[j_of == j]
+        axis_point = samples.points[samples.pair_sample[source[c]]]
+        origins = axis_point - dj[:, None] * touch.poses[c, :3, 2]
+        parts.append(first_touches(mesh, origins, facets.normals[samples.pair_facet[source[c]]], angles[j:j + 1],
+                                   gripper))
+        src.append(source[c])
+        rots.append(rot[c])
+    merged = Touches(**{f: np.concatenate([getattr(t, f) for t in parts]) for f in Touches.__dataclass_fields__})
+    return merged, np.concatenate(src), np.concatenate(rots)
 
 
 def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, angle: float) -> np.ndarray:

@@ -72,6 +72,25 @@ def axis_frames(origins: np.ndarray, axes: np.ndarray, angles: np.ndarray) -> np
     return poses.reshape(-1, 4, 4)
 
 
+def fingertip_shifts(vertices: np.ndarray, poses: np.ndarray, gripper: Gripper, margin: float,
+                     min_contact: float = 1e-3) -> np.ndarray:
+    """How far to move each TCP back along its approach so the fingertips end `margin` beyond the part (H,), NaN
+    where no shift is needed or possible.
+
+    With the TCP at the pad's centre, a part thinner than half a pad beyond the contact (a washer or a bracket
+    lying flat, gripped from above) leaves the fingertips poking past it, into the table in every placement with
+    that side down. Moving the hand back by d = (pad tip) - (extent) + margin puts the contact on the pad's tip
+    end; it is possible while the contact stays `min_contact` inside the pad. `vertices`: the part's convex hull
+    vertices (the extent along a direction is a hull vertex's); `poses` (H, 4, 4) TCP poses in the part's frame.
+    """
+    _, cz, _, hz = pad_rectangle(gripper)
+    tip = cz + hz
+    extent = np.einsum("hj,vj->hv", poses[:, :3, 2], vertices).max(axis=1) - np.einsum("hj,hj->h", poses[:, :3, 2],
+                                                                                       poses[:, :3, 3])
+    d = tip - extent + margin
+    return np.where((d > 0) & (d <= tip - min_contact), d, np.nan)
+
+
 def _near_axis_tri(tri: np.ndarray, origins: np.ndarray, axes: np.ndarray, radius: float,
                    budget: int = 2_000_000) -> tuple[np.ndarray, np.ndarray]:
     """(axis, triangle) pairs whose triangle may reach within `radius` of the axis line (broad phase)."""
@@ -97,15 +116,14 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
     axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
     angles = np.asarray(angles, dtype=np.float64)
     frames = axis_frames(origins, axes, angles)
+    # the reference frames (rotation 0): `_rows` turns every triangle into each rotation's pad coordinates from them
+    fr0 = axis_frames(origins, axes, np.zeros(1))
     with np.errstate(divide="ignore", invalid="ignore"):
-        return _touches(mesh, origins, frames, angles, gripper, tie)
+        return _touches(mesh, origins, frames, fr0, angles, gripper, tie)
 
 
-def _touches(mesh, origins, frames, angles, gripper, tie, budget=1_500_000) -> Touches:
-    na = len(angles)
+def _touches(mesh, origins, frames, fr0, angles, gripper, tie, budget=1_500_000) -> Touches:
     H = len(frames)
-    cx, cz, hx, hz = pad_rectangle(gripper)
-    fr0 = frames.reshape(-1, na, 4, 4)[:, 0]
     tri = mesh.triangles
     fn = np.asarray(mesh.face_normals)
     flip = not mesh.is_watertight
@@ -163,7 +181,7 @@ def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows) -> No
     cb = np.einsum("pvj,pj->pv", rel, fr0[k, :3, 0])
     ny = np.einsum("pj,pj->p", fn[t], fr0[k, :3, 1])
     # heights where the axis itself crosses each triangle: true surface points inside every rotation's footprint
-    hx_axis = _axis_heights(cb, ly, ca, -cx, -cz)
+    hx_axis = _axis_heights(cb, ly, ca, 0.0, 0.0)
     a_max = np.full(len(origins), -np.inf)
     a_min = np.full(len(origins), np.inf)
     np.maximum.at(a_max, k, np.where(np.isfinite(hx_axis), hx_axis, -np.inf))
