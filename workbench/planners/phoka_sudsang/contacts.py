@@ -57,7 +57,8 @@ class ContactSet:
 
 
 def decimate(mesh: trimesh.Trimesh, faces: int | None, resolution: int = 100) -> trimesh.Trimesh:
-    """The mesh reduced to about `faces` triangles by quadric decimation (unchanged when already small enough).
+    """The mesh reduced to about `faces` triangles by quadric decimation, or subdivided (each triangle split in four)
+    until it has at least half of them.
 
     Quadric decimation (fast-simplification) refuses edge collapses that would leave a near-degenerate triangle,
     so on meshes full of slivers (typical CSG output) it stalls far above the target. A closed mesh is then
@@ -68,6 +69,10 @@ def decimate(mesh: trimesh.Trimesh, faces: int | None, resolution: int = 100) ->
         raise MeshError("mesh has no faces: give a triangle mesh with at least 4 faces")
     if not faces or len(mesh.faces) <= faces:
         out = mesh.copy()
+        # a coarse CAD mesh (a box is 12 triangles) would give too few contact points: split every triangle in
+        # four until the mesh has at least half the budget
+        while faces and len(out.faces) < faces / 2:
+            out = out.subdivide()
     else:
         out = mesh.simplify_quadric_decimation(face_count=int(faces))
         if len(out.faces) > 1.1 * faces and mesh.is_watertight:

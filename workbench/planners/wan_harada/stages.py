@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from workbench.errors import PartialStageWarning, PlanningError, RobotError, StoreError
-from workbench.geometry.objects import ObjectModel, from_arrays
+from workbench.geometry.objects import MeshWarning, ObjectModel, from_arrays
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.grasping.placements import (
     PlacementParams,
@@ -460,8 +460,10 @@ def stored_plan(store: Store, plan: Plan) -> int | None:
 def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
     """The stored object `name` rebuilt as an ObjectModel (mesh in metres, the stored centre of mass)."""
     oid, row = object_row(store, name)
-    obj = from_arrays(np.asarray(row["vertices"], dtype=np.float64), np.asarray(row["faces"], dtype=np.int64), scale=1.0,
-                      name=name, source=row["source"])
+    with warnings.catch_warnings():  # the stored mesh was repaired, and its warnings shown, when it was loaded
+        warnings.simplefilter("ignore", MeshWarning)
+        obj = from_arrays(np.asarray(row["vertices"], dtype=np.float64), np.asarray(row["faces"], dtype=np.int64),
+                          scale=1.0, name=name, source=row["source"])
     return oid, ObjectModel(name=name, mesh=obj.mesh, com=np.asarray(row["com"], dtype=np.float64),
                             com_method=row["com_method"], scale=row["scale"], source=row["source"], digest=obj.digest)
 
