@@ -17,8 +17,8 @@ from workbench.planners.wan_harada.stages import HANDX, WORLDZ, run_ik
 from workbench.resources import erd_robots
 from workbench.robots.chain import forward
 from workbench.robots.collider import Scene, default_scene
-from workbench.robots.ik import IKOptions, ik_feasibility
-from workbench.robots.model import get_robot, robot_from_urdf
+from workbench.robots.ik import IKOptions, diagnose_unreachable, ik_feasibility
+from workbench.robots.model import get_robot, pose_xyz_yaw, robot_from_urdf
 from workbench.store import Store
 from workbench.store import robots as sql
 
@@ -304,3 +304,24 @@ def test_a_stored_urdf_robot_is_rebuilt_from_its_row_with_every_field(tmp_path):
     assert str(urdf.parent) in rebuilt.spec.package_dirs
     with pytest.raises(PlanningError, match="other kinematics"):
         _robot_from_row({**row, "digest": "0" * 24})
+
+
+def test_no_feasible_grip_names_its_cause(tmp_path):
+    """Zero feasible grips is a result that names its cause (issue 10): a UR5 loaded from its URDF with the Franka
+    hand at the flange (no mount) reaches into the part with its wrist, and the diagnosis says to give the mount;
+    with the mount the same grips are feasible; with the base 2.5 m away they are out of reach."""
+    grips, mesh, _ = synthetic_grips(xs=np.array([0.45]), ys=np.array([0.1]), angles=2, approaches=4, offsets=1)
+    urdf = erd_robots() / "ur_description" / "urdf" / "ur5_robot.urdf"
+    scene = default_scene("ur5")
+    bare = robot_from_urdf(urdf, "tool0", name="ur5_flange")
+    res = ik_feasibility(bare, grips, scene, HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
+    assert not res.feasible[:, 0].any()
+    why = diagnose_unreachable(bare, grips, scene, mesh, OPTS)
+    assert "wrist" in why and "hits the object" in why and "--mount 0,0,0.1034" in why
+    mount = np.eye(4)
+    mount[2, 3] = 0.1034
+    mounted = robot_from_urdf(urdf, "tool0", mount=mount, name="ur5_mounted")
+    res = ik_feasibility(mounted, grips, scene, HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
+    assert res.feasible[:, 0].any()
+    far = robot_from_urdf(urdf, "tool0", mount=mount, base=pose_xyz_yaw(2.5, 0.0, 0.0, 0.0), name="ur5_far")
+    assert "out of reach" in diagnose_unreachable(far, grips, scene, mesh, OPTS)

@@ -103,6 +103,10 @@ def main(args: argparse.Namespace) -> int:
           f"{run.seconds:.1f} s")
     with Store(args.db) as store:
         reason = empty_stage(store, args.object, robot.name)
+    if run.grips and run.feasible_all == 0:  # this run's robot (another base or mount may share its name)
+        reason = f"ik: {run.reason}" if run.reason else (
+            f"ik: no tabletop grip is feasible at all five poses for {robot.name} (grasp poses {run.feasible:,}); lower "
+            f"the retractions (--handx, --worldz, --worlda) or move the grid toward the robot")
     if reason:
         warn(f"no reachable tabletop grip of {args.object}; stage {reason}")
     return 0

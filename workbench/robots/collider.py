@@ -167,6 +167,22 @@ class Collider:
                     hit[bi] = True
         return hit
 
+    def hit_parts(self, q: np.ndarray, placement: np.ndarray | None) -> list[tuple[str, str]]:
+        """(part, "table" or "object") for every part that one joint vector `q` (n,) puts into the table or, with the
+        object at `placement` (4, 4), into the object (the gripper is never tested against the object it grasps)."""
+        rot, pos, _, _ = forward(self.robot, np.atleast_2d(q))
+        out = []
+        if placement is not None and self.obj is not None:
+            set_pose(self.obj, placement[:3, :3], placement[:3, 3])
+        for pi, (pl, cobj) in enumerate(self.parts):
+            j = self.joint[pi]
+            set_pose(cobj, rot[0, j] @ pl[:3, :3], rot[0, j] @ pl[:3, 3] + pos[0, j])
+            if collide(cobj, self.table):
+                out.append((self.names[pi], "table"))
+            if placement is not None and self.obj is not None and self.vs_object[pi] and collide(cobj, self.obj):
+                out.append((self.names[pi], "object"))
+        return out
+
     def collides_q(self, q: np.ndarray, placements: np.ndarray | None, table_only: bool = False) -> np.ndarray:
         """`collides` for joint vectors (B, n)."""
         rot, pos, _, _ = forward(self.robot, np.atleast_2d(q))

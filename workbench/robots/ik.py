@@ -456,6 +456,58 @@ def _result(future):
                          "code with `if __name__ == '__main__':`, or use --workers 1)") from None
 
 
+def diagnose_unreachable(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, obj_mesh: trimesh.Trimesh | None,
+                         opts: IKOptions = IKOptions(), samples: int = 24) -> str:
+    """Why no grip's grasp pose is feasible, from `samples` of them solved again without collision checks: out of
+    reach; the arm's links in the part (the usual sign of a missing gripper mount on a URDF's flange); the table;
+    or self-collision. One line with what to try (issue 10: zero is a result that names its cause)."""
+    poses = check_poses(grips["rotmat"])
+    places = check_poses(grips["placement_rotmat"], "object placement")
+    pick = np.unique(np.linspace(0, len(poses) - 1, min(samples, len(poses))).astype(np.int64))
+    free = IKSolver(robot, scene, IKOptions(**{**opts.as_dict(), "collide": False, "closed_form": opts.closed_form}))
+    targets, placements = poses[pick], places[pick]
+    q = np.full((len(pick), robot.nq), np.nan)
+    ok = np.zeros(len(pick), dtype=bool)
+    seeds = free.library_seeds(targets)
+    for k in range(seeds.shape[1]):
+        rows = np.flatnonzero(~ok)
+        if len(rows) == 0:
+            break
+        qk, okk = free.solve(targets[rows], placements[rows], free.library.q[seeds[rows, k]], opts.iters_seed)
+        q[rows[okk]], ok[rows[okk]] = qk[okk], True
+    if not ok.any():
+        return (f"none of {len(pick)} sampled grasp poses has an IK solution for {robot.name} within its joint limits, "
+                f"even ignoring collisions: they are out of reach; move the grid (--x, --y) toward the robot or the "
+                f"robot's base (--base)")
+    collider = Collider(robot, scene, obj_mesh)
+    hits: dict[tuple[str, str], int] = {}
+    for i in np.flatnonzero(ok):
+        for h in set(collider.hit_parts(q[i], placements[i])):
+            hits[h] = hits.get(h, 0) + 1
+    solved = int(ok.sum())
+    if hits:
+        (part, what), n = max(hits.items(), key=lambda kv: kv[1])
+        text = (f"{solved} of {len(pick)} sampled grasp poses have an IK solution, but {part} hits the {what} in {n} of "
+                f"them")
+        if what == "object" and part != "gripper":
+            return (f"{text}: the arm reaches into the part, so the gripper is probably mounted at the wrong place; give "
+                    f"the tip-to-TCP transform (--mount x,y,z,roll,pitch,yaw; the Franka hand on a flange: "
+                    f"--mount 0,0,0.1034,0,0,0)")
+        return f"{text}; move the grid (--x, --y), the table (--table) or the robot's base (--base)"
+    if opts.self_collide:
+        pairs: dict[tuple[str, str], int] = {}
+        checker = SelfCollision(robot)
+        for i in np.flatnonzero(ok):
+            for pair in checker.colliding(q[i]):
+                pairs[pair] = pairs.get(pair, 0) + 1
+        if pairs:
+            (a, b), n = max(pairs.items(), key=lambda kv: kv[1])
+            return (f"{solved} of {len(pick)} sampled grasp poses have an IK solution, but {a} and {b} collide in {n} of "
+                    f"them; check the gripper mount (--mount) and the robot's SRDF")
+    return (f"{solved} of {len(pick)} sampled grasp poses have a collision-free IK solution here, but the full search "
+            f"found none; raise the IK effort (seeds, iterations) or check the retractions (--handx, --worldz)")
+
+
 def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: float, worldz: float,
             obj_mesh: trimesh.Trimesh | None = None, opts: IKOptions = IKOptions(), workers: int | None = None,
             skip: Callable[[np.ndarray], bool] | None = None, progress: bool = True, solver: IKSolver | None = None,

@@ -34,7 +34,7 @@ from workbench.planners.wan_harada.tabletop import (
 )
 from workbench.robots.collider import Collider, Scene, default_scene
 from workbench.robots.gripper import Gripper, franka_hand
-from workbench.robots.ik import WORLDA, IKOptions, iter_ik
+from workbench.robots.ik import WORLDA, IKOptions, diagnose_unreachable, iter_ik
 from workbench.robots.model import ROBOTS, Robot, RobotSpec, builtin_robot, get_robot
 from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
 from workbench.store import Store
@@ -294,13 +294,14 @@ class BuildResult:
 
 
 def ensure_ik_rows(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
-                   workers: int | None = None, progress: bool = True, worlda: float = WORLDA) -> tuple[dict, bool]:
+                   workers: int | None = None, progress: bool = True, worlda: float = WORLDA) -> tuple[dict, bool, str | None]:
     """IK feasibility of the tabletop grips for a robot (Section IV's ik and ikret tables), computed or reused by the
-    IK stage's runner (`stages.ensure_ik`); returns the run's ids and whether it was reused."""
+    IK stage's runner (`stages.ensure_ik`); returns the run's ids, whether it was reused and, with no feasible grasp
+    pose, why."""
 
     run = ensure_ik(store, idobject, obj, idtabletop, robot_name, handx=handx, worldz=worldz, workers=workers, progress=progress,
                     worlda=worlda)
-    return {"idrobot": run.idrobot, "idscene": run.idscene, "idikret": run.idikret}, run.reused
+    return {"idrobot": run.idrobot, "idscene": run.idscene, "idikret": run.idikret}, run.reused, run.reason
 
 
 def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pparams: PlacementParams = PlacementParams(),
@@ -323,10 +324,12 @@ def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pp
                           tabletop_grips=p.n_tabletop_grips, usable_grasps=p.n_usable_grasps, roadmap_grasps=p.n_roadmap_grasps,
                           grasps_label=p.grasps_label)
         t0 = time.perf_counter()
-        ik_ids, reused = ensure_ik_rows(store, g.idobject, obj, p.idtabletop, robot_name, handx, worldz, workers, progress,
-                                        worlda=worlda)
+        ik_ids, reused, ik_reason = ensure_ik_rows(store, g.idobject, obj, p.idtabletop, robot_name, handx, worldz, workers,
+                                                   progress, worlda=worlda)
         out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, reused
         out.empty = g.plan.empty_reason if g.plan is not None and g.count == 0 else empty_stage(store, obj.name, robot_name)
+        if ik_reason is not None and out.empty is not None and out.empty.startswith("ik:"):
+            out.empty = f"ik: {ik_reason}"
         if out.empty is not None:  # zero is a result: no graph to build, the stage that emptied is named
             out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **ik_ids}
             return out
@@ -356,6 +359,7 @@ class IKRun:
     feasible: int
     feasible_all: int
     seconds: float
+    reason: str | None = None  # with no feasible grasp pose: why (`robots.ik.diagnose_unreachable`)
 
     @property
     def reused(self) -> bool:
@@ -400,7 +404,8 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
         computed += robot_sql.insert_ik(store, rid, sid, kid, ids[ix][todo], feas[todo], joints[todo])
     robot_sql.mark_ik_complete(store, pid, rid, sid, kid)
     counts = robot_sql.run_counts(store, rid, sid, kid, pid)
-    return IKRun(rid, sid, kid, pid, len(ids), computed, counts[0], counts[1], time.perf_counter() - t0)
+    reason = diagnose_unreachable(robot, arrays, scene, obj.mesh, opts) if len(ids) and counts[0] == 0 else None
+    return IKRun(rid, sid, kid, pid, len(ids), computed, counts[0], counts[1], time.perf_counter() - t0, reason)
 
 
 def ensure_ik(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
