@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
+from scipy.spatial import QhullError
 
 from workbench.errors import ParameterError
 from workbench.geometry.collision import (
@@ -319,7 +320,11 @@ def _fingertip_variants(mesh, gripper, margin, touch: Touches, source, rot, samp
     cand = np.flatnonzero(touch.hit & (touch.width <= gripper.jaw_max))
     if len(cand) == 0:
         return touch, source, rot
-    d = fingertip_shifts(np.asarray(mesh.convex_hull.vertices), touch.poses[cand], gripper, margin)
+    try:
+        extreme = np.asarray(mesh.convex_hull.vertices)
+    except QhullError:  # a flat sheet has no hull; its own vertices bound it as well
+        extreme = np.unique(np.asarray(mesh.vertices), axis=0)
+    d = fingertip_shifts(extreme, touch.poses[cand], gripper, margin)
     cand, d = cand[np.isfinite(d)], d[np.isfinite(d)]
     parts = [touch]
     src, rots = [source], [rot]
