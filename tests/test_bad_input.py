@@ -421,6 +421,16 @@ def test_plan_rerun_answers_from_the_store_without_a_duplicate(work, db):
     assert "from the store" in second.stdout
 
 
+def test_a_start_that_is_the_goal_needs_no_plan(work, db):
+    """The same placement, position and yaw (a full turn apart): nothing is moved, nothing is stored, exit 0."""
+    before = state(db)
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", "--start", "1,0.4,-0.1,0", "--goal",
+              "1,0.4,-0.1,360", cwd=work)
+    assert_clean(res)
+    assert "already in place" in res.stdout
+    assert state(db) == before
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # Kind 5: messages that lead to the fix.
 

@@ -81,6 +81,11 @@ def run(args: argparse.Namespace) -> int:
         t0 = time.perf_counter()
         planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial)
         t_load = time.perf_counter() - t0
+        turn = (goal.yaw - start.yaw + math.pi) % (2 * math.pi) - math.pi
+        if (start.idfreetabletopplacement == goal.idfreetabletopplacement in planner.placement_ids()
+                and math.hypot(goal.x - start.x, goal.y - start.y) < 1e-6 and abs(turn) < 1e-9):
+            print(f"the start is the goal ({args.start}): {args.object} is already in place; no plan to make")
+            return 0
         plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
         report_graph(planner, t_load)
         best = plans[0]
