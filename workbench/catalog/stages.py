@@ -124,14 +124,13 @@ def merge_ik_shards(store: Store, run: dict, units: list[tuple[dict, Path]]) -> 
     """The shard files of one (part, robot) IK run and their units' catalog_unit rows, in one transaction (rows of
     grips already stored for the run are kept, not duplicated); returns the rows inserted."""
     return sql.merge_ik_shards(store, run["idrobot"], run["idscene"], run["idikret"], run["nq"], [u for u, _ in units],
-                               [str(p) for _, p in units])
+                               [str(p) for _, p in units], stored=len(run["stored"]) > 0)
 
 
 def graph_inputs(store: Store, run: dict) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """The tabletop grips of a part and their IK flags for a run (Section V's inputs, joints left out)."""
-    rows = roadmap_rows(store, run["idtabletop"], run["idrobot"], run["idscene"], run["idikret"], 0)
+    rows = roadmap_rows(store, run["idtabletop"], run["idrobot"], run["idscene"], run["idikret"], 0, joints=False)
     feasible = rows.pop("feasible")
-    rows.pop("joints")
     return rows, feasible
 
 

@@ -106,11 +106,12 @@ def unit_transaction(store: Store, unit: dict[str, Any]) -> Iterator[dict[str, A
 
 
 def merge_ik_shards(store: Store, idrobot: int, idscene: int, idikret: int, nq: int, units: list[dict[str, Any]],
-                    paths: list[str]) -> int:
+                    paths: list[str], stored: bool = True) -> int:
     """The `ik` rows of one IK run's shard files (Parquet, one per unit: idtabletopgrips, feasible (5) and joints
     (5 x nq, NaN where infeasible), as `workbench.catalog.units.ik_unit` writes them) and the units' catalog_unit
-    rows, in one transaction; grips that already have a row for the run are left as they are. Returns the rows
-    inserted. A shard that cannot be read is a StoreError naming it."""
+    rows, in one transaction; grips that already have a row for the run are left as they are (`stored`: the run may
+    have rows already; when False the anti-join is skipped, and the UNIQUE key still refuses a duplicate). Returns
+    the rows inserted. A shard that cannot be read is a StoreError naming it."""
     if not paths:
         return 0
     feas = ", ".join(f"f[{k + 1}]" for k in range(len(FEASIBILITY)))
@@ -123,8 +124,9 @@ def merge_ik_shards(store: Store, idrobot: int, idscene: int, idikret: int, nq: 
                 f"INSERT INTO ik (idik, idrobot, idtabletopgrips, idikret, idscene, {', '.join(FEASIBILITY)}, {', '.join(JOINTS)}) "
                 f"SELECT ? - 1 + row_number() OVER (ORDER BY idtabletopgrips), ?, idtabletopgrips, ?, ?, {feas}, {jnts} "
                 "FROM (SELECT idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j FROM read_parquet(?)) s "
-                "WHERE idtabletopgrips NOT IN (SELECT idtabletopgrips FROM ik WHERE idrobot = ? AND idscene = ? AND idikret = ?)",
-                [first, idrobot, idikret, idscene, list(paths), idrobot, idscene, idikret])
+                + ("WHERE idtabletopgrips NOT IN (SELECT idtabletopgrips FROM ik WHERE idrobot = ? AND idscene = ? AND idikret = ?)"
+                   if stored else ""),
+                [first, idrobot, idikret, idscene, list(paths)] + ([idrobot, idscene, idikret] if stored else []))
         except duckdb.IOException as exc:
             raise StoreError(f"a shard of this IK run cannot be read ({str(exc).splitlines()[0]})") from None
         n = store.next_id("ik", "idik") - first
