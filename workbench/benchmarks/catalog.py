@@ -108,10 +108,14 @@ def run(args: argparse.Namespace) -> int:
     for (w, path), (r, *_) in runs.items():
         for kind in KINDS:
             k = r.computed[kind]
+            dk = r.driver_kind[kind]
             kinds.append((w, path, kind, k, round(r.compute[kind], 2), round(r.cpu[kind], 2),
-                          round(r.compute[kind] / k, 3) if k else "-", round(r.cpu[kind] / k, 3) if k else "-"))
-    print_table(("workers", "path", "unit kind", "units", "unit s", "unit cpu s", "s per unit", "cpu s per unit"), kinds,
-                title="time per unit kind")
+                          round(r.compute[kind] / k, 3) if k else "-", round(r.cpu[kind] / k, 3) if k else "-",
+                          round(dk, 2), round(1000 * dk / k, 1) if k else "-",
+                          round(r.compute[kind] / dk) if dk else "-"))
+    print_table(("workers", "path", "unit kind", "units", "unit s", "unit cpu s", "s per unit", "cpu s per unit",
+                 "driver s", "driver ms per unit", "saturates at"), kinds,
+                title="time per unit kind (saturates at: unit s / driver s, for a build of this kind of unit only)")
     tails = []
     for (w, path), (r, *_) in runs.items():
         if r.timeline:

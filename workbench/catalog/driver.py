@@ -14,9 +14,10 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import pyarrow as pa
@@ -102,6 +103,8 @@ class CatalogResult:
     rows_written: int = 0
     batches: int = 0
     driver: dict = field(default_factory=lambda: {"decode": 0.0, "rows": 0.0, "commit": 0.0, "schedule": 0.0, "merge": 0.0})
+    # ... and the same driver seconds by the kind of unit they served (`driver_kind`): a part's rows and scheduling its
+    # IK chunks; an IK chunk's rows (or note and merge); preparing and writing a graph
     workers: int = 0
     dashboard: str = ""
     cpu: dict = field(default_factory=lambda: {"part": 0.0, "ik": 0.0, "graph": 0.0})
@@ -109,6 +112,7 @@ class CatalogResult:
     start: float = 0.0  # epoch seconds when the build started scheduling
     merges: int = 0
     shards: str | None = None
+    driver_kind: dict = field(default_factory=lambda: {"part": 0.0, "ik": 0.0, "graph": 0.0})  # driver s per unit kind
 
 
 def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> list[tuple[Path, float | None]]:
@@ -187,11 +191,30 @@ class _Build:
         self.bar = tqdm(total=0, desc="catalog", unit="unit", disable=not progress, dynamic_ncols=True)
         self.hand = franka_hand()
         self.shards = shards
+        self._stack: list[float] = []  # seconds of nested `charge` blocks, innermost last
         self.on_disk: dict[str, Path] = {}  # digest -> shard file of an IK unit computed but not merged yet
         self.to_merge: dict[tuple[str, str], list[tuple[dict, Path]]] = {}  # (part, robot) -> its IK units on disk
         if shards is not None:
             self.on_disk = open_shards(shards, self.done)
             self.result.shards = str(shards)
+
+    @contextmanager
+    def charge(self, kind: str, what: str) -> Iterator[None]:
+        """Count the block's seconds (less those of nested blocks) as driver time of `what` for a unit of `kind`; the
+        outermost blocks add up to `write_seconds`."""
+        t0 = time.perf_counter()
+        self._stack.append(0.0)
+        try:
+            yield
+        finally:
+            dt = time.perf_counter() - t0
+            own = dt - self._stack.pop()
+            self.result.driver_kind[kind] += own
+            self.result.driver[what] += own
+            if self._stack:
+                self._stack[-1] += dt
+            else:
+                self.result.write_seconds += dt
 
     # -- scheduling --------------------------------------------------------------------------------------------
     def _count(self, n: int = 1) -> None:
@@ -230,6 +253,10 @@ class _Build:
 
     def schedule_robots(self, part: dict, obj: ObjectModel | None = None) -> None:
         """IK chunk units of a stored part for every robot (and the graph units of runs already complete)."""
+        with self.charge("part", "schedule"):
+            self._schedule_robots(part, obj)
+
+    def _schedule_robots(self, part: dict, obj: ObjectModel | None) -> None:
         p = self.params
         grips, obj = stages.part_grips(self.store, part, obj)
         n = len(grips["idtabletopgrips"])
@@ -278,27 +305,24 @@ class _Build:
         if unit["digest"] in self.done:
             self._skip()
             return
-        rows, feasible = stages.graph_inputs(self.store, run)
-        self._submit(unit, graph_unit, rows, feasible, priority=GRAPH_PRIORITY)
+        with self.charge("graph", "schedule"):
+            rows, feasible = stages.graph_inputs(self.store, run)
+            self._submit(unit, graph_unit, rows, feasible, priority=GRAPH_PRIORITY)
 
     def finish_run(self, run: dict) -> None:
         """Every IK chunk of a (part, robot) is stored or on disk: merge the shards (one transaction), then the graph."""
         key = (run["part"], run["robot"])
         units = self.to_merge.pop(key, [])
         if units:
-            t0 = time.perf_counter()
             try:
-                n = stages.merge_ik_shards(self.store, run, units)
+                with self.charge("ik", "merge"):
+                    n = stages.merge_ik_shards(self.store, run, units)
             except WorkbenchError as exc:  # an unreadable shard: the run's chunks are computed again by a re-run
                 for unit, path in units:
                     path.unlink(missing_ok=True)
                     stages.record_failure(self.store, unit, one_line(exc))
                 self.left[key] = -1
                 return
-            finally:
-                dt = time.perf_counter() - t0
-                self.result.driver["merge"] += dt
-                self.result.write_seconds += dt
             self.result.merges += 1
             self.result.rows_written += n
             for unit, path in units:
@@ -321,9 +345,8 @@ class _Build:
         return lambda: None
 
     def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> Callable[[], None]:
-        t0 = time.perf_counter()
-        res = part_from_tables(tables)
-        self.result.driver["decode"] += time.perf_counter() - t0
+        with self.charge("part", "decode"):
+            res = part_from_tables(tables)
         p = self.params
         stages.write_part(self.store, unit, res, self.hand, p.grasps, p.placements, p.tabletop)
 
@@ -333,9 +356,8 @@ class _Build:
         return after
 
     def write_ik(self, unit: dict, table: pa.Table) -> Callable[[], None]:
-        t0 = time.perf_counter()
-        cols = table_arrays(table)
-        self.result.driver["decode"] += time.perf_counter() - t0
+        with self.charge("ik", "decode"):
+            cols = table_arrays(table)
         run = self.runs[(unit["part"], unit["robot"])]
         ids, feas, joints = cols["idtabletopgrips"], cols["feasible"], cols["joints"]
         stages.write_ik(self.store, unit, ids, feas, joints, run["stored"])
@@ -349,20 +371,18 @@ class _Build:
 
     def shard_done(self, fut, unit: dict, table: pa.Table) -> None:
         """An IK unit whose worker wrote its rows to a shard: note it; merge its run when it is the run's last."""
-        t0 = time.perf_counter()
-        meta = table.schema.metadata or {}
-        row = table.to_pylist()[0]
-        unit.update(counts={k: int(row[k]) for k in ("grips", "feasible", "feasible_all")})
-        self._account(unit, meta)
-        key = (unit["part"], unit["robot"])
-        self.to_merge[key].append((unit, Path(meta[b"shard"].decode())))
-        fut.release()
-        self.bar.update(1)
-        self.left[key] -= 1
-        self.result.driver["schedule"] += time.perf_counter() - t0
-        self.result.write_seconds += time.perf_counter() - t0
-        if self.left[key] == 0:
-            self.finish_run(self.runs[key])
+        with self.charge("ik", "schedule"):
+            meta = table.schema.metadata or {}
+            row = table.to_pylist()[0]
+            unit.update(counts={k: int(row[k]) for k in ("grips", "feasible", "feasible_all")})
+            self._account(unit, meta)
+            key = (unit["part"], unit["robot"])
+            self.to_merge[key].append((unit, Path(meta[b"shard"].decode())))
+            fut.release()
+            self.bar.update(1)
+            self.left[key] -= 1
+            if self.left[key] == 0:
+                self.finish_run(self.runs[key])
         if self.on_unit is not None:
             self.on_unit("ik", unit)
 
@@ -379,10 +399,12 @@ class _Build:
     def write_batch(self, items: list[tuple[object, dict, object]]) -> None:
         """Write the units that finished together in one transaction (each unit whole, so the commit's cost is
         shared when the writer falls behind); if one of them cannot be written, write them one by one."""
-        t0, decode = time.perf_counter(), self.result.driver["decode"]
         try:
             with stages.batch(self.store):
-                after = [self.write_rows(unit, result) for _, unit, result in items]
+                after = []
+                for _, unit, result in items:
+                    with self.charge(unit["kind"], "rows"):
+                        after.append(self.write_rows(unit, result))
                 t1 = time.perf_counter()
         except Exception as exc:  # noqa: BLE001 - one part's rows that cannot be stored must not stop the others
             if len(items) > 1:
@@ -392,10 +414,15 @@ class _Build:
             self.fail(items[0][1], exc)
             items[0][0].release()
             return
-        t2 = time.perf_counter()
+        commit = time.perf_counter() - t1  # shared by the batch's units
+        self.result.driver["commit"] += commit
+        self.result.write_seconds += commit
+        for _, unit, _ in items:
+            self.result.driver_kind[unit["kind"]] += commit / len(items)
         for (fut, unit, _), then in zip(items, after):
             try:
-                then()
+                with self.charge(unit["kind"], "schedule"):
+                    then()
             except WorkbenchError as exc:  # e.g. a part whose tabletop grips are not rigid poses: its IK cannot start
                 self.fail({**unit, "kind": "ik", "digest": unit["digest"] + "-schedule"}, exc)
             fut.release()
@@ -405,12 +432,6 @@ class _Build:
             self.bar.update(1)
             if self.on_unit is not None:
                 self.on_unit(kind, unit)
-        t3 = time.perf_counter()
-        d = self.result.driver
-        d["rows"] += (t1 - t0) - (d["decode"] - decode)
-        d["commit"] += t2 - t1
-        d["schedule"] += t3 - t2
-        self.result.write_seconds += t3 - t0
         self.result.batches += 1
         if self.result.write_seconds > 0:
             self.bar.set_postfix_str(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written", refresh=False)

@@ -88,8 +88,7 @@ def _put_unit(store: Store, unit: dict[str, Any]) -> None:
     row = {k: unit.get(k) for k in UNIT_COLUMNS}
     row["counts"] = json.dumps(row["counts"] or {}, sort_keys=True, default=_plain)
     row["nrows"] = int(row["nrows"] or 0)
-    store.run("DELETE FROM catalog_unit WHERE digest = ?", [row["digest"]])
-    store.run(f"INSERT INTO catalog_unit ({', '.join(UNIT_COLUMNS)}) VALUES ({', '.join('?' * len(UNIT_COLUMNS))})",
+    store.run(f"INSERT OR REPLACE INTO catalog_unit ({', '.join(UNIT_COLUMNS)}) VALUES ({', '.join('?' * len(UNIT_COLUMNS))})",
               [_plain(row[k]) for k in UNIT_COLUMNS])
 
 
