@@ -26,6 +26,7 @@ from pathlib import Path
 from workbench.benchmarks import print_table
 from workbench.catalog.cluster import cluster_client
 from workbench.catalog.driver import CatalogParams, build_catalog
+from workbench.errors import WorkbenchError
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.resources import bundled_objects, paper_objects
 
@@ -77,8 +78,10 @@ def run(args: argparse.Namespace) -> int:
     params = CatalogParams(tabletop=tparams, ik_chunk=args.ik_chunk)
     counts = [int(w) for w in args.workers.split(",")]
     paths = [p.strip() for p in args.paths.split(",") if p.strip()]
-    configs = [(w, "direct") for w in counts if "direct" in paths]
-    configs += [(counts[-1], "shards")] if "shards" in paths else []
+    if not paths or set(paths) - {"direct", "shards"}:
+        raise WorkbenchError(f"--paths takes direct and/or shards, got {args.paths!r}")
+    # the first worker count on the first path is the base; every path then runs with the other worker counts
+    configs = [(counts[0], paths[0])] + [(w, path) for path in paths for w in counts[1:]]
     runs = {}
     for w, path in configs:
         done = []
@@ -128,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
             tails.append((w, path, round(first, 2), round(idle_end, 2), round(max(last.values()) - min(last.values()), 2)))
     print_table(("workers", "path", "first unit starts s", "idle at the end s (mean)", "workers' last ends spread s"),
                 tails, title="the start and the tail")
-    two = [(w, path) for w, path in runs if w == counts[-1]]
+    two = [(w, path) for w, path in runs if w == counts[-1]] or list(runs)
     for key in two:
         r = runs[key][0]
         sat = sum(r.compute.values()) / r.write_seconds if r.write_seconds else float("inf")
