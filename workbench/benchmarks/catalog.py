@@ -115,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
             kinds.append((w, path, kind, k, round(r.compute[kind], 2), round(r.cpu[kind], 2),
                           round(r.compute[kind] / k, 3) if k else "-", round(r.cpu[kind] / k, 3) if k else "-",
                           round(dk, 2), round(1000 * dk / k, 1) if k else "-",
-                          round(r.compute[kind] / dk) if dk else "-"))
+                          round(r.compute[kind] / dk, 1) if dk else "-"))
     print_table(("workers", "path", "unit kind", "units", "unit s", "unit cpu s", "s per unit", "cpu s per unit",
                  "driver s", "driver ms per unit", "saturates at"), kinds,
                 title="time per unit kind (saturates at: unit s / driver s, for a build of this kind of unit only)")
@@ -138,6 +138,17 @@ def run(args: argparse.Namespace) -> int:
         verdict = "below" if sat < SATURATION_TARGET else "at or above"
         print(f"{key[1]}: speed-up {base.wall / r.wall:.2f} with {key[0]} workers (target >= 1.8); driver {r.write_seconds / r.wall:.1%} "
               f"of the wall time (target <= 10%); the single writer saturates at about {sat:.0f} workers ({verdict} {SATURATION_TARGET}).")
+    # On free cores each process would run at its CPU seconds: W workers and the driver (which also runs the scheduler)
+    # share min(cores, W + 1) cores, and no worker finishes before its share of the units' CPU seconds.
+    cores = os.cpu_count() or 1
+
+    def free_wall(key) -> float:
+        r, dcpu, wcpu, *_ = runs[key]
+        return max(wcpu / key[0], (wcpu + dcpu) / min(cores, key[0] + 1))
+
+    t1 = free_wall(configs[0])
+    print("on free cores (from the CPU seconds above): " + "; ".join(
+        f"{path} {w} worker(s) {free_wall((w, path)):.1f} s, speed-up {t1 / free_wall((w, path)):.2f}" for w, path in runs))
     last = runs[two[0]][0]
     inflation = (sum(last.compute.values()) / max(sum(last.cpu.values()), 1e-9))
     if inflation > 1.15:

@@ -35,7 +35,7 @@ hand before the client is handed out (`warm_worker`)."""
             raise ClusterError(f"no Dask scheduler answers at {scheduler} ({type(exc).__name__}); start one with "
                                f"`dask scheduler` or check the address") from None
         try:
-            client.run(warm_worker)
+            _warm(client)
             yield client
         finally:
             client.close()
@@ -48,11 +48,22 @@ hand before the client is handed out (`warm_worker`)."""
                                dashboard_address="127.0.0.1:0" if dashboard else None, silence_logs=50 if quiet else 20)
         client = Client(cluster)
         try:
-            client.run(warm_worker)  # imports and the hand: start-up, not the build's time
+            _warm(client)  # imports and the hand: start-up, not the build's time
             yield client
         finally:
             client.close()
             cluster.close()
+
+
+def _warm(client) -> None:
+    """Every worker imports the units' modules and builds its hand now (`warm_worker`); a worker that cannot (another
+    environment on a remote machine) is a ClusterError, not a traceback."""
+    try:
+        client.run(warm_worker)
+    except Exception as exc:  # noqa: BLE001 - whatever the remote worker raised, reported in one line
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise ClusterError(f"a Dask worker cannot load the workbench ({type(exc).__name__}: {first}); "
+                           f"start the workers from the same environment (venv, PYTHONPATH)") from None
 
 
 def dashboard_link(client) -> str:
