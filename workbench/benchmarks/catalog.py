@@ -143,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
     cores = os.cpu_count() or 1
 
     def free_wall(key) -> float:
-        r, dcpu, wcpu, *_ = runs[key]
+        _, dcpu, wcpu, *_ = runs[key]
         return max(wcpu / key[0], (wcpu + dcpu) / min(cores, key[0] + 1))
 
     t1 = free_wall(configs[0])
