@@ -7,6 +7,7 @@ import os
 from contextlib import contextmanager
 from typing import Iterator
 
+from workbench.catalog.units import warm_worker
 from workbench.errors import WorkbenchError
 
 
@@ -19,7 +20,9 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, das
                    quiet: bool = True) -> Iterator["distributed.Client"]:  # noqa: F821
     """A `distributed.Client` on a new `LocalCluster` of `workers` single-threaded worker processes (default: all
     cores) on 127.0.0.1, or on the scheduler at `scheduler` (tcp://host:8786); closed (and the cluster shut down) on
-    exit. Worker processes start with the `spawn` method, so nothing is forked from a threaded process."""
+    exit. Worker processes start with the `spawn` method, so nothing is forked from a threaded process; each starts with
+one BLAS/OpenMP thread (Dask's `distributed.nanny.pre-spawn-environ`), and imports the units' modules and builds its
+hand before the client is handed out (`warm_worker`)."""
     import dask
     from distributed import Client, LocalCluster
 
@@ -32,6 +35,7 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, das
             raise ClusterError(f"no Dask scheduler answers at {scheduler} ({type(exc).__name__}); start one with "
                                f"`dask scheduler` or check the address") from None
         try:
+            _warm(client)
             yield client
         finally:
             client.close()
@@ -44,10 +48,22 @@ def cluster_client(workers: int | None = None, scheduler: str | None = None, das
                                dashboard_address="127.0.0.1:0" if dashboard else None, silence_logs=50 if quiet else 20)
         client = Client(cluster)
         try:
+            _warm(client)  # imports and the hand: start-up, not the build's time
             yield client
         finally:
             client.close()
             cluster.close()
+
+
+def _warm(client) -> None:
+    """Every worker imports the units' modules and builds its hand now (`warm_worker`); a worker that cannot (another
+    environment on a remote machine) is a ClusterError, not a traceback."""
+    try:
+        client.run(warm_worker)
+    except Exception as exc:  # noqa: BLE001 - whatever the remote worker raised, reported in one line
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+        raise ClusterError(f"a Dask worker cannot load the workbench ({type(exc).__name__}: {first}); "
+                           f"start the workers from the same environment (venv, PYTHONPATH)") from None
 
 
 def dashboard_link(client) -> str:

@@ -14,9 +14,10 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 import pyarrow as pa
@@ -47,6 +48,9 @@ from workbench.robots.ik import (
 from workbench.robots.model import Robot, get_robot
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
+PART_PRIORITY = 1 << 40  # Dask priorities (higher runs first): parts, then graphs, then IK chunks by their length
+GRAPH_PRIORITY = 1 << 30
+SHARD_SUFFIX = ".parquet"
 
 
 class CatalogError(WorkbenchError):
@@ -85,9 +89,9 @@ class CatalogParams:
 @dataclass
 class CatalogResult:
     """What a build did: the summary rows (parts x robots), failures, units computed and skipped, seconds of wall
-    time, of worker compute per unit kind and of the driver's work on finished units (`write_seconds`, split in
-    `driver`: decoding the Arrow results, writing rows, committing, scheduling the units that depend on them), rows
-    written and write transactions (`batches`)."""
+    time, of worker compute (wall and CPU) per unit kind and of the driver's work on finished units (`write_seconds`,
+    split in `driver`: decoding the Arrow results, writing rows, committing, scheduling the units that depend on them,
+    merging Parquet shards), rows written and write transactions (`batches`, and `merges` of shards)."""
 
     rows: list[dict]
     failures: list[dict]
@@ -98,9 +102,17 @@ class CatalogResult:
     write_seconds: float = 0.0
     rows_written: int = 0
     batches: int = 0
-    driver: dict = field(default_factory=lambda: {"decode": 0.0, "rows": 0.0, "commit": 0.0, "schedule": 0.0})
+    driver: dict = field(default_factory=lambda: {"decode": 0.0, "rows": 0.0, "commit": 0.0, "schedule": 0.0, "merge": 0.0})
+    # ... and the same driver seconds by the kind of unit they served (`driver_kind`): a part's rows and scheduling its
+    # IK chunks; an IK chunk's rows (or note and merge); preparing and writing a graph
     workers: int = 0
     dashboard: str = ""
+    cpu: dict = field(default_factory=lambda: {"part": 0.0, "ik": 0.0, "graph": 0.0})
+    timeline: list = field(default_factory=list)  # (worker, kind, start, end) epoch seconds of every computed unit
+    start: float = 0.0  # epoch seconds when the build started scheduling
+    merges: int = 0
+    shards: str | None = None
+    driver_kind: dict = field(default_factory=lambda: {"part": 0.0, "ik": 0.0, "graph": 0.0})  # driver s per unit kind
 
 
 def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> list[tuple[Path, float | None]]:
@@ -163,7 +175,7 @@ class _Build:
     """The state of one build: the store, the client, what is stored, what runs."""
 
     def __init__(self, store, client, robots: dict[str, Robot], params: CatalogParams, progress: bool,
-                 on_unit: Callable[[str, dict], None] | None):
+                 on_unit: Callable[[str, dict], None] | None, shards: Path | None = None):
         from distributed import as_completed
         from tqdm.auto import tqdm
 
@@ -178,6 +190,31 @@ class _Build:
         self.result = CatalogResult(rows=[], failures=[])
         self.bar = tqdm(total=0, desc="catalog", unit="unit", disable=not progress, dynamic_ncols=True)
         self.hand = franka_hand()
+        self.shards = shards
+        self._stack: list[float] = []  # seconds of nested `charge` blocks, innermost last
+        self.on_disk: dict[str, Path] = {}  # digest -> shard file of an IK unit computed but not merged yet
+        self.to_merge: dict[tuple[str, str], list[tuple[dict, Path]]] = {}  # (part, robot) -> its IK units on disk
+        if shards is not None:
+            self.on_disk = open_shards(shards, self.done)
+            self.result.shards = str(shards)
+
+    @contextmanager
+    def charge(self, kind: str, what: str) -> Iterator[None]:
+        """Count the block's seconds (less those of nested blocks) as driver time of `what` for a unit of `kind`; the
+        outermost blocks add up to `write_seconds`."""
+        t0 = time.perf_counter()
+        self._stack.append(0.0)
+        try:
+            yield
+        finally:
+            dt = time.perf_counter() - t0
+            own = dt - self._stack.pop()
+            self.result.driver_kind[kind] += own
+            self.result.driver[what] += own
+            if self._stack:
+                self._stack[-1] += dt
+            else:
+                self.result.write_seconds += dt
 
     # -- scheduling --------------------------------------------------------------------------------------------
     def _count(self, n: int = 1) -> None:
@@ -189,10 +226,12 @@ class _Build:
         self._count()
         self.bar.update(1)
 
-    def _submit(self, unit: dict, fn, *args) -> None:
+    def _submit(self, unit: dict, fn, *args, priority: int = 0, **kwargs) -> None:
         key = f"{unit['kind']}-{unit['part']}-{unit.get('robot') or ''}-{unit.get('chunk') or 0}-{unit['digest'][:12]}"
-        # pure=False: a retry after a crash must not reuse a result the cluster still holds under the same key
-        fut = self.client.submit(fn, *args, key=key, pure=False)
+        # pure=False: a retry after a crash must not reuse a result the cluster still holds under the same key.
+        # priority: parts first (they unlock the IK units; the largest file first), then graphs (cheap, they end a
+        # run), then IK chunks longest first, so the last units to run are the short ones.
+        fut = self.client.submit(fn, *args, key=key, pure=False, priority=priority, **kwargs)
         self.pending[fut] = unit
         self.ac.add(fut)
         self._count()
@@ -208,10 +247,16 @@ class _Build:
             self._skip()
             self.schedule_robots(self.done[digest])
             return
-        self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop)
+        size = path.stat().st_size if path.is_file() else 0
+        self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop,
+                     priority=PART_PRIORITY + min(size, PART_PRIORITY - 1))
 
     def schedule_robots(self, part: dict, obj: ObjectModel | None = None) -> None:
         """IK chunk units of a stored part for every robot (and the graph units of runs already complete)."""
+        with self.charge("part", "schedule"):
+            self._schedule_robots(part, obj)
+
+    def _schedule_robots(self, part: dict, obj: ObjectModel | None) -> None:
         p = self.params
         grips, obj = stages.part_grips(self.store, part, obj)
         n = len(grips["idtabletopgrips"])
@@ -232,27 +277,58 @@ class _Build:
                    "stored": stored, "base": _digest(part["digest"], robot.spec.digest, ids_run["scene_params"], p.handx,
                                                      p.worldz, p.worlda, p.ik_chunk)}
             self.runs[(part["part"], name)] = run
-            left = 0
+            run["nq"] = robot.nq
+            left, key = 0, (part["part"], name)
+            self.to_merge[key] = []
             for k, (s, e) in enumerate(chunk_bounds(n, p.ik_chunk)):
                 unit = {**_unit_ids(run), "kind": "ik", "chunk": k, "digest": _digest(run["base"], "ik", k, n)}
                 if unit["digest"] in self.done:
                     self._skip()
                     continue
                 ix = order[s:e]
+                if self.shards is not None:
+                    unit["nrows"] = int((~np.isin(ids[ix], stored)).sum())
+                    if unit["digest"] in self.on_disk:  # computed by an earlier run, not merged yet
+                        self._skip()
+                        self.to_merge[key].append((unit, self.on_disk.pop(unit["digest"])))
+                        continue
                 left += 1
+                extra = {} if self.shards is None else {"shard": str(shard_path(self.shards, unit["digest"]))}
                 self._submit(unit, ik_unit, robot.spec, scene, p.ik, p.handx, p.worldz, p.worlda, obj.digest, verts,
-                             faces, ids[ix], poses[ix], places[ix])
-            self.left[(part["part"], name)] = left
+                             faces, ids[ix], poses[ix], places[ix], priority=len(ix), **extra)
+            self.left[key] = left
             if left == 0:
-                self.schedule_graph(run)
+                self.finish_run(run)
 
     def schedule_graph(self, run: dict) -> None:
         unit = {**_unit_ids(run), "kind": "graph", "digest": _digest(run["base"], "graph")}
         if unit["digest"] in self.done:
             self._skip()
             return
-        rows, feasible = stages.graph_inputs(self.store, run)
-        self._submit(unit, graph_unit, rows, feasible)
+        with self.charge("graph", "schedule"):
+            rows, feasible = stages.graph_inputs(self.store, run)
+            self._submit(unit, graph_unit, rows, feasible, priority=GRAPH_PRIORITY)
+
+    def finish_run(self, run: dict) -> None:
+        """Every IK chunk of a (part, robot) is stored or on disk: merge the shards (one transaction), then the graph."""
+        key = (run["part"], run["robot"])
+        units = self.to_merge.pop(key, [])
+        if units:
+            try:
+                with self.charge("ik", "merge"):
+                    n = stages.merge_ik_shards(self.store, run, units)
+            except WorkbenchError as exc:  # an unreadable shard: the run's chunks are computed again by a re-run
+                for unit, path in units:
+                    path.unlink(missing_ok=True)
+                    stages.record_failure(self.store, unit, one_line(exc))
+                self.left[key] = -1
+                return
+            self.result.merges += 1
+            self.result.rows_written += n
+            for unit, path in units:
+                self.done[unit["digest"]] = unit
+                path.unlink(missing_ok=True)
+        self.schedule_graph(run)
 
     # -- writing -------------------------------------------------------------------------------------------------
     def write_rows(self, unit: dict, result) -> Callable[[], None]:
@@ -260,7 +336,7 @@ class _Build:
         committed (schedule the units that depend on it)."""
         kind = unit["kind"]
         meta = (result["meta"] if kind == "part" else result).schema.metadata or {}
-        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode())
+        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode(), meta=meta)
         if kind == "part":
             return self.write_part(unit, result)
         if kind == "ik":
@@ -269,12 +345,9 @@ class _Build:
         return lambda: None
 
     def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> Callable[[], None]:
-        t0 = time.perf_counter()
-        res = part_from_tables(tables)
-        self.result.driver["decode"] += time.perf_counter() - t0
+        with self.charge("part", "decode"):
+            res = part_from_tables(tables)
         p = self.params
-        unit["seconds"] = sum(res.seconds.values())
-        unit["worker"] = tables["meta"].column("worker")[0].as_py()
         stages.write_part(self.store, unit, res, self.hand, p.grasps, p.placements, p.tabletop)
 
         def after() -> None:
@@ -283,9 +356,8 @@ class _Build:
         return after
 
     def write_ik(self, unit: dict, table: pa.Table) -> Callable[[], None]:
-        t0 = time.perf_counter()
-        cols = table_arrays(table)
-        self.result.driver["decode"] += time.perf_counter() - t0
+        with self.charge("ik", "decode"):
+            cols = table_arrays(table)
         run = self.runs[(unit["part"], unit["robot"])]
         ids, feas, joints = cols["idtabletopgrips"], cols["feasible"], cols["joints"]
         stages.write_ik(self.store, unit, ids, feas, joints, run["stored"])
@@ -294,16 +366,45 @@ class _Build:
             key = (unit["part"], unit["robot"])
             self.left[key] -= 1
             if self.left[key] == 0:
-                self.schedule_graph(run)
+                self.finish_run(run)
         return after
+
+    def shard_done(self, fut, unit: dict, table: pa.Table) -> None:
+        """An IK unit whose worker wrote its rows to a shard: note it; merge its run when it is the run's last."""
+        with self.charge("ik", "schedule"):
+            meta = table.schema.metadata or {}
+            row = table.to_pylist()[0]
+            unit.update(counts={k: int(row[k]) for k in ("grips", "feasible", "feasible_all")})
+            self._account(unit, meta)
+            key = (unit["part"], unit["robot"])
+            self.to_merge[key].append((unit, Path(meta[b"shard"].decode())))
+            fut.release()
+            self.bar.update(1)
+            self.left[key] -= 1
+            if self.left[key] == 0:
+                self.finish_run(self.runs[key])
+        if self.on_unit is not None:
+            self.on_unit("ik", unit)
+
+    def _account(self, unit: dict, meta: dict) -> None:
+        """A computed unit's worker seconds, CPU seconds and place on the workers' timeline."""
+        kind = unit["kind"]
+        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode())
+        self.result.computed[kind] += 1
+        self.result.compute[kind] += unit["seconds"]
+        self.result.cpu[kind] += float(meta.get(b"cpu", b"0"))
+        if b"start" in meta:
+            self.result.timeline.append((unit["worker"], kind, float(meta[b"start"]), float(meta[b"end"])))
 
     def write_batch(self, items: list[tuple[object, dict, object]]) -> None:
         """Write the units that finished together in one transaction (each unit whole, so the commit's cost is
         shared when the writer falls behind); if one of them cannot be written, write them one by one."""
-        t0, decode = time.perf_counter(), self.result.driver["decode"]
         try:
             with stages.batch(self.store):
-                after = [self.write_rows(unit, result) for _, unit, result in items]
+                after = []
+                for _, unit, result in items:
+                    with self.charge(unit["kind"], "rows"):
+                        after.append(self.write_rows(unit, result))
                 t1 = time.perf_counter()
         except Exception as exc:  # noqa: BLE001 - one part's rows that cannot be stored must not stop the others
             if len(items) > 1:
@@ -313,26 +414,24 @@ class _Build:
             self.fail(items[0][1], exc)
             items[0][0].release()
             return
-        t2 = time.perf_counter()
+        commit = time.perf_counter() - t1  # shared by the batch's units
+        self.result.driver["commit"] += commit
+        self.result.write_seconds += commit
+        for _, unit, _ in items:
+            self.result.driver_kind[unit["kind"]] += commit / len(items)
         for (fut, unit, _), then in zip(items, after):
             try:
-                then()
+                with self.charge(unit["kind"], "schedule"):
+                    then()
             except WorkbenchError as exc:  # e.g. a part whose tabletop grips are not rigid poses: its IK cannot start
                 self.fail({**unit, "kind": "ik", "digest": unit["digest"] + "-schedule"}, exc)
             fut.release()
             kind = unit["kind"]
             self.result.rows_written += int(unit.get("nrows") or 0)
-            self.result.computed[kind] += 1
-            self.result.compute[kind] += float(unit.get("seconds") or 0.0)
+            self._account(unit, unit.pop("meta", {}))
             self.bar.update(1)
             if self.on_unit is not None:
                 self.on_unit(kind, unit)
-        t3 = time.perf_counter()
-        d = self.result.driver
-        d["rows"] += (t1 - t0) - (d["decode"] - decode)
-        d["commit"] += t2 - t1
-        d["schedule"] += t3 - t2
-        self.result.write_seconds += t3 - t0
         self.result.batches += 1
         if self.result.write_seconds > 0:
             self.bar.set_postfix_str(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written", refresh=False)
@@ -355,11 +454,38 @@ class _Build:
                 if fut.status == "error" or isinstance(result, BaseException):
                     self.fail(unit, result[1] if isinstance(result, tuple) else result)
                     fut.release()
+                elif unit["kind"] == "ik" and self.shards is not None:
+                    self.shard_done(fut, unit, result)
                 else:
                     items.append((fut, unit, result))
             if items:
                 self.write_batch(items)
         self.bar.close()
+
+
+def shard_path(folder: Path, digest: str) -> Path:
+    """The Parquet file of an IK unit's rows in the shard folder."""
+    return folder / f"ik-{digest}{SHARD_SUFFIX}"
+
+
+def open_shards(folder: Path, done: dict) -> dict[str, Path]:
+    """The shard folder (created when missing): the files of IK units computed but not merged yet, by digest.
+    Temporary files of killed writers, and files of units already stored (a driver killed after the merge's commit),
+    are deleted."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise CatalogError(f"cannot create the shard folder {folder}: {exc.strerror or exc}") from None
+    for tmp in folder.glob(f"ik-*{SHARD_SUFFIX}.*.tmp"):
+        tmp.unlink(missing_ok=True)
+    out = {}
+    for path in folder.glob(f"ik-*{SHARD_SUFFIX}"):
+        digest = path.name[3:-len(SHARD_SUFFIX)]
+        if digest in done:
+            path.unlink(missing_ok=True)
+        else:
+            out[digest] = path
+    return out
 
 
 def _unit_ids(run: dict) -> dict:
@@ -369,14 +495,22 @@ def _unit_ids(run: dict) -> dict:
 
 def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]], robots: str | Sequence[str], db: str | Path, client,
                   params: CatalogParams = CatalogParams(), progress: bool = True,
-                  on_unit: Callable[[str, dict], None] | None = None) -> CatalogResult:
+                  on_unit: Callable[[str, dict], None] | None = None, shards: str | Path | None = None) -> CatalogResult:
     """Build (or finish) the catalogue of `parts` x `robots` in the store `db` on the Dask `client`; returns the
-    summary. Stored units are skipped; each finished unit is written in one transaction."""
+    summary. Stored units are skipped; each finished unit is written in one transaction.
+
+    With `shards` (a folder, created when missing; on a file system every worker sees), the IK units' workers write
+    their rows to one Parquet file per unit there, and the driver merges the files of each (part, robot) into the
+    store in one transaction once all its chunks are on disk, then deletes them: the driver's per-unit work is a
+    note, not a write. Files of a killed build are merged by the re-run; a file is whole or absent (renamed into
+    place), and the merge skips grips that already have rows, so nothing is lost or duplicated."""
     paths = collect_parts(parts)
     robot_models = parse_robots(robots)
     t0 = time.perf_counter()
     with stages.open_store(db) as store:
-        build = _Build(store, client, robot_models, params, progress, on_unit)
+        build = _Build(store, client, robot_models, params, progress, on_unit,
+                       None if shards is None else Path(shards))
+        build.result.start = time.time()
         try:
             build.run(paths)
         finally:

@@ -52,6 +52,7 @@ def open_store(db: str | Path, read_only: bool = False) -> Store:
     store = Store(db, read_only=read_only)
     if not read_only:
         sql.ensure_catalog_tables(store)
+        sql.single_thread(store)  # the driver shares the machine with the workers
     elif not sql.has_catalog(store):
         store.close()
         raise StoreError(f"store {db} holds no catalogue; build one with `workbench catalog build`")
@@ -119,11 +120,17 @@ def write_ik(store: Store, unit: dict, grip_ids: np.ndarray, feasible: np.ndarra
                                      "feasible_all": int(feasible.all(axis=1).sum())})
 
 
+def merge_ik_shards(store: Store, run: dict, units: list[tuple[dict, Path]]) -> int:
+    """The shard files of one (part, robot) IK run and their units' catalog_unit rows, in one transaction (rows of
+    grips already stored for the run are kept, not duplicated); returns the rows inserted."""
+    return sql.merge_ik_shards(store, run["idrobot"], run["idscene"], run["idikret"], run["nq"], [u for u, _ in units],
+                               [str(p) for _, p in units], stored=len(run["stored"]) > 0)
+
+
 def graph_inputs(store: Store, run: dict) -> tuple[dict[str, np.ndarray], np.ndarray]:
     """The tabletop grips of a part and their IK flags for a run (Section V's inputs, joints left out)."""
-    rows = roadmap_rows(store, run["idtabletop"], run["idrobot"], run["idscene"], run["idikret"], 0)
+    rows = roadmap_rows(store, run["idtabletop"], run["idrobot"], run["idscene"], run["idikret"], 0, joints=False)
     feasible = rows.pop("feasible")
-    rows.pop("joints")
     return rows, feasible
 
 

@@ -19,6 +19,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.parquet as pq
 import trimesh
 
 from workbench.geometry.objects import ObjectModel, load_object
@@ -119,11 +120,13 @@ def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams
 def part_unit(path: str, name: str, scale: float | None, units: str | None, gparams: GraspParams,
               pparams: PlacementParams, tparams: TabletopParams) -> dict[str, pa.Table]:
     """The worker's task for one part: `part_stages` of the mesh at `path`, returned as Arrow tables."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     obj = load_object(path, scale=scale, units=units, name=name)
     res = part_stages(obj, gparams, pparams, tparams, worker_state().hand())
     res.seconds["load"] = time.perf_counter() - t0 - sum(res.seconds.values())
-    return part_tables(res)
+    tables = part_tables(res)
+    tables["meta"] = stamp(tables["meta"], t0, c0)
+    return tables
 
 
 def part_tables(res: PartResult) -> dict[str, pa.Table]:
@@ -176,18 +179,26 @@ def part_from_tables(tables: dict[str, pa.Table]) -> PartResult:
 
 
 class SolverCache:
-    """IK solvers of one worker process keyed on (robot digest, scene, options, mesh digest); keeps the latest few."""
+    """IK solvers of one worker process keyed on (robot digest, scene, options, mesh digest); keeps the latest few.
+    The robot's part of a solver (seed library, self-collision model, reachability filter: most of its build time)
+    is built once per (robot, scene, options) and shared by the solvers of every object (`IKSolver.for_object`)."""
 
     def __init__(self, size: int = 4):
         self.size = size
         self.solvers: dict[tuple, IKSolver] = {}
+        self.robots: dict[tuple, IKSolver] = {}
 
     def get(self, spec: RobotSpec, scene: Scene, opts: IKOptions, mesh_digest: str, mesh: trimesh.Trimesh | None) -> IKSolver:
         key = (spec.digest, scene, opts, mesh_digest)
         if key not in self.solvers:
             if len(self.solvers) >= self.size:
                 self.solvers.pop(next(iter(self.solvers)))
-            self.solvers[key] = IKSolver(robot_from_spec(spec), scene, opts, mesh)
+            base = self.robots.get(key[:3])
+            if base is None:
+                base = self.robots[key[:3]] = IKSolver(robot_from_spec(spec), scene, opts, mesh)
+                self.solvers[key] = base
+            else:
+                self.solvers[key] = base.for_object(mesh)
         return self.solvers[key]
 
 
@@ -219,6 +230,22 @@ def worker_state() -> WorkerState:
     return state
 
 
+def warm_worker() -> str:
+    """Import the units' modules and build the worker's Franka hand before the first unit (run on every worker when a
+    cluster starts, so a build's timed region holds no start-up); returns the worker's name."""
+    worker_state().hand()
+    return worker_name()
+
+
+def stamp(table: pa.Table, t0: float, c0: float, **extra: object) -> pa.Table:
+    """`table` with the unit's timings in its schema metadata: seconds (wall), cpu (CPU seconds of the thread that ran it),
+    start and end (epoch seconds, for the workers' timeline) and the worker's name."""
+    meta = {b"seconds": str(time.perf_counter() - t0), b"cpu": str(time.thread_time() - c0), b"end": str(time.time()),
+            b"worker": worker_name(), **{k.encode(): str(v) for k, v in extra.items()}}
+    meta[b"start"] = str(float(meta[b"end"]) - float(meta[b"seconds"]))
+    return table.replace_schema_metadata({k: v.encode() for k, v in meta.items()})
+
+
 def worker_name() -> str:
     try:
         from distributed import get_worker
@@ -230,22 +257,36 @@ def worker_name() -> str:
 
 def ik_unit(spec: RobotSpec, scene: Scene, opts: IKOptions, handx: float, worldz: float, worlda: float,
             mesh_digest: str, vertices: np.ndarray, faces: np.ndarray, grip_ids: np.ndarray, poses: np.ndarray,
-            placements: np.ndarray, cache: SolverCache | None = None) -> pa.Table:
+            placements: np.ndarray, cache: SolverCache | None = None, shard: str | None = None) -> pa.Table:
     """IK feasibility of one chunk of tabletop grips (given in `neighbour_order`) at the five poses of
     `robots.ik.KINDS` (grasp, handx, handxworldz, worlda, worldaworldz): a table of idtabletopgrips, feasible (C, 5)
-    and joints (C, 5, nq), NaN where infeasible."""
-    t0 = time.perf_counter()
+    and joints (C, 5, nq), NaN where infeasible.
+
+    With `shard` (a Parquet path), the table is written there instead (to a temporary name first, then renamed: the
+    file exists whole or not at all) and the returned table holds its counts only: the rows never travel through the
+    scheduler and the driver."""
+    t0, c0 = time.perf_counter(), time.thread_time()
     mesh = trimesh.Trimesh(vertices, faces, process=False) if opts.collide else None
     solver = (cache or worker_state().solvers).get(spec, scene, opts, mesh_digest, mesh)
     feas, joints = solver.chunk(retract(poses, handx, worldz, worlda), placements)
     table = arrays_table({"idtabletopgrips": np.asarray(grip_ids, dtype=np.int64), "feasible": feas, "joints": joints})
-    return table.replace_schema_metadata({b"seconds": str(time.perf_counter() - t0).encode(), b"worker": worker_name().encode()})
+    if shard is None:
+        return stamp(table, t0, c0)
+    write_shard(table, shard)
+    counts = pa.table({"grips": [len(feas)], "feasible": [int(feas[:, 0].sum())], "feasible_all": [int(feas.all(axis=1).sum())]})
+    return stamp(counts, t0, c0, shard=shard)
+
+
+def write_shard(table: pa.Table, path: str) -> None:
+    """Write a unit's table to the Parquet file `path` atomically (a killed writer leaves only a `.tmp` file)."""
+    tmp = f"{path}.{os.getpid()}.tmp"
+    pq.write_table(table, tmp, compression="none")
+    os.replace(tmp, path)
 
 
 def graph_unit(rows: dict[str, np.ndarray], feasible: np.ndarray) -> pa.Table:
     """The regrasp graph's sizes (Section V): grips, nodes, transfer and transit edges, grasps, placements,
     components, largest component; one row."""
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.thread_time()
     s = build_roadmap(rows, feasible).summary()
-    table = pa.table({k: [int(v)] for k, v in s.items()})
-    return table.replace_schema_metadata({b"seconds": str(time.perf_counter() - t0).encode(), b"worker": worker_name().encode()})
+    return stamp(pa.table({k: [int(v)] for k, v in s.items()}), t0, c0)

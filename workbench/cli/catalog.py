@@ -45,6 +45,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--ik-chunk", type=int, default=1024, help=f"tabletop grips per IK unit (a multiple of {o.lane})")
     b.add_argument("--ik-library", type=int, default=o.library, help="IK seed library size")
     b.add_argument("--ik-seeds", type=int, default=o.seeds, help="library seeds tried after the warm start")
+    b.add_argument("--shards", default=None, metavar="DIR",
+                   help="IK workers write their rows to Parquet files in DIR (created; on a file system every worker "
+                        "sees), merged into the store per part and robot: the driver writes less (see `workbench bench catalog`)")
     b.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_placement_arguments(b)
     add_grasp_arguments(b)
@@ -68,7 +71,8 @@ def run_build(args: argparse.Namespace) -> int:
     with cluster_client(workers=args.workers, scheduler=args.scheduler) as client:
         n = len(client.scheduler_info().get("workers", {}))
         print(f"dask: {n} worker(s) at {client.scheduler.address}; dashboard {dashboard_link(client)}", file=sys.stderr)
-        res = build_catalog(args.parts, args.robots, args.db, client, params, progress=not args.no_progress)
+        res = build_catalog(args.parts, args.robots, args.db, client, params, progress=not args.no_progress,
+                            shards=args.shards)
     print_summary(res.rows, res.failures)
     write_share = f", writing {res.write_seconds / res.wall:.0%} of it" if res.wall > 0 else ""
     print(f"{sum(res.computed.values())} units computed ({res.computed['part']} part, {res.computed['ik']} IK, "

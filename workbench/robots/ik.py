@@ -25,6 +25,7 @@ an uninterrupted one, whatever the number of workers.
 
 from __future__ import annotations
 
+import copy
 import hashlib
 import multiprocessing as mp
 import os
@@ -287,6 +288,13 @@ class IKSolver:
         self.analytic = analytic_ik(robot) if opts.closed_form else None
         self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)
+
+    def for_object(self, obj_mesh: trimesh.Trimesh | None) -> IKSolver:
+        """This solver for another object: its own collider, the same robot, seed library (the library keeps the seeds
+        clear of the table, which no object changes), self-collision model and reachability filter."""
+        other = copy.copy(self)
+        other.collider = Collider(self.robot, self.scene, obj_mesh) if self.opts.collide else None
+        return other
 
     def solve(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray, iters: int) -> tuple[np.ndarray, np.ndarray]:
         """Joint vectors (M, n) from seeds `q0` for TCP poses (M, 4, 4) of grips of the object at `placements`

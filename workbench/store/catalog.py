@@ -18,10 +18,12 @@ import time
 from contextlib import contextmanager
 from typing import Any, Iterator
 
+import duckdb
 import numpy as np
 
+from workbench.errors import StoreError
 from workbench.store import Store
-from workbench.store.robots import ALL_FEASIBLE, FEASIBILITY
+from workbench.store.robots import ALL_FEASIBLE, FEASIBILITY, JOINTS
 
 CATALOG_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS catalog_unit (
@@ -60,6 +62,11 @@ def ensure_catalog_tables(store: Store) -> None:
             store.run(ddl)
 
 
+def single_thread(store: Store) -> None:
+    """One DuckDB thread on this connection (the catalogue's driver leaves the cores to its workers)."""
+    store.run("SET threads = 1")
+
+
 def has_catalog(store: Store) -> bool:
     """Whether the store holds a catalogue (its catalog_unit table)."""
     return store.one("SELECT count(*) FROM information_schema.tables WHERE table_name = 'catalog_unit'")[0] > 0
@@ -81,8 +88,7 @@ def _put_unit(store: Store, unit: dict[str, Any]) -> None:
     row = {k: unit.get(k) for k in UNIT_COLUMNS}
     row["counts"] = json.dumps(row["counts"] or {}, sort_keys=True, default=_plain)
     row["nrows"] = int(row["nrows"] or 0)
-    store.run("DELETE FROM catalog_unit WHERE digest = ?", [row["digest"]])
-    store.run(f"INSERT INTO catalog_unit ({', '.join(UNIT_COLUMNS)}) VALUES ({', '.join('?' * len(UNIT_COLUMNS))})",
+    store.run(f"INSERT OR REPLACE INTO catalog_unit ({', '.join(UNIT_COLUMNS)}) VALUES ({', '.join('?' * len(UNIT_COLUMNS))})",
               [_plain(row[k]) for k in UNIT_COLUMNS])
 
 
@@ -96,6 +102,37 @@ def unit_transaction(store: Store, unit: dict[str, Any]) -> Iterator[dict[str, A
         unit["status"] = "done"
         unit["write_seconds"] = time.perf_counter() - t0  # the commit itself is not included
         _put_unit(store, unit)
+
+
+def merge_ik_shards(store: Store, idrobot: int, idscene: int, idikret: int, nq: int, units: list[dict[str, Any]],
+                    paths: list[str], stored: bool = True) -> int:
+    """The `ik` rows of one IK run's shard files (Parquet, one per unit: idtabletopgrips, feasible (5) and joints
+    (5 x nq, NaN where infeasible), as `workbench.catalog.units.ik_unit` writes them) and the units' catalog_unit
+    rows, in one transaction; grips that already have a row for the run are left as they are (`stored`: the run may
+    have rows already; when False the anti-join is skipped, and the UNIQUE key still refuses a duplicate). Returns
+    the rows inserted. A shard that cannot be read is a StoreError naming it."""
+    if not paths:
+        return 0
+    feas = ", ".join(f"f[{k + 1}]" for k in range(len(FEASIBILITY)))
+    jnts = ", ".join(f"CASE WHEN f[{k + 1}] THEN j[{k * nq + 1}:{(k + 1) * nq}] END" for k in range(len(JOINTS)))
+    t0 = time.perf_counter()
+    with store.transaction():
+        first = store.next_id("ik", "idik")
+        try:
+            store.run(
+                f"INSERT INTO ik (idik, idrobot, idtabletopgrips, idikret, idscene, {', '.join(FEASIBILITY)}, {', '.join(JOINTS)}) "
+                f"SELECT ? - 1 + row_number() OVER (ORDER BY idtabletopgrips), ?, idtabletopgrips, ?, ?, {feas}, {jnts} "
+                "FROM (SELECT idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j FROM read_parquet(?)) s "
+                + ("WHERE idtabletopgrips NOT IN (SELECT idtabletopgrips FROM ik WHERE idrobot = ? AND idscene = ? AND idikret = ?)"
+                   if stored else ""),
+                [first, idrobot, idikret, idscene, list(paths)] + ([idrobot, idscene, idikret] if stored else []))
+        except duckdb.IOException as exc:
+            raise StoreError(f"a shard of this IK run cannot be read ({str(exc).splitlines()[0]})") from None
+        n = store.next_id("ik", "idik") - first
+        seconds = (time.perf_counter() - t0) / len(units)
+        for unit in units:
+            _put_unit(store, {**unit, "status": "done", "write_seconds": seconds})
+    return n
 
 
 def record_failure(store: Store, unit: dict[str, Any], error: str) -> None:

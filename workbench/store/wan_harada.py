@@ -26,15 +26,18 @@ def ik_fingerprint(store: Store, idtabletop: int, idrobot: int, idscene: int, id
     return int(row[0]), int(row[1])
 
 
-def roadmap_rows(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int, nq: int) -> dict[str, np.ndarray]:
+def roadmap_rows(store: Store, idtabletop: int, idrobot: int, idscene: int, idikret: int, nq: int,
+                 joints: bool = True) -> dict[str, np.ndarray]:
     """Every tabletop grip of a tabletop parameter set with its placement, angle and IK row (Section V's inputs):
     idtabletopgrips, idtabletopplacements, idfreeairgrip, rotmat (N, 4, 4), jawwidth, placement_rotmat (N, 4, 4),
     idfreetabletopplacement, tabletopposition (N, 3), angle (rad), feasible (N, 5) (False where no IK row) and
-    joints (N, 5, nq) for the five poses of `robots.ik.KINDS` (NaN where infeasible)."""
+    joints (N, 5, nq) for the five poses of `robots.ik.KINDS` (NaN where infeasible; left out, and not read, when
+    `joints` is False)."""
+    cols = FEASIBILITY + JOINTS if joints else FEASIBILITY
     table = store.con.sql(
         "SELECT g.idtabletopgrips, g.idtabletopplacements, g.idfreeairgrip, g.rotmat, g.jawwidth, "
         "p.rotmat AS placement_rotmat, p.idfreetabletopplacement, p.tabletopposition, a.value AS angle, "
-        + ", ".join(f"k.{c}" for c in FEASIBILITY + JOINTS) + " "
+        + ", ".join(f"k.{c}" for c in cols) + " "
         "FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) JOIN angle a USING (idangle) "
         "LEFT JOIN ik k ON k.idtabletopgrips = g.idtabletopgrips AND k.idrobot = $robot AND k.idscene = $scene AND k.idikret = $ikret "
         "WHERE p.idparamset = $tabletop ORDER BY g.idtabletopgrips",
@@ -47,7 +50,11 @@ def roadmap_rows(store: Store, idtabletop: int, idrobot: int, idscene: int, idik
     out["rotmat"] = np.asarray(out["rotmat"], dtype=np.float64).reshape(n, 4, 4)
     out["placement_rotmat"] = np.asarray(out["placement_rotmat"], dtype=np.float64).reshape(n, 4, 4)
     out["tabletopposition"] = np.asarray(out["tabletopposition"], dtype=np.float64).reshape(n, 3)
-    out["feasible"], out["joints"] = feasibility_arrays(table, n, nq)
+    if joints:
+        out["feasible"], out["joints"] = feasibility_arrays(table, n, nq)
+    else:
+        out["feasible"] = np.stack([np.asarray(table.column(c).fill_null(False).to_numpy(zero_copy_only=False), dtype=bool)
+                                    for c in FEASIBILITY], axis=1).reshape(n, len(FEASIBILITY))
     return out
 
 
