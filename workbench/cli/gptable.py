@@ -41,12 +41,15 @@ def add_table_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-face-area", type=float, default=c.min_face_area, help="smallest face used by a class (m^2)")
     parser.add_argument("--min-contact-area", type=float, default=c.min_contact_area,
                         help="pad area that must cover the face overlap at every legal theta (m^2, Section 5.1; 0: off)")
+    parser.add_argument("--min-range", type=float, default=float(np.degrees(c.min_range)),
+                        help="drop grasp classes whose legal theta range is narrower than this (degrees; 0, the paper's "
+                             "rule: keep every class with a non-empty range)")
 
 
 def params_from_args(args: argparse.Namespace):
     cp = ClassParams(min_face_area=args.min_face_area, edge_angle=float(np.radians(args.edge_angle)),
                      theta_step=float(np.radians(args.theta_step)), bisection=min(float(np.radians(0.1)), float(np.radians(args.theta_step))),
-                     min_contact_area=args.min_contact_area)
+                     min_contact_area=args.min_contact_area, min_range=float(np.radians(args.min_range)))
     tp = TableParams(theta_step=float(np.radians(args.theta_step)), phi_step=float(np.radians(args.phi_step)),
                      table_point=parse_point(args.table_point), clearance=args.clearance)
     return cp, tp

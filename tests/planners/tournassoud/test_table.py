@@ -240,3 +240,30 @@ def test_minimum_contact_area(box, hand):
     assert any(abs(c.opening - 0.03) < 1e-9 for c in plain)
     assert not any(abs(c.opening - 0.03) < 1e-9 for c in strict)
     assert any(abs(c.opening - 0.006) < 1e-9 for c in strict)
+
+
+def test_narrow_legal_range_is_kept():
+    """Section 5.1: a class is kept whenever its legal theta range is non-empty, even when it is narrower than the
+    coarse candidate step (15 degrees): the candidates are compared again at the full step, and the range's ends are
+    bisected to the true boundaries."""
+    from workbench.planners.tournassoud.classes import select_point
+    from workbench.planners.tournassoud.table import grid
+
+    theta = grid(np.radians(5.0))
+    coarse = theta[::3]
+    lo, hi = np.radians(106.0), np.radians(114.0)      # 8 degrees, no coarse sample (105, 120) inside, one 5-degree one
+
+    def test(t, point=None):
+        t = np.mod(np.asarray(t, dtype=float), 2 * np.pi)
+        return (t >= lo) & (t <= hi) & bool(point[0] == 1.0)   # only the second candidate is ever free
+
+    cands = np.array([[0.0, 0, 0], [1.0, 0, 0]])
+    point, intervals = select_point(cands, test, theta, coarse, np.radians(0.01))
+    assert point[0] == 1.0
+    assert len(intervals) == 1 and np.allclose(intervals[0], (lo, hi), atol=np.radians(0.011))
+    # nothing free at any sample: no class
+    assert select_point(cands, lambda t, point=None: np.zeros(len(np.atleast_1d(t)), bool), theta, coarse, 0.01) is None
+    # the documented threshold drops narrow classes only when asked
+    assert ClassParams().min_range == 0.0
+    with pytest.raises(WorkbenchError):
+        ClassParams(min_range=-1.0)

@@ -14,9 +14,12 @@ candidates inside the overlap of the contacts' projections (rasterised at about 
 face/face the overlap's centroid, its deepest point (farthest from its boundary) and the centroids of its largest
 connected pieces; for face/edge the middles of the edge's pieces over the face and the quarter points of the
 longest; for face/vertex the vertex's projection. The candidate with the widest legal theta range against
-hand-object collision (Section 5.1) at a coarse step (1/24 turn) wins; ties go to the earlier candidate; a class
-free at no coarse sample is dropped (a legal range narrower than 15 degrees is no use for regrasping). Legal theta ranges are intervals found
-at `theta_step` and refined at their ends by bisection down to `bisection`. With `min_contact_area` > 0 the pad's
+hand-object collision (Section 5.1) at a coarse step (1/24 turn) wins; ties go to the earlier candidate. When no
+candidate is free at any coarse sample, the candidates are scanned again at `theta_step` (a narrow legal range is
+still a legal range: the paper keeps every class whose range is non-empty). A class is dropped only when it is free
+at no `theta_step` sample (any legal range it has is then narrower than the resolution) or, with the documented
+parameter `min_range` > 0 (default 0: keep all), when its legal range is narrower than `min_range`. Legal theta
+ranges are intervals found at `theta_step` and refined at their ends by bisection down to `bisection`. With `min_contact_area` > 0 the pad's
 rectangle must also cover that much of the face overlap at each theta (Section 5.1's minimum contact area).
 
 Placement classes are the stable faces of the convex hull (Section 3) with the roadmap planner's stability margin:
@@ -61,13 +64,15 @@ class ClassParams:
     min_contact_area: float = 0.0
     candidates: int = 5
     min_overlap: float = 1e-6
+    min_range: float = 0.0
 
     def __post_init__(self) -> None:
         if not (0 < self.theta_step <= np.pi / 2):
             raise WorkbenchError(f"theta step must be in (0, 90] degrees, got {np.degrees(self.theta_step):g}")
         if not (0 < self.bisection <= self.theta_step):
             raise WorkbenchError("bisection resolution must be positive and at most the theta step")
-        if min(self.min_face_area, self.tolerance, self.min_contact_area, self.min_overlap) < 0 or self.candidates < 1:
+        if min(self.min_face_area, self.tolerance, self.min_contact_area, self.min_overlap, self.min_range) < 0 \
+                or self.candidates < 1 or not np.isfinite(self.min_range):
             raise WorkbenchError(f"grasp class parameters must be non-negative (and candidates >= 1), got {self}")
 
     def as_dict(self) -> dict:
@@ -300,6 +305,32 @@ def _bisect(good: float, bad: float, test, resolution: float) -> float:
     return good
 
 
+def select_point(cands: np.ndarray, test, theta: np.ndarray, coarse: np.ndarray,
+                 resolution: float) -> tuple[np.ndarray, list[tuple[float, float]]] | None:
+    """The grasp point among `cands` with the widest legal theta range and its legal intervals (Sections 2.3, 5.1):
+    `test(theta, point=c)` says which angles are free. Candidates are compared at the `coarse` samples (stopping at
+    one free at all of them); when none is free at any coarse sample they are compared again at every sample of
+    `theta`, so a range narrower than the coarse step is kept. None when no candidate is free at any `theta` sample."""
+    best_k, best_free = 0, 0
+    for grid_ in (coarse, theta):
+        for k, c in enumerate(cands):
+            n_free = int(test(grid_, point=c).sum())
+            if n_free > best_free:
+                best_k, best_free = k, n_free
+            if n_free == len(grid_):
+                break
+        if best_free:
+            break
+    if best_free == 0:
+        return None
+    point = cands[best_k]
+    free = test(theta, point=point)
+    if not free.any():
+        return None
+    step = float(theta[1] - theta[0]) if len(theta) > 1 else 2 * np.pi
+    return point, _intervals(free, theta, step, lambda t: test(t, point=point), resolution)
+
+
 def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = ClassParams(),
                   progress: bool = False) -> list[GraspClass]:
     """The grasp classes of `obj` for `gripper` with their grasp points and legal theta intervals (Sections 2, 5.1).
@@ -321,24 +352,12 @@ def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = Clas
                 ok &= _contact_area(cls, point, t, gripper) >= params.min_contact_area
             return ok
 
-        # the candidate with the widest legal range at a coarse step (stop at one free everywhere), then the full step
-        # (a class free at no coarse sample is dropped: its legal range, if any, is narrower than the coarse step)
-        cands = cls["candidates"]
-        best_k, best_free = 0, 0
-        for k, c in enumerate(cands):
-            n_free = int(test(coarse, point=c).sum())
-            if n_free > best_free:
-                best_k, best_free = k, n_free
-            if n_free == len(coarse):
-                break
-        if best_free == 0:
+        picked = select_point(cls["candidates"], test, theta, coarse, params.bisection)
+        if picked is None:
             continue
-        point = cands[best_k]
-        best = test(theta, point=point)
-        if not best.any():
+        point, intervals = picked
+        if params.min_range > 0 and sum(b - a for a, b in intervals) < params.min_range:
             continue
-
-        intervals = _intervals(best, theta, step, lambda t, cls=cls, point=point: test(t, cls, point), params.bisection)
         n, u, v = cls["normal"], cls["u"], cls["v"]
         out.append(GraspClass(kind=cls["kind"], features=cls["features"], normal=n.copy(), u=u, v=v, point=point.copy(),
                               eccentricity=float(n @ (point - obj.com)), opening=float(cls["opening"]),
