@@ -18,7 +18,12 @@ from workbench.planners.tournassoud.plans import (
     plan_grasp_query,
     plan_placement_query,
 )
-from workbench.planners.tournassoud.stages import load_planner, plan_validator
+from workbench.planners.tournassoud.stages import (
+    load_planner,
+    plan_validator,
+    save_plan,
+    stored_validator,
+)
 from workbench.robots.collider import default_scene
 
 
@@ -62,6 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--to", default=None, help="goal placement P,PHI (degrees), instead of --goal")
     p.add_argument("--handx", type=float, default=0.05, help="approach distance along the hand's axis (m)")
     p.add_argument("--worldz", type=float, default=0.05, help="lift after the approach (m)")
+    p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
     p.add_argument("--json", default=None, help="write the sequence and its plan to this JSON file")
     p.add_argument("--html", default=None, help="write the table with the sequence overlaid (Fig. 6) to this HTML file")
     p.set_defaults(func=run)
@@ -105,7 +111,12 @@ def run(args: argparse.Namespace) -> int:
         print("the initial grasp is already in the goal range: nothing to do")
     else:
         print(plan.summary())
-        report = plan_validator(args.db, r, scene).check(plan)
+        if args.no_save:
+            report = plan_validator(args.db, r, scene).check(plan)
+        else:
+            idplan, plan = save_plan(args.db, r, plan, scene, realiser.opts)
+            print(f"stored plan id {idplan} in {args.db} (planner tournassoud; tables plan, planstep)")
+            report = stored_validator(args.db, r, idplan).check(plan)
         print("validator: " + ("ok" if report.ok else "FAILED: " + "; ".join(report.errors[:3])))
     if args.json:
         doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict()}

@@ -62,8 +62,8 @@ def test_cli_gptable_and_gpplan(tmp_path, lpart, capsys):
     out = capsys.readouterr().out
     doc = json.loads(js.read_text())
     if doc["plan"] is not None:
-        assert "validator: ok" in out
-        assert doc["sequence"]["regrasps"] == doc["plan"]["regrasps"]
+        assert "validator: ok" in out and "(planner tournassoud" in out
+        assert doc["sequence"]["regrasps"] == doc["plan"]["regrasps"] and doc["plan"]["planner"] == "tournassoud"
     assert html.read_text().startswith("<!doctype html>")
     # bad input: one line, status 2
     assert main(["gpplan", "--db", db, "--object", "L", "--initial", "0,abc", "--goal", "3,0:360"]) == 2
@@ -81,3 +81,45 @@ def test_zero_classes_is_a_warning(tmp_path, capsys):
     assert main(["gptable", str(big), "--db", str(tmp_path / "z.duckdb"), "--theta-step", "15", "--phi-step", "15"]) == 0
     cap = capsys.readouterr()
     assert "0 grasp classes" in cap.out and "warning: no grasp class" in cap.err
+
+
+def test_plans_are_stored_like_the_roadmap_planners(tmp_path, lpart, puma560):
+    """A plan of this planner goes into the store's plan / planstep tables, named, with foreign keys to real
+    freeairgrip / freetabletopplacement rows whose poses agree with the steps, and passes the validator rebuilt
+    from the store; the same query is not stored twice."""
+    from workbench.errors import PlanningError
+    from workbench.planners.tournassoud.plans import Realiser, plan_placement_query
+    from workbench.planners.tournassoud.stages import save_plan, stored_validator
+    from workbench.robots.collider import default_scene
+
+    db = str(tmp_path / "plans.duckdb")
+    run = table_stage_at(db, lpart, puma560, params=PARAMS)
+    scene = default_scene("puma560")
+    realiser = Realiser(puma560, scene, lpart.mesh)
+    plan = None
+    p_n = run.table.q.shape[1]
+    for a, b in [(a, b) for a in range(p_n) for b in range(p_n) if a != b]:
+        try:
+            _, plan = plan_placement_query(run.table, run.classes, realiser, puma560, "L", (a, 0.3), (b, 1.0))
+        except PlanningError:
+            continue
+        if plan.regrasps >= 1:
+            break
+    assert plan is not None and plan.regrasps >= 1
+    pid, stored = save_plan(db, run, plan, scene, realiser.opts)
+    assert stored_validator(db, run, pid).check(stored).ok
+    assert save_plan(db, run, plan, scene, realiser.opts)[0] == pid
+    con = duckdb.connect(db, read_only=True)
+    assert con.execute("SELECT count(*), min(planner), min(regrasps) FROM plan").fetchone() == (1, "tournassoud", plan.regrasps)
+    rows = con.execute("SELECT s.kind, s.object, s.tcp, s.yaw, s.position, g.rotmat, g.jawwidth, f.rotmat FROM planstep s "
+                       "JOIN freeairgrip g USING (idfreeairgrip) JOIN freetabletopplacement f USING (idfreetabletopplacement) "
+                       "WHERE s.idplan = ? ORDER BY s.seq", [pid]).fetchall()
+    con.close()
+    assert [r[0] for r in rows] == [s.kind for s in plan.steps]
+    for _, obj, tcp, yaw, pos, grip, jaw, free in rows:
+        obj, tcp = np.reshape(obj, (4, 4)), np.reshape(tcp, (4, 4))
+        assert np.allclose(obj @ np.reshape(grip, (4, 4)), tcp, atol=1e-9)           # TCP = object pose x stored grasp
+        c, s = np.cos(yaw), np.sin(yaw)
+        move = np.array([[c, -s, 0, pos[0]], [s, c, 0, pos[1]], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        assert np.allclose(move @ np.reshape(free, (4, 4)), obj, atol=1e-9)          # object = H Rz(phi) placement
+        assert 0 < jaw <= 0.08
