@@ -30,7 +30,7 @@ from workbench.planners.tournassoud.chaining import (
     grasp_query,
     placement_query,
 )
-from workbench.planners.tournassoud.classes import KINDS, grasp_classes
+from workbench.planners.tournassoud.classes import KINDS, ClassParams, grasp_classes
 from workbench.planners.tournassoud.shapes import l_part
 from workbench.planners.tournassoud.table import TableParams, build_table, grid
 from workbench.planners.wan_harada.query import PoseQuery
@@ -51,6 +51,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--compare", default="L,box", help="objects compared with the roadmap planner ('' for none)")
     parser.add_argument("--pairs", type=int, default=5, help="start/goal placement pairs per compared object")
     parser.add_argument("--seed", type=int, default=0, help="seed of the queries and pairs")
+    parser.add_argument("--points", type=int, default=3, help="grasp points per feature pair of the second compared table")
     parser.add_argument("--dir", default="build/bench/gptable", help="folder of the roadmap planner's stores")
 
 
@@ -111,14 +112,18 @@ def chaining_times(table, classes, queries: int, seed: int) -> list[float]:
     return out
 
 
-def compare_roadmap(name: str, obj: ObjectModel, robot_name: str, table, point, pairs: int, seed: int, folder: Path) -> tuple:
-    """(this planner's regrasps, the roadmap planner's) over seeded start/goal placement pairs at H (None: no plan)."""
+def compare_roadmap(name: str, obj: ObjectModel, robot_name: str, tables: list, point, pairs: int, seed: int,
+                    folder: Path) -> tuple[list[list], list, list[str]]:
+    """Per table of `tables` (same placements, e.g. one and several grasp points per class), this planner's regrasps
+    over seeded start/goal placement pairs at H, the roadmap planner's (Wan & Harada) for the same pairs (None: no
+    plan), and why the first table has no answer where it has none."""
+    table = tables[0]
     tp = TabletopParams(x_min=point[0], x_max=point[0], nx=1, y_min=point[1], y_max=point[1], ny=1, angles=8)
     folder.mkdir(parents=True, exist_ok=True)
     db = folder / f"{name.split(' ')[0]}_{robot_name}.duckdb"
     build_all(db, obj, robot_name, tparams=tp, progress=False)
     rng = np.random.default_rng(seed)
-    ours, theirs = [], []
+    ours, theirs, why = [[] for _ in tables], [], []
     with Store(db) as store:
         planner = load_planner(store, obj.name, robot_name)
         free_ids, free_poses = planner.free["idfreetabletopplacement"], planner.free["rotmat"]
@@ -131,17 +136,20 @@ def compare_roadmap(name: str, obj: ObjectModel, robot_name: str, table, point, 
         js = sorted(match)
         for _ in range(pairs if js else 0):
             (a, b), (fa, fb) = rng.choice(js, 2), rng.uniform(0, 2 * np.pi, 2)
-            try:
-                ours.append(placement_query(table, (int(a), float(fa)), (int(b), float(fb))).regrasps)
-            except NoSequence:
-                ours.append(None)
+            for k, t in enumerate(tables):
+                try:
+                    ours[k].append(placement_query(t, (int(a), float(fa)), (int(b), float(fb))).regrasps)
+                except NoSequence as exc:
+                    ours[k].append(None)
+                    if k == 0:
+                        why.append(f"{int(a)}->{int(b)}: {str(exc).split('connect them: ', 1)[-1]}")
             try:
                 res = planner.search(PoseQuery(match[int(a)], point[0], point[1], float(fa)),
                                      PoseQuery(match[int(b)], point[0], point[1], float(fb)), 0)
                 theirs.append(res.routes[0].n_regrasps)
             except PlanningError:
                 theirs.append(None)
-    return ours, theirs
+    return ours, theirs, why
 
 
 def run(args: argparse.Namespace) -> int:
@@ -149,7 +157,7 @@ def run(args: argparse.Namespace) -> int:
     robot = get_robot(args.robot)
     hand = robot.gripper
     compare = {n.strip() for n in args.compare.split(",") if n.strip()}
-    rows, cmp_rows = [], []
+    rows, cmp_rows, why = [], [], []
     for label, obj in _objects(args.objects):
         t0 = time.perf_counter()
         classes = grasp_classes(obj, hand)
@@ -175,9 +183,12 @@ def run(args: argparse.Namespace) -> int:
                      round(t_cls, 2), round(t5, 2), table.timings.get("ik_poses", 0), t1,
                      statistics.median(times) * 1000 if times else "-", max(times) * 1000 if times else "-"])
         if label.split(" ")[0] in compare:
-            ours, theirs = compare_roadmap(label, obj, args.robot, table, point, args.pairs, args.seed, Path(args.dir))
+            more = build_table(grasp_classes(obj, hand, ClassParams(points=args.points)), pl.poses, robot, hand, p5, progress=False)
+            ours, theirs, w = compare_roadmap(label, obj, args.robot, [table, more], point, args.pairs, args.seed, Path(args.dir))
             fmt = lambda v: "-" if v is None else str(v)  # noqa: E731
-            cmp_rows.append([label, len(ours), " ".join(map(fmt, ours)), " ".join(map(fmt, theirs))])
+            cmp_rows.append([label, len(theirs), " ".join(map(fmt, ours[0])), f"{' '.join(map(fmt, ours[1]))} ({more.q.shape[0]} classes)",
+                             " ".join(map(fmt, theirs))])
+            why += [f"{label}, {x}" for x in w]
     print_table(["object", "#tri", "face/face", "face/edge", "face/vertex", "placements", "non-empty cells", "classes s",
                  "table 5x5 s", "IK poses 5x5", "table 1x1 s", "chain med ms", "chain max ms"], rows,
                 title=f"Grasp-placement table for {args.robot} at H = {point} (Tournassoud et al. 1987); targets: 100 classes x 10 "
@@ -188,6 +199,10 @@ def run(args: argparse.Namespace) -> int:
           f"(target >= 500,000)")
     if cmp_rows:
         print()
-        print_table(["object", "pairs", "regrasps (this planner)", "regrasps (roadmap planner)"], cmp_rows,
-                    title="Same start/goal placements at H, seeded ('-': no plan)")
+        print_table(["object", "pairs", "regrasps (this planner)", f"this planner, {args.points} points per pair",
+                     "regrasps (roadmap planner)"], cmp_rows,
+                    title="Same start/goal placements at H, seeded ('-': no plan); this planner with one grasp point per "
+                          f"class (the paper's method) and with up to {args.points} (its Handey remedy, Section 2.3)")
+        for line in why:
+            print(f"  no plan (one point per class): {line}")
     return 0

@@ -44,12 +44,16 @@ def add_table_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-range", type=float, default=float(np.degrees(c.min_range)),
                         help="drop grasp classes whose legal theta range is narrower than this (degrees; 0, the paper's "
                              "rule: keep every class with a non-empty range)")
+    parser.add_argument("--points", type=int, default=c.points,
+                        help="grasp points per feature pair (1: the paper's one point per class; more: its remedy for "
+                             "elongated parts, a discrete set of points as in Handey, Section 2.3)")
 
 
 def params_from_args(args: argparse.Namespace):
     cp = ClassParams(min_face_area=args.min_face_area, edge_angle=float(np.radians(args.edge_angle)),
                      theta_step=float(np.radians(args.theta_step)), bisection=min(float(np.radians(0.1)), float(np.radians(args.theta_step))),
-                     min_contact_area=args.min_contact_area, min_range=float(np.radians(args.min_range)))
+                     min_contact_area=args.min_contact_area, min_range=float(np.radians(args.min_range)),
+                     points=args.points)
     tp = TableParams(theta_step=float(np.radians(args.theta_step)), phi_step=float(np.radians(args.phi_step)),
                      table_point=parse_point(args.table_point), clearance=args.clearance)
     return cp, tp

@@ -267,3 +267,33 @@ def test_narrow_legal_range_is_kept():
     assert ClassParams().min_range == 0.0
     with pytest.raises(WorkbenchError):
         ClassParams(min_range=-1.0)
+
+
+def test_several_grasp_points_connect_the_l_part(lpart, hand, puma560):
+    """Section 2.3's remedy for elongated parts (a discrete set of grasp points per feature pair, as in Handey): on the
+    L-part, one point per class leaves the placement on the slanted hull face reachable only by the class it alone
+    uses (the query says so); with three points per pair every placement query of the table has an answer, each
+    extra point is a class of the same feature pair adding theta samples its first point lacks."""
+    from workbench.planners.tournassoud.chaining import NoSequence, placement_groups
+
+    pl = stable_placements(lpart)
+    tp = TableParams(theta_step=np.radians(10), phi_step=np.radians(10), table_point=(0.45, 0.1))
+    one = build_table(grasp_classes(lpart, hand), pl.poses, puma560, hand, tp, progress=False)
+    classes = grasp_classes(lpart, hand, ClassParams(points=3))
+    three = build_table(classes, pl.poses, puma560, hand, tp, progress=False)
+    assert len(placement_groups(one)) > 1 and len(placement_groups(three)) == 1
+    split = next(g for g in placement_groups(one) if len(g) == 1).pop()
+    other = (split + 1) % len(pl)
+    with pytest.raises(NoSequence, match=f"placement {split} is held only by"):
+        placement_query(one, (other, 0.0), (split, 0.0))
+    assert placement_query(three, (other, 0.0), (split, 0.0)).regrasps >= 0
+    by_pair: dict = {}
+    for c in classes:
+        by_pair.setdefault(tuple(c.features["faces"]), []).append(c)
+    assert len(by_pair) == 5 and max(len(v) for v in by_pair.values()) > 1
+    for group in by_pair.values():
+        first = group[0].legal(three.theta)
+        for extra in group[1:]:
+            assert (extra.legal(three.theta) & ~first).any()                # adds angles the first point lacks
+            assert not np.allclose(extra.point, group[0].point)
+    assert lpart.mesh.contains(np.array([c.point for c in classes])).all()

@@ -19,7 +19,15 @@ candidate is free at any coarse sample, the candidates are scanned again at `the
 still a legal range: the paper keeps every class whose range is non-empty). A class is dropped only when it is free
 at no `theta_step` sample (any legal range it has is then narrower than the resolution) or, with the documented
 parameter `min_range` > 0 (default 0: keep all), when its legal range is narrower than `min_range`. Legal theta
-ranges are intervals found at `theta_step` and refined at their ends by bisection down to `bisection`. With `min_contact_area` > 0 the pad's
+ranges are intervals found at `theta_step` and refined at their ends by bisection down to `bisection`.
+
+One grasp point per feature pair is the paper's "reasonable approximation" (Section 2.3), which it says fails for
+elongated parts; its remedy, "a discrete set of positions of the grasp point to represent them all, as is done in
+Handey", is the parameter `points` (default 1, the paper's method): with `points` > 1 the overlap's candidates also
+spread over it (farthest-point sampling among its cells at least half as deep as the deepest; the ends of an edge's
+longest piece), and up to `points` of them become classes of the same feature pair (`features["point"]` = 0, 1,
+...): first the one free at the most theta samples, then each adding the most theta samples not yet free at a kept
+point (a point adding none is not kept). With `min_contact_area` > 0 the pad's
 rectangle must also cover that much of the face overlap at each theta (Section 5.1's minimum contact area).
 
 Placement classes are the stable faces of the convex hull (Section 3) with the roadmap planner's stability margin:
@@ -65,6 +73,7 @@ class ClassParams:
     candidates: int = 5
     min_overlap: float = 1e-6
     min_range: float = 0.0
+    points: int = 1
 
     def __post_init__(self) -> None:
         if not (0 < self.theta_step <= np.pi / 2):
@@ -72,7 +81,7 @@ class ClassParams:
         if not (0 < self.bisection <= self.theta_step):
             raise WorkbenchError("bisection resolution must be positive and at most the theta step")
         if min(self.min_face_area, self.tolerance, self.min_contact_area, self.min_overlap, self.min_range) < 0 \
-                or self.candidates < 1 or not np.isfinite(self.min_range):
+                or self.candidates < 1 or self.points < 1 or not np.isfinite(self.min_range):
             raise WorkbenchError(f"grasp class parameters must be non-negative (and candidates >= 1), got {self}")
 
     def as_dict(self) -> dict:
@@ -166,7 +175,7 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
             if region is None or region.area < p.min_overlap:
                 continue
             area = region.area
-            cands = _face_candidates(region, p.candidates)
+            cands = _face_candidates(region, max(p.candidates, 2 * p.points) if p.points > 1 else p.candidates, spread=p.points > 1)
             mid = fa.offset - w / 2
             pts = cands[:, :1] * u + cands[:, 1:] * v + mid * n
             out.append(dict(kind="face/face", features={"faces": [a, int(b)], "overlap": float(area)}, normal=n, u=u, v=v,
@@ -194,7 +203,9 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
                 ss = [(a_ + b_) / 2 for a_, b_ in spans]
                 lo, hi = max(spans, key=lambda sp: sp[1] - sp[0])
                 ss += [lo + (hi - lo) / 4, lo + 3 * (hi - lo) / 4]
-                pts = np.array([e0[k] + t * ed[k] + (w / 2) * n for t in ss[: max(p.candidates, 1)]])
+                if p.points > 1:  # spread along the longest piece too: its ends' neighbourhoods and its middle
+                    ss += [lo + (hi - lo) * f for f in (0.1, 0.9)]
+                pts = np.array([e0[k] + t * ed[k] + (w / 2) * n for t in ss[: max(p.candidates, 2 * p.points if p.points > 1 else 1)]])
                 out.append(dict(kind="face/edge", features={"faces": [a], "edge": [e0[k].tolist(), e1[k].tolist()],
                                                             "length": length}, normal=n, u=u, v=v, opening=w,
                                 candidates=pts, region=None, mid=fa.offset - w / 2))
@@ -217,9 +228,10 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
     return out
 
 
-def _face_candidates(region: Raster, k: int) -> np.ndarray:
+def _face_candidates(region: Raster, k: int, spread: bool = False) -> np.ndarray:
     """Grasp point candidates in an overlap region (2D): its centroid when inside, its deepest point (farthest from
-    the boundary) and the centroids of its largest connected pieces."""
+    the boundary) and the centroids of its largest connected pieces; with `spread`, then points spread over the
+    region (farthest-point sampling among the cells at least half as deep as the deepest), up to `k` in all."""
     from scipy import ndimage
 
     pts = region.points()
@@ -236,6 +248,14 @@ def _face_candidates(region: Raster, k: int) -> np.ndarray:
         for lab in np.argsort(-sizes, kind="stable")[: max(k - len(out), 0)] + 1:
             ii, jj = np.nonzero(labels == lab)
             out.append(region.origin + (np.array([jj.mean(), ii.mean()]) + 0.5) * region.cell)
+    if spread and len(out) < k:
+        ii, jj = np.nonzero(depth >= 0.5 * depth.max())
+        deep = region.origin + (np.stack([jj, ii], axis=1) + 0.5) * region.cell
+        dist = np.min(np.linalg.norm(deep[:, None] - np.array(out)[None], axis=2), axis=1)
+        while len(out) < k and dist.max() > 2 * region.cell:
+            far = deep[int(np.argmax(dist))]
+            out.append(far)
+            dist = np.minimum(dist, np.linalg.norm(deep - far, axis=1))
     uniq = []
     for c in out:
         if all(np.linalg.norm(c - d) > 1e-6 for d in uniq):
@@ -331,6 +351,27 @@ def select_point(cands: np.ndarray, test, theta: np.ndarray, coarse: np.ndarray,
     return point, _intervals(free, theta, step, lambda t: test(t, point=point), resolution)
 
 
+def select_points(cands: np.ndarray, test, theta: np.ndarray, resolution: float,
+                  points: int) -> list[tuple[np.ndarray, list[tuple[float, float]]]]:
+    """Up to `points` grasp points among `cands` for one feature pair (Section 2.3: "a discrete set of positions of
+    the grasp point to represent them all, as is done in Handey"): the candidate free at the most `theta` samples,
+    then greedily the candidate adding the most samples not yet free at a kept point (at least one), each with its
+    legal intervals."""
+    free = np.array([test(theta, point=c) for c in cands]).reshape(len(cands), len(theta))
+    covered = np.zeros(len(theta), dtype=bool)
+    step = float(theta[1] - theta[0]) if len(theta) > 1 else 2 * np.pi
+    out = []
+    while len(out) < points:
+        gain = (free & ~covered).sum(axis=1)
+        k = int(np.argmax(gain))
+        if gain[k] == 0:
+            break
+        covered |= free[k]
+        c = cands[k]
+        out.append((c, _intervals(free[k], theta, step, lambda t, c=c: test(t, point=c), resolution)))
+    return out
+
+
 def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = ClassParams(),
                   progress: bool = False) -> list[GraspClass]:
     """The grasp classes of `obj` for `gripper` with their grasp points and legal theta intervals (Sections 2, 5.1).
@@ -352,16 +393,19 @@ def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = Clas
                 ok &= _contact_area(cls, point, t, gripper) >= params.min_contact_area
             return ok
 
-        picked = select_point(cls["candidates"], test, theta, coarse, params.bisection)
-        if picked is None:
-            continue
-        point, intervals = picked
-        if params.min_range > 0 and sum(b - a for a, b in intervals) < params.min_range:
-            continue
+        if params.points > 1:
+            picked = select_points(cls["candidates"], test, theta, params.bisection, params.points)
+        else:
+            one = select_point(cls["candidates"], test, theta, coarse, params.bisection)
+            picked = [] if one is None else [one]
         n, u, v = cls["normal"], cls["u"], cls["v"]
-        out.append(GraspClass(kind=cls["kind"], features=cls["features"], normal=n.copy(), u=u, v=v, point=point.copy(),
-                              eccentricity=float(n @ (point - obj.com)), opening=float(cls["opening"]),
-                              intervals=intervals, candidates=cls["candidates"]))
+        for k, (point, intervals) in enumerate(picked):
+            if params.min_range > 0 and sum(b - a for a, b in intervals) < params.min_range:
+                continue
+            feats = cls["features"] if params.points == 1 else {**cls["features"], "point": k}
+            out.append(GraspClass(kind=cls["kind"], features=feats, normal=n.copy(), u=u, v=v, point=point.copy(),
+                                  eccentricity=float(n @ (point - obj.com)), opening=float(cls["opening"]),
+                                  intervals=intervals, candidates=cls["candidates"]))
     order = sorted(range(len(out)), key=lambda i: (KINDS.index(out[i].kind), -out[i].legal_range))
     return [out[i] for i in order]
 
