@@ -297,3 +297,54 @@ def test_several_grasp_points_connect_the_l_part(lpart, hand, puma560):
             assert (extra.legal(three.theta) & ~first).any()                # adds angles the first point lacks
             assert not np.allclose(extra.point, group[0].point)
     assert lpart.mesh.contains(np.array([c.point for c in classes])).all()
+
+
+def test_rasterise_matches_point_in_triangle():
+    """The scan-line rasteriser marks exactly the cells whose centre lies in (or on) a triangle (brute force)."""
+    from workbench.planners.tournassoud.features import rasterise
+
+    rng = np.random.default_rng(3)
+    for k in range(40):
+        tris = rng.uniform(0, 1, (int(rng.integers(1, 8)), 3, 2))
+        if k % 2:
+            tris = np.round(tris * 10) / 10                     # vertices on cell centres, horizontal edges
+        cell = 1 / 20
+        mask = rasterise(tris, np.array([-0.025, -0.025]), cell, (22, 22)).mask
+        i, j = np.mgrid[0:22, 0:22]
+        pts = np.stack([j.ravel() * cell, i.ravel() * cell], axis=1)   # the cell centres
+        inside = np.zeros(len(pts), dtype=bool)
+        for a, b, c in tris:
+            m = np.array([b - a, c - a]).T
+            if abs(np.linalg.det(m)) < 1e-12:
+                continue
+            uv = np.linalg.solve(m, (pts - a).T).T
+            inside |= (uv >= -1e-9).all(axis=1) & (uv.sum(axis=1) <= 1 + 1e-9)
+        near_edge = np.zeros(len(pts), dtype=bool)   # centres within 1e-6 of an edge may go either way
+        for t in tris:
+            for a, b in ((t[0], t[1]), (t[1], t[2]), (t[2], t[0])):
+                d = b - a
+                s = np.clip(((pts - a) @ d) / max(d @ d, 1e-18), 0, 1)
+                near_edge |= np.linalg.norm(pts - (a + s[:, None] * d), axis=1) < 1e-6
+        assert (mask.ravel() == inside)[~near_edge].all()
+
+
+def test_blocked_everywhere_agrees_with_fcl(hand):
+    """The cheap pre-test (an object vertex inside the disc a pad covers at every theta) rejects a grasp point only
+    where fcl finds the hand colliding at every theta sample; a point on a plain face is not rejected."""
+    from workbench.planners.tournassoud.classes import HandObject, grasp_poses
+
+    boxm = trimesh.creation.box((0.04, 0.04, 0.04))
+    bump = trimesh.creation.cone(radius=0.003, height=0.003)
+    bump.apply_translation([0.004, 0.0, 0.02])                      # a 3 mm spike on the +z face, 4 mm off centre
+    obj = from_trimesh(trimesh.util.concatenate([boxm, bump]), "bumpy")
+    ho = HandObject(obj, hand, 5e-4)
+    n = np.array([0.0, 0.0, 1.0])
+    cls = {"normal": n, "u": np.array([1.0, 0, 0]), "v": np.array([0, 1.0, 0]), "opening": 0.04}
+    pts = np.array([[0.0, 0.0, 0.0], [0.0, 0.012, 0.0], [0.012, 0.0, 0.0]])
+    blocked = ho.blocked_everywhere(cls, pts)
+    theta = np.radians(np.arange(0, 360, 5.0))
+    fcl_free = np.array([(~np.asarray(ho.free(cls, p, theta))).sum() < len(theta) for p in pts])
+    assert blocked[0] and not fcl_free[0]                          # the spike sits in the pad at every angle
+    assert not blocked[1]                                           # 12 mm away: outside the covered disc
+    assert not (blocked & fcl_free).any()
+    assert grasp_poses(n, cls["u"], cls["v"], pts[0], theta).shape == (len(theta), 4, 4)

@@ -271,9 +271,37 @@ class HandObject:
     (`geometry.collision`: python-fcl BVHs, one per opening rounded up to 0.1 mm)."""
 
     def __init__(self, obj: ObjectModel, gripper: Gripper, tolerance: float):
+        from scipy.spatial import cKDTree
+
         self.target = object_collider(obj.mesh)
         self.gripper, self.tol = gripper, tolerance
         self._geom: dict[float, object] = {}
+        self.vertices = np.asarray(obj.mesh.vertices, dtype=np.float64)
+        self.tree = cKDTree(self.vertices)
+        ext, centre = gripper.pad_extents, gripper.pad_center
+        # the disc about the TCP's y axis that a pad covers at every theta, and the pad's thickness along y
+        self.disc = float(min(ext[0], ext[2]) / 2 - np.hypot(centre[0], centre[2]))
+        self.thick = float(ext[1])
+
+    def blocked_everywhere(self, cls: dict, points: np.ndarray) -> np.ndarray:
+        """(K,) bool: an object vertex lies strictly inside a pad at grasp point points[k] for every theta (inside the
+        disc both pads cover whatever theta, between their inner and outer faces), so the point is blocked at every
+        angle without asking fcl (a cheap pre-test; the object surface through that vertex crosses the pad)."""
+        out = np.zeros(len(points), dtype=bool)
+        if self.disc <= 0:
+            return out
+        n = cls["normal"]
+        inner = cls["opening"] / 2 + self.tol
+        outer = inner + self.thick
+        for k, c in enumerate(points):
+            near = self.tree.query_ball_point(c, float(np.hypot(self.disc, outer)))
+            if not near:
+                continue
+            d = self.vertices[near] - c
+            y = d @ n
+            rho2 = (d * d).sum(axis=1) - y * y
+            out[k] = bool(((rho2 < (self.disc - 1e-7) ** 2) & (np.abs(y) > inner + 1e-7) & (np.abs(y) < outer - 1e-7)).any())
+        return out
 
     def geometry(self, opening: float) -> object:
         """The hand with its pads `tolerance` clear of both contacts, widths rounded up to 0.1 mm (shared BVHs)."""
@@ -332,7 +360,7 @@ def select_point(cands: np.ndarray, test, theta: np.ndarray, coarse: np.ndarray,
     one free at all of them); when none is free at any coarse sample they are compared again at every sample of
     `theta`, so a range narrower than the coarse step is kept. None when no candidate is free at any `theta` sample."""
     best_k, best_free = 0, 0
-    for grid_ in (coarse, theta):
+    for grid_ in (coarse, theta[~np.isin(theta, coarse)]):
         for k, c in enumerate(cands):
             n_free = int(test(grid_, point=c).sum())
             if n_free > best_free:
@@ -393,10 +421,13 @@ def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = Clas
                 ok &= _contact_area(cls, point, t, gripper) >= params.min_contact_area
             return ok
 
+        cands = cls["candidates"][~hand.blocked_everywhere(cls, cls["candidates"])]
+        if not len(cands):
+            continue
         if params.points > 1:
-            picked = select_points(cls["candidates"], test, theta, params.bisection, params.points)
+            picked = select_points(cands, test, theta, params.bisection, params.points)
         else:
-            one = select_point(cls["candidates"], test, theta, coarse, params.bisection)
+            one = select_point(cands, test, theta, coarse, params.bisection)
             picked = [] if one is None else [one]
         n, u, v = cls["normal"], cls["u"], cls["v"]
         for k, (point, intervals) in enumerate(picked):
