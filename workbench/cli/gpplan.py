@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 
+from workbench.cli.plan import exec_options
 from workbench.errors import WorkbenchError
 from workbench.planners.tournassoud.chaining import NoSequence
 from workbench.planners.tournassoud.figures import table_html
@@ -22,8 +23,9 @@ from workbench.planners.tournassoud.stages import (
     load_planner,
     plan_validator,
     save_plan,
-    stored_validator,
+    validate_stored,
 )
+from workbench.planners.wan_harada.motions import DEFAULT_ACC
 from workbench.robots.collider import default_scene
 
 
@@ -68,6 +70,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--handx", type=float, default=0.05, help="approach distance along the hand's axis (m)")
     p.add_argument("--worldz", type=float, default=0.05, help="lift after the approach (m)")
     p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
+    p.add_argument("--no-motion", action="store_true", help="waypoints only: do not plan and time the motions")
+    p.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
+    p.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
+    p.add_argument("--max-removed", type=int, default=10,
+                   help="conjunctions whose motions fail to remove from the table before giving up (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
     p.add_argument("--json", default=None, help="write the sequence and its plan to this JSON file")
     p.add_argument("--html", default=None, help="write the table with the sequence overlaid (Fig. 6) to this HTML file")
     p.set_defaults(func=run)
@@ -85,21 +93,25 @@ def run(args: argparse.Namespace) -> int:
     r = load_planner(args.db, args.object, args.robot)
     scene = default_scene(r.robot.name)
     realiser = Realiser(r.robot, scene, r.obj.mesh, args.handx, args.worldz)
+    motions = None if args.no_motion else exec_options(args)
     try:
         if grasp_mode:
             initial = parse_grasp(args.initial)
             gc, rng = parse_goal(args.goal)
-            seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng)
+            seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng, motions)
         else:
             start = parse_grasp(args.from_, "--from")
             goal = parse_grasp(args.to, "--to")
-            seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal)
+            seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal, motions)
     except NoSequence as exc:
         print(f"warning: {exc}", file=sys.stderr)
         print(f"{r.obj.name} with {r.robot.name}: no regrasp sequence (0 results)")
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump({"sequence": None, "plan": None, "reason": str(exc)}, fh, indent=1)
+        if args.html:  # the table alone (Fig. 5): where the query's grasps and placements are
+            with open(args.html, "w") as fh:
+                fh.write(table_html(r.table, r.classes, None, title=f"{r.obj.name} with {r.robot.name}: no sequence"))
         return 0
     t = r.table
     print(f"{r.obj.name} with {r.robot.name}: {seq.regrasps} regrasp(s), chaining {seq.levels} step(s) in {seq.seconds * 1000:.2f} ms")
@@ -116,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
         else:
             idplan, plan = save_plan(args.db, r, plan, scene, realiser.opts)
             print(f"stored plan id {idplan} in {args.db} (planner tournassoud; tables plan, planstep)")
-            report = stored_validator(args.db, r, idplan).check(plan)
+            report = validate_stored(args.db, r, idplan, plan, require_motion=motions is not None)
         print("validator: " + ("ok" if report.ok else "FAILED: " + "; ".join(report.errors[:3])))
     if args.json:
         doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict()}

@@ -83,34 +83,38 @@ def test_zero_classes_is_a_warning(tmp_path, capsys):
     assert "0 grasp classes" in cap.out and "warning: no grasp class" in cap.err
 
 
-def test_plans_are_stored_like_the_roadmap_planners(tmp_path, lpart, puma560):
-    """A plan of this planner goes into the store's plan / planstep tables, named, with foreign keys to real
-    freeairgrip / freetabletopplacement rows whose poses agree with the steps, and passes the validator rebuilt
-    from the store; the same query is not stored twice."""
+def test_plans_are_stored_like_the_roadmap_planners(tmp_path, lpart, make_puma):
+    """A plan of this planner, with its timed motions, goes into the store's plan / planstep / plansegment tables,
+    named, with foreign keys to real freeairgrip / freetabletopplacement rows whose poses agree with the steps, and
+    passes the validators rebuilt from the store (waypoints and trajectory); the same query is not stored twice."""
     from workbench.errors import PlanningError
     from workbench.planners.tournassoud.plans import Realiser, plan_placement_query
-    from workbench.planners.tournassoud.stages import save_plan, stored_validator
-    from workbench.robots.collider import default_scene
+    from workbench.planners.tournassoud.stages import save_plan, validate_stored
+    from workbench.planners.wan_harada.motions import ExecOptions
+    from workbench.robots.collider import Scene
 
     db = str(tmp_path / "plans.duckdb")
-    run = table_stage_at(db, lpart, puma560, params=PARAMS)
-    scene = default_scene("puma560")
-    realiser = Realiser(puma560, scene, lpart.mesh)
+    puma = make_puma(base_z=-0.3)  # see test_table._setup: from the default pedestal few sequences are executable
+    run = table_stage_at(db, lpart, puma, params=PARAMS)
+    scene = Scene(table_min=(0.15, -0.8))
+    realiser = Realiser(puma, scene, lpart.mesh)
     plan = None
-    p_n = run.table.q.shape[1]
-    for a, b in [(a, b) for a in range(p_n) for b in range(p_n) if a != b]:
+    for a, b in [(1, 3), (1, 0), (3, 1)]:
         try:
-            _, plan = plan_placement_query(run.table, run.classes, realiser, puma560, "L", (a, 0.3), (b, 1.0))
+            _, plan = plan_placement_query(run.table, run.classes, realiser, puma, "L", (a, 0.3), (b, 1.0),
+                                           ExecOptions(max_removed=3))
         except PlanningError:
             continue
         if plan.regrasps >= 1:
             break
-    assert plan is not None and plan.regrasps >= 1
+    assert plan is not None and plan.regrasps >= 1 and plan.segments
     pid, stored = save_plan(db, run, plan, scene, realiser.opts)
-    assert stored_validator(db, run, pid).check(stored).ok
+    report = validate_stored(db, run, pid, stored, require_motion=True)
+    assert report.ok, report.errors
     assert save_plan(db, run, plan, scene, realiser.opts)[0] == pid
     con = duckdb.connect(db, read_only=True)
     assert con.execute("SELECT count(*), min(planner), min(regrasps) FROM plan").fetchone() == (1, "tournassoud", plan.regrasps)
+    assert con.execute("SELECT count(*) FROM plansegment WHERE idplan = ?", [pid]).fetchone()[0] == len(plan.segments)
     rows = con.execute("SELECT s.kind, s.object, s.tcp, s.yaw, s.position, g.rotmat, g.jawwidth, f.rotmat FROM planstep s "
                        "JOIN freeairgrip g USING (idfreeairgrip) JOIN freetabletopplacement f USING (idfreetabletopplacement) "
                        "WHERE s.idplan = ? ORDER BY s.seq", [pid]).fetchall()

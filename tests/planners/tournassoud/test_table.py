@@ -11,7 +11,12 @@ import trimesh
 from workbench.errors import PlanningError, WorkbenchError
 from workbench.geometry.objects import from_trimesh
 from workbench.grasping.placements import stable_placements
-from workbench.planners.tournassoud.chaining import chain, grasp_query, placement_query
+from workbench.planners.tournassoud.chaining import (
+    NoSequence,
+    chain,
+    grasp_query,
+    placement_query,
+)
 from workbench.planners.tournassoud.classes import ClassParams, grasp_classes
 from workbench.planners.tournassoud.plans import (
     Realiser,
@@ -154,12 +159,18 @@ def test_runs_wrap_around():
     assert runs(np.ones(8, dtype=bool), vals) == [(0.0, 7.0)]
 
 
+SCENE = Scene(table_min=(0.15, -0.8))  # the table clear of the lowered PUMA's pedestal
+
+
 def _setup(obj, hand, robot):
-    """Classes, table, realiser and an independent validator (built here from the URDF text and the meshes)."""
+    """Classes, table, realiser and an independent validator (built here from the URDF text and the meshes). The
+    PUMA stands 0.3 m lower than its default pedestal (shoulder 0.37 m above the table): from 0.67 m its upper arm
+    must point so steeply down that about half the grasp poses at H collide with its own column, and few regrasp
+    sequences can be executed (the realiser rejects self-collisions like the roadmap planner's IK)."""
     classes = grasp_classes(obj, hand)
     pl = stable_placements(obj)
     table = build_table(classes, pl.poses, robot, hand, TableParams(table_point=(0.45, 0.1)), progress=False)
-    scene = Scene()
+    scene = SCENE
     realiser = Realiser(robot, scene, obj.mesh)
     r = robot
     validator = PlanValidator(r.spec.urdf, r.spec.tip_frame, r.mount, r.base, list(r.joint_names),
@@ -170,16 +181,22 @@ def _setup(obj, hand, robot):
 
 
 @pytest.fixture(scope="module")
-def box_setup(box, hand, puma560):
-    return _setup(box, hand, puma560)
+def low_puma(make_puma):
+    return make_puma(base_z=-0.3)
 
 
-def test_l_part_sequences_pass_the_validator(lpart, hand, puma560):
+@pytest.fixture(scope="module")
+def box_setup(box, hand, low_puma):
+    return _setup(box, hand, low_puma)
+
+
+def test_l_part_sequences_pass_the_validator(lpart, hand, low_puma):
+    puma560 = low_puma
     classes, table, realiser, validator = _setup(lpart, hand, puma560)
     rng = np.random.default_rng(1)
     legal = np.argwhere(table.hand_object)
     n = 0
-    for _ in range(30):
+    for _ in range(12):
         c, t = legal[rng.integers(len(legal))]
         goal = int((c + rng.integers(1, len(classes))) % len(classes))  # another class: at least one regrasp
         try:
@@ -195,13 +212,17 @@ def test_l_part_sequences_pass_the_validator(lpart, hand, puma560):
     assert n >= 3
 
 
-def test_every_sequence_passes_the_validator(box_setup, puma560):
+def test_every_sequence_passes_the_validator(box_setup, low_puma):
+    puma560 = low_puma
     classes, table, realiser, validator = box_setup
     n = 0
     for a in range(len(classes)):
-        for b in range(len(classes)):
-            seq, plan = plan_grasp_query(table, classes, realiser, puma560, "box", (a, np.radians(15)), b,
-                                         (np.radians(60), np.radians(120)))
+        for b in (a, (a + 1) % len(classes)):
+            try:
+                seq, plan = plan_grasp_query(table, classes, realiser, puma560, "box", (a, np.radians(15)), b,
+                                             (np.radians(60), np.radians(120)))
+            except NoSequence:
+                continue
             if plan is None:
                 continue
             rep = validator.check(plan)
@@ -209,13 +230,42 @@ def test_every_sequence_passes_the_validator(box_setup, puma560):
             assert plan.regrasps == seq.regrasps
             n += 1
     for ps, pg in [(0, 3), (0, 1), (2, 5), (4, 1)]:
-        seq, plan = plan_placement_query(table, classes, realiser, puma560, "box", (ps, 0.0), (pg, 1.0))
+        try:
+            seq, plan = plan_placement_query(table, classes, realiser, puma560, "box", (ps, 0.0), (pg, 1.0))
+        except NoSequence:
+            continue
         assert np.allclose(plan.goal_pose, table.object_pose(pg, 1.0))  # the query's angle, not its nearest sample
         rep = validator.check(plan)
         assert rep.ok, rep.errors
         assert plan.regrasps == seq.regrasps
         n += 1
-    assert n >= 8
+    assert n >= 4
+
+
+def test_executable_plan_with_motions(box_setup, low_puma):
+    """With motions the plan carries a timed trajectory (the roadmap planner's motion planner) that the independent
+    trajectory validator accepts: self-collision, table and object contacts, joint position, velocity and
+    acceleration limits at every knot."""
+    from workbench.planners.wan_harada.motions import ExecOptions
+    from workbench.robots.selfcollision import allowed_pairs
+    from workbench.validation import TrajectoryValidator
+
+    classes, table, realiser, validator = box_setup
+    seq, plan = plan_placement_query(table, classes, realiser, low_puma, "box", (0, 0.0), (2, 1.0), ExecOptions(max_removed=3))
+    assert plan.segments and plan.duration > 0 and plan.regrasps == seq.regrasps >= 1
+    assert validator.check(plan).ok
+    hand = low_puma.gripper
+    allowed = list(allowed_pairs(low_puma).allowed)
+    tv = TrajectoryValidator(validator, hand.body, trimesh.Trimesh(*_fingers(hand)), allowed, np.array(plan.acc),
+                             urdf=low_puma.spec.urdf)
+    errors, knots = tv.check(plan, plan.segments)
+    assert not errors and knots > 0
+
+
+def _fingers(hand):
+    boxes = [trimesh.creation.box(extents=e, transform=p) for e, p in hand.finger_poses(hand.jaw_max)]
+    m = trimesh.util.concatenate(boxes)
+    return m.vertices, m.faces
 
 
 def test_bad_queries(box_setup):

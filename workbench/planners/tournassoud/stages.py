@@ -35,12 +35,14 @@ from workbench.planners.tournassoud.table import (
     grid,
     table_frame,
 )
+from workbench.planners.wan_harada.motions import DEFAULT_ACC
 from workbench.planners.wan_harada.plans import Plan, plan_rows
 from workbench.planners.wan_harada.stages import get_object, scene_params
 from workbench.robots.collider import Scene
 from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import IKOptions
 from workbench.robots.model import Robot, RobotSpec, get_robot, robot_from_spec
+from workbench.robots.selfcollision import allowed_pairs
 from workbench.store import Store
 from workbench.store import tournassoud as sql
 from workbench.store import wan_harada as plan_sql
@@ -53,7 +55,13 @@ from workbench.store.robots import (
     robot_row,
     scene_row,
 )
-from workbench.validation import PlanValidator, validator_from_rows
+from workbench.validation import (
+    PlanValidator,
+    TrajectoryValidator,
+    ValidationReport,
+    trajectory_validator_from_rows,
+    validator_from_rows,
+)
 
 CLASSES = "tournassoud.classes"
 TABLE = "tournassoud.table"
@@ -211,6 +219,7 @@ def save_plan(db: str, run: TableRun, plan: Plan, scene: Scene, ik: IKOptions) -
                 s.idfreetabletopplacement = int(fp[s.idfreetabletopplacement])
             stored.start = replace(plan.start, idfreetabletopplacement=int(fp[plan.start.idfreetabletopplacement]))
             stored.goal = replace(plan.goal, idfreetabletopplacement=int(fp[plan.goal.idfreetabletopplacement]))
+            put_robot(store, run.robot, allowed_pairs(run.robot).to_json())  # for the trajectory validator
             stored.ids = {"idobject": ids["idobject"], "idrobot": ids["idrobot"],
                           "idscene": put_scene(store, scene_params(run.robot, scene, ik)),
                           "idikret": put_ikret(store, plan.handx, plan.worldz, plan.worlda), "idtabletop": run.idtable}
@@ -221,10 +230,33 @@ def save_plan(db: str, run: TableRun, plan: Plan, scene: Scene, ik: IKOptions) -
 def stored_validator(db: str, run: TableRun, idplan: int) -> PlanValidator:
     """The independent plan validator rebuilt from the store's rows only (robot, object, gripper, the stored plan's
     scene) with this table's `freetabletopplacement` rows as its stable placements (ids as in a stored plan)."""
+    return _validators(db, run, idplan)[0]
+
+
+def _validators(db: str, run: TableRun, idplan: int, acc=None) -> tuple[PlanValidator, TrajectoryValidator | None]:
     with Store(db, read_only=True) as store:
         _, obj = object_row(store, run.obj.name)
         r = robot_row(store, sql.table_robot(store, run.idtable))
         g = gripper_row(store, sql.gripper_id(store, run.gripper.digest))
         free = sql.stored_placements(store, run.idtable)
         scene = scene_row(store, sql.plan_scene(store, idplan))
-    return validator_from_rows({"robot": r, "object": obj, "gripper": g, "scene": scene}, free_poses=free)
+    rows = {"robot": r, "object": obj, "gripper": g, "scene": scene}
+    pv = validator_from_rows(rows, free_poses=free)
+    return pv, (None if acc is None else trajectory_validator_from_rows(rows, pv, acc))
+
+
+def validate_stored(db: str, run: TableRun, idplan: int, plan: Plan, require_motion: bool = False) -> ValidationReport:
+    """A stored plan (with the store's ids, as `save_plan` returns it) checked like the roadmap planner's plans
+    (`wan_harada.planner.Planner.validate`): its waypoints, and its timed trajectory when it has one (required with
+    `require_motion`), by the independent validators rebuilt from the store's rows."""
+    acc = None
+    if plan.segments:
+        acc = np.broadcast_to(np.asarray(plan.acc or DEFAULT_ACC, dtype=np.float64), (len(plan.joint_names),))
+    pv, tv = _validators(db, run, idplan, acc)
+    report = pv.check(plan)
+    if tv is not None:
+        errors, knots = tv.check(plan, plan.segments)
+        report = ValidationReport(report.ok and not errors, report.errors + errors, report.checks + knots)
+    elif require_motion:
+        report = ValidationReport(False, report.errors + ["the plan has no timed motions"], report.checks + 1)
+    return report
