@@ -26,7 +26,7 @@ from workbench.planners.tournassoud.stages import (
     validate_stored,
 )
 from workbench.planners.wan_harada.motions import DEFAULT_ACC
-from workbench.robots.collider import default_scene
+from workbench.robots.collider import Scene, default_scene
 
 
 def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
@@ -34,6 +34,14 @@ def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
     if len(parts) != n:
         raise WorkbenchError(f"{label} {text!r} is malformed; see `workbench gpplan --help`")
     return parts
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def parse_grasp(text: str, label: str = "--initial") -> tuple[int, float]:
@@ -67,6 +75,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--goal", default=None, help="goal class and theta range CLASS,MIN:MAX (degrees)")
     p.add_argument("--from", dest="from_", default=None, help="start placement P,PHI (degrees), instead of --initial")
     p.add_argument("--to", default=None, help="goal placement P,PHI (degrees), instead of --goal")
+    p.add_argument("--table", default=None, help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
     p.add_argument("--handx", type=float, default=0.05, help="approach distance along the hand's axis (m)")
     p.add_argument("--worldz", type=float, default=0.05, help="lift after the approach (m)")
     p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
@@ -92,6 +101,13 @@ def run(args: argparse.Namespace) -> int:
             raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
     r = load_planner(args.db, args.object, args.robot)
     scene = default_scene(r.robot.name)
+    if args.table:
+        t = [float(v) for v in _nums(args.table, "--table", 4)] if all(
+            _is_float(v) for v in str(args.table).split(",")) else []
+        if len(t) != 4 or not np.isfinite(t).all() or t[0] >= t[2] or t[1] >= t[3]:
+            raise WorkbenchError(f"--table {args.table!r} must be XMIN,YMIN,XMAX,YMAX in metres with XMIN < XMAX, YMIN < YMAX")
+        scene = Scene(table_min=(t[0], t[1]), table_max=(t[2], t[3]), table_thickness=scene.table_thickness,
+                      workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
     realiser = Realiser(r.robot, scene, r.obj.mesh, args.handx, args.worldz)
     motions = None if args.no_motion else exec_options(args)
     try:

@@ -14,7 +14,7 @@ from workbench.geometry.objects import load_object
 from workbench.planners.tournassoud.classes import KINDS, ClassParams
 from workbench.planners.tournassoud.stages import table_stage_at
 from workbench.planners.tournassoud.table import TableParams
-from workbench.robots.model import get_robot
+from workbench.robots.model import get_robot, pose_xyz_yaw
 
 
 def parse_point(text: str, label: str = "--table-point") -> tuple[float, float]:
@@ -31,6 +31,7 @@ def add_table_arguments(parser: argparse.ArgumentParser) -> None:
     c, t = ClassParams(), TableParams()
     parser.add_argument("--robot", default="puma560", help="a built-in robot or the path of a URDF (then --tip)")
     parser.add_argument("--tip", default=None, help="tip frame of a URDF robot")
+    parser.add_argument("--base", default=None, help="robot base in the world: X,Y,Z,YAW (m, rad); default per robot")
     parser.add_argument("--theta-step", type=float, default=float(np.degrees(t.theta_step)), help="theta resolution (degrees)")
     parser.add_argument("--phi-step", type=float, default=float(np.degrees(t.phi_step)), help="phi resolution (degrees)")
     parser.add_argument("--table-point", default=",".join(f"{v:g}" for v in t.table_point),
@@ -84,7 +85,17 @@ def summary(run) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     cp, tp = params_from_args(args)
-    robot = get_robot(args.robot, tip_frame=args.tip)
+    base = None
+    if args.base:
+        parts = [p.strip() for p in args.base.split(",")]
+        try:
+            vals = [float(p) for p in parts]
+        except ValueError:
+            vals = []
+        if len(vals) != 4 or not np.isfinite(vals).all():
+            raise WorkbenchError(f"--base {args.base!r} must be X,Y,Z,YAW (m, rad), e.g. 0,0,-0.3,0")
+        base = pose_xyz_yaw(*vals)
+    robot = get_robot(args.robot, base=base, tip_frame=args.tip)
     r = table_stage_at(args.db, obj, robot, cp, tp, progress=sys.stderr.isatty())
     for line in summary(r):
         print(line)

@@ -127,3 +127,27 @@ def test_plans_are_stored_like_the_roadmap_planners(tmp_path, lpart, make_puma):
         move = np.array([[c, -s, 0, pos[0]], [s, c, 0, pos[1]], [0, 0, 1, 0], [0, 0, 0, 1.0]])
         assert np.allclose(move @ np.reshape(free, (4, 4)), obj, atol=1e-9)          # object = H Rz(phi) placement
         assert 0 < jaw <= 0.08
+
+
+def test_cli_gpplan_stores_an_executable_plan(tmp_path, lpart, capsys):
+    """`workbench gpplan` plans the motions, stores the plan in the plan tables (planner named) and checks it with the
+    validators rebuilt from the store; a second run of the same query finds the stored plan."""
+    mesh = tmp_path / "L.stl"
+    lpart.mesh.export(mesh)
+    db = str(tmp_path / "cli.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--theta-step", "10", "--phi-step", "10", "--table-point", "0.45,0.1",
+                 "--base", "0,0,-0.3,0"]) == 0
+    query = ["gpplan", "--db", db, "--object", "L", "--from", f"1,{np.degrees(0.3):.6f}", "--to", f"3,{np.degrees(1.0):.6f}",
+             "--table", "0.15,-0.8,1.0,0.8", "--max-removed", "3"]
+    assert main(query) == 0
+    out = capsys.readouterr().out
+    assert "1 regrasp(s)" in out and "(planner tournassoud" in out and "validator: ok" in out
+    con = duckdb.connect(db, read_only=True)
+    (idplan, planner, regrasps, duration), = con.execute("SELECT idplan, planner, regrasps, duration FROM plan").fetchall()
+    segments = con.execute("SELECT count(*) FROM plansegment WHERE idplan = ?", [idplan]).fetchone()[0]
+    con.close()
+    assert planner == "tournassoud" and regrasps == 1 and duration > 0 and segments > 0
+    assert main(query) == 0
+    assert f"stored plan id {idplan}" in capsys.readouterr().out
+    assert main(["gptable", str(mesh), "--db", db, "--base", "0,0"]) == 2
+    assert main(query[:-2] + ["--table", "1,0,0,1"]) == 2
