@@ -25,7 +25,8 @@ from tqdm import tqdm
 from workbench.errors import WorkbenchError
 from workbench.grasping.placements import grips_above_table
 from workbench.planners.tournassoud.classes import GraspClass
-from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
+from workbench.robots.analytic import analytic_ik, spherical_wrist_reason
+from workbench.robots.analytic import reachable as closed_reachable
 from workbench.robots.collider import default_scene
 from workbench.robots.ik import IKOptions, IKSolver
 from workbench.robots.model import Robot
@@ -191,8 +192,7 @@ def reachable(robot: Robot, base: np.ndarray, held: np.ndarray, chunk: int, prog
     rows = max(chunk // f_n, 1)
     for s in tqdm(range(0, k_n, rows), desc="IK (closed form)", unit="chunk", disable=not progress, leave=False):
         h = held[s:s + rows]
-        _, valid = solve(ik, compose(base, h).reshape(-1, 4, 4))
-        out[s:s + rows] = valid.any(axis=1).reshape(len(h), f_n)
+        out[s:s + rows] = closed_reachable(ik, compose(base, h).reshape(-1, 4, 4)).reshape(len(h), f_n)
     return out
 
 
