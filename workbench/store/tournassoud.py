@@ -310,17 +310,19 @@ def grasp_rows(store: Store, idclasses: int, idobject: int, idgripper: int, gras
     1e-12) keeps its id; the others are written. Call inside a transaction."""
     n = len(grasps["cls"])
     out = np.zeros(n, dtype=np.int64)
-    new = []
+    have = store.query_arrays("SELECT idfreeairgrip, idcontactpair, rotation FROM freeairgrip WHERE idparamset = ? "
+                              "ORDER BY idfreeairgrip", [idclasses])
+    new: list[int] = []
     for k in range(n):
-        row = store.one("SELECT min(idfreeairgrip) FROM freeairgrip WHERE idparamset = ? AND idcontactpair = ? "
-                        "AND abs(rotation - ?) < 1e-12", [idclasses, int(grasps["cls"][k]), float(grasps["theta"][k])])
-        if row is not None and row[0] is not None:
-            out[k] = int(row[0])
-        else:
-            dup = [j for j in new if grasps["cls"][j] == grasps["cls"][k] and abs(grasps["theta"][j] - grasps["theta"][k]) < 1e-12]
-            out[k] = -1 - dup[0] if dup else -1 - k
-            if not dup:
-                new.append(k)
+        c, th = int(grasps["cls"][k]), float(grasps["theta"][k])
+        hit = np.flatnonzero((have["idcontactpair"] == c) & (np.abs(have["rotation"] - th) < 1e-12))
+        if len(hit):
+            out[k] = int(have["idfreeairgrip"][hit[0]])
+            continue
+        dup = [j for j in new if int(grasps["cls"][j]) == c and abs(float(grasps["theta"][j]) - th) < 1e-12]
+        out[k] = -1 - (dup[0] if dup else k)
+        if not dup:
+            new.append(k)
     if new:
         ids = store.new_ids("freeairgrip", len(new))
         sel = np.array(new)
@@ -362,3 +364,11 @@ def plan_scene(store: Store, idplan: int) -> int:
     if row is None:
         raise StoreError(f"store {store.path} has no plan {idplan}")
     return int(row[0])
+
+
+def placement_stability(store: Store, pid: int) -> np.ndarray:
+    """The stability of a table's placement classes in index order."""
+    row = store.one("SELECT idtgptable FROM tgptable WHERE idparamset = ?", [pid])
+    if row is None:
+        raise StoreError(f"store {store.path} has no grasp-placement table for paramset {pid}; run `workbench gptable` first")
+    return store.query_arrays("SELECT stability FROM tplacementclass WHERE idtgptable = ? ORDER BY idx", [int(row[0])])["stability"]

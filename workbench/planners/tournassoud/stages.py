@@ -207,7 +207,7 @@ def save_plan(db: str, run: TableRun, plan: Plan, scene: Scene, ik: IKOptions) -
     answering the same query is not stored again."""
     with Store(db) as store:
         ids = sql.table_ids(store, run.idtable)
-        stability = sql.load_table(store, run.idtable)["stability"]
+        stability = sql.placement_stability(store, run.idtable)
         with store.transaction():
             fp = sql.placement_rows(store, run.idtable, ids["idobject"], run.table.placements, stability)
             idgripper = sql.gripper_id(store, run.gripper.digest)
