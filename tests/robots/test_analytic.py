@@ -102,3 +102,23 @@ def test_roadmap_ik_stage_closed_form_option(puma):
         fk = _fk(puma, closed.joints[rows, k])
         assert np.abs(fk - t[rows]).max() < 1e-9
     assert IKOptions().as_dict() == {k: v for k, v in IKOptions(closed_form=True).as_dict().items() if k != "closed_form"}
+
+
+@pytest.mark.parametrize("limits", [True, False])
+def test_reachable_agrees_with_the_branches(puma, limits):
+    """The table's validity-only pass (no joint values, the last joint skipped when it spans a full turn) says
+    "reachable" exactly where some full branch is valid, on poses in and out of reach, in and out of the limits;
+    blocks of any size give the same answer."""
+    from workbench.robots.analytic import reachable
+
+    ik = analytic_ik(puma, limits=limits)
+    rng = np.random.default_rng(5)
+    q = rng.uniform(puma.lower - 0.5, puma.upper + 0.5, size=(300, 6))    # some outside the limits
+    poses = _fk(puma, q)
+    far = poses[:100].copy()
+    far[:, :3, 3] *= rng.uniform(0.2, 3.0, size=(100, 1))                # many out of reach
+    poses = np.concatenate([poses, far])
+    expect = solve(ik, poses)[1].any(axis=1)
+    assert 0 < expect.sum() < len(poses) or not limits
+    assert np.array_equal(reachable(ik, poses), expect)
+    assert np.array_equal(reachable(ik, poses, block=37), expect)

@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 
+from workbench.cli.plan import exec_options
 from workbench.errors import WorkbenchError
 from workbench.planners.tournassoud.chaining import NoSequence
 from workbench.planners.tournassoud.figures import table_html
@@ -18,8 +19,14 @@ from workbench.planners.tournassoud.plans import (
     plan_grasp_query,
     plan_placement_query,
 )
-from workbench.planners.tournassoud.stages import load_planner, plan_validator
-from workbench.robots.collider import default_scene
+from workbench.planners.tournassoud.stages import (
+    load_planner,
+    plan_validator,
+    save_plan,
+    validate_stored,
+)
+from workbench.planners.wan_harada.motions import DEFAULT_ACC
+from workbench.robots.collider import Scene, default_scene
 
 
 def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
@@ -27,6 +34,14 @@ def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
     if len(parts) != n:
         raise WorkbenchError(f"{label} {text!r} is malformed; see `workbench gpplan --help`")
     return parts
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def parse_grasp(text: str, label: str = "--initial") -> tuple[int, float]:
@@ -60,8 +75,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--goal", default=None, help="goal class and theta range CLASS,MIN:MAX (degrees)")
     p.add_argument("--from", dest="from_", default=None, help="start placement P,PHI (degrees), instead of --initial")
     p.add_argument("--to", default=None, help="goal placement P,PHI (degrees), instead of --goal")
+    p.add_argument("--table", default=None, help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
     p.add_argument("--handx", type=float, default=0.05, help="approach distance along the hand's axis (m)")
     p.add_argument("--worldz", type=float, default=0.05, help="lift after the approach (m)")
+    p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
+    p.add_argument("--no-motion", action="store_true", help="waypoints only: do not plan and time the motions")
+    p.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
+    p.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
+    p.add_argument("--max-removed", type=int, default=10,
+                   help="conjunctions whose motions fail to remove from the table before giving up (default 10)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
     p.add_argument("--json", default=None, help="write the sequence and its plan to this JSON file")
     p.add_argument("--html", default=None, help="write the table with the sequence overlaid (Fig. 6) to this HTML file")
     p.set_defaults(func=run)
@@ -78,22 +101,33 @@ def run(args: argparse.Namespace) -> int:
             raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
     r = load_planner(args.db, args.object, args.robot)
     scene = default_scene(r.robot.name)
+    if args.table:
+        t = [float(v) for v in _nums(args.table, "--table", 4)] if all(
+            _is_float(v) for v in str(args.table).split(",")) else []
+        if len(t) != 4 or not np.isfinite(t).all() or t[0] >= t[2] or t[1] >= t[3]:
+            raise WorkbenchError(f"--table {args.table!r} must be XMIN,YMIN,XMAX,YMAX in metres with XMIN < XMAX, YMIN < YMAX")
+        scene = Scene(table_min=(t[0], t[1]), table_max=(t[2], t[3]), table_thickness=scene.table_thickness,
+                      workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
     realiser = Realiser(r.robot, scene, r.obj.mesh, args.handx, args.worldz)
+    motions = None if args.no_motion else exec_options(args)
     try:
         if grasp_mode:
             initial = parse_grasp(args.initial)
             gc, rng = parse_goal(args.goal)
-            seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng)
+            seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng, motions)
         else:
             start = parse_grasp(args.from_, "--from")
             goal = parse_grasp(args.to, "--to")
-            seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal)
+            seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal, motions)
     except NoSequence as exc:
         print(f"warning: {exc}", file=sys.stderr)
         print(f"{r.obj.name} with {r.robot.name}: no regrasp sequence (0 results)")
         if args.json:
             with open(args.json, "w") as fh:
                 json.dump({"sequence": None, "plan": None, "reason": str(exc)}, fh, indent=1)
+        if args.html:  # the table alone (Fig. 5): where the query's grasps and placements are
+            with open(args.html, "w") as fh:
+                fh.write(table_html(r.table, r.classes, None, title=f"{r.obj.name} with {r.robot.name}: no sequence"))
         return 0
     t = r.table
     print(f"{r.obj.name} with {r.robot.name}: {seq.regrasps} regrasp(s), chaining {seq.levels} step(s) in {seq.seconds * 1000:.2f} ms")
@@ -105,7 +139,12 @@ def run(args: argparse.Namespace) -> int:
         print("the initial grasp is already in the goal range: nothing to do")
     else:
         print(plan.summary())
-        report = plan_validator(args.db, r, scene).check(plan)
+        if args.no_save:
+            report = plan_validator(args.db, r, scene).check(plan)
+        else:
+            idplan, plan = save_plan(args.db, r, plan, scene, realiser.opts)
+            print(f"stored plan id {idplan} in {args.db} (planner tournassoud; tables plan, planstep)")
+            report = validate_stored(args.db, r, idplan, plan, require_motion=motions is not None)
         print("validator: " + ("ok" if report.ok else "FAILED: " + "; ".join(report.errors[:3])))
     if args.json:
         doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict()}

@@ -14,7 +14,7 @@ from workbench.geometry.objects import load_object
 from workbench.planners.tournassoud.classes import KINDS, ClassParams
 from workbench.planners.tournassoud.stages import table_stage_at
 from workbench.planners.tournassoud.table import TableParams
-from workbench.robots.model import get_robot
+from workbench.robots.model import get_robot, pose_xyz_yaw
 
 
 def parse_point(text: str, label: str = "--table-point") -> tuple[float, float]:
@@ -31,6 +31,7 @@ def add_table_arguments(parser: argparse.ArgumentParser) -> None:
     c, t = ClassParams(), TableParams()
     parser.add_argument("--robot", default="puma560", help="a built-in robot or the path of a URDF (then --tip)")
     parser.add_argument("--tip", default=None, help="tip frame of a URDF robot")
+    parser.add_argument("--base", default=None, help="robot base in the world: X,Y,Z,YAW (m, rad); default per robot")
     parser.add_argument("--theta-step", type=float, default=float(np.degrees(t.theta_step)), help="theta resolution (degrees)")
     parser.add_argument("--phi-step", type=float, default=float(np.degrees(t.phi_step)), help="phi resolution (degrees)")
     parser.add_argument("--table-point", default=",".join(f"{v:g}" for v in t.table_point),
@@ -41,12 +42,19 @@ def add_table_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-face-area", type=float, default=c.min_face_area, help="smallest face used by a class (m^2)")
     parser.add_argument("--min-contact-area", type=float, default=c.min_contact_area,
                         help="pad area that must cover the face overlap at every legal theta (m^2, Section 5.1; 0: off)")
+    parser.add_argument("--min-range", type=float, default=float(np.degrees(c.min_range)),
+                        help="drop grasp classes whose legal theta range is narrower than this (degrees; 0, the paper's "
+                             "rule: keep every class with a non-empty range)")
+    parser.add_argument("--points", type=int, default=c.points,
+                        help="grasp points per feature pair (1: the paper's one point per class; more: its remedy for "
+                             "elongated parts, a discrete set of points as in Handey, Section 2.3)")
 
 
 def params_from_args(args: argparse.Namespace):
     cp = ClassParams(min_face_area=args.min_face_area, edge_angle=float(np.radians(args.edge_angle)),
                      theta_step=float(np.radians(args.theta_step)), bisection=min(float(np.radians(0.1)), float(np.radians(args.theta_step))),
-                     min_contact_area=args.min_contact_area)
+                     min_contact_area=args.min_contact_area, min_range=float(np.radians(args.min_range)),
+                     points=args.points)
     tp = TableParams(theta_step=float(np.radians(args.theta_step)), phi_step=float(np.radians(args.phi_step)),
                      table_point=parse_point(args.table_point), clearance=args.clearance)
     return cp, tp
@@ -77,7 +85,17 @@ def summary(run) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     cp, tp = params_from_args(args)
-    robot = get_robot(args.robot, tip_frame=args.tip)
+    base = None
+    if args.base:
+        parts = [p.strip() for p in args.base.split(",")]
+        try:
+            vals = [float(p) for p in parts]
+        except ValueError:
+            vals = []
+        if len(vals) != 4 or not np.isfinite(vals).all():
+            raise WorkbenchError(f"--base {args.base!r} must be X,Y,Z,YAW (m, rad), e.g. 0,0,-0.3,0")
+        base = pose_xyz_yaw(*vals)
+    robot = get_robot(args.robot, base=base, tip_frame=args.tip)
     r = table_stage_at(args.db, obj, robot, cp, tp, progress=sys.stderr.isatty())
     for line in summary(r):
         print(line)

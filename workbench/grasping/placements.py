@@ -138,8 +138,9 @@ def grips_above_table(placement_poses: np.ndarray, grasp_poses: np.ndarray, grip
     pts = np.asarray(gripper.collision_mesh().convex_hull.vertices)  # lowest point of a mesh is a hull vertex
     # z of every hull point for every (placement, grasp): row 2 of P @ G applied to the points
     row = np.einsum("pj,gjk->pgk", placement_poses[:, 2, :], grasp_poses)  # (P, G, 4)
-    z = np.einsum("pgk,vk->pgv", row[..., :3], pts) + row[..., 3:4]
-    return z.min(axis=2) >= clearance
+    p_n, g_n = row.shape[:2]
+    z = row[..., :3].reshape(-1, 3) @ pts.T                                # (P G, V) through BLAS
+    return (z.min(axis=1) + row[..., 3].reshape(-1) >= clearance).reshape(p_n, g_n)
 
 
 def free_tabletop_grips(placements: Placements, grasp_poses: np.ndarray, gripper: Gripper,

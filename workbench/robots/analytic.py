@@ -133,8 +133,9 @@ def _axis(k: np.ndarray) -> tuple[int, float] | None:
 _NEXT = ((1, 2), (2, 0), (0, 1))  # the two other coordinates, cyclic
 
 
-def _rot(k: np.ndarray, c: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors v (3, N) about the constant unit axis k by angles with cosines c and sines s (Rodrigues)."""
+def _rot(k: np.ndarray, c: np.ndarray, s: np.ndarray, v: np.ndarray, inverse: bool = False) -> np.ndarray:
+    """Rotate vectors v (3, N) about the constant unit axis k by angles with cosines c and sines s (Rodrigues);
+    `inverse` rotates by minus those angles (no negated copy of s)."""
     ax = _axis(k)
     if ax is not None:
         m, sg = ax
@@ -142,7 +143,7 @@ def _rot(k: np.ndarray, c: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarr
         out = np.empty(np.broadcast_shapes(v.shape, (3,) + np.shape(c)))
         np.multiply(v[i], c, out=out[i])
         np.multiply(v[j], c, out=out[j])
-        if sg > 0:
+        if (sg > 0) != inverse:
             out[i] -= v[j] * s
             out[j] += v[i] * s
         else:
@@ -150,6 +151,8 @@ def _rot(k: np.ndarray, c: np.ndarray, s: np.ndarray, v: np.ndarray) -> np.ndarr
             out[j] -= v[i] * s
         out[m] = v[m]
         return out
+    if inverse:
+        s = -s
     kv = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1 - c)
     return np.stack((v[0] * c + (k[1] * v[2] - k[2] * v[1]) * s + k[0] * kv,
                      v[1] * c + (k[2] * v[0] - k[0] * v[2]) * s + k[1] * kv,
@@ -224,11 +227,39 @@ def _limit(q: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return out
 
 
-def solve(ik: AnalyticIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+BLOCK = 4096  # poses per vectorised pass: its ~50 temporaries of 8 x BLOCK doubles stay in the CPU caches
+
+
+def reachable(ik: AnalyticIK, poses: np.ndarray, block: int = BLOCK) -> np.ndarray:
+    """(N,) bool: whether any of the 8 branches of each TCP pose (N, 4, 4) is within the joint limits (Section 5.2:
+    the grasp-placement table needs no joint values). Skips writing the joints and, when the last joint's range
+    spans a full turn, its angle altogether."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    out = np.empty(len(poses), dtype=bool)
+    for s in range(0, len(poses), block):
+        out[s:s + block] = _solve_block(ik, poses[s:s + block], joints=False)[1].any(axis=1)
+    return out
+
+
+def solve(ik: AnalyticIK, poses: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
     """All 8 IK branches of TCP poses (N, 4, 4) in the world: joints (N, 8, 6) and valid (N, 8).
 
-    Branch index bits: 4 = elbow (q3 root), 2 = shoulder (q2 root), 1 = wrist flip (q5 root). Section 5.2."""
+    Branch index bits: 4 = elbow (q3 root), 2 = shoulder (q2 root), 1 = wrist flip (q5 root). Section 5.2.
+    Poses are solved `block` at a time into preallocated outputs (larger blocks spill the temporaries out of the
+    caches and run slower)."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    n = len(poses)
+    if n <= block:
+        return _solve_block(ik, poses)
+    q = np.empty((n, 8, 6))
+    valid = np.empty((n, 8), dtype=bool)
+    for s in range(0, n, block):
+        q[s:s + block], valid[s:s + block] = _solve_block(ik, poses[s:s + block])
+    return q, valid
+
+
+def _solve_block(ik: AnalyticIK, poses: np.ndarray, joints: bool = True) -> tuple[np.ndarray | None, np.ndarray]:
+    """`solve` on one block of poses (N, 4, 4); without `joints`, only the validity (None, (N, 8))."""
     n = len(poses)
     # the joint-6 frame in the robot root is B P T (B = base^-1, P = pose, T = TCP -> joint 6); only its products
     # with constant vectors are needed: B P T u = B (P_R (T_R u) + P_t + P_R T_t) ...
@@ -275,27 +306,41 @@ def solve(ik: AnalyticIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     c1, s1 = _sub1(a1, x, col(pw))
     # 4. wrist: Y = R4^T R03^T R6 (R5 R6)^T; only Y c and Y d are needed
     wa, wb, wc, wd = ik.wrist_a, ik.wrist_b, ik.wrist_c, ik.wrist_d
+    free6 = not joints and ik.upper[5] - ik.lower[5] >= 2 * np.pi
     ys = []
-    for vec in (wc, wd):
-        y = _rot(a1, c1, -s1, col(rot6(ik.wrist_at @ vec)))
-        y = _rot(a2, c2, -s2, _lin(r2.T, y))
-        ys.append(_lin(r4.T, _rot(a3, c3, -s3, _lin(r3.T, y))))
-    yc, yd = ys
+    for vec in ((wc,) if free6 else (wc, wd)):
+        y = _rot(a1, c1, s1, col(rot6(ik.wrist_at @ vec)), inverse=True)
+        y = _rot(a2, c2, s2, _lin(r2.T, y), inverse=True)
+        ys.append(_lin(r4.T, _rot(a3, c3, s3, _lin(r3.T, y), inverse=True)))
+    yc, yd = ys[0], (ys[1] if len(ys) > 1 else None)
     cpar = wb * (wb @ wc)
     c5, s5 = _acs(wa @ (wc - cpar), wa @ np.cross(wb, wc), _dot(wa, yc) - wa @ cpar)
     c5, s5 = np.moveaxis(c5[..., 0, :], 0, 2), np.moveaxis(s5[..., 0, :], 0, 2)  # (2, 2, 2, N)
     u = _rot(wb, c5, s5, col(wc))
     c4, s4 = _sub1(wa, u, yc)
-    tt = _rot(wb, c5, -s5, _rot(wa, c4, -s4, yd))
-    c6, s6 = _sub1(wc, col(wd), tt)
-    sins = np.stack(np.broadcast_arrays(s1, s2, s3, s4, s5, s6))
-    coss = np.stack(np.broadcast_arrays(c1, c2, c3, c4, c5, c6))
-    q = np.arctan2(sins, coss)                                                # (6, 2, 2, 2, N)
-    for j in range(6):
-        q[j] = _limit(q[j], ik.lower[j], ik.upper[j])
-    # (6, q3, q2, q5, N) -> (N, branch = 4 q3 + 2 q2 + q5, 6)
-    q = q.transpose(4, 1, 2, 3, 0).reshape(n, 8, 6)
-    valid = np.isfinite(q).all(axis=2)
+    angles = [(s1, c1), (s2, c2), (s3, c3), (s4, c4), (s5, c5)]
+    if not free6:
+        tt = _rot(wb, c5, s5, _rot(wa, c4, s4, yd, inverse=True), inverse=True)
+        c6, s6 = _sub1(wc, col(wd), tt)
+        angles.append((s6, c6))
+    if not joints:  # validity only: every computed joint within its limits (by whole turns), NaN fails
+        ok = np.ones((2, 2, 2, n), dtype=bool)
+        for j, (sj, cj) in enumerate(angles):
+            a = np.arctan2(sj, cj)
+            lo, hi = ik.lower[j], ik.upper[j]
+            inside = (a >= lo) & (a <= hi)
+            if lo < -np.pi or hi > np.pi:
+                inside |= ((a + 2 * np.pi >= lo) & (a + 2 * np.pi <= hi)) | ((a - 2 * np.pi >= lo) & (a - 2 * np.pi <= hi))
+            ok &= inside
+        return None, ok.transpose(3, 0, 1, 2).reshape(n, 8)
+    # each joint's angle on its own branch shape (q1, q2: 4 per pose, q3: 2, wrist: 8), written into the output's
+    # (N, q3 root, q2 root, q5 root, joint) layout through a transposed view (no stacked or broadcast copies)
+    q = np.empty((n, 2, 2, 2, 6))
+    view = q.transpose(1, 2, 3, 0, 4)                                         # (2, 2, 2, N, 6)
+    for j, (sj, cj) in enumerate(angles):
+        view[..., j] = _limit(np.arctan2(sj, cj), ik.lower[j], ik.upper[j])
+    q = q.reshape(n, 8, 6)
+    valid = ~np.isnan(q).any(axis=2)
     return q, valid
 
 

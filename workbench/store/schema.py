@@ -196,6 +196,10 @@ ALL_TABLES: tuple[str, ...] = CORE_TABLES
 # step it serves: pick, transfer, release, regrasp, place), step (planstep seq), holding (object in the hand), t0 (s
 # from the plan's start), duration (s), method (tcp-line, line, rrtconnect, dwell), jaw (m) and its knots: t (s from
 # the segment's start), q and qd (row-major K x n, robot.joint_names order, rad and rad/s).
+# plan.planner names the planner that answered: 'wan_harada' (the roadmap planner; idtabletop its tabletop parameter
+# set) or 'tournassoud' (the grasp-placement table, Tournassoud et al. 1987; idtabletop the `tournassoud.table`
+# parameter set, its placements and grasps are `freetabletopplacement` / `freeairgrip` rows written for the plan, see
+# store.tournassoud). Both go through the same plan validator.
 PLAN_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS plan (
         idplan BIGINT PRIMARY KEY,
@@ -414,4 +418,6 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS removed INTEGER",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS t_motion DOUBLE",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS acc DOUBLE[]",
+    # the planner that answered (issue 13): 'wan_harada' (the roadmap planner, every plan stored before) or 'tournassoud'
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS planner VARCHAR DEFAULT 'wan_harada'",
 )

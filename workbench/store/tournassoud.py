@@ -20,6 +20,14 @@ Tables (created on first use, idempotent; angles in radians, lengths in metres, 
   solution as closed intervals of sample values `phi_lo[k]`..`phi_hi[k]` (Section 5.2); a run across 2 pi is
   two intervals. Empty lists: no phi.
 
+Plans of this planner go into the roadmap planner's `plan`, `planstep` (and `plansegment`) tables with
+`plan.planner` = 'tournassoud' and `plan.idtabletop` the table's paramset. Their foreign keys point at rows of the
+paper's tables written for them (`placement_rows`, `grasp_rows`): one `freetabletopplacement` row per placement
+class (idparamset = the table's paramset; rotmat, stability as `tplacementclass`) and one `freeairgrip` row per grasp
+(G_i, theta) a plan uses (idparamset = the class set's paramset, `idcontactpair` = the class index, `rotation` =
+theta; rotmat the TCP in the object frame; contactpoint0/1 = C_i +/- opening/2 n_i on the contacts, contactnormal0/1
+= +/- n_i, the contacts' outward normals along the jaw axis).
+
 Reuse: each stage's parameter set is digested (`paramset`); `find_*` return a stored set, `save_*` write a whole
 stage in one transaction (the caller computes first, outside it).
 """
@@ -271,3 +279,96 @@ def gripper_id(store: Store, digest: str) -> int:
     if row is None:
         raise StoreError(f"store {store.path} has no row of this gripper; rebuild the table with `workbench gptable`")
     return int(row[0])
+
+
+# -- rows of the paper's tables for plans (the `plan` / `planstep` tables of store.wan_harada) ------------------------
+
+
+def placement_rows(store: Store, idtable: int, idobject: int, placements: np.ndarray, stability: np.ndarray) -> np.ndarray:
+    """The `freetabletopplacement` ids of a table's placement classes in index order (idparamset = the table's
+    `tournassoud.table` paramset), written on first use; call inside a transaction."""
+    have = store.query_arrays("SELECT idfreetabletopplacement FROM freetabletopplacement WHERE idparamset = ? "
+                              "ORDER BY idfreetabletopplacement", [idtable])["idfreetabletopplacement"]
+    p_n = len(placements)
+    if len(have) == p_n:
+        return np.asarray(have, dtype=np.int64)
+    if len(have):
+        raise StoreError(f"store {store.path}: table {idtable} has {len(have)} placement rows, not {p_n}; rebuild it in a new store")
+    ids = store.new_ids("freetabletopplacement", p_n)
+    if p_n:
+        store.insert("freetabletopplacement", {"idfreetabletopplacement": ids, "idobject": np.full(p_n, idobject, dtype=np.int64),
+                                               "idparamset": np.full(p_n, idtable, dtype=np.int64),
+                                               "rotmat": np.asarray(placements, dtype=np.float64).reshape(p_n, 16),
+                                               "stability": np.asarray(stability, dtype=np.float64)})
+    return ids
+
+
+def grasp_rows(store: Store, idclasses: int, idobject: int, idgripper: int, grasps: dict[str, np.ndarray]) -> np.ndarray:
+    """The `freeairgrip` ids of grasps (G_i, theta) of a class set: `grasps` holds arrays `cls` (class index, stored
+    in `idcontactpair`), `theta` (radians in [0, 2 pi), stored in `rotation`), `rotmat` (N, 4, 4) TCP in the object
+    frame, `jawwidth`, `contactpoint0/1`, `contactnormal0/1` (N, 3). A grasp already stored (same class, theta to
+    1e-12) keeps its id; the others are written. Call inside a transaction."""
+    n = len(grasps["cls"])
+    out = np.zeros(n, dtype=np.int64)
+    have = store.query_arrays("SELECT idfreeairgrip, idcontactpair, rotation FROM freeairgrip WHERE idparamset = ? "
+                              "ORDER BY idfreeairgrip", [idclasses])
+    new: list[int] = []
+    for k in range(n):
+        c, th = int(grasps["cls"][k]), float(grasps["theta"][k])
+        hit = np.flatnonzero((have["idcontactpair"] == c) & (np.abs(have["rotation"] - th) < 1e-12))
+        if len(hit):
+            out[k] = int(have["idfreeairgrip"][hit[0]])
+            continue
+        dup = [j for j in new if int(grasps["cls"][j]) == c and abs(float(grasps["theta"][j]) - th) < 1e-12]
+        out[k] = -1 - (dup[0] if dup else k)
+        if not dup:
+            new.append(k)
+    if new:
+        ids = store.new_ids("freeairgrip", len(new))
+        sel = np.array(new)
+        m = len(sel)
+        store.insert("freeairgrip", {
+            "idfreeairgrip": ids, "idobject": np.full(m, idobject, dtype=np.int64),
+            "idparamset": np.full(m, idclasses, dtype=np.int64), "idgripper": np.full(m, idgripper, dtype=np.int64),
+            **{c: np.asarray(grasps[c], dtype=np.float64)[sel].reshape(m, 3)
+               for c in ("contactpoint0", "contactpoint1", "contactnormal0", "contactnormal1")},
+            "rotmat": np.asarray(grasps["rotmat"], dtype=np.float64)[sel].reshape(m, 16),
+            "jawwidth": np.asarray(grasps["jawwidth"], dtype=np.float64)[sel],
+            "idcontactpair": np.asarray(grasps["cls"], dtype=np.int64)[sel],
+            "rotation": np.asarray(grasps["theta"], dtype=np.float64)[sel]})
+        where = {k: i for k, i in zip(new, ids)}
+        for k in range(n):
+            if out[k] < 0:
+                out[k] = where[-1 - out[k]]
+    return out
+
+
+def table_ids(store: Store, pid: int) -> dict[str, int]:
+    """idobject, idrobot and idclasses of the table with paramset `pid`."""
+    row = store.one("SELECT idobject, idrobot, idclasses FROM tgptable WHERE idparamset = ?", [pid])
+    if row is None:
+        raise StoreError(f"store {store.path} has no grasp-placement table for paramset {pid}; run `workbench gptable` first")
+    return {"idobject": int(row[0]), "idrobot": int(row[1]), "idclasses": int(row[2])}
+
+
+def stored_placements(store: Store, idtable: int) -> dict[int, np.ndarray]:
+    """{idfreetabletopplacement: rotmat (4, 4)} of a table's placement rows (empty before its first stored plan)."""
+    rows = store.query_arrays("SELECT idfreetabletopplacement, rotmat FROM freetabletopplacement WHERE idparamset = ? "
+                              "ORDER BY idfreetabletopplacement", [idtable])
+    return {int(i): np.asarray(m, dtype=np.float64).reshape(4, 4) for i, m in zip(rows["idfreetabletopplacement"], rows["rotmat"])}
+
+
+def plan_scene(store: Store, idplan: int) -> int:
+    """The idscene of a stored plan."""
+    row = store.one("SELECT idscene FROM plan WHERE idplan = ?", [idplan])
+    if row is None:
+        raise StoreError(f"store {store.path} has no plan {idplan}")
+    return int(row[0])
+
+
+def placement_stability(store: Store, pid: int) -> np.ndarray:
+    """The stability of a table's placement classes in index order."""
+    row = store.one("SELECT idtgptable FROM tgptable WHERE idparamset = ?", [pid])
+    if row is None:
+        raise StoreError(f"store {store.path} has no grasp-placement table for paramset {pid}; run `workbench gptable` first")
+    return store.query_arrays("SELECT stability FROM tplacementclass WHERE idtgptable = ? ORDER BY idx", [int(row[0])])["stability"]

@@ -62,8 +62,8 @@ def test_cli_gptable_and_gpplan(tmp_path, lpart, capsys):
     out = capsys.readouterr().out
     doc = json.loads(js.read_text())
     if doc["plan"] is not None:
-        assert "validator: ok" in out
-        assert doc["sequence"]["regrasps"] == doc["plan"]["regrasps"]
+        assert "validator: ok" in out and "(planner tournassoud" in out
+        assert doc["sequence"]["regrasps"] == doc["plan"]["regrasps"] and doc["plan"]["planner"] == "tournassoud"
     assert html.read_text().startswith("<!doctype html>")
     # bad input: one line, status 2
     assert main(["gpplan", "--db", db, "--object", "L", "--initial", "0,abc", "--goal", "3,0:360"]) == 2
@@ -81,3 +81,73 @@ def test_zero_classes_is_a_warning(tmp_path, capsys):
     assert main(["gptable", str(big), "--db", str(tmp_path / "z.duckdb"), "--theta-step", "15", "--phi-step", "15"]) == 0
     cap = capsys.readouterr()
     assert "0 grasp classes" in cap.out and "warning: no grasp class" in cap.err
+
+
+def test_plans_are_stored_like_the_roadmap_planners(tmp_path, lpart, make_puma):
+    """A plan of this planner, with its timed motions, goes into the store's plan / planstep / plansegment tables,
+    named, with foreign keys to real freeairgrip / freetabletopplacement rows whose poses agree with the steps, and
+    passes the validators rebuilt from the store (waypoints and trajectory); the same query is not stored twice."""
+    from workbench.errors import PlanningError
+    from workbench.planners.tournassoud.plans import Realiser, plan_placement_query
+    from workbench.planners.tournassoud.stages import save_plan, validate_stored
+    from workbench.planners.wan_harada.motions import ExecOptions
+    from workbench.robots.collider import Scene
+
+    db = str(tmp_path / "plans.duckdb")
+    puma = make_puma(base_z=-0.3)  # see test_table._setup: from the default pedestal few sequences are executable
+    run = table_stage_at(db, lpart, puma, params=PARAMS)
+    scene = Scene(table_min=(0.15, -0.8))
+    realiser = Realiser(puma, scene, lpart.mesh)
+    plan = None
+    for a, b in [(1, 3), (1, 0), (3, 1)]:
+        try:
+            _, plan = plan_placement_query(run.table, run.classes, realiser, puma, "L", (a, 0.3), (b, 1.0),
+                                           ExecOptions(max_removed=3))
+        except PlanningError:
+            continue
+        if plan.regrasps >= 1:
+            break
+    assert plan is not None and plan.regrasps >= 1 and plan.segments
+    pid, stored = save_plan(db, run, plan, scene, realiser.opts)
+    report = validate_stored(db, run, pid, stored, require_motion=True)
+    assert report.ok, report.errors
+    assert save_plan(db, run, plan, scene, realiser.opts)[0] == pid
+    con = duckdb.connect(db, read_only=True)
+    assert con.execute("SELECT count(*), min(planner), min(regrasps) FROM plan").fetchone() == (1, "tournassoud", plan.regrasps)
+    assert con.execute("SELECT count(*) FROM plansegment WHERE idplan = ?", [pid]).fetchone()[0] == len(plan.segments)
+    rows = con.execute("SELECT s.kind, s.object, s.tcp, s.yaw, s.position, g.rotmat, g.jawwidth, f.rotmat FROM planstep s "
+                       "JOIN freeairgrip g USING (idfreeairgrip) JOIN freetabletopplacement f USING (idfreetabletopplacement) "
+                       "WHERE s.idplan = ? ORDER BY s.seq", [pid]).fetchall()
+    con.close()
+    assert [r[0] for r in rows] == [s.kind for s in plan.steps]
+    for _, obj, tcp, yaw, pos, grip, jaw, free in rows:
+        obj, tcp = np.reshape(obj, (4, 4)), np.reshape(tcp, (4, 4))
+        assert np.allclose(obj @ np.reshape(grip, (4, 4)), tcp, atol=1e-9)           # TCP = object pose x stored grasp
+        c, s = np.cos(yaw), np.sin(yaw)
+        move = np.array([[c, -s, 0, pos[0]], [s, c, 0, pos[1]], [0, 0, 1, 0], [0, 0, 0, 1.0]])
+        assert np.allclose(move @ np.reshape(free, (4, 4)), obj, atol=1e-9)          # object = H Rz(phi) placement
+        assert 0 < jaw <= 0.08
+
+
+def test_cli_gpplan_stores_an_executable_plan(tmp_path, lpart, capsys):
+    """`workbench gpplan` plans the motions, stores the plan in the plan tables (planner named) and checks it with the
+    validators rebuilt from the store; a second run of the same query finds the stored plan."""
+    mesh = tmp_path / "L.stl"
+    lpart.mesh.export(mesh)
+    db = str(tmp_path / "cli.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--theta-step", "10", "--phi-step", "10", "--table-point", "0.45,0.1",
+                 "--base", "0,0,-0.3,0"]) == 0
+    query = ["gpplan", "--db", db, "--object", "L", "--from", f"1,{np.degrees(0.3):.6f}", "--to", f"3,{np.degrees(1.0):.6f}",
+             "--table", "0.15,-0.8,1.0,0.8", "--max-removed", "3"]
+    assert main(query) == 0
+    out = capsys.readouterr().out
+    assert "1 regrasp(s)" in out and "(planner tournassoud" in out and "validator: ok" in out
+    con = duckdb.connect(db, read_only=True)
+    (idplan, planner, regrasps, duration), = con.execute("SELECT idplan, planner, regrasps, duration FROM plan").fetchall()
+    segments = con.execute("SELECT count(*) FROM plansegment WHERE idplan = ?", [idplan]).fetchone()[0]
+    con.close()
+    assert planner == "tournassoud" and regrasps == 1 and duration > 0 and segments > 0
+    assert main(query) == 0
+    assert f"stored plan id {idplan}" in capsys.readouterr().out
+    assert main(["gptable", str(mesh), "--db", db, "--base", "0,0"]) == 2
+    assert main(query[:-2] + ["--table", "1,0,0,1"]) == 2

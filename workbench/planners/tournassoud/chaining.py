@@ -196,7 +196,8 @@ def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: 
         raise PlanningError(f"no grasp can put the object at placement {pg}, {np.degrees(phg):.1f} deg; choose another angle")
     levels = chain(table, a, b)
     if levels is None:
-        raise NoSequence(f"no regrasp sequence from placement {ps} to placement {pg}: the table does not connect them")
+        raise NoSequence(f"no regrasp sequence from placement {ps} to placement {pg}: the table does not connect them: "
+                         f"{why_apart(table, ps, pg)}")
     cur = _pick2(levels[-1] & a)
     grasps, placements = [cur], [(ps, fs)]
     for prev in reversed(levels[:-1]):
@@ -207,6 +208,45 @@ def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: 
     placements.append((pg, fg))
     return Sequence("placement", grasps, placements, len(levels) - 1, time.perf_counter() - t0,
                     extra={"phi_start": float(phs), "phi_goal": float(phg)})
+
+
+def placement_groups(table: GraspPlacementTable) -> list[set[int]]:
+    """The placement classes linked by a grasp class usable in both (any theta, any phi), as connected groups: a
+    placement query between two groups has no answer at any angle (Proposition 1 needs a shared grasp)."""
+    cells = table.q.any(axis=(2, 3))                          # (C, P)
+    p_n = cells.shape[1]
+    link = (cells.T.astype(np.int32) @ cells.astype(np.int32)) > 0   # (P, P) sharing a class
+    seen, out = set(), []
+    for j in range(p_n):
+        if j in seen:
+            continue
+        group, todo = set(), [j]
+        while todo:
+            k = todo.pop()
+            if k in group:
+                continue
+            group.add(k)
+            todo += [int(m) for m in np.flatnonzero(link[k]) if m not in group]
+        seen |= group
+        out.append(group)
+    return out
+
+
+def why_apart(table: GraspPlacementTable, ps: int, pg: int) -> str:
+    """Why the table does not connect placement `ps` to `pg` (for the NoSequence message and the benchmark)."""
+    cells = table.q.any(axis=(2, 3))
+    for j in (ps, pg):
+        only = np.flatnonzero(cells[:, j])
+        others = [k for k in range(cells.shape[1]) if k != j]
+        if len(only) and not cells[np.ix_(only, others)].any():
+            return (f"placement {j} is held only by grasp class(es) {only.tolist()}, usable at no other placement at the table "
+                    f"point H (the paper's one grasp point per class and single H; try more grasp points per class "
+                    f"(--points) or another table point)")
+    group = next(g for g in placement_groups(table) if ps in g)
+    if pg not in group:
+        return (f"no chain of shared grasp classes links placement {ps} (group {sorted(group)}) to placement {pg} at the "
+                f"table point H (the paper's one grasp point per class and single H; try --points or another table point)")
+    return "the shared grasps' theta and phi ranges do not meet at these angles (try finer steps or other angles)"
 
 
 def nearest_sample(grid: np.ndarray, angle: float) -> int:

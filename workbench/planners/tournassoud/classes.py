@@ -14,9 +14,20 @@ candidates inside the overlap of the contacts' projections (rasterised at about 
 face/face the overlap's centroid, its deepest point (farthest from its boundary) and the centroids of its largest
 connected pieces; for face/edge the middles of the edge's pieces over the face and the quarter points of the
 longest; for face/vertex the vertex's projection. The candidate with the widest legal theta range against
-hand-object collision (Section 5.1) at a coarse step (1/24 turn) wins; ties go to the earlier candidate; a class
-free at no coarse sample is dropped (a legal range narrower than 15 degrees is no use for regrasping). Legal theta ranges are intervals found
-at `theta_step` and refined at their ends by bisection down to `bisection`. With `min_contact_area` > 0 the pad's
+hand-object collision (Section 5.1) at a coarse step (1/24 turn) wins; ties go to the earlier candidate. When no
+candidate is free at any coarse sample, the candidates are scanned again at `theta_step` (a narrow legal range is
+still a legal range: the paper keeps every class whose range is non-empty). A class is dropped only when it is free
+at no `theta_step` sample (any legal range it has is then narrower than the resolution) or, with the documented
+parameter `min_range` > 0 (default 0: keep all), when its legal range is narrower than `min_range`. Legal theta
+ranges are intervals found at `theta_step` and refined at their ends by bisection down to `bisection`.
+
+One grasp point per feature pair is the paper's "reasonable approximation" (Section 2.3), which it says fails for
+elongated parts; its remedy, "a discrete set of positions of the grasp point to represent them all, as is done in
+Handey", is the parameter `points` (default 1, the paper's method): with `points` > 1 the overlap's candidates also
+spread over it (farthest-point sampling among its cells at least half as deep as the deepest; the ends of an edge's
+longest piece), and up to `points` of them become classes of the same feature pair (`features["point"]` = 0, 1,
+...): first the one free at the most theta samples, then each adding the most theta samples not yet free at a kept
+point (a point adding none is not kept). With `min_contact_area` > 0 the pad's
 rectangle must also cover that much of the face overlap at each theta (Section 5.1's minimum contact area).
 
 Placement classes are the stable faces of the convex hull (Section 3) with the roadmap planner's stability margin:
@@ -61,13 +72,16 @@ class ClassParams:
     min_contact_area: float = 0.0
     candidates: int = 5
     min_overlap: float = 1e-6
+    min_range: float = 0.0
+    points: int = 1
 
     def __post_init__(self) -> None:
         if not (0 < self.theta_step <= np.pi / 2):
             raise WorkbenchError(f"theta step must be in (0, 90] degrees, got {np.degrees(self.theta_step):g}")
         if not (0 < self.bisection <= self.theta_step):
             raise WorkbenchError("bisection resolution must be positive and at most the theta step")
-        if min(self.min_face_area, self.tolerance, self.min_contact_area, self.min_overlap) < 0 or self.candidates < 1:
+        if min(self.min_face_area, self.tolerance, self.min_contact_area, self.min_overlap, self.min_range) < 0 \
+                or self.candidates < 1 or self.points < 1 or not np.isfinite(self.min_range):
             raise WorkbenchError(f"grasp class parameters must be non-negative (and candidates >= 1), got {self}")
 
     def as_dict(self) -> dict:
@@ -161,7 +175,7 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
             if region is None or region.area < p.min_overlap:
                 continue
             area = region.area
-            cands = _face_candidates(region, p.candidates)
+            cands = _face_candidates(region, max(p.candidates, 2 * p.points) if p.points > 1 else p.candidates, spread=p.points > 1)
             mid = fa.offset - w / 2
             pts = cands[:, :1] * u + cands[:, 1:] * v + mid * n
             out.append(dict(kind="face/face", features={"faces": [a, int(b)], "overlap": float(area)}, normal=n, u=u, v=v,
@@ -189,7 +203,9 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
                 ss = [(a_ + b_) / 2 for a_, b_ in spans]
                 lo, hi = max(spans, key=lambda sp: sp[1] - sp[0])
                 ss += [lo + (hi - lo) / 4, lo + 3 * (hi - lo) / 4]
-                pts = np.array([e0[k] + t * ed[k] + (w / 2) * n for t in ss[: max(p.candidates, 1)]])
+                if p.points > 1:  # spread along the longest piece too: its ends' neighbourhoods and its middle
+                    ss += [lo + (hi - lo) * f for f in (0.1, 0.9)]
+                pts = np.array([e0[k] + t * ed[k] + (w / 2) * n for t in ss[: max(p.candidates, 2 * p.points if p.points > 1 else 1)]])
                 out.append(dict(kind="face/edge", features={"faces": [a], "edge": [e0[k].tolist(), e1[k].tolist()],
                                                             "length": length}, normal=n, u=u, v=v, opening=w,
                                 candidates=pts, region=None, mid=fa.offset - w / 2))
@@ -212,9 +228,10 @@ def _pairs(feats: Features, opening: tuple[float, float], p: ClassParams) -> lis
     return out
 
 
-def _face_candidates(region: Raster, k: int) -> np.ndarray:
+def _face_candidates(region: Raster, k: int, spread: bool = False) -> np.ndarray:
     """Grasp point candidates in an overlap region (2D): its centroid when inside, its deepest point (farthest from
-    the boundary) and the centroids of its largest connected pieces."""
+    the boundary) and the centroids of its largest connected pieces; with `spread`, then points spread over the
+    region (farthest-point sampling among the cells at least half as deep as the deepest), up to `k` in all."""
     from scipy import ndimage
 
     pts = region.points()
@@ -231,6 +248,14 @@ def _face_candidates(region: Raster, k: int) -> np.ndarray:
         for lab in np.argsort(-sizes, kind="stable")[: max(k - len(out), 0)] + 1:
             ii, jj = np.nonzero(labels == lab)
             out.append(region.origin + (np.array([jj.mean(), ii.mean()]) + 0.5) * region.cell)
+    if spread and len(out) < k:
+        ii, jj = np.nonzero(depth >= 0.5 * depth.max())
+        deep = region.origin + (np.stack([jj, ii], axis=1) + 0.5) * region.cell
+        dist = np.min(np.linalg.norm(deep[:, None] - np.array(out)[None], axis=2), axis=1)
+        while len(out) < k and dist.max() > 2 * region.cell:
+            far = deep[int(np.argmax(dist))]
+            out.append(far)
+            dist = np.minimum(dist, np.linalg.norm(deep - far, axis=1))
     uniq = []
     for c in out:
         if all(np.linalg.norm(c - d) > 1e-6 for d in uniq):
@@ -246,9 +271,37 @@ class HandObject:
     (`geometry.collision`: python-fcl BVHs, one per opening rounded up to 0.1 mm)."""
 
     def __init__(self, obj: ObjectModel, gripper: Gripper, tolerance: float):
+        from scipy.spatial import cKDTree
+
         self.target = object_collider(obj.mesh)
         self.gripper, self.tol = gripper, tolerance
         self._geom: dict[float, object] = {}
+        self.vertices = np.asarray(obj.mesh.vertices, dtype=np.float64)
+        self.tree = cKDTree(self.vertices)
+        ext, centre = gripper.pad_extents, gripper.pad_center
+        # the disc about the TCP's y axis that a pad covers at every theta, and the pad's thickness along y
+        self.disc = float(min(ext[0], ext[2]) / 2 - np.hypot(centre[0], centre[2]))
+        self.thick = float(ext[1])
+
+    def blocked_everywhere(self, cls: dict, points: np.ndarray) -> np.ndarray:
+        """(K,) bool: an object vertex lies strictly inside a pad at grasp point points[k] for every theta (inside the
+        disc both pads cover whatever theta, between their inner and outer faces), so the point is blocked at every
+        angle without asking fcl (a cheap pre-test; the object surface through that vertex crosses the pad)."""
+        out = np.zeros(len(points), dtype=bool)
+        if self.disc <= 0:
+            return out
+        n = cls["normal"]
+        inner = cls["opening"] / 2 + self.tol
+        outer = inner + self.thick
+        for k, c in enumerate(points):
+            near = self.tree.query_ball_point(c, float(np.hypot(self.disc, outer)))
+            if not near:
+                continue
+            d = self.vertices[near] - c
+            y = d @ n
+            rho2 = (d * d).sum(axis=1) - y * y
+            out[k] = bool(((rho2 < (self.disc - 1e-7) ** 2) & (np.abs(y) > inner + 1e-7) & (np.abs(y) < outer - 1e-7)).any())
+        return out
 
     def geometry(self, opening: float) -> object:
         """The hand with its pads `tolerance` clear of both contacts, widths rounded up to 0.1 mm (shared BVHs)."""
@@ -300,6 +353,53 @@ def _bisect(good: float, bad: float, test, resolution: float) -> float:
     return good
 
 
+def select_point(cands: np.ndarray, test, theta: np.ndarray, coarse: np.ndarray,
+                 resolution: float) -> tuple[np.ndarray, list[tuple[float, float]]] | None:
+    """The grasp point among `cands` with the widest legal theta range and its legal intervals (Sections 2.3, 5.1):
+    `test(theta, point=c)` says which angles are free. Candidates are compared at the `coarse` samples (stopping at
+    one free at all of them); when none is free at any coarse sample they are compared again at every sample of
+    `theta`, so a range narrower than the coarse step is kept. None when no candidate is free at any `theta` sample."""
+    best_k, best_free = 0, 0
+    for grid_ in (coarse, theta[~np.isin(theta, coarse)]):
+        for k, c in enumerate(cands):
+            n_free = int(test(grid_, point=c).sum())
+            if n_free > best_free:
+                best_k, best_free = k, n_free
+            if n_free == len(grid_):
+                break
+        if best_free:
+            break
+    if best_free == 0:
+        return None
+    point = cands[best_k]
+    free = test(theta, point=point)
+    if not free.any():
+        return None
+    step = float(theta[1] - theta[0]) if len(theta) > 1 else 2 * np.pi
+    return point, _intervals(free, theta, step, lambda t: test(t, point=point), resolution)
+
+
+def select_points(cands: np.ndarray, test, theta: np.ndarray, resolution: float,
+                  points: int) -> list[tuple[np.ndarray, list[tuple[float, float]]]]:
+    """Up to `points` grasp points among `cands` for one feature pair (Section 2.3: "a discrete set of positions of
+    the grasp point to represent them all, as is done in Handey"): the candidate free at the most `theta` samples,
+    then greedily the candidate adding the most samples not yet free at a kept point (at least one), each with its
+    legal intervals."""
+    free = np.array([test(theta, point=c) for c in cands]).reshape(len(cands), len(theta))
+    covered = np.zeros(len(theta), dtype=bool)
+    step = float(theta[1] - theta[0]) if len(theta) > 1 else 2 * np.pi
+    out = []
+    while len(out) < points:
+        gain = (free & ~covered).sum(axis=1)
+        k = int(np.argmax(gain))
+        if gain[k] == 0:
+            break
+        covered |= free[k]
+        c = cands[k]
+        out.append((c, _intervals(free[k], theta, step, lambda t, c=c: test(t, point=c), resolution)))
+    return out
+
+
 def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = ClassParams(),
                   progress: bool = False) -> list[GraspClass]:
     """The grasp classes of `obj` for `gripper` with their grasp points and legal theta intervals (Sections 2, 5.1).
@@ -321,28 +421,22 @@ def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = Clas
                 ok &= _contact_area(cls, point, t, gripper) >= params.min_contact_area
             return ok
 
-        # the candidate with the widest legal range at a coarse step (stop at one free everywhere), then the full step
-        # (a class free at no coarse sample is dropped: its legal range, if any, is narrower than the coarse step)
-        cands = cls["candidates"]
-        best_k, best_free = 0, 0
-        for k, c in enumerate(cands):
-            n_free = int(test(coarse, point=c).sum())
-            if n_free > best_free:
-                best_k, best_free = k, n_free
-            if n_free == len(coarse):
-                break
-        if best_free == 0:
+        cands = cls["candidates"][~hand.blocked_everywhere(cls, cls["candidates"])]
+        if not len(cands):
             continue
-        point = cands[best_k]
-        best = test(theta, point=point)
-        if not best.any():
-            continue
-
-        intervals = _intervals(best, theta, step, lambda t, cls=cls, point=point: test(t, cls, point), params.bisection)
+        if params.points > 1:
+            picked = select_points(cands, test, theta, params.bisection, params.points)
+        else:
+            one = select_point(cands, test, theta, coarse, params.bisection)
+            picked = [] if one is None else [one]
         n, u, v = cls["normal"], cls["u"], cls["v"]
-        out.append(GraspClass(kind=cls["kind"], features=cls["features"], normal=n.copy(), u=u, v=v, point=point.copy(),
-                              eccentricity=float(n @ (point - obj.com)), opening=float(cls["opening"]),
-                              intervals=intervals, candidates=cls["candidates"]))
+        for k, (point, intervals) in enumerate(picked):
+            if params.min_range > 0 and sum(b - a for a, b in intervals) < params.min_range:
+                continue
+            feats = cls["features"] if params.points == 1 else {**cls["features"], "point": k}
+            out.append(GraspClass(kind=cls["kind"], features=feats, normal=n.copy(), u=u, v=v, point=point.copy(),
+                                  eccentricity=float(n @ (point - obj.com)), opening=float(cls["opening"]),
+                                  intervals=intervals, candidates=cls["candidates"]))
     order = sorted(range(len(out)), key=lambda i: (KINDS.index(out[i].kind), -out[i].legal_range))
     return [out[i] for i in order]
 

@@ -200,30 +200,40 @@ def grid_for(lo: np.ndarray, hi: np.ndarray, cells: int = 200, min_cell: float =
 
 
 def rasterise(tris: np.ndarray, origin: np.ndarray, cell: float, shape: tuple[int, int]) -> Raster:
-    """The cells of a grid whose centre lies in (or on the edge of) one of the 2D triangles (T, 3, 2), all at once:
-    every triangle's bounding box of cells is enumerated and tested with edge functions."""
+    """The cells of a grid whose centre lies in (or on the edge of) one of the 2D triangles (T, 3, 2), all at once by
+    scan lines: for every triangle and every cell row its span crosses, the span's first and last cell, filled
+    through a difference array (cost per row, not per cell of each triangle's bounding box)."""
     h, w = shape
     mask = np.zeros((h, w), dtype=bool)
     p = (np.asarray(tris, dtype=np.float64).reshape(-1, 3, 2) - origin) / cell - 0.5  # cell (i, j) centre at (j, i)
     if len(p) == 0:
         return Raster(np.asarray(origin, dtype=np.float64), cell, mask)
-    lo = np.clip(np.ceil(p.min(axis=1) - 1e-9), 0, [w - 1, h - 1]).astype(np.int64)
-    hi = np.clip(np.floor(p.max(axis=1) + 1e-9), -1, [w - 1, h - 1]).astype(np.int64)
-    nx, ny = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0), np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
-    counts = nx * ny
-    tri = np.repeat(np.arange(len(p)), counts)
-    k = np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
-    jx = lo[tri, 0] + k % nx[tri]
-    iy = lo[tri, 1] + k // nx[tri]
-    a, b, c = p[tri, 0], p[tri, 1], p[tri, 2]
-
-    def edge(o, q):
-        return (q[:, 0] - o[:, 0]) * (iy - o[:, 1]) - (q[:, 1] - o[:, 1]) * (jx - o[:, 0])
-
-    d1, d2, d3 = edge(a, b), edge(b, c), edge(c, a)
     eps = 1e-9
-    inside = ((d1 >= -eps) & (d2 >= -eps) & (d3 >= -eps)) | ((d1 <= eps) & (d2 <= eps) & (d3 <= eps))
-    mask[iy[inside], jx[inside]] = True
+    y_lo = np.clip(np.ceil(p[:, :, 1].min(axis=1) - eps), 0, h).astype(np.int64)
+    y_hi = np.clip(np.floor(p[:, :, 1].max(axis=1) + eps), -1, h - 1).astype(np.int64)
+    counts = np.maximum(y_hi - y_lo + 1, 0)
+    tri = np.repeat(np.arange(len(p)), counts)
+    iy = y_lo[tri] + np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
+    y = iy.astype(np.float64)
+    x_min = np.full(len(iy), np.inf)
+    x_max = np.full(len(iy), -np.inf)
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        x0, y0, x1, y1 = p[tri, a, 0], p[tri, a, 1], p[tri, b, 0], p[tri, b, 1]
+        dy = y1 - y0
+        flat = np.abs(dy) <= eps
+        t = np.clip((y - y0) / np.where(flat, 1.0, dy), 0.0, 1.0)
+        cross = ~flat & (y >= np.minimum(y0, y1) - eps) & (y <= np.maximum(y0, y1) + eps)
+        x = x0 + t * (x1 - x0)
+        on = flat & (np.abs(y - y0) <= eps)             # a horizontal edge on the row: both its ends
+        x_min = np.where(cross, np.minimum(x_min, x), np.where(on, np.minimum(x_min, np.minimum(x0, x1)), x_min))
+        x_max = np.where(cross, np.maximum(x_max, x), np.where(on, np.maximum(x_max, np.maximum(x0, x1)), x_max))
+    c0 = np.clip(np.ceil(x_min - eps), 0, w).astype(np.int64)
+    c1 = np.clip(np.floor(x_max + eps), -1, w - 1).astype(np.int64)
+    keep = np.isfinite(x_min) & (c1 >= c0)
+    diff = np.zeros((h, w + 1), dtype=np.int32)
+    np.add.at(diff, (iy[keep], c0[keep]), 1)
+    np.add.at(diff, (iy[keep], c1[keep] + 1), -1)
+    mask = np.cumsum(diff[:, :w], axis=1) > 0
     return Raster(np.asarray(origin, dtype=np.float64), cell, mask)
 
 

@@ -22,6 +22,7 @@ A grasp's id (`idfreeairgrip`) is class * T + theta sample; placements are the p
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,13 +35,16 @@ from workbench.planners.tournassoud.chaining import (
     placement_query,
 )
 from workbench.planners.tournassoud.classes import GraspClass
-from workbench.planners.tournassoud.table import GraspPlacementTable
+from workbench.planners.tournassoud.table import GraspPlacementTable, rz
+from workbench.planners.wan_harada.motions import ExecOptions, MotionResult, plan_motion
 from workbench.planners.wan_harada.plans import Plan, PlanStep
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
 from workbench.robots.collider import Scene
 from workbench.robots.ik import WORLDA, IKOptions, IKSolver, held_placements, retract
 from workbench.robots.model import Robot
+from workbench.robots.motion import MotionChecker
+from workbench.robots.selfcollision import allowed_pairs
 
 
 @dataclass
@@ -64,9 +68,34 @@ class Realiser:
                  worlda: float = WORLDA):
         self.robot, self.handx, self.worldz, self.worlda = robot, handx, worldz, worlda
         self.closed = not spherical_wrist_reason(robot)
-        self.opts = IKOptions(closed_form=self.closed, library=8192, seed=seed)
+        self.opts = IKOptions(closed_form=self.closed, library=8192, seed=seed, self_collide=True)
         self.solver = IKSolver(robot, scene, self.opts, obj_mesh)
         self.ik = analytic_ik(robot) if self.closed else None
+        self.scene, self.obj_mesh = scene, obj_mesh
+        self._checker: tuple | None = None
+
+    def motion_checker(self, opts: ExecOptions) -> MotionChecker:
+        """The motion checker of the robot, table and object (built once per motion options)."""
+        if self._checker is None or self._checker[0] != opts.motion:
+            self._checker = (opts.motion, MotionChecker(self.robot, self.scene, self.obj_mesh, allowed_pairs(self.robot),
+                                                        opts.motion))
+        return self._checker[1]
+
+    def grasp_free(self, object_poses: np.ndarray, tcps: np.ndarray) -> np.ndarray:
+        """(K,) bool, closed-form arms only: whether some IK branch of each grasp pose is within the joint limits and
+        free of self-collisions, of the table and of the resting object away from the fingers (the motion checker's
+        test, `robots.motion.MotionChecker.valid`). A necessary condition of `configurations`, cheap enough to sweep
+        a whole (class, placement) block of the table: the table itself (Section 5.2) checks joint limits only."""
+        checker = self.motion_checker(ExecOptions())
+        q, valid = solve(self.ik, tcps)
+        out = np.zeros(len(tcps), dtype=bool)
+        for k in range(len(tcps)):
+            branches = np.flatnonzero(valid[k])
+            if not len(branches):
+                continue
+            checker.set_resting(object_poses[k], False)
+            out[k] = any(checker.valid(q[k, b]) for b in branches)
+        return out
 
     def seeds(self, pose: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray:
         """Seeds for the grasp: the previous configuration first, then every closed-form branch or diverse library seeds."""
@@ -111,12 +140,19 @@ def conjunction_poses(table: GraspPlacementTable, classes: list[GraspClass], gra
     return obj, obj @ g, g
 
 
-def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser, attempts: int = 40,
-            **kw) -> tuple[Sequence, list[Conjunction]]:
-    """Answer `query` (grasp_query or placement_query with keyword arguments `kw`) and give every conjunction its
-    joint vectors; failing conjunctions are removed from a copy of the table and the query re-run."""
-    work = GraspPlacementTable(theta=table.theta, phi=table.phi, hand_object=table.hand_object, hand_table=table.hand_table,
+def working_copy(table: GraspPlacementTable) -> GraspPlacementTable:
+    """A copy of the table whose Q may lose conjunctions (the stored table stays as it is)."""
+    return GraspPlacementTable(theta=table.theta, phi=table.phi, hand_object=table.hand_object, hand_table=table.hand_table,
                                q=table.q.copy(), placements=table.placements, frame=table.frame, timings=table.timings)
+
+
+def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser, attempts: int = 40,
+            copy: bool = True, **kw) -> tuple[Sequence, list[Conjunction]]:
+    """Answer `query` (grasp_query or placement_query with keyword arguments `kw`) and give every conjunction its
+    joint vectors; failing conjunctions are removed from a copy of the table (from `table` itself when not `copy`),
+    with the failing samples of the rest of their phi row, and the query re-run."""
+    work = working_copy(table) if copy else table
+    rows_done: set[tuple] = set()
     for _ in range(attempts):
         seq = query(work, **kw)
         pairs = seq.conjunctions()
@@ -136,9 +172,37 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
             return seq, out
         (c, t), (j, f) = bad
         work.q[c, j, t, f] = False
+        # the same grasp at the same placement usually fails at its other angles too (the arm's reach and self-
+        # collisions vary slowly): test the rest of its block (closed form) or phi row (numerical IK) now, once, and
+        # drop every failing sample (configurations() tries every seed, so a failure does not depend on the previous
+        # configuration)
+        if realiser.ik is not None and (c, j) not in rows_done:
+            # closed form: sweep the whole (class, placement) block once with the cheap grasp-pose test
+            rows_done.add((c, j))
+            ts, fs = np.nonzero(work.q[c, j])
+            objs = work.frame[None] @ rz(work.phi[fs]) @ work.placements[j]
+            ok = realiser.grasp_free(objs, objs @ classes[c].pose(work.theta[ts]))
+            work.q[c, j, ts[~ok], fs[~ok]] = False
+        elif realiser.ik is None and (c, j, t) not in rows_done:
+            rows_done.add((c, j, t))
+            for f2 in np.flatnonzero(work.q[c, j, t]):
+                o2, tcp2, _ = conjunction_poses(work, classes, (c, t), (j, int(f2)))
+                if realiser.configurations(o2, tcp2, None) is None:
+                    work.q[c, j, t, f2] = False
         work._matrix = None
     raise NoSequence(f"no executable regrasp sequence after {attempts} attempts: the table's conjunctions fail their approach, "
                         f"retract or arm collision checks; try another table point or larger handx/worldz")
+
+
+def step_conjunctions(kind: str, n: int) -> tuple[list[str], list[int]]:
+    """The plan's step kinds and, per step, the index of the conjunction it realises (see the module docstring)."""
+    if kind == "placement":
+        return ["pick"] + ["transfer", "regrasp"] * ((n - 2) // 2) + ["place"], list(range(n))
+    kinds, which = ["pick", "transfer"], [0, 0]
+    for k in range(1, n - 1, 2):
+        kinds += ["regrasp", "transfer"]
+        which += [k, k + 1]
+    return kinds + ["regrasp", "place"], which + [n - 1, n - 1]
 
 
 def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, classes: list[GraspClass], robot: Robot,
@@ -157,14 +221,8 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
                         jawwidth=float(classes[c].opening), q_approach=cj.q[1], q_grasp=cj.q[0], q_retract=cj.q[2],
                         q_worlda=cj.q[3], q_worldaworldz=cj.q[4])
 
-    if seq.kind == "placement":
-        kinds = ["pick"] + ["transfer", "regrasp"] * ((len(conj) - 2) // 2) + ["place"]
-        steps = [step(k, cj) for k, cj in zip(kinds, conj)]
-    else:
-        steps = [step("pick", conj[0]), step("transfer", conj[0])]
-        for k in range(1, len(conj) - 1, 2):
-            steps += [step("regrasp", conj[k]), step("transfer", conj[k + 1])]
-        steps += [step("regrasp", conj[-1]), step("place", conj[-1])]
+    kinds, which = step_conjunctions(seq.kind, len(conj))
+    steps = [step(k, conj[i]) for k, i in zip(kinds, which)]
     first, last = steps[0], steps[-1]
     start = PoseQuery(first.idfreetabletopplacement, float(hx), float(hy), first.yaw)
     goal = PoseQuery(last.idfreetabletopplacement, float(hx), float(hy), last.yaw)
@@ -173,16 +231,65 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
                 timings={"search": seq.seconds})
 
 
+def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResult:
+    """Plan and time the motions of a plan with the roadmap planner's motion planner (`wan_harada.motions.plan_motion`,
+    CONVENTIONS.md "Plans and motions"); on success they are attached to the plan (segments, the waypoints on the
+    IK branch the motions use, acceleration limits, time)."""
+    robot = realiser.robot
+    checker = realiser.motion_checker(opts)
+    vlim = np.asarray(robot.model.velocityLimit, dtype=np.float64)
+    t0 = time.perf_counter()
+    res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz)
+    if res.ok:
+        for st, ln in zip(plan.steps, lines):
+            st.q_retract, st.q_approach, st.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp
+            st.q_worlda, st.q_worldaworldz = ln.q_worlda, ln.q_worldaworldz
+        plan.segments = res.segments
+        plan.acc = np.broadcast_to(np.asarray(opts.acc, dtype=np.float64), (robot.nq,)).tolist()
+        plan.timings["motion"] = time.perf_counter() - t0
+    return res
+
+
+def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: str, motions: ExecOptions | None,
+          **kw) -> tuple[Sequence, Plan | None]:
+    """Answer, realise and plan a query; with `motions`, a conjunction whose motion fails (the step's lines, or the
+    move into the next step) is removed from a working copy of the table and the query answered again, at most
+    `motions.max_removed` times (as the roadmap planner removes failing nodes)."""
+    work = working_copy(table)
+    removed, last = 0, ""
+    while True:
+        seq, conj = realise(query, work, classes, realiser, copy=False, **kw)
+        if not conj:
+            return seq, None
+        plan = to_plan(seq, conj, work, classes, robot, object_name, realiser.handx, realiser.worldz)
+        if motions is None:
+            return seq, plan
+        res = add_motions(plan, realiser, motions)
+        if res.ok:
+            plan.removed = removed
+            return seq, plan
+        last = res.reason
+        if removed >= motions.max_removed:
+            raise NoSequence(f"no executable regrasp sequence after removing {removed} conjunction(s) whose motions failed "
+                             f"(limit --max-removed {motions.max_removed}); last failure: {last}")
+        i = res.blame[1] if res.blame[0] == "step" else res.blame[2]
+        cj = conj[step_conjunctions(seq.kind, len(conj))[1][i]]
+        (c, t), (j, f) = cj.grasp, cj.placement
+        work.q[c, j, t, f] = False
+        work._matrix = None
+        removed += 1
+
+
 def plan_grasp_query(table, classes, realiser: Realiser, robot: Robot, object_name: str, initial: tuple[int, float],
-                     goal_class: int, goal_range: tuple[float, float]) -> tuple[Sequence, Plan | None]:
-    """Section 6's query, realised and turned into a plan (None when no regrasp is needed)."""
-    seq, conj = realise(grasp_query, table, classes, realiser, initial=initial, goal_class=goal_class, goal_range=goal_range)
-    plan = to_plan(seq, conj, table, classes, robot, object_name, realiser.handx, realiser.worldz) if conj else None
-    return seq, plan
+                     goal_class: int, goal_range: tuple[float, float], motions: ExecOptions | None = None) -> tuple[Sequence, Plan | None]:
+    """Section 6's query, realised and turned into a plan (None when no regrasp is needed); with `motions`, an
+    executable plan with its timed motions."""
+    return _plan(grasp_query, table, classes, realiser, robot, object_name, motions, initial=initial, goal_class=goal_class,
+                 goal_range=goal_range)
 
 
 def plan_placement_query(table, classes, realiser: Realiser, robot: Robot, object_name: str, start: tuple[int, float],
-                         goal: tuple[int, float]) -> tuple[Sequence, Plan]:
-    """The placement-to-placement query, realised and turned into a plan."""
-    seq, conj = realise(placement_query, table, classes, realiser, start=start, goal=goal)
-    return seq, to_plan(seq, conj, table, classes, robot, object_name, realiser.handx, realiser.worldz)
+                         goal: tuple[int, float], motions: ExecOptions | None = None) -> tuple[Sequence, Plan]:
+    """The placement-to-placement query, realised and turned into a plan; with `motions`, an executable plan with its
+    timed motions."""
+    return _plan(placement_query, table, classes, realiser, robot, object_name, motions, start=start, goal=goal)

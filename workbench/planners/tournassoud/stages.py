@@ -3,7 +3,10 @@
 
 - `classes_stage`: grasp classes of an object for a gripper and parameters (stage `tournassoud.classes`);
 - `table_stage`: placement classes and the table Q_ij for a robot and table parameters (stage `tournassoud.table`);
-- `load_planner`: a stored table with its classes, object and robot, ready for queries.
+- `load_planner`: a stored table with its classes, object and robot, ready for queries;
+- `save_plan`: a plan of this planner in the store's `plan` / `planstep` tables (`plan.planner` = 'tournassoud'),
+  with the `freetabletopplacement` and `freeairgrip` rows its steps reference; `stored_validator` checks it
+  with the independent validator rebuilt from those rows.
 
 Each stage computes outside any transaction and writes in one; a re-run with the same inputs and parameters loads
 the stored rows (keyed by the parameter-set digest) instead of computing again.
@@ -11,8 +14,9 @@ the stored rows (keyed by the parameter-set digest) instead of computing again.
 
 from __future__ import annotations
 
+import copy
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -31,16 +35,33 @@ from workbench.planners.tournassoud.table import (
     grid,
     table_frame,
 )
-from workbench.planners.wan_harada.stages import get_object
+from workbench.planners.wan_harada.motions import DEFAULT_ACC
+from workbench.planners.wan_harada.plans import Plan, plan_rows
+from workbench.planners.wan_harada.stages import get_object, scene_params
 from workbench.robots.collider import Scene
 from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import IKOptions
 from workbench.robots.model import Robot, RobotSpec, get_robot, robot_from_spec
+from workbench.robots.selfcollision import allowed_pairs
 from workbench.store import Store
 from workbench.store import tournassoud as sql
+from workbench.store import wan_harada as plan_sql
 from workbench.store.objects import gripper_row, object_row, put_gripper, put_object
-from workbench.store.robots import StoredScene, put_robot, robot_row
-from workbench.validation import PlanValidator, validator_from_rows
+from workbench.store.robots import (
+    StoredScene,
+    put_ikret,
+    put_robot,
+    put_scene,
+    robot_row,
+    scene_row,
+)
+from workbench.validation import (
+    PlanValidator,
+    TrajectoryValidator,
+    ValidationReport,
+    trajectory_validator_from_rows,
+    validator_from_rows,
+)
 
 CLASSES = "tournassoud.classes"
 TABLE = "tournassoud.table"
@@ -156,3 +177,86 @@ def plan_validator(db: str, run: TableRun, scene: Scene) -> PlanValidator:
     rows = {"robot": r, "object": obj, "gripper": g,
             "scene": StoredScene(idscene=0, scene=scene, ik=IKOptions(), robot={})}
     return validator_from_rows(rows, free_poses=dict(enumerate(run.table.placements)))
+
+
+def _grasp_columns(run: TableRun, plan: Plan) -> dict[str, np.ndarray]:
+    """The free-air grasp columns of a plan's steps (class from the step's table-local id class * T + theta sample,
+    theta read off the step's grasp pose)."""
+    t_n = len(run.table.theta)
+    cols: dict[str, list] = {k: [] for k in ("cls", "theta", "rotmat", "jawwidth", "contactpoint0", "contactpoint1",
+                                             "contactnormal0", "contactnormal1")}
+    for s in plan.steps:
+        c = int(s.idfreeairgrip) // t_n
+        g = run.classes[c]
+        z = np.asarray(s.grasp)[:3, 2]
+        cols["cls"].append(c)
+        cols["theta"].append(float(np.mod(np.arctan2(z @ g.v, z @ g.u), 2 * np.pi)))
+        cols["rotmat"].append(np.asarray(s.grasp, dtype=np.float64))
+        cols["jawwidth"].append(g.opening)
+        cols["contactpoint0"].append(g.point + g.opening / 2 * g.normal)
+        cols["contactpoint1"].append(g.point - g.opening / 2 * g.normal)
+        cols["contactnormal0"].append(g.normal)
+        cols["contactnormal1"].append(-g.normal)
+    return {k: np.asarray(v) for k, v in cols.items()}
+
+
+def save_plan(db: str, run: TableRun, plan: Plan, scene: Scene, ik: IKOptions) -> tuple[int, Plan]:
+    """Store a plan of this planner like the roadmap planner's (tables `plan`, `planstep`, `plansegment`; Section 6's
+    sequence with its joint vectors), named `tournassoud`, in one transaction: the placements and grasps it uses
+    become `freetabletopplacement` / `freeairgrip` rows. Returns (idplan, the plan with the store's ids); a plan
+    answering the same query is not stored again."""
+    with Store(db) as store:
+        ids = sql.table_ids(store, run.idtable)
+        stability = sql.placement_stability(store, run.idtable)
+        with store.transaction():
+            fp = sql.placement_rows(store, run.idtable, ids["idobject"], run.table.placements, stability)
+            idgripper = sql.gripper_id(store, run.gripper.digest)
+            fg = sql.grasp_rows(store, ids["idclasses"], ids["idobject"], idgripper, _grasp_columns(run, plan))
+            stored = copy.deepcopy(plan)
+            stored.planner = "tournassoud"
+            for s, g in zip(stored.steps, fg):
+                s.idfreeairgrip = int(g)
+                s.idfreetabletopplacement = int(fp[s.idfreetabletopplacement])
+            stored.start = replace(plan.start, idfreetabletopplacement=int(fp[plan.start.idfreetabletopplacement]))
+            stored.goal = replace(plan.goal, idfreetabletopplacement=int(fp[plan.goal.idfreetabletopplacement]))
+            put_robot(store, run.robot, allowed_pairs(run.robot).to_json())  # for the trajectory validator
+            stored.ids = {"idobject": ids["idobject"], "idrobot": ids["idrobot"],
+                          "idscene": put_scene(store, scene_params(run.robot, scene, ik)),
+                          "idikret": put_ikret(store, plan.handx, plan.worldz, plan.worlda), "idtabletop": run.idtable}
+            pid = plan_sql.save_plan(store, *plan_rows(stored))
+    return pid, stored
+
+
+def stored_validator(db: str, run: TableRun, idplan: int) -> PlanValidator:
+    """The independent plan validator rebuilt from the store's rows only (robot, object, gripper, the stored plan's
+    scene) with this table's `freetabletopplacement` rows as its stable placements (ids as in a stored plan)."""
+    return _validators(db, run, idplan)[0]
+
+
+def _validators(db: str, run: TableRun, idplan: int, acc=None) -> tuple[PlanValidator, TrajectoryValidator | None]:
+    with Store(db, read_only=True) as store:
+        _, obj = object_row(store, run.obj.name)
+        r = robot_row(store, sql.table_robot(store, run.idtable))
+        g = gripper_row(store, sql.gripper_id(store, run.gripper.digest))
+        free = sql.stored_placements(store, run.idtable)
+        scene = scene_row(store, sql.plan_scene(store, idplan))
+    rows = {"robot": r, "object": obj, "gripper": g, "scene": scene}
+    pv = validator_from_rows(rows, free_poses=free)
+    return pv, (None if acc is None else trajectory_validator_from_rows(rows, pv, acc))
+
+
+def validate_stored(db: str, run: TableRun, idplan: int, plan: Plan, require_motion: bool = False) -> ValidationReport:
+    """A stored plan (with the store's ids, as `save_plan` returns it) checked like the roadmap planner's plans
+    (`wan_harada.planner.Planner.validate`): its waypoints, and its timed trajectory when it has one (required with
+    `require_motion`), by the independent validators rebuilt from the store's rows."""
+    acc = None
+    if plan.segments:
+        acc = np.broadcast_to(np.asarray(plan.acc or DEFAULT_ACC, dtype=np.float64), (len(plan.joint_names),))
+    pv, tv = _validators(db, run, idplan, acc)
+    report = pv.check(plan)
+    if tv is not None:
+        errors, knots = tv.check(plan, plan.segments)
+        report = ValidationReport(report.ok and not errors, report.errors + errors, report.checks + knots)
+    elif require_motion:
+        report = ValidationReport(False, report.errors + ["the plan has no timed motions"], report.checks + 1)
+    return report

@@ -25,7 +25,8 @@ from tqdm import tqdm
 from workbench.errors import WorkbenchError
 from workbench.grasping.placements import grips_above_table
 from workbench.planners.tournassoud.classes import GraspClass
-from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
+from workbench.robots.analytic import analytic_ik, spherical_wrist_reason
+from workbench.robots.analytic import reachable as closed_reachable
 from workbench.robots.collider import default_scene
 from workbench.robots.ik import IKOptions, IKSolver
 from workbench.robots.model import Robot
@@ -191,9 +192,22 @@ def reachable(robot: Robot, base: np.ndarray, held: np.ndarray, chunk: int, prog
     rows = max(chunk // f_n, 1)
     for s in tqdm(range(0, k_n, rows), desc="IK (closed form)", unit="chunk", disable=not progress, leave=False):
         h = held[s:s + rows]
-        poses = np.einsum("fij,kjl->kfil", base, h).reshape(-1, 4, 4)
-        _, valid = solve(ik, poses)
-        out[s:s + rows] = valid.any(axis=1).reshape(len(h), f_n)
+        out[s:s + rows] = closed_reachable(ik, compose(base, h).reshape(-1, 4, 4)).reshape(len(h), f_n)
+    return out
+
+
+def compose(base: np.ndarray, held: np.ndarray) -> np.ndarray:
+    """(K, F, 4, 4): base[f] @ held[k] for rigid transforms (last rows 0 0 0 1), row by row with broadcasting (the
+    table's bases are rotations about z, but any rigid base works)."""
+    out = np.empty((len(held), len(base), 4, 4))
+    b = base[None, :, :3, :]                                           # (1, F, 3, 4)
+    for i in range(3):
+        row = out[:, :, i, :]
+        np.multiply(b[..., i, 0, None], held[:, None, 0, :], out=row)
+        row += b[..., i, 1, None] * held[:, None, 1, :]
+        row += b[..., i, 2, None] * held[:, None, 2, :]
+        row[..., 3] += b[..., i, 3]
+    out[:, :, 3, :] = (0.0, 0.0, 0.0, 1.0)
     return out
 
 

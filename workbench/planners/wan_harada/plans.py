@@ -133,6 +133,7 @@ class Plan:
     segments: list[TimedSegment] = field(default_factory=list)
     removed: int = 0
     acc: list[float] = field(default_factory=list)
+    planner: str = "wan_harada"
 
     @property
     def duration(self) -> float:
@@ -153,7 +154,7 @@ class Plan:
         return [s.idfreeairgrip for s in self.steps if s.kind in ("pick", "regrasp")]
 
     def as_dict(self) -> dict[str, Any]:
-        return {"object": self.object, "robot": self.robot, "joint_names": list(self.joint_names),
+        return {"planner": self.planner, "object": self.object, "robot": self.robot, "joint_names": list(self.joint_names),
                 "start": self.start.as_dict(), "goal": self.goal.as_dict(), "start_pose": _list(self.start_pose),
                 "goal_pose": _list(self.goal_pose), "handx": self.handx, "worldz": self.worldz, "worlda": self.worlda, "rank": self.rank,
                 "regrasps": self.regrasps, "transfers": self.transfers, "timings": {k: float(v) for k, v in self.timings.items()},
@@ -171,7 +172,8 @@ class Plan:
                    worlda=float(d.get("worlda", WORLDA)),
                    rank=int(d.get("rank", 0)), timings=dict(d.get("timings", {})), ids=dict(d.get("ids", {})),
                    segments=[TimedSegment.from_dict(s) for s in (d.get("motion") or {}).get("segments", [])],
-                   removed=int((d.get("motion") or {}).get("removed", 0)), acc=list((d.get("motion") or {}).get("acc", [])))
+                   removed=int((d.get("motion") or {}).get("removed", 0)), acc=list((d.get("motion") or {}).get("acc", [])),
+                   planner=str(d.get("planner", "wan_harada")))
 
     def to_json(self, path: str | Path | None = None) -> str:
         """The plan as JSON (written to `path` when given)."""
@@ -261,7 +263,7 @@ def plan_rows(plan: Plan) -> tuple[dict, dict, dict]:
            "goal_xyyaw": [plan.goal.x, plan.goal.y, plan.goal.yaw], "rank": plan.rank, "regrasps": plan.regrasps,
            "transfers": plan.transfers, "t_connect": plan.timings.get("connect"), "t_search": plan.timings.get("search"),
            "duration": plan.duration if plan.segments else None, "removed": plan.removed,
-           "t_motion": plan.timings.get("motion"), "acc": [float(a) for a in plan.acc] or None}
+           "t_motion": plan.timings.get("motion"), "acc": [float(a) for a in plan.acc] or None, "planner": plan.planner}
     s = plan.steps
 
     steps = {"seq": np.arange(len(s), dtype=np.int32), "kind": np.array([x.kind for x in s], dtype=object),
