@@ -11,6 +11,8 @@ import numpy as np
 from workbench.cli.grasps import add_object_arguments
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import load_object
+from workbench.grasping.placements import PlacementParams
+from workbench.params import add_param
 from workbench.planners.tournassoud.classes import KINDS, ClassParams
 from workbench.planners.tournassoud.stages import table_stage_at
 from workbench.planners.tournassoud.table import TableParams
@@ -65,6 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_object_arguments(p)
     p.add_argument("--db", required=True, help="DuckDB store file")
     add_table_arguments(p)
+    add_param(p, PlacementParams, "min_stability")
     p.set_defaults(func=run)
 
 
@@ -96,14 +99,14 @@ def run(args: argparse.Namespace) -> int:
             raise WorkbenchError(f"--base {args.base!r} must be X,Y,Z,YAW (m, rad), e.g. 0,0,-0.3,0")
         base = pose_xyz_yaw(*vals)
     robot = get_robot(args.robot, base=base, tip_frame=args.tip)
-    r = table_stage_at(args.db, obj, robot, cp, tp, progress=sys.stderr.isatty())
+    r = table_stage_at(args.db, obj, robot, cp, tp, PlacementParams(min_stability=args.min_stability),
+                       progress=sys.stderr.isatty())
     for line in summary(r):
         print(line)
     if not r.classes:
         print(f"warning: no grasp class: the gripper (jaw {robot.gripper.jaw_max * 1000:.0f} mm) spans no pair of parallel "
               f"features of {obj.name}; check the scale or lower --min-face-area", file=sys.stderr)
     elif not r.table.q.any():
-        print("warning: the table is empty: no grasp class reaches any placement at the table point; "
-              "move --table-point into the robot's workspace", file=sys.stderr)
+        print(f"warning: the table is empty; stage {r.table.empty_reason()}", file=sys.stderr)
     print(f"store {args.db}: classes paramset {r.idclasses}, table paramset {r.idtable}")
     return 0

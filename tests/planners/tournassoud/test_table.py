@@ -398,3 +398,22 @@ def test_blocked_everywhere_agrees_with_fcl(hand):
     assert not blocked[1]                                           # 12 mm away: outside the covered disc
     assert not (blocked & fcl_free).any()
     assert grasp_poses(n, cls["u"], cls["v"], pts[0], theta).shape == (len(theta), 4, 4)
+
+
+def test_an_empty_table_names_the_stage_that_emptied_it(box, hand, puma560):
+    """Zero is a result (issue 10): a table point 2.5 m away leaves only the IK stage to blame; a 3 mm plate whose
+    classes grasp it across its width only is emptied by the table (the pads centred on a 3 mm part reach into it);
+    a table with the part at reach is not empty."""
+    classes = grasp_classes(box, hand)
+    pl = stable_placements(box).poses
+    far = build_table(classes, pl, puma560, hand, TableParams(table_point=(2.5, 0.0)), progress=False)
+    assert not far.q.any() and far.hand_table.any()
+    assert far.empty_reason().startswith("inverse kinematics")
+    plate = from_trimesh(trimesh.creation.box((0.06, 0.05, 0.003)), "plate")
+    side = [c for c in grasp_classes(plate, hand) if abs(c.normal[2]) < 0.5]
+    flat = stable_placements(plate).poses
+    t = build_table(side, flat, puma560, hand, TableParams(table_point=(0.45, 0.0)), progress=False)
+    assert side and t.hand_object.any() and not t.q.any()
+    assert t.empty_reason().startswith("hand-table")
+    near = build_table(classes, pl, puma560, hand, TableParams(table_point=(0.45, 0.0)), progress=False)
+    assert near.q.any() and near.empty_reason() is None

@@ -105,6 +105,24 @@ class GraspPlacementTable:
         """The object in the world at placement (P_j, phi) (Section 3)."""
         return self.frame @ rz(phi)[0] @ self.placements[j]
 
+    def empty_reason(self) -> str | None:
+        """Which pruning stage of Section 5 emptied the table, and what to try (None when some cell is legal)."""
+        c, p = self.q.shape[:2]
+        if self.q.any():
+            return None
+        if c == 0:
+            return "no grasp class"
+        if p == 0:
+            return ("no placement class: no convex-hull face holds the centre of mass stably (the part rolls or tips); "
+                    "lower --min-stability")
+        if not self.hand_object.any():
+            return "hand-object: the hand collides with the part at every class and theta; lower --theta-step"
+        if not (self.hand_table & self.hand_object[:, None, :]).any():
+            return ("hand-table: at every placement the fingers or the hand reach into the table at every legal theta "
+                    "(the part is too low for a grasp at the pad's centre, or lies on the faces the classes grasp)")
+        return ("inverse kinematics: no (theta, phi) of any cell has an IK solution within the joint limits; move "
+                "--table-point into the robot's workspace")
+
     def phi_intervals(self, i: int, j: int, t: int) -> list[tuple[float, float]]:
         """The phi samples of Q_ij at theta sample t as closed intervals [first, last] of sample values."""
         return runs(self.q[i, j, t], self.phi)
