@@ -122,3 +122,27 @@ def test_reachable_agrees_with_the_branches(puma, limits):
     assert 0 < expect.sum() < len(poses) or not limits
     assert np.array_equal(reachable(ik, poses), expect)
     assert np.array_equal(reachable(ik, poses, block=37), expect)
+
+
+def test_the_puma_upper_arm_swings_beside_its_column():
+    """The shipped PUMA 560's upper arm carries the DH offset d3 at the shoulder, so over its whole joint range it
+    never meets the pedestal or the column (checked with pinocchio + coal on the URDF file alone)."""
+    from workbench.robots.model import PUMA560_URDF
+
+    model = pin.buildModelFromUrdf(str(PUMA560_URDF))
+    from workbench.resources import erd_share
+
+    geom = pin.buildGeomFromUrdf(model, str(PUMA560_URDF), pin.GeometryType.COLLISION, package_dirs=[str(erd_share())])
+    link = {g.name: g for g in geom.geometryObjects}
+    base = [i for i, g in enumerate(geom.geometryObjects) if model.frames[g.parentFrame].name == "puma_base"]
+    upper = [i for i, g in enumerate(geom.geometryObjects) if model.frames[g.parentFrame].name == "puma_link2"]
+    assert base and upper and link
+    for a in base:
+        for b in upper:
+            geom.addCollisionPair(pin.CollisionPair(a, b))
+    data, gdata = model.createData(), pin.GeometryData(geom)
+    rng = np.random.default_rng(0)
+    q = rng.uniform(model.lowerPositionLimit, model.upperPositionLimit, (2000, model.nq))
+    q[:1000, 1] = np.linspace(model.lowerPositionLimit[1], model.upperPositionLimit[1], 1000)  # the whole swing
+    hits = [pin.computeCollisions(model, data, geom, gdata, qi, True) for qi in q]
+    assert not any(hits)

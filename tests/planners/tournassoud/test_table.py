@@ -164,9 +164,8 @@ SCENE = Scene(table_min=(0.15, -0.8))  # the table clear of the lowered PUMA's p
 
 def _setup(obj, hand, robot):
     """Classes, table, realiser and an independent validator (built here from the URDF text and the meshes). The
-    PUMA stands 0.3 m lower than its default pedestal (shoulder 0.37 m above the table): from 0.67 m its upper arm
-    must point so steeply down that about half the grasp poses at H collide with its own column, and few regrasp
-    sequences can be executed (the realiser rejects self-collisions like the roadmap planner's IK)."""
+    PUMA stands 0.3 m lower than its default pedestal (shoulder 0.37 m above the table), where more of its wrist
+    orientations at H are free of its forearm (the realiser rejects self-collisions like the roadmap planner's IK)."""
     classes = grasp_classes(obj, hand)
     pl = stable_placements(obj)
     table = build_table(classes, pl.poses, robot, hand, TableParams(table_point=(0.45, 0.1)), progress=False)
