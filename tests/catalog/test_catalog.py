@@ -13,6 +13,7 @@ import sys
 import time
 from pathlib import Path
 
+import duckdb
 import numpy as np
 import pytest
 import trimesh
@@ -32,6 +33,7 @@ from workbench.robots.gripper import franka_hand
 from workbench.robots.ik import IKOptions
 from workbench.robots.model import get_robot
 from workbench.store import Store
+from workbench.store import catalog as sql
 from workbench.store.catalog import ik_vectors
 
 ROBOTS = ("panda", "ur5")
@@ -271,3 +273,23 @@ def test_catalog_over_a_serial_store_duplicates_nothing(parts, serial, serial_db
     assert res.rows_written == 0  # every stage row and IK row was there already
     _same(_rows(db), serial)
     assert all(r["ik_rows"] == r["tabletop_grips"] > 0 for r in res.rows)
+
+
+def test_unit_rows_replace_a_recorded_failure_and_are_never_duplicated(tmp_path):
+    """A failed unit's row is replaced when the unit later succeeds; a unit the writer knows is new is inserted (and a
+    second insert of the same digest is refused by the key, never duplicated)."""
+    with Store(tmp_path / "units.duckdb") as store:
+        sql.ensure_catalog_tables(store)
+        unit = {"digest": "d1", "kind": "part", "part": "p", "counts": {}, "nrows": 0}
+        sql.record_failure(store, {**unit, "fresh": True}, "broken mesh")
+        assert sql.unit_digests(store) == {"d1"} and sql.done_units(store) == {}
+        with sql.unit_transaction(store, {**unit, "nrows": 3}):
+            pass  # not fresh: the failure row is replaced
+        rows = store.run("SELECT status, nrows FROM catalog_unit")
+        assert rows == [("done", 3)]
+        with sql.unit_transaction(store, {**unit, "digest": "d2", "fresh": True}):
+            pass
+        with pytest.raises(duckdb.ConstraintException):
+            with sql.unit_transaction(store, {**unit, "digest": "d2", "fresh": True}):
+                pass
+        assert store.one("SELECT count(*) FROM catalog_unit WHERE digest = 'd2'")[0] == 1

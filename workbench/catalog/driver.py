@@ -182,6 +182,7 @@ class _Build:
         self.store, self.client, self.robots, self.params = store, client, robots, params
         self.on_unit = on_unit
         self.done = stages.done_units(store)
+        self.rows = stages.unit_digests(store)  # digests with a catalog_unit row (done or failed), kept by this writer
         self.pending: dict = {}  # future -> unit dict
         self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not stored yet
         self.runs: dict[tuple[str, str], dict] = {}
@@ -314,19 +315,23 @@ class _Build:
         key = (run["part"], run["robot"])
         units = self.to_merge.pop(key, [])
         if units:
+            for unit, _ in units:
+                unit["fresh"] = unit["digest"] not in self.rows
             try:
                 with self.charge("ik", "merge"):
                     n = stages.merge_ik_shards(self.store, run, units)
             except WorkbenchError as exc:  # an unreadable shard: the run's chunks are computed again by a re-run
                 for unit, path in units:
                     path.unlink(missing_ok=True)
-                    stages.record_failure(self.store, unit, one_line(exc))
+                    stages.record_failure(self.store, {**unit, "fresh": False}, one_line(exc))
+                    self.rows.add(unit["digest"])
                 self.left[key] = -1
                 return
             self.result.merges += 1
             self.result.rows_written += n
             for unit, path in units:
                 self.done[unit["digest"]] = unit
+                self.rows.add(unit["digest"])
                 path.unlink(missing_ok=True)
         self.schedule_graph(run)
 
@@ -335,6 +340,7 @@ class _Build:
         """Write one unit's rows and its catalog_unit row (joining the caller's transaction); returns what to do once
         committed (schedule the units that depend on it)."""
         kind = unit["kind"]
+        unit["fresh"] = unit["digest"] not in self.rows
         meta = (result["meta"] if kind == "part" else result).schema.metadata or {}
         unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode(), meta=meta)
         if kind == "part":
@@ -415,6 +421,7 @@ class _Build:
             items[0][0].release()
             return
         commit = time.perf_counter() - t1  # shared by the batch's units
+        self.rows.update(unit["digest"] for _, unit, _ in items)
         self.result.driver["commit"] += commit
         self.result.write_seconds += commit
         for _, unit, _ in items:
@@ -438,7 +445,8 @@ class _Build:
 
     def fail(self, unit: dict, exc: BaseException) -> None:
         reason = one_line(exc)
-        stages.record_failure(self.store, unit, reason)
+        stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, reason)
+        self.rows.add(unit["digest"])
         self.bar.update(1)
         if unit["kind"] == "ik":  # the part's other chunks go on; its graph waits for a re-run
             self.left[(unit["part"], unit["robot"])] = -1

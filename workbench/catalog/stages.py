@@ -41,6 +41,7 @@ from workbench.store.robots import insert_ik, prepare_run
 from workbench.store.wan_harada import roadmap_rows
 
 done_units = sql.done_units
+unit_digests = sql.unit_digests
 record_failure = sql.record_failure
 summary = sql.summary
 failures = sql.failures
