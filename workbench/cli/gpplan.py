@@ -10,7 +10,7 @@ import sys
 
 import numpy as np
 
-from workbench.cli.plan import exec_options
+from workbench.cli.plan import add_motion_arguments, exec_options
 from workbench.errors import WorkbenchError
 from workbench.planners.tournassoud.chaining import NoSequence
 from workbench.planners.tournassoud.figures import table_html
@@ -25,7 +25,6 @@ from workbench.planners.tournassoud.stages import (
     save_plan,
     validate_stored,
 )
-from workbench.planners.wan_harada.motions import DEFAULT_ACC
 from workbench.robots.collider import Scene, default_scene
 
 
@@ -80,11 +79,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--worldz", type=float, default=0.05, help="lift after the approach (m)")
     p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
     p.add_argument("--no-motion", action="store_true", help="waypoints only: do not plan and time the motions")
-    p.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
-    p.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
-    p.add_argument("--max-removed", type=int, default=10,
-                   help="conjunctions whose motions fail to remove from the table before giving up (default 10)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
+    add_motion_arguments(p, "conjunctions of the table")
     p.add_argument("--json", default=None, help="write the sequence and its plan to this JSON file")
     p.add_argument("--html", default=None, help="write the table with the sequence overlaid (Fig. 6) to this HTML file")
     p.set_defaults(func=run)

@@ -55,11 +55,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--meshes", choices=["collision", "visual"], default="collision",
                         help="robot meshes in the HTML: collision (small file, default) or visual (nicer, larger)")
     parser.add_argument("--no-save", action="store_true", help="do not store the plans in the store's plan tables")
-    parser.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
-    parser.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
-    parser.add_argument("--max-removed", type=int, default=10,
-                        help="roadmap nodes or grips whose motions fail to remove before giving up (default 10)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
+    add_motion_arguments(parser, "roadmap nodes or grips")
     parser.add_argument("--trajectory", default=None, metavar="OUT",
                         help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot) or OUT.json")
     parser.set_defaults(func=run)
@@ -120,6 +116,16 @@ def report_graph(planner, t_load: float) -> None:
     print(f"regrasp graph of {planner.object.name} for {planner.robot.name}: {s['nodes']:,} nodes (IK-feasible of {s['grips']:,} "
           f"tabletop grips), {s['transfer_edges']:,} transfer and {s['transit_edges']:,} transit edges, {s['grasps']} grasps, "
           f"{s['placements']} placements, {s['components']} component(s); ready in {t_load:.2f} s")
+
+
+def add_motion_arguments(parser: argparse.ArgumentParser, removed: str) -> None:
+    """--acc, --budget, --max-removed (of `removed`, what a failing motion takes out) and --seed, read by
+    `exec_options`."""
+    parser.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
+    parser.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
+    parser.add_argument("--max-removed", type=int, default=10,
+                        help=f"{removed} whose motions fail to remove before giving up (default 10)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
 
 
 def exec_options(args: argparse.Namespace) -> ExecOptions:
