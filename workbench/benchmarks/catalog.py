@@ -104,8 +104,10 @@ def run(args: argparse.Namespace) -> int:
                      round(worker_s / r.write_seconds) if r.write_seconds else "-", f"{l0:.1f}-{l1:.1f}", len(r.failures)))
     print_table(("workers", "path", "units", "wall s", "speed-up", "unit s", "unit cpu s", "busy", "worker cpu s",
                  "driver cpu s", "driver s", "driver share", "rows", "rows/s written", "saturates at", "load", "failed"), rows)
-    print_table(("workers", "path", "write transactions", "merges", "decode s", "rows s", "commit s", "schedule s", "merge s"),
-                [(w, path, r.batches, r.merges, *(round(r.driver[k], 2) for k in ("decode", "rows", "commit", "schedule", "merge")))
+    print_table(("workers", "path", "write transactions", "merges", "decode s", "rows s", "commit s", "schedule s", "merge s",
+                 "graphs s"),
+                [(w, path, r.batches, r.merges,
+                  *(round(r.driver[k], 2) for k in ("decode", "rows", "commit", "schedule", "merge", "graph")))
                  for (w, path), (r, *_) in runs.items()], title="driver time (all of it on finished units)")
     kinds = []
     for (w, path), (r, *_) in runs.items():

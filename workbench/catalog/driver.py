@@ -2,7 +2,8 @@
 
 Units: one per part (grasps, placements, tabletop grips; Wan & Harada Sections III-IV), one per chunk of a part's
 tabletop grips and robot (IK with retractions, Section IV), one per part and robot (the regrasp graph's size,
-Section V). Workers return Arrow tables; the driver writes each finished unit and its `catalog_unit` row in one
+Section V, a few milliseconds: the driver computes it from the run's stored rows when its last IK chunk is in, in
+the transaction of the run's shard merge when there is one, cheaper than a worker's round trip). Workers return Arrow tables; the driver writes each finished unit and its `catalog_unit` row in one
 transaction through the stage writers of `workbench.store`, so a unit is stored whole or not at all. Units whose
 digest is stored are skipped, so a re-run after a crash computes only the rest. A task on a worker that dies is
 rescheduled by the Dask scheduler on another worker; a unit that raises (a broken mesh) is recorded as failed with
@@ -48,8 +49,7 @@ from workbench.robots.ik import (
 from workbench.robots.model import Robot, get_robot
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
-PART_PRIORITY = 1 << 40  # Dask priorities (higher runs first): parts, then graphs, then IK chunks by their length
-GRAPH_PRIORITY = 1 << 30
+PART_PRIORITY = 1 << 40  # Dask priorities (higher runs first): parts, then IK chunks by their length
 SHARD_SUFFIX = ".parquet"
 
 
@@ -102,7 +102,8 @@ class CatalogResult:
     write_seconds: float = 0.0
     rows_written: int = 0
     batches: int = 0
-    driver: dict = field(default_factory=lambda: {"decode": 0.0, "rows": 0.0, "commit": 0.0, "schedule": 0.0, "merge": 0.0})
+    driver: dict = field(default_factory=lambda: {"decode": 0.0, "rows": 0.0, "commit": 0.0, "schedule": 0.0, "merge": 0.0,
+                                                  "graph": 0.0})
     # ... and the same driver seconds by the kind of unit they served (`driver_kind`): a part's rows and scheduling its
     # IK chunks; an IK chunk's rows (or note and merge); preparing and writing a graph
     workers: int = 0
@@ -230,8 +231,8 @@ class _Build:
     def _submit(self, unit: dict, fn, *args, priority: int = 0, **kwargs) -> None:
         key = f"{unit['kind']}-{unit['part']}-{unit.get('robot') or ''}-{unit.get('chunk') or 0}-{unit['digest'][:12]}"
         # pure=False: a retry after a crash must not reuse a result the cluster still holds under the same key.
-        # priority: parts first (they unlock the IK units; the largest file first), then graphs (cheap, they end a
-        # run), then IK chunks longest first, so the last units to run are the short ones.
+        # priority: parts first (they unlock the IK units; the largest file first), then IK chunks longest first, so
+        # the last units to run are the short ones (a run's graph is computed by the driver when its last chunk is in).
         fut = self.client.submit(fn, *args, key=key, pure=False, priority=priority, **kwargs)
         self.pending[fut] = unit
         self.ac.add(fut)
@@ -301,14 +302,30 @@ class _Build:
             if left == 0:
                 self.finish_run(run)
 
-    def schedule_graph(self, run: dict) -> None:
+    def graph(self, run: dict) -> Callable[[], None]:
+        """The run's regrasp-graph sizes (a few milliseconds), computed here from the rows the caller's transaction
+        can read and written in it: a worker round trip and a commit of their own would cost more. Returns what to
+        do once committed."""
         unit = {**_unit_ids(run), "kind": "graph", "digest": _digest(run["base"], "graph")}
         if unit["digest"] in self.done:
             self._skip()
-            return
-        with self.charge("graph", "schedule"):
+            return lambda: None
+        self._count()
+        with self.charge("graph", "graph"):
             rows, feasible = stages.graph_inputs(self.store, run)
-            self._submit(unit, graph_unit, rows, feasible, priority=GRAPH_PRIORITY)
+            table = graph_unit(rows, feasible)
+        with self.charge("graph", "rows"):
+            self.write_rows(unit, table)
+
+        def after() -> None:
+            self.done[unit["digest"]] = unit
+            self.rows.add(unit["digest"])
+            meta = {k: v for k, v in unit.pop("meta", {}).items() if k not in (b"start", b"end")}  # not a worker's
+            self._account(unit, meta)
+            self.bar.update(1)
+            if self.on_unit is not None:
+                self.on_unit("graph", unit)
+        return after
 
     def finish_run(self, run: dict) -> None:
         """Every IK chunk of a (part, robot) is stored or on disk: merge the shards (one transaction), then the graph."""
@@ -318,8 +335,9 @@ class _Build:
             for unit, _ in units:
                 unit["fresh"] = unit["digest"] not in self.rows
             try:
-                with self.charge("ik", "merge"):
+                with self.charge("ik", "merge"), stages.batch(self.store):  # the merge and its graph commit together
                     n = stages.merge_ik_shards(self.store, run, units)
+                    then = self.graph(run)
             except WorkbenchError as exc:  # an unreadable shard: the run's chunks are computed again by a re-run
                 for unit, path in units:
                     path.unlink(missing_ok=True)
@@ -333,7 +351,11 @@ class _Build:
                 self.done[unit["digest"]] = unit
                 self.rows.add(unit["digest"])
                 path.unlink(missing_ok=True)
-        self.schedule_graph(run)
+            then()
+            return
+        with self.charge("graph", "commit"), stages.batch(self.store):
+            then = self.graph(run)
+        then()
 
     # -- writing -------------------------------------------------------------------------------------------------
     def write_rows(self, unit: dict, result) -> Callable[[], None]:
