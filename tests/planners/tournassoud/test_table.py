@@ -302,12 +302,12 @@ def test_narrow_legal_range_is_kept():
     coarse = theta[::3]
     lo, hi = np.radians(106.0), np.radians(114.0)      # 8 degrees, no coarse sample (105, 120) inside, one 5-degree one
 
-    def test(t, point=None):
+    def free_at(t, point=None):
         t = np.mod(np.asarray(t, dtype=float), 2 * np.pi)
         return (t >= lo) & (t <= hi) & bool(point[0] == 1.0)   # only the second candidate is ever free
 
     cands = np.array([[0.0, 0, 0], [1.0, 0, 0]])
-    point, intervals = select_point(cands, test, theta, coarse, np.radians(0.01))
+    point, intervals = select_point(cands, free_at, theta, coarse, np.radians(0.01))
     assert point[0] == 1.0
     assert len(intervals) == 1 and np.allclose(intervals[0], (lo, hi), atol=np.radians(0.011))
     # nothing free at any sample: no class
