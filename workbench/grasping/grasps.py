@@ -289,9 +289,9 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     axes = facets.normals[samples.pair_facet[sel]]
     touch = first_touches(mesh, origins, axes, angles, gripper)
     source = np.repeat(sel, len(angles))
-    rot = np.tile(angles, len(sel))
+    turn = np.tile(np.arange(len(angles)), len(sel))  # each hand pose's rotation, as an index into `angles`
     if params.fingertip_margin is not None:
-        touch, source, rot = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source, rot,
+        touch, source, turn = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source, turn,
                                                  samples, facets, angles)
     counts["fingertip"] = int(len(touch) - len(sel) * len(angles))
     timings["pads"] = time.perf_counter() - t0
@@ -311,15 +311,15 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     target = object_collider(mesh)
     free = _level2(gripper, touch.poses[live], touch.width[live], target, params.finger_clearance, counts, timings,
                    pads=False)
-    return pairs, touch.poses[live], live, rot[live], free
+    return pairs, touch.poses[live], live, angles[turn[live]], free
 
 
-def _fingertip_variants(mesh, gripper, margin, touch: Touches, source, rot, samples, facets, angles):
+def _fingertip_variants(mesh, gripper, margin, touch: Touches, source, turn, samples, facets, angles):
     """`touch` extended with the fingertip variants of its hand poses that hit the part within the jaw range (the
     same jaw axis and rotation, the TCP moved back by `pads.fingertip_shifts`), and their sources and rotations."""
     cand = np.flatnonzero(touch.hit & (touch.width <= gripper.jaw_max))
     if len(cand) == 0:
-        return touch, source, rot
+        return touch, source, turn
     try:
         extreme = np.asarray(mesh.convex_hull.vertices)
     except QhullError:  # a flat sheet has no hull; its own vertices bound it as well
@@ -327,18 +327,17 @@ def _fingertip_variants(mesh, gripper, margin, touch: Touches, source, rot, samp
     d = fingertip_shifts(extreme, touch.poses[cand], gripper, margin)
     cand, d = cand[np.isfinite(d)], d[np.isfinite(d)]
     parts = [touch]
-    src, rots = [source], [rot]
-    j_of = np.rint(rot[cand] / (2 * np.pi) * len(angles)).astype(np.int64) % len(angles)
-    for j in np.unique(j_of):
-        c, dj = cand[j_of == j], d[j_of == j]
+    src, turns = [source], [turn]
+    for j in np.unique(turn[cand]):
+        c, dj = cand[turn[cand] == j], d[turn[cand] == j]
         axis_point = samples.points[samples.pair_sample[source[c]]]
         origins = axis_point - dj[:, None] * touch.poses[c, :3, 2]
         parts.append(first_touches(mesh, origins, facets.normals[samples.pair_facet[source[c]]], angles[j:j + 1],
                                    gripper))
         src.append(source[c])
-        rots.append(rot[c])
+        turns.append(turn[c])
     merged = Touches(**{f: np.concatenate([getattr(t, f) for t in parts]) for f in Touches.__dataclass_fields__})
-    return merged, np.concatenate(src), np.concatenate(rots)
+    return merged, np.concatenate(src), np.concatenate(turns)
 
 
 def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, angle: float) -> np.ndarray:
