@@ -152,6 +152,41 @@ def test_worker_killed_mid_run_loses_nothing(parts, serial, client, tmp_path, sh
     assert killed[0] not in client.run(os.getpid).values()
 
 
+def test_unit_that_kills_its_worker_is_reported_and_rerun_finishes(parts, serial, tmp_path):
+    """With no retries allowed, the IK units on a killed worker fail (Dask's KilledWorker): each is reported with its
+    part, robot and one-line reason while its run's other chunks are stored; that run gets no graph; a re-run
+    computes the failed chunks and the graph only, and the rows equal a serial build's."""
+    import dask
+
+    db = tmp_path / "k.duckdb"
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0}), cluster_client(workers=2) as client:
+        killed = []
+
+        def kill_one(kind: str, unit: dict) -> None:
+            running = client.processing()
+            if kind == "ik" and not killed:
+                addr = next((a for a, keys in running.items() if any(str(k).startswith("ik-") for k in keys)), None)
+                if addr is not None:
+                    pid = client.run(os.getpid, workers=[addr])[addr]
+                    os.kill(pid, signal.SIGKILL)
+                    killed.append(pid)
+
+        res = build_catalog(parts[:-1], ",".join(ROBOTS), db, client, PARAMS, progress=False, on_unit=kill_one)
+        assert killed
+        failed = {(f["part"], f["robot"]) for f in res.failures}
+        assert failed and all(f["kind"] == "ik" and f["error"].startswith("KilledWorker") and "\n" not in f["error"]
+                              for f in res.failures)
+        with Store(db, read_only=True) as s:
+            graphs = set(s.run("SELECT part, robot FROM catalog_unit WHERE kind = 'graph' AND status = 'done'"))
+            chunks = s.one("SELECT count(*) FROM catalog_unit WHERE kind = 'ik' AND status = 'done'")[0]
+        assert chunks > 0 and graphs == {(p.stem, r) for p in parts[:-1] for r in ROBOTS} - failed
+        client.wait_for_workers(2, timeout=60)
+        again = build_catalog(parts[:-1], ",".join(ROBOTS), db, client, PARAMS, progress=False)
+    assert again.failures == [] and again.computed["part"] == 0
+    assert again.computed["ik"] == len(res.failures) and again.computed["graph"] == len(failed)
+    _same(_rows(db), serial)
+
+
 def test_driver_killed_then_rerun_finishes(parts, serial, tmp_path):
     db = tmp_path / "d.duckdb"
     cmd = [sys.executable, "-m", "workbench.cli", "catalog", "build", *map(str, parts[:-1]), "--robots", ",".join(ROBOTS),

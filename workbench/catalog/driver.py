@@ -50,6 +50,7 @@ from workbench.robots.model import Robot, get_robot
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
 PART_PRIORITY = 1 << 40  # Dask priorities (higher runs first): parts, then IK chunks by their length
+HOLD_MAX = 16  # IK units of one (part, robot) held in memory at most before they are written without its graph
 SHARD_SUFFIX = ".parquet"
 
 
@@ -185,7 +186,9 @@ class _Build:
         self.done = stages.done_units(store)
         self.rows = stages.unit_digests(store)  # digests with a catalog_unit row (done or failed), kept by this writer
         self.pending: dict = {}  # future -> unit dict
-        self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not stored yet
+        self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not finished yet
+        self.broken: set[tuple[str, str]] = set()  # runs with a failed IK chunk: their graph waits for a re-run
+        self.held: dict[tuple[str, str], list] = {}  # (part, robot) -> finished IK units not written yet (direct path)
         self.runs: dict[tuple[str, str], dict] = {}
         self.ik_runs: dict[str, dict] = {}  # robot name -> its run's ids in this store
         self.ac = as_completed(with_results=True, raise_errors=False)  # results fetched in the background
@@ -272,7 +275,7 @@ class _Build:
             if name not in self.ik_runs:  # robot, scene and ikret rows: once per build
                 self.ik_runs[name] = stages.ik_run(self.store, robot, scene, p.ik, p.handx, p.worldz, p.worlda)
             ids_run = self.ik_runs[name]
-            stored = stages.stored_ik(self.store, ids_run, part["idtabletop"])
+            stored = stages.stored_ik(self.store, ids_run, part["idtabletop"], part.get("new_tabletop", False))
             run = {"part": part["part"], "robot": name, "idobject": part["idobject"], "idtabletop": part["idtabletop"],
                    "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "source": part.get("source"),
                    "idrobot": ids_run["idrobot"], "idscene": ids_run["idscene"], "idikret": ids_run["idikret"],
@@ -328,8 +331,14 @@ class _Build:
         return after
 
     def finish_run(self, run: dict) -> None:
-        """Every IK chunk of a (part, robot) is stored or on disk: merge the shards (one transaction), then the graph."""
+        """Every IK chunk of a (part, robot) is finished: write the held ones (direct path) or merge the shards, and
+        the graph, in one transaction; a run with a failed chunk gets no graph (shards stay on disk for a re-run)."""
         key = (run["part"], run["robot"])
+        if self.shards is None:
+            self.write_batch(self.held.pop(key, []), None if key in self.broken else run)
+            return
+        if key in self.broken:
+            return
         units = self.to_merge.pop(key, [])
         if units:
             for unit, _ in units:
@@ -343,7 +352,7 @@ class _Build:
                     path.unlink(missing_ok=True)
                     stages.record_failure(self.store, {**unit, "fresh": False}, one_line(exc))
                     self.rows.add(unit["digest"])
-                self.left[key] = -1
+                self.broken.add(key)
                 return
             self.result.merges += 1
             self.result.rows_written += n
@@ -389,13 +398,22 @@ class _Build:
         run = self.runs[(unit["part"], unit["robot"])]
         ids, feas, joints = cols["idtabletopgrips"], cols["feasible"], cols["joints"]
         stages.write_ik(self.store, unit, ids, feas, joints, run["stored"])
+        return lambda: None
 
-        def after() -> None:
-            key = (unit["part"], unit["robot"])
-            self.left[key] -= 1
-            if self.left[key] == 0:
-                self.finish_run(run)
-        return after
+    def hold(self, fut, unit: dict, result) -> None:
+        """A finished IK unit (direct path): held until its run's last chunk is in, then written with the others and
+        the run's graph in one transaction (one commit per run, not per chunk); `HOLD_MAX` bounds what a killed
+        driver loses (units not written are computed again by the re-run)."""
+        key = (unit["part"], unit["robot"])
+        self.held.setdefault(key, []).append((fut, unit, result))
+        self._chunk_done(key)
+        if key in self.held and len(self.held[key]) >= HOLD_MAX:
+            self.write_batch(self.held.pop(key))
+
+    def _chunk_done(self, key: tuple[str, str]) -> None:
+        self.left[key] -= 1
+        if self.left[key] == 0:
+            self.finish_run(self.runs[key])
 
     def shard_done(self, fut, unit: dict, table: pa.Table) -> None:
         """An IK unit whose worker wrote its rows to a shard: note it; merge its run when it is the run's last."""
@@ -408,9 +426,7 @@ class _Build:
             self.to_merge[key].append((unit, Path(meta[b"shard"].decode())))
             fut.release()
             self.bar.update(1)
-            self.left[key] -= 1
-            if self.left[key] == 0:
-                self.finish_run(self.runs[key])
+            self._chunk_done(key)
         if self.on_unit is not None:
             self.on_unit("ik", unit)
 
@@ -424,30 +440,37 @@ class _Build:
         if b"start" in meta:
             self.result.timeline.append((unit["worker"], kind, float(meta[b"start"]), float(meta[b"end"])))
 
-    def write_batch(self, items: list[tuple[object, dict, object]]) -> None:
-        """Write the units that finished together in one transaction (each unit whole, so the commit's cost is
-        shared when the writer falls behind); if one of them cannot be written, write them one by one."""
+    def write_batch(self, items: list[tuple[object, dict, object]], run: dict | None = None) -> None:
+        """Write finished units in one transaction (each unit whole, so they share the commit's cost), with `run`'s
+        graph when given (its IK chunks are all among them or stored); if one of them cannot be written, write them
+        one by one (and leave the graph to a re-run)."""
+        graph_done = None
         try:
             with stages.batch(self.store):
                 after = []
                 for _, unit, result in items:
                     with self.charge(unit["kind"], "rows"):
                         after.append(self.write_rows(unit, result))
+                if run is not None:
+                    graph_done = self.graph(run)
                 t1 = time.perf_counter()
         except Exception as exc:  # noqa: BLE001 - one part's rows that cannot be stored must not stop the others
             if len(items) > 1:
                 for item in items:
                     self.write_batch([item])
                 return
-            self.fail(items[0][1], exc)
+            if not items:  # the graph alone
+                raise
+            self.fail(items[0][1], exc, counted=True)
             items[0][0].release()
             return
         commit = time.perf_counter() - t1  # shared by the batch's units
         self.rows.update(unit["digest"] for _, unit, _ in items)
         self.result.driver["commit"] += commit
         self.result.write_seconds += commit
-        for _, unit, _ in items:
-            self.result.driver_kind[unit["kind"]] += commit / len(items)
+        kinds = [unit["kind"] for _, unit, _ in items] + (["graph"] if run is not None else [])
+        for kind in kinds:
+            self.result.driver_kind[kind] += commit / len(kinds)
         for (fut, unit, _), then in zip(items, after):
             try:
                 with self.charge(unit["kind"], "schedule"):
@@ -461,17 +484,23 @@ class _Build:
             self.bar.update(1)
             if self.on_unit is not None:
                 self.on_unit(kind, unit)
+        if graph_done is not None:
+            graph_done()
         self.result.batches += 1
         if self.result.write_seconds > 0:
             self.bar.set_postfix_str(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written", refresh=False)
 
-    def fail(self, unit: dict, exc: BaseException) -> None:
+    def fail(self, unit: dict, exc: BaseException, counted: bool = False) -> None:
+        """Record a unit that raised or could not be written (`counted`: an IK unit already counted as finished)."""
         reason = one_line(exc)
         stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, reason)
         self.rows.add(unit["digest"])
         self.bar.update(1)
-        if unit["kind"] == "ik":  # the part's other chunks go on; its graph waits for a re-run
-            self.left[(unit["part"], unit["robot"])] = -1
+        if unit["kind"] == "ik" and not unit["digest"].endswith("-schedule"):
+            key = (unit["part"], unit["robot"])  # the run's other chunks go on; its graph waits for a re-run
+            self.broken.add(key)
+            if not counted:
+                self._chunk_done(key)
 
     # -- the loop ------------------------------------------------------------------------------------------------
     def run(self, parts: Sequence[tuple[Path, float | None]]) -> None:
@@ -486,10 +515,14 @@ class _Build:
                     fut.release()
                 elif unit["kind"] == "ik" and self.shards is not None:
                     self.shard_done(fut, unit, result)
+                elif unit["kind"] == "ik":
+                    self.hold(fut, unit, result)
                 else:
                     items.append((fut, unit, result))
             if items:
                 self.write_batch(items)
+        for key in list(self.held):  # runs cut short (none when every unit came back)
+            self.write_batch(self.held.pop(key))
         self.bar.close()
 
 

@@ -86,7 +86,8 @@ def write_part(store: Store, unit: dict, res: PartResult, hand: Gripper, gparams
                   "tabletop_placements": len(tt.placement), "tabletop_grips": len(tt.grip_tp), "seconds": res.seconds}
         nrows = ((0 if had_grasps else len(res.grasps)) + (0 if had_placements else len(res.placements) + len(res.ftg[0]))
                  + (0 if had_tabletop else len(tt.placement) + len(tt.grip_tp)))
-        unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts, nrows=nrows)
+        unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts, nrows=nrows,
+                    new_tabletop=not had_tabletop)
 
 
 def part_grips(store: Store, part: dict, obj: ObjectModel | None = None) -> tuple[dict[str, np.ndarray], ObjectModel]:
@@ -104,8 +105,11 @@ def ik_run(store: Store, robot: Robot, scene: Scene, opts: IKOptions, handx: flo
     return {"idrobot": rid, "idscene": sid, "idikret": kid, "scene_params": params}
 
 
-def stored_ik(store: Store, run: dict, idtabletop: int) -> np.ndarray:
-    """The tabletop grips of a part (its tabletop parameter set) that already have `ik` rows for the run."""
+def stored_ik(store: Store, run: dict, idtabletop: int, new: bool = False) -> np.ndarray:
+    """The tabletop grips of a part (its tabletop parameter set) that already have `ik` rows for the run (none when
+    the tabletop rows are `new`: written by this build's part unit)."""
+    if new:
+        return np.zeros(0, dtype=np.int64)
     return sql.stored_part_grips(store, run["idrobot"], run["idscene"], run["idikret"], idtabletop)
 
 

@@ -149,11 +149,12 @@ def record_failure(store: Store, unit: dict[str, Any], error: str) -> None:
 
 
 def failures(store: Store) -> list[dict[str, Any]]:
-    """Failed units (no `done` row with the same part and kind since): part, kind, robot, source, error."""
+    """Failed units (no `done` row of the same part, kind, robot and IK chunk since): part, kind, robot, source, error."""
     rows = store.run(
         "SELECT f.part, f.kind, f.robot, f.source, f.error FROM catalog_unit f WHERE f.status = 'failed' AND NOT EXISTS "
         "(SELECT 1 FROM catalog_unit d WHERE d.status = 'done' AND d.part = f.part AND d.kind = f.kind "
-        "AND d.robot IS NOT DISTINCT FROM f.robot) ORDER BY f.part, f.kind, f.robot")
+        "AND d.robot IS NOT DISTINCT FROM f.robot AND d.chunk IS NOT DISTINCT FROM f.chunk AND d.created >= f.created) "
+        "ORDER BY f.part, f.kind, f.robot, f.chunk")
     return [dict(zip(("part", "kind", "robot", "source", "error"), r)) for r in rows]
 
 
