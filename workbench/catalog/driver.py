@@ -4,7 +4,8 @@ Units: one per part (grasps, placements, tabletop grips; Wan & Harada Sections I
 tabletop grips and robot (IK with retractions, Section IV), one per part and robot (the regrasp graph's size,
 Section V, a few milliseconds: the driver computes it from the run's stored rows when its last IK chunk is in, in
 the transaction of the run's shard merge when there is one, cheaper than a worker's round trip). Workers return Arrow tables; the driver writes each finished unit and its `catalog_unit` row in one
-transaction through the stage writers of `workbench.store`, so a unit is stored whole or not at all. Units whose
+transaction through the stage writers of `workbench.store`, so a unit is stored whole or not at all (a part and
+robot's IK chunks are held and written together with its graph, one commit per run). Units whose
 digest is stored are skipped, so a re-run after a crash computes only the rest. A task on a worker that dies is
 rescheduled by the Dask scheduler on another worker; a unit that raises (a broken mesh) is recorded as failed with
 its one-line reason and the others go on.
