@@ -138,7 +138,10 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
         centre = 0.5 * (plan.start_pose[:3, 3] + plan.goal_pose[:3, 3])
         key = [("part", OBJECT_COLOR), ("start pose", START_COLOR), ("goal pose", GOAL_COLOR),
                ("put down to regrasp", 0x999999), ("table", TABLE_COLOR)]
-        add_overlays(vis, anim, frames, f"{path}/captions", centre + CAMERA_DIR * -0.3 + [0.0, 0.0, 0.62], CAMERA_DIR, key)
+        # above the highest the arm reaches (every 10th frame), so that the arm never hides the caption
+        top = max(m[2, 3] for fr in frames[::10] for m in view.poses(fr["q"], fr["jaw"]).values())
+        add_overlays(vis, anim, frames, f"{path}/captions", centre + CAMERA_DIR * -0.3 + [0.0, 0.0, max(0.62, top + 0.25)],
+                     CAMERA_DIR, key)
     for i, fr in enumerate(frames):
         poses = view.poses(fr["q"], fr["jaw"])
         obj_pose = fr["object"]
@@ -154,10 +157,20 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
 
 
 def frame_plan(vis: meshcat.Visualizer, plan, robot) -> None:
-    """Camera on the robot's base and every pose the part takes (start, placements, goal), with the arm's height."""
-    pts = [plan.start_pose[:3, 3], plan.goal_pose[:3, 3], robot.base[:3, 3], robot.base[:3, 3] + [0, 0, 0.4]]
+    """Camera on every pose the part takes (start, placements, goal), the robot's base and its joints at every
+    waypoint (so that a large arm stays in view as well as a small one) and the captions above them."""
+    import pinocchio as pin
+
+    pts = [plan.start_pose[:3, 3], plan.goal_pose[:3, 3], robot.base[:3, 3]]
     pts += [np.asarray(s.object_pose)[:3, 3] for s in plan.steps]
-    frame_points(vis, np.array(pts))
+    data = robot.model.createData()
+    for fr in keyframes(plan, frames_move=1, frames_line=1, frames_jaw=1):
+        pin.forwardKinematics(robot.model, data, np.asarray(fr["q"], dtype=np.float64))
+        pts += [(robot.base @ np.asarray(m.homogeneous))[:3, 3] for m in data.oMi[1:]]
+    pts = np.array(pts)
+    # and the captions `show_plan` stands above the arm
+    centre = 0.5 * (plan.start_pose[:3, 3] + plan.goal_pose[:3, 3]) + CAMERA_DIR * -0.3
+    frame_points(vis, np.vstack([pts, [centre[0], centre[1], max(0.62, pts[:, 2].max() + 0.25)]]))
 
 
 def scene_table(planner) -> tuple:
