@@ -2,7 +2,8 @@
 
 For each grasp (TCP pose in the object frame, opening, contacts and outward contact normals):
 - both contacts lie on the object's surface within 0.5 mm (trimesh's exact closest point);
-- each stored normal is the normal of a triangle within 0.5 mm of its contact (either side on an open mesh);
+- each stored normal is the normal of a triangle within 0.5 mm of its contact (either side on an open mesh; the
+  distance to every triangle by `point_triangle_distance`, exact on thin triangles too);
 - both normals lie within the friction cone of the jaw axis (the TCP's y);
 - the contacts are where the pads are: at +/- half the opening along y, inside the pad rectangles;
 - the Franka hand's collision geometry, loaded by pinocchio from example-robot-data's panda.urdf and placed with
@@ -109,6 +110,29 @@ def pad_face() -> tuple[float, float, float]:
     return float(ext[0]), float(ext[2]), float(M[2, 3])
 
 
+def point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Distance (T,) from the point `p` to each triangle (T, 3, 3): to its plane where the point projects inside it,
+    else to its nearest edge. Exact on sliver triangles too, where a closest point found through barycentric
+    coordinates loses its precision (a sliver is its edges)."""
+    a, b, c = tris[:, 0], tris[:, 1], tris[:, 2]
+    seg = np.full(len(tris), np.inf)
+    for u, v in ((a, b), (b, c), (c, a)):
+        e = v - u
+        ee = np.einsum("ij,ij->i", e, e)
+        t = np.clip(np.einsum("ij,ij->i", p - u, e) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+        seg = np.minimum(seg, np.linalg.norm(u + t[:, None] * e - p, axis=1))
+    n = np.cross(b - a, c - a)
+    nn = np.linalg.norm(n, axis=1)
+    wide = nn > 1e-12 * np.maximum(np.einsum("ij,ij->i", b - a, b - a) + np.einsum("ij,ij->i", c - a, c - a), 1e-300)
+    n = n / np.where(nn > 0, nn, 1.0)[:, None]
+    h = np.einsum("ij,ij->i", p - a, n)
+    q = p - h[:, None] * n  # the projection on the plane: inside when on the inner side of every edge
+    inside = wide.copy()
+    for u, v in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(v - u, q - u), n) >= 0
+    return np.where(inside, np.abs(h), seg)
+
+
 def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction: float, jaw_max: float = 0.08) -> Verdict:
     """The independent verdict on each grasp (see the module docstring)."""
     hx, hz, pad_z = pad_face()
@@ -128,8 +152,7 @@ def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction:
     normal_ok = np.zeros(2 * G, dtype=bool)
     open_mesh = not mesh.is_watertight
     for i, (p, n) in enumerate(zip(pts, nrm)):
-        cp = trimesh.triangles.closest_point(tris, np.repeat(p[None], len(tris), axis=0))
-        near = np.linalg.norm(cp - p, axis=1) <= 5e-4
+        near = point_triangle_distance(p, tris) <= 5e-4
         cos = fn[near] @ n
         if open_mesh:
             cos = np.abs(cos)
