@@ -10,6 +10,7 @@ from dataclasses import replace
 
 from workbench.benchmarks import print_table
 from workbench.catalog.cluster import cluster_client, dashboard_link
+from workbench.catalog.stages import open_store
 from workbench.catalog.driver import (
     SUMMARY_HEADERS,
     CatalogParams,
@@ -66,8 +67,9 @@ def catalog_params(args: argparse.Namespace) -> CatalogParams:
 
 def run_build(args: argparse.Namespace) -> int:
     params = catalog_params(args)
-    collect_parts(args.parts)  # bad input fails before a cluster starts
+    collect_parts(args.parts)  # bad input fails before a cluster starts: parts, robots, a locked or damaged store
     parse_robots(args.robots)
+    open_store(args.db).close()
     with cluster_client(workers=args.workers, scheduler=args.scheduler) as client:
         n = len(client.scheduler_info().get("workers", {}))
         print(f"dask: {n} worker(s) at {client.scheduler.address}; dashboard {dashboard_link(client)}", file=sys.stderr)
