@@ -371,16 +371,22 @@ class _Build:
     def write_rows(self, unit: dict, result) -> Callable[[], None]:
         """Write one unit's rows and its catalog_unit row (joining the caller's transaction); returns what to do once
         committed (schedule the units that depend on it)."""
+        kind = self._stamp(unit, result)
+        if kind == "part":
+            return self.write_part(unit, result)
+        if kind == "ik":
+            self.write_iks([unit], [result])
+            return lambda: None
+        stages.write_graph(self.store, unit, {k: v[0] for k, v in result.to_pydict().items()})
+        return lambda: None
+
+    def _stamp(self, unit: dict, result) -> str:
+        """Note whether the unit's row is new and its worker's timings; returns its kind."""
         kind = unit["kind"]
         unit["fresh"] = unit["digest"] not in self.rows
         meta = (result["meta"] if kind == "part" else result).schema.metadata or {}
         unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode(), meta=meta)
-        if kind == "part":
-            return self.write_part(unit, result)
-        if kind == "ik":
-            return self.write_ik(unit, result)
-        stages.write_graph(self.store, unit, {k: v[0] for k, v in result.to_pydict().items()})
-        return lambda: None
+        return kind
 
     def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> Callable[[], None]:
         with self.charge("part", "decode"):
@@ -393,13 +399,13 @@ class _Build:
             self.schedule_robots(unit, res.obj)  # the mesh as stored (its digest is the stored one)
         return after
 
-    def write_ik(self, unit: dict, table: pa.Table) -> Callable[[], None]:
+    def write_iks(self, units: list[dict], tables: list[pa.Table]) -> None:
+        """IK units (stamped) of one part and robot: their rows in one `ik` insert, and their catalog_unit rows."""
         with self.charge("ik", "decode"):
-            cols = table_arrays(table)
-        run = self.runs[(unit["part"], unit["robot"])]
-        ids, feas, joints = cols["idtabletopgrips"], cols["feasible"], cols["joints"]
-        stages.write_ik(self.store, unit, ids, feas, joints, run["stored"])
-        return lambda: None
+            cols = [table_arrays(t) for t in tables]
+        run = self.runs[(units[0]["part"], units[0]["robot"])]
+        stages.write_ik(self.store, units, [(c["idtabletopgrips"], c["feasible"], c["joints"]) for c in cols],
+                        run["stored"])
 
     def hold(self, fut, unit: dict, result) -> None:
         """A finished IK unit (direct path): held until its run's last chunk is in, then written with the others and
@@ -448,10 +454,19 @@ class _Build:
         graph_done = None
         try:
             with stages.batch(self.store):
-                after = []
+                after: list = []
+                iks: dict[tuple[str, str], list] = {}  # IK units by part and robot: one insert each
                 for _, unit, result in items:
+                    if unit["kind"] == "ik" and len(items) > 1:
+                        self._stamp(unit, result)
+                        iks.setdefault((unit["part"], unit["robot"]), []).append((unit, result))
+                        after.append(lambda: None)
+                        continue
                     with self.charge(unit["kind"], "rows"):
                         after.append(self.write_rows(unit, result))
+                for group in iks.values():
+                    with self.charge("ik", "rows"):
+                        self.write_iks([u for u, _ in group], [r for _, r in group])
                 if run is not None:
                     graph_done = self.graph(run)
                 t1 = time.perf_counter()

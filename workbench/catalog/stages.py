@@ -113,16 +113,21 @@ def stored_ik(store: Store, run: dict, idtabletop: int, new: bool = False) -> np
     return sql.stored_part_grips(store, run["idrobot"], run["idscene"], run["idikret"], idtabletop)
 
 
-def write_ik(store: Store, unit: dict, grip_ids: np.ndarray, feasible: np.ndarray, joints: np.ndarray,
+def write_ik(store: Store, units: list[dict], chunks: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
              stored: np.ndarray) -> None:
-    """An IK chunk's `ik` rows (Section IV) and its catalog_unit row; grips a `workbench ik` run already stored for
-    the same run keep their rows (nothing is duplicated)."""
-    todo = ~np.isin(grip_ids, stored)
-    with sql.unit_transaction(store, unit):
-        n = insert_ik(store, unit["idrobot"], unit["idscene"], unit["idikret"], grip_ids[todo], feasible[todo],
-                      joints[todo]) if todo.any() else 0
-        unit.update(nrows=n, counts={"grips": int(len(grip_ids)), "feasible": int(feasible[:, 0].sum()),
-                                     "feasible_all": int(feasible.all(axis=1).sum())})
+    """IK units of one part and robot: their `ik` rows (Section IV) in one insert and each unit's catalog_unit row,
+    in one transaction; `chunks` holds each unit's (grip ids, feasibility (C, 5), joints (C, 5, nq)). Grips a
+    `workbench ik` run already stored for the same run keep their rows (nothing is duplicated)."""
+    todo = [~np.isin(ids, stored) for ids, _, _ in chunks]
+    unit = units[0]
+    with store.transaction():
+        if any(t.any() for t in todo):
+            insert_ik(store, unit["idrobot"], unit["idscene"], unit["idikret"],
+                      *(np.concatenate([c[k][t] for c, t in zip(chunks, todo)]) for k in range(3)))
+        for u, (ids, feasible, _), t in zip(units, chunks, todo):
+            with sql.unit_transaction(store, u):
+                u.update(nrows=int(t.sum()), counts={"grips": int(len(ids)), "feasible": int(feasible[:, 0].sum()),
+                                                     "feasible_all": int(feasible.all(axis=1).sum())})
 
 
 def merge_ik_shards(store: Store, run: dict, units: list[tuple[dict, Path]]) -> int:
