@@ -1,6 +1,6 @@
 # The two commands a newcomer needs: `make demo` and `make test`. Both build .venv from nothing.
 # `make demo` installs only the runtime dependencies; `make test` adds the test extras (pytest, nbmake, MuJoCo,
-# playwright, nbstripout) on top, each behind its own stamp so one never reinstalls the other.
+# playwright, nbstripout, pytest-xdist) on top, each behind its own stamp so one never reinstalls the other.
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -27,7 +27,7 @@ demo: $(RUNTIME)
 	$(BIN)/workbench demo --out build/demo
 
 test: $(TESTDEPS)
-	$(BIN)/python -m pytest -q -p no:cacheprovider --nbmake tests notebooks
+	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --nbmake tests notebooks
 
 lab: $(RUNTIME)
 	$(BIN)/jupyter lab $(LAB_ROOT) --ContentsManager.pre_save_hook=workbench.widgets.saving.strip_widget_views notebooks/
