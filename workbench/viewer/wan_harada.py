@@ -22,6 +22,7 @@ import numpy as np
 import trimesh
 
 from workbench.planners.wan_harada.plans import inverse_pose
+from workbench.robots.chain import forward
 from workbench.robots.timing import TimedSegment
 from workbench.viewer.captions import add_overlays
 from workbench.viewer.robot import RobotView
@@ -135,13 +136,9 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
             fr["object"] = robot.tcp_pose(fr["q"]) @ inverse_pose(fr["grasp"]) if fr["held"] else fr["rest"]
     anim = manim.Animation(default_framerate=fps)
     if plan.segments:
-        centre = 0.5 * (plan.start_pose[:3, 3] + plan.goal_pose[:3, 3])
         key = [("part", OBJECT_COLOR), ("start pose", START_COLOR), ("goal pose", GOAL_COLOR),
                ("put down to regrasp", 0x999999), ("table", TABLE_COLOR)]
-        # above the highest the arm reaches (every 10th frame), so that the arm never hides the caption
-        top = max(m[2, 3] for fr in frames[::10] for m in view.poses(fr["q"], fr["jaw"]).values())
-        add_overlays(vis, anim, frames, f"{path}/captions", centre + CAMERA_DIR * -0.3 + [0.0, 0.0, max(0.62, top + 0.25)],
-                     CAMERA_DIR, key)
+        add_overlays(vis, anim, frames, f"{path}/captions", caption_anchor(plan, arm_reach(plan, robot)), CAMERA_DIR, key)
     for i, fr in enumerate(frames):
         poses = view.poses(fr["q"], fr["jaw"])
         obj_pose = fr["object"]
@@ -159,18 +156,31 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
 def frame_plan(vis: meshcat.Visualizer, plan, robot) -> None:
     """Camera on every pose the part takes (start, placements, goal), the robot's base and its joints at every
     waypoint (so that a large arm stays in view as well as a small one) and the captions above them."""
-    import pinocchio as pin
+    reach = arm_reach(plan, robot)
+    parts = [plan.start_pose[:3, 3], plan.goal_pose[:3, 3], robot.base[:3, 3]]
+    parts += [np.asarray(s.object_pose)[:3, 3] for s in plan.steps]
+    frame_points(vis, np.vstack([parts, reach, caption_anchor(plan, reach)]))
 
-    pts = [plan.start_pose[:3, 3], plan.goal_pose[:3, 3], robot.base[:3, 3]]
-    pts += [np.asarray(s.object_pose)[:3, 3] for s in plan.steps]
-    data = robot.model.createData()
-    for fr in keyframes(plan, frames_move=1, frames_line=1, frames_jaw=1):
-        pin.forwardKinematics(robot.model, data, np.asarray(fr["q"], dtype=np.float64))
-        pts += [(robot.base @ np.asarray(m.homogeneous))[:3, 3] for m in data.oMi[1:]]
-    pts = np.array(pts)
-    # and the captions `show_plan` stands above the arm
-    centre = 0.5 * (plan.start_pose[:3, 3] + plan.goal_pose[:3, 3]) + CAMERA_DIR * -0.3
-    frame_points(vis, np.vstack([pts, [centre[0], centre[1], max(0.62, pts[:, 2].max() + 0.25)]]))
+
+def arm_reach(plan, robot) -> np.ndarray:
+    """(K, 3) world positions of the arm's joints and TCP along the plan: at its trajectories' knots, or at its
+    waypoints when it has no timed motion (batched forward kinematics)."""
+    if plan.segments:
+        qs = np.vstack([s.traj.q for s in plan.segments])
+    else:
+        qs = np.array([fr["q"] for fr in keyframes(plan, frames_move=1, frames_line=1, frames_jaw=1)])
+    if len(qs) == 0:  # a plan without steps: the arm is not drawn moving
+        return robot.base[None, :3, 3]
+    _, joints, _, tcp = forward(robot, qs)
+    return np.vstack([joints.reshape(-1, 3), tcp])
+
+
+def caption_anchor(plan, reach: np.ndarray) -> np.ndarray:
+    """Where `show_plan` stands the captions: behind the part's start and goal as the camera sees them, 0.25 m above
+    the highest the arm reaches (`arm_reach`), so that the arm never hides them, and at least 0.62 m up."""
+    anchor = 0.5 * (plan.start_pose[:3, 3] + plan.goal_pose[:3, 3]) + CAMERA_DIR * -0.3
+    anchor[2] = max(0.62, float(reach[:, 2].max()) + 0.25)
+    return anchor
 
 
 def scene_table(planner) -> tuple:
