@@ -33,23 +33,14 @@ def batch_config() -> dict:
     """`BATCH_CONFIG` less the keys whose value the user changed from Dask's default."""
     import dask
     import distributed  # noqa: F401 - adds distributed's defaults to dask.config.defaults
-    from dask.config import defaults, get
 
+    defaults = dask.config.merge(*dask.config.defaults)
     out = {}
     for key, value in BATCH_CONFIG.items():
-        default = get(key, config=_merged(defaults))
+        default = dask.config.get(key, config=defaults)
         if dask.config.get(key, default) == default:
             out[key] = value
     return out
-
-
-def _merged(dicts: list[dict]) -> dict:
-    from dask.config import update
-
-    merged: dict = {}
-    for d in dicts:
-        update(merged, d)
-    return merged
 
 
 @contextmanager

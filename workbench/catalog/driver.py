@@ -369,14 +369,10 @@ class _Build:
 
     # -- writing -------------------------------------------------------------------------------------------------
     def write_rows(self, unit: dict, result) -> Callable[[], None]:
-        """Write one unit's rows and its catalog_unit row (joining the caller's transaction); returns what to do once
-        committed (schedule the units that depend on it)."""
-        kind = self._stamp(unit, result)
-        if kind == "part":
+        """Write a part or graph unit's rows and its catalog_unit row (joining the caller's transaction); returns what
+        to do once committed (schedule the units that depend on it). IK units go through `write_iks`."""
+        if self._stamp(unit, result) == "part":
             return self.write_part(unit, result)
-        if kind == "ik":
-            self.write_iks([unit], [result])
-            return lambda: None
         stages.write_graph(self.store, unit, {k: v[0] for k, v in result.to_pydict().items()})
         return lambda: None
 
@@ -457,7 +453,7 @@ class _Build:
                 after: list = []
                 iks: dict[tuple[str, str], list] = {}  # IK units by part and robot: one insert each
                 for _, unit, result in items:
-                    if unit["kind"] == "ik" and len(items) > 1:
+                    if unit["kind"] == "ik":
                         self._stamp(unit, result)
                         iks.setdefault((unit["part"], unit["robot"]), []).append((unit, result))
                         after.append(lambda: None)
@@ -512,7 +508,7 @@ class _Build:
         stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, reason)
         self.rows.add(unit["digest"])
         self.bar.update(1)
-        if unit["kind"] == "ik" and not unit["digest"].endswith("-schedule"):
+        if unit["kind"] == "ik" and unit.get("chunk") is not None:  # not a part whose IK could not be scheduled
             key = (unit["part"], unit["robot"])  # the run's other chunks go on; its graph waits for a re-run
             self.broken.add(key)
             if not counted:
