@@ -120,9 +120,57 @@ def test_noisy_flat_base_is_a_stable_placement(organic_objects):
     assert not (down[:, 2] < -0.999).any() or exact.stability[down[:, 2] < -0.999].max() < 0.5 * expect
 
 
+def _top_down_clear(obj, hand, grasps, placement_pose, clearance=0.002):
+    """Grasps approaching within 0.5 degrees of straight down whose hand and fingers at full opening stay
+    `clearance` above the table, from the gripper's mesh vertices (not the placement stage's hull test)."""
+    world = placement_pose @ grasps.poses
+    down = world[:, 2, 2] <= -np.cos(np.radians(0.5))
+    verts = np.asarray(hand.collision_mesh().vertices)
+    low = np.einsum("gij,vj->gvi", world[:, :3, :3], verts)[..., 2].min(axis=1) + world[:, 2, 3]
+    return down & (low >= clearance)
+
+
+def test_support_grasps_grip_a_ring_lying_flat_from_above(organic_objects, hand):
+    """A 16 mm thick ring lying flat can only be gripped from above, across its 76 mm diameter, with a level jaw axis.
+    No facet normal of its tessellated tube is level (they are 11 degrees off), so the open fingers of the facet-normal
+    grasps dip into the table; the levelled support grasps reach it, and every one of them passes the independent
+    check."""
+    obj = organic_objects["ring"]
+    base = stable_placements(obj)
+    flat = np.flatnonzero(np.abs(base.normals[:, 2]) > 0.999)
+    assert len(flat) == 2  # either face down
+    plain = plan_grasps(obj, hand, GraspParams(support_grasps=False))
+    plan = plan_grasps(obj, hand, GraspParams())
+    assert plain.counts["support"] == 0 and plan.counts["support"] > 0
+    for k in flat:
+        assert not _top_down_clear(obj, hand, plain.grasps, base.poses[k]).any()
+        assert _top_down_clear(obj, hand, plan.grasps, base.poses[k]).sum() >= 8
+    new = np.flatnonzero(np.abs(plan.grasps.poses[:, :3, 1] @ base.normals[flat[0]]) < 1e-9)
+    g = plan.grasps
+    v = check_grasps(obj.mesh, g.poses[new], g.jawwidth[new], g.contact0[new], g.contact1[new], g.normal0[new],
+                     g.normal1[new], GraspParams().friction)
+    assert len(new) >= 8 and v.ok.all()
+    # the stored rotation is still the right-handed angle from the reference approach about the jaw axis
+    y, z = g.poses[:, :3, 1], g.poses[:, :3, 2]
+    ref = np.eye(3)[np.argmin(np.abs(y), axis=1)]
+    z0 = ref - np.einsum("ij,ij->i", ref, y)[:, None] * y
+    z0 /= np.linalg.norm(z0, axis=1, keepdims=True)
+    angle = np.arctan2(np.einsum("ij,ij->i", np.cross(z0, z), y), np.einsum("ij,ij->i", z0, z))
+    assert np.abs(np.angle(np.exp(1j * (angle - g.rotation)))).max() < 1e-9
+
+
+def test_support_grasps_leave_a_cad_box_unchanged(box, hand):
+    """On a box the regular rotations about its face normals already approach straight down onto every face it
+    rests on: no levelled axis is added and the grasps are the same."""
+    plain = plan_grasps(box, hand, GraspParams(support_grasps=False)).grasps
+    plan = plan_grasps(box, hand, GraspParams())
+    assert plan.counts["support"] == 0
+    assert np.array_equal(plan.grasps.poses, plain.poses)
+
+
 # objects that rest stably and go through placements, IK and a plan (the cup, a scan with holes, the studded brick,
-# the flat-bottomed scan; an ellipsoid rolls: no stable placement)
-PIPELINE = ["cup", "scan_holes", "stud_brick", "flat_scan"]
+# the flat-bottomed scan, a ring lying flat; an ellipsoid rolls: no stable placement)
+PIPELINE = ["cup", "scan_holes", "stud_brick", "flat_scan", "ring"]
 
 
 @pytest.mark.parametrize("name", PIPELINE)

@@ -1,4 +1,5 @@
-"""A procedural set of organic objects, the kind users bring (issue 10): smooth and noisy blobs, ellipsoids, tori,
+"""A procedural set of organic objects, the kind users bring (issue 10): smooth and noisy blobs, ellipsoids, tori
+(one lying flat thinner than the fingers are long), a flat pebble,
 cups (closed walls and a single open sheet), a brick with studs (manifold3d), a scan with holes and a flat-bottomed
 noisy scan. 300 to 5,000 triangles, some not watertight; metres; seeded, so every run builds the same meshes.
 
@@ -115,6 +116,8 @@ ORGANIC = {
     "blob_long": lambda: blob(seed=5, stretch=(0.7, 0.9, 1.8), rows=24, cols=50),
     "ellipsoid": lambda: ellipsoid(),
     "torus": lambda: torus(),
+    "ring": lambda: torus(major=0.03, minor=0.008),
+    "pebble": lambda: blob(seed=8, bump=0.1, noise=3e-4, stretch=(1.3, 1.0, 0.55), rows=22, cols=44),
     "cup": lambda: cup(),
     "open_bowl": lambda: open_bowl(),
     "stud_brick": lambda: stud_brick(),

@@ -41,6 +41,9 @@ def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
         add_param(parser, GraspParams, name)
     parser.add_argument("--no-fingertip", action="store_true",
                         help="centre-of-pad grasps only (no fingertip grasps of thin parts)")
+    parser.add_argument("--no-support-grasps", action="store_true",
+                        help="jaw axes along the facet normals only (no levelled axes approaching straight down onto "
+                             "the supports the part rests on)")
     parser.add_argument("--fixed-lengths", action="store_true",
                         help="use --neighbour-radius, --dist-min/max and --com-max as given instead of scaling them "
                              f"with the part (size sqrt(area / 6) over {GraspParams().reference_size * 1e3:.0f} mm)")
@@ -53,6 +56,7 @@ def grasp_params(args: argparse.Namespace) -> GraspParams:
                        rotations=args.rotations, seed=args.seed, contact_model=args.contact_model,
                        friction=args.friction, finger_clearance=args.finger_clearance,
                        fingertip_margin=None if args.no_fingertip else args.fingertip_margin,
+                       support_grasps=not args.no_support_grasps,
                        lengths="fixed" if args.fixed_lengths else "adaptive")
 
 

@@ -25,20 +25,27 @@ def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float) -> tup
     free = np.ones(len(areas), dtype=bool)
     cos_a = np.cos(angle)
     groups = []
-    for f in order:
-        if not free[f]:
-            continue
-        n = normals[f]
-        level = float(tri[f, 0] @ n)
+    block = max(1, min(128, 2_000_000 // max(len(areas), 1)))
+    # the tests of a block of upcoming seeds against every free face at once (rows: seeds); the greedy pass reads them
+    while free.any():
         cand = np.flatnonzero(free)
-        low = (tri[cand] @ n).min(axis=1) - level
+        seeds = order[free[order]][:block]  # the next free faces, largest first
+        n = normals[seeds]
+        t = tri[cand]
+        low = np.minimum(np.minimum(n @ t[:, 0].T, n @ t[:, 1].T), n @ t[:, 2].T)
+        low -= np.einsum("sj,sj->s", tri[seeds, 0], n)[:, None]
         # within the angle and the distance; or, whatever its tilt, flat against the plane to a quarter of the
         # distance (the slivers a noisy scan's hull puts along the rim of its base)
-        ok = (low >= -distance) & ((normals[cand] @ n >= cos_a) | (low >= -0.25 * distance))
-        ok[np.searchsorted(cand, f)] = True
-        g = cand[ok]
-        free[g] = False
-        groups.append(g)
+        near = (low >= -distance) & ((n @ normals[cand].T >= cos_a) | (low >= -0.25 * distance))
+        at = np.searchsorted(cand, seeds)
+        for j, f in enumerate(seeds):
+            if not free[f]:
+                continue
+            ok = near[j] & free[cand]
+            ok[at[j]] = True
+            g = cand[ok]
+            free[g] = False
+            groups.append(g)
     wn = np.array([(normals[g] * areas[g, None]).sum(axis=0) for g in groups]).reshape(-1, 3)
     wn /= np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300)
     return groups, wn
@@ -50,13 +57,12 @@ def support_stability(points: np.ndarray, com: np.ndarray, normal: np.ndarray) -
     height (Section VI); negative when the projection falls outside, 0 when the support has no area."""
     from scipy.spatial import ConvexHull
 
-    height = float(((points - com) @ normal).max())
+    rel = points - com
+    height = float((rel @ normal).max())
     if len(points) < 3 or height <= 0:
         return 0.0
-    u = np.cross(normal, np.eye(3)[np.argmin(np.abs(normal))])
-    u /= np.linalg.norm(u)
-    v = np.cross(normal, u)
-    p2 = np.column_stack([(points - com) @ u, (points - com) @ v])
+    basis = _plane_basis(normal)
+    p2 = rel @ basis.T
     try:
         h = ConvexHull(p2)
     except Exception:  # collinear support: no area
@@ -64,15 +70,32 @@ def support_stability(points: np.ndarray, com: np.ndarray, normal: np.ndarray) -
     return float(np.min(-h.equations[:, 2])) / height  # equations: unit n.x + d <= 0 inside; negative outside
 
 
+def _plane_basis(normal: np.ndarray) -> np.ndarray:
+    """Two unit vectors (2, 3) spanning the plane normal to the unit `normal`."""
+    a = np.zeros(3)
+    a[np.argmin(np.abs(normal))] = 1.0
+    u = a - (a @ normal) * normal
+    u /= np.sqrt(u @ u)
+    n0, n1, n2 = normal
+    return np.array([u, [n1 * u[2] - n2 * u[1], n2 * u[0] - n0 * u[2], n0 * u[1] - n1 * u[0]]])
+
+
 def stabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.ndarray], normals: np.ndarray,
                 floor: float = 0.0) -> np.ndarray:
     """`support_stability` of every group, its support the vertices of its faces. Groups whose farthest support point
-    from the centre of mass's vertical cannot give a stability of `floor` score 0 (no hull is built)."""
+    from the centre of mass's vertical cannot give a stability of `floor` score 0 (no hull is built). Groups of one
+    face (most of a curved part's hull) are scored together: their support polygon is the triangle itself."""
     faces = np.asarray(hull.faces)
     verts = np.asarray(hull.vertices)
     out = np.zeros(len(groups))
-    for i, g in enumerate(groups):
-        pts = verts[np.unique(faces[g])]
+    support = [np.unique(faces[g]) for g in groups]
+    size = np.array([len(v) for v in support])
+    small = np.flatnonzero(size <= SMALL)
+    if len(small):
+        idx = np.array([np.resize(support[i], SMALL) for i in small])  # padded by repeating the group's vertices
+        out[small] = _small_stabilities(verts[idx], com, normals[small], floor)
+    for i in np.flatnonzero(size > SMALL):
+        pts = verts[support[i]]
         rel = pts - com
         n = normals[i]
         h = rel @ n
@@ -84,3 +107,36 @@ def stabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.ndarray]
             continue
         out[i] = support_stability(pts, com, n)
     return out
+
+
+SMALL = 8  # supports of at most this many vertices are scored together, without a hull each
+
+
+def _small_stabilities(pts: np.ndarray, com: np.ndarray, normals: np.ndarray, floor: float) -> np.ndarray:
+    """`support_stability` of G supports of SMALL points each (G, SMALL, 3; repeated points allowed) with outward
+    `normals` (G, 3), all at once, and 0 where the farthest point cannot give `floor`. The support polygon's edges are
+    the point pairs with every other point on one side; the stability is the least signed distance from the centre
+    of mass's projection to their lines (negative outside) over its height."""
+    rel = pts - com
+    h = np.einsum("gvj,gj->gv", rel, normals)
+    height = h.max(axis=1)
+    reach = np.sqrt(np.clip((np.einsum("gvj,gvj->gv", rel, rel) - h**2).max(axis=1), 0.0, None))
+    a = np.zeros_like(normals)
+    a[np.arange(len(normals)), np.argmin(np.abs(normals), axis=1)] = 1.0
+    u = a - np.einsum("gj,gj->g", a, normals)[:, None] * normals
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(normals, u)
+    p2 = np.stack([np.einsum("gvj,gj->gv", rel, u), np.einsum("gvj,gj->gv", rel, v)], axis=2)  # (G, K, 2)
+    i, j = np.triu_indices(pts.shape[1], 1)
+    e = p2[:, j] - p2[:, i]  # (G, P, 2)
+    length = np.linalg.norm(e, axis=2)
+    tol = 1e-9 * np.maximum(np.abs(p2).max(axis=(1, 2)), 1e-300)
+    m = np.stack([-e[..., 1], e[..., 0]], axis=2) / np.maximum(length, 1e-300)[..., None]
+    side = np.einsum("gpkc,gpc->gpk", p2[:, None, :, :] - p2[:, i][:, :, None, :], m)  # (G, P, K)
+    lo, hi = side.min(axis=2), side.max(axis=2)
+    edge = (length > tol[:, None]) & ((lo >= -tol[:, None]) | (hi <= tol[:, None]))
+    inward = np.where(lo >= -tol[:, None], 1.0, -1.0)
+    dist = np.where(edge, -inward * np.einsum("gpc,gpc->gp", p2[:, i], m), np.inf).min(axis=1)
+    area = np.abs(side).max(axis=(1, 2)) > tol
+    ok = (height > 0) & area & (reach >= floor * height)
+    return np.where(ok, dist / np.where(height > 0, height, 1.0), 0.0)

@@ -27,7 +27,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import QhullError
 
-from workbench.errors import ParameterError
+from workbench.errors import MeshError, ParameterError
 from workbench.geometry.collision import (
     boxes_collide,
     bvh,
@@ -39,6 +39,7 @@ from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
 from workbench.grasping.pads import Touches, axis_frames, fingertip_shifts, first_touches
+from workbench.grasping.placements import stable_placements
 from workbench.params import Params, check_memory, param
 from workbench.robots.gripper import Gripper
 
@@ -62,8 +63,9 @@ class GraspParams(Params):
     the fixed lengths apply unscaled (60 mm). axis_angle: the pad model tries one jaw axis per sample and group of
     facet normals within this angle (None: tau/2; 0: every facet sample, see `distinct_axes`). fingertip_margin:
     with the pad model, where the fingertips would poke past the part (thin parts), the same jaw axis is also tried
-    with the hand moved back so they end this far beyond it (3 mm, beyond the placements' 2 mm table clearance;
-    `pads.fingertip_shifts`; None turns it off).
+    with the hand moved back so they end this far short of its far side (3 mm, more than the placements' 2 mm table
+    clearance; `pads.fingertip_shifts`; None turns it off). support_grasps: with the pad model, also try every jaw axis
+    levelled for each support the part rests on, approaching straight down (`support_axes`).
     """
 
     tau: float = param(float(np.radians(18.0)), gt=0, lt=np.pi / 2, unit="rad", help="facet normal threshold",
@@ -90,9 +92,10 @@ class GraspParams(Params):
     axis_angle: float | None = param(None, ge=0, lt=np.pi, optional=True, unit="rad",
                                      help="one jaw axis per sample and group of facet normals within this angle",
                                      cli_scale=DEG, cli_unit="deg")
+    support_grasps: bool = True
     fingertip_margin: float | None = param(0.003, ge=0, le=0.05, optional=True, unit="m",
                                            help="fingertip grasps of thin parts: the hand moved back so the fingertips "
-                                                "end this far beyond the part")
+                                                "end this far short of the part's far side")
 
     def check(self) -> None:
         self.require(self.dist_min <= self.dist_max, ("dist_min", "dist_max"), "the distance filter needs dist_min <= dist_max")
@@ -287,13 +290,18 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     angles = 2 * np.pi * np.arange(params.rotations) / params.rotations
     origins = samples.points[samples.pair_sample[sel]]
     axes = facets.normals[samples.pair_facet[sel]]
-    touch = first_touches(mesh, origins, axes, angles, gripper)
-    source = np.repeat(sel, len(angles))
-    turn = np.tile(np.arange(len(angles)), len(sel))  # each hand pose's rotation, as an index into `angles`
+    parts = [first_touches(mesh, origins, axes, angles, gripper)]
+    source = [np.repeat(sel, len(angles))]
+    if params.support_grasps:
+        k, y, z = support_axes(axes, _support_normals(obj), params.rotations, params.friction_coefficient)
+        parts.append(first_touches(mesh, origins[k], y, np.zeros(1), gripper, ref=z))
+        source.append(sel[k])
+    counts["support"] = int(len(parts[-1])) if params.support_grasps else 0
+    touch, source = _merge(parts), np.concatenate(source)
     if params.fingertip_margin is not None:
-        touch, source, turn = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source, turn,
-                                                 samples, facets, angles)
-    counts["fingertip"] = int(len(touch) - len(sel) * len(angles))
+        tips, tip_source = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source)
+        touch, source = _merge([touch, tips]), np.concatenate([source, tip_source])
+        counts["fingertip"] = int(len(tips))
     timings["pads"] = time.perf_counter() - t0
     y = touch.poses[:, :3, 1]
     cos_f = np.cos(np.arctan(params.friction_coefficient))
@@ -311,33 +319,71 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     target = object_collider(mesh)
     free = _level2(gripper, touch.poses[live], touch.width[live], target, params.finger_clearance, counts, timings,
                    pads=False)
-    return pairs, touch.poses[live], live, angles[turn[live]], free
+    return pairs, touch.poses[live], live, rotation_about_axis(touch.poses[live]), free
 
 
-def _fingertip_variants(mesh, gripper, margin, touch: Touches, source, turn, samples, facets, angles):
-    """`touch` extended with the fingertip variants of its hand poses that hit the part within the jaw range (the
-    same jaw axis and rotation, the TCP moved back by `pads.fingertip_shifts`), and their sources and rotations."""
+def _support_normals(obj: ObjectModel) -> np.ndarray:
+    """Outward normals (S, 3) of the supports the part rests on stably (the placement stage's defaults)."""
+    try:
+        return stable_placements(obj).normals
+    except MeshError:  # a flat sheet rests on no face
+        return np.zeros((0, 3))
+
+
+def _merge(parts: list[Touches]) -> Touches:
+    return Touches(**{f: np.concatenate([getattr(t, f) for t in parts]) for f in Touches.__dataclass_fields__})
+
+
+def rotation_about_axis(poses: np.ndarray) -> np.ndarray:
+    """The stored rotation of TCP poses (H, 4, 4): the angle in [0, 2 pi) about the jaw axis y from the reference
+    approach z0 of `pads.axis_frames` to the pose's approach."""
+    ref = axis_frames(np.zeros((len(poses), 3)), poses[:, :3, 1], np.zeros(1))
+    z = poses[:, :3, 2]
+    a = np.arctan2(np.einsum("ij,ij->i", z, ref[:, :3, 0]), np.einsum("ij,ij->i", z, ref[:, :3, 2]))
+    return np.mod(a, 2 * np.pi)
+
+
+def support_axes(normals: np.ndarray, downs: np.ndarray, rotations: int, friction: float,
+                 same: float = np.radians(0.5)) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Jaw axes levelled for the supports the part rests on: (index into `normals`, axis y, approach z), one row per
+    (axis, support) pair that the regular hand rotations miss.
+
+    A part lying on the table is mostly gripped from above, with a level jaw axis and the approach straight down.
+    The paper's axes follow the facet normals; on a curved or scanned part those are a few degrees off level, and
+    the open fingers (40 mm either side of the axis) then dip into the table. So every facet normal within the
+    friction angle of level for a support's outward normal d (the direction into the table) is also tried levelled,
+    y = n - (n . d) d normalised, with the approach z = d. A pair the regular rotations already give (y within
+    `same` of n and a rotation within `same` of d, as on a CAD part's vertical faces) is skipped.
+    `normals` (K, 3) unit facet normals; `downs` (S, 3) unit outward support normals in the part's frame.
+    """
+    if len(normals) == 0 or len(downs) == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3))
+    dots = normals @ downs.T  # (K, S)
+    k, s = np.nonzero(np.abs(dots) <= np.sin(np.arctan(friction)))
+    d = downs[s]
+    y = normals[k] - dots[k, s][:, None] * d
+    y /= np.linalg.norm(y, axis=1, keepdims=True)
+    ref = axis_frames(np.zeros((len(k), 3)), normals[k], np.zeros(1))
+    a = np.arctan2(np.einsum("ij,ij->i", d, ref[:, :3, 0]), np.einsum("ij,ij->i", d, ref[:, :3, 2]))
+    step = 2 * np.pi / rotations
+    off = np.abs(a / step - np.round(a / step)) * step
+    dup = (np.einsum("ij,ij->i", y, normals[k]) >= np.cos(same)) & (off <= same)
+    return k[~dup], y[~dup], d[~dup]
+
+
+def _fingertip_variants(mesh, gripper, margin, touch: Touches, source: np.ndarray) -> tuple[Touches, np.ndarray]:
+    """The fingertip variants of `touch`'s hand poses that hit the part within the jaw range (the same jaw axis and
+    approach, the TCP moved back by `pads.fingertip_shifts`), and their sources."""
     cand = np.flatnonzero(touch.hit & (touch.width <= gripper.jaw_max))
-    if len(cand) == 0:
-        return touch, source, turn
     try:
         extreme = np.asarray(mesh.convex_hull.vertices)
     except QhullError:  # a flat sheet has no hull; its own vertices bound it as well
         extreme = np.unique(np.asarray(mesh.vertices), axis=0)
-    d = fingertip_shifts(extreme, touch.poses[cand], gripper, margin)
+    d = fingertip_shifts(extreme, touch.poses[cand], gripper, margin) if len(cand) else np.zeros(0)
     cand, d = cand[np.isfinite(d)], d[np.isfinite(d)]
-    parts = [touch]
-    src, turns = [source], [turn]
-    for j in np.unique(turn[cand]):
-        c, dj = cand[turn[cand] == j], d[turn[cand] == j]
-        axis_point = samples.points[samples.pair_sample[source[c]]]
-        origins = axis_point - dj[:, None] * touch.poses[c, :3, 2]
-        parts.append(first_touches(mesh, origins, facets.normals[samples.pair_facet[source[c]]], angles[j:j + 1],
-                                   gripper))
-        src.append(source[c])
-        turns.append(turn[c])
-    merged = Touches(**{f: np.concatenate([getattr(t, f) for t in parts]) for f in Touches.__dataclass_fields__})
-    return merged, np.concatenate(src), np.concatenate(turns)
+    poses = touch.poses[cand]
+    origins = poses[:, :3, 3] - d[:, None] * poses[:, :3, 2]
+    return first_touches(mesh, origins, poses[:, :3, 1], np.zeros(1), gripper, ref=poses[:, :3, 2]), source[cand]
 
 
 def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, angle: float) -> np.ndarray:

@@ -54,11 +54,13 @@ def pad_rectangle(gripper: Gripper) -> tuple[float, float, float, float]:
     return float(c[0]), float(c[2]), float(ext[0] / 2), float(ext[2] / 2)
 
 
-def axis_frames(origins: np.ndarray, axes: np.ndarray, angles: np.ndarray) -> np.ndarray:
+def axis_frames(origins: np.ndarray, axes: np.ndarray, angles: np.ndarray, ref: np.ndarray | None = None) -> np.ndarray:
     """TCP frames (K * A, 4, 4): origin on the axis, y along it, approach z = the reference z0 (the world axis least
-    aligned with y, made perpendicular) rotated by +angle about y (right-handed, the stored rotation), axis-major."""
+    aligned with y, made perpendicular) rotated by +angle about y (right-handed, the stored rotation), axis-major.
+    `ref` (K, 3), when given, replaces the world axis as each axis's reference (it must not be parallel to y)."""
     y = axes / np.linalg.norm(axes, axis=1, keepdims=True)
-    ref = np.eye(3)[np.argmin(np.abs(y), axis=1)]
+    if ref is None:
+        ref = np.eye(3)[np.argmin(np.abs(y), axis=1)]
     z0 = ref - np.einsum("ij,ij->i", ref, y)[:, None] * y
     z0 /= np.linalg.norm(z0, axis=1, keepdims=True)
     x0 = np.cross(y, z0)
@@ -74,8 +76,8 @@ def axis_frames(origins: np.ndarray, axes: np.ndarray, angles: np.ndarray) -> np
 
 def fingertip_shifts(vertices: np.ndarray, poses: np.ndarray, gripper: Gripper, margin: float,
                      min_contact: float = 1e-3) -> np.ndarray:
-    """How far to move each TCP back along its approach so the fingertips end `margin` beyond the part (H,), NaN
-    where no shift is needed or possible.
+    """How far to move each TCP back along its approach so the fingertips end `margin` short of the part's far side
+    along it (H,), NaN where no shift is needed or possible.
 
     With the TCP at the pad's centre, a part thinner than half a pad beyond the contact (a washer or a bracket
     lying flat, gripped from above) leaves the fingertips poking past it, into the table in every placement with
@@ -109,15 +111,16 @@ def _near_axis_tri(tri: np.ndarray, origins: np.ndarray, axes: np.ndarray, radiu
 
 
 def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, angles: np.ndarray,
-                  gripper: Gripper, tie: float = 1e-6) -> Touches:
-    """First touches of both pads closing along each axis at each hand rotation (CONVENTIONS.md, Gripper)."""
+                  gripper: Gripper, tie: float = 1e-6, ref: np.ndarray | None = None) -> Touches:
+    """First touches of both pads closing along each axis at each hand rotation (CONVENTIONS.md, Gripper); `ref`
+    as in `axis_frames` (rotation 0 approaching along it)."""
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
     axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
     angles = np.asarray(angles, dtype=np.float64)
-    frames = axis_frames(origins, axes, angles)
+    frames = axis_frames(origins, axes, angles, ref)
     # the reference frames (rotation 0): `_rows` turns every triangle into each rotation's pad coordinates from them
-    fr0 = axis_frames(origins, axes, np.zeros(1))
+    fr0 = axis_frames(origins, axes, np.zeros(1), ref)
     with np.errstate(divide="ignore", invalid="ignore"):
         return _touches(mesh, origins, frames, fr0, angles, gripper, tie)
 
