@@ -161,7 +161,7 @@ BAD_FILES = {
     "metres loaded as mm": (lambda d: _export(box(), d / "metres.stl"), {"units": "mm"},
                             r"0\.0001 m across.*implausible"),
     "mm loaded without scale": (lambda d: _export(box(np.array(BOX) * 1000), d / "mm.stl"), {},
-                                r"100 m across.*implausible.*scale=0\.001"),
+                                r"100 m across.*implausible.*--units mm \(100 mm across\)"),
     "unknown unit": (lambda d: _export(box(), d / "a.stl"), {"units": "furlong"}, r"unknown unit 'furlong'"),
     "zero scale": (lambda d: _export(box(), d / "a.stl"), {"scale": 0.0}, r"scale must be a positive"),
     "negative scale": (lambda d: _export(box(), d / "a.stl"), {"scale": -0.001}, r"scale must be a positive"),
@@ -259,3 +259,22 @@ def test_stl_obj_and_ply_load(tmp_path, ext):
     assert obj.n_triangles == 12 and obj.mesh.is_watertight
     np.testing.assert_allclose(obj.mesh.extents, BOX, rtol=1e-6)
     np.testing.assert_allclose(obj.com, BOX_CENTRE, atol=1e-7)
+
+
+def test_unit_hints_name_every_unit_giving_a_gripper_sized_part(tmp_path):
+    """A 5-unit can is 50 mm in centimetres and 127 mm in inches: the error names both, with the sizes; a 2 m part
+    read in metres is accepted with a warning that names the units that would make it hand-sized."""
+    can = tmp_path / "can.stl"
+    trimesh.creation.cylinder(radius=2.0, height=5.0, sections=24).export(can)
+    with pytest.raises(WorkbenchError) as err:
+        load_object(can)
+    msg = str(err.value)
+    assert "--units cm (50 mm across)" in msg and "--units in (127 mm across)" in msg and "--units mm" not in msg
+    bar = tmp_path / "bar.stl"
+    trimesh.creation.box((2.0, 1.0, 1.0)).export(bar)
+    with pytest.warns(MeshWarning, match=r"2 m across read in metres.*--units in \(50.8 mm across\)"):
+        obj = load_object(bar)
+    assert obj.mesh.extents.max() == pytest.approx(2.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MeshWarning)
+        assert load_object(bar, units="in").mesh.extents.max() == pytest.approx(0.0508)

@@ -115,7 +115,7 @@ def test_cli_bad_input_is_one_line_and_status_2(tmp_path, capsys):
     trimesh.creation.box((60.0, 40.0, 30.0)).export(big)
     assert main(["grasps", str(big), "--db", str(tmp_path / "x.duckdb")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "scale=0.001" in err[0]
+    assert len(err) == 1 and "--units mm (60 mm across)" in err[0]
     assert main(["placements", "--db", str(tmp_path / "x.duckdb"), "--object", "nothing"]) == 2
     assert "does not exist" in capsys.readouterr().err  # refused meshes never created the store; reading creates none
     assert not (tmp_path / "x.duckdb").exists()

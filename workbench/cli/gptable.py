@@ -13,7 +13,7 @@ from workbench.errors import WorkbenchError
 from workbench.geometry.objects import load_object
 from workbench.grasping.placements import PlacementParams
 from workbench.params import add_param
-from workbench.planners.tournassoud.classes import KINDS, ClassParams
+from workbench.planners.tournassoud.classes import KINDS, ClassParams, no_class_reason
 from workbench.planners.tournassoud.stages import table_stage_at
 from workbench.planners.tournassoud.table import TableParams
 from workbench.robots.model import get_robot, pose_xyz_yaw
@@ -104,8 +104,7 @@ def run(args: argparse.Namespace) -> int:
     for line in summary(r):
         print(line)
     if not r.classes:
-        print(f"warning: no grasp class: the gripper (jaw {robot.gripper.jaw_max * 1000:.0f} mm) spans no pair of parallel "
-              f"features of {obj.name}; check the scale or lower --min-face-area", file=sys.stderr)
+        print(f"warning: no grasp class: {no_class_reason(obj, robot.gripper, cp)}", file=sys.stderr)
     elif not r.table.q.any():
         print(f"warning: the table is empty; stage {r.table.empty_reason()}", file=sys.stderr)
     print(f"store {args.db}: classes paramset {r.idclasses}, table paramset {r.idtable}")

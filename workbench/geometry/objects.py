@@ -14,6 +14,7 @@ from workbench.errors import MeshError
 from workbench.geometry.repair import repair
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254}
+NAMES = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "in": "inches"}
 MAX_EXTENT = 2.0
 MIN_EXTENT = 0.005
 
@@ -120,6 +121,9 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         hint = _scale_hint(extent, scale)
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
                         f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {hint}")
+    if extent > TYPICAL[1] and scale == 1.0:
+        warnings.warn(f"{label} is {extent:.3g} m across read in metres, larger than a gripper-sized part; "
+                      f"{_scale_hint(extent, scale)}", MeshWarning, stacklevel=3)
     if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0:
         com, method = np.asarray(mesh.center_mass, dtype=np.float64), "volume"
     else:
@@ -131,14 +135,18 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
                        repairs=tuple(repairs))
 
 
+TYPICAL = (0.01, 0.5)  # the sizes (m) of parts a hand-sized gripper usually meets, for the unit hints
+
+
 def _scale_hint(extent: float, scale: float = 1.0) -> str:
-    """The unit (or scale) that makes a part `extent` m across at `scale` gripper-sized, for the error message."""
+    """The units (or scale) that make a part `extent` m across at `scale` gripper-sized, for the error message:
+    those giving a typical part size first, each with the size it gives."""
     raw = extent / scale  # in the file's own units
-    units = (("mm", 0.001), ("cm", 0.01), ("in", 0.0254), ("m", 1.0)) if extent > MAX_EXTENT else \
-        (("m", 1.0), ("cm", 0.01), ("in", 0.0254), ("mm", 0.001))
-    for unit, factor in units:
-        if factor != scale and MIN_EXTENT <= raw * factor <= MAX_EXTENT:
-            return f"if the file is in {unit}, pass --units {unit} (scale={factor:g})"
+    fits = [(u, f) for u, f in UNITS.items() if u != "inch" and f != scale and MIN_EXTENT <= raw * f <= MAX_EXTENT]
+    typical = [(u, f) for u, f in fits if TYPICAL[0] <= raw * f <= TYPICAL[1]]
+    if typical or fits:
+        return "; ".join(f"if the file is in {NAMES[u]}, pass --units {u} ({raw * f * 1000:.3g} mm across)"
+                         for u, f in (typical or fits))
     if extent < MIN_EXTENT:
         need = MIN_EXTENT / raw
         return (f"no unit makes it at least {MIN_EXTENT * 1000:g} mm across: it would take --scale {need:.3g} or more; "

@@ -80,7 +80,13 @@ def test_zero_classes_is_a_warning(tmp_path, capsys):
     trimesh.creation.box((0.3, 0.2, 0.15)).export(big)  # wider than the 80 mm jaw in every direction
     assert main(["gptable", str(big), "--db", str(tmp_path / "z.duckdb"), "--theta-step", "15", "--phi-step", "15"]) == 0
     cap = capsys.readouterr()
-    assert "0 grasp classes" in cap.out and "warning: no grasp class" in cap.err
+    assert "0 grasp classes" in cap.out and "warning: no grasp class" in cap.err and "spans no pair" in cap.err
+    # a curved part has no planar face to pair: the warning says so and names the planner for it
+    ball = tmp_path / "ball.stl"
+    trimesh.creation.icosphere(subdivisions=3, radius=0.025).export(ball)
+    assert main(["gptable", str(ball), "--db", str(tmp_path / "z.duckdb"), "--theta-step", "15", "--phi-step", "15"]) == 0
+    err = capsys.readouterr().err
+    assert "0 planar face(s)" in err and "workbench build" in err
 
 
 def test_plans_are_stored_like_the_roadmap_planners(tmp_path, lpart, make_puma):

@@ -48,6 +48,7 @@ from workbench.planners.tournassoud.features import (
     Features,
     Raster,
     face_overlap,
+    faces_of,
     features,
     grid_for,
     plane_basis,
@@ -398,6 +399,18 @@ def select_points(cands: np.ndarray, test, theta: np.ndarray, resolution: float,
         c = cands[k]
         out.append((c, _intervals(free[k], theta, step, lambda t, c=c: test(t, point=c), resolution)))
     return out
+
+
+def no_class_reason(obj: ObjectModel, gripper: Gripper, params: ClassParams = ClassParams()) -> str:
+    """Why `obj` has no grasp class, and what to try (Section 2.1: classes pair planar faces with parallel features)."""
+    faces = faces_of(obj.mesh, params.min_face_area)
+    area = f"{params.min_face_area * 1e6:.3g} mm^2"
+    if len(faces) < 2:
+        return (f"{obj.name} has {len(faces)} planar face(s) of at least {area} (a curved or scanned surface), and a "
+                f"grasp class needs a planar face opposite a parallel feature; plan its regrasps with `workbench build` "
+                f"and `workbench plan` (Wan & Harada), or lower --min-face-area")
+    return (f"the gripper (jaw {gripper.jaw_max * 1000:.0f} mm) spans no pair of parallel features of {obj.name} "
+            f"({len(faces)} planar faces of at least {area}); check the scale or lower --min-face-area")
 
 
 def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = ClassParams(),
