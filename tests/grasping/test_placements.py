@@ -76,6 +76,20 @@ def test_tube_stands_on_rims_not_on_curved_side():
     assert np.allclose(pl.rejected_stability, np.tan(np.pi / 64), rtol=1e-6)
 
 
+def test_foil_thinner_than_the_coplanar_tolerance_rests_on_either_side():
+    """A 10 micron foil: its two sides lie within the 0.5 mm merge distance of each other but face away from each
+    other, so they stay two supports (merged, their normals cancelled and the placement stage divided by zero)."""
+    import warnings
+
+    foil = from_trimesh(trimesh.creation.box((0.05, 0.04, 1e-5)), "foil")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        p = stable_placements(foil)
+    assert len(p) == 2
+    assert np.allclose(np.sort(p.normals[:, 2]), [-1.0, 1.0])
+    assert (p.stability > 100).all()  # 20 mm of margin over a 5 micron height
+
+
 def test_off_centre_mass_tips_over():
     """An L-shaped part cannot rest on the face whose support its centre of mass overhangs."""
     a = trimesh.creation.box((0.10, 0.02, 0.02))

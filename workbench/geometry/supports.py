@@ -4,10 +4,11 @@ A scanned base is flat only to a tolerance: its convex hull is many small faces 
 or so, none of which holds the centre of mass's projection on its own. Hull faces are grouped greedily, largest
 first: a face joins a group when its normal is within `angle` of the group's seed and all its vertices lie within
 `distance` of the seed's plane, or when its vertices lie within a quarter of `distance` whatever its tilt (thin
-slivers along the rim of a noisy base). A group is one candidate support resting on its area-weighted normal; its support polygon is the convex hull
-of the group's vertices (all within `distance` of the table). Only the group's own vertices count: on a curved side
-(a cylinder's flat strips) vertices of neighbouring strips also lie within half a millimetre of the table, but the
-object would roll, not rest on them.
+slivers along the rim of a noisy base), as long as it does not face away from the seed. A group is one candidate
+support resting on its area-weighted normal; its support polygon is the convex hull of the group's vertices (all
+within `distance` of the table). Only the group's own vertices count: on a curved side (a cylinder's flat strips)
+vertices of neighbouring strips also lie within half a millimetre of the table, but the object would roll, not
+rest on them.
 """
 
 from __future__ import annotations
@@ -36,7 +37,9 @@ def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float) -> tup
         low -= np.einsum("sj,sj->s", tri[seeds, 0], n)[:, None]
         # within the angle and the distance; or, whatever its tilt, flat against the plane to a quarter of the
         # distance (the slivers a noisy scan's hull puts along the rim of its base)
-        near = (low >= -distance) & ((n @ normals[cand].T >= cos_a) | (low >= -0.25 * distance))
+        # (never a face turned away from the seed: both sides of a foil thinner than the distance are not one support)
+        facing = n @ normals[cand].T
+        near = (low >= -distance) & ((facing >= cos_a) | ((low >= -0.25 * distance) & (facing > 0)))
         at = np.searchsorted(cand, seeds)
         for j, f in enumerate(seeds):
             if not free[f]:
