@@ -65,3 +65,14 @@ def test_each_grasp_filter_is_named_when_it_removes_the_last_candidate(hand):
         assert len(plan.grasps) == 0 and plan.empty_reason.startswith(stage), (stage, plan.counts, plan.empty_reason)
     ok = plan_grasps(box, hand, GraspParams())
     assert len(ok.grasps) > 0 and ok.empty_reason is None
+
+
+def test_a_card_lying_flat_is_named_too_thin_to_grip(tmp_path):
+    """A 0.8 mm card has grasps in free air but none that reaches it on the table: `build` exits 0, stores its
+    placements and says the part is too thin, with its height."""
+    trimesh.creation.box((0.05, 0.04, 0.0008)).export(tmp_path / "card.stl")
+    out = _cli("build", "card.stl", "--db", "c.duckdb", "--robot", "panda", "--workers", "1", "--x=0.4,0.6,2",
+               "--y=-0.1,0.1,2", "--angles", "2", cwd=tmp_path)
+    assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr
+    assert "2 stable placements" in out.stdout
+    assert "stage free tabletop grips" in out.stderr and "card stands at most 0.8 mm above the table" in out.stderr

@@ -477,6 +477,9 @@ def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
 # Zero results (issue 10): which stage stored no rows, and what to try.
 
 
+THIN_PART = 0.004  # m: a part lower than this on the table (a card, a foil) is named as too thin to grip
+
+
 def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -> str | None:
     """The first stage of `object_name`'s latest stored runs that kept nothing, as "stage: why; what to try", or None
     when every stage (grasps, placements, free tabletop grips, tabletop grips, and IK for `robot_name`) has rows."""
@@ -497,8 +500,13 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -
     if len(free["stability"]) == 0:
         return "placements: no convex-hull face holds the centre of mass stably; lower --min-stability"
     if len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]) == 0:
-        return ("free tabletop grips: every grasp puts the hand into the table at every stable placement; lower "
-                "--clearance or plan more grasps")
+        _, obj = get_object(store, object_name)
+        v = np.asarray(obj.mesh.vertices)
+        top = max(float((v @ r[2, :3] + r[2, 3]).max()) for r in free["rotmat"])
+        thin = (f" ({object_name} stands at most {top * 1e3:.3g} mm above the table: too thin for the fingers to close "
+                f"on its sides from above)") if top < THIN_PART else ""
+        return ("free tabletop grips: every grasp puts the hand into the table at every stable placement" + thin +
+                "; lower --clearance or plan more grasps")
     if tabletop_counts(store, tt)[1] == 0:
         return "tabletop grips: no grasp is kept on the tabletop grid; raise --max-grasps or widen the grid"
     if robot_name is not None:
