@@ -17,6 +17,7 @@ UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254}
 NAMES = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "in": "inches"}
 MAX_EXTENT = 2.0
 MIN_EXTENT = 0.005
+TYPICAL = (0.01, 0.5)  # the sizes (m) of parts a hand-sized gripper usually meets, for the unit hints
 
 
 class MeshWarning(UserWarning):
@@ -133,9 +134,6 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     digest = hashlib.sha256(np.ascontiguousarray(mesh.vertices).tobytes() + np.ascontiguousarray(mesh.faces).tobytes()).hexdigest()[:16]
     return ObjectModel(name=name, mesh=mesh, com=com, com_method=method, scale=scale, source=source, digest=digest,
                        repairs=tuple(repairs))
-
-
-TYPICAL = (0.01, 0.5)  # the sizes (m) of parts a hand-sized gripper usually meets, for the unit hints
 
 
 def _scale_hint(extent: float, scale: float = 1.0) -> str:

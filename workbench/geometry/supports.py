@@ -64,8 +64,7 @@ def support_stability(points: np.ndarray, com: np.ndarray, normal: np.ndarray) -
     height = float((rel @ normal).max())
     if len(points) < 3 or height <= 0:
         return 0.0
-    basis = _plane_basis(normal)
-    p2 = rel @ basis.T
+    p2 = rel @ _plane_bases(normal[None])[0].T
     try:
         h = ConvexHull(p2)
     except Exception:  # collinear support: no area
@@ -73,21 +72,20 @@ def support_stability(points: np.ndarray, com: np.ndarray, normal: np.ndarray) -
     return float(np.min(-h.equations[:, 2])) / height  # equations: unit n.x + d <= 0 inside; negative outside
 
 
-def _plane_basis(normal: np.ndarray) -> np.ndarray:
-    """Two unit vectors (2, 3) spanning the plane normal to the unit `normal`."""
-    a = np.zeros(3)
-    a[np.argmin(np.abs(normal))] = 1.0
-    u = a - (a @ normal) * normal
-    u /= np.sqrt(u @ u)
-    n0, n1, n2 = normal
-    return np.array([u, [n1 * u[2] - n2 * u[1], n2 * u[0] - n0 * u[2], n0 * u[1] - n1 * u[0]]])
+def _plane_bases(normals: np.ndarray) -> np.ndarray:
+    """Two unit vectors (G, 2, 3) spanning the plane normal to each unit normal (G, 3)."""
+    a = np.zeros_like(normals)
+    a[np.arange(len(normals)), np.argmin(np.abs(normals), axis=1)] = 1.0
+    u = a - np.einsum("gj,gj->g", a, normals)[:, None] * normals
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    return np.stack([u, np.cross(normals, u)], axis=1)
 
 
 def stabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.ndarray], normals: np.ndarray,
                 floor: float = 0.0) -> np.ndarray:
     """`support_stability` of every group, its support the vertices of its faces. Groups whose farthest support point
-    from the centre of mass's vertical cannot give a stability of `floor` score 0 (no hull is built). Groups of one
-    face (most of a curved part's hull) are scored together: their support polygon is the triangle itself."""
+    from the centre of mass's vertical cannot give a stability of `floor` score 0 (no hull is built). Supports of at
+    most SMALL vertices (most of a curved part's hull) are scored together, by `_small_stabilities`."""
     faces = np.asarray(hull.faces)
     verts = np.asarray(hull.vertices)
     out = np.zeros(len(groups))
@@ -124,12 +122,7 @@ def _small_stabilities(pts: np.ndarray, com: np.ndarray, normals: np.ndarray, fl
     h = np.einsum("gvj,gj->gv", rel, normals)
     height = h.max(axis=1)
     reach = np.sqrt(np.clip((np.einsum("gvj,gvj->gv", rel, rel) - h**2).max(axis=1), 0.0, None))
-    a = np.zeros_like(normals)
-    a[np.arange(len(normals)), np.argmin(np.abs(normals), axis=1)] = 1.0
-    u = a - np.einsum("gj,gj->g", a, normals)[:, None] * normals
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(normals, u)
-    p2 = np.stack([np.einsum("gvj,gj->gv", rel, u), np.einsum("gvj,gj->gv", rel, v)], axis=2)  # (G, K, 2)
+    p2 = np.einsum("gvj,gcj->gvc", rel, _plane_bases(normals))  # (G, K, 2)
     i, j = np.triu_indices(pts.shape[1], 1)
     e = p2[:, j] - p2[:, i]  # (G, P, 2)
     length = np.linalg.norm(e, axis=2)

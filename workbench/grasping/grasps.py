@@ -292,11 +292,12 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     axes = facets.normals[samples.pair_facet[sel]]
     parts = [first_touches(mesh, origins, axes, angles, gripper)]
     source = [np.repeat(sel, len(angles))]
+    counts["support"] = 0
     if params.support_grasps:
         k, y, z = support_axes(axes, _support_normals(obj), params.rotations, params.friction_coefficient)
         parts.append(first_touches(mesh, origins[k], y, np.zeros(1), gripper, ref=z))
         source.append(sel[k])
-    counts["support"] = int(len(parts[-1])) if params.support_grasps else 0
+        counts["support"] = int(len(k))
     touch, source = _merge(parts), np.concatenate(source)
     if params.fingertip_margin is not None:
         tips, tip_source = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source)
@@ -319,7 +320,8 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     target = object_collider(mesh)
     free = _level2(gripper, touch.poses[live], touch.width[live], target, params.finger_clearance, counts, timings,
                    pads=False)
-    return pairs, touch.poses[live], live, rotation_about_axis(touch.poses[live]), free
+    kept = touch.poses[live]
+    return pairs, kept, live, rotation_about_axis(kept[:, :3, 1], kept[:, :3, 2]), free
 
 
 def _support_normals(obj: ObjectModel) -> np.ndarray:
@@ -334,12 +336,11 @@ def _merge(parts: list[Touches]) -> Touches:
     return Touches(**{f: np.concatenate([getattr(t, f) for t in parts]) for f in Touches.__dataclass_fields__})
 
 
-def rotation_about_axis(poses: np.ndarray) -> np.ndarray:
-    """The stored rotation of TCP poses (H, 4, 4): the angle in [0, 2 pi) about the jaw axis y from the reference
-    approach z0 of `pads.axis_frames` to the pose's approach."""
-    ref = axis_frames(np.zeros((len(poses), 3)), poses[:, :3, 1], np.zeros(1))
-    z = poses[:, :3, 2]
-    a = np.arctan2(np.einsum("ij,ij->i", z, ref[:, :3, 0]), np.einsum("ij,ij->i", z, ref[:, :3, 2]))
+def rotation_about_axis(axes: np.ndarray, approach: np.ndarray) -> np.ndarray:
+    """The stored rotation (H,) of hand poses with jaw axes y and approaches z (H, 3): the angle in [0, 2 pi) about
+    y from the reference approach z0 of `pads.axis_frames` to z."""
+    ref = axis_frames(np.zeros((len(axes), 3)), axes, np.zeros(1))
+    a = np.arctan2(np.einsum("ij,ij->i", approach, ref[:, :3, 0]), np.einsum("ij,ij->i", approach, ref[:, :3, 2]))
     return np.mod(a, 2 * np.pi)
 
 
@@ -363,8 +364,7 @@ def support_axes(normals: np.ndarray, downs: np.ndarray, rotations: int, frictio
     d = downs[s]
     y = normals[k] - dots[k, s][:, None] * d
     y /= np.linalg.norm(y, axis=1, keepdims=True)
-    ref = axis_frames(np.zeros((len(k), 3)), normals[k], np.zeros(1))
-    a = np.arctan2(np.einsum("ij,ij->i", d, ref[:, :3, 0]), np.einsum("ij,ij->i", d, ref[:, :3, 2]))
+    a = rotation_about_axis(normals[k], d)
     step = 2 * np.pi / rotations
     off = np.abs(a / step - np.round(a / step)) * step
     dup = (np.einsum("ij,ij->i", y, normals[k]) >= np.cos(same)) & (off <= same)

@@ -483,7 +483,7 @@ THIN_PART = 0.004  # m: a part lower than this on the table (a card, a foil) is 
 def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -> str | None:
     """The first stage of `object_name`'s latest stored runs that kept nothing, as "stage: why; what to try", or None
     when every stage (grasps, placements, free tabletop grips, tabletop grips, and IK for `robot_name`) has rows."""
-    oid, _ = get_object(store, object_name)
+    oid, obj = get_object(store, object_name)
     try:
         grasps = load_grasps(store, oid)
     except StoreError:  # no grasp stage run (tabletop grips given otherwise): nothing is empty
@@ -500,9 +500,8 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -
     if len(free["stability"]) == 0:
         return "placements: no convex-hull face holds the centre of mass stably; lower --min-stability"
     if len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]) == 0:
-        _, obj = get_object(store, object_name)
-        v = np.asarray(obj.mesh.vertices)
-        top = max(float((v @ r[2, :3] + r[2, 3]).max()) for r in free["rotmat"])
+        rows = free["rotmat"][:, 2]  # the height of a vertex v in placement p: rows[p, :3] . v + rows[p, 3]
+        top = float((np.asarray(obj.mesh.vertices) @ rows[:, :3].T + rows[:, 3]).max())
         thin = (f" ({object_name} stands at most {top * 1e3:.3g} mm above the table: too thin for the fingers to close "
                 f"on its sides from above)") if top < THIN_PART else ""
         return ("free tabletop grips: every grasp puts the hand into the table at every stable placement" + thin +
