@@ -60,6 +60,12 @@ def cup(radius: float = 0.032, height: float = 0.09, wall: float = 0.004, sectio
     return _revolve(prof, sections)
 
 
+def washer(outer: float = 0.05, inner: float = 0.04, thickness: float = 0.006, sections: int = 64) -> trimesh.Trimesh:
+    """A flat washer (watertight): its centre of mass lies in the hole, at least `inner` from any grasp on the rim."""
+    prof = np.array([[inner, 0.0], [outer, 0.0], [outer, thickness], [inner, thickness], [inner, 0.0]])
+    return _revolve(prof, sections)
+
+
 def open_bowl(radius: float = 0.03, height: float = 0.05, sections: int = 40, rings: int = 10) -> trimesh.Trimesh:
     """A single curved sheet (no thickness, open rim): not watertight."""
     t = np.linspace(0.0, 1.0, rings)
@@ -118,6 +124,7 @@ ORGANIC = {
     "torus": lambda: torus(),
     "ring": lambda: torus(major=0.03, minor=0.008),
     "pebble": lambda: blob(seed=8, bump=0.1, noise=3e-4, stretch=(1.3, 1.0, 0.55), rows=22, cols=44),
+    "washer": lambda: washer(),
     "cup": lambda: cup(),
     "open_bowl": lambda: open_bowl(),
     "stud_brick": lambda: stud_brick(),

@@ -49,7 +49,7 @@ from workbench.robots.ik import (
 )
 from workbench.robots.model import Robot, get_robot
 
-MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf")
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf", ".dae")
 PART_PRIORITY = 1 << 40  # Dask priorities (higher runs first): parts, then IK chunks by their length
 HOLD_MAX = 16  # IK units of one (part, robot) held in memory at most before they are written without its graph
 SHARD_SUFFIX = ".parquet"

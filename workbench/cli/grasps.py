@@ -20,7 +20,7 @@ SCALE = cli_bound(0, 1e3, lo_open=True, help="the scale")
 
 def add_object_arguments(parser: argparse.ArgumentParser) -> None:
     """MESH, --scale/--units and --name, shared by the commands that load an object."""
-    parser.add_argument("mesh", help="STL, OBJ or PLY file of the object")
+    parser.add_argument("mesh", help="mesh file of the object (STL, OBJ, PLY, OFF, glTF/GLB or COLLADA DAE)")
     unit = parser.add_mutually_exclusive_group()
     unit.add_argument("--scale", type=parse_number(SCALE, "--scale"), default=None, metavar="X",
                       help=f"factor from the file's units to metres, e.g. 0.001 ({SCALE.describe(True)})")
@@ -44,6 +44,9 @@ def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-support-grasps", action="store_true",
                         help="jaw axes along the facet normals only (no levelled axes approaching straight down onto "
                              "the supports the part rests on)")
+    parser.add_argument("--no-gap-grasps", action="store_true",
+                        help="pads start outside the part only (no grasps of a wall with one finger inside a hole or "
+                             "cavity)")
     parser.add_argument("--fixed-lengths", action="store_true",
                         help="use --neighbour-radius, --dist-min/max and --com-max as given instead of scaling them "
                              f"with the part (size sqrt(area / 6) over {GraspParams().reference_size * 1e3:.0f} mm)")
@@ -56,7 +59,7 @@ def grasp_params(args: argparse.Namespace) -> GraspParams:
                        rotations=args.rotations, seed=args.seed, contact_model=args.contact_model,
                        friction=args.friction, finger_clearance=args.finger_clearance,
                        fingertip_margin=None if args.no_fingertip else args.fingertip_margin,
-                       support_grasps=not args.no_support_grasps,
+                       support_grasps=not args.no_support_grasps, gap_grasps=not args.no_gap_grasps,
                        lengths="fixed" if args.fixed_lengths else "adaptive")
 
 

@@ -63,12 +63,13 @@ def resolve_scale(scale: float | None, units: str | None) -> float:
 
 def load_object(path: str | Path, scale: float | None = None, units: str | None = None,
                 name: str | None = None) -> ObjectModel:
-    """Load an STL, OBJ or PLY file as an object in metres (CONVENTIONS.md: scaled once, at load)."""
+    """Load a mesh file (STL, OBJ, PLY, OFF, glTF/GLB, COLLADA) as an object in metres (CONVENTIONS.md: scaled once,
+    at load)."""
     path = Path(path)
     if not path.exists():
         raise MeshError(f"object file {path} does not exist")
     if path.is_dir():
-        raise MeshError(f"object file {path} is a folder; give a mesh file (STL, OBJ, PLY)")
+        raise MeshError(f"object file {path} is a folder; give a mesh file (STL, OBJ, PLY, OFF, GLB, DAE)")
     if path.stat().st_size == 0:
         raise MeshError(f"object file {path} is empty")
     try:

@@ -13,9 +13,11 @@ inverse facet normal to a parallel facet, then level 1 (the pads' swept cylinder
 
 Lengths scale with the part (the paper: sampling density, stability and torque strategies "are adaptive to varying
 model geometry"). The part's size is the side of the cube of the same surface area, sqrt(area / 6); the neighbour
-radius, the boundary distances and the centre-of-mass distance are their fixed values times size / reference_size
-(60 mm, between the paper's tube and tail, so those parts keep about the fixed values). `lengths="fixed"` uses the
-fixed values as given.
+radius and the boundary distances are their fixed values times size / reference_size (60 mm, between the paper's tube
+and tail, so those parts keep about the fixed values). The centre-of-mass distance, the paper's bound on the gravity
+torque m g d, scales only up: a smaller part is lighter (m grows as size^3), so the fixed distance already bounds its
+torque below the reference part's, and a flat washer or ring, whose centre of mass lies in its hole, keeps its rim
+grasps. `lengths="fixed"` uses the fixed values as given.
 """
 
 from __future__ import annotations
@@ -38,7 +40,7 @@ from workbench.geometry.collision import (
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
-from workbench.grasping.pads import Touches, axis_frames, fingertip_shifts, first_touches
+from workbench.grasping.pads import Touches, axis_frames, fingertip_shifts, first_touches, gap_windows
 from workbench.grasping.placements import stable_placements
 from workbench.params import Params, check_memory, param
 from workbench.robots.gripper import Gripper
@@ -65,7 +67,8 @@ class GraspParams(Params):
     with the pad model, where the fingertips would poke past the part (thin parts), the same jaw axis is also tried
     with the hand moved back so they end this far short of its far side (3 mm, more than the placements' 2 mm table
     clearance; `pads.fingertip_shifts`; None turns it off). support_grasps: with the pad model, also try every jaw axis
-    levelled for each support the part rests on, approaching straight down (`support_axes`).
+    levelled for each support the part rests on, approaching straight down (`support_axes`). gap_grasps: with the pad
+    model, also try every jaw axis with one pad starting inside a hole or cavity, gripping a wall (`pads.gap_windows`).
     """
 
     tau: float = param(float(np.radians(18.0)), gt=0, lt=np.pi / 2, unit="rad", help="facet normal threshold",
@@ -93,6 +96,7 @@ class GraspParams(Params):
                                      help="one jaw axis per sample and group of facet normals within this angle",
                                      cli_scale=DEG, cli_unit="deg")
     support_grasps: bool = True
+    gap_grasps: bool = True
     fingertip_margin: float | None = param(0.003, ge=0, le=0.05, optional=True, unit="m",
                                            help="fingertip grasps of thin parts: the hand moved back so the fingertips "
                                                 "end this far short of the part's far side")
@@ -116,8 +120,10 @@ class GraspParams(Params):
     def scaled(self, mesh: trimesh.Trimesh) -> dict[str, float]:
         """The lengths used on `mesh`: neighbour_radius, dist_min, dist_max, com_max, and the factor applied."""
         s = 1.0 if self.lengths == "fixed" else part_size(mesh) / self.reference_size
+        # the gravity torque m g d grows with the mass, as size^3: a part smaller than the reference size held at
+        # com_max is under less torque than the reference part, so the distance only ever scales up
         return {"scale": s, "neighbour_radius": self.neighbour_radius * s, "dist_min": self.dist_min * s,
-                "dist_max": self.dist_max * s, "com_max": self.com_max * s}
+                "dist_max": self.dist_max * s, "com_max": self.com_max * max(s, 1.0)}
 
 
 def part_size(mesh: trimesh.Trimesh) -> float:
@@ -290,14 +296,22 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     angles = 2 * np.pi * np.arange(params.rotations) / params.rotations
     origins = samples.points[samples.pair_sample[sel]]
     axes = facets.normals[samples.pair_facet[sel]]
-    parts = [first_touches(mesh, origins, axes, angles, gripper)]
-    source = [np.repeat(sel, len(angles))]
-    counts["support"] = 0
+    counts["gap"] = counts["support"] = 0
+    # (sources, origins, jaw axes, rotations, approach references): the facet-normal axes, then the levelled ones
+    axis_sets = [(sel, origins, axes, angles, None)]
     if params.support_grasps:
         k, y, z = support_axes(axes, _support_normals(obj), params.rotations, params.friction_coefficient)
-        parts.append(first_touches(mesh, origins[k], y, np.zeros(1), gripper, ref=z))
-        source.append(sel[k])
+        axis_sets.append((sel[k], origins[k], y, np.zeros(1), z))
         counts["support"] = int(len(k))
+    parts, source = [], []
+    for src, o, a, ang, ref in axis_sets:
+        parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref))
+        source.append(np.repeat(src, len(ang)))
+        if params.gap_grasps:
+            w, win = gap_windows(mesh, o, a, gripper.jaw_max)
+            parts.append(first_touches(mesh, o[w], a[w], ang, gripper, ref=None if ref is None else ref[w], windows=win))
+            source.append(np.repeat(src[w], len(ang)))
+            counts["gap"] += int(len(w))
     touch, source = _merge(parts), np.concatenate(source)
     if params.fingertip_margin is not None:
         tips, tip_source = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source)
@@ -383,7 +397,8 @@ def _fingertip_variants(mesh, gripper, margin, touch: Touches, source: np.ndarra
     cand, d = cand[np.isfinite(d)], d[np.isfinite(d)]
     poses = touch.poses[cand]
     origins = poses[:, :3, 3] - d[:, None] * poses[:, :3, 2]
-    return first_touches(mesh, origins, poses[:, :3, 1], np.zeros(1), gripper, ref=poses[:, :3, 2]), source[cand]
+    return (first_touches(mesh, origins, poses[:, :3, 1], np.zeros(1), gripper, ref=poses[:, :3, 2],
+                          windows=touch.window[cand]), source[cand])
 
 
 def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, angle: float) -> np.ndarray:

@@ -13,6 +13,13 @@ touch first (within `tie` metres, e.g. a face parallel to the pad), the one near
 at an edge or vertex touch, the triangle whose normal faces the pad best gives the normal.
 
 On a mesh that is not watertight the side of a triangle is unknown; its normal is flipped to face the pad.
+
+The pads start at full opening, half the jaw range either side of the TCP. Where the part is narrower than the jaw
+along the axis, they start outside it and only the first touches matter. Where it is not, one pad may start inside
+a hole or a cavity and close outwards onto a wall (a washer's rim, a mug's wall, the tube of a ring wider than the
+jaw): `gap_windows` finds those starts along the axis line and `first_touches` takes a window per axis, so each pad
+touches only what lies between its start and the TCP. The hand at full opening is checked against the object
+afterwards (level 2), which rejects a start inside material.
 """
 
 from __future__ import annotations
@@ -31,7 +38,8 @@ class Touches:
 
     `poses` TCP poses (H, 4, 4) centred between the touches; `width` the opening; `hit` whether the pad footprint
     meets the object at all; `point0/normal0` the left pad's contact (+y side), `point1/normal1` the right pad's;
-    `tri0/tri1` their triangles.
+    `tri0/tri1` their triangles; `window` (H, 2) the lowest and highest heights along y, from the TCP, that the
+    right and left pads can touch (their starts; -inf, inf: from outside the part).
     """
 
     poses: np.ndarray
@@ -43,6 +51,7 @@ class Touches:
     point1: np.ndarray
     normal1: np.ndarray
     tri1: np.ndarray
+    window: np.ndarray
 
     def __len__(self) -> int:
         return len(self.width)
@@ -111,21 +120,85 @@ def _near_axis_tri(tri: np.ndarray, origins: np.ndarray, axes: np.ndarray, radiu
 
 
 def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, angles: np.ndarray,
-                  gripper: Gripper, tie: float = 1e-6, ref: np.ndarray | None = None) -> Touches:
+                  gripper: Gripper, tie: float = 1e-6, ref: np.ndarray | None = None,
+                  windows: np.ndarray | None = None) -> Touches:
     """First touches of both pads closing along each axis at each hand rotation (CONVENTIONS.md, Gripper); `ref`
-    as in `axis_frames` (rotation 0 approaching along it)."""
+    as in `axis_frames` (rotation 0 approaching along it); `windows` (K, 2), heights along each axis from its origin:
+    the right pad starts at the first and touches nothing below it, the left at the second (None: from outside)."""
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
     axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
     angles = np.asarray(angles, dtype=np.float64)
+    if windows is None:
+        windows = np.tile([-np.inf, np.inf], (len(origins), 1))
+    windows = np.asarray(windows, dtype=np.float64).reshape(-1, 2)
     frames = axis_frames(origins, axes, angles, ref)
     # the reference frames (rotation 0): `_rows` turns every triangle into each rotation's pad coordinates from them
     fr0 = axis_frames(origins, axes, np.zeros(1), ref)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return _touches(mesh, origins, frames, fr0, angles, gripper, tie)
+        return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows)
 
 
-def _touches(mesh, origins, frames, fr0, angles, gripper, tie, budget=1_500_000) -> Touches:
+def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, jaw_max: float,
+                tie: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """Pad starts inside a hole or cavity for jaw axes through surface points `origins` (K, 3) along their outward
+    normals `axes` (K, 3): (axis index (W,), window (W, 2)) for `first_touches`.
+
+    Along the axis line, the left pad touches the origin's surface and the right pad a surface below it facing down
+    (any surface on an open mesh) at most `jaw_max` away; with the TCP midway, the pads start `jaw_max` / 2 either
+    side of it, and each start must leave the line clear up to its touch. The windows where both starts lie outside
+    the part along the line are the ordinary grasp from outside and are not returned.
+    """
+    origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
+    axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
+    empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
+    if len(origins) == 0:
+        return empty
+    reach = 1.1 * float(np.linalg.norm(mesh.extents)) + 1e-3
+    start = origins + reach * axes  # beyond the part: every crossing of the line is at a height below `reach`
+    locs, ray, tri = mesh.ray.intersects_location(start, -axes, multiple_hits=True)
+    if len(ray) == 0:
+        return empty
+    # heights along the axis from the origin, in float64 on the hit triangle's plane (the caster may be float32)
+    tn = mesh.face_normals[tri]
+    a = axes[ray]
+    t = np.einsum("ij,ij->i", mesh.triangles[tri, 0] - start[ray], tn) / np.einsum("ij,ij->i", -a, tn)
+    h = np.where(np.isfinite(t), reach - t, np.einsum("ij,ij->i", locs - origins[ray], a))
+    facing = np.einsum("ij,ij->i", tn, a)
+    down = facing < 0 if mesh.is_watertight else np.ones(len(h), dtype=bool)
+    order = np.lexsort((-h, ray))
+    ray, h, down = ray[order], h[order], down[order]
+    bounds = np.flatnonzero(np.r_[True, ray[1:] != ray[:-1], True])
+    idx, win = [], []
+    eps = max(1e-7, 1e-9 * reach)
+    for b0, b1 in zip(bounds[:-1], bounds[1:]):
+        hh, dd = h[b0:b1], down[b0:b1]  # descending heights along this axis
+        top = int(np.argmin(np.abs(hh)))
+        if abs(hh[top]) > 1e-5 * reach:
+            continue  # the line misses the origin's own surface (a sample on a sliver)
+        above = hh[:top]
+        ceiling = above[-1] if len(above) else np.inf  # lowest crossing above the touched surface
+        for j in range(top + 1, b1 - b0):
+            bottom = hh[j]
+            if hh[top] - bottom > jaw_max:
+                break
+            if not dd[j] or hh[top] - bottom <= eps:
+                continue
+            mid = 0.5 * (hh[top] + bottom)
+            lo, hi = mid - jaw_max / 2, mid + jaw_max / 2
+            floor = hh[j + 1] if j + 1 < b1 - b0 else -np.inf  # highest crossing below the bottom touch
+            if hi >= ceiling - eps or lo <= floor + eps:
+                continue  # a start inside material along the line
+            if np.isinf(ceiling) and np.isinf(floor):
+                continue  # both pads start outside the part: the ordinary grasp
+            idx.append(ray[b0])
+            win.append((lo, hi))
+    if not idx:
+        return empty
+    return np.asarray(idx, dtype=np.int64), np.asarray(win, dtype=np.float64)
+
+
+def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, budget=1_500_000) -> Touches:
     H = len(frames)
     tri = mesh.triangles
     fn = np.asarray(mesh.face_normals)
@@ -134,7 +207,8 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, budget=1_500_000)
     # axes in chunks: at most about `budget` (axis, triangle) pairs at a time, so memory stays bounded
     step = max(1, budget // max(len(tri), 1))
     for a0 in range(0, len(origins), step):
-        _rows(tri, fn, flip, origins[a0:a0 + step], fr0[a0:a0 + step], a0, angles, gripper, tie, rows)
+        _rows(tri, fn, flip, origins[a0:a0 + step], fr0[a0:a0 + step], a0, angles, gripper, tie, rows,
+              windows[a0:a0 + step])
     hit = np.ones(H, dtype=bool)
     res = {}
     for side in (1, -1):
@@ -166,13 +240,15 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, budget=1_500_000)
     mid = np.where(hit, 0.5 * (res[1][0] + res[-1][0]), 0.0)
     poses[:, :3, 3] += poses[:, :3, 1] * mid[:, None]
     width = np.where(hit, res[1][0] - res[-1][0], np.inf)
+    window = np.repeat(windows, len(angles), axis=0) - mid[:, None]
     return Touches(poses=poses, width=width, hit=hit, point0=res[1][1], normal0=res[1][2], tri0=res[1][3],
-                   point1=res[-1][1], normal1=res[-1][2], tri1=res[-1][3])
+                   point1=res[-1][1], normal1=res[-1][2], tri1=res[-1][3], window=window)
 
 
-def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows) -> None:
+def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows, windows) -> None:
     """Candidate first-touch rows (pose, triangle, height, local point, distance to the axis, alignment) of a chunk of
-    axes, appended to `rows[side]`; only rows within `tie` of their pose's best in this chunk are kept."""
+    axes, appended to `rows[side]`; only rows within `tie` of their pose's best in this chunk are kept. A pad
+    touches only heights inside its axis's window."""
     na = len(angles)
     cx, cz, hx, hz = pad_rectangle(gripper)
     radius = float(np.hypot(abs(cx) + hx, abs(cz) + hz))
@@ -183,12 +259,17 @@ def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows) -> No
     ca = np.einsum("pvj,pj->pv", rel, fr0[k, :3, 2])
     cb = np.einsum("pvj,pj->pv", rel, fr0[k, :3, 0])
     ny = np.einsum("pj,pj->p", fn[t], fr0[k, :3, 1])
+    w_lo, w_hi = windows[:, 0], windows[:, 1]
+    # a triangle wholly outside its axis's window is touched by neither pad (the right pad's touch is below the left's)
+    near = (_max3(ly) >= w_lo[k]) & (_min3(ly) <= w_hi[k])
+    if not near.all():
+        k, t, ly, ca, cb, ny = k[near], t[near], ly[near], ca[near], cb[near], ny[near]
     # heights where the axis itself crosses each triangle: true surface points inside every rotation's footprint
     hx_axis = _axis_heights(cb, ly, ca, 0.0, 0.0)
     a_max = np.full(len(origins), -np.inf)
     a_min = np.full(len(origins), np.inf)
-    np.maximum.at(a_max, k, np.where(np.isfinite(hx_axis), hx_axis, -np.inf))
-    np.minimum.at(a_min, k, np.where(np.isfinite(hx_axis), hx_axis, np.inf))
+    np.maximum.at(a_max, k, np.where(np.isfinite(hx_axis) & (hx_axis <= w_hi[k]), hx_axis, -np.inf))
+    np.minimum.at(a_min, k, np.where(np.isfinite(hx_axis) & (hx_axis >= w_lo[k]), hx_axis, np.inf))
     # an axis whose own crossings are farther apart than the jaw opens cannot be grasped at any rotation
     live = (a_max - a_min <= gripper.jaw_max + tie) | ~np.isfinite(a_max - a_min)
     sel = live[k]
@@ -206,8 +287,9 @@ def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows) -> No
         x3, y3, z3 = lx[p], ly[p], lz[p]
         # bounds from vertices inside the rectangle: rows that cannot reach them are skipped
         inside = (np.abs(x3) <= hx) & (np.abs(z3) <= hz)
-        vmax = _max3(np.where(inside, y3, -np.inf))
-        vmin = _min3(np.where(inside, y3, np.inf))
+        top_lim, bottom_lim = w_hi[k[p]][:, None], w_lo[k[p]][:, None]
+        vmax = _max3(np.where(inside & (y3 <= top_lim), y3, -np.inf))
+        vmin = _min3(np.where(inside & (y3 >= bottom_lim), y3, np.inf))
         lo = np.maximum(_segment_max(h, vmax)[h], a_max[k[p]])
         hi = np.minimum(-_segment_max(h, -vmin)[h], a_min[k[p]])
         need = (_max3(y3) >= lo - tie) | (_min3(y3) <= hi + tie)
@@ -216,9 +298,10 @@ def _rows(tri, fn, flip, origins, fr0, offset, angles, gripper, tie, rows) -> No
         px, pz, py, valid = _candidates(x3, y3, z3, hx, hz, -cx, -cz)
         r = np.arange(len(q))
         for side in (1, -1):
-            score = np.where(valid, side * py, -np.inf)
+            reach = py <= w_hi[k[q]][:, None] if side == 1 else py >= w_lo[k[q]][:, None]
+            score = np.where(valid & reach, side * py, -np.inf)
             top = score.max(axis=1)
-            near = valid & (score >= top[:, None] - tie)
+            near = valid & reach & (score >= top[:, None] - tie)
             d2 = np.where(near, (px + cx) ** 2 + (pz + cz) ** 2, np.inf)
             m = d2.argmin(axis=1)
             align = np.abs(ny[q]) if flip else side * ny[q]

@@ -1,0 +1,114 @@
+"""Grasps with one finger inside a hole or cavity (CONVENTIONS.md, Gripper: the pads close from full opening, half
+the jaw range either side of the TCP): a bin's wall gripped from above, a frame's bar lying flat, a washer's rim."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import trimesh
+
+from workbench.benchmarks.graspcheck import check_grasps
+from workbench.geometry.objects import from_trimesh
+from workbench.grasping.grasps import GraspParams, plan_grasps
+from workbench.grasping.pads import first_touches, gap_windows
+from workbench.grasping.placements import free_tabletop_grips, stable_placements
+
+
+def _frame(outer=0.1, inner=0.076, thickness=0.008):
+    return trimesh.creation.box((outer, outer, thickness)).difference(
+        trimesh.creation.box((inner, inner, 2 * thickness)))
+
+
+def _bin(side=0.09, height=0.05, wall=0.004):
+    cavity = trimesh.creation.box((side - 2 * wall, side - 2 * wall, height))
+    cavity.apply_translation((0, 0, wall))
+    return trimesh.creation.box((side, side, height)).difference(cavity)
+
+
+@pytest.fixture(scope="module")
+def frame():
+    return from_trimesh(_frame(), "frame")
+
+
+@pytest.fixture(scope="module")
+def open_bin():
+    return from_trimesh(_bin(), "bin")
+
+
+def test_gap_windows_on_a_frame_bar_follow_the_line_crossings(frame, hand):
+    """Along x through the frame's +x bar (12 mm wide, a 76 mm hole beyond): from its outer face the inner pad starts
+    in the hole, 6 + J/2 mm below the sample, and the outer pad J/2 - 6 mm above; from the hole's face the same bar
+    with the pads' roles swapped. Both windows computed by hand from the crossings at x = 50, 38, -38, -50 mm."""
+    J = hand.jaw_max
+    origins = np.array([[0.05, 0.0, 0.0], [0.038, 0.0, 0.0]])
+    axes = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
+    idx, win = gap_windows(frame.mesh, origins, axes, J)
+    assert idx.tolist() == [0, 1]
+    want = np.array([[-0.006 - J / 2, -0.006 + J / 2]] * 2)
+    assert np.allclose(win, want, atol=1e-6)
+    # the pads then touch the bar's two faces: a 12 mm grasp with the TCP in the bar
+    t = first_touches(frame.mesh, origins[:1], axes[:1], np.zeros(1), hand, windows=win[:1])
+    assert t.hit[0] and t.width[0] == pytest.approx(0.012, abs=1e-6)
+    assert t.poses[0, 0, 3] == pytest.approx(0.044, abs=1e-6)
+
+
+def test_no_gap_window_where_the_pads_start_outside_or_cannot_reach(box, hand):
+    """A solid box narrower than the jaw is gripped from outside only; one wider than the jaw along the axis has no
+    surface facing the other pad within reach."""
+    m = box.mesh
+    c = m.bounds.mean(axis=0)
+    origins = np.array([[m.bounds[1, 0], c[1], c[2]]])
+    idx, _ = gap_windows(m, origins, np.array([[1.0, 0.0, 0.0]]), hand.jaw_max)
+    assert len(idx) == 0
+    wide = trimesh.creation.box((0.12, 0.03, 0.03))
+    idx, _ = gap_windows(wide, np.array([[0.06, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]]), hand.jaw_max)
+    assert len(idx) == 0
+
+
+def _top_down(placements, grasps, hand, k):
+    p, g, world = free_tabletop_grips(placements, grasps.poses, hand)
+    keep = (p == k) & (world[:, 2, 2] < -0.999)
+    return g[keep]
+
+
+def test_an_open_bin_standing_up_is_gripped_by_its_wall_from_above(open_bin, hand):
+    """A 90 mm bin is wider than the 80 mm jaw: standing on its base, the only grip from above is a wall, one finger
+    inside. Without gap windows there is none; with them every such grip holds a 4 mm wall between its contacts and
+    passes the independent check (trimesh closest points, coal)."""
+    base = stable_placements(open_bin)
+    up = int(np.flatnonzero(base.normals[:, 2] < -0.999)[0])  # resting on its base: its -z face down
+    plain = plan_grasps(open_bin, hand, GraspParams(gap_grasps=False))
+    plan = plan_grasps(open_bin, hand, GraspParams())
+    assert plan.counts["gap"] > 0
+    assert len(_top_down(base, plain.grasps, hand, up)) == 0
+    g = plan.grasps
+    sel = _top_down(base, g, hand, up)
+    assert len(sel) >= 20
+    assert np.allclose(g.jawwidth[sel], 0.004, atol=1e-6)
+    # one contact on an outer face (|coordinate| 45 mm), the other on the inner face behind it (41 mm)
+    c0, c1 = np.abs(g.contact0[sel, :2]).max(axis=1), np.abs(g.contact1[sel, :2]).max(axis=1)
+    assert np.allclose(np.sort(np.c_[c0, c1], axis=1), [0.041, 0.045], atol=1e-6)
+    v = check_grasps(open_bin.mesh, g.poses[sel], g.jawwidth[sel], g.contact0[sel], g.contact1[sel], g.normal0[sel],
+                     g.normal1[sel], GraspParams().friction)
+    assert v.ok.all()
+
+
+def test_a_frame_lying_flat_is_gripped_across_its_bars(frame, hand):
+    """A 100 mm frame lying flat: no top-down grip in either placement without gap windows, and some in both with
+    them, across a 12 mm bar."""
+    base = stable_placements(frame)
+    assert len(base.poses) == 2
+    plain = plan_grasps(frame, hand, GraspParams(gap_grasps=False))
+    plan = plan_grasps(frame, hand, GraspParams())
+    for k in range(2):
+        assert len(_top_down(base, plain.grasps, hand, k)) == 0
+        sel = _top_down(base, plan.grasps, hand, k)
+        assert len(sel) >= 4
+        assert np.allclose(plan.grasps.jawwidth[sel], 0.012, atol=1e-6)
+
+
+def test_gap_grasps_change_nothing_on_a_part_without_holes(box, hand):
+    plain = plan_grasps(box, hand, GraspParams(gap_grasps=False))
+    plan = plan_grasps(box, hand, GraspParams())
+    assert plan.counts["gap"] == 0
+    assert np.array_equal(plan.grasps.poses, plain.grasps.poses)
