@@ -30,7 +30,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("catalog", help="build a parts x robots catalogue on a Dask cluster, or print one")
     inner = parser.add_subparsers(dest="action", required=True, parser_class=type(parser))
     b = inner.add_parser("build", help="compute every part's stages and every robot's IK on a local or existing cluster")
-    b.add_argument("parts", nargs="+", help="mesh files (STL, OBJ, PLY, OFF, GLB, DAE) or folders of them; the file name names the part")
+    b.add_argument("parts", nargs="+",
+                   help="mesh files (STL, OBJ, PLY, OFF, GLB, DAE) or folders of them; the file name names the part")
     b.add_argument("--robots", required=True, help="comma-separated robots: panda, ur5, talos")
     b.add_argument("--db", required=True, help="DuckDB store file (created when missing; a re-run resumes)")
     where = b.add_mutually_exclusive_group()

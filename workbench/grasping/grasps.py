@@ -309,7 +309,8 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
         source.append(np.repeat(src, len(ang)))
         if params.gap_grasps:
             w, win = gap_windows(mesh, o, a, gripper.jaw_max)
-            parts.append(first_touches(mesh, o[w], a[w], ang, gripper, ref=None if ref is None else ref[w], windows=win))
+            parts.append(first_touches(mesh, o[w], a[w], ang, gripper, ref=None if ref is None else ref[w],
+                                       windows=win))
             source.append(np.repeat(src[w], len(ang)))
             counts["gap"] += int(len(w))
     touch, source = _merge(parts), np.concatenate(source)

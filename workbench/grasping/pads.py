@@ -139,8 +139,8 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
         return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows)
 
 
-def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, jaw_max: float,
-                tie: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray,
+                jaw_max: float) -> tuple[np.ndarray, np.ndarray]:
     """Pad starts inside a hole or cavity for jaw axes through surface points `origins` (K, 3) along their outward
     normals `axes` (K, 3): (axis index (W,), window (W, 2)) for `first_touches`.
 
@@ -151,51 +151,40 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     """
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
-    empty = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
-    if len(origins) == 0:
-        return empty
     reach = 1.1 * float(np.linalg.norm(mesh.extents)) + 1e-3
     start = origins + reach * axes  # beyond the part: every crossing of the line is at a height below `reach`
     locs, ray, tri = mesh.ray.intersects_location(start, -axes, multiple_hits=True)
     if len(ray) == 0:
-        return empty
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
     # heights along the axis from the origin, in float64 on the hit triangle's plane (the caster may be float32)
     tn = mesh.face_normals[tri]
     a = axes[ray]
     t = np.einsum("ij,ij->i", mesh.triangles[tri, 0] - start[ray], tn) / np.einsum("ij,ij->i", -a, tn)
     h = np.where(np.isfinite(t), reach - t, np.einsum("ij,ij->i", locs - origins[ray], a))
-    facing = np.einsum("ij,ij->i", tn, a)
-    down = facing < 0 if mesh.is_watertight else np.ones(len(h), dtype=bool)
+    down = np.einsum("ij,ij->i", tn, a) < 0 if mesh.is_watertight else np.ones(len(h), dtype=bool)
+    # every crossing, grouped by axis and in descending height along it
     order = np.lexsort((-h, ray))
     ray, h, down = ray[order], h[order], down[order]
-    bounds = np.flatnonzero(np.r_[True, ray[1:] != ray[:-1], True])
-    idx, win = [], []
+    n = len(h)
+    first = np.flatnonzero(np.r_[True, ray[1:] != ray[:-1]])
+    group = np.repeat(np.arange(len(first)), np.diff(np.r_[first, n]))
+    last = np.r_[first[1:], n][group] - 1
+    # the origin's own surface: the crossing nearest height 0 (the line may miss it on a sliver)
+    nearest = np.abs(h) == np.minimum.reduceat(np.abs(h), first)[group]
+    top = np.full(len(first), n)
+    np.minimum.at(top, group[nearest], np.flatnonzero(nearest))
+    hit_origin = np.abs(h[top]) <= 1e-5 * reach
+    ceiling = np.where(top > first, h[np.maximum(top - 1, 0)], np.inf)[group]  # lowest crossing above it
+    floor = np.where(np.arange(n) < last, np.r_[h[1:], -np.inf], -np.inf)  # highest crossing below each
     eps = max(1e-7, 1e-9 * reach)
-    for b0, b1 in zip(bounds[:-1], bounds[1:]):
-        hh, dd = h[b0:b1], down[b0:b1]  # descending heights along this axis
-        top = int(np.argmin(np.abs(hh)))
-        if abs(hh[top]) > 1e-5 * reach:
-            continue  # the line misses the origin's own surface (a sample on a sliver)
-        above = hh[:top]
-        ceiling = above[-1] if len(above) else np.inf  # lowest crossing above the touched surface
-        for j in range(top + 1, b1 - b0):
-            bottom = hh[j]
-            if hh[top] - bottom > jaw_max:
-                break
-            if not dd[j] or hh[top] - bottom <= eps:
-                continue
-            mid = 0.5 * (hh[top] + bottom)
-            lo, hi = mid - jaw_max / 2, mid + jaw_max / 2
-            floor = hh[j + 1] if j + 1 < b1 - b0 else -np.inf  # highest crossing below the bottom touch
-            if hi >= ceiling - eps or lo <= floor + eps:
-                continue  # a start inside material along the line
-            if np.isinf(ceiling) and np.isinf(floor):
-                continue  # both pads start outside the part: the ordinary grasp
-            idx.append(ray[b0])
-            win.append((lo, hi))
-    if not idx:
-        return empty
-    return np.asarray(idx, dtype=np.int64), np.asarray(win, dtype=np.float64)
+    span = h[top][group] - h
+    mid = 0.5 * (h[top][group] + h)
+    lo, hi = mid - jaw_max / 2, mid + jaw_max / 2
+    ok = (hit_origin[group] & (np.arange(n) > top[group]) & down & (span > eps) & (span <= jaw_max)
+          & (hi < ceiling - eps) & (lo > floor + eps)  # both starts in free space along the line
+          & ~(np.isinf(ceiling) & np.isinf(floor)))  # not both outside the part: the ordinary grasp
+    j = np.flatnonzero(ok)
+    return ray[j].astype(np.int64), np.column_stack([lo[j], hi[j]])
 
 
 def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, budget=1_500_000) -> Touches:
