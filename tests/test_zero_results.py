@@ -3,9 +3,13 @@ warning that names the stage that removed the last candidate, and every stage st
 
 from __future__ import annotations
 
+import json
+import re
 import subprocess
 import sys
 
+import duckdb
+import numpy as np
 import pytest
 import trimesh
 
@@ -76,3 +80,66 @@ def test_a_card_lying_flat_is_named_too_thin_to_grip(tmp_path):
     assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr
     assert "2 stable placements" in out.stdout
     assert "stage free tabletop grips" in out.stderr and "card stands at most 0.8 mm above the table" in out.stderr
+
+
+def test_a_cone_names_the_friction_its_most_opposed_pads_need(hand):
+    """A cone's sides are tilted by its half-angle atan(r / h) from the jaw: with less friction there is no grasp,
+    and the message's lower bound on the friction needed is tan(half-angle), computed here from r and h."""
+    obj = from_trimesh(trimesh.creation.cone(0.03, 0.08, sections=48), "cone")
+    plan = plan_grasps(obj, hand, GraspParams(friction=0.3))
+    assert len(plan.grasps) == 0 and plan.empty_reason.startswith("pads_cone"), plan.empty_reason
+    need = float(re.search(r"needs at least ([0-9.]+)", plan.empty_reason).group(1))
+    assert abs(need - 0.03 / 0.08) <= 0.01, plan.empty_reason
+    assert len(plan_grasps(obj, hand, GraspParams(friction=0.45)).grasps) > 0
+
+
+def test_a_ball_without_stable_placement_is_told_the_threshold_that_keeps_one(tmp_path):
+    """A ball's convex hull is small triangles, each a support too small for --min-stability 0.1: `placements`
+    exits 0 naming the steadiest support's score and a lower threshold, and that threshold keeps what it says."""
+    trimesh.creation.icosphere(2, 0.025).export(tmp_path / "ball.stl")
+    grid = ["--x=0.4,0.6,2", "--y=-0.1,0.1,2", "--angles", "2"]
+    assert _cli("grasps", "ball.stl", "--db", "b.duckdb", cwd=tmp_path).returncode == 0
+    out = _cli("placements", "--db", "b.duckdb", "--object", "ball", *grid, cwd=tmp_path)
+    assert out.returncode == 0 and "ball: 0 stable placements" in out.stdout, out.stderr
+    m = re.search(r"steadiest support of ball scores ([0-9.]+) .*--min-stability ([0-9.]+) keeps (\d+)", out.stderr)
+    assert m, out.stderr
+    best, lower, kept = float(m.group(1)), float(m.group(2)), int(m.group(3))
+    # independently: an icosphere's faces are near-equal triangles; the centre of mass projects on the face's centre,
+    # whose distance to the edges (the inradius) over the radius to the face plane is the stability
+    ball = trimesh.creation.icosphere(2, 0.025)
+    tri = ball.triangles
+    a, b, c = (np.linalg.norm(tri[:, i] - tri[:, (i + 1) % 3], axis=1) for i in range(3))
+    inradius = 2 * ball.area_faces / (a + b + c)
+    height = np.abs(np.einsum("ij,ij->i", ball.face_normals, tri[:, 0]))
+    assert abs(best - (inradius / height).max()) <= 0.05 * best
+    assert lower < best
+    again = _cli("placements", "--db", "b.duckdb", "--object", "ball", "--min-stability", str(lower), *grid, cwd=tmp_path)
+    assert again.returncode == 0 and f"ball: {kept} stable placements" in again.stdout, again.stdout + again.stderr
+
+
+def test_a_disc_cannot_be_flipped_and_plan_says_no_robot_could(tmp_path):
+    """A disc lying on one face or the other: every grasp that clears the table in one has its approach from below
+    in the other, so no chain of placements links them. `plan` exits 0 with 0 plans and says so; the placements'
+    link is cross-checked on the store's rows by a search written here."""
+    trimesh.creation.cylinder(radius=0.03, height=0.012, sections=64).export(tmp_path / "disc.stl")
+    grid = ["--x=0.45,0.55,2", "--y=-0.1,0.1,2", "--angles", "2"]
+    out = _cli("build", "disc.stl", "--db", "d.duckdb", "--robot", "panda", "--workers", "1", *grid, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    con = duckdb.connect(str(tmp_path / "d.duckdb"), read_only=True)
+    rows = con.sql("SELECT idfreetabletopplacement, idfreeairgrip FROM freetabletopgrip").fetchall()
+    places = sorted({int(r[0]) for r in con.sql("SELECT idfreetabletopplacement FROM freetabletopplacement").fetchall()})
+    con.close()
+    assert len(places) == 2
+    grasps_of = {p: {g for q, g in rows if q == p} for p in places}
+    assert all(grasps_of.values()) and not grasps_of[places[0]] & grasps_of[places[1]]
+    res = _cli("plan", "--db", "d.duckdb", "--object", "disc", "--robot", "panda", "--start", f"{places[0]},0.45,0.1,0",
+               "--goal", f"{places[1]},0.55,-0.1,90", "--json", "p.json", cwd=tmp_path)
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr
+    assert "disc with panda: 0 plans (unconnected)" in res.stdout
+    warning = [line for line in res.stderr.splitlines() if line.startswith("warning:")]
+    assert len(warning) == 1 and "no robot could" in warning[0] and "90 deg" in warning[0], res.stderr
+    data = json.loads((tmp_path / "p.json").read_text())
+    assert data["plan"] is None and data["reason"] == "unconnected"
+    con = duckdb.connect(str(tmp_path / "d.duckdb"), read_only=True)
+    assert con.execute("SELECT count(*) FROM plan").fetchall()[0][0] == 0
+    con.close()

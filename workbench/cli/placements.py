@@ -100,8 +100,11 @@ def roadmap_grasps_line(label: str, roadmap: int, usable: int) -> str:
 
 def print_placements(name: str, result, seconds: float) -> None:
     stab = result.placements["stability"]
-    print(f"{name}: {len(stab)} stable placements (stability {', '.join(f'{s:.2f}' for s in stab)})")
-    print(f"free tabletop grips per placement: {', '.join(str(int(n)) for n in result.n_free_grips)}")
+    if len(stab):
+        print(f"{name}: {len(stab)} stable placements (stability {', '.join(f'{s:.2f}' for s in stab)})")
+        print(f"free tabletop grips per placement: {', '.join(str(int(n)) for n in result.n_free_grips)}")
+    else:
+        print(f"{name}: 0 stable placements")
     print(roadmap_grasps_line(result.grasps_label, result.n_roadmap_grasps, result.n_usable_grasps))
     print(f"{'reused' if result.reused else 'stored'} {result.n_tabletop_placements} tabletop placements and "
           f"{result.n_tabletop_grips} tabletop grips (parameter sets {result.idplacements}, {result.idtabletop}) in {seconds:.2f} s")

@@ -16,6 +16,7 @@ from workbench.errors import PlanningError
 from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
 from workbench.planners.wan_harada.query import parse_pose
+from workbench.planners.wan_harada.roadmap import NO_RESULT
 from workbench.planners.wan_harada.stages import (
     empty_stage,
     load_planner,
@@ -82,7 +83,20 @@ def run(args: argparse.Namespace) -> int:
                 and math.hypot(goal.x - start.x, goal.y - start.y) < 1e-6 and abs(turn) < 1e-9):
             print(f"the start is the goal ({args.start}): {args.object} is already in place; no plan to make")
             return 0
-        plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
+        try:
+            plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
+        except PlanningError as exc:
+            if getattr(exc, "reason", None) not in NO_RESULT:
+                raise
+            report_graph(planner, t_load)
+            warn(f"no plan for {args.object}: {exc}")
+            print(f"{args.object} with {args.robot}: 0 plans ({exc.reason}); nothing stored")
+            if args.json:
+                out = Path(args.json)
+                out.parent.mkdir(parents=True, exist_ok=True)
+                out.write_text(json.dumps({"plan": None, "alternatives": [], "reason": exc.reason, "message": str(exc)}, indent=1))
+                print(f"json: {Path(args.json).resolve()}")
+            return 0
         report_graph(planner, t_load)
         best = plans[0]
         print_plan(best)

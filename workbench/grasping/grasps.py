@@ -254,7 +254,7 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
     counts["grasps"] = int(len(grasps))
     return GraspPlan(params=params, facets=facets, samples=samples, pairs=pairs, candidate_poses=poses,
                      candidate_pair=cand_pair, candidate_free=free, grasps=grasps, counts=counts, timings=timings,
-                     lengths=lengths, empty_reason=empty_reason(counts, params, lengths, gripper))
+                     lengths=lengths, empty_reason=empty_reason(counts, params, lengths, gripper, pairs))
 
 
 def _level2(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, clearance: float,
@@ -574,11 +574,19 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     return out
 
 
-def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Gripper) -> str | None:
-    """Which stage removed the last candidate, and what to try; None when grasps remain (issue 10)."""
+def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Gripper,
+                 pairs: ContactPairs | None = None) -> str | None:
+    """Which stage removed the last candidate, and what to try; None when grasps remain (issue 10). With the contact
+    `pairs`, an empty friction stage names the friction the most nearly opposed pair that fits the jaw needs: half the
+    angle between one normal and the other reversed, the best any jaw axis can do."""
     if counts.get("grasps", 0) > 0:
         return None
     mu = params.friction_coefficient
+    need = ""
+    if pairs is not None and pairs.width_ok.any():
+        n0, n1 = pairs.normal0[pairs.width_ok], pairs.normal1[pairs.width_ok]
+        half = 0.5 * np.arccos(np.clip(-np.einsum("ij,ij->i", n0, n1), -1.0, 1.0)).min()
+        need = f" (the most nearly opposed pair that fits needs at least {np.tan(half):.2g}: {np.degrees(half):.3g} degrees)"
     stages = [
         ("facets", "the mesh has no facets"),
         ("samples_neighbour", "the surface got no samples; raise --density"),
@@ -592,7 +600,7 @@ def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Grip
         ("pairs_width", f"every facet pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
         ("pads_width", f"every contact pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
         ("pads_cone", f"no pad contact has both normals within the friction cone (friction {mu:.2g}, "
-                      f"{np.degrees(np.arctan(mu)):.3g} degrees); raise --friction"),
+                      f"{np.degrees(np.arctan(mu)):.3g} degrees); raise --friction{need}"),
         ("pairs_com", f"every contact pair is more than {lengths['com_max'] * 1e3:.3g} mm from the centre of mass; "
                       f"raise --com-max"),
         ("pads_com", f"every grasp centre is more than {lengths['com_max'] * 1e3:.3g} mm from the centre of mass; "

@@ -11,7 +11,7 @@ above the table.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.spatial import ConvexHull
@@ -117,6 +117,23 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     return Placements(poses=np.array([poses[i] for i in idx]).reshape(-1, 4, 4), stability=stability[idx],
                       supports=[supports[i] for i in idx], normals=normals[idx].reshape(-1, 3),
                       rejected_poses=rejected_poses, rejected_stability=stability[rejected])
+
+
+def stability_hint(obj: ObjectModel, params: PlacementParams = PlacementParams()) -> str:
+    """Why no placement reached `min_stability`, for the zero-placement message: the best support's stability and the
+    threshold that keeps at least one placement (a rounded base rocks on a small support; a ball has none)."""
+    hull = obj.mesh.convex_hull
+    groups, normals = coplanar_groups(hull, params.coplanar_distance, params.coplanar_angle)
+    best = float(stabilities(hull, obj.com, groups, normals).max(initial=0.0))
+    if best <= 0:
+        return "no convex-hull face holds the centre of mass above its support (the part rolls or tips)"
+    step = 10.0 ** np.floor(np.log10(best))
+    lower = float(np.floor(best / step) * step)  # rounded down to one significant digit
+    kept = len(stable_placements(obj, replace(params, min_stability=lower)))
+    what = f"--min-stability {lower:g} keeps {kept} (each rocks on a small support: check them in the viewer)" if kept else \
+        "even a lower --min-stability keeps none"
+    return (f"the steadiest support of {obj.name} scores {best:.3g} (support margin over centre-of-mass height), below "
+            f"--min-stability {params.min_stability:g}: a rounded base rests on a small support; {what}")
 
 
 def _polygon(points2d: np.ndarray) -> np.ndarray:

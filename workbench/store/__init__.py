@@ -255,6 +255,11 @@ class Store:
             raise StoreError(f"store {self.path} has no {what} for object id {idobject}; run `workbench {command}` first")
         return pid
 
+    def params_of(self, idparamset: int) -> dict[str, Any]:
+        """The parameters stored with a parameter set (as JSON: lengths in metres, angles in radians); {} if unknown."""
+        row = self.one("SELECT params FROM paramset WHERE idparamset = ?", [int(idparamset)])
+        return {} if row is None else json.loads(row[0])
+
     def find_paramset(self, stage: str, params: dict[str, Any], idobject: int | None) -> int | None:
         """The id of a stored parameter set of `stage` for these parameters and object, or None."""
         row = self.one("SELECT idparamset FROM paramset WHERE digest = ?", [_digest(stage, params, idobject)])

@@ -106,8 +106,19 @@ def timed_frames(plan, segments: list[TimedSegment], tcp_pose, fps: float = 30.0
         else:
             obj = np.asarray(step.object_pose, dtype=np.float64)
         out.append({"t": float(t), "q": q, "jaw": float(jaw), "held": bool(seg.holding), "object": obj, "caption": seg.caption,
-                    "segment": k})
+                    "segment": k, "step": int(seg.step)})
     return out
+
+
+def plan_frames(plan, robot, fps: int = 30) -> list[dict]:
+    """The frames `show_plan` animates, one per 1/fps s of plan time when the plan has timed motions (`timed_frames`),
+    else its waypoint keyframes; each with q, jaw, held, object (4x4 world pose) and step (index in plan.steps)."""
+    if plan.segments:
+        return timed_frames(plan, plan.segments, robot.tcp_pose, fps, jaw_open=robot.gripper.jaw_max)
+    frames = keyframes(plan, jaw_open=robot.gripper.jaw_max)
+    for fr in frames:
+        fr["object"] = robot.tcp_pose(fr["q"]) @ inverse_pose(fr["grasp"]) if fr["held"] else fr["rest"]
+    return frames
 
 
 def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30,
@@ -128,12 +139,7 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
         show_mesh(vis, f"{path}/placements/{i}", obj_mesh, color=0x999999, opacity=0.15, pose=s.object_pose)
     show_mesh(vis, f"{path}/object", obj_mesh, color=OBJECT_COLOR)
     view = RobotView(vis, robot, f"{path}/robot", kind)
-    if plan.segments:
-        frames = timed_frames(plan, plan.segments, robot.tcp_pose, fps, jaw_open=robot.gripper.jaw_max)
-    else:
-        frames = keyframes(plan, jaw_open=robot.gripper.jaw_max)
-        for fr in frames:
-            fr["object"] = robot.tcp_pose(fr["q"]) @ inverse_pose(fr["grasp"]) if fr["held"] else fr["rest"]
+    frames = plan_frames(plan, robot, fps)
     anim = manim.Animation(default_framerate=fps)
     if plan.segments:
         key = [("part", OBJECT_COLOR), ("start pose", START_COLOR), ("goal pose", GOAL_COLOR),
@@ -201,7 +207,7 @@ def plan_scene(plan, planner, out: str | Path | None = None, vis: meshcat.Visual
     if out is None:
         return vis
     path = static_html(vis, out)
-    frames = keyframes(plan, jaw_open=planner.robot.gripper.jaw_max)
+    frames = plan_frames(plan, planner.robot)  # the animation's own frames: the caption follows its clock
     page = path.read_text()
     path.write_text(page.replace("</body>", plan_overlay(plan, [f["step"] for f in frames]) + "</body>", 1))
     return path

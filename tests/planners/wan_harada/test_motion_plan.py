@@ -5,6 +5,7 @@ table; same seed, same trajectory."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -24,7 +25,7 @@ from workbench.planners.wan_harada.stages import (
 )
 from workbench.resources import bundled_objects
 from workbench.robots.timing import TimedSegment, Trajectory, time_line, within_limits
-from workbench.viewer.wan_harada import timed_frames
+from workbench.viewer.wan_harada import plan_scene, timed_frames
 
 FIXTURE = Path(__file__).parent / "data" / "demo_plan_straight.json"
 ACC = 3.0
@@ -205,3 +206,17 @@ def test_unwrapping_whole_turns_keeps_poses_and_limits():
     # a turn that would leave the limits is not taken
     far = lines.q_retract + np.array([4 * np.pi, 0, 0, 0, 0, 0])
     assert np.isclose(unwrap_lines(ur5, lines, lines.q_retract, far).q_retract[0], q[0, 0] + 2 * np.pi)
+
+
+def test_plan_html_caption_follows_the_timed_animation(planner, demo_result, tmp_path):
+    """The page's caption names the step whose motion is playing: its frame-to-step table has one entry per animation
+    frame (30 per second of the trajectory), and at the middle of every segment it names that segment's step."""
+    plan = demo_result.plan
+    page = plan_scene(plan, planner, tmp_path / "plan.html").read_text()
+    data = json.loads(re.search(r"var d = (\{.*?\}), el =", page).group(1))
+    duration = plan.segments[-1].t0 + plan.segments[-1].duration
+    assert abs(len(data["steps"]) - (duration * data["fps"] + 1)) <= 1
+    for seg in plan.segments:
+        frame = int((seg.t0 + 0.5 * seg.duration) * data["fps"])
+        assert data["steps"][frame] == seg.step + 1, (seg.kind, seg.caption, seg.t0)
+        assert data["captions"][seg.step + 1].startswith(f"step {seg.step + 1} of {len(plan.steps)}: ")

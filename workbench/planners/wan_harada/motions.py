@@ -409,7 +409,7 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
         if not result.routes:
             if removed == 0:
                 planner.explain(result)
-            err = PlanningError(f"no executable plan from {s_side.query.text()} to {goal_text(g_side)}: the graph ran out of "
+            err = PlanningError(f"no executable plan from {s_side.query.text()} to {g_side.query.text()}: the graph ran out of "
                                 f"alternatives after removing {removed} node(s) or grip(s) whose motions failed "
                                 f"(last: {failures[-1] if failures else 'none'})")
             err.reason = "exhausted"
@@ -440,7 +440,7 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
             return out
         failures.append(motion.reason)
         if removed >= opts.max_removed:
-            err = PlanningError(f"no executable plan from {s_side.query.text()} to {goal_text(g_side)} after removing "
+            err = PlanningError(f"no executable plan from {s_side.query.text()} to {g_side.query.text()} after removing "
                                 f"{removed} node(s) or grip(s) (limit --max-removed {opts.max_removed}); last failure: {motion.reason}")
             err.reason = "exhausted"
             raise err
@@ -468,10 +468,6 @@ def _attach(plan, motion: MotionResult, lines: list[StepLines], removed: int, se
     plan.removed = removed
     plan.acc = np.broadcast_to(np.asarray(acc, dtype=np.float64), (nq,)).tolist()
     plan.timings["motion"] = seconds
-
-
-def goal_text(side) -> str:
-    return side.query.text()
 
 
 def _step_nodes(route, n_steps: int) -> list[tuple[str, int]]:

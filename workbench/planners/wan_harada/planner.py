@@ -9,6 +9,8 @@ import time
 from typing import TYPE_CHECKING
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
 
 from workbench.errors import PlanningError
 from workbench.planners.wan_harada.motions import (
@@ -188,11 +190,29 @@ class Planner:
                     f"worlda {self.worlda:g} m) without collision; "
                     f"move it closer to the robot or choose another placement")
         a, b = self.attach(s), self.attach(g)
-        raise _failure(
-            "unconnected", f"start ({s.query.text()}) and goal ({g.query.text()}) are not connected in the regrasp graph of {self.object.name} for "
-            f"{self.robot.name}: no feasible grasp serves both, and the start's {s.n_feasible} feasible grasps reach roadmap components "
-            f"{sorted(a['components']) or 'none'} while the goal's {g.n_feasible} reach {sorted(b['components']) or 'none'}; "
-            f"add grid positions, angles or grasps (workbench placements --x/--y/--angles/--max-grasps) and rebuild")
+        head = (f"start ({s.query.text()}) and goal ({g.query.text()}) are not connected in the regrasp graph of {self.object.name} for "
+                f"{self.robot.name}: no feasible grasp serves both, and the start's {s.n_feasible} feasible grasps reach roadmap components "
+                f"{sorted(a['components']) or 'none'} while the goal's {g.n_feasible} reach {sorted(b['components']) or 'none'}")
+        p, q = s.query.idfreetabletopplacement, g.query.idfreetabletopplacement
+        if not self.placements_linked(p, q):
+            raise _failure("unconnected", f"{head}; no robot could: no chain of stable placements sharing grasps that clear the table "
+                           f"links placement {p} to {q} (a part flipped over needs a placement in between, held by a grasp "
+                           f"both allow); choose another goal placement or plan more grasps")
+        raise _failure("unconnected", f"{head}; add grid positions, angles or grasps (workbench placements "
+                                      f"--x/--y/--angles/--max-grasps) and rebuild")
+
+    def placements_linked(self, a: int, b: int) -> bool:
+        """Whether stable placements `a` and `b` are joined by a chain of placements in which consecutive ones share a
+        grasp that clears the table in both (the free tabletop grips, Section IV), whatever the robot can reach."""
+        ids = np.sort(np.asarray(self.free["idfreetabletopplacement"], dtype=np.int64))
+        place = np.searchsorted(ids, np.asarray(self.ftg["idfreetabletopplacement"], dtype=np.int64))
+        grasps, g = np.unique(np.asarray(self.ftg["idfreeairgrip"], dtype=np.int64), return_inverse=True)
+        # bipartite placement-grasp graph: placements are nodes 0..P-1, grasps P..P+G-1
+        n = len(ids) + len(grasps)
+        m = sp.coo_matrix((np.ones(len(place)), (place, len(ids) + g)), shape=(n, n))
+        _, label = connected_components(m, directed=False)
+        i, j = np.searchsorted(ids, [a, b])
+        return bool(label[i] == label[j])
 
     def attach(self, side: Side) -> dict:
         """Where a side joins the roadmap: its feasible grasps, the roadmap nodes sharing them (transfer edges) and the

@@ -57,7 +57,8 @@ class PoseQuery:
         return m
 
     def text(self) -> str:
-        return f"{self.idfreetabletopplacement},{self.x:g},{self.y:g},{self.yaw:g}"
+        """`PLACEMENT,X,Y,YAW deg` for messages: the yaw in degrees with its unit, as the command line takes it."""
+        return f"{self.text_degrees()} deg"
 
     def text_degrees(self) -> str:
         """`PLACEMENT,X,Y,YAW` with the yaw in degrees, as the command line takes it."""

@@ -33,6 +33,10 @@ UNREACHED = np.iinfo(np.int32).max
 """Distance of two grasps that no sequence of regrasps joins."""
 
 
+# reasons that answer a valid query (no plan exists for it), as opposed to bad input (input, unstable)
+NO_RESULT = frozenset({"nogrip", "unreachable", "unconnected", "exhausted"})
+
+
 def _failure(reason: str, message: str) -> PlanningError:
     """A PlanningError tagged with why the query fails (`reason`: input, unstable, nogrip, unreachable, unconnected)."""
     err = PlanningError(message)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -22,6 +22,7 @@ from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.grasping.placements import (
     PlacementParams,
     free_tabletop_grips,
+    stability_hint,
     stable_placements,
 )
 from workbench.planners.wan_harada.planner import Planner
@@ -498,7 +499,9 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -
     pl = sql.placements_of_tabletop(store, tt)
     free = load_placements(store, pl)
     if len(free["stability"]) == 0:
-        return "placements: no convex-hull face holds the centre of mass stably; lower --min-stability"
+        known = {f.name for f in fields(PlacementParams)}
+        params = PlacementParams(**{k: v for k, v in store.params_of(pl).items() if k in known})
+        return f"placements: {stability_hint(obj, params)}"
     if len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]) == 0:
         rows = free["rotmat"][:, 2]  # the height of a vertex v in placement p: rows[p, :3] . v + rows[p, 3]
         top = float((np.asarray(obj.mesh.vertices) @ rows[:, :3].T + rows[:, 3]).max())
