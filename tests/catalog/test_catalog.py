@@ -297,6 +297,11 @@ def test_part_without_grasps_is_stored_with_zero_counts(client, tmp_path):
     (row,) = res.rows
     assert (row["part"], row["robot"], row["grasps"], row["tabletop_grips"], row["ik_rows"]) == ("bigcube", "panda", 0, 0, 0)
     assert row["placements"] == 6 and row["graph"]["nodes"] == 0
+    assert row["reason"].startswith("pads_width: every contact pair is wider than the gripper's 80 mm opening")
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        assert main(["catalog", "report", "--db", str(tmp_path / "z.duckdb")]) == 0
+    assert "warning: bigcube has no free-air grasps; stage pads_width: every contact pair is wider" in err.getvalue()
 
 
 def test_catalog_over_a_serial_store_duplicates_nothing(parts, serial, serial_db, client, tmp_path):

@@ -84,6 +84,8 @@ def write_part(store: Store, unit: dict, res: PartResult, hand: Gripper, gparams
         tid = save_tabletop(store, oid, pid, tparams, tt, ftg, fp_ids)
         counts = {"grasps": len(res.grasps), "placements": len(res.placements), "free_tabletop_grips": len(res.ftg[0]),
                   "tabletop_placements": len(tt.placement), "tabletop_grips": len(tt.grip_tp), "seconds": res.seconds}
+        if res.reason:
+            counts["reason"] = res.reason
         nrows = ((0 if had_grasps else len(res.grasps)) + (0 if had_placements else len(res.placements) + len(res.ftg[0]))
                  + (0 if had_tabletop else len(tt.placement) + len(tt.grip_tp)))
         unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts, nrows=nrows,

@@ -28,6 +28,8 @@ from workbench.grasping.placements import (
     PlacementParams,
     Placements,
     free_tabletop_grips,
+    no_grip_hint,
+    stability_hint,
     stable_placements,
 )
 from workbench.planners.wan_harada.roadmap import build_roadmap
@@ -98,6 +100,7 @@ class PartResult:
     ftg: tuple[np.ndarray, np.ndarray, np.ndarray]
     tabletop: Tabletop
     seconds: dict
+    reason: str | None = None  # when a stage kept nothing: "stage: why; what to try" (as `workbench build` says)
 
 
 def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams, tparams: TabletopParams,
@@ -106,15 +109,21 @@ def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams
     the grasps carried into the roadmap are chosen as `workbench build` chooses them."""
     hand = hand or franka_hand()
     t0 = time.perf_counter()
-    grasps = plan_grasps(obj, hand, gparams).grasps
+    plan = plan_grasps(obj, hand, gparams)
+    grasps = plan.grasps
     t1 = time.perf_counter()
     placements = stable_placements(obj, pparams)
     p_idx, g_idx, poses = free_tabletop_grips(placements, grasps.poses, hand, pparams)
+    reason = plan.empty_reason
+    if reason is None and len(placements) == 0:
+        reason = f"placements: {stability_hint(obj, pparams)}"
+    elif reason is None and len(p_idx) == 0:
+        reason = f"free tabletop grips: {no_grip_hint(obj, placements.poses)}"
     t2 = time.perf_counter()
     tt = plan_tabletop(placements.poses, p_idx, g_idx, poses, grasps.poses, tparams)
     t3 = time.perf_counter()
     return PartResult(obj, grasps, placements, (p_idx, g_idx, poses), tt,
-                      {"grasps": t1 - t0, "placements": t2 - t1, "tabletop": t3 - t2})
+                      {"grasps": t1 - t0, "placements": t2 - t1, "tabletop": t3 - t2}, reason)
 
 
 def part_unit(path: str, name: str, scale: float | None, units: str | None, gparams: GraspParams,
@@ -133,7 +142,7 @@ def part_tables(res: PartResult) -> dict[str, pa.Table]:
     """A `PartResult` as Arrow tables: object (1 row), grasps, placements, ftg, tabletop placements and grips, meta."""
     o = res.obj
     obj = pa.table({"name": [o.name], "source": [o.source], "digest": [o.digest], "scale": [float(o.scale)],
-                    "com_method": [o.com_method]})
+                    "com_method": [o.com_method], "reason": pa.array([res.reason], type=pa.string())})
     pl = res.placements
     place = arrays_table({"poses": pl.poses, "stability": pl.stability, "normals": pl.normals})
     place = place.append_column("supports", _ragged(pl.supports))
@@ -171,7 +180,7 @@ def part_from_tables(tables: dict[str, pa.Table]) -> PartResult:
                   grip_tp=tg["grip_tp"], grip_ftg=tg["grip_ftg"], grip_poses=tg["grip_poses"])
     meta = tables["meta"].to_pydict()
     return PartResult(obj, GraspSet(**g), placements, (f["placement"], f["grasp"], f["poses"]), tt,
-                      dict(zip(meta["stage"], meta["seconds"])))
+                      dict(zip(meta["stage"], meta["seconds"])), o.get("reason"))
 
 
 # ----------------------------------------------------------------------------------------------------------------

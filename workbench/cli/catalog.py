@@ -102,7 +102,8 @@ def print_summary(rows: list[dict], failures: list[dict]) -> None:
             empty.add(r["part"])
             what = ("free-air grasps" if not r["grasps"] else "stable placements" if not r["placements"]
                     else "tabletop grips (no stable placement keeps a grasp clear of the table)")
-            print(f"warning: {r['part']} has no {what}; check its size and units", file=sys.stderr)
+            why = f"stage {r['reason']}" if r.get("reason") else "check its size and units"
+            print(f"warning: {r['part']} has no {what}; {why}", file=sys.stderr)
         elif r["part"] not in empty and r["robot"] and r["ik_rows"] and not r["ik_feasible"]:
             print(f"warning: no tabletop grip of {r['part']} is IK-feasible for {r['robot']} at all five poses",
                   file=sys.stderr)

@@ -136,6 +136,19 @@ def stability_hint(obj: ObjectModel, params: PlacementParams = PlacementParams()
             f"--min-stability {params.min_stability:g}: a rounded base rests on a small support; {what}")
 
 
+THIN_PART = 0.004  # m: a part lower than this on the table (a card, a foil) is named as too thin to grip
+
+
+def no_grip_hint(obj: ObjectModel, placement_poses: np.ndarray) -> str:
+    """Why no grasp clears the table at any of the placements (P, 4, 4), for the zero-grip message: a part lower than
+    THIN_PART is named too thin to grip, with its height."""
+    rows = np.asarray(placement_poses)[:, 2]  # the height of a vertex v in placement p: rows[p, :3] . v + rows[p, 3]
+    top = float((np.asarray(obj.mesh.vertices) @ rows[:, :3].T + rows[:, 3]).max()) if len(rows) else 0.0
+    thin = (f" ({obj.name} stands at most {top * 1e3:.3g} mm above the table: too thin for the fingers to close "
+            f"on its sides from above)") if len(rows) and top < THIN_PART else ""
+    return "every grasp puts the hand into the table at every stable placement" + thin + "; lower --clearance or plan more grasps"
+
+
 def _polygon(points2d: np.ndarray) -> np.ndarray:
     """Convex support polygon (counter-clockwise, z = 0) of the contact points."""
     if len(points2d) >= 3:

@@ -164,7 +164,7 @@ def summary(store: Store) -> list[dict[str, Any]]:
     (from the graph unit), and seconds of worker time for the part's stages and the robot's IK and graph."""
     sql = f"""
     WITH part AS (  -- the newest part unit of each part name (a store may hold builds with other parameters)
-        SELECT part, idobject, idgrasps, idplacements, idtabletop, seconds FROM catalog_unit
+        SELECT part, idobject, idgrasps, idplacements, idtabletop, seconds, counts FROM catalog_unit
         WHERE kind = 'part' AND status = 'done' QUALIFY row_number() OVER (PARTITION BY part ORDER BY created DESC) = 1),
     robot AS (  -- per part, tabletop set and robot: the newest IK run (robot, scene, retractions)
         SELECT part, robot, idtabletop, idrobot, idscene, idikret,
@@ -186,14 +186,15 @@ def summary(store: Store) -> list[dict[str, Any]]:
             USING (idtabletopplacements) WHERE t.idparamset = p.idtabletop AND k.idrobot = r.idrobot
             AND k.idscene = r.idscene AND k.idikret = r.idikret
             AND {ALL_FEASIBLE}) AS ik_feasible,
-        r.graph, p.seconds AS part_seconds, r.ik_seconds, r.graph_seconds
+        r.graph, p.seconds AS part_seconds, r.ik_seconds, r.graph_seconds, p.counts AS part_counts
     FROM part p LEFT JOIN robot r ON r.part = p.part AND r.idtabletop = p.idtabletop ORDER BY p.part, r.robot"""
     keys = ("part", "robot", "grasps", "placements", "tabletop_grips", "ik_rows", "ik_feasible", "graph",
-            "part_seconds", "ik_seconds", "graph_seconds")
+            "part_seconds", "ik_seconds", "graph_seconds", "part_counts")
     out = []
     for r in store.run(sql):
         d = dict(zip(keys, r))
         d["graph"] = json.loads(d["graph"]) if d["graph"] else {}
+        d["reason"] = json.loads(d.pop("part_counts") or "{}").get("reason")  # why a stage kept nothing
         out.append(d)
     return out
 

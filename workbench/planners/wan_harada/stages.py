@@ -22,6 +22,7 @@ from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.grasping.placements import (
     PlacementParams,
     free_tabletop_grips,
+    no_grip_hint,
     stability_hint,
     stable_placements,
 )
@@ -478,9 +479,6 @@ def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
 # Zero results (issue 10): which stage stored no rows, and what to try.
 
 
-THIN_PART = 0.004  # m: a part lower than this on the table (a card, a foil) is named as too thin to grip
-
-
 def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -> str | None:
     """The first stage of `object_name`'s latest stored runs that kept nothing, as "stage: why; what to try", or None
     when every stage (grasps, placements, free tabletop grips, tabletop grips, and IK for `robot_name`) has rows."""
@@ -503,12 +501,7 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -
         params = PlacementParams(**{k: v for k, v in store.params_of(pl).items() if k in known})
         return f"placements: {stability_hint(obj, params)}"
     if len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]) == 0:
-        rows = free["rotmat"][:, 2]  # the height of a vertex v in placement p: rows[p, :3] . v + rows[p, 3]
-        top = float((np.asarray(obj.mesh.vertices) @ rows[:, :3].T + rows[:, 3]).max())
-        thin = (f" ({object_name} stands at most {top * 1e3:.3g} mm above the table: too thin for the fingers to close "
-                f"on its sides from above)") if top < THIN_PART else ""
-        return ("free tabletop grips: every grasp puts the hand into the table at every stable placement" + thin +
-                "; lower --clearance or plan more grasps")
+        return f"free tabletop grips: {no_grip_hint(obj, free['rotmat'])}"
     if tabletop_counts(store, tt)[1] == 0:
         return "tabletop grips: no grasp is kept on the tabletop grid; raise --max-grasps or widen the grid"
     if robot_name is not None:
