@@ -273,6 +273,8 @@ BAD_PARAMETERS = [
     ("ik", ["--handx", "-1"], "--handx"),
     ("ik", ["--workers", "0"], "--workers"),
     ("ik", ["--table-thickness", "0"], "--table-thickness"),
+    ("ik", ["--base", "0,0,0,90"], "--base yaw 90 is in radians"),  # a yaw typed in degrees
+    ("ik", ["--mount", "0,0,0.1034,0,0,-45"], "--mount yaw -45 is in radians"),
     ("plan", ["--alternatives", "-1"], "--alternatives"),
     ("plan", ["--start", "one,two"], "--start"),
     ("build", ["--handx", "nan"], "--handx"),

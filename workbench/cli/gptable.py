@@ -9,6 +9,7 @@ import sys
 import numpy as np
 
 from workbench.cli.grasps import add_object_arguments
+from workbench.cli.ik import parse_base
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import load_object
 from workbench.grasping.placements import PlacementParams
@@ -16,7 +17,7 @@ from workbench.params import add_param
 from workbench.planners.tournassoud.classes import KINDS, ClassParams, no_class_reason
 from workbench.planners.tournassoud.stages import table_stage_at
 from workbench.planners.tournassoud.table import TableParams
-from workbench.robots.model import get_robot, pose_xyz_yaw
+from workbench.robots.model import get_robot
 
 
 def parse_point(text: str, label: str = "--table-point") -> tuple[float, float]:
@@ -88,16 +89,7 @@ def summary(run) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     cp, tp = params_from_args(args)
-    base = None
-    if args.base:
-        parts = [p.strip() for p in args.base.split(",")]
-        try:
-            vals = [float(p) for p in parts]
-        except ValueError:
-            vals = []
-        if len(vals) != 4 or not np.isfinite(vals).all():
-            raise WorkbenchError(f"--base {args.base!r} must be X,Y,Z,YAW (m, rad), e.g. 0,0,-0.3,0")
-        base = pose_xyz_yaw(*vals)
+    base = parse_base(args.base) if args.base else None
     robot = get_robot(args.robot, base=base, tip_frame=args.tip)
     r = table_stage_at(args.db, obj, robot, cp, tp, PlacementParams(min_stability=args.min_stability),
                        progress=sys.stderr.isatty())
