@@ -277,6 +277,21 @@ def test_bad_queries(box_setup):
         TableParams(theta_step=0.0)
 
 
+def test_an_unserved_angle_is_a_result_naming_the_served_ones():
+    """A start angle at which no grasp holds the placement is no sequence (a result, exit 0 on the command line), and
+    the message lists the angles that are served, wrapping around 360 degrees, as read off the table here."""
+    phi = np.radians(np.arange(0, 360, 30.0))
+    q = np.zeros((2, 2, 4, len(phi)), dtype=bool)
+    q[0, 0, 1, [0, 1, 10, 11]] = True  # placement 0 served at 300..30 degrees, across 0
+    q[1, 1, 2, 5] = True
+    t = GraspPlacementTable(theta=np.arange(4) * np.pi / 2, phi=phi, hand_object=q.any(axis=(1, 3)),
+                            hand_table=q.any(axis=3), q=q, placements=np.repeat(np.eye(4)[None], 2, axis=0), frame=np.eye(4))
+    with pytest.raises(NoSequence, match=r"no grasp can pick the object at placement 0, 90.0 deg; .*grasps at 300 to 30 through 0 deg"):
+        placement_query(t, (0, np.radians(90)), (1, np.radians(150)))
+    with pytest.raises(NoSequence, match=r"no grasp can put the object at placement 1, 0.0 deg; .*grasps at 150 deg"):
+        placement_query(t, (0, 0.0), (1, 0.0))
+
+
 def test_minimum_contact_area(box, hand):
     """Section 5.1: the pad must cover `min_contact_area` of the face overlap at every legal theta."""
     pad = float(hand.pad_extents[0] * hand.pad_extents[2])

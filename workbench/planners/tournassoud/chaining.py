@@ -178,6 +178,16 @@ def grasp_query(table: GraspPlacementTable, initial: tuple[int, float], goal_cla
     return Sequence("grasp", grasps, placements, len(levels) - 1, time.perf_counter() - t0, theta_ini=float(theta_ini))
 
 
+def _served_angles(table: GraspPlacementTable, p: int) -> str:
+    """The angles phi (degrees, as runs of samples, wrapping around) at which some grasp of the table holds placement
+    `p`."""
+    spans = runs(table.q[:, p].any(axis=(0, 1)), np.degrees(table.phi))
+    if not spans:
+        return f"no angle of placement {p} has a grasp"
+    text = [f"{a:.0f}" if a == b else f"{a:.0f} to {b:.0f}{' through 0' if a > b else ''}" for a, b in spans]
+    return f"placement {p} has grasps at {', '.join(text[:6])}{' ...' if len(text) > 6 else ''} deg"
+
+
 def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: tuple[int, float]) -> Sequence:
     """The object from placement (P_s, phi_s) to (P_g, phi_g) (radians; the table is read at the nearest samples, the
     plan realises the exact angles), fewest grasps."""
@@ -191,9 +201,11 @@ def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: 
     a = table.q[:, ps, :, fs]
     b = table.q[:, pg, :, fg]
     if not a.any():
-        raise PlanningError(f"no grasp can pick the object at placement {ps}, {np.degrees(phs):.1f} deg; choose another angle")
+        raise NoSequence(f"no grasp can pick the object at placement {ps}, {np.degrees(phs):.1f} deg; choose another angle "
+                         f"({_served_angles(table, ps)})")
     if not b.any():
-        raise PlanningError(f"no grasp can put the object at placement {pg}, {np.degrees(phg):.1f} deg; choose another angle")
+        raise NoSequence(f"no grasp can put the object at placement {pg}, {np.degrees(phg):.1f} deg; choose another angle "
+                         f"({_served_angles(table, pg)})")
     levels = chain(table, a, b)
     if levels is None:
         raise NoSequence(f"no regrasp sequence from placement {ps} to placement {pg}: the table does not connect them: "

@@ -153,8 +153,16 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
     with the failing samples of the rest of their phi row, and the query re-run."""
     work = working_copy(table) if copy else table
     rows_done: set[tuple] = set()
+    legal = int(work.q.sum())
     for _ in range(attempts):
-        seq = query(work, **kw)
+        try:
+            seq = query(work, **kw)
+        except NoSequence as exc:
+            dropped = legal - int(work.q.sum())
+            if not dropped:
+                raise
+            raise NoSequence(f"after dropping {dropped} table sample(s) whose approach, retract or arm fails its collision "
+                             f"checks (a larger --handx/--worldz or another table point may keep them): {exc}") from None
         pairs = seq.conjunctions()
         out, q_prev, bad = [], None, None
         for k, (g, p) in enumerate(pairs):
@@ -258,7 +266,12 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
     work = working_copy(table)
     removed, last = 0, ""
     while True:
-        seq, conj = realise(query, work, classes, realiser, copy=False, **kw)
+        try:
+            seq, conj = realise(query, work, classes, realiser, copy=False, **kw)
+        except NoSequence as exc:
+            if not removed:
+                raise
+            raise NoSequence(f"after removing {removed} conjunction(s) whose motions failed (last failure: {last}): {exc}") from None
         if not conj:
             return seq, None
         plan = to_plan(seq, conj, work, classes, robot, object_name, realiser.handx, realiser.worldz)
