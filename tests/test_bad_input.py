@@ -421,6 +421,13 @@ def test_plan_rerun_answers_from_the_store_without_a_duplicate(work, db):
     assert second.returncode == 0, second.stderr[-2000:]
     assert state(db) == after_first
     assert "from the store" in second.stdout
+    # other motion settings are another plan, stored beside the first (the stored one is not passed off as it)
+    third = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, "--acc", "2", cwd=work)
+    assert third.returncode == 0 and "from the store" not in third.stdout, third.stdout + third.stderr[-2000:]
+    con = duckdb.connect(str(db), read_only=True)
+    accs = {tuple(r[0]) for r in con.execute("SELECT acc FROM plan").fetchall()}
+    con.close()
+    assert {a[0] for a in accs} >= {2.0, 3.0}
 
 
 def test_a_start_that_is_the_goal_needs_no_plan(work, db):

@@ -14,8 +14,9 @@ Collision model (`MotionChecker`, pinocchio + coal on the URDF's collision geome
   fixed parts. The gripper's own parts hold it rigidly and are not checked against it.
 
 Resolution (CONVENTIONS.md): a joint-space segment is checked at samples at most `resolution` (1 degree) apart in
-every joint; a TCP line is solved by IK at samples at most `tcp_step` (5 mm) and 1 degree of TCP rotation apart,
-and the joint path between them is checked at 1 degree.
+every joint and `tcp_step` (5 mm) apart in TCP travel, both; a TCP line is solved by IK at samples at most
+`tcp_step` and 1 degree of TCP rotation apart, and the joint path between them is checked the same way. The timed
+trajectories' knots keep both bounds too (`planners.wan_harada.motions`).
 """
 
 from __future__ import annotations
@@ -216,11 +217,17 @@ class MotionChecker:
         return out
 
     def line_samples(self, qa: np.ndarray, qb: np.ndarray) -> np.ndarray:
-        """Samples of the straight joint line qa -> qb at most `resolution` apart in every joint (both ends included)."""
+        """Samples of the straight joint line qa -> qb at most `resolution` apart in every joint and `tcp_step` apart
+        in TCP travel (both ends included; a long arm turning at its base moves the TCP 15-20 mm per degree)."""
         qa, qb = np.asarray(qa, dtype=np.float64), np.asarray(qb, dtype=np.float64)
         n = max(1, int(math.ceil(np.abs(qb - qa).max() / self.opts.resolution - 1e-9)))
-        t = np.linspace(0.0, 1.0, n + 1)[:, None]
-        return qa + t * (qb - qa)
+        for _ in range(8):
+            s = qa + np.linspace(0.0, 1.0, n + 1)[:, None] * (qb - qa)
+            gap = float(np.linalg.norm(np.diff(forward(self.robot, s)[3], axis=0), axis=1).max())
+            if gap <= self.opts.tcp_step:
+                return s
+            n = int(math.ceil(n * 1.1 * gap / self.opts.tcp_step))
+        return s
 
     def line_free(self, qa: np.ndarray, qb: np.ndarray) -> bool:
         """Whether the straight joint line qa -> qb is valid at every sample (checked coarse-to-fine)."""

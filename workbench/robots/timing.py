@@ -7,7 +7,8 @@ through its vertices, pieces longer than `densify` first subdivided so the splin
 callers check the timed samples and fall back to `stops` (rest-to-rest along every piece) when the spline strays.
 
 A timed trajectory is knots: times (s), joint positions and velocities, consecutive knots at most `max_step`
-(1 degree) apart in every joint, so checking the knots checks the motion at the stated resolution; between knots
+(1 degree) apart in every joint (callers that know the arm lower it until the TCP also travels at most 5 mm
+between knots), so checking the knots checks the motion at the stated resolution; between knots
 a controller interpolates (cubic Hermite from positions and velocities). `sample` and `resample` serve
 validation and animation; `to_csv` and `to_json` export a whole timed plan for replay.
 """

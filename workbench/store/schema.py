@@ -42,7 +42,8 @@ Extra tables
 - stagedone(stage, runkey, rows, finished): completion of a stage written in several transactions (the IK stage,
   chunk by chunk; runkey names its tabletop set, robot, scene and retractions). A stage written in one
   transaction is complete when its paramset row exists. Consumers refuse an incomplete IK run unless asked.
-- plan rows are unique per query: a re-run of the same query finds the stored answer (store.wan_harada.find_plan).
+- plan rows are unique per query and motions: a re-run of the same query with the same motion settings finds the
+  stored answer (store.wan_harada.find_plan); another --acc, or motions timed otherwise, is a new plan.
 """
 
 from __future__ import annotations

@@ -80,22 +80,30 @@ def placements_of_tabletop(store: Store, idtabletop: int) -> int:
 QUERY_COLUMNS = ("idobject", "idrobot", "idscene", "idikret", "idtabletop", "start_placement", "goal_placement", "rank")
 
 
-def find_plan(store: Store, plan: dict[str, Any]) -> int | None:
+def find_plan(store: Store, plan: dict[str, Any], segments: dict[str, Any] | None = None) -> int | None:
     """The id of a stored plan answering the same query (object, robot, scene, retractions, tabletop set, start and
-    goal placements and poses to 1e-9, rank), or None."""
+    goal placements and poses to 1e-9, rank), or None. With its `segments`, only a plan with the same motions counts:
+    the same acceleration limits, duration (to 1e-9 s) and number of knots (another --acc, or a trajectory timed
+    otherwise by another version, is a new plan)."""
     where = " AND ".join(f"{c} = ?" for c in QUERY_COLUMNS)
+    args = [*(plan[c] for c in QUERY_COLUMNS), list(plan["start_xyyaw"]), list(plan["goal_xyyaw"])]
+    same = ""
+    if segments is not None:
+        knots = sum(len(t) for t in (segments["t"].to_pylist() if hasattr(segments["t"], "to_pylist") else segments["t"]))
+        same = (" AND acc IS NOT DISTINCT FROM ?::DOUBLE[] AND coalesce(abs(duration - ?), 0) < 1e-9 AND (duration IS NULL) = ?"
+                " AND (SELECT coalesce(sum(len(s.t)), 0) FROM plansegment s WHERE s.idplan = plan.idplan) = ?")
+        args += [plan.get("acc"), plan.get("duration") or 0.0, plan.get("duration") is None, int(knots)]
     row = store.one(f"SELECT min(idplan) FROM plan WHERE {where} AND list_distance(start_xyyaw, ?::DOUBLE[3]) < 1e-9 "
-                    f"AND list_distance(goal_xyyaw, ?::DOUBLE[3]) < 1e-9",
-                    [*(plan[c] for c in QUERY_COLUMNS), list(plan["start_xyyaw"]), list(plan["goal_xyyaw"])])
+                    f"AND list_distance(goal_xyyaw, ?::DOUBLE[3]) < 1e-9{same}", args)
     return None if row is None or row[0] is None else int(row[0])
 
 
 def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray], segments: dict[str, np.ndarray] | None = None) -> int:
     """Store one plan (columns of `plan`), its steps (columns of `planstep`, arrays) and its timed motions (columns
-    of `plansegment`) in one transaction; returns idplan. A plan answering a query already stored is not stored
-    again: the stored plan's id is returned."""
+    of `plansegment`) in one transaction; returns idplan. A plan answering a query already stored, with the same
+    motions, is not stored again: the stored plan's id is returned."""
     with store.transaction():
-        found = find_plan(store, plan)
+        found = find_plan(store, plan, segments)
         if found is not None:
             return found
         pid = store.next_id("plan", "idplan")

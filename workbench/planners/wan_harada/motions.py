@@ -37,6 +37,7 @@ from workbench.robots.motion import (
 )
 from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
 from workbench.robots.timing import (
+    ONE_DEGREE,
     TimedSegment,
     Trajectory,
     check_limits,
@@ -251,8 +252,8 @@ def solve_moves(checker: MotionChecker, moves: list[Move], vlim: np.ndarray, ali
                 seed: int | None = None) -> MotionResult:
     """Plan and time every move in order (see the module docstring); stops at the first that fails.
 
-    Every trajectory's knots (at most 1 degree apart) are checked again after timing: a spline that strays from
-    the checked path is replaced by rest-to-rest timing along its pieces."""
+    Every trajectory's knots (at most 1 degree and 5 mm of TCP travel apart) are checked again after timing: a
+    spline that strays from the checked path is replaced by rest-to-rest timing along its pieces."""
     robot = checker.robot
     vlim, alim = check_limits(vlim, alim, robot.nq)
     seed = checker.opts.seed if seed is None else seed
@@ -297,13 +298,32 @@ def solve_moves(checker: MotionChecker, moves: list[Move], vlim: np.ndarray, ali
     return MotionResult(segments, None, "", time.perf_counter() - t_start, rrt, methods)
 
 
+TCP_STEP = 0.005  # m: the most the TCP travels between two knots (CONVENTIONS.md, Plans and motions)
+
+
 def _timed(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.ndarray) -> Trajectory | None:
+    """The path timed with knots at most 1 degree apart in every joint and TCP_STEP apart in TCP travel (a long arm
+    turning at its base moves the TCP 15-20 mm per degree): the knot spacing shrinks until both hold."""
+    step = ONE_DEGREE
+    for _ in range(8):
+        traj = _timed_at(checker, path, vlim, alim, step)
+        if traj is None or len(traj.q) < 2:
+            return traj
+        gap = float(np.linalg.norm(np.diff(forward(checker.robot, traj.q)[3], axis=0), axis=1).max())
+        if gap <= TCP_STEP:
+            return traj
+        step *= max(0.2, 0.9 * TCP_STEP / gap)
+    return None
+
+
+def _timed_at(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.ndarray,
+              step: float) -> Trajectory | None:
     if len(path) == 2:
-        return time_line(path[0], path[1], vlim, alim)
-    traj = time_spline(path, vlim, alim)
+        return time_line(path[0], path[1], vlim, alim, step)
+    traj = time_spline(path, vlim, alim, max_step=step)
     if not within_limits(traj, checker.robot.lower, checker.robot.upper, vlim, alim) and _knots_ok(checker, traj):
         return traj
-    traj = time_stops(path, vlim, alim)
+    traj = time_stops(path, vlim, alim, step)
     return traj if _knots_ok(checker, traj) else None
 
 

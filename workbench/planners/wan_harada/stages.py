@@ -460,8 +460,9 @@ def save_plans(store: Store, plans: list[Plan]) -> list[int]:
 
 
 def stored_plan(store: Store, plan: Plan) -> int | None:
-    """The id of a stored plan answering the same query as `plan`, or None."""
-    return sql.find_plan(store, plan_rows(plan)[0])
+    """The id of a stored plan answering the same query as `plan` with the same motions, or None."""
+    row, _, segments = plan_rows(plan)
+    return sql.find_plan(store, row, segments)
 
 
 def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
