@@ -20,6 +20,7 @@ import io
 import json
 import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -90,9 +91,29 @@ def _knot_times(duration: float, vpeak: float, max_step: float) -> np.ndarray:
     return np.linspace(0.0, duration, n + 1)
 
 
-def time_line(qa: np.ndarray, qb: np.ndarray, vlim: np.ndarray, alim: np.ndarray, max_step: float = ONE_DEGREE) -> Trajectory:
+Spacing = Callable[[np.ndarray], float]
+"""A second measure of knot spacing: joint positions (K, n) -> the largest gap between consecutive knots over its
+limit (e.g. TCP travel over 5 mm); knots are added until it is at most 1."""
+
+
+def _knots(duration: float, vpeak: float, max_step: float, positions: Callable[[np.ndarray], np.ndarray],
+           spacing: Spacing | None) -> np.ndarray:
+    """Evenly spaced knot times at most `max_step` apart in every joint (at peak speed) and, with `spacing`, dense
+    enough for it too (`positions(t)` gives the joint positions at times t)."""
+    t = _knot_times(duration, vpeak, max_step)
+    for _ in range(8):
+        ratio = spacing(positions(t)) if spacing is not None and len(t) > 1 else 0.0
+        if ratio <= 1.0:
+            break
+        t = np.linspace(0.0, duration, int(math.ceil((len(t) - 1) * 1.1 * ratio)) + 1)
+    return t
+
+
+def time_line(qa: np.ndarray, qb: np.ndarray, vlim: np.ndarray, alim: np.ndarray, max_step: float = ONE_DEGREE,
+              spacing: Spacing | None = None) -> Trajectory:
     """The time-optimal rest-to-rest trapezoidal profile along the straight joint line qa -> qb (all joints
-    synchronised, so the motion stays on the line)."""
+    synchronised, so the motion stays on the line); knots at most `max_step` apart in every joint and, with
+    `spacing`, within it too."""
     qa, qb = np.asarray(qa, dtype=np.float64), np.asarray(qb, dtype=np.float64)
     vlim, alim = check_limits(vlim, alim, len(qa))
     d = qb - qa
@@ -109,21 +130,25 @@ def time_line(qa: np.ndarray, qb: np.ndarray, vlim: np.ndarray, alim: np.ndarray
         ta = vs / as_
         tc = (1.0 - vs * ta) / vs
     dur = 2 * ta + tc
-    t = _knot_times(dur, vs * ad.max(), max_step)
-    s = np.where(t < ta, 0.5 * as_ * t ** 2,
-                 np.where(t < ta + tc, 0.5 * as_ * ta ** 2 + vs * (t - ta),
-                          1.0 - 0.5 * as_ * np.maximum(dur - t, 0.0) ** 2))
+
+    def path_s(t: np.ndarray) -> np.ndarray:
+        return np.where(t < ta, 0.5 * as_ * t ** 2, np.where(t < ta + tc, 0.5 * as_ * ta ** 2 + vs * (t - ta),
+                                                             1.0 - 0.5 * as_ * np.maximum(dur - t, 0.0) ** 2))
+
+    t = _knots(dur, vs * ad.max(), max_step, lambda t: qa + path_s(t)[:, None] * d, spacing)
+    s = path_s(t)
     sd = np.where(t < ta, as_ * t, np.where(t < ta + tc, vs, as_ * np.maximum(dur - t, 0.0)))
     s[-1], sd[-1], sd[0] = 1.0, 0.0, 0.0
     return Trajectory(t, qa + s[:, None] * d, sd[:, None] * d)
 
 
-def time_stops(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, max_step: float = ONE_DEGREE) -> Trajectory:
+def time_stops(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, max_step: float = ONE_DEGREE,
+               spacing: Spacing | None = None) -> Trajectory:
     """Rest to rest along every straight piece of a path (exactly on the checked pieces)."""
     path = np.asarray(path, dtype=np.float64)
-    out = time_line(path[0], path[min(1, len(path) - 1)], vlim, alim, max_step)
+    out = time_line(path[0], path[min(1, len(path) - 1)], vlim, alim, max_step, spacing)
     for a, b in zip(path[1:-1], path[2:]):
-        nxt = time_line(a, b, vlim, alim, max_step).shifted(out.t[-1])
+        nxt = time_line(a, b, vlim, alim, max_step, spacing).shifted(out.t[-1])
         out = Trajectory(np.r_[out.t, nxt.t[1:]], np.vstack([out.q, nxt.q[1:]]), np.vstack([out.qd, nxt.qd[1:]]))
     return out
 
@@ -139,10 +164,11 @@ def densify(path: np.ndarray, spacing: float) -> np.ndarray:
     return np.vstack(out)
 
 
-def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, spacing: float = 0.05,
-                max_step: float = ONE_DEGREE, gridpoints: int = 60) -> Trajectory:
-    """TOPP-RA along a natural cubic spline through the (densified) path vertices, rest to rest; on `gridpoints`
-    grid points first, on five times as many when the knots break a limit between grid points."""
+def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, density: float = 0.05,
+                max_step: float = ONE_DEGREE, gridpoints: int = 60, spacing: Spacing | None = None) -> Trajectory:
+    """TOPP-RA along a natural cubic spline through the path vertices (pieces longer than `density` in any joint
+    subdivided first), rest to rest; on `gridpoints` grid points first, on five times as many when the knots break a
+    limit between grid points. Knots at most `max_step` apart in every joint and, with `spacing`, within it too."""
     import toppra as ta
     import toppra.algorithm as algo
     import toppra.constraint as constraint
@@ -150,14 +176,14 @@ def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, spacing: f
     logging.getLogger("toppra").setLevel(logging.ERROR)
     path = np.asarray(path, dtype=np.float64)
     vlim, alim = check_limits(vlim, alim, path.shape[1])
-    pts = densify(path, spacing)
+    pts = densify(path, density)
     chord = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
     keep = np.r_[True, np.diff(chord) > 1e-12]
     pts, chord = pts[keep], chord[keep]
     if len(pts) < 2:
         return Trajectory(np.zeros(1), pts[:1].copy(), np.zeros((1, pts.shape[1])))
     if len(pts) == 2:
-        return time_line(pts[0], pts[1], vlim, alim, max_step)
+        return time_line(pts[0], pts[1], vlim, alim, max_step, spacing)
     s = chord / chord[-1]
     geo = ta.SplineInterpolator(s, pts, bc_type="natural")
     v, a = LIMIT_MARGIN * vlim, LIMIT_MARGIN * alim
@@ -173,7 +199,7 @@ def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, spacing: f
         dur = float(traj.duration)
         coarse = np.linspace(0.0, dur, 100)
         vpeak = float(np.abs(traj(coarse, 1)).max()) * 1.2 + 1e-9
-        t = _knot_times(dur, vpeak, max_step)
+        t = _knots(dur, vpeak, max_step, lambda t: np.asarray(traj(t)), spacing)
         q, qd = np.asarray(traj(t)), np.asarray(traj(t, 1))
         q[0], q[-1] = path[0], path[-1]
         qd[0], qd[-1] = 0.0, 0.0

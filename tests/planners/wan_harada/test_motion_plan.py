@@ -220,3 +220,20 @@ def test_plan_html_caption_follows_the_timed_animation(planner, demo_result, tmp
         frame = int((seg.t0 + 0.5 * seg.duration) * data["fps"])
         assert data["steps"][frame] == seg.step + 1, (seg.kind, seg.caption, seg.t0)
         assert data["captions"][seg.step + 1].startswith(f"step {seg.step + 1} of {len(plan.steps)}: ")
+
+
+def test_knots_are_within_one_degree_and_five_mm_of_tcp_travel(planner, demo_result):
+    """The check resolution of CONVENTIONS.md holds between every two knots: at most 1 degree in every joint and 5 mm
+    of TCP travel, the TCP from pinocchio on the stored URDF (the arm's shoulder alone moves the TCP up to 10 mm per
+    degree, so the joint bound alone would not give the TCP's)."""
+    fk = FK(planner)
+    worst_deg = worst_mm = 0.0
+    for seg in demo_result.plan.segments:
+        q = seg.traj.q
+        if len(q) < 2:
+            continue
+        tcp = np.array([fk(x)[:3, 3] for x in q])
+        worst_deg = max(worst_deg, float(np.degrees(np.abs(np.diff(q, axis=0)).max())))
+        worst_mm = max(worst_mm, float(np.linalg.norm(np.diff(tcp, axis=0), axis=1).max() * 1000))
+    assert worst_deg <= 1.0 + 1e-6 and worst_mm <= 5.0 + 1e-3, (worst_deg, worst_mm)
+    assert worst_mm > 2.0  # the bound is reached, not trivially met by tiny steps

@@ -37,7 +37,6 @@ from workbench.robots.motion import (
 )
 from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
 from workbench.robots.timing import (
-    ONE_DEGREE,
     TimedSegment,
     Trajectory,
     check_limits,
@@ -303,27 +302,16 @@ TCP_STEP = 0.005  # m: the most the TCP travels between two knots (CONVENTIONS.m
 
 def _timed(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.ndarray) -> Trajectory | None:
     """The path timed with knots at most 1 degree apart in every joint and TCP_STEP apart in TCP travel (a long arm
-    turning at its base moves the TCP 15-20 mm per degree): the knot spacing shrinks until both hold."""
-    step = ONE_DEGREE
-    for _ in range(8):
-        traj = _timed_at(checker, path, vlim, alim, step)
-        if traj is None or len(traj.q) < 2:
-            return traj
-        gap = float(np.linalg.norm(np.diff(forward(checker.robot, traj.q)[3], axis=0), axis=1).max())
-        if gap <= TCP_STEP:
-            return traj
-        step *= max(0.2, 0.9 * TCP_STEP / gap)
-    return None
+    turning at its base moves the TCP 15-20 mm per degree)."""
+    def spacing(q: np.ndarray) -> float:
+        return float(np.linalg.norm(np.diff(forward(checker.robot, q)[3], axis=0), axis=1).max()) / TCP_STEP
 
-
-def _timed_at(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.ndarray,
-              step: float) -> Trajectory | None:
     if len(path) == 2:
-        return time_line(path[0], path[1], vlim, alim, step)
-    traj = time_spline(path, vlim, alim, max_step=step)
+        return time_line(path[0], path[1], vlim, alim, spacing=spacing)
+    traj = time_spline(path, vlim, alim, spacing=spacing)
     if not within_limits(traj, checker.robot.lower, checker.robot.upper, vlim, alim) and _knots_ok(checker, traj):
         return traj
-    traj = time_stops(path, vlim, alim, step)
+    traj = time_stops(path, vlim, alim, spacing=spacing)
     return traj if _knots_ok(checker, traj) else None
 
 
