@@ -39,3 +39,10 @@ def test_placement_explorer_counts_equal_the_stored_ones(tmp_path, box, hand):
     numbers = dict(re.findall(r"(tabletop grips|tabletop placements)\s+([\d,]+)", text))
     assert int(numbers["tabletop grips"].replace(",", "")) == p.n_tabletop_grips
     assert int(numbers["tabletop placements"].replace(",", "")) == p.n_tabletop_placements
+    # a threshold above every support: no placement, and the widget says what threshold keeps one
+    ex.stability.value = 1.5
+    text = re.sub(r"<[^>]+>", " ", ex.info.value)
+    assert "no stable placement at this threshold" in text and "--min-stability" in text
+    lower = float(re.search(r"--min-stability ([0-9.]+) keeps", text).group(1))
+    ex.stability.value = lower
+    assert len(ex.placements) > 0

@@ -5,6 +5,7 @@ stage functions) and draw with `workbench.viewer`; no planning logic lives here.
 
 from __future__ import annotations
 
+import html
 from dataclasses import replace
 from pathlib import Path
 
@@ -18,6 +19,7 @@ from workbench.geometry.objects import ObjectModel, load_object
 from workbench.grasping.placements import (
     PlacementParams,
     free_tabletop_grips,
+    stability_hint,
     stable_placements,
 )
 from workbench.planners.wan_harada.query import PoseQuery
@@ -310,7 +312,7 @@ class PlacementExplorer:
             w.observe(lambda _: self.draw(), names="value")
         self.widget = W.VBox([W.HBox([self.stability, self.which]), W.HBox([self.nx, self.ny]),
                               W.HBox([self.angles, self.hands]), self.roadmap, self.key, self.info])
-        self.placements = None
+        self.placements, self.params = None, self.base
 
     def grid(self) -> TabletopParams:
         return replace(self.base_grid, nx=self.nx.value, ny=self.ny.value, angles=self.angles.value)
@@ -318,7 +320,7 @@ class PlacementExplorer:
     def run(self):
         """Placements and free tabletop grips with the library's stages (the numbers the store would hold)."""
         params = replace(self.base, min_stability=self.stability.value)
-        self.placements = stable_placements(self.obj, params)
+        self.placements, self.params = stable_placements(self.obj, params), params
         self.ftg = free_tabletop_grips(self.placements, self.grasp_poses, self.gripper, params)
         self.ok = np.zeros((len(self.placements), len(self.grasp_poses)), dtype=bool)
         self.ok[self.ftg[0], self.ftg[1]] = True
@@ -337,7 +339,8 @@ class PlacementExplorer:
         counts = {"stable placements": len(pl), "rejected faces": len(pl.rejected_stability),
                   "tabletop placements": len(tt.poses), "tabletop grips": len(tt.grip_poses)}
         if len(pl) == 0:
-            self.info.value = counts_table(counts, "no stable placement at this threshold")
+            why = html.escape(stability_hint(self.obj, self.params))
+            self.info.value = counts_table(counts, "no stable placement at this threshold") + f"<p>{why}</p>"
             return
         k = self.which.value
         show_at = np.eye(4)
