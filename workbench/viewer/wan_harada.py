@@ -106,13 +106,17 @@ def timed_frames(plan, segments: list[TimedSegment], tcp_pose, fps: float = 30.0
         else:
             obj = np.asarray(step.object_pose, dtype=np.float64)
         out.append({"t": float(t), "q": q, "jaw": float(jaw), "held": bool(seg.holding), "object": obj, "caption": seg.caption,
-                    "segment": k, "step": int(seg.step)})
+                    "segment": k, "step": min(int(seg.step) + (seg.kind in MOVES_TO_NEXT), len(plan.steps) - 1)})
     return out
+
+
+MOVES_TO_NEXT = ("transfer", "transit")  # motions from one step's pose to the next step's: they serve the next step
 
 
 def plan_frames(plan, robot, fps: int = 30) -> list[dict]:
     """The frames `show_plan` animates, one per 1/fps s of plan time when the plan has timed motions (`timed_frames`),
-    else its waypoint keyframes; each with q, jaw, held, object (4x4 world pose) and step (index in plan.steps)."""
+    else its waypoint keyframes; each with q, jaw, held, object (4x4 world pose) and step (index in plan.steps of the
+    step it serves: a transfer or transit serves the step it goes to)."""
     if plan.segments:
         return timed_frames(plan, plan.segments, robot.tcp_pose, fps, jaw_open=robot.gripper.jaw_max)
     frames = keyframes(plan, jaw_open=robot.gripper.jaw_max)

@@ -210,7 +210,8 @@ def test_unwrapping_whole_turns_keeps_poses_and_limits():
 
 def test_plan_html_caption_follows_the_timed_animation(planner, demo_result, tmp_path):
     """The page's caption names the step whose motion is playing: its frame-to-step table has one entry per animation
-    frame (30 per second of the trajectory), and at the middle of every segment it names that segment's step."""
+    frame (30 per second of the trajectory), and at the middle of every segment it names the step that segment serves
+    (a transfer or transit the step it carries the part or the hand to)."""
     plan = demo_result.plan
     page = plan_scene(plan, planner, tmp_path / "plan.html").read_text()
     data = json.loads(re.search(r"var d = (\{.*?\}), el =", page).group(1))
@@ -218,8 +219,9 @@ def test_plan_html_caption_follows_the_timed_animation(planner, demo_result, tmp
     assert abs(len(data["steps"]) - (duration * data["fps"] + 1)) <= 1
     for seg in plan.segments:
         frame = int((seg.t0 + 0.5 * seg.duration) * data["fps"])
-        assert data["steps"][frame] == seg.step + 1, (seg.kind, seg.caption, seg.t0)
-        assert data["captions"][seg.step + 1].startswith(f"step {seg.step + 1} of {len(plan.steps)}: ")
+        serves = seg.step + (seg.kind in ("transfer", "transit"))  # a move to the next step's pose serves that step
+        assert data["steps"][frame] == serves + 1, (seg.kind, seg.caption, seg.t0)
+        assert data["captions"][serves + 1].startswith(f"step {serves + 1} of {len(plan.steps)}: ")
 
 
 def test_knots_are_within_one_degree_and_five_mm_of_tcp_travel(planner, demo_result):
