@@ -223,11 +223,15 @@ class MotionChecker:
         n = max(1, int(math.ceil(np.abs(qb - qa).max() / self.opts.resolution - 1e-9)))
         for _ in range(8):
             s = qa + np.linspace(0.0, 1.0, n + 1)[:, None] * (qb - qa)
-            gap = float(np.linalg.norm(np.diff(forward(self.robot, s)[3], axis=0), axis=1).max())
+            gap = self.tcp_gap(s)
             if gap <= self.opts.tcp_step:
                 return s
             n = int(math.ceil(n * 1.1 * gap / self.opts.tcp_step))
         return s
+
+    def tcp_gap(self, q: np.ndarray) -> float:
+        """The largest TCP travel (m) between consecutive joint vectors of q (K, n), K >= 2 (batched FK)."""
+        return float(np.linalg.norm(np.diff(forward(self.robot, q)[3], axis=0), axis=1).max())
 
     def line_free(self, qa: np.ndarray, qb: np.ndarray) -> bool:
         """Whether the straight joint line qa -> qb is valid at every sample (checked coarse-to-fine)."""

@@ -297,14 +297,11 @@ def solve_moves(checker: MotionChecker, moves: list[Move], vlim: np.ndarray, ali
     return MotionResult(segments, None, "", time.perf_counter() - t_start, rrt, methods)
 
 
-TCP_STEP = 0.005  # m: the most the TCP travels between two knots (CONVENTIONS.md, Plans and motions)
-
-
 def _timed(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.ndarray) -> Trajectory | None:
-    """The path timed with knots at most 1 degree apart in every joint and TCP_STEP apart in TCP travel (a long arm
-    turning at its base moves the TCP 15-20 mm per degree)."""
+    """The path timed with knots at most 1 degree apart in every joint and the checker's `tcp_step` (5 mm) apart in
+    TCP travel (a long arm turning at its base moves the TCP 15-20 mm per degree)."""
     def spacing(q: np.ndarray) -> float:
-        return float(np.linalg.norm(np.diff(forward(checker.robot, q)[3], axis=0), axis=1).max()) / TCP_STEP
+        return checker.tcp_gap(q) / checker.opts.tcp_step
 
     if len(path) == 2:
         return time_line(path[0], path[1], vlim, alim, spacing=spacing)
