@@ -24,6 +24,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from workbench.store import Store
+
 ROOT = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "workbench.cli"]
 GRID = ["--x", "0.4,0.6,2", "--y=-0.1,0.1,2", "--angles", "2", "--max-grasps", "10"]
@@ -565,6 +567,30 @@ def test_full_disk(work, tmp_path, reference):
     res = cli("build", work / "box.stl", "--db", moved / "s.duckdb", *BUILD, cwd=work)
     assert res.returncode == 0, res.stderr[-2000:]
     assert state(moved / "s.duckdb") == reference
+
+
+def test_schema_2_plans_move_to_plan_time(work, tmp_path):
+    """Schema 2 stored knot times from each segment's start: opening such a store moves them to plan time (from the
+    plan's start, CONVENTIONS.md), once."""
+    db = tmp_path / "p.duckdb"
+    res = cli("build", work / "box.stl", "--db", db, *BUILD, cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    con = duckdb.connect(str(db))
+    now = con.execute("SELECT idplansegment, t0, t FROM plansegment ORDER BY idplan, seq").fetchall()
+    assert len(now) > 3 and all(abs(t[0] - t0) < 1e-9 for _, t0, t in now)
+    con.executemany("UPDATE plansegment SET t = ? WHERE idplansegment = ?",  # as schema 2 wrote them
+                    [[[x - t0 for x in t], i] for i, t0, t in now])
+    con.execute("UPDATE workbench_meta SET value = '2' WHERE key = 'schema_version'")
+    con.close()
+    for _ in range(2):  # upgraded once: a second opening changes nothing
+        Store(db).close()
+    con = duckdb.connect(str(db), read_only=True)
+    back = con.execute("SELECT idplansegment, t0, t FROM plansegment ORDER BY idplan, seq").fetchall()
+    version = con.execute("SELECT value FROM workbench_meta WHERE key = 'schema_version'").fetchall()[0][0]
+    con.close()
+    assert version == "3" and all(np.allclose(a[2], b[2]) for a, b in zip(now, back))
 
 
 def test_store_left_by_an_older_version(work, db, reference):

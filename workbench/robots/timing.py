@@ -255,13 +255,21 @@ class TimedSegment:
         return self.traj.duration
 
     def as_dict(self) -> dict:
+        """The segment with its knot times `t` in plan time (s from the plan's start, CONVENTIONS.md); t0 = t[0]."""
         return {"kind": self.kind, "caption": self.caption, "step": self.step, "holding": self.holding, "t0": self.t0,
-                "duration": self.duration, "method": self.method, "jaw": self.jaw, **self.traj.as_dict()}
+                "duration": self.duration, "method": self.method, "jaw": self.jaw,
+                **self.traj.shifted(self.t0).as_dict()}
 
     @classmethod
     def from_dict(cls, d: dict) -> "TimedSegment":
-        return cls(d["kind"], d["caption"], int(d["step"]), bool(d["holding"]), float(d["t0"]), Trajectory.from_dict(d),
-                   d.get("method", ""), float(d.get("jaw", 0.0)))
+        """The inverse of `as_dict`; knot times that start at 0 rather than at t0 (files of versions before plan
+        time) are read as from the segment's start."""
+        t0 = float(d["t0"])
+        traj = Trajectory.from_dict(d)
+        if len(traj.t) and abs(float(traj.t[0]) - t0) < 1e-9:
+            traj = traj.shifted(-t0)
+        return cls(d["kind"], d["caption"], int(d["step"]), bool(d["holding"]), t0, traj, d.get("method", ""),
+                   float(d.get("jaw", 0.0)))
 
 
 def plan_knots(segments: list[TimedSegment]) -> dict[str, np.ndarray]:

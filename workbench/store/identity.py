@@ -24,7 +24,8 @@ if TYPE_CHECKING:
     from workbench.store import Store
 
 APPLICATION = "regrasp-workbench"
-SCHEMA_VERSION = 2  # 1: no metadata, no completion records; 2: workbench_meta and stagedone
+SCHEMA_VERSION = 3  # 1: no metadata, no completion records; 2: workbench_meta and stagedone; 3: plansegment.t in
+# plan time (s from the plan's start, CONVENTIONS.md), it was from the segment's start
 
 META_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS workbench_meta (
@@ -169,7 +170,8 @@ def upgrade(store: Store, version: int) -> None:
 
     Schema 1 (no `workbench_meta`, no `stagedone`): every stage but IK wrote in one transaction, so its rows are
     complete when its paramset exists; an IK run (written chunk by chunk) is recorded complete when it has a row for
-    every tabletop grip of its tabletop parameter set, and left unrecorded (incomplete) otherwise."""
+    every tabletop grip of its tabletop parameter set, and left unrecorded (incomplete) otherwise. Schema 2: the knot
+    times of `plansegment.t` counted from the segment's start (`t0`); they are moved to plan time."""
     if version < 2:
         rows = store.run(
             "WITH runs AS (SELECT p.idparamset AS tt, k.idrobot, k.idscene, k.idikret, count(*) AS n "
@@ -180,3 +182,13 @@ def upgrade(store: Store, version: int) -> None:
         for tt, robot, scene, ikret, n in rows:
             store.run("INSERT OR REPLACE INTO stagedone (stage, runkey, rows) VALUES (?, ?, ?)",
                       [IK_STAGE, ik_runkey(tt, robot, scene, ikret), int(n)])
+    if version < 3:  # knot times from the segment's start -> from the plan's start
+        import pyarrow as pa
+
+        rows = store.run("SELECT idplansegment, t0, t FROM plansegment")
+        if rows:
+            fix = pa.table({"id": pa.array([r[0] for r in rows], type=pa.int64()),
+                            "t": pa.array([[r[1] + x for x in r[2]] for r in rows], type=pa.list_(pa.float64()))})
+            store.con.register("plansegment_plan_time", fix)
+            store.run("UPDATE plansegment SET t = f.t FROM plansegment_plan_time f WHERE plansegment.idplansegment = f.id")
+            store.con.unregister("plansegment_plan_time")

@@ -196,7 +196,8 @@ ALL_TABLES: tuple[str, ...] = CORE_TABLES
 # plansegment: one row per motion in order (seq): kind (approach, retract, transit, transfer, gripper), caption (the
 # step it serves: pick, transfer, release, regrasp, place), step (planstep seq), holding (object in the hand), t0 (s
 # from the plan's start), duration (s), method (tcp-line, line, rrtconnect, dwell), jaw (m) and its knots: t (s from
-# the segment's start), q and qd (row-major K x n, robot.joint_names order, rad and rad/s).
+# the plan's start, as CONVENTIONS.md says; t[0] = t0; schema 2 counted them from the segment's start), q and qd
+# (row-major K x n, robot.joint_names order, rad and rad/s).
 # plan.planner names the planner that answered: 'wan_harada' (the roadmap planner; idtabletop its tabletop parameter
 # set) or 'tournassoud' (the grasp-placement table, Tournassoud et al. 1987; idtabletop the `tournassoud.table`
 # parameter set, its placements and grasps are `freetabletopplacement` / `freeairgrip` rows written for the plan, see

@@ -174,6 +174,12 @@ def test_plan_with_motions_round_trips_json_and_store(planner, demo_result, tmp_
     k = 5
     q = np.asarray(table["q"][k]).reshape(len(table["t"][k]), -1)
     assert np.array_equal(q, plan.segments[k].traj.q) and np.isclose(table["t0"][k], plan.segments[k].t0)
+    # knot times are plan time (CONVENTIONS.md: seconds from the plan's start), in the store and in the JSON: each
+    # segment starts at its t0, ends where the next starts, and the whole never goes back
+    for ts in (table["t"], [seg["t"] for seg in json.loads(plan.to_json())["motion"]["segments"]]):
+        assert all(np.isclose(t[0], t0) for t, t0 in zip(ts, table["t0"]))
+        assert all(np.isclose(a[-1], b[0]) for a, b in zip(ts[:-1], ts[1:]))
+        assert (np.diff(np.concatenate(ts)) >= 0).all() and np.isclose(ts[-1][-1], plan.duration)
 
 
 def test_planner_plan_returns_executable_validated_plans(planner):

@@ -17,9 +17,10 @@ while it is near the table, whatever the grasp's approach direction):
 
 A plan is executable only with its motions (issue 12; CONVENTIONS.md, Plans and motions): `segments` are its
 timed motions in order (`robots.timing.TimedSegment`: kind, the step it serves, whether the object is held, start
-time, knots t / q / qd), planned by `planners.wan_harada.motions`; `removed` counts the roadmap nodes or query
-grips removed because their motions failed, `acc` the acceleration limits used. The JSON carries them under
-"motion"; the store in the `plansegment` table.
+time, knots t / q / qd; in the JSON and the store the knot times are plan time, from the plan's start), planned by
+`planners.wan_harada.motions`; `removed` counts the roadmap nodes or query grips removed because their motions
+failed, `acc` the acceleration limits used. The JSON carries them under "motion"; the store in the `plansegment`
+table.
 """
 
 from __future__ import annotations
@@ -286,5 +287,5 @@ def plan_rows(plan: Plan) -> tuple[dict, dict, dict]:
                 "holding": np.array([x.holding for x in g], dtype=bool), "t0": np.array([x.t0 for x in g], dtype=np.float64),
                 "duration": np.array([x.duration for x in g], dtype=np.float64),
                 "method": np.array([x.method for x in g], dtype=object), "jaw": np.array([x.jaw for x in g], dtype=np.float64),
-                "t": flat(lambda x: x.traj.t), "q": flat(lambda x: x.traj.q), "qd": flat(lambda x: x.traj.qd)}
+                "t": flat(lambda x: x.t0 + x.traj.t), "q": flat(lambda x: x.traj.q), "qd": flat(lambda x: x.traj.qd)}
     return row, steps, segments
