@@ -152,6 +152,13 @@ class Params:
     def as_dict(self) -> dict:
         return asdict(self)
 
+    @classmethod
+    def from_dict(cls, d: dict) -> "Params":
+        """The inverse of `as_dict` (a stored parameter set); keys that are not fields (the ids of the parameter sets
+        a stage consumed) are ignored."""
+        names = {f.name for f in fields(cls)}
+        return cls(**{k: v for k, v in d.items() if k in names})
+
 
 # ---------------------------------------------------------------------------------------------------------------
 # Command line: options built from the same declarations.

@@ -36,9 +36,9 @@ def _floats(text: str, n: int, label: str) -> list[float]:
     return vals
 
 
-def _radians(values: list[float], names: str, option: str) -> None:
+def _radians(values: list[float], names: tuple[str, ...], option: str) -> None:
     """Refuse an angle outside [-2 pi, 2 pi]: these options take radians, as URDF does, and 90 there is a typed degree."""
-    for name, v in zip(names.split(","), values):
+    for name, v in zip(names, values):
         if abs(v) > 2 * np.pi + 1e-9:
             raise RobotError(f"{option} {name} {v:g} is in radians and must lie within [-2 pi, 2 pi]; for {v:g} degrees "
                              f"give {np.radians(v):.6g}")
@@ -47,14 +47,14 @@ def _radians(values: list[float], names: str, option: str) -> None:
 def parse_base(text: str) -> np.ndarray:
     """--base X,Y,Z,YAW (m, rad) as the robot's base pose in the world."""
     vals = _floats(text, 4, "--base (X,Y,Z,YAW in m and rad)")
-    _radians(vals[3:], "yaw", "--base")
+    _radians(vals[3:], ("yaw",), "--base")
     return pose_xyz_yaw(*vals)
 
 
 def _mount(text: str) -> np.ndarray:
 
     x, y, z, roll, pitch, yaw = _floats(text, 6, "--mount (x,y,z,roll,pitch,yaw in m and rad)")
-    _radians([roll, pitch, yaw], "roll,pitch,yaw", "--mount")
+    _radians([roll, pitch, yaw], ("roll", "pitch", "yaw"), "--mount")
     out = np.eye(4)
     out[:3, :3] = Rotation.from_euler("xyz", [roll, pitch, yaw]).as_matrix()
     out[:3, 3] = (x, y, z)

@@ -83,21 +83,17 @@ def run(args: argparse.Namespace) -> int:
                 and math.hypot(goal.x - start.x, goal.y - start.y) < 1e-6 and abs(turn) < 1e-9):
             print(f"the start is the goal ({args.start}): {args.object} is already in place; no plan to make")
             return 0
+        report_graph(planner, t_load)
         try:
             plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
         except PlanningError as exc:
             if getattr(exc, "reason", None) not in NO_RESULT:
                 raise
-            report_graph(planner, t_load)
             warn(f"no plan for {args.object}: {exc}")
             print(f"{args.object} with {args.robot}: 0 plans ({exc.reason}); nothing stored")
             if args.json:
-                out = Path(args.json)
-                out.parent.mkdir(parents=True, exist_ok=True)
-                out.write_text(json.dumps({"plan": None, "alternatives": [], "reason": exc.reason, "message": str(exc)}, indent=1))
-                print(f"json: {Path(args.json).resolve()}")
+                print(f"json: {write_json([], args.json, reason=exc.reason, message=str(exc)).resolve()}")
             return 0
-        report_graph(planner, t_load)
         best = plans[0]
         print_plan(best)
         for p in plans[1:]:
@@ -181,10 +177,12 @@ def print_plan(plan) -> None:
               f"{plan.removed} roadmap node(s) or grip(s) removed because their motions failed")
 
 
-def write_json(plans, out: str | Path) -> Path:
-    """The best plan with its alternatives as one JSON file: {"plan": ..., "alternatives": [...]}."""
+def write_json(plans, out: str | Path, **why: str) -> Path:
+    """The best plan with its alternatives as one JSON file: {"plan": ..., "alternatives": [...]}; with no plan,
+    {"plan": null, "alternatives": [], ...`why`} (reason and message)."""
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"plan": plans[0].as_dict(), "alternatives": [p.as_dict() for p in plans[1:]]}, indent=1))
+    out.write_text(json.dumps({"plan": plans[0].as_dict() if plans else None,
+                               "alternatives": [p.as_dict() for p in plans[1:]], **why}, indent=1))
     return out

@@ -182,13 +182,17 @@ def upgrade(store: Store, version: int) -> None:
         for tt, robot, scene, ikret, n in rows:
             store.run("INSERT OR REPLACE INTO stagedone (stage, runkey, rows) VALUES (?, ?, ?)",
                       [IK_STAGE, ik_runkey(tt, robot, scene, ikret), int(n)])
-    if version < 3:  # knot times from the segment's start -> from the plan's start
+    if version < 3:  # knot times from the segment's start -> from the plan's start, every knot at once
+        import numpy as np
         import pyarrow as pa
+        import pyarrow.compute as pc
 
-        rows = store.run("SELECT idplansegment, t0, t FROM plansegment")
-        if rows:
-            fix = pa.table({"id": pa.array([r[0] for r in rows], type=pa.int64()),
-                            "t": pa.array([[r[1] + x for x in r[2]] for r in rows], type=pa.list_(pa.float64()))})
+        seg = store.con.sql("SELECT idplansegment AS id, t0, t FROM plansegment").to_arrow_table()
+        if seg.num_rows:
+            t = seg["t"].combine_chunks()
+            n = pc.list_value_length(t).to_numpy(zero_copy_only=False)
+            shifted = pc.list_flatten(t).to_numpy(zero_copy_only=False) + np.repeat(seg["t0"].to_numpy(), n)
+            fix = pa.table({"id": seg["id"], "t": pa.ListArray.from_arrays(np.r_[0, np.cumsum(n)].astype(np.int32), shifted)})
             store.con.register("plansegment_plan_time", fix)
             store.run("UPDATE plansegment SET t = f.t FROM plansegment_plan_time f WHERE plansegment.idplansegment = f.id")
             store.con.unregister("plansegment_plan_time")

@@ -75,6 +75,9 @@ def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int
     return out
 
 
+MOVES_TO_NEXT = ("transfer", "transit")  # motions from one step's pose to the next step's: they serve the next step
+
+
 def timed_frames(plan, segments: list[TimedSegment], tcp_pose, fps: float = 30.0, jaw_open: float = 0.08) -> list[dict]:
     """Frames of a timed plan at `fps` frames per second of plan time (a player at `fps` plays the motion at its real
     speed): t, q, jaw, held, object (4x4 world pose), caption (the step: pick, transfer, release, regrasp, place) and
@@ -110,9 +113,6 @@ def timed_frames(plan, segments: list[TimedSegment], tcp_pose, fps: float = 30.0
     return out
 
 
-MOVES_TO_NEXT = ("transfer", "transit")  # motions from one step's pose to the next step's: they serve the next step
-
-
 def plan_frames(plan, robot, fps: int = 30) -> list[dict]:
     """The frames `show_plan` animates, one per 1/fps s of plan time when the plan has timed motions (`timed_frames`),
     else its waypoint keyframes; each with q, jaw, held, object (4x4 world pose) and step (index in plan.steps of the
@@ -126,9 +126,10 @@ def plan_frames(plan, robot, fps: int = 30) -> list[dict]:
 
 
 def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30,
-              path: str = "plan", kind: str = "visual") -> manim.Animation:
+              path: str = "plan", kind: str = "visual", frames: list[dict] | None = None) -> manim.Animation:
     """Draw the plan's scene under `path` and attach its animation to `vis` (looped). The robot and the planning
-    gripper are drawn by `workbench.viewer.robot.RobotView` (`kind`: the URDF's visual or collision meshes)."""
+    gripper are drawn by `workbench.viewer.robot.RobotView` (`kind`: the URDF's visual or collision meshes);
+    `frames`: `plan_frames(plan, robot, fps)` when the caller has them already."""
 
     vis[path].delete()
     vis["/Grid"].set_property("visible", False)  # the table stands for the plane z = 0
@@ -143,7 +144,7 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
         show_mesh(vis, f"{path}/placements/{i}", obj_mesh, color=0x999999, opacity=0.15, pose=s.object_pose)
     show_mesh(vis, f"{path}/object", obj_mesh, color=OBJECT_COLOR)
     view = RobotView(vis, robot, f"{path}/robot", kind)
-    frames = plan_frames(plan, robot, fps)
+    frames = plan_frames(plan, robot, fps) if frames is None else frames
     anim = manim.Animation(default_framerate=fps)
     if plan.segments:
         key = [("part", OBJECT_COLOR), ("start pose", START_COLOR), ("goal pose", GOAL_COLOR),
@@ -206,12 +207,12 @@ def plan_scene(plan, planner, out: str | Path | None = None, vis: meshcat.Visual
     or its visual meshes (nicer, about 15 MB for the Panda)."""
     if vis is None:
         vis = new_scene()
-    show_plan(vis, plan, planner.robot, planner.object.mesh, scene_table(planner), kind=kind)
+    frames = plan_frames(plan, planner.robot)  # the animation's, and the page caption's clock
+    show_plan(vis, plan, planner.robot, planner.object.mesh, scene_table(planner), kind=kind, frames=frames)
     frame_plan(vis, plan, planner.robot)
     if out is None:
         return vis
     path = static_html(vis, out)
-    frames = plan_frames(plan, planner.robot)  # the animation's own frames: the caption follows its clock
     page = path.read_text()
     path.write_text(page.replace("</body>", plan_overlay(plan, [f["step"] for f in frames]) + "</body>", 1))
     return path

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 import warnings
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -498,9 +498,7 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -
     pl = sql.placements_of_tabletop(store, tt)
     free = load_placements(store, pl)
     if len(free["stability"]) == 0:
-        known = {f.name for f in fields(PlacementParams)}
-        params = PlacementParams(**{k: v for k, v in store.params_of(pl).items() if k in known})
-        return f"placements: {stability_hint(obj, params)}"
+        return f"placements: {stability_hint(obj, PlacementParams.from_dict(store.params_of(pl)))}"
     if len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]) == 0:
         return f"free tabletop grips: {no_grip_hint(obj, free['rotmat'])}"
     if tabletop_counts(store, tt)[1] == 0:
