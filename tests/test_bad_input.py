@@ -453,10 +453,13 @@ def test_speck_names_its_size_and_a_scale(work, tmp_path):
     assert not (tmp_path / "s.duckdb").exists()
 
 
-def test_build_with_a_broken_urdf_does_not_advise_an_option_it_lacks(work, tmp_path):
-    res = cli("build", work / "box.stl", "--db", tmp_path / "s.duckdb", *BUILD[:0], "--robot", work / "broken.urdf", cwd=work)
-    err = assert_refused(res, "broken.urdf")
-    assert "--tip" not in err
+def test_build_with_a_broken_urdf_is_refused_before_any_work(work, tmp_path):
+    res = cli("build", work / "box.stl", "--db", tmp_path / "s.duckdb", "--robot", work / "broken.urdf", cwd=work)
+    assert_refused(res, "broken.urdf", "--tip")
+    res = cli("build", work / "box.stl", "--db", tmp_path / "s.duckdb", "--robot", work / "broken.urdf", "--tip", "a",
+              cwd=work)
+    assert_refused(res, "broken.urdf", "not well-formed")
+    assert not (tmp_path / "s.duckdb").exists()
 
 
 @pytest.mark.parametrize("form", [["--y", "-0.1,0.1,2"], ["--y=-0.1,0.1,2"]])

@@ -35,3 +35,7 @@ class MemoryBudgetError(WorkbenchError):
 
 class PartialStageWarning(UserWarning):
     """A consumer went on with a stage that did not complete (asked for with --allow-partial)."""
+
+
+class RobotWarning(UserWarning):
+    """A robot was loaded with a change the user should know of (bounded continuous joints, links replaced)."""

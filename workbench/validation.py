@@ -128,7 +128,8 @@ class PlanValidator:
         self.data = self.model.createData()
         if not self.model.existFrame(tip_frame):
             raise PlanningError(f"validator: the robot URDF has no frame {tip_frame!r}")
-        self.tip = self.model.getFrameId(tip_frame)
+        kinds = (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT, pin.FrameType.JOINT)
+        self.tip = next(self.model.getFrameId(tip_frame, k) for k in kinds if self.model.existFrame(tip_frame, k))
         self.mount = np.asarray(mount, dtype=np.float64).reshape(4, 4)
         self.base = np.asarray(base, dtype=np.float64).reshape(4, 4)
         self.joint_names = list(joint_names)

@@ -69,7 +69,7 @@ def test_cross_check_with_fcl_on_the_full_urdf(panda, panda_self):
     full model, the SRDF's disabled pairs and adjacency read here from the XML."""
     urdf = panda.spec.urdf
     model = pin.buildModelFromXML(urdf)
-    geom = pin.buildGeomFromUrdfString(model, urdf, pin.COLLISION, package_dirs=list(panda._dirs))
+    geom = pin.buildGeomFromUrdfString(model, urdf, pin.COLLISION, package_dirs=list(panda.package_dirs))
     data, gdata = model.createData(), pin.GeometryData(geom)
     srdf = ET.parse(srdf_for(panda)).getroot()
     disabled = {frozenset((e.get("link1"), e.get("link2"))) for e in srdf.iter("disable_collisions")}

@@ -19,7 +19,7 @@ from workbench.params import add_param, cli_bound, parse_number
 from workbench.planners.wan_harada.stages import empty_stage, run_ik
 from workbench.robots.collider import Scene, default_scene
 from workbench.robots.ik import WORLDA, IKOptions
-from workbench.robots.model import ROBOTS, get_robot, pose_xyz_yaw
+from workbench.robots.model import ROBOTS, Robot, get_robot, pose_xyz_yaw
 from workbench.store import Store
 
 HANDX = 0.05
@@ -79,16 +79,48 @@ def add_retraction_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"IK processes ({WORKERS.describe(True)}; default: all cores)")
 
 
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("ik", help="IK feasibility of every tabletop grip for a robot (paper Section IV: ik, ikret)")
-    p.add_argument("--db", required=True, help="DuckDB store file")
-    p.add_argument("--object", required=True, help="object name in the store")
+def add_robot_arguments(p: argparse.ArgumentParser) -> None:
+    """--robot (built-in name or URDF path), --base, --tip, --mount, --table and --table-thickness, shared by `ik` and
+    `build`."""
     p.add_argument("--robot", required=True, help=f"one of {', '.join(ROBOTS)}, or the path of a URDF (then --tip)")
     p.add_argument("--base", help="robot base in the world: X,Y,Z,YAW (m, rad); default per robot")
     p.add_argument("--tip", help="the arm's tip frame (required for a URDF path)")
     p.add_argument("--mount", help="tip frame to gripper TCP: x,y,z,roll,pitch,yaw (m, rad); default per robot")
+    p.add_argument("--hand-links", metavar="PREFIX,...",
+                   help="with a URDF: links of the robot's own hand, replaced by the planning gripper (name prefixes; "
+                        "default: the links past --tip)")
     p.add_argument("--table", help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
     add_param(p, Scene, "table_thickness", default=None)
+
+
+def robot_and_scene(args: argparse.Namespace) -> tuple[Robot, Scene]:
+    """The robot and table of `add_robot_arguments`' options."""
+    base = parse_base(args.base) if args.base else None
+    mount = _mount(args.mount) if args.mount else None
+    hand = tuple(h.strip() for h in (args.hand_links or "").split(",") if h.strip())
+    robot = get_robot(args.robot, base=base, tip_frame=args.tip, mount=mount, hand_links=hand)
+    scene = default_scene(robot.name)
+    if args.table or args.table_thickness is not None:
+        t = _floats(args.table, 4, "--table (XMIN,YMIN,XMAX,YMAX)") if args.table else [*scene.table_min, *scene.table_max]
+        scene = Scene(table_min=(t[0], t[1]), table_max=(t[2], t[3]),
+                      table_thickness=scene.table_thickness if args.table_thickness is None else args.table_thickness,
+                      workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
+    return robot, scene
+
+
+def stored_as(robot: Robot, stored: str) -> str:
+    """A note when the store keeps `robot` under another name (another base, mount or model took its name first)."""
+    if stored == robot.name:
+        return ""
+    return (f"; stored as robot {stored!r}: a robot named {robot.name!r} with another model, base or mount is in the "
+            f"store, so plan with --robot {stored}")
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("ik", help="IK feasibility of every tabletop grip for a robot (paper Section IV: ik, ikret)")
+    p.add_argument("--db", required=True, help="DuckDB store file")
+    p.add_argument("--object", required=True, help="object name in the store")
+    add_robot_arguments(p)
     add_retraction_arguments(p)
     p.add_argument("--tabletop", type=parse_number(TABLETOP, "--tabletop"), default=None, metavar="ID",
                    help="tabletop parameter set id (default: the latest)")
@@ -100,28 +132,20 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
 
-    base = parse_base(args.base) if args.base else None
-    mount = _mount(args.mount) if args.mount else None
-    robot = get_robot(args.robot, base=base, tip_frame=args.tip, mount=mount)
-    scene = default_scene(robot.name)
-    if args.table or args.table_thickness is not None:
-        t = _floats(args.table, 4, "--table (XMIN,YMIN,XMAX,YMAX)") if args.table else [*scene.table_min, *scene.table_max]
-        scene = Scene(table_min=(t[0], t[1]), table_max=(t[2], t[3]),
-                      table_thickness=scene.table_thickness if args.table_thickness is None else args.table_thickness,
-                      workspace_min=scene.workspace_min, workspace_max=scene.workspace_max)
+    robot, scene = robot_and_scene(args)
     with Store(args.db, create=False) as store:
         opts = IKOptions(closed_form=args.closed_form, self_collide=True)
         run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, opts, args.workers,
                      progress=not args.no_progress, idtabletop=args.tabletop, worlda=args.worlda)
     what = "reused" if run.reused else f"computed {run.computed:,}"
-    print(f"ik {robot.name}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "
+    print(f"ik {run.robot}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "
           f"at all five poses (retractions and lifts) {run.feasible_all:,}; robot {run.idrobot}, scene {run.idscene}, ikret {run.idikret}; "
-          f"{run.seconds:.1f} s")
+          f"{run.seconds:.1f} s{stored_as(robot, run.robot)}")
     with Store(args.db) as store:
-        reason = empty_stage(store, args.object, robot.name)
-    if run.grips and run.feasible_all == 0:  # this run's robot (another base or mount may share its name)
+        reason = empty_stage(store, args.object, run.robot)
+    if run.grips and run.feasible_all == 0:  # this run's robot (another scene may share its robot row)
         reason = f"ik: {run.reason}" if run.reason else (
-            f"ik: no tabletop grip is feasible at all five poses for {robot.name} (grasp poses {run.feasible:,}); lower "
+            f"ik: no tabletop grip is feasible at all five poses for {run.robot} (grasp poses {run.feasible:,}); lower "
             f"the retractions (--handx, --worldz, --worlda) or move the grid toward the robot")
     if reason:
         warn(f"no reachable tabletop grip of {args.object}; stage {reason}")

@@ -30,15 +30,20 @@ Built-in robots (all from example-robot-data, all carrying the Franka hand as pl
 from __future__ import annotations
 
 import hashlib
+import os
+import re
+import warnings
 import json
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
+from xml.etree import ElementTree
+
 import numpy as np
 import pinocchio as pin
 
-from workbench.errors import RobotError
+from workbench.errors import RobotError, RobotWarning
 from workbench.resources import ASSETS, erd_robots, erd_share
 from workbench.robots.gripper import Gripper, franka_hand
 
@@ -138,20 +143,22 @@ class Robot:
         self.gripper = spec.hand
         self.base = check_pose(spec.base, f"base pose of robot {spec.name!r}")
         self.mount = check_pose(spec.mount, f"mount transform of robot {spec.name!r}")
-        dirs = [str(erd_share()), *spec.package_dirs]
-        if spec.urdf_path:
-            dirs.append(str(Path(spec.urdf_path).parent))
+        dirs = mesh_search_dirs(spec.urdf, spec.urdf_path, spec.package_dirs)
         try:
             full = pin.buildModelFromXML(spec.urdf)
             geom = pin.buildGeomFromUrdfString(full, spec.urdf, pin.COLLISION, package_dirs=dirs)
         except Exception as exc:
             first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-            raise RobotError(f"robot URDF {spec.urdf_path or spec.name!r} could not be loaded ({first}); check the file and its mesh paths") from None
+            hint = "check the file and its mesh paths"
+            if "package://" in first:
+                hint = ("give the folder holding that package in ROS_PACKAGE_PATH (the URDF's own package is found when "
+                        "the URDF lies inside it)")
+            raise RobotError(f"robot URDF {spec.urdf_path or spec.name!r} could not be loaded ({first}); {hint}") from None
         if not full.existFrame(spec.tip_frame):
             names = [f.name for f in full.frames if f.type in (pin.FrameType.BODY, pin.FrameType.OP_FRAME)]
             raise RobotError(f"robot URDF {spec.urdf_path or spec.name!r} has no tip frame {spec.tip_frame!r} "
                              f"(links: {', '.join(names[-8:])}, ...); pass --tip with one of its links")
-        tip = full.frames[full.getFrameId(spec.tip_frame)]
+        tip = full.frames[frame_id(full, spec.tip_frame)]
         chain = []
         j = tip.parentJoint
         while j > 0:
@@ -176,15 +183,23 @@ class Robot:
                 raise RobotError(f"locked joint {jname!r} of robot {spec.name!r} is not a joint of the URDF outside the arm")
             jid = full.getJointId(jname)
             q_ref[full.joints[jid].idx_q] = float(value)
-        model, rgeom = pin.buildReducedModel(full, geom, lock, q_ref)
+        try:
+            model, rgeom = pin.buildReducedModel(full, geom, lock, q_ref)
+        except Exception as exc:  # pinocchio's own checks on the URDF's tree and names
+            raise RobotError(f"robot URDF {spec.urdf_path or spec.name!r}: the arm from its root to {spec.tip_frame!r} cannot "
+                             f"be separated from the other joints ({str(exc).strip().splitlines()[0]})") from None
         self.model, self.geom = model, rgeom
-        self._lock, self._q_ref, self._dirs, self._visual = lock, q_ref, dirs, None
+        self._lock, self._q_ref, self.package_dirs, self._visual = lock, q_ref, dirs, None
         self.joint_names = tuple(model.names[j] for j in range(1, model.njoints))
         self.lower = np.asarray(model.lowerPositionLimit, dtype=np.float64).copy()
         self.upper = np.asarray(model.upperPositionLimit, dtype=np.float64).copy()
         if not (np.isfinite(self.lower).all() and np.isfinite(self.upper).all()) or (self.upper - self.lower < 0).any():
             raise RobotError(f"robot {spec.name!r} has joints without finite limits; add <limit> to its URDF")
-        fid = model.getFrameId(spec.tip_frame)
+        slow = [n for n, v in zip(self.joint_names, model.velocityLimit) if not (np.isfinite(v) and v > 0)]
+        if slow:
+            raise RobotError(f"joints {', '.join(slow)} of robot {spec.name!r} have no velocity limit, which timing needs; "
+                             f"add <limit velocity=...> (rad/s) to them in its URDF")
+        fid = frame_id(model, spec.tip_frame)
         self.last_joint = model.frames[fid].parentJoint
         if self.last_joint != model.njoints - 1:
             raise RobotError(f"tip frame {spec.tip_frame!r} of robot {spec.name!r} is not after the last arm joint")
@@ -197,7 +212,7 @@ class Robot:
         else:
             model.addFrame(pin.Frame(spec.tcp_frame, self.last_joint, fid,
                                      pin.SE3(self.tip_in_joint[:3, :3], self.tip_in_joint[:3, 3]), pin.FrameType.OP_FRAME))
-        self.tcp_id = model.getFrameId(spec.tcp_frame)
+        self.tcp_id = frame_id(model, spec.tcp_frame)
         # Chain description for batched kinematics.
         n = model.nq
         self.chain_placement = np.stack([np.asarray(model.jointPlacements[j].homogeneous) for j in range(1, n + 1)])
@@ -239,7 +254,7 @@ class Robot:
 
         if self._visual is None:
             full = pin.buildModelFromXML(self.spec.urdf)
-            vis = pin.buildGeomFromUrdfString(full, self.spec.urdf, pin.VISUAL, package_dirs=self._dirs)
+            vis = pin.buildGeomFromUrdfString(full, self.spec.urdf, pin.VISUAL, package_dirs=self.package_dirs)
             _, self._visual = pin.buildReducedModel(full, vis, self._lock, self._q_ref)
         return self._visual
 
@@ -289,6 +304,98 @@ class Robot:
         return q
 
 
+def frame_id(model: pin.Model, name: str) -> int:
+    """The id of frame `name`: the link's where a joint or another frame has the same name (`model.nframes` if none)."""
+    for kind in (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT, pin.FrameType.JOINT):
+        if model.existFrame(name, kind):
+            return model.getFrameId(name, kind)
+    return model.nframes
+
+
+def prepare_urdf(text: str, tip_frame: str, label: str = "robot URDF") -> tuple[str, tuple[str, ...], tuple[str, ...], dict[str, str]]:
+    """A user's URDF made plannable: (text, links past the tip, continuous joints bounded, joints renamed).
+
+    Continuous joints become revolute within [-2 pi, 2 pi] (their velocity and effort kept), so that joint vectors
+    are angles and the stored URDF says so. The robot's own hand or tool is returned for `drop_geometry`, since the
+    planning gripper mounted at the tip replaces it: the links past the tip link, and those hanging by a moving joint
+    off the links from the last arm joint to the tip (fingers beside the tip frame). A joint with a link's name is renamed
+    NAME_joint (locked, it would make two frames of one name, which pinocchio cannot reduce). Text with nothing to
+    change is returned unchanged."""
+    try:
+        root = ElementTree.fromstring(text)
+    except ElementTree.ParseError as exc:
+        raise RobotError(f"{label} could not be loaded (not well-formed XML: {exc}); check the file") from None
+    joints = root.findall("joint")
+    links = {lk.get("name", "") for lk in root.findall("link")}
+    children: dict[str, list[tuple[str, str]]] = {}  # link -> (child link, joint type)
+    up: dict[str, tuple[str, str]] = {}  # link -> (parent link, joint type)
+    for j in joints:
+        parent, child = j.find("parent"), j.find("child")
+        if parent is not None and child is not None:
+            children.setdefault(parent.get("link", ""), []).append((child.get("link", ""), j.get("type", "")))
+            up[child.get("link", "")] = (parent.get("link", ""), j.get("type", ""))
+    # the robot's own hand: everything past the tip link, and what hangs by a moving joint off the links between the
+    # last arm joint and the tip (a hand whose fingers sit on the wrist link, beside the tip frame)
+    path, link = [], tip_frame
+    while link in up and link not in path:
+        path.append(link)
+        if up[link][1] != "fixed":
+            break
+        link = up[link][0]
+    roots = [c for c, _ in children.get(tip_frame, [])]
+    roots += [c for lk in path for c, kind in children.get(lk, []) if kind != "fixed" and c not in path]
+    past: list[str] = []
+    while roots:
+        link = roots.pop()
+        if link not in past:
+            past.append(link)
+            roots.extend(c for c, _ in children.get(link, []))
+    others = links - set(past)
+    past = sorted(lk for lk in past if not any(o.startswith(lk) for o in others))  # drop_geometry matches prefixes
+    names = links | {j.get("name", "") for j in joints}
+    renamed = {}
+    for j in joints:
+        name = j.get("name", "")
+        if name in links:
+            new = f"{name}_joint"
+            while new in names:
+                new += "_"
+            names.add(new)
+            renamed[name] = new
+            j.set("name", new)
+    for m in root.iter("mimic"):
+        m.set("joint", renamed.get(m.get("joint", ""), m.get("joint", "")))
+    bounded = []
+    for j in joints:
+        if j.get("type") != "continuous":
+            continue
+        j.set("type", "revolute")
+        limit = j.find("limit")
+        if limit is None:
+            limit = ElementTree.SubElement(j, "limit", {"effort": "0", "velocity": "0"})
+        limit.set("lower", f"{-2 * np.pi:.17g}")
+        limit.set("upper", f"{2 * np.pi:.17g}")
+        bounded.append(j.get("name", ""))
+    if bounded or renamed:
+        text = ElementTree.tostring(root, encoding="unicode")
+    return text, tuple(past), tuple(bounded), renamed
+
+
+def mesh_search_dirs(urdf: str, urdf_path: str | None = None, extra: tuple[str, ...] = ()) -> list[str]:
+    """The folders `package://PKG/...` and relative mesh paths of `urdf` are resolved in, first match first:
+    example-robot-data's share folder, `extra`, ROS_PACKAGE_PATH, then for every PKG the URDF names, the parent of
+    the nearest folder named PKG above the URDF file (the ROS layout PKG/urdf/robot.urdf), and the URDF's folder."""
+    dirs = [str(erd_share()), *extra, *[d for d in os.environ.get("ROS_PACKAGE_PATH", "").split(os.pathsep) if d]]
+    if urdf_path:
+        here = Path(urdf_path).resolve().parent
+        for pkg in sorted(set(re.findall(r"package://([^/\"'\s]+)/", urdf))):
+            hit = next((a for a in (here, *here.parents) if a.name == pkg), None)
+            if hit is not None:
+                dirs.append(str(hit.parent))
+        dirs.append(str(here))
+    return list(dict.fromkeys(dirs))
+
+
 def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = None, mount: np.ndarray | None = None,
                     tcp_frame: str | None = None, name: str | None = None, joints: tuple[str, ...] | None = None,
                     drop_geometry: tuple[str, ...] = (), package_dirs: tuple[str, ...] = (),
@@ -304,6 +411,18 @@ def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = 
         raise RobotError(f"robot URDF {path} cannot be read as text ({type(exc).__name__})") from None
     if "<robot" not in text:
         raise RobotError(f"robot URDF {path} is not a URDF (no <robot> element)")
+    text, past, bounded, renamed = prepare_urdf(text, tip_frame, f"robot URDF {path}")
+    if renamed:
+        warnings.warn(f"robot URDF {path}: joints named like links are renamed "
+                      f"({', '.join(f'{a} -> {b}' for a, b in renamed.items())})", RobotWarning, stacklevel=2)
+    if bounded:
+        warnings.warn(f"robot URDF {path}: continuous joints {', '.join(bounded)} are planned as revolute within "
+                      f"[-360, 360] degrees", RobotWarning, stacklevel=2)
+    if past and not drop_geometry:
+        drop_geometry = past
+        warnings.warn(f"robot URDF {path}: the planning gripper replaces the links past {tip_frame} "
+                      f"({', '.join(past[:4])}{', ...' if len(past) > 4 else ''}); their geometry is not checked",
+                      RobotWarning, stacklevel=2)
     if tcp_frame is None:
         tcp_frame = tip_frame if mount is None else f"{tip_frame}_tcp"
     spec = RobotSpec(name=name or path.stem, urdf=text, urdf_path=str(path), tip_frame=tip_frame, tcp_frame=tcp_frame,
@@ -351,13 +470,22 @@ def builtin_robot(name: str, base: np.ndarray | None = None, tip_frame: str | No
 
 
 def get_robot(name_or_path: str, base: np.ndarray | None = None, tip_frame: str | None = None,
-              mount: np.ndarray | None = None, gripper: Gripper | None = None) -> Robot:
-    """A built-in robot by name, or a robot from a URDF path (then `tip_frame` is required)."""
+              mount: np.ndarray | None = None, gripper: Gripper | None = None,
+              hand_links: tuple[str, ...] = ()) -> Robot:
+    """A built-in robot by name, or a robot from a URDF path (then `tip_frame` is required; `hand_links`, link-name
+    prefixes of the robot's own hand that the planning gripper replaces, default the links past the tip)."""
     if name_or_path in ROBOTS:
+        if hand_links:
+            raise RobotError(f"--hand-links is for a URDF path; the built-in robot {name_or_path!r} has its hand removed already")
         return builtin_robot(name_or_path, base=base, tip_frame=tip_frame, mount=mount, gripper=gripper)
     if tip_frame is None:
         raise RobotError(f"robot {name_or_path!r} is not one of {', '.join(ROBOTS)}; for a URDF path also give --tip FRAME")
-    return robot_from_urdf(name_or_path, tip_frame, base=base, mount=mount, gripper=gripper)
+    robot = robot_from_urdf(name_or_path, tip_frame, base=base, mount=mount, gripper=gripper, drop_geometry=hand_links)
+    links = [f.name for f in robot.model.frames if f.type == pin.FrameType.BODY]
+    unknown = [h for h in hand_links if not any(lk.startswith(h) for lk in links)]
+    if unknown:
+        raise RobotError(f"--hand-links {', '.join(unknown)} match no link of {name_or_path} (links: {', '.join(links[-6:])}, ...)")
+    return robot
 
 
 def robot_from_spec(spec: RobotSpec) -> Robot:

@@ -53,7 +53,7 @@ def put_robot(store: Store, robot: Robot, allowed_pairs: str | None = None) -> i
               [rid, name, robot.spec.urdf, robot.spec.tcp_frame, robot.spec.tip_frame, robot.mount.ravel().tolist(),
                robot.base.ravel().tolist(), list(robot.joint_names),
                json.dumps({k: float(v) for k, v in robot.spec.locked}, sort_keys=True), list(robot.spec.drop_geometry),
-               digest, list(robot.spec.package_dirs) + ([str(Path(robot.spec.urdf_path).parent)] if robot.spec.urdf_path else []),
+               digest, list(robot.package_dirs),
                gid, allowed_pairs])
     return rid
 
@@ -93,6 +93,11 @@ def prepare_run(store: Store, robot: Robot, scene_params: dict[str, Any], handx:
     with store.transaction():
         return (put_robot(store, robot, allowed_pairs), put_scene(store, scene_params),
                 put_ikret(store, handx, worldz, worlda))
+
+
+def robot_name(store: Store, idrobot: int) -> str:
+    """The stored name of robot `idrobot`."""
+    return str(store.one("SELECT name FROM robot WHERE idrobot = ?", [int(idrobot)])[0])
 
 
 def stored_grips(store: Store, idrobot: int, idscene: int, idikret: int) -> np.ndarray:

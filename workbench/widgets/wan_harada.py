@@ -102,7 +102,7 @@ class RegraspExplorer:
         if self.build is not None:
             self.build(self.db, obj, self.robot.value)
         self.planner = load_planner(self.db, obj.name, self.robot.value)
-        ids = self.planner.placement_ids()
+        ids = self.planner.placement_ids(gripped=True) or self.planner.placement_ids()
         for label in ("start", "goal"):
             self.ends[label][0].options = ids
         self.ends["start"][0].value = ids[0]

@@ -87,8 +87,10 @@ class Planner:
                               worlda=self.worlda)
         return self._ik
 
-    def placement_ids(self) -> list[int]:
-        return [int(i) for i in self.free["idfreetabletopplacement"]]
+    def placement_ids(self, gripped: bool = False) -> list[int]:
+        """The stable placements' ids; with `gripped`, only those with a grasp that clears the table."""
+        ids = np.asarray(self.free["idfreetabletopplacement"])
+        return [int(i) for i in (ids[np.isin(ids, self._ftg_keys)] if gripped else ids)]
 
     def query_pose(self, query: PoseQuery, label: str = "pose") -> np.ndarray:
         """translate(x, y, 0) @ yaw @ freetabletopplacement.rotmat, after checking the placement id and the table."""
@@ -117,7 +119,7 @@ class Planner:
         rows = self._ftg_order[lo:hi]
         if len(rows) == 0:
             raise _failure("nogrip", f"{label} placement {query.idfreetabletopplacement} of {self.object.name} has no grasp that clears "
-                                f"the table; choose another placement ({', '.join(map(str, self.placement_ids()))})")
+                                f"the table; choose a placement that has one ({', '.join(map(str, self.placement_ids(gripped=True))) or 'none has'})")
         grasp = np.asarray(self.ftg["idfreeairgrip"])[rows].astype(np.int64)
         order = np.argsort(grasp, kind="stable")
         rows, grasp = rows[order], grasp[order]

@@ -8,6 +8,7 @@ This is the only module of the planner that talks to the store; computations run
 
 from __future__ import annotations
 
+import re
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -295,25 +296,17 @@ class BuildResult:
     empty: str | None = None  # the stage that kept nothing, with what to try (no graph then)
 
 
-def ensure_ik_rows(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
-                   workers: int | None = None, progress: bool = True, worlda: float = WORLDA) -> tuple[dict, bool, str | None]:
-    """IK feasibility of the tabletop grips for a robot (Section IV's ik and ikret tables), computed or reused by the
-    IK stage's runner (`stages.ensure_ik`); returns the run's ids, whether it was reused and, with no feasible grasp
-    pose, why."""
-
-    run = ensure_ik(store, idobject, obj, idtabletop, robot_name, handx=handx, worldz=worldz, workers=workers, progress=progress,
-                    worlda=worlda)
-    return {"idrobot": run.idrobot, "idscene": run.idscene, "idikret": run.idikret}, run.reused, run.reason
-
-
-def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pparams: PlacementParams = PlacementParams(),
+def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(), pparams: PlacementParams = PlacementParams(),
               tparams: TabletopParams = TabletopParams(), handx: float = HANDX, worldz: float = WORLDZ,
-              workers: int | None = None, progress: bool = True, worlda: float = WORLDA) -> BuildResult:
-    """Grasps, placements, tabletop grips, IK and the regrasp graph of `obj` (an ObjectModel) for `robot_name` in the
-    store `db` (path or Store), each stage reused when stored with the same inputs and parameters."""
+              workers: int | None = None, progress: bool = True, worlda: float = WORLDA,
+              scene: Scene | None = None) -> BuildResult:
+    """Grasps, placements, tabletop grips, IK and the regrasp graph of `obj` (an ObjectModel) for `robot` (a Robot, or a
+    built-in robot's name; on `scene`, default the robot's table) in the store `db` (path or Store), each stage reused
+    when stored with the same inputs and parameters. `BuildResult.robot` is the robot's name in the store."""
 
     store = db if isinstance(db, Store) else Store(db)
-    out = BuildResult(name=obj.name, robot=robot_name)
+    robot = get_robot(robot) if isinstance(robot, str) else robot
+    out = BuildResult(name=obj.name, robot=robot.name)
     try:
         hand = franka_hand()
         t0 = time.perf_counter()
@@ -326,12 +319,17 @@ def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pp
                           tabletop_grips=p.n_tabletop_grips, usable_grasps=p.n_usable_grasps, roadmap_grasps=p.n_roadmap_grasps,
                           grasps_label=p.grasps_label)
         t0 = time.perf_counter()
-        ik_ids, reused, ik_reason = ensure_ik_rows(store, g.idobject, obj, p.idtabletop, robot_name, handx, worldz, workers,
-                                                   progress, worlda=worlda)
-        out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, reused
-        out.empty = g.plan.empty_reason if g.plan is not None and g.count == 0 else empty_stage(store, obj.name, robot_name)
-        if ik_reason is not None and out.empty is not None and out.empty.startswith("ik:"):
-            out.empty = f"ik: {ik_reason}"
+        run = ensure_ik(store, g.idobject, obj, p.idtabletop, robot, handx, worldz, workers, progress, worlda=worlda,
+                        scene=scene)
+        ik_ids = {"idrobot": run.idrobot, "idscene": run.idscene, "idikret": run.idikret}
+        out.robot = run.robot
+        out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, run.reused
+        out.empty = g.plan.empty_reason if g.plan is not None and g.count == 0 else empty_stage(store, obj.name, run.robot)
+        if run.grips and run.feasible_all == 0 and out.empty is None:  # this scene's run (another may share the robot)
+            out.empty = (f"ik: no tabletop grip is feasible at all five poses for {run.robot} (grasp poses {run.feasible:,}); "
+                         f"lower the retractions (--handx, --worldz, --worlda) or move the grid toward the robot")
+        if run.reason is not None and out.empty is not None and out.empty.startswith("ik:"):
+            out.empty = f"ik: {run.reason}"
         if out.empty is not None:  # zero is a result: no graph to build, the stage that emptied is named
             out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **ik_ids}
             return out
@@ -340,7 +338,8 @@ def build_all(db, obj, robot_name: str, gparams: GraspParams = GraspParams(), pp
                                idscene=ik_ids["idscene"], worlda=worlda)
         out.timings["graph"] = time.perf_counter() - t0
         out.counts.update({f"graph_{k}": v for k, v in planner.roadmap.summary().items()})
-        out.counts["placement_ids"] = planner.placement_ids()
+        out.counts["placement_ids"] = planner.placement_ids(gripped=True)
+        out.counts["placements_nogrip"] = sorted(set(planner.placement_ids()) - set(out.counts["placement_ids"]))
         out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **planner.ids}
         return out
     finally:
@@ -362,6 +361,7 @@ class IKRun:
     feasible_all: int
     seconds: float
     reason: str | None = None  # with no feasible grasp pose: why (`robots.ik.diagnose_unreachable`)
+    robot: str = ""  # the stored name (`robot.name`, or with a digest suffix when that name holds another robot)
 
     @property
     def reused(self) -> bool:
@@ -407,13 +407,15 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
     robot_sql.mark_ik_complete(store, pid, rid, sid, kid)
     counts = robot_sql.run_counts(store, rid, sid, kid, pid)
     reason = diagnose_unreachable(robot, arrays, scene, obj.mesh, opts) if len(ids) and counts[0] == 0 else None
-    return IKRun(rid, sid, kid, pid, len(ids), computed, counts[0], counts[1], time.perf_counter() - t0, reason)
+    return IKRun(rid, sid, kid, pid, len(ids), computed, counts[0], counts[1], time.perf_counter() - t0, reason,
+                 robot_sql.robot_name(store, rid))
 
 
-def ensure_ik(store, idobject: int, obj, idtabletop: int, robot_name: str, handx: float = HANDX, worldz: float = WORLDZ,
-              workers: int | None = None, progress: bool = True, worlda: float = WORLDA) -> IKRun:
-    """`run_ik` for a built-in robot (or URDF path) by name, with the signature `workbench build` expects."""
-    return run_ik(store, obj.name, get_robot(robot_name), None, handx, worldz, IKOptions(self_collide=True), workers, progress,
+def ensure_ik(store, idobject: int, obj, idtabletop: int, robot: str | Robot, handx: float = HANDX, worldz: float = WORLDZ,
+              workers: int | None = None, progress: bool = True, worlda: float = WORLDA, scene: Scene | None = None) -> IKRun:
+    """`run_ik` for a robot (or a built-in robot's name), with the signature `workbench build` expects."""
+    robot = get_robot(robot) if isinstance(robot, str) else robot
+    return run_ik(store, obj.name, robot, scene, handx, worldz, IKOptions(self_collide=True), workers, progress,
                   idtabletop, worlda=worlda)
 
 
@@ -426,7 +428,7 @@ def choose_task(planner, seed: int = 0, tries: int = 40, grid: TabletopParams = 
     pairs of different stable placements; the one needing the most regrasps among the first solvable ones."""
 
     rng = np.random.default_rng(seed)
-    ids = planner.placement_ids()
+    ids = planner.placement_ids(gripped=True)
     best = None
     for _ in range(tries):
         a, b = rng.choice(ids, size=2, replace=len(ids) < 2)
@@ -504,10 +506,17 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -
     if tabletop_counts(store, tt)[1] == 0:
         return "tabletop grips: no grasp is kept on the tabletop grid; raise --max-grasps or widen the grid"
     if robot_name is not None:
-        runs = [r for r in ik_runs(store, idtabletop=tt) if r["robot"] == robot_name]
+        all_runs = ik_runs(store, idtabletop=tt)
+        runs = [r for r in all_runs if r["robot"] == robot_name]
         if runs and max(r["feasible_all"] for r in runs) == 0:
+            # a robot stored again with another base or mount gets the name NAME-DIGEST8 (`store.robots.put_robot`)
+            base = re.sub(r"-[0-9a-f]{8}$", "", robot_name)
+            other = {r["robot"]: r["feasible_all"] for r in all_runs if r["feasible_all"] > 0 and r["robot"] != robot_name
+                     and (r["robot"] == base or r["robot"].startswith(f"{base}-"))}
+            hint = "".join(f"; robot {k} (the same name with another model, base or mount) reaches {v:,}: plan with "
+                           f"--robot {k}" for k, v in sorted(other.items())[:2])
             return (f"ik: no tabletop grip is reachable by {robot_name} with its retractions; move the grid (--x, --y) "
-                    f"toward the robot")
+                    f"toward the robot{hint}")
     return None
 
 
