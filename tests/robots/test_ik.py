@@ -325,3 +325,21 @@ def test_no_feasible_grip_names_its_cause(tmp_path):
     assert res.feasible[:, 0].any()
     far = robot_from_urdf(urdf, "tool0", mount=mount, base=pose_xyz_yaw(2.5, 0.0, 0.0, 0.0), name="ur5_far")
     assert "out of reach" in diagnose_unreachable(far, grips, scene, mesh, OPTS)
+
+
+def test_load_ik_of_one_tabletop_grid_when_the_store_holds_two(tmp_path, panda):
+    """Two tabletop grids of one object, IK for both: each run's rows are exactly its grid's grips (counted with
+    DuckDB directly), and without the grid filter the object's rows are both runs'."""
+    with Store(tmp_path / "two.duckdb") as store:
+        runs = []
+        for xs in (np.array([0.45]), np.array([0.5, 0.6])):
+            oid, pid = synthetic_store(store, "box", **{**SMALL, "xs": xs})
+            runs.append(run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=pid))
+        assert runs[0].idrobot == runs[1].idrobot and runs[0].idtabletop != runs[1].idtabletop
+        for run in runs:
+            rows = sql.load_ik(store, run.idrobot, run.idscene, run.idikret, oid, run.idtabletop)
+            n = store.con.execute("SELECT count(*) FROM tabletopgrips JOIN tabletopplacements USING (idtabletopplacements) "
+                                  "WHERE idparamset = ?", [run.idtabletop]).fetchone()[0]
+            assert len(rows["idik"]) == run.grips == n > 0
+        both = sql.load_ik(store, runs[0].idrobot, runs[0].idscene, runs[0].idikret, oid)
+        assert len(both["idik"]) == runs[0].grips + runs[1].grips

@@ -220,8 +220,10 @@ def scene_row(store: Store, idscene: int) -> StoredScene:
     return StoredScene(int(idscene), Scene(**pick(Scene, d)), IKOptions(**pick(IKOptions, d.get("ik") or {})),
                        dict(d.get("robot") or {}))
 
-def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: int | None = None) -> dict[str, np.ndarray]:
-    """The `ik` rows of a run joined with their tabletop grips, ordered by idtabletopgrips: idik, idtabletopgrips,
+def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: int | None = None,
+            idtabletop: int | None = None) -> dict[str, np.ndarray]:
+    """The `ik` rows of a run (of one object's, of one tabletop grid's grips) joined with their tabletop grips,
+    ordered by idtabletopgrips: idik, idtabletopgrips,
     idtabletopplacements, idfreeairgrip, rotmat (N, 4, 4), placement_rotmat (N, 4, 4), tabletopposition (N, 3),
     idangle, feasible (N, 5) and joints (N, 5, nq) for the five poses (`robots.ik.KINDS`), NaN where infeasible."""
     nq = len(robot_row(store, idrobot)["joint_names"])
@@ -235,6 +237,9 @@ def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: in
     if idobject is not None:
         sql += " AND f.idobject = ?"
         params.append(idobject)
+    if idtabletop is not None:
+        sql += " AND p.idparamset = ?"
+        params.append(idtabletop)
     table = store.con.sql(sql + " ORDER BY k.idtabletopgrips", params=params).to_arrow_table()
 
     out = {c: from_arrow(table.column(c)) for c in ("idik", "idtabletopgrips", "idtabletopplacements", "idfreeairgrip",
