@@ -159,6 +159,33 @@ def test_support_grasps_grip_a_ring_lying_flat_from_above(organic_objects, hand)
     assert np.abs(np.angle(np.exp(1j * (angle - g.rotation)))).max() < 1e-9
 
 
+def test_slice_grasps_grip_a_rounded_part_from_above_where_it_lies(hand):
+    """A pebble scan (60 x 40 x 30 mm, noisy) pressed flat underneath lies on its flat. Its rounded sides are level only on
+    a band a few millimetres tall round its widest section, so few surface samples give a top-down grasp that keeps
+    the open fingers above the table. Jaw axes across the part at fixed heights (`slice_axes`) give many; every one
+    passes the independent check, and the count without them is far lower."""
+    import trimesh
+
+    rng = np.random.default_rng(5)
+    s = trimesh.creation.icosphere(4)
+    s.vertices *= (0.030, 0.020, 0.015)
+    s.vertices += rng.normal(0, 3e-4, s.vertices.shape)
+    s.vertices[:, 2] = np.maximum(s.vertices[:, 2], -0.011)  # pressed flat underneath
+    obj = from_trimesh(s, "cut_pebble")
+    base = stable_placements(obj)
+    k = int(np.argmax(base.normals[:, 2] < -0.999))  # resting on the flat
+    assert base.normals[k, 2] < -0.999
+    plan = plan_grasps(obj, hand, GraspParams())
+    assert plan.counts["slice"] > 0
+    plain = plan_grasps(obj, hand, GraspParams(support_grasps=False))
+    top = _top_down_clear(obj, hand, plan.grasps, base.poses[k])
+    assert top.sum() >= 20 and top.sum() >= 3 * _top_down_clear(obj, hand, plain.grasps, base.poses[k]).sum()
+    g, idx = plan.grasps, np.flatnonzero(top)
+    v = check_grasps(obj.mesh, g.poses[idx], g.jawwidth[idx], g.contact0[idx], g.contact1[idx], g.normal0[idx],
+                     g.normal1[idx], GraspParams().friction)
+    assert v.ok.all()
+
+
 def test_support_grasps_leave_a_cad_box_unchanged(box, hand):
     """On a box the regular rotations about its face normals already approach straight down onto every face it
     rests on: no levelled axis is added and the grasps are the same."""

@@ -58,6 +58,14 @@ def test_prepare_urdf_bounds_continuous_joints_drops_the_own_hand_and_renames_cl
     assert prepare_urdf(plain, "a")[0] == plain
 
 
+def test_a_continuous_joint_without_a_velocity_limit_is_refused_in_one_line(tmp_path):
+    urdf = tmp_path / "spin.urdf"
+    urdf.write_text("""<robot name="spin"><link name="base"/><link name="a"/>
+      <joint name="j1" type="continuous"><parent link="base"/><child link="a"/><axis xyz="0 0 1"/></joint></robot>""")
+    with pytest.raises(RobotError, match="j1 of robot 'spin' have no velocity limit"):
+        get_robot(str(urdf), tip_frame="a")
+
+
 def test_a_urdf_in_a_ros_package_finds_its_meshes_and_the_row_lets_pinocchio_load_them(tmp_path):
     pkg = tmp_path / "ws" / "src" / "my_xarm"
     shutil.copytree(erd_robots() / "xarm_description", pkg)

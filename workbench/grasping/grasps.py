@@ -299,15 +299,24 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     counts["gap"] = counts["support"] = 0
     # (sources, origins, jaw axes, rotations, approach references): the facet-normal axes, then the levelled ones
     axis_sets = [(sel, origins, axes, angles, None)]
+    counts["slice"] = 0
     if params.support_grasps:
-        k, y, z = support_axes(axes, _support_normals(obj), params.rotations, params.friction_coefficient)
+        downs = _support_normals(obj)
+        k, y, z = support_axes(axes, downs, params.rotations, params.friction_coefficient)
         axis_sets.append((sel[k], origins[k], y, np.zeros(1), z))
         counts["support"] = int(len(k))
+        # after the sampling filters, as every other axis (zero samples: zero axes); twice the hand rotations in
+        # direction, as the pads of a scan first touch bumps, whose normals vary
+        if len(sel):
+            o, y, z = slice_axes(mesh, obj.com, downs, 2 * params.rotations, max(lengths["neighbour_radius"] / 2, 1e-4),
+                                 params.friction_coefficient)
+            axis_sets.append((np.full(len(o), -1), o, y, np.zeros(1), z))  # no surface sample: source -1
+            counts["slice"] = int(len(o))
     parts, source = [], []
     for src, o, a, ang, ref in axis_sets:
         parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref))
         source.append(np.repeat(src, len(ang)))
-        if params.gap_grasps:
+        if params.gap_grasps and (src >= 0).all():  # gaps open from a surface sample along its normal
             w, win = gap_windows(mesh, o, a, gripper.jaw_max)
             parts.append(first_touches(mesh, o[w], a[w], ang, gripper, ref=None if ref is None else ref[w],
                                        windows=win))
@@ -327,7 +336,9 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     com_ok = cone_ok & (np.linalg.norm(0.5 * (touch.point0 + touch.point1) - obj.com, axis=1) <= lengths["com_max"])
     counts.update(hand_poses=int(len(touch)), pads_width=int(width_ok.sum()), pads_cone=int(cone_ok.sum()),
                   pads_com=int(com_ok.sum()))
-    pairs = ContactPairs(sample=samples.pair_sample[source], facet0=samples.pair_facet[source],
+    sampled = source >= 0
+    pairs = ContactPairs(sample=np.where(sampled, samples.pair_sample[source], -1),
+                         facet0=np.where(sampled, samples.pair_facet[source], _facet_of(facets, touch.tri0, y)),
                          facet1=_facet_of(facets, touch.tri1, -y), point0=touch.point0, point1=touch.point1,
                          normal0=touch.normal0, normal1=touch.normal1, width=touch.width, width_ok=width_ok,
                          com_ok=com_ok, level1_ok=com_ok)
@@ -384,6 +395,47 @@ def support_axes(normals: np.ndarray, downs: np.ndarray, rotations: int, frictio
     off = np.abs(a / step - np.round(a / step)) * step
     dup = (np.einsum("ij,ij->i", y, normals[k]) >= np.cos(same)) & (off <= same)
     return k[~dup], y[~dup], d[~dup]
+
+
+def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, directions: int, spacing: float,
+               friction: float, flat_share: float = 0.9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Level jaw axes across the part as it rests on each support, approaching straight down: origins (K, 3) on the
+    vertical line through the centre of mass at heights `spacing` apart (2 to 12 levels), `directions` jaw
+    directions about the vertical, and the approach z = the support's outward normal d, all in the part's frame.
+
+    On a rounded part (a pebble, a duck, a bottle lying down) the facet normals are level only on a thin band
+    round its widest section, and the surface samples that fall in that band are few; top-down grasps of the part
+    where it lies are what a regrasp needs most (Section IV keeps only grasps that clear the table). These axes
+    close the pads across the part at fixed heights whatever the sampling; the friction cone, the width and the
+    hand checks then decide as for every other axis. A support whose sides are flat (at least `flat_share` of the
+    surface within 45 degrees of vertical is within the friction angle of it, as a CAD part's walls) is skipped:
+    its facet samples give those grasps already. `downs` (S, 3) unit outward support normals.
+    """
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    theta = 2 * np.pi * np.arange(directions) / directions
+    origins, axes, approach = [], [], []
+    tilt = np.abs(mesh.face_normals @ np.asarray(downs, dtype=np.float64).T)  # (F, S): |sin| of a face's tilt from vertical
+    area = np.asarray(mesh.area_faces)
+    for d, t in zip(np.asarray(downs, dtype=np.float64), tilt.T):
+        side = area[t <= np.sin(np.pi / 4)].sum()
+        if side <= 0 or area[t <= np.sin(np.arctan(friction))].sum() >= flat_share * side:
+            continue
+        up = -d
+        lo, hi = (v @ up).min(), (v @ up).max()
+        n = int(np.clip(np.ceil((hi - lo) / spacing), 2, 12))
+        h = lo + (np.arange(n) + 0.5) / n * (hi - lo)
+        e1 = np.cross(up, [1.0, 0, 0] if abs(up[0]) < 0.9 else [0, 1.0, 0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(up, e1)
+        base = com - (com @ up) * up
+        o = base[None] + h[:, None] * up[None]
+        y = np.cos(theta)[:, None] * e1[None] + np.sin(theta)[:, None] * e2[None]
+        origins.append(np.repeat(o, len(theta), axis=0))
+        axes.append(np.tile(y, (n, 1)))
+        approach.append(np.tile(d, (n * len(theta), 1)))
+    if not origins:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
+    return np.concatenate(origins), np.concatenate(axes), np.concatenate(approach)
 
 
 def _fingertip_variants(mesh, gripper, margin, touch: Touches, source: np.ndarray) -> tuple[Touches, np.ndarray]:
