@@ -141,12 +141,10 @@ def main(args: argparse.Namespace) -> int:
     print(f"ik {run.robot}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "
           f"at all five poses (retractions and lifts) {run.feasible_all:,}; robot {run.idrobot}, scene {run.idscene}, ikret {run.idikret}; "
           f"{run.seconds:.1f} s{stored_as(robot, run.robot)}")
-    with Store(args.db) as store:
-        reason = empty_stage(store, args.object, run.robot)
-    if run.grips and run.feasible_all == 0:  # this run's robot (another scene may share its robot row)
-        reason = f"ik: {run.reason}" if run.reason else (
-            f"ik: no tabletop grip is feasible at all five poses for {run.robot} (grasp poses {run.feasible:,}); lower "
-            f"the retractions (--handx, --worldz, --worlda) or move the grid toward the robot")
+    reason = run.empty_reason()  # this run's scene and retractions; other runs may share the robot row
+    if reason is None:
+        with Store(args.db) as store:
+            reason = empty_stage(store, args.object, run.robot)
     if reason:
         warn(f"no reachable tabletop grip of {args.object}; stage {reason}")
     return 0

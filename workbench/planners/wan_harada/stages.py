@@ -324,12 +324,8 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
         ik_ids = {"idrobot": run.idrobot, "idscene": run.idscene, "idikret": run.idikret}
         out.robot = run.robot
         out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, run.reused
-        out.empty = g.plan.empty_reason if g.plan is not None and g.count == 0 else empty_stage(store, obj.name, run.robot)
-        if run.grips and run.feasible_all == 0 and out.empty is None:  # this scene's run (another may share the robot)
-            out.empty = (f"ik: no tabletop grip is feasible at all five poses for {run.robot} (grasp poses {run.feasible:,}); "
-                         f"lower the retractions (--handx, --worldz, --worlda) or move the grid toward the robot")
-        if run.reason is not None and out.empty is not None and out.empty.startswith("ik:"):
-            out.empty = f"ik: {run.reason}"
+        out.empty = (g.plan.empty_reason if g.plan is not None and g.count == 0
+                     else run.empty_reason() or empty_stage(store, obj.name, run.robot))
         if out.empty is not None:  # zero is a result: no graph to build, the stage that emptied is named
             out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **ik_ids}
             return out
@@ -366,6 +362,15 @@ class IKRun:
     @property
     def reused(self) -> bool:
         return self.computed == 0
+
+    def empty_reason(self) -> str | None:
+        """"ik: why; what to try" when this run (its robot, scene and retractions) has grips but none feasible at all
+        five poses, else None."""
+        if not self.grips or self.feasible_all > 0:
+            return None
+        return f"ik: {self.reason}" if self.reason else (
+            f"ik: no tabletop grip is feasible at all five poses for {self.robot} (grasp poses {self.feasible:,}); lower "
+            f"the retractions (--handx, --worldz, --worlda) or move the grid toward the robot")
 
 
 def scene_params(robot: Robot, scene: Scene, opts: IKOptions) -> dict:
