@@ -53,6 +53,27 @@ def _panel_pose(anchor: np.ndarray, facing: np.ndarray) -> np.ndarray:
     return out
 
 
+KEY_WIDTH = 0.28  # m, the colour-key panel
+
+
+def _key_pose(pose: np.ndarray, width: float) -> np.ndarray:
+    """The colour key's pose beside the caption panel at `pose`: below left of it, clear of it in perspective."""
+    out = pose.copy()
+    out[:3, 3] -= pose[:3, 0] * (0.5 * width + 0.22) + pose[:3, 1] * 0.16
+    return out
+
+
+def overlay_corners(anchor: np.ndarray, facing: np.ndarray, width: float = 0.6, margin: float = 0.08) -> np.ndarray:
+    """(8, 3) corners of the caption and key panels of `add_overlays`, `margin` metres out, for framing the camera."""
+    pose = _panel_pose(np.asarray(anchor, dtype=np.float64), np.asarray(facing, dtype=np.float64))
+    out = []
+    for at, half_w, half_h in ((pose, width / 2, 0.03), (_key_pose(pose, width), KEY_WIDTH / 2, 0.09)):
+        for sx in (-1, 1):
+            for sy in (-1, 1):
+                out.append(at[:3, 3] + at[:3, 0] * sx * (half_w + margin) + at[:3, 1] * sy * (half_h + margin))
+    return np.array(out)
+
+
 def add_overlays(vis, anim, frames: list[dict], path: str, anchor: np.ndarray, facing: np.ndarray,
                  key: list[tuple[str, int | None]], width: float = 0.6) -> None:
     """Caption panels (one per step name, shown while a frame belongs to that step) and a colour-key panel, as thin
@@ -70,9 +91,7 @@ def add_overlays(vis, anim, frames: list[dict], path: str, anchor: np.ndarray, f
         vis[f"{path}/{name}"].set_transform(at)
 
     key_png = caption_png(key, width=480)
-    key_at = pose.copy()
-    key_at[:3, 3] -= pose[:3, 0] * (0.5 * width + 0.15) + pose[:3, 1] * 0.12  # below left of the caption
-    panel("key", key_png, (480, 56 * len(key) + 16), key_at, 0.28)
+    panel("key", key_png, (480, 56 * len(key) + 16), _key_pose(pose, width), KEY_WIDTH)
     used = [c for c in CAPTIONS if any(f["caption"] == c for f in frames)]
     for c in used:
         panel(f"caption_{c}", caption_png([(CAPTION_TEXT[c], None)], width=820), (820, 72), hidden, width)

@@ -24,7 +24,7 @@ import trimesh
 from workbench.planners.wan_harada.plans import inverse_pose
 from workbench.robots.chain import forward
 from workbench.robots.timing import TimedSegment
-from workbench.viewer.captions import add_overlays
+from workbench.viewer.captions import add_overlays, overlay_corners
 from workbench.viewer.robot import RobotView
 from workbench.viewer.scenes import (
     frame_points,
@@ -170,7 +170,7 @@ def frame_plan(vis: meshcat.Visualizer, plan, robot) -> None:
     reach = arm_reach(plan, robot)
     parts = [plan.start_pose[:3, 3], plan.goal_pose[:3, 3], robot.base[:3, 3]]
     parts += [np.asarray(s.object_pose)[:3, 3] for s in plan.steps]
-    frame_points(vis, np.vstack([parts, reach, caption_anchor(plan, reach)]))
+    frame_points(vis, np.vstack([parts, reach, overlay_corners(caption_anchor(plan, reach), CAMERA_DIR)]))
 
 
 def arm_reach(plan, robot) -> np.ndarray:
