@@ -181,3 +181,16 @@ def test_the_same_robot_with_another_mount_is_named_apart_and_plan_says_which_to
                 "--goal", "3,0.55,-0.1,90", cwd=work)
     assert plan.returncode == 0, plan.stderr[-3000:]
     assert "plan with --robot kinova" in plan.stderr, plan.stderr
+
+
+def test_the_motion_benchmark_loads_its_urdf_arms_as_a_user_would():
+    from workbench.benchmarks.regrasp import bench_robot
+    from workbench.errors import WorkbenchError
+
+    assert bench_robot("panda") == "panda"  # a built-in stays a name
+    kinova = bench_robot("kinova")
+    assert kinova.spec.urdf_path.endswith("kinova.urdf") and kinova.spec.drop_geometry == ("j2s6s200_link_finger",)
+    assert np.allclose(kinova.mount[:3, 3], [0, 0, 0.1034])
+    assert 'type="continuous"' not in kinova.spec.urdf  # bounded, as `build` stores it
+    with pytest.raises(WorkbenchError, match="unknown robot 'nope'"):
+        bench_robot("nope")

@@ -25,7 +25,9 @@ from workbench.planners.wan_harada.stages import DEMO_GRID
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--objects", default="tube,bracket", help="comma-separated bundled objects (default tube,bracket)")
-    parser.add_argument("--robots", default="panda,ur5", help="comma-separated robots (default panda,ur5)")
+    parser.add_argument("--robots", default="panda,ur5",
+                        help="comma-separated robots: built-in, or ur10, xarm7, kinova loaded from example-robot-data's URDF "
+                             "files as a user's robot (default panda,ur5)")
     parser.add_argument("--pairs", type=int, default=30, help="random start/goal pairs per object and robot (default 30)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the random pairs")
     parser.add_argument("--acc", type=float, default=3.0, help="joint acceleration limit, rad/s^2 (default 3)")

@@ -22,19 +22,21 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from workbench.benchmarks import print_table
 from workbench.benchmarks.paper import BUNDLED_ROW, TABLE_I
-from workbench.errors import PlanningError, WorkbenchError
+from workbench.errors import PlanningError, RobotWarning, WorkbenchError
 from workbench.geometry.objects import load_object
 from workbench.planners.wan_harada.plans import make_plan
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.stages import build_all, load_planner
 from workbench.planners.wan_harada.tabletop import TabletopParams
-from workbench.resources import bundled_objects, paper_objects
+from workbench.resources import bundled_objects, erd_robots, paper_objects
+from workbench.robots.model import ROBOTS, TCP_OFFSET, get_robot, pose_xyz_yaw
 from workbench.store import Store
 
 
@@ -113,22 +115,47 @@ def paper_task_objects(spec: str) -> list[tuple[str, str, object]]:
     return out
 
 
+# Arms of example-robot-data loaded from their URDF files as a user's robot would be (`workbench build --robot PATH
+# --tip ... --mount ...`), the Franka hand 103.4 mm out on the flange: (URDF below example-robot-data's robots
+# folder, tip frame, hand links replaced by the planning gripper; empty: the links past the tip).
+URDF_ARMS = {
+    "ur10": ("ur_description/urdf/ur10_robot.urdf", "tool0", ()),
+    "xarm7": ("xarm_description/urdf/xarm7.urdf", "link_eef", ()),
+    "kinova": ("kinova_description/robots/kinova.urdf", "j2s6s200_end_effector", ("j2s6s200_link_finger",)),
+}
+
+
+def bench_robot(name: str):
+    """A built-in robot's name, or the Robot of a `URDF_ARMS` arm loaded from its URDF."""
+    if name in ROBOTS:
+        return name
+    if name not in URDF_ARMS:
+        raise WorkbenchError(f"unknown robot {name!r}; use some of {', '.join((*ROBOTS, *URDF_ARMS))}")
+    path, tip, hand = URDF_ARMS[name]
+    with warnings.catch_warnings():  # the bounded joints and replaced links are as intended here
+        warnings.simplefilter("ignore", RobotWarning)
+        return get_robot(str(erd_robots() / path), tip_frame=tip, mount=pose_xyz_yaw(0.0, 0.0, TCP_OFFSET, 0.0),
+                         hand_links=hand)
+
+
 def built_planners(objects: str, robots: str, folder: str | Path, grid: TabletopParams, workers: int | None):
-    """(object name, robot, planner, build seconds) for each comma-separated bundled object and robot: the store
-    `folder/<object>.duckdb` is built once (its stages reused on later runs) and its planner loaded."""
+    """(object name, robot, planner, build seconds) for each comma-separated bundled object and robot (built-in, or
+    a `URDF_ARMS` arm from its URDF): the store `folder/<object>.duckdb` is built once (its stages reused on later
+    runs) and its planner loaded."""
     objs = bundled_objects()
     names = [n.strip() for n in objects.split(",") if n.strip()]
     unknown = [n for n in names if n not in objs]
     if unknown:
         raise WorkbenchError(f"unknown bundled objects {unknown}; use some of {', '.join(objs)}")
+    arms = {r: bench_robot(r) for r in [r.strip() for r in robots.split(",") if r.strip()]}
     for name in names:
         obj = load_object(objs[name])
         db = Path(folder) / f"{name}.duckdb"
-        for robot in [r.strip() for r in robots.split(",") if r.strip()]:
+        for label, robot in arms.items():
             t0 = time.perf_counter()
-            build_all(db, obj, robot, tparams=grid, workers=workers)
+            res = build_all(db, obj, robot, tparams=grid, workers=workers)
             t_build = time.perf_counter() - t0
-            yield name, robot, load_planner(db, obj.name, robot), t_build
+            yield name, label, load_planner(db, obj.name, res.robot), t_build
 
 
 def run(args: argparse.Namespace) -> int:
