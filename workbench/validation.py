@@ -419,13 +419,12 @@ class TrajectoryValidator:
     def _hit(self, a, b) -> bool:
         return self.fcl.collide(a, b, self.request, self.fcl.CollisionResult())
 
-    def problems(self, q: np.ndarray, holding: bool, object_pose: np.ndarray | None, grasp: np.ndarray | None,
+    def problems(self, tcp: np.ndarray, holding: bool, object_pose: np.ndarray | None, grasp: np.ndarray | None,
                  fingers: bool = True) -> list[str]:
-        """What is wrong at one configuration (empty when nothing); with `fingers` False the fingers may touch the
-        resting object (on the way to or from the grasp)."""
+        """What is wrong at the configuration last placed by `_place` (its TCP pose `tcp`; empty when nothing); with
+        `fingers` False the fingers may touch the resting object (on the way to or from the grasp)."""
         pv = self.pv
         out = []
-        tcp = self._place(q)
         objs = [(lk, j, o) for _, lk, j, o in self.parts] + [(self.GRIPPER_HAND, -1, self.hand), (self.GRIPPER_FINGERS, -1, self.fingers)]
         for i, (a, _, oa) in enumerate(objs):
             for b, _, ob in objs[i + 1:]:
@@ -494,11 +493,6 @@ class TrajectoryValidator:
                 if drift.max() > 1e-4:
                     errs.append(f"{tag}: positions and velocities disagree (by {math.degrees(drift.max()):.2f} deg more than the "
                                 f"acceleration limit allows between knots)")
-                step = float(np.abs(np.diff(q, axis=0)).max())
-                travel = float(np.linalg.norm(np.diff([pv.fk(x)[:3, 3] for x in q], axis=0), axis=1).max())
-                if step > ONE_DEGREE + 1e-9 or travel > TCP_STEP + 1e-6:
-                    errs.append(f"{tag}: knots up to {math.degrees(step):.2f} deg and {travel * 1000:.1f} mm of TCP travel "
-                                f"apart, beyond the check resolution (1 degree and 5 mm)")
             s = steps[seg.step]
             taking = s.kind in ("pick", "regrasp")
             if seg.kind == "gripper":
@@ -518,12 +512,24 @@ class TrajectoryValidator:
             # the fingers may touch the resting part on the segment that reaches or leaves the step's grasp pose
             at_grasp = seg.kind in ("approach", "retract", "gripper") and min(
                 float(np.linalg.norm(self._place(q[e])[:3, 3] - np.asarray(s.tcp)[:3, 3])) for e in (0, -1)) <= pv.tol_pos
+            tcp_at = np.zeros((len(q), 3))  # every knot is placed once: its TCP for the spacing, its parts for collisions
+            found = False
             for k, x in enumerate(q):
+                tcp = self._place(x)
+                tcp_at[k] = tcp[:3, 3]
+                if found:
+                    continue
                 knots += 1
-                p = self.problems(x, holding, None if holding else pose, grasp if holding else None, not at_grasp)
+                p = self.problems(tcp, holding, None if holding else pose, grasp if holding else None, not at_grasp)
                 if p:
                     errs.append(f"{tag} at t = {seg.t0 + t[k] - t[0]:.2f} s: {'; '.join(sorted(set(p)))}")
-                    break
+                    found = True
+            if len(q) > 1:
+                step = float(np.abs(np.diff(q, axis=0)).max())
+                travel = float(np.linalg.norm(np.diff(tcp_at, axis=0), axis=1).max())
+                if step > ONE_DEGREE + 1e-9 or travel > TCP_STEP + 1e-6:
+                    errs.append(f"{tag}: knots up to {math.degrees(step):.2f} deg and {travel * 1000:.1f} mm of TCP travel "
+                                f"apart, beyond the check resolution (1 degree and 5 mm)")
             if len(errs) >= max_errors:
                 break
         if holding:
