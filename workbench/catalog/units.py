@@ -27,9 +27,8 @@ from workbench.grasping.grasps import GraspParams, GraspSet, plan_grasps
 from workbench.grasping.placements import (
     PlacementParams,
     Placements,
+    empty_placement_stage,
     free_tabletop_grips,
-    no_grip_hint,
-    stability_hint,
     stable_placements,
 )
 from workbench.planners.wan_harada.roadmap import build_roadmap
@@ -114,11 +113,7 @@ def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams
     t1 = time.perf_counter()
     placements = stable_placements(obj, pparams)
     p_idx, g_idx, poses = free_tabletop_grips(placements, grasps.poses, hand, pparams)
-    reason = plan.empty_reason
-    if reason is None and len(placements) == 0:
-        reason = f"placements: {stability_hint(obj, pparams)}"
-    elif reason is None and len(p_idx) == 0:
-        reason = f"free tabletop grips: {no_grip_hint(obj, placements.poses)}"
+    reason = plan.empty_reason or empty_placement_stage(obj, pparams, placements.poses, len(p_idx))
     t2 = time.perf_counter()
     tt = plan_tabletop(placements.poses, p_idx, g_idx, poses, grasps.poses, tparams)
     t3 = time.perf_counter()

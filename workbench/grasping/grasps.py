@@ -421,7 +421,8 @@ def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, direct
         if side <= 0 or area[t <= np.sin(np.arctan(friction))].sum() >= flat_share * side:
             continue
         up = -d
-        lo, hi = (v @ up).min(), (v @ up).max()
+        heights = v @ up
+        lo, hi = heights.min(), heights.max()
         n = int(np.clip(np.ceil((hi - lo) / spacing), 2, 12))
         h = lo + (np.arange(n) + 0.5) / n * (hi - lo)
         e1 = np.cross(up, [1.0, 0, 0] if abs(up[0]) < 0.9 else [0, 1.0, 0])

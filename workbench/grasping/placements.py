@@ -149,6 +149,17 @@ def no_grip_hint(obj: ObjectModel, placement_poses: np.ndarray) -> str:
     return "every grasp puts the hand into the table at every stable placement" + thin + "; lower --clearance or plan more grasps"
 
 
+def empty_placement_stage(obj: ObjectModel, params: PlacementParams, placement_poses: np.ndarray,
+                          n_free_grips: int) -> str | None:
+    """"placements: why" when no placement is stable, "free tabletop grips: why" when no grasp clears the table at
+    any, else None (issue 10: the stage that kept nothing, for `workbench build` and the catalogue alike)."""
+    if len(placement_poses) == 0:
+        return f"placements: {stability_hint(obj, params)}"
+    if n_free_grips == 0:
+        return f"free tabletop grips: {no_grip_hint(obj, placement_poses)}"
+    return None
+
+
 def _polygon(points2d: np.ndarray) -> np.ndarray:
     """Convex support polygon (counter-clockwise, z = 0) of the contact points."""
     if len(points2d) >= 3:

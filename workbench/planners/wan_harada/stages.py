@@ -22,9 +22,8 @@ from workbench.geometry.objects import MeshWarning, ObjectModel, from_arrays
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.grasping.placements import (
     PlacementParams,
+    empty_placement_stage,
     free_tabletop_grips,
-    no_grip_hint,
-    stability_hint,
     stable_placements,
 )
 from workbench.planners.wan_harada.planner import Planner
@@ -503,11 +502,10 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -
     except StoreError:  # no placements run yet: nothing empty so far
         return None
     pl = sql.placements_of_tabletop(store, tt)
-    free = load_placements(store, pl)
-    if len(free["stability"]) == 0:
-        return f"placements: {stability_hint(obj, PlacementParams.from_dict(store.params_of(pl)))}"
-    if len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]) == 0:
-        return f"free tabletop grips: {no_grip_hint(obj, free['rotmat'])}"
+    reason = empty_placement_stage(obj, PlacementParams.from_dict(store.params_of(pl)), load_placements(store, pl)["rotmat"],
+                                   len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]))
+    if reason is not None:
+        return reason
     if tabletop_counts(store, tt)[1] == 0:
         return "tabletop grips: no grasp is kept on the tabletop grid; raise --max-grasps or widen the grid"
     if robot_name is not None:
