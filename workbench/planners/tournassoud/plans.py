@@ -36,6 +36,7 @@ from workbench.planners.tournassoud.chaining import (
 )
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable, rz
+from workbench.planners.tournassoud.task import task_query
 from workbench.planners.wan_harada.motions import ExecOptions, MotionResult, plan_motion
 from workbench.planners.wan_harada.plans import Plan, PlanStep
 from workbench.planners.wan_harada.query import PoseQuery
@@ -496,7 +497,5 @@ def plan_task_query(table, classes, realiser: Realiser, robot: Robot, object_nam
     `start` ((C, T), `task.end_mask`), regrasped on the table at H as often as needed, and put at the destination
     (inserted, the hand clear of its obstacles) with a grasp of `goal`. The plan's first step takes the part at the
     pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles."""
-    from workbench.planners.tournassoud.task import task_query
-
     return _plan(task_query, table, classes, realiser, robot, object_name, motions, start=start, goal=goal, pickup=pickup,
                  destination=destination)

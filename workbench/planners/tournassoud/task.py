@@ -27,6 +27,7 @@ The paper leaves the obstacle test's details open; this is the workbench's choic
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,7 +35,7 @@ import trimesh
 
 from workbench.errors import WorkbenchError
 from workbench.geometry.collision import bvh, collide_at_poses, object_collider
-from workbench.planners.tournassoud.chaining import Sequence, _pick2, _through, chain, NoSequence
+from workbench.planners.tournassoud.chaining import NoSequence, Sequence, _pick2, _through, chain
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable, reachable, rz
 from workbench.robots.gripper import Gripper
@@ -151,8 +152,6 @@ def task_query(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, 
     the first grasp in `start` ((C, T), legal at the pick-up), the last in `goal` (legal at the destination), the
     intermediate placements at the table point H. A placement-kind sequence whose first and last placements are the
     two ends (their nearest phi samples; `extra` holds their exact poses, "start_pose" and "goal_pose")."""
-    import time
-
     t0 = time.perf_counter()
     if not start.any():
         raise NoSequence("no grasp is legal at the pick-up")
