@@ -23,6 +23,7 @@ import numpy as np
 import pyarrow as pa
 
 from workbench.errors import StoreError
+from workbench.params import WAIT_ENV
 from workbench.store.identity import (
     APPLICATION,
     META_TABLES,
@@ -39,7 +40,6 @@ from workbench.store.identity import (
 from workbench.store.schema import ALL_TABLES, MIGRATIONS
 
 CONNECT_CONFIG = {"autoinstall_known_extensions": False}
-WAIT_ENV = "WORKBENCH_WAIT"  # seconds to wait for another process's lock (the command line's --wait)
 FAULT_ENV = "WORKBENCH_FAULT"  # tests only: "TABLE:N:SIGNAL" sends SIGNAL to this process after the N-th insert into TABLE
 
 
