@@ -262,6 +262,7 @@ def why_apart(table: GraspPlacementTable, ps: int, pg: int) -> str:
 
 
 def nearest_sample(grid: np.ndarray, angle: float) -> int:
+    """Index of the sample of an evenly spaced angle grid over [0, 2 pi) nearest `angle` (radians)."""
     n = len(grid)
     return int(np.round(np.mod(angle, 2 * np.pi) / (2 * np.pi / n))) % n
 
