@@ -51,8 +51,8 @@ def parse_base(text: str) -> np.ndarray:
     return pose_xyz_yaw(*vals)
 
 
-def _mount(text: str) -> np.ndarray:
-
+def parse_mount(text: str) -> np.ndarray:
+    """--mount x,y,z,roll,pitch,yaw (m, rad) as the tip-to-TCP transform."""
     x, y, z, roll, pitch, yaw = _floats(text, 6, "--mount (x,y,z,roll,pitch,yaw in m and rad)")
     _radians([roll, pitch, yaw], ("roll", "pitch", "yaw"), "--mount")
     out = np.eye(4)
@@ -96,7 +96,7 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
 def robot_and_scene(args: argparse.Namespace) -> tuple[Robot, Scene]:
     """The robot and table of `add_robot_arguments`' options."""
     base = parse_base(args.base) if args.base else None
-    mount = _mount(args.mount) if args.mount else None
+    mount = parse_mount(args.mount) if args.mount else None
     hand = tuple(h.strip() for h in (args.hand_links or "").split(",") if h.strip())
     robot = get_robot(args.robot, base=base, tip_frame=args.tip, mount=mount, hand_links=hand)
     scene = default_scene(robot.name)

@@ -5,11 +5,11 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
+from workbench.store import Store
+
 
 def table_columns() -> dict[str, list[tuple[str, str, bool]]]:
     """{table: [(column, DuckDB type, nullable), ...]} of a new, empty store, in creation order."""
-    from workbench.store import Store
-
     with tempfile.TemporaryDirectory() as tmp:
         store = Store(Path(tmp) / "reference.duckdb")
         try:
