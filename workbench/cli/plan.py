@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from workbench.cli import warn
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.cli.ik import RETRACT
 from workbench.errors import PlanningError
 from workbench.params import cli_bound, parse_number
@@ -26,6 +27,7 @@ from workbench.planners.wan_harada.stages import (
 from workbench.robots.motion import MotionOptions
 from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
 from workbench.store import Store
+from workbench.store.robots import robot_with_gripper
 from workbench.viewer.wan_harada import plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
@@ -60,6 +62,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--trajectory", default=None, metavar="OUT",
                         help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml "
                              "(a ROS 2 trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
+    add_gripper_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -71,13 +74,19 @@ def run(args: argparse.Namespace) -> int:
         raise PlanningError(f"--trajectory {args.trajectory!r} must end in .csv, .yaml or .json")
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
+    if args.gripper == "own":
+        raise PlanningError("plan takes a robot's own hand by its URDF: --gripper ROBOT.urdf --gripper-hand TIP "
+                            "--gripper-fingers LEFT,RIGHT (as given to build)")
+    gripper = gripper_from_args(args)
     with Store(args.db, create=False) as store:
+        args.robot = robot_with_gripper(store, args.robot, gripper.digest) or args.robot
         reason = empty_stage(store, args.object, args.robot)
         if reason:
             warn(f"no plan for {args.object}: nothing to plan with; stage {reason}")
             return 0
         t0 = time.perf_counter()
-        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial)
+        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial,
+                               gripper=gripper)
         t_load = time.perf_counter() - t0
         turn = (goal.yaw - start.yaw + math.pi) % (2 * math.pi) - math.pi
         if (start.idfreetabletopplacement == goal.idfreetabletopplacement in planner.placement_ids()
