@@ -26,7 +26,7 @@ from workbench.planners.wan_harada.stages import (
     stored_plan,
 )
 from workbench.robots.motion import MotionOptions
-from workbench.robots.timing import to_csv, to_json
+from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
 from workbench.store import Store
 from workbench.store.robots import robot_with_gripper
 from workbench.viewer.wan_harada import plan_scene
@@ -60,8 +60,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="robot meshes in the HTML: collision (small file, default) or visual (nicer, larger)")
     parser.add_argument("--no-save", action="store_true", help="do not store the plans in the store's plan tables")
     add_motion_arguments(parser, "roadmap nodes or grips")
-    add_output(parser, "--trajectory", suffixes=(".csv", ".json"),
-               help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot) or OUT.json")
+    add_output(parser, "--trajectory", suffixes=(".csv", ".yaml", ".yml", ".json"),
+               help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml "
+                    "(a ROS 2 trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
     add_gripper_argument(parser)
     parser.set_defaults(func=run)
 
@@ -158,10 +159,11 @@ def exec_options(args: argparse.Namespace) -> ExecOptions:
 
 
 def write_trajectory(plan, out: str | Path) -> Path:
-    """The plan's timed trajectory for replay: CSV (one row per knot) or JSON (per segment), by the file's suffix."""
+    """The plan's timed trajectory for replay, by the file's suffix: CSV (one row per knot), YAML (a ROS 2
+    `trajectory_msgs/JointTrajectory`) or JSON (per segment)."""
     out = Path(out)
-    text = to_csv(plan.segments, plan.joint_names) if out.suffix.lower() == ".csv" else to_json(plan.segments, plan.joint_names)
-    return write_text(out, text)
+    writer = {".csv": to_csv, ".yaml": to_ros2_yaml, ".yml": to_ros2_yaml}.get(out.suffix.lower(), to_json)
+    return write_text(out, writer(plan.segments, plan.joint_names))
 
 
 def print_plan(plan) -> None:

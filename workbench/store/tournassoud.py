@@ -161,6 +161,7 @@ def load_classes(store: Store, pid: int) -> list[dict]:
 
 
 def class_ids(store: Store, pid: int) -> np.ndarray:
+    """The ids of a class parameter set's grasp classes, in their index order."""
     return np.array([r[0] for r in store.run("SELECT idtgraspclass FROM tgraspclass WHERE idparamset = ? AND idx >= 0 "
                                              "ORDER BY idx", [pid])], dtype=np.int64)
 
@@ -176,6 +177,7 @@ def dropped_classes(store: Store, pid: int) -> tuple[int, float]:
 
 
 def find_paramset(store: Store, stage: str, params: dict, idobject: int) -> int | None:
+    """The id of a stored parameter set of `stage` for this object, if any."""
     return store.find_paramset(stage, params, idobject)
 
 
