@@ -14,6 +14,7 @@ STAGE = "grasps"
 
 
 def grasp_param_dict(params: GraspParams, gripper: Gripper) -> dict:
+    """The grasp stage's parameter set as stored: the parameters and the gripper's digest."""
     return {**params.as_dict(), "gripper": gripper.digest}
 
 

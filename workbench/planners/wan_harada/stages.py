@@ -70,6 +70,9 @@ if TYPE_CHECKING:  # pragma: no cover
 
 @dataclass
 class GraspsResult:
+    """The free-air grasp stage's result (Section III): its object and parameter set, whether the rows were reused,
+    and the grasps' TCP poses (N, 4, 4) in the object frame with their jaw widths (N,) in metres."""
+
     idobject: int
     idparamset: int
     reused: bool
@@ -101,6 +104,9 @@ def ensure_grasps(db: str | Path | Store, obj: ObjectModel, gripper: Gripper, pa
 
 @dataclass
 class PlacementsResult:
+    """The placement stage's result (Section IV): the parameter sets of the free and tabletop placements, whether
+    they were reused, the placements, the free tabletop grips per placement and the tabletop counts."""
+
     idplacements: int
     idtabletop: int
     reused: bool
