@@ -22,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
-from workbench.resources import erd_robots, erd_share
+from workbench.resources import ASSETS, erd_robots, erd_share
 
 
 @dataclass
@@ -81,8 +81,6 @@ def _spec(path: str) -> dict:
 def _hand_model(hand: str):
     if hand == "franka":
         return (*franka_geometry(), ("panda_finger_joint1", "panda_finger_joint2"), "panda_hand_tcp")
-    from workbench.resources import ASSETS
-
     file, keep, joints, tcp_frame = URDF_HANDS[hand]
     return (*_urdf_geometry(str(ASSETS / "grippers" / file), keep), joints, tcp_frame)
 
