@@ -91,7 +91,7 @@ def test_repaired_boxes_give_the_clean_box_grasp_rows(tmp_path, hand):
         obj = _load(trimesh.Trimesh(v, f, process=False), "box")
         db = tmp_path / f"{label}.duckdb"
         result = ensure_grasps(db, obj, hand, GraspParams())
-        with Store(db, read_only=True) as store:
+        with Store(db) as store:
             g = load_grasps(store, result.idobject, result.idparamset)
         rows[label] = (obj.digest, obj.mesh.vertices, obj.mesh.faces, g)
     assert len({r[0] for r in rows.values()}) == 1

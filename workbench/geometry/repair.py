@@ -16,10 +16,12 @@ are the same part to every later stage.
 
 from __future__ import annotations
 
+import manifold3d
 import numpy as np
 import trimesh
 
 from workbench.errors import MeshError
+from workbench.geometry.collision import mesh_distance
 
 
 def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: float = 0.01,
@@ -174,32 +176,19 @@ def _submesh(mesh: trimesh.Trimesh, faces: np.ndarray) -> trimesh.Trimesh:
 def _gaps(bodies: list[trimesh.Trimesh], tol: float) -> np.ndarray:
     """Distances between bodies (n, n): 0 where they touch, cross or one lies inside the other; the bounding boxes'
     gap where those are more than `tol` apart (a lower bound), else the surfaces' distance (python-fcl)."""
-    import fcl
-
     n = len(bodies)
     lo = np.array([b.bounds[0] for b in bodies])
     hi = np.array([b.bounds[1] for b in bodies])
     box = np.linalg.norm(np.maximum(0.0, np.maximum(lo[:, None] - hi[None], lo[None] - hi[:, None])), axis=2)
     gap = box.copy()
-    objs: dict[int, fcl.CollisionObject] = {}
-
-    def obj(i: int):
-        if i not in objs:
-            m = fcl.BVHModel()
-            m.beginModel(len(bodies[i].vertices), len(bodies[i].faces))
-            m.addSubModel(np.asarray(bodies[i].vertices, dtype=np.float64), np.asarray(bodies[i].faces, dtype=np.int32))
-            m.endModel()
-            objs[i] = fcl.CollisionObject(m, fcl.Transform())
-        return objs[i]
-
     for i in range(n):
         for j in range(i + 1, n):
             if box[i, j] > tol:
                 continue
-            d = fcl.distance(obj(i), obj(j), fcl.DistanceRequest(), fcl.DistanceResult())
+            d = mesh_distance(bodies[i], bodies[j])
             if d > 0 and any(_inside(bodies[a], bodies[b].vertices[:1]) for a, b in ((i, j), (j, i))):
                 d = 0.0
-            gap[i, j] = gap[j, i] = max(float(d), 0.0)
+            gap[i, j] = gap[j, i] = d
     return gap
 
 
@@ -211,8 +200,6 @@ def _union(pieces: list[trimesh.Trimesh], tol: float) -> trimesh.Trimesh | None:
     """The pieces' boolean union (manifold3d, in double precision) as one closed body, or None when a piece is not a
     closed manifold. Pieces that meet only within export rounding (faces 1e-9 m apart) give separate solids; they
     are then grown about their centres by the least of 1e-3, 1e-2, 0.1 and 1 times `tol` that joins them."""
-    import manifold3d
-
     closed = []
     for p in pieces:
         if not p.is_watertight:
