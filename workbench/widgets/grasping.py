@@ -13,7 +13,7 @@ import trimesh
 
 from workbench.geometry.objects import ObjectModel
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
-from workbench.robots.gripper import Gripper
+from workbench.robots.gripper import BUNDLED, Gripper, load_gripper
 from workbench.viewer import scenes as viz
 
 
@@ -50,6 +50,11 @@ class GraspExplorer:
         self.layers = {name: W.Checkbox(value=on, description=name, indent=False, layout=W.Layout(width="auto", margin="0 14px 0 0"))
                        for name, on in (("facets", True), ("all samples", False), ("after neighbour filter", False),
                                         ("after distance filter", True), ("contact pairs", True), ("collided hands", False))}
+        given = [] if gripper.name in BUNDLED or gripper.name == "franka_hand" else [(gripper.name, gripper)]
+        self.grippers = W.Dropdown(options=given + [(name, name) for name in BUNDLED],
+                                   value=given[0][1] if given else ("franka" if gripper.name == "franka_hand" else gripper.name),
+                                   description="gripper", layout=W.Layout(width="260px"))
+        self.grippers.observe(lambda change: self.set_gripper(change["new"]), names="value")
         self.button = W.Button(description="plan grasps", button_style="primary")
         self.counts = W.HTML()
         self.key = W.HTML()
@@ -60,7 +65,11 @@ class GraspExplorer:
             box.observe(lambda _: self.draw(), names="value")
         self.widget = W.VBox([W.HBox([self.tau, self.method]), W.HBox([self.density, self.radius]),
                               W.HBox([self.dist, self.rotations]), W.HBox(list(self.layers.values())),
-                              W.HBox([self.button, self.facet, self.hands]), self.key, self.counts])
+                              W.HBox([self.grippers, self.button, self.facet, self.hands]), self.key, self.counts])
+
+    def set_gripper(self, choice: Gripper | str) -> None:
+        """Plan with another gripper (a bundled name or a loaded Gripper); press plan grasps to see its grasps."""
+        self.gripper = choice if isinstance(choice, Gripper) else load_gripper(choice)
 
     def params(self) -> GraspParams:
         """The given parameters with the widgets' values; the others are kept."""
