@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-BENCHES = ("grasps", "placements", "ik", "regrasp", "motion", "fingers", "gptable", "catalog")
+BENCHES = ("grasps", "placements", "ik", "regrasp", "motion", "fingers", "gptable", "catalog", "widgets")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

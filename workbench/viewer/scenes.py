@@ -6,14 +6,21 @@ file that opens in a browser without a running server; `grasp_scene` is a ready-
 
 from __future__ import annotations
 
-import contextlib
+import atexit
+import collections
+import ctypes
 import html
-import io
 import json
+import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
+from types import SimpleNamespace
 from urllib.parse import urlparse
 
 import meshcat
+import meshcat.visualizer
 import meshcat.geometry as g
 import meshcat.transformations as tf
 import numpy as np
@@ -27,13 +34,65 @@ GREEN, RED, GREY, BLUE, ORANGE, WHITE = 0x33AA55, 0xDD3333, 0xB0B0B0, 0x3366DD, 
 HIGHLIGHT = 0xFF00CC  # not in the tab20 palette the facets use
 
 
-def new_scene() -> meshcat.Visualizer:
-    """A meshcat visualizer with its own server (bound to 127.0.0.1, closed with the kernel); starts empty.
-    meshcat's "You can open the visualizer ..." line is not printed: `view(vis)` shows the scene."""
-    with contextlib.redirect_stdout(io.StringIO()):
-        vis = meshcat.Visualizer()
+class SceneWindow(meshcat.visualizer.ViewerWindow):
+    """meshcat's link to its own server, started so that it ends with this process (on Linux the kernel stops it
+    when its parent dies, so a shut-down notebook kernel leaves no server behind); it counts the commands it sends
+    by type (`sent["set_object"]`: geometry, `sent["set_transform"]`, `sent["set_property"]`: view-only changes)."""
+
+    def __init__(self) -> None:
+        self.server_proc, self.zmq_url, self.web_url = _start_server()
+        self.connect_zmq()
+        self.sent: collections.Counter = collections.Counter()
+
+    def send(self, command) -> None:
+        self.sent[type(command).__name__] += 1
+        super().send(command)
+
+    def close(self) -> None:
+        """Stop the server (the scene cannot be used afterwards)."""
+        if self.server_proc is not None and self.server_proc.poll() is None:
+            self.server_proc.kill()
+            self.server_proc.wait()
+
+
+def _die_with_parent() -> None:  # runs in the child between fork and exec
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def _start_server() -> tuple[subprocess.Popen, str, str]:
+    """meshcat's zmq server as a child process bound to 127.0.0.1 (as `meshcat.servers.zmqserver` starts it, plus
+    the parent-death signal)."""
+    from meshcat.servers.zmqserver import match_web_url, match_zmq_url
+
+    env = dict(os.environ, PYTHONPATH=str(Path(meshcat.__file__).resolve().parents[1]))
+    proc = subprocess.Popen([sys.executable, "-u", "-m", "meshcat.servers.zmqserver"], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, env=env, start_new_session=True,
+                            preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None)
+    line = ""
+    while "zmq_url" not in line:
+        line = proc.stdout.readline().strip().decode("utf-8")
+        if proc.poll() is not None:
+            raise RuntimeError(f"the meshcat server exited with status {proc.returncode}")
+    zmq_url = match_zmq_url(line)
+    web_url = match_web_url(proc.stdout.readline().strip().decode("utf-8"))
+    proc.stdout.close()
+    atexit.register(SceneWindow.close, SimpleNamespace(server_proc=proc))
+    return proc, zmq_url, web_url
+
+
+def new_scene(grid: bool = False, axes: bool = False) -> meshcat.Visualizer:
+    """A meshcat visualizer with its own server (bound to 127.0.0.1, ended with the kernel); starts empty, without
+    meshcat's grid and axes unless asked for. `view(vis)` shows the scene."""
+    vis = meshcat.Visualizer(window=SceneWindow())
     vis.delete()
+    vis["/Grid"].set_property("visible", bool(grid))
+    vis["/Axes"].set_property("visible", bool(axes))
     return vis
+
+
+def geometry_sent(vis) -> int:
+    """How many geometry messages (set_object) the scene's window has sent (0 for a window that does not count)."""
+    return int(getattr(vis.window, "sent", {}).get("SetObject", 0))
 
 
 # The page shown in a notebook output: meshcat's viewer script and websocket reached through the Jupyter server
