@@ -16,7 +16,7 @@ step's pose); every object pose rests on the table and is stable; the object sta
 its regrasp; the grasp (object in the TCP frame, from forward kinematics) is unchanged along each transfer;
 the object starts at the start pose and ends at the goal pose.
 
-Motions (issue 12; CONVENTIONS.md, Plans and motions), `TrajectoryValidator`: a plan is executable only with its
+Motions (CONVENTIONS.md, Plans and motions), `TrajectoryValidator`: a plan is executable only with its
 timed trajectory, checked at every knot (knots at most 1 degree apart in every joint and 5 mm of TCP travel):
 times increase and segments join without jumps, rest at both ends; positions, velocities (URDF) and
 accelerations (the plan's limits, from knot velocity differences) within limits, positions consistent with

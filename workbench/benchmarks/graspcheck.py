@@ -1,4 +1,4 @@
-"""An independent check of parallel-jaw grasps (issue 10), written without the planner's code or collision library.
+"""An independent check of parallel-jaw grasps, written without the planner's code or collision library.
 
 For each grasp (TCP pose in the object frame, opening, contacts and outward contact normals):
 - both contacts lie on the object's surface within 0.5 mm (trimesh's exact closest point);

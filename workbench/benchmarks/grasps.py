@@ -1,4 +1,4 @@
-"""Grasp planning (Section III) beside Table I's #-fg and t-fg, and on the organic set (issue 10)."""
+"""Grasp planning (Section III) beside Table I's #-fg and t-fg, and on the organic set."""
 
 from __future__ import annotations
 
@@ -49,7 +49,7 @@ def _paper(args: argparse.Namespace) -> int:
                  "pads ok", "#-fg conv", "#-fg", "#-fg fixed", "#-fg paper pairs", "paper pairs kept", "t-fg s", "paper #-fg", "paper t-fg s"],
                 rows, title=f"Grasp planning, Franka hand, over-segmentation, pad contact model, lengths scaled with the part "
                             f"(median of {args.repeats} runs; '#-fg fixed': fixed lengths; '#-fg paper pairs': the paper's "
-                            f"contact pairs and swept cylinders with fixed lengths, the model before issue 10; 'paper pairs kept': those grasps "
+                            f"contact pairs and swept cylinders with fixed lengths, the paper's own model; 'paper pairs kept': those grasps "
                             f"the pad model with fixed lengths also finds, TCP within 1 mm and 3 degrees; it finds more "
                             f"where the paper's rotation-invariant level-1 cylinder rejects a pair at every rotation "
                             f"while the pad rectangle fits at some; Table I beside)")

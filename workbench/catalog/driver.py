@@ -1,4 +1,4 @@
-"""The catalogue's driver: schedules units on a Dask cluster, resumes by digest, is the single store writer (issue 15).
+"""The catalogue's driver: schedules units on a Dask cluster, resumes by digest, is the single store writer.
 
 Units: one per part (grasps, placements, tabletop grips; Wan & Harada Sections III-IV), one per chunk of a part's
 tabletop grips and robot (IK with retractions, Section IV), one per part and robot (the regrasp graph's size,

@@ -1,4 +1,4 @@
-"""The catalogue's store side (issue 15): the only module of `workbench.catalog` that talks to the store.
+"""The catalogue's store side: the only module of `workbench.catalog` that talks to the store.
 
 The driver hands it finished units; each is written with the Wan & Harada stage writers of `workbench.store`
 (object, free-air grasps, placements, free tabletop grips, tabletop placements and grips, `ik` rows) together with

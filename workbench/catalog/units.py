@@ -1,4 +1,4 @@
-"""Units of work of a catalogue, run on Dask workers: pure functions from inputs to Arrow tables (issue 15).
+"""Units of work of a catalogue, run on Dask workers: pure functions from inputs to Arrow tables.
 
 - `part_unit`: load a mesh, plan free-air grasps (Wan & Harada Section III), stable placements, free tabletop
   grips and the tabletop grid (Section IV); returns the result dataclasses as Arrow tables (`part_tables`).

@@ -1,5 +1,5 @@
 """`workbench catalog build PARTS... --robots panda,ur5 --db DB`: grasps, placements, tabletop grips and IK of many
-parts for several robots on a Dask cluster (Wan & Harada's fully off-line stages, Sections III-V; issue 15), and
+parts for several robots on a Dask cluster (Wan & Harada's fully off-line stages, Sections III-V), and
 `workbench catalog report --db DB` to print the stored catalogue again."""
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """`workbench plan --db DB --object NAME --robot ROBOT --start P,X,Y,YAW --goal P,X,Y,YAW`: connect a start and a goal
-pose to the regrasp graph, search it, plan and time its motions, print and write the plan (Wan & Harada, Section V;
-issue 12). Yaw in degrees on the command line, radians in the library."""
+pose to the regrasp graph, search it, plan and time its motions, print and write the plan (Wan & Harada,
+Section V). Yaw in degrees on the command line, radians in the library."""
 
 from __future__ import annotations
 

@@ -629,7 +629,7 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
 
 def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Gripper,
                  pairs: ContactPairs | None = None) -> str | None:
-    """Which stage removed the last candidate, and what to try; None when grasps remain (issue 10). With the contact
+    """Which stage removed the last candidate, and what to try; None when grasps remain. With the contact
     `pairs`, an empty friction stage names the friction the most nearly opposed pair that fits the jaw needs: half the
     angle between one normal and the other reversed, the best any jaw axis can do."""
     if counts.get("grasps", 0) > 0:

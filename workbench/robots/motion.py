@@ -1,4 +1,4 @@
-"""Collision-free motions between a plan's waypoints (CONVENTIONS.md, Plans and motions; issue 12).
+"""Collision-free motions between a plan's waypoints (CONVENTIONS.md, Plans and motions).
 
 As wrs, the first author's framework, does for Wan & Harada's plans (Section V): approach and retract are straight
 TCP lines, transit (empty hand) and transfer (object in the hand) run in joint space: the straight joint line

@@ -1,4 +1,4 @@
-"""Is this file our store, of which version, and is it readable? (issue 11: stores that are not ours).
+"""Is this file our store, of which version, and is it readable? (stores that are not ours).
 
 Every store written by this version holds `workbench_meta` (application, schema_version), written in the same
 transaction as the schema at creation. Before anything is written, `inspect` reads the file read-only and

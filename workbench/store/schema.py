@@ -190,7 +190,7 @@ ALL_TABLES: tuple[str, ...] = CORE_TABLES
 # its rank among the alternatives; regrasp and transfer counts; time to connect and search), its steps in order
 # (kind pick / transfer / regrasp / place, the grasp, the object pose and the TCP pose in the world, the roadmap
 # rows when the step is on the grid, joint vectors for approach (handx), grasp and retract (handx + worldz)).
-# Motions (issue 12; CONVENTIONS.md, Plans and motions): plan.duration (s, the whole timed trajectory),
+# Motions (CONVENTIONS.md, Plans and motions): plan.duration (s, the whole timed trajectory),
 # plan.removed (roadmap nodes or start/goal grips removed because their motions failed before this plan was found),
 # plan.t_motion (s spent planning and timing motions), plan.acc (the acceleration limits used, rad/s^2 per joint);
 # plansegment: one row per motion in order (seq): kind (approach, retract, transit, transfer, gripper), caption (the
@@ -403,7 +403,7 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS idgripper BIGINT",
     "ALTER TABLE gripper ADD COLUMN IF NOT EXISTS collision_vertices DOUBLE[][]",
     "ALTER TABLE gripper ADD COLUMN IF NOT EXISTS collision_faces INTEGER[][]",
-    # the lift retractions (issue 16): ik rows computed before them lack two of the five poses; they are dropped so
+    # the lift retractions: ik rows computed before them lack two of the five poses; they are dropped so
     # the next `workbench ik` run computes them again, and their retraction set gets the default worlda
     "ALTER TABLE ikret ADD COLUMN IF NOT EXISTS worlda DOUBLE",
     "ALTER TABLE ik ADD COLUMN IF NOT EXISTS feasibility_worlda BOOLEAN",
@@ -420,6 +420,6 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS removed INTEGER",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS t_motion DOUBLE",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS acc DOUBLE[]",
-    # the planner that answered (issue 13): 'wan_harada' (the roadmap planner, every plan stored before) or 'tournassoud'
+    # the planner that answered: 'wan_harada' (the roadmap planner, every plan stored before) or 'tournassoud'
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS planner VARCHAR DEFAULT 'wan_harada'",
 )

@@ -483,7 +483,7 @@ def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Zero results (issue 10): which stage stored no rows, and what to try.
+# Zero results: which stage stored no rows, and what to try.
 
 
 def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -> str | None:
