@@ -17,10 +17,13 @@ from pathlib import Path
 
 from workbench.benchmarks import print_table
 from workbench.geometry.objects import load_object
+from workbench.grasping.grasps import GraspParams
+from workbench.planners.wan_harada.stages import ensure_grasps
 from workbench.resources import bundled_objects
 from workbench.robots.gripper import franka_hand
 from workbench.viewer.scenes import geometry_sent
 from workbench.widgets.grasping import GraspExplorer
+from workbench.widgets.wan_harada import PlacementExplorer
 
 NOTEBOOKS = ("01", "02", "03", "04", "05", "06")
 
@@ -70,7 +73,25 @@ def bench_grasps(rows: list, repeats: int, db: Path) -> None:
     _row(rows, "01", "threshold tau (cached)", "recompute", "500 ms", measure(ex.tau, (tau + 2, tau), repeats, ex.vis))
 
 
-BENCHES = {"01": bench_grasps}
+def bench_placements(rows: list, repeats: int, db: Path) -> None:
+    obj, hand = load_object(bundled_objects()["tube"]), franka_hand()
+    grasps = ensure_grasps(db, obj, hand, GraspParams())
+    ex = PlacementExplorer(obj, hand, grasps.poses, grasps.widths)
+    ex.run()
+    ids = [v for _, v in ex.which.options]
+    _row(rows, "02", "selected placement", "view only", "100 ms", measure(ex.which, (ids[-1], ids[0]), repeats, ex.vis))
+    _row(rows, "02", "grips drawn", "view only", "100 ms", measure(ex.hands, (20, 4), repeats, ex.vis))
+    _row(rows, "02", "every placement on the roadmap", "view only", "100 ms",
+         measure(ex.roadmap, (True, False), repeats, ex.vis))
+    nx = ex.nx.value
+    _row(rows, "02", "grid positions along x (cached after 2)", "recompute", "-",
+         measure(ex.nx, (nx + 2, nx), repeats, ex.vis))
+    s = ex.stability.value
+    _row(rows, "02", "stability threshold (cached after 2)", "recompute", "500 ms",
+         measure(ex.stability, (s + 0.1, s), repeats, ex.vis))
+
+
+BENCHES = {"01": bench_grasps, "02": bench_placements}
 
 
 def run(args: argparse.Namespace) -> int:

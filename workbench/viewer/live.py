@@ -23,7 +23,7 @@ class Switches:
 
     def __init__(self, vis: meshcat.Visualizer):
         self.vis = vis
-        self.visible: dict[str, bool] = {}
+        self.visible: dict = {}  # path (or (path, property)) -> value
         self.poses: dict[str, bytes] = {}
 
     def show(self, path: str, on: bool) -> None:
@@ -32,10 +32,11 @@ class Switches:
             self.vis[path].set_property("visible", on)
             self.visible[path] = on
 
-    def only(self, prefix: str, paths: list[str], on: set[str]) -> None:
-        """Show the `paths` (under `prefix`) in `on`, hide the others."""
-        for p in paths:
-            self.show(f"{prefix}/{p}", p in on)
+    def set(self, path: str, key: str, value) -> None:
+        """Any other property (meshcat's "color" takes [r, g, b, opacity] and recolours the children too)."""
+        if self.visible.get((path, key)) != value:
+            self.vis[path].set_property(key, value)
+            self.visible[(path, key)] = value
 
     def move(self, path: str, pose: np.ndarray) -> None:
         pose = np.asarray(pose, dtype=np.float64)
@@ -47,7 +48,7 @@ class Switches:
     def forget(self, prefix: str) -> None:
         """Drop what is remembered under `prefix` (its objects were deleted or replaced)."""
         for d in (self.visible, self.poses):
-            for k in [k for k in d if k == prefix or k.startswith(prefix + "/")]:
+            for k in [k for k in d if (k if isinstance(k, str) else k[0]).startswith(prefix)]:
                 del d[k]
 
 

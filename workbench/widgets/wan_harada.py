@@ -16,6 +16,7 @@ import trimesh
 
 from workbench.errors import PlanningError
 from workbench.geometry.objects import ObjectModel, load_object
+from workbench.grasping.naming import describe_placement
 from workbench.grasping.placements import (
     PlacementParams,
     free_tabletop_grips,
@@ -49,7 +50,9 @@ from workbench.viewer.wan_harada import (
     show_plan,
     show_roadmap,
 )
+from workbench.viewer.live import HandOutlines, Switches, pick_evenly
 from workbench.widgets.grasping import counts_table
+from workbench.widgets.panel import Busy, StageCache, beside, digest
 
 
 class RegraspExplorer:
@@ -286,7 +289,11 @@ def plot_feasibility(rows: dict[str, np.ndarray], title: str = ""):
 
 
 class PlacementExplorer:
-    """Tune the stability threshold and the table grid; inspect placements, their grips and the roadmap (Section IV)."""
+    """Tune the stability threshold and the table grid; inspect placements, their grips and the roadmap (Section IV).
+
+    The threshold reruns the placement and free-grip stages, the grid sliders only the tabletop roadmap (each cached
+    by parameter digest); the selected placement, the grips drawn and the roadmap box only show, hide and recolour
+    what was sent."""
 
     def __init__(self, obj: ObjectModel, gripper: Gripper, grasp_poses: np.ndarray, grasp_widths: np.ndarray, vis=None,
                  max_hands: int = 30, params: PlacementParams = PlacementParams(), tabletop: TabletopParams = TabletopParams()):
@@ -294,81 +301,170 @@ class PlacementExplorer:
         self.grasp_poses, self.grasp_widths = grasp_poses, grasp_widths
         self.vis = vis if vis is not None else viz.new_scene()
         self.base, self.base_grid = params, tabletop  # parameters without a widget stay as given
+        self.switches, self.outlines = Switches(self.vis), HandOutlines(gripper)
+        self.stage_cache, self.tabletop_cache = StageCache(), StageCache()
+        self.source = digest(obj.digest or obj.name, gripper.digest, np.asarray(grasp_poses).round(9).tobytes().hex()[:4096])
         t = tabletop
-        label = {"style": {"description_width": "initial"}, "layout": W.Layout(width="400px")}
+        label = {"style": {"description_width": "initial"}, "layout": W.Layout(width="420px"), "continuous_update": False}
         self.stability = W.FloatSlider(value=params.min_stability, min=0, max=1.5, step=0.01,
                                        description="minimum stability (margin / COM height)", **label)
         self.angles = W.IntSlider(value=t.angles, min=1, max=16, description="rotations per position", **label)
         self.nx = W.IntSlider(value=t.nx, min=1, max=15, description="table grid positions along x", **label)
         self.ny = W.IntSlider(value=t.ny, min=1, max=15, description="table grid positions along y", **label)
-        self.which = W.IntSlider(value=0, min=0, max=0, description="selected placement", **label)
-        self.hands = W.IntSlider(value=min(8, max_hands), min=0, max=max_hands, description="grips drawn", **label)
-        self.roadmap = W.Checkbox(value=True, description="whole tabletop roadmap", indent=False)
+        self.which = W.Dropdown(options=[], description="selected placement", style=label["style"],
+                                layout=W.Layout(width="420px"))
+        self.hands = W.IntSlider(value=min(8, max_hands), min=0, max=max_hands, description="grips drawn (outlines)", **label)
+        self.roadmap = W.Checkbox(value=False, description="every placement on the roadmap (faint)", indent=False)
+        self.busy = Busy()
         self.key = W.HTML()
         self.info = W.HTML()
-        for w in (self.stability,):
-            w.observe(lambda _: self.run(), names="value")
-        for w in (self.angles, self.nx, self.ny, self.which, self.hands, self.roadmap):
-            w.observe(lambda _: self.draw(), names="value")
-        self.widget = W.VBox([W.HBox([self.stability, self.which]), W.HBox([self.nx, self.ny]),
-                              W.HBox([self.angles, self.hands]), self.roadmap, self.key, self.info])
-        self.placements, self.params = None, self.base
+        self.stability.observe(lambda _: self.run(), names="value")
+        for w in (self.angles, self.nx, self.ny):
+            w.observe(lambda _: self.run_tabletop(), names="value")
+        for w in (self.which, self.hands, self.roadmap):
+            w.observe(lambda _: self.show(), names="value")
+        self.controls = W.VBox([self.stability, self.which, self.hands, self.roadmap, W.HTML("<b>table grid</b>"),
+                                self.nx, self.ny, self.angles, self.busy.widget, self.info])
+        self.placements, self.params, self.tt, self._widget = None, self.base, None, None
+
+    @property
+    def widget(self) -> W.Widget:
+        """The controls beside the live 3D view and its colour key."""
+        if self._widget is None:
+            self._widget = beside(self.controls.children, self.vis, self.key)
+        return self._widget
 
     def grid(self) -> TabletopParams:
         return replace(self.base_grid, nx=self.nx.value, ny=self.ny.value, angles=self.angles.value)
 
+    def names(self) -> list[str]:
+        """Each placement numbered within the part (from 1) and described by how it rests."""
+        pl = self.placements
+        return [describe_placement(k + 1, pl.normals[k], float(pl.stability[k])) for k in range(len(pl))]
+
     def run(self):
         """Placements and free tabletop grips with the library's stages (the numbers the store would hold)."""
         params = replace(self.base, min_stability=self.stability.value)
-        self.placements, self.params = stable_placements(self.obj, params), params
-        self.ftg = free_tabletop_grips(self.placements, self.grasp_poses, self.gripper, params)
-        self.ok = np.zeros((len(self.placements), len(self.grasp_poses)), dtype=bool)
-        self.ok[self.ftg[0], self.ftg[1]] = True
-        self.which.max = max(len(self.placements) - 1, 0)
-        self.draw()
+
+        def compute():
+            pl = stable_placements(self.obj, params)
+            return pl, free_tabletop_grips(pl, self.grasp_poses, self.gripper, params)
+
+        with self.busy.running("placements and free grips"):
+            (self.placements, self.ftg), self.params = self.stage_cache.get(digest(self.source, params), compute), params
+            self.ok = np.zeros((len(self.placements), len(self.grasp_poses)), dtype=bool)
+            self.ok[self.ftg[0], self.ftg[1]] = True
+            self.send_placements()
+            self.run_tabletop()
         return self.placements
 
-    def draw(self) -> None:
-        pl, vis = self.placements, self.vis
+    def run_tabletop(self) -> None:
+        """The tabletop roadmap of the current placements on the grid (cached), sent once per placement."""
+        pl, grid = self.placements, self.grid()
         if pl is None:
             return
+        with self.busy.running("tabletop roadmap"):
+            self.tt = self.tabletop_cache.get(
+                digest(self.source, self.params, grid),
+                lambda: plan_tabletop(pl.poses, self.ftg[0], self.ftg[1], self.ftg[2], self.grasp_poses, grid))
+            self.vis["placements/roadmap"].delete()
+            self.switches.forget("placements/roadmap")
+            hull, colors = self.obj.mesh.convex_hull, viz.palette(max(len(pl), 1))
+            for p in range(len(pl)):
+                parts = [hull.copy().apply_transform(m) for m in self.tt.poses[self.tt.placement == p]]
+                if parts:
+                    viz.show_mesh(self.vis, f"placements/roadmap/{p}", trimesh.util.concatenate(parts),
+                                  color=int(colors[p]), opacity=0.999)
+        self.show()
+
+    def send_placements(self) -> None:
+        """Every placement beside the table (part, support polygon, grip outlines), hidden but the selected one."""
+        pl, vis = self.placements, self.vis
         vis["placements"].delete()
-        viz.show_mesh(vis, "placements/table", table_mesh(), color=0x8B6B4A, opacity=0.6)
+        self.switches.forget("placements")
         grid = self.grid()
-        tt = plan_tabletop(pl.poses, self.ftg[0], self.ftg[1], self.ftg[2], self.grasp_poses, grid)
+        viz.show_mesh(vis, "placements/table", table_mesh(), color=0x8B6B4A, opacity=0.6)
+        self.show_at = np.eye(4)
+        self.show_at[:3, 3] = (grid.x_min - 0.25, 0.0, 0.0)  # the selected placement beside the grid
+        self.grip_pick = pick_evenly(len(self.grasp_poses), self.max_hands)
+        for k in range(len(pl)):
+            pose = self.show_at @ pl.poses[k]
+            viz.show_mesh(vis, f"placements/selected/{k}/object", self.obj.mesh, color=0xE0C040, pose=pose)
+            ring = pl.supports[k] + self.show_at[:3, 3] + [0, 0, 1e-4]
+            viz.show_segments(vis, f"placements/selected/{k}/support", ring, np.roll(ring, -1, axis=0), viz.RED)
+            grips = pose @ self.grasp_poses[self.grip_pick]
+            ok = self.ok[k, self.grip_pick]
+            self.outlines.send(vis, f"placements/selected/{k}/kept", grips[ok], self.grasp_widths[self.grip_pick][ok], viz.GREEN)
+            self.outlines.send(vis, f"placements/selected/{k}/hit", grips[~ok], self.grasp_widths[self.grip_pick][~ok], viz.RED)
+            self.switches.show(f"placements/selected/{k}", False)
+        options = [(name.split(", stability")[0], k) for k, name in enumerate(self.names())]
+        self.which.unobserve_all("value")
+        self.which.options = options
+        self.which.value = options[0][1] if options else None
+        self.which.observe(lambda _: self.show(), names="value")
+        if len(pl):
+            corners = np.array([[grid.x_min, grid.y_min, 0.0], [grid.x_max, grid.y_max, 0.0]])
+            viz.frame_points(vis, np.vstack([corners, trimesh.transform_points(self.obj.mesh.bounds, self.show_at @ pl.poses[0])]))
+
+    def show(self) -> None:
+        """View-only: the selected placement, how many of its grips, and the roadmap's colours."""
+        pl, tt, sw = self.placements, self.tt, self.switches
+        if pl is None or tt is None:
+            return
         counts = {"stable placements": len(pl), "rejected faces": len(pl.rejected_stability),
                   "tabletop placements": len(tt.poses), "tabletop grips": len(tt.grip_poses)}
         if len(pl) == 0:
             why = html.escape(stability_hint(self.obj, self.params))
             self.info.value = counts_table(counts, "no stable placement at this threshold") + f"<p>{why}</p>"
+            self.key.value = ""
             return
-        k = self.which.value
-        show_at = np.eye(4)
-        show_at[:3, 3] = (grid.x_min - 0.25, 0.0, 0.0)  # the selected placement beside the grid
-        pose = show_at @ pl.poses[k]
-        viz.show_mesh(vis, "placements/selected/object", self.obj.mesh, color=0xE0C040, pose=pose)
-        ring = pl.supports[k] + show_at[:3, 3] + [0, 0, 1e-4]
-        viz.show_segments(vis, "placements/selected/support", ring, np.roll(ring, -1, axis=0), viz.RED)
-        grips = show_at @ pl.poses[k] @ self.grasp_poses
-        shown = min(self.hands.value, len(grips))
-        if shown:
-            viz.show_grippers(vis, "placements/selected/grips", self.gripper, grips, self.grasp_widths,
-                              np.where(self.ok[k], viz.GREEN, viz.RED), 0.15, shown)
-        if self.roadmap.value:
-            hull = self.obj.mesh.convex_hull
-            colors = viz.palette(len(pl))
-            for p in range(len(pl)):
-                parts = [hull.copy().apply_transform(m) for m in tt.poses[tt.placement == p]]
-                viz.show_mesh(vis, f"placements/roadmap/{p}", trimesh.util.concatenate(parts), color=int(colors[p]),
-                              opacity=1.0 if p == k else 0.15)
-        corners = np.array([[grid.x_min, grid.y_min, 0.0], [grid.x_max, grid.y_max, 0.0]])
-        viz.frame_points(vis, np.vstack([corners, trimesh.transform_points(self.obj.mesh.bounds, pose)]))
+        k = self.which.value or 0
+        shown = set(pick_evenly(len(self.grip_pick), self.hands.value).tolist())
+        colors = viz.palette(len(pl))
+        for p in range(len(pl)):
+            sw.show(f"placements/selected/{p}", p == k)
+            ok = self.ok[p, self.grip_pick]
+            for name, members in (("kept", np.flatnonzero(ok)), ("hit", np.flatnonzero(~ok))):
+                for i, j in enumerate(members):
+                    sw.show(f"placements/selected/{p}/{name}/{i}", p == k and int(j) in shown)
+            if (tt.placement == p).any():
+                sw.show(f"placements/roadmap/{p}", p == k or self.roadmap.value)
+                rgb = [((int(colors[p]) >> s) & 255) / 255 for s in (16, 8, 0)]
+                sw.set(f"placements/roadmap/{p}", "color", rgb + [1.0 if p == k else 0.15])
+        n_shown = len(shown)
         self.key.value = viz.legend(
-            [(0xE0C040, f"placement {k} beside the table"), (viz.RED, "its support polygon"),
+            [(0xE0C040, f"placement {k + 1} beside the table"), (viz.RED, "its support polygon"),
              (viz.GREEN, "grips kept above the table"), (viz.RED, "grips hitting the table"),
              (0x8B6B4A, "table")], "colour key:") + \
-            f"<small>{shown} of {len(grips):,} grips drawn; on the table, the roadmap: every placement's convex hull " \
-            f"at each grid position and rotation, one colour per placement, the selected one opaque</small>"
-        counts["selected stability"] = f"{pl.stability[k]:.3f}"
+            f"<small>{n_shown} of {len(self.grasp_poses):,} grips drawn as outlines; on the table, the roadmap: the " \
+            f"selected placement's convex hull at each grid position and rotation (tick the box for every placement, " \
+            f"faint)</small>"
+        counts["selected"] = html.escape(self.names()[k])
         counts["selected grips kept / collided"] = f"{int(self.ok[k].sum())} / {int((~self.ok[k]).sum())}"
         self.info.value = counts_table(counts, "placements and the tabletop roadmap")
+
+
+def plot_placements(obj: ObjectModel, placements, columns: int = 6):
+    """A thumbnail per placement: the part resting on the table as it would stand, seen from the front, numbered
+    within the part and named by how it rests (upright, on its side, ...)."""
+    import matplotlib.pyplot as plt
+
+    n = len(placements)
+    cols = max(1, min(columns, n))
+    rows = max(1, -(-n // cols))
+    fig = plt.figure(figsize=(2.3 * cols, 2.5 * rows))
+    size = float(np.ptp(obj.mesh.vertices, axis=0).max())
+    for k in range(n):
+        ax = fig.add_subplot(rows, cols, k + 1, projection="3d")
+        v = trimesh.transform_points(obj.mesh.vertices, placements.poses[k])
+        ax.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=obj.mesh.faces, color="#E0A030", linewidth=0, shade=True)
+        ax.plot([-size / 2, size / 2, size / 2, -size / 2, -size / 2], [-size / 2, -size / 2, size / 2, size / 2, -size / 2],
+                [0] * 5, color="#8B6B4A", lw=1)
+        ax.set(xlim=(-size / 2, size / 2), ylim=(-size / 2, size / 2), zlim=(0, size))
+        ax.set_box_aspect((1, 1, 1))
+        ax.view_init(elev=18, azim=-60)
+        ax.set_axis_off()
+        name = describe_placement(k + 1, placements.normals[k]).split(", face normal")
+        ax.set_title(f"{name[0]}\nnormal{name[1]}", fontsize=8)
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.02, top=0.86, wspace=0.05, hspace=0.3)
+    return fig
