@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import meshcat
 import meshcat.geometry as g
+from meshcat.animation import Animation, AnimationClip, AnimationTrack
 import numpy as np
 import trimesh
 
@@ -143,3 +144,19 @@ def mesh_object(mesh: trimesh.Trimesh, color: int, opacity: float = 1.0) -> g.Me
 def points_object(points: np.ndarray, colors: np.ndarray, size: float) -> g.Points:
     pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
     return g.Points(g.PointsGeometry(pts.T, color=_rgb(colors, len(pts)).T), g.PointsMaterial(size=size))
+
+
+def transform_animation(vis: meshcat.Visualizer, poses: dict[str, np.ndarray], fps: float = 30.0) -> Animation:
+    """A meshcat animation moving each scene path through its (F, 4, 4) poses, one per frame at `fps`, built from
+    whole arrays (meshcat's frame-by-frame builder converts every matrix on its own)."""
+    from scipy.spatial.transform import Rotation
+
+    anim = Animation(default_framerate=fps)
+    for path, m in poses.items():
+        m = np.asarray(m, dtype=np.float64).reshape(-1, 4, 4)
+        frames = list(range(len(m)))
+        quat = Rotation.from_matrix(m[:, :3, :3]).as_quat()  # x, y, z, w: three.js's order
+        anim.clips[vis[path].path] = AnimationClip(fps=fps, tracks={
+            "position": AnimationTrack("position", "vector3", frames, m[:, :3, 3].tolist()),
+            "quaternion": AnimationTrack("quaternion", "quaternion", frames, quat.tolist())})
+    return anim

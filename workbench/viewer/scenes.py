@@ -21,6 +21,7 @@ from urllib.parse import urlparse
 
 import meshcat
 import meshcat.visualizer
+import msgpack
 import meshcat.geometry as g
 import meshcat.transformations as tf
 import numpy as np
@@ -29,6 +30,7 @@ from IPython.display import HTML
 
 from workbench.geometry.objects import ObjectModel
 from workbench.robots.gripper import Gripper
+from workbench.viewer.captions import CAPTION_SCRIPT
 
 GREEN, RED, GREY, BLUE, ORANGE, WHITE = 0x33AA55, 0xDD3333, 0xB0B0B0, 0x3366DD, 0xFF9922, 0xFFFFFF
 HIGHLIGHT = 0xFF00CC  # not in the tab20 palette the facets use
@@ -46,13 +48,27 @@ class SceneWindow(meshcat.visualizer.ViewerWindow):
 
     def send(self, command) -> None:
         self.sent[type(command).__name__] += 1
-        super().send(command)
+        data = command.lower()
+        self.zmq_socket.send_multipart([data["type"].encode("utf-8"), data["path"].encode("utf-8"), _pack(data)])
+        self.zmq_socket.recv()
 
     def close(self) -> None:
         """Stop the server (the scene cannot be used afterwards)."""
         if self.server_proc is not None and self.server_proc.poll() is None:
             self.server_proc.kill()
             self.server_proc.wait()
+
+
+def _ext(obj):
+    if type(obj).__name__ == "Ext" and isinstance(getattr(obj, "type", None), int):  # meshcat's arrays (umsgpack.Ext)
+        return msgpack.ExtType(obj.type, obj.data)
+    raise TypeError(f"cannot pack {type(obj).__name__} for meshcat")
+
+
+def _pack(data: dict) -> bytes:
+    """meshcat's message bytes, packed by msgpack's compiled packer (meshcat's own is pure Python: a long animation
+    took seconds to pack)."""
+    return msgpack.packb(data, default=_ext)
 
 
 def _die_with_parent() -> None:  # runs in the child between fork and exec
@@ -120,14 +136,19 @@ overflow:hidden}</style></head><body><div id="pane"></div><script>
   };
   document.head.appendChild(script);
 })();
-</script></body></html>"""
+</script>OVERLAY</body></html>"""
+_CAPTION_BOXES = ("<div style='position:fixed;left:0;top:0;background:rgba(255,255,255,.88);font:15px sans-serif;"
+                  "padding:5px 10px'><b id='wb-caption'></b></div><div id='wb-footer' style='position:fixed;right:0;"
+                  "bottom:0;background:rgba(255,255,255,.88);font:13px sans-serif;padding:4px 10px'></div>")
 
 
-def view(vis: meshcat.Visualizer, height: int = 460) -> HTML:
+def view(vis: meshcat.Visualizer, height: int = 460, captions: bool = False) -> HTML:
     """The live scene as a notebook output (an IPython HTML object): works on a remote JupyterLab through the Jupyter
-    server's proxy; the meshcat server itself listens on 127.0.0.1 only."""
+    server's proxy; the meshcat server itself listens on 127.0.0.1 only. With `captions`, the caption and footer of
+    the animation playing (the track a plan view sets on the scene) are shown over the canvas's corners."""
     port = urlparse(vis.url()).port
-    page = _VIEW_PAGE.replace("PORT", json.dumps(int(port)))
+    overlay = _CAPTION_BOXES + f"<script>{CAPTION_SCRIPT.replace('TRACK', 'null')}</script>" if captions else ""
+    page = _VIEW_PAGE.replace("PORT", json.dumps(int(port))).replace("OVERLAY", overlay)
     return HTML(f'<div class="workbench-view"><iframe srcdoc="{html.escape(page, quote=True)}" '
                 f'style="width:100%;height:{int(height)}px;border:1px solid #ddd;resize:vertical"></iframe></div>')
 

@@ -68,13 +68,14 @@ class Busy:
             self.widget.value = ""
 
 
-def view_widget(vis, height: int = VIEW_HEIGHT) -> W.HTML:
+def view_widget(vis, height: int = VIEW_HEIGHT, captions: bool = False) -> W.HTML:
     """The live meshcat view as a widget (so that it sits in the same output as its controls)."""
-    return W.HTML(view(vis, height).data, layout=W.Layout(width="100%"))
+    return W.HTML(view(vis, height, captions).data, layout=W.Layout(width="100%"))
 
 
-def beside(controls: list, vis, key: W.HTML | None = None, height: int = VIEW_HEIGHT) -> W.Box:
+def beside(controls: list, vis, key: W.HTML | None = None, height: int = VIEW_HEIGHT, captions: bool = False) -> W.Box:
     """Controls in a side column, the view (fixed height) with its key under it: one output."""
     column = W.VBox(controls, layout=W.Layout(width=CONTROLS_WIDTH, min_width=CONTROLS_WIDTH, overflow="hidden"))
-    right = W.VBox([view_widget(vis, height)] + ([key] if key is not None else []), layout=W.Layout(flex="1 1 auto"))
+    right = W.VBox([view_widget(vis, height, captions)] + ([key] if key is not None else []),
+                   layout=W.Layout(flex="1 1 auto"))
     return W.HBox([column, right], layout=W.Layout(width="100%", align_items="flex-start"))

@@ -16,7 +16,7 @@ import trimesh
 
 from workbench.errors import PlanningError
 from workbench.geometry.objects import ObjectModel, load_object
-from workbench.grasping.naming import describe_placement
+from workbench.grasping.naming import describe_placement, per_part_numbers
 from workbench.grasping.placements import (
     PlacementParams,
     free_tabletop_grips,
@@ -35,8 +35,6 @@ from workbench.viewer.robot import (
     FEASIBLE_GRASP,
     INFEASIBLE,
     RobotView,
-    show_robot,
-    show_table,
 )
 from workbench.viewer.robot import show_roadmap as show_ik_roadmap
 from workbench.viewer.scenes import legend, new_scene, show_mesh, table_mesh
@@ -45,9 +43,11 @@ from workbench.viewer.wan_harada import (
     OBJECT_COLOR,
     START_COLOR,
     TABLE_COLOR,
-    frame_plan,
+    MOVES_TO_NEXT,
+    STEP_NAMES,
+    PlanView,
+    caption_track,
     scene_table,
-    show_plan,
     show_roadmap,
 )
 from workbench.viewer.live import HandOutlines, Switches, pick_evenly
@@ -56,34 +56,36 @@ from workbench.widgets.panel import Busy, StageCache, beside, digest
 
 
 class RegraspExplorer:
-    """ipywidgets front-end of notebook 04: choose object, robot, start and goal (placement, x, y, yaw), search,
-    animate the plan in meshcat, and report the graph (size, components, where start and goal attach)."""
+    """ipywidgets front-end of notebook 04: choose object, robot, start and goal (placement, x, y, yaw in degrees),
+    search, animate the plan in meshcat, and report the graph (size, components, where start and goal attach).
+
+    Loading draws the table, robot, part and its ghosts once (`PlanView`); a search or another alternative then only
+    moves them and sets the animation. Placements are numbered within the part and named by how it rests."""
 
     def __init__(self, db, objects: dict, robots=("panda", "ur5", "talos"), tparams=None, vis=None, build=None):
-        import ipywidgets as W
-
         self.db, self.objects, self.tparams, self.build = Path(db), dict(objects), tparams, build
         self.vis = vis if vis is not None else new_scene()
-        self.planner, self.plans, self.result = None, [], None
+        self.planner, self.plans, self.result, self.scene = None, [], None, None
         names = list(self.objects)
-        self.object = W.Dropdown(options=names, value="tube" if "tube" in names else names[0], description="object")
-        self.robot = W.Dropdown(options=list(robots), description="robot")
+        wide = {"style": {"description_width": "initial"}, "layout": W.Layout(width="420px")}
+        self.object = W.Dropdown(options=names, value="tube" if "tube" in names else names[0], description="object", **wide)
+        self.robot = W.Dropdown(options=list(robots), description="robot", **wide)
         self.load_button = W.Button(description="build / load graph", button_style="info")
-        wide = {"style": {"description_width": "initial"}}
         self.ends = {}
         for label in ("start", "goal"):
-            self.ends[label] = (W.Dropdown(options=[], description=f"{label} placement", layout=W.Layout(width="200px"), **wide),
-                                W.FloatSlider(value=0.5, min=0.3, max=0.7, step=0.005, description="x (m)",
-                                              layout=W.Layout(width="300px"), **wide),
-                                W.FloatSlider(value=0.0, min=-0.25, max=0.25, step=0.005, description="y (m)",
-                                              layout=W.Layout(width="300px"), **wide),
-                                W.FloatSlider(value=0.0, min=-np.pi, max=np.pi, step=0.01, description="yaw (rad)",
-                                              layout=W.Layout(width="320px"), **wide))
-        self.alternatives = W.IntSlider(value=2, min=0, max=5, description="alternative plans", layout=W.Layout(width="300px"), **wide)
+            self.ends[label] = (W.Dropdown(options=[], description=f"{label} placement", **wide),
+                                W.FloatSlider(value=0.5, min=0.3, max=0.7, step=0.005, description=f"{label} x (m)",
+                                              continuous_update=False, **wide),
+                                W.FloatSlider(value=0.0, min=-0.25, max=0.25, step=0.005, description=f"{label} y (m)",
+                                              continuous_update=False, **wide),
+                                W.FloatSlider(value=0.0, min=-180, max=180, step=1, description=f"{label} yaw (deg)",
+                                              continuous_update=False, **wide))
+        self.alternatives = W.IntSlider(value=2, min=0, max=5, description="alternative plans", **wide)
         self.full = W.Checkbox(value=False, description="evaluate every start/goal grip (not lazy)", indent=False)
         self.nodes = W.Checkbox(value=False, description="show the graph's nodes", indent=False)
         self.plan_button = W.Button(description="search", button_style="primary")
-        self.which = W.Dropdown(options=[], description="animate", layout=W.Layout(width="300px"), **wide)
+        self.which = W.Dropdown(options=[], description="animate", **wide)
+        self.busy = Busy()
         self.key = W.HTML(legend([(OBJECT_COLOR, "the part (animated)"), (START_COLOR, "start pose"),
                                   (GOAL_COLOR, "goal pose"), (0x999999, "intermediate placements"), (TABLE_COLOR, "table")],
                                  "colour key:") + "<small>graph nodes (when shown): dots at their TCPs, one grey shade per "
@@ -93,45 +95,62 @@ class RegraspExplorer:
         self.plan_button.on_click(lambda _: self.run())
         self.which.observe(lambda _: self.animate(), names="value")
         self.nodes.observe(lambda _: self.vis["roadmap"].set_property("visible", bool(self.nodes.value)), names="value")
-        rows = [W.HBox(list(self.ends[k])) for k in ("start", "goal")]
-        self.widget = W.VBox([W.HBox([self.object, self.robot, self.load_button]), *rows,
-                              W.HBox([self.alternatives, self.full, self.plan_button]),
-                              W.HBox([self.which, self.nodes]), self.key, self.info])
+        self.controls = W.VBox([self.object, self.robot, W.HBox([self.load_button]), *self.ends["start"], *self.ends["goal"],
+                                self.alternatives, self.full, W.HBox([self.plan_button, self.busy.widget]), self.which,
+                                self.nodes, self.info])
+        self._widget = None
+
+    @property
+    def widget(self) -> W.Widget:
+        """The controls beside the live 3D view (caption and footer of the step playing over it) and its key."""
+        if self._widget is None:
+            self._widget = beside(self.controls.children, self.vis, self.key, captions=True)
+        return self._widget
+
+    def placement_options(self) -> list[tuple[str, int]]:
+        """(label, store id) per stable placement with a grip: numbered within the part, named by how it rests."""
+        free = self.planner.free
+        ids = self.planner.placement_ids(gripped=True) or self.planner.placement_ids()
+        number = per_part_numbers(free["idfreetabletopplacement"])
+        rot = {int(i): np.asarray(m) for i, m in zip(free["idfreetabletopplacement"], free["rotmat"])}
+        return [(describe_placement(number[i], rot[i][:3, :3].T @ [0.0, 0.0, -1.0]).split(", face")[0], i) for i in ids]
 
     def load(self):  # -> regrasp.Planner
-        """Build (or reuse) the store's stages for the chosen object and robot and load the regrasp graph."""
+        """Build (or reuse) the store's stages for the chosen object and robot, load the regrasp graph and draw its
+        scene once (table, robot, part and ghosts)."""
 
         obj = load_object(self.objects[self.object.value])
-        if self.build is not None:
-            self.build(self.db, obj, self.robot.value)
-        self.planner = load_planner(self.db, obj.name, self.robot.value)
-        ids = self.planner.placement_ids(gripped=True) or self.planner.placement_ids()
-        for label in ("start", "goal"):
-            self.ends[label][0].options = ids
-        self.ends["start"][0].value = ids[0]
-        self.ends["goal"][0].value = ids[-1]
-        # framed now, before a view of the scene opens (a view replays the camera it finds; later moves may not apply)
-        (x0, y0), (x1, y1), _ = scene_table(self.planner)
-        if self.tparams is not None:
-            x0, x1, y0, y1 = self.tparams.x_min, self.tparams.x_max, self.tparams.y_min, self.tparams.y_max
-        base = self.planner.robot.base[:3, 3]
-        self.vis.delete()  # the robot and the table on open; a query replaces them with its plan
-        show_table(self.vis, self.planner.scene)
-        show_robot(self.vis, self.planner.robot, self.planner.robot.neutral())
-        viz.frame_points(self.vis, np.array([base, base + [0, 0, 0.6], [x0, y0, 0], [x1, y1, 0]]))
-        self.info.value = self.graph_html()
+        with self.busy.running(f"building / loading {obj.name} for {self.robot.value}"):
+            if self.build is not None:
+                self.build(self.db, obj, self.robot.value)
+            self.planner = load_planner(self.db, obj.name, self.robot.value)
+            options = self.placement_options()
+            for label in ("start", "goal"):
+                self.ends[label][0].options = options
+            self.ends["start"][0].value = options[0][1]
+            self.ends["goal"][0].value = options[-1][1]
+            # framed now, before a view of the scene opens (a view replays the camera it finds; later moves may not apply)
+            (x0, y0), (x1, y1), _ = scene_table(self.planner)
+            if self.tparams is not None:
+                x0, x1, y0, y1 = self.tparams.x_min, self.tparams.x_max, self.tparams.y_min, self.tparams.y_max
+            base = self.planner.robot.base[:3, 3]
+            self.vis.delete()
+            self.scene = PlanView(self.vis, self.planner.robot, self.planner.object.mesh, scene_table(self.planner))
+            self.scene.robot_view.show(self.planner.robot.neutral())
+            viz.frame_points(self.vis, np.array([base, base + [0, 0, 0.6], [x0, y0, 0], [x1, y1, 0]]))
+            self.info.value = self.graph_html()
         return self.planner
 
     def set_query(self, start, goal) -> None:
         """Put two PoseQuery values into the widgets."""
         for label, q in (("start", start), ("goal", goal)):
             p, x, y, yaw = self.ends[label]
-            p.value, x.value, y.value, yaw.value = q.idfreetabletopplacement, q.x, q.y, q.yaw
+            p.value, x.value, y.value, yaw.value = q.idfreetabletopplacement, q.x, q.y, float(np.degrees(q.yaw))
 
-    def query(self, label: str):  # -> regrasp.PoseQuery
-
+    def query(self, label: str) -> PoseQuery:
+        """The widgets' pose (yaw in degrees there, radians in the library)."""
         p, x, y, yaw = self.ends[label]
-        return PoseQuery(int(p.value), float(x.value), float(y.value), float(yaw.value))
+        return PoseQuery(int(p.value), float(x.value), float(y.value), float(np.radians(yaw.value)))
 
     def run(self) -> list:
         """Search (Section V) from the widgets' start to their goal; animate the best plan."""
@@ -139,8 +158,9 @@ class RegraspExplorer:
         if self.planner is None:
             self.load()
         try:
-            self.plans = self.planner.plan(self.query("start"), self.query("goal"), alternatives=self.alternatives.value,
-                                           lazy=not self.full.value)
+            with self.busy.running("searching"):
+                self.plans = self.planner.plan(self.query("start"), self.query("goal"), alternatives=self.alternatives.value,
+                                               lazy=not self.full.value)
             self.result = self.planner.last
         except PlanningError as exc:
             self.plans, self.result = [], None
@@ -156,11 +176,9 @@ class RegraspExplorer:
         if not self.plans:
             return
         plan = self.plans[self.which.value or 0]
-        self.vis.delete()
-        show_plan(self.vis, plan, self.planner.robot, self.planner.object.mesh, scene_table(self.planner))
+        self.scene.play(plan, numbers=per_part_numbers(self.planner.free["idfreetabletopplacement"]))
         attach = show_roadmap(self.vis, self.planner, self.result)
         self.vis["roadmap"].set_property("visible", bool(self.nodes.value))  # node clouds hide the part: off by default
-        frame_plan(self.vis, plan, self.planner.robot)
         self.info.value = self.graph_html(attach) + self.plan_html(plan)
 
     def graph_html(self, attach: dict | None = None) -> str:
@@ -185,8 +203,10 @@ class RegraspExplorer:
         return html
 
     def plan_html(self, plan) -> str:
+        """The plan's steps (as the view's footer names them) and what the search and motions took."""
         t = plan.timings
-        lines = "<br>".join(plan.lines())
+        numbers = per_part_numbers(self.planner.free["idfreetabletopplacement"])
+        lines = "<br>".join(html.escape(f) for f in caption_track(plan, [], numbers=numbers)["footers"][1:])
         motion = (f"; motions planned in {t.get('motion', 0):.2f} s: {len(plan.segments)} timed segments, trajectory "
                   f"{plan.duration:.1f} s (the animation plays it at real speed), {plan.removed} node(s) or grip(s) removed"
                   if plan.segments else "")
@@ -467,4 +487,38 @@ def plot_placements(obj: ObjectModel, placements, columns: int = 6):
         name = describe_placement(k + 1, placements.normals[k]).split(", face normal")
         ax.set_title(f"{name[0]}\nnormal{name[1]}", fontsize=8)
     fig.subplots_adjust(left=0.01, right=0.99, bottom=0.02, top=0.86, wspace=0.05, hspace=0.3)
+    return fig
+
+
+def plot_trajectory(plan, joint_names: list[str] | None = None):
+    """Joint positions (deg) and velocities (deg/s) of a timed plan against time, each plan step shaded and named
+    (a transfer or transit is shaded with the step it moves to, as the animation's caption counts it)."""
+    import matplotlib.pyplot as plt
+
+    if not plan.segments:
+        raise PlanningError("the plan has no timed motions to plot (plan it with motions)")
+    t = np.concatenate([s.t0 + s.traj.t for s in plan.segments])
+    q = np.degrees(np.vstack([s.traj.q for s in plan.segments]))
+    qd = np.degrees(np.vstack([s.traj.qd for s in plan.segments]))
+    names = joint_names or [f"joint {j + 1}" for j in range(q.shape[1])]
+    fig, ax = plt.subplots(2, 1, figsize=(11, 5.6), sharex=True)
+    spans: dict[int, list[float]] = {}
+    for s in plan.segments:
+        k = min(int(s.step) + (s.kind in MOVES_TO_NEXT), len(plan.steps) - 1)
+        lo, hi = spans.get(k, [s.t0, s.t0])
+        spans[k] = [min(lo, s.t0), max(hi, s.t0 + s.duration)]
+    shades = ("#f3e3c3", "#dde8f3")
+    for k, (lo, hi) in sorted(spans.items()):
+        for a in ax:
+            a.axvspan(lo, hi, color=shades[k % 2], zorder=0)
+        ax[0].text(0.5 * (lo + hi), 1.01, f"{k + 1} {STEP_NAMES.get(plan.steps[k].kind, plan.steps[k].kind)}",
+                   transform=ax[0].get_xaxis_transform(), ha="center", va="bottom", fontsize=8)
+    for j, name in enumerate(names):
+        ax[0].plot(t, q[:, j], lw=1.2, label=name)
+        ax[1].plot(t, qd[:, j], lw=1.2)
+    ax[0].set(ylabel="position (deg)")
+    ax[1].set(ylabel="velocity (deg/s)", xlabel="time from the plan's start (s)")
+    ax[0].legend(fontsize=7, ncol=min(len(names), 9), loc="upper center", bbox_to_anchor=(0.5, -1.35), frameon=False)
+    fig.suptitle(f"{plan.object} with {plan.robot}: {plan.duration:.1f} s, steps shaded and named", y=0.995)
+    fig.subplots_adjust(left=0.07, right=0.99, top=0.9, bottom=0.17, hspace=0.08)
     return fig
