@@ -216,13 +216,14 @@ class RegraspExplorer:
 
 class IKBrowser:
     """The robot at the feasible tabletop grips: a slider over them, a choice of grasp / handx / handxworldz, and the
-    object at the grip's placement. `widget` holds the ipywidgets; `set_rows` switches robot and rows in place."""
+    object at the grip's placement. `controls` and `key` are its widgets (`widget` both); `set_rows` switches robot
+    and rows in place. The slider and the pose choice only move the robot and the part."""
 
     def __init__(self, vis: meshcat.Visualizer, robot: Robot, rows: dict[str, np.ndarray], obj_mesh, kind: str = "visual"):
         self.vis, self.kind_meshes = vis, kind
         self.slider = W.IntSlider(min=0, max=0, value=0, description="feasible grip", continuous_update=False,
-                                  style={"description_width": "initial"}, layout=W.Layout(width="520px"))
-        self.kind = W.ToggleButtons(options=list(KINDS), value="grasp")
+                                  style={"description_width": "initial"}, layout=W.Layout(width="420px"))
+        self.kind = W.ToggleButtons(options=list(KINDS), value="grasp", style={"button_width": "80px"})
         self.label = W.HTML()
         self.key = W.HTML(viz.legend([(FEASIBLE_ALL, "feasible at all five poses"),
                                       (FEASIBLE_GRASP, "grasp only"), (INFEASIBLE, "grasp out of reach or in collision"),
@@ -230,8 +231,10 @@ class IKBrowser:
                                      "colour key (points: tabletop grips' TCPs):"))
         self.slider.observe(lambda _: self.update(), names="value")
         self.kind.observe(lambda _: self.update(), names="value")
-        self.widget = W.VBox([W.HBox([self.slider, self.kind]), self.key, self.label])
+        self.controls = W.VBox([self.slider, self.kind, self.label])
+        self.widget = W.VBox([self.controls, self.key])
         self.view = None
+        self.switches = Switches(vis)
         self.set_rows(robot, rows, obj_mesh)
 
     def set_rows(self, robot: Robot, rows: dict[str, np.ndarray], obj_mesh) -> None:
@@ -240,6 +243,8 @@ class IKBrowser:
         self.vis["robot"].delete()
         self.view = RobotView(self.vis, robot, "robot", self.kind_meshes)
         show_ik_roadmap(self.vis, rows)
+        show_mesh(self.vis, "object", obj_mesh, color=0x4477CC)
+        self.switches.forget("object")
         self.feasible = np.flatnonzero(np.asarray(rows["feasible"])[:, 0])
         self.slider.value = 0
         self.slider.max = max(len(self.feasible) - 1, 0)
@@ -259,7 +264,7 @@ class IKBrowser:
         if not ok:
             q = self.rows["joints"][i, 0]
         self.view.show(q, float(self.rows["jawwidth"][i]) if k == 0 else None)
-        show_mesh(self.vis, "object", self.mesh, color=0x4477CC, pose=self.rows["placement_rotmat"][i])
+        self.switches.move("object", self.rows["placement_rotmat"][i])
         self.label.value = (f"{self.robot.name}: tabletop grip {int(self.rows['idtabletopgrips'][i])}, free-air grasp "
                             f"{int(self.rows['idfreeairgrip'][i])}, position "
                             f"{np.round(self.rows['tabletopposition'][i][:2], 3).tolist()} m; {self.kind.value}: "
