@@ -272,6 +272,7 @@ def check_memory(nbytes: float, what: str, hint: str, budget: int | str | None =
 
 
 def format_bytes(n: float) -> str:
+    """A byte count in binary units (KiB, MiB, GiB, TiB)."""
     for unit, f in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
         if n >= f:
             return f"{n / f:.1f} {unit}"

@@ -251,6 +251,7 @@ def stamp(table: pa.Table, t0: float, c0: float, **extra: object) -> pa.Table:
 
 
 def worker_name() -> str:
+    """This process's Dask worker address and pid (or "local pid N" outside a worker), for failure reports."""
     try:
         from distributed import get_worker
 

@@ -65,6 +65,32 @@ def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
     return cls, (float(np.radians(lo)), float(np.radians(hi)))
 
 
+def explanation(table, own, removals: list, seq=None, own_dict: dict | None = None) -> list[str]:
+    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
+    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one."""
+    if own is not None:
+        own_dict = own.as_dict(table)
+    if own_dict is None:
+        return []
+    n = own_dict["regrasps"]
+    if not removals:
+        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
+    lines = [f"  removed {x.text(table)}" for x in removals]
+    own_pairs = set()
+    g, p = own_dict["grasps"], own_dict["placements"]
+    if own_dict["kind"] == "grasp":
+        for k, pl in enumerate(p):
+            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
+    else:
+        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
+    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
+    kinds = sorted({x.motion for x in removals})
+    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
+                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
+                 f"executable one has {'none' if seq is None else seq.regrasps}")
+    return lines
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)")
     p.add_argument("--db", required=True, help="DuckDB store file with a table built by `workbench gptable`")
@@ -117,9 +143,15 @@ def run(args: argparse.Namespace) -> int:
     except NoSequence as exc:
         print(f"warning: {exc}", file=sys.stderr)
         print(f"{r.obj.name} with {r.robot.name}: no regrasp sequence (0 results)")
+        removals = getattr(exc, "removals", [])
+        for line in explanation(r.table, exc.table_sequence, removals, None):
+            print(line)
         if args.json:
             with open(args.json, "w") as fh:
-                json.dump({"sequence": None, "plan": None, "reason": str(exc)}, fh, indent=1)
+                own = exc.table_sequence
+                json.dump({"sequence": None, "plan": None, "reason": str(exc),
+                           "table_sequence": None if own is None else own.as_dict(r.table),
+                           "removed": [x.as_dict() for x in removals]}, fh, indent=1)
         if args.html:  # the table alone (Fig. 5): where the query's grasps and placements are
             with open(args.html, "w") as fh:
                 fh.write(table_html(r.table, r.classes, None, title=f"{r.obj.name} with {r.robot.name}: no sequence"))
@@ -130,6 +162,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  grasp {k}: class {c} ({r.classes[c].kind}) theta {np.degrees(t.theta[ti]):6.1f} deg")
     for k, (j, fi) in enumerate(seq.placements):
         print(f"  placement {k}: class {j} phi {np.degrees(t.phi[fi]):6.1f} deg")
+    for line in explanation(t, None, seq.extra.get("removals", []), seq, seq.extra.get("table")):
+        print(line)
     if plan is None:
         print("the initial grasp is already in the goal range: nothing to do")
     else:
@@ -142,7 +176,8 @@ def run(args: argparse.Namespace) -> int:
             report = validate_stored(args.db, r, idplan, plan, require_motion=motions is not None)
         print("validator: " + ("ok" if report.ok else "FAILED: " + "; ".join(report.errors[:3])))
     if args.json:
-        doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict()}
+        doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict(),
+               "table_sequence": seq.extra.get("table"), "removed": seq.extra.get("removed", [])}
         with open(args.json, "w") as fh:
             json.dump(doc, fh, indent=1)
         print(f"json: {args.json}")

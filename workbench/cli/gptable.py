@@ -46,8 +46,9 @@ def add_table_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-contact-area", type=float, default=c.min_contact_area,
                         help="pad area that must cover the face overlap at every legal theta (m^2, Section 5.1; 0: off)")
     parser.add_argument("--min-range", type=float, default=float(np.degrees(c.min_range)),
-                        help="drop grasp classes whose legal theta range is narrower than this (degrees; 0, the paper's "
-                             "rule: keep every class with a non-empty range)")
+                        help="what to do with narrow grasp classes: 0 (the paper's rule) keeps every class of any width "
+                             "whose legal theta range holds a sample; a positive width (degrees) drops the classes "
+                             "narrower than it, with a warning giving their count")
     parser.add_argument("--points", type=int, default=c.points,
                         help="grasp points per feature pair (1: the paper's one point per class; more: its remedy for "
                              "elongated parts, a discrete set of points as in Handey, Section 2.3)")
@@ -95,6 +96,9 @@ def run(args: argparse.Namespace) -> int:
                        progress=sys.stderr.isatty())
     for line in summary(r):
         print(line)
+    if r.narrow[0]:
+        print(f"warning: {r.narrow[0]} grasp class(es) dropped as narrower than --min-range {args.min_range:g} deg (the "
+              f"widest of them {np.degrees(r.narrow[1]):.1f} deg); --min-range 0 keeps them", file=sys.stderr)
     if not r.classes:
         print(f"warning: no grasp class: {no_class_reason(obj, robot.gripper, cp)}", file=sys.stderr)
     elif not r.table.q.any():

@@ -277,6 +277,8 @@ def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, tar
     the object? (The body does not move with the fingers: it is tested at full opening.) `pads=False` skips the pad
     boxes, for grasps whose pads closed onto their first touches and so cannot overlap the object."""
     boxes = [b for k, b in enumerate(gripper.finger_poses(0.0)) if pads or k // 2 != gripper.pad]
+    if not boxes:  # fingers that are their pads only
+        return np.zeros(len(poses), dtype=bool)
     extents = np.array([np.maximum(ext - 2 * clearance, 1e-6) for ext, _ in boxes])
     local = np.array([pose for _, pose in boxes])
     side = np.sign(local[:, 1, 3])

@@ -103,6 +103,7 @@ def open_error(path: Path, exc: BaseException) -> StoreError:
 
 
 def is_disk_full(exc: BaseException) -> bool:
+    """Whether an exception from a write means the disk or the file size limit is full."""
     if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
         return True
     low = str(exc).lower()
@@ -162,6 +163,7 @@ def inspect(con: duckdb.DuckDBPyConnection, path: Path, ddl: tuple[str, ...]) ->
 
 
 def table_names(ddl: tuple[str, ...]) -> list[str]:
+    """The table names created by a tuple of CREATE TABLE statements."""
     return [m.group(1) for stmt in ddl for m in [re.search(r"CREATE TABLE IF NOT EXISTS (\w+)", stmt)] if m]
 
 

@@ -1,7 +1,7 @@
 """The store's schema (CONVENTIONS.md, Store; Wan & Harada Section IV, Fig. 4 and Fig. 5).
 
-The ten tables of the paper keep their names and columns (lowercase). Poses are DOUBLE[16] row-major
-4x4 transforms, points and normals DOUBLE[3], distances in metres, angles in radians.
+The ten tables of the paper keep their names and columns (lowercase). Poses are `DOUBLE[16]` row-major
+4x4 transforms, points and normals `DOUBLE[3]`, distances in metres, angles in radians.
 
 Paper tables
 - object(idobject, name, ...): one row per object; extra columns keep the scaled mesh (vertices, faces),
@@ -15,7 +15,7 @@ Paper tables
 - freeairgrip: grasps in the object frame; rotmat is the TCP pose in the object frame.
   Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y).
 - freetabletopplacement: rotmat is the object in the table frame, centre of mass above the origin, lowest
-  point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, DOUBLE[3][]).
+  point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, `DOUBLE[3][]`).
 - freetabletopgrip: free-air grasps kept at a free placement; rotmat is the TCP in the table frame.
 - angle(idangle, value): rotations about world z in radians.
 - tabletopplacements: rotmat is the object in the world; tabletopposition the (x, y, z) of the placement.

@@ -80,19 +80,22 @@ class TableRun:
     idtable: int
     reused: tuple[bool, bool]
     seconds: float = 0.0
+    narrow: tuple[int, float] = (0, 0.0)  # classes dropped as narrower than `min_range`, the widest of them (rad)
 
 
 def classes_stage(store: Store, obj: ObjectModel, gripper: Gripper, params: ClassParams,
                   progress: bool = False) -> tuple[int, list[GraspClass], bool]:
-    """Grasp classes of `obj` (Sections 2, 5.1): (paramset, classes, reused from the store)."""
+    """Grasp classes of `obj` (Sections 2, 5.1): (paramset, classes, reused from the store). Classes dropped as
+    narrower than `params.min_range` are stored apart (`sql.dropped_classes` counts them)."""
     sql.ensure_schema(store)
     idobject = put_object(store, obj)
     key = {"classes": params.as_dict(), "gripper": gripper.digest}
     pid = store.find_paramset(CLASSES, key, idobject)
     if pid is not None:
         return pid, [GraspClass(**d) for d in sql.load_classes(store, pid)], True
-    classes = grasp_classes(obj, gripper, params, progress=progress)
-    return sql.save_classes(store, CLASSES, key, idobject, classes), classes, False
+    dropped: list[GraspClass] = []
+    classes = grasp_classes(obj, gripper, params, progress=progress, dropped=dropped)
+    return sql.save_classes(store, CLASSES, key, idobject, classes, dropped), classes, False
 
 
 def _table_key(idclasses: int, robot: Robot, params: TableParams, placement: PlacementParams) -> dict:
@@ -114,13 +117,14 @@ def table_stage(store: Store, obj: ObjectModel, robot: Robot, gripper: Gripper |
         idrobot = put_robot(store, robot)
     key = _table_key(idc, robot, params, placement)
     pid = store.find_paramset(TABLE, key, idobject)
+    narrow = sql.dropped_classes(store, idc)
     if pid is not None:
         return TableRun(obj, robot, gripper, classes, _table_from_rows(sql.load_table(store, pid)), idc, pid,
-                        (reused_c, True), time.perf_counter() - t0)
+                        (reused_c, True), time.perf_counter() - t0, narrow)
     pl = stable_placements(obj, placement)
     table = build_table(classes, pl.poses, robot, gripper, params, progress=progress)
     pid = sql.save_table(store, TABLE, key, idobject, idrobot, idc, table, pl.normals, pl.stability)
-    return TableRun(obj, robot, gripper, classes, table, idc, pid, (reused_c, False), time.perf_counter() - t0)
+    return TableRun(obj, robot, gripper, classes, table, idc, pid, (reused_c, False), time.perf_counter() - t0, narrow)
 
 
 def table_stage_at(db: str, obj: ObjectModel, robot: Robot, class_params: ClassParams = ClassParams(),

@@ -42,11 +42,12 @@ from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
 from workbench.store import Store
 from workbench.store import robots as robot_sql
 from workbench.store import wan_harada as sql
-from workbench.store.grasps import find_grasps, load_grasps, save_grasps
+from workbench.store.grasps import find_grasps, latest_paramset_for, load_grasps, save_grasps
 from workbench.store.objects import gripper_row, object_row, put_object
 from workbench.store.placements import (
     find_placements,
     find_tabletop,
+    TABLETOP_STAGE,
     latest_tabletop_paramset,
     load_free_tabletop_grips,
     load_placements,
@@ -69,6 +70,9 @@ if TYPE_CHECKING:  # pragma: no cover
 
 @dataclass
 class GraspsResult:
+    """The free-air grasp stage's result (Section III): its object and parameter set, whether the rows were reused,
+    and the grasps' TCP poses (N, 4, 4) in the object frame with their jaw widths (N,) in metres."""
+
     idobject: int
     idparamset: int
     reused: bool
@@ -100,6 +104,9 @@ def ensure_grasps(db: str | Path | Store, obj: ObjectModel, gripper: Gripper, pa
 
 @dataclass
 class PlacementsResult:
+    """The placement stage's result (Section IV): the parameter sets of the free and tabletop placements, whether
+    they were reused, the placements, the free tabletop grips per placement and the tabletop counts."""
+
     idplacements: int
     idtabletop: int
     reused: bool
@@ -193,8 +200,13 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         oid, obj = get_object(store, object_name)
-        tt = latest_tabletop_paramset(store, oid) if idtabletop is None else int(idtabletop)
         rrow = robot_row(store, robot_name)
+        if idtabletop is not None:
+            tt = int(idtabletop)
+        elif rrow["idgripper"] is not None:  # the latest tabletop grips of the robot's gripper
+            tt = latest_paramset_for(store, TABLETOP_STAGE, oid, gripper_row(store, rrow["idgripper"])["digest"], "placements")
+        else:
+            tt = latest_tabletop_paramset(store, oid)
         # the run with the most rows (then the newest) first: (idscene, idikret)
         runs = [(int(r["idscene"]), int(r["idikret"])) for r in
                 sorted(ik_runs(store, idtabletop=tt, idrobot=rrow["idrobot"]), key=lambda r: (-r["rows"], -r["last"]))]
@@ -307,7 +319,7 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
     robot = get_robot(robot) if isinstance(robot, str) else robot
     out = BuildResult(name=obj.name, robot=robot.name)
     try:
-        hand = franka_hand()
+        hand = robot.gripper
         t0 = time.perf_counter()
         g = ensure_grasps(store, obj, hand, gparams)
         out.timings["grasps"], out.reused["grasps"], out.counts["grasps"] = time.perf_counter() - t0, g.reused, g.count
@@ -392,6 +404,8 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
         raise RobotError(f"the fixed links ({', '.join(hit[:3])}) of robot {robot.name!r} cut into the table; move its base "
                          f"(--base) or the table (--table)")
     oid, obj = get_object(store, obj_name)
+    if idtabletop is None:  # the latest tabletop grips of this robot's gripper
+        idtabletop = latest_paramset_for(store, TABLETOP_STAGE, oid, robot.gripper, "placements")
     grips = load_tabletop_grips(store, oid, idtabletop)
     pid = int(np.asarray(grips["idparamset"])) if "idparamset" in grips else int(idtabletop if idtabletop is not None else -1)
     ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
