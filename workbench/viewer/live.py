@@ -87,15 +87,25 @@ def pick_evenly(n: int, k: int) -> np.ndarray:
     return np.unique(np.linspace(0, n - 1, min(k, n)).astype(int)) if n and k else np.zeros(0, dtype=int)
 
 
-class SolidHand:
-    """The selected hand drawn solid: its body and finger boxes are sent once and placed by transforms."""
+def finger_corners(gripper: Gripper, pose: np.ndarray, width: float) -> np.ndarray:
+    """(16, 3) corners of both finger boxes of the hand at a TCP pose and jaw opening: what a camera framed on a
+    grasp keeps in view (the hand's body may leave the frame; the part and the jaw stay)."""
+    unit = np.array([[x, y, z] for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (-0.5, 0.5)])
+    return np.vstack([trimesh.transform_points(unit * ext, np.asarray(pose) @ local)
+                      for ext, local in gripper.finger_poses(float(width))])
 
-    def __init__(self, vis: meshcat.Visualizer, path: str, gripper: Gripper, color: int):
+
+class SolidHand:
+    """The selected hand drawn solid (its body a little translucent, so that the part behind it stays readable):
+    body and finger boxes are sent once and placed by transforms."""
+
+    def __init__(self, vis: meshcat.Visualizer, path: str, gripper: Gripper, color: int, body_opacity: float = 0.55):
         self.vis, self.path, self.gripper = vis, path, gripper
         self.switches = Switches(vis)
         material = g.MeshLambertMaterial(color=int(color))
         body = gripper.body
-        vis[f"{path}/body"].set_object(g.TriangularMeshGeometry(body.vertices, body.faces), material)
+        vis[f"{path}/body"].set_object(g.TriangularMeshGeometry(body.vertices, body.faces), g.MeshLambertMaterial(
+            color=int(color), opacity=body_opacity, transparent=body_opacity < 1))
         self.fingers = []
         for k, (ext, _) in enumerate(gripper.finger_poses(gripper.jaw_max)):
             vis[f"{path}/finger{k}"].set_object(g.Box(list(map(float, ext))), material)

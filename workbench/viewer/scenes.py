@@ -128,6 +128,7 @@ overflow:hidden}</style></head><body><div id="pane"></div><script>
   script.src = http + "static/main.min.js";
   script.onload = function () {
     window.viewer = new MeshCat.Viewer(document.getElementById("pane"));
+    window.viewer.gui.domElement.style.display = "none";  // meshcat's "Open Controls" bar would cover a corner
     window.viewer.connect(ws);
   };
   script.onerror = function () {
@@ -278,22 +279,40 @@ def show_frame(vis: meshcat.Visualizer, path: str, pose: np.ndarray, length: flo
     vis[path].set_transform(np.asarray(pose, dtype=np.float64))
 
 
-def frame_camera(vis: meshcat.Visualizer, center: np.ndarray, radius: float) -> None:
+VIEW_DIRECTION = np.array([0.75, -0.65, 0.55])
+"""World direction from the framed work toward the default camera: front right and above."""
+
+
+def frame_camera(vis: meshcat.Visualizer, center: np.ndarray, radius: float, direction: np.ndarray | None = None) -> None:
     """Aim the default camera at `center` so a sphere of `radius` fills the view (meshcat's 75 degree vertical field
-    of view; its camera frame is y-up), seen from the front right and above."""
+    of view), seen from `direction` (world; default `VIEW_DIRECTION`, from the front right and above)."""
     c = np.asarray(center, dtype=np.float64)
     vis["/Cameras/default"].set_transform(tf.translation_matrix(c))
     d = 1.1 * max(float(radius), 1e-3) / np.sin(np.radians(37.5))
-    direction = np.array([0.75, 0.55, 0.65])  # x, y-up, z of meshcat's rotated camera frame
-    pos = d * direction / np.linalg.norm(direction)
+    w = np.asarray(VIEW_DIRECTION if direction is None else direction, dtype=np.float64)
+    w = w / max(np.linalg.norm(w), 1e-12)
+    pos = d * np.array([w[0], w[2], -w[1]])  # meshcat's rotated camera frame is y-up: world (x, y, z) -> (x, z, -y)
     vis["/Cameras/default/rotated/<object>"].set_property("position", pos.tolist())
 
 
-def frame_points(vis: meshcat.Visualizer, points: np.ndarray) -> None:
+def frame_points(vis: meshcat.Visualizer, points: np.ndarray, direction: np.ndarray | None = None) -> None:
     """Frame the camera on everything in `points` (vertices, positions): their bounding sphere fills the view."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     lo, hi = p.min(axis=0), p.max(axis=0)
-    frame_camera(vis, (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2)
+    frame_camera(vis, (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2, direction)
+
+
+def beside_hand(approach: np.ndarray) -> np.ndarray:
+    """A camera direction near the default that looks at a grasp from the fingers' side, not through the hand's
+    body (which lies behind the TCP along -`approach`)."""
+    a = np.asarray(approach, dtype=np.float64)
+    a = a / max(np.linalg.norm(a), 1e-12)
+    d = VIEW_DIRECTION / np.linalg.norm(VIEW_DIRECTION)
+    side = d - (d @ a) * a
+    if np.linalg.norm(side) < 1e-6:
+        side = np.cross(a, [0.0, 0.0, 1.0]) if abs(a[2]) < 0.9 else np.cross(a, [1.0, 0.0, 0.0])
+    side /= np.linalg.norm(side)
+    return side + 0.6 * a  # from the side, a little ahead of the jaw
 
 
 def static_html(vis: meshcat.Visualizer, out: str | Path) -> Path:

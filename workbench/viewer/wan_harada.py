@@ -125,6 +125,11 @@ def plan_frames(plan, robot, fps: int = 30) -> list[dict]:
     return frames
 
 
+PLAN_VIEW = np.array([0.35, -0.9, 0.6])
+"""World direction toward the camera of a plan: from the side of the arm's reach, so that the arm stands beside the
+part rather than in front of it."""
+
+
 class PlanView:
     """A plan's scene, sent once per robot and part: the table, the robot, the part, its start and goal ghosts and
     ghosts for intermediate placements (more are sent only when a plan needs more). `play(plan)` then only moves
@@ -197,7 +202,7 @@ def frame_plan(vis: meshcat.Visualizer, plan, robot) -> None:
     parts = np.vstack(parts)
     patch = np.vstack([parts[:, :2].min(0) - 0.1, parts[:, :2].max(0) + 0.1])
     patch = np.column_stack([patch, np.zeros(2)])
-    frame_points(vis, np.vstack([parts, patch, arm_reach(plan, robot)]))
+    frame_points(vis, np.vstack([parts, patch, arm_reach(plan, robot)]), PLAN_VIEW)
 
 
 def arm_reach(plan, robot) -> np.ndarray:

@@ -18,6 +18,7 @@ from workbench.viewer.live import (
     HandOutlines,
     SolidHand,
     Switches,
+    finger_corners,
     mesh_object,
     pick_evenly,
     points_object,
@@ -169,9 +170,9 @@ class GraspExplorer:
         self.facet.max = max(len(plan.facets) - 1, 0)
         self.selected.max = max(len(g) - 1, 0)
         self.show()
-        first_hand = g.poses[:1] if len(g) else np.zeros((0, 4, 4))
-        reach = [trimesh.transform_points(self.outlines.at(w), m) for m, w in zip(first_hand, g.jawwidth[:1])]
-        viz.frame_points(vis, np.vstack([mesh.bounds, *reach]))  # the part and the selected hand
+        jaw = [finger_corners(self.gripper, g.poses[i], g.jawwidth[i]) for i in range(min(len(g), 1))]
+        # the part and the selected hand's jaw, seen from beside the hand rather than through its body
+        viz.frame_points(vis, np.vstack([mesh.bounds, *jaw]), viz.beside_hand(g.poses[0][:3, 2]) if len(g) else None)
 
     def show(self) -> None:
         """View-only: which layers, facet, hands and grasp are visible; no geometry is sent."""

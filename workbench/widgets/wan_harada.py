@@ -44,6 +44,7 @@ from workbench.viewer.wan_harada import (
     START_COLOR,
     TABLE_COLOR,
     MOVES_TO_NEXT,
+    PLAN_VIEW,
     STEP_NAMES,
     PlanView,
     caption_track,
@@ -137,7 +138,7 @@ class RegraspExplorer:
             self.vis.delete()
             self.scene = PlanView(self.vis, self.planner.robot, self.planner.object.mesh, scene_table(self.planner))
             self.scene.robot_view.show(self.planner.robot.neutral())
-            viz.frame_points(self.vis, np.array([base, base + [0, 0, 0.6], [x0, y0, 0], [x1, y1, 0]]))
+            viz.frame_points(self.vis, np.array([base, base + [0, 0, 0.6], [x0, y0, 0], [x1, y1, 0]]), PLAN_VIEW)
             self.info.value = self.graph_html()
         return self.planner
 
@@ -427,9 +428,11 @@ class PlacementExplorer:
         self.which.options = options
         self.which.value = options[0][1] if options else None
         self.which.observe(lambda _: self.show(), names="value")
-        if len(pl):
-            corners = np.array([[grid.x_min, grid.y_min, 0.0], [grid.x_max, grid.y_max, 0.0]])
-            viz.frame_points(vis, np.vstack([corners, trimesh.transform_points(self.obj.mesh.bounds, self.show_at @ pl.poses[0])]))
+        if len(pl):  # the work: the selected placement and its grips beside the table, the nearest grid corner
+            pose = self.show_at @ pl.poses[0]
+            grips = pose @ self.grasp_poses[self.grip_pick]
+            corner = np.array([[grid.x_min, grid.y_min, 0.0]])
+            viz.frame_points(vis, np.vstack([trimesh.transform_points(self.obj.mesh.bounds, pose), grips[:, :3, 3], corner]))
 
     def show(self) -> None:
         """View-only: the selected placement, how many of its grips, and the roadmap's colours."""
