@@ -22,6 +22,7 @@ from workbench.catalog.driver import (
 from workbench.catalog.robots import CatalogRobot, parse_robots
 from workbench.cli.grasps import add_grasp_arguments, grasp_params
 from workbench.cli.ik import parse_base, parse_mount
+from workbench.cli.outputs import add_output
 from workbench.cli.placements import add_placement_arguments, placement_params
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.robots.ik import WORLDA, IKOptions
@@ -60,9 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--ik-chunk", type=int, default=1024, help=f"tabletop grips per IK unit (a multiple of {o.lane})")
     b.add_argument("--ik-library", type=int, default=o.library, help="IK seed library size")
     b.add_argument("--ik-seeds", type=int, default=o.seeds, help="library seeds tried after the warm start")
-    b.add_argument("--shards", default=None, metavar="DIR",
-                   help="IK workers write their rows to Parquet files in DIR (created; on a file system every worker "
-                        "sees), merged into the store per part and robot: the driver writes less (see `workbench bench catalog`)")
+    add_output(b, "--shards", folder=True,
+               help="IK workers write their rows to Parquet files in DIR (created; on a file system every worker "
+                    "sees), merged into the store per part and robot: the driver writes less (see `workbench bench catalog`)")
     b.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_placement_arguments(b)
     add_grasp_arguments(b)

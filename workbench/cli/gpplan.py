@@ -10,6 +10,8 @@ import sys
 
 import numpy as np
 
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.outputs import add_output, write_text
 from workbench.cli.plan import add_motion_arguments, exec_options
 from workbench.errors import WorkbenchError
 from workbench.planners.tournassoud.chaining import NoSequence
@@ -26,6 +28,8 @@ from workbench.planners.tournassoud.stages import (
     validate_stored,
 )
 from workbench.robots.collider import Scene, default_scene
+from workbench.store import Store
+from workbench.store.robots import robot_with_gripper
 
 
 def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
@@ -106,8 +110,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
     p.add_argument("--no-motion", action="store_true", help="waypoints only: do not plan and time the motions")
     add_motion_arguments(p, "conjunctions of the table")
-    p.add_argument("--json", default=None, help="write the sequence and its plan to this JSON file")
-    p.add_argument("--html", default=None, help="write the table with the sequence overlaid (Fig. 6) to this HTML file")
+    add_output(p, "--json", "write the sequence and its plan to this JSON file")
+    add_output(p, "--html", "write the table with the sequence overlaid (Fig. 6) to this HTML file")
+    add_gripper_argument(p)
     p.set_defaults(func=run)
 
 
@@ -120,7 +125,12 @@ def run(args: argparse.Namespace) -> int:
     for label, v in (("--handx", args.handx), ("--worldz", args.worldz)):
         if not np.isfinite(v) or v < 0:
             raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
-    r = load_planner(args.db, args.object, args.robot)
+    gripper = gripper_from_args(args)
+    robot = args.robot
+    if robot is not None:
+        with Store(args.db, read_only=True) as store:
+            robot = robot_with_gripper(store, robot, gripper.digest) or robot
+    r = load_planner(args.db, args.object, robot, gripper=gripper)
     scene = default_scene(r.robot.name)
     if args.table:
         t = [float(v) for v in _nums(args.table, "--table", 4)] if all(
@@ -147,14 +157,12 @@ def run(args: argparse.Namespace) -> int:
         for line in explanation(r.table, exc.table_sequence, removals, None):
             print(line)
         if args.json:
-            with open(args.json, "w") as fh:
-                own = exc.table_sequence
-                json.dump({"sequence": None, "plan": None, "reason": str(exc),
-                           "table_sequence": None if own is None else own.as_dict(r.table),
-                           "removed": [x.as_dict() for x in removals]}, fh, indent=1)
+            own = exc.table_sequence
+            write_text(args.json, json.dumps({"sequence": None, "plan": None, "reason": str(exc),
+                                              "table_sequence": None if own is None else own.as_dict(r.table),
+                                              "removed": [x.as_dict() for x in removals]}, indent=1))
         if args.html:  # the table alone (Fig. 5): where the query's grasps and placements are
-            with open(args.html, "w") as fh:
-                fh.write(table_html(r.table, r.classes, None, title=f"{r.obj.name} with {r.robot.name}: no sequence"))
+            write_text(args.html, table_html(r.table, r.classes, None, title=f"{r.obj.name} with {r.robot.name}: no sequence"))
         return 0
     t = r.table
     print(f"{r.obj.name} with {r.robot.name}: {seq.regrasps} regrasp(s), chaining {seq.levels} step(s) in {seq.seconds * 1000:.2f} ms")
@@ -178,12 +186,10 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict(),
                "table_sequence": seq.extra.get("table"), "removed": seq.extra.get("removed", [])}
-        with open(args.json, "w") as fh:
-            json.dump(doc, fh, indent=1)
+        write_text(args.json, json.dumps(doc, indent=1))
         print(f"json: {args.json}")
     if args.html:
-        with open(args.html, "w") as fh:
-            fh.write(table_html(t, r.classes, seq, title=f"{r.obj.name} with {r.robot.name}"))
+        write_text(args.html, table_html(t, r.classes, seq, title=f"{r.obj.name} with {r.robot.name}"))
         print(f"html: {args.html}")
     sys.stdout.flush()
     return 0

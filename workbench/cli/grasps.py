@@ -8,6 +8,7 @@ import time
 import numpy as np
 
 from workbench.cli import warn
+from workbench.cli.outputs import add_output
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.geometry.objects import load_object
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
@@ -69,7 +70,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--db", required=True, help="DuckDB store file")
     add_grasp_arguments(parser)
     add_gripper_argument(parser)
-    parser.add_argument("--html", default=None, help="write a meshcat scene of the grasps to this HTML file")
+    add_output(parser, "--html", "write a meshcat scene of the grasps to this HTML file")
     parser.set_defaults(func=run)
 
 

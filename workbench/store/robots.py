@@ -239,7 +239,7 @@ def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: in
     if idtabletop is not None:
         sql += " AND p.idparamset = ?"
         params.append(idtabletop)
-    table = store.con.sql(sql + " ORDER BY k.idtabletopgrips", params=params).to_arrow_table()
+    table = store.arrow(sql + " ORDER BY k.idtabletopgrips", params)
 
     out = {c: from_arrow(table.column(c)) for c in ("idik", "idtabletopgrips", "idtabletopplacements", "idfreeairgrip",
                                                       "jawwidth", "idangle")}
