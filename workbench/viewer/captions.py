@@ -4,7 +4,6 @@ and are shown as HTML beside the canvas, never as panels in the scene."""
 
 from __future__ import annotations
 
-CAPTIONS = ("pick", "transfer", "release", "regrasp", "place")
 CAPTION_TEXT = {"pick": "pick: grasp the part at its start pose", "transfer": "transfer: carry the part",
                 "release": "release: put the part down to regrasp it", "regrasp": "regrasp: take it with another grasp",
                 "place": "place: put the part down at its goal pose"}
