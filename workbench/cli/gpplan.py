@@ -10,6 +10,7 @@ import sys
 
 import numpy as np
 
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.cli.outputs import add_output, write_text
 from workbench.cli.plan import add_motion_arguments, exec_options
 from workbench.errors import WorkbenchError
@@ -27,6 +28,8 @@ from workbench.planners.tournassoud.stages import (
     validate_stored,
 )
 from workbench.robots.collider import Scene, default_scene
+from workbench.store import Store
+from workbench.store.robots import robot_with_gripper
 
 
 def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
@@ -109,6 +112,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_motion_arguments(p, "conjunctions of the table")
     add_output(p, "--json", "write the sequence and its plan to this JSON file")
     add_output(p, "--html", "write the table with the sequence overlaid (Fig. 6) to this HTML file")
+    add_gripper_argument(p)
     p.set_defaults(func=run)
 
 
@@ -121,7 +125,12 @@ def run(args: argparse.Namespace) -> int:
     for label, v in (("--handx", args.handx), ("--worldz", args.worldz)):
         if not np.isfinite(v) or v < 0:
             raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
-    r = load_planner(args.db, args.object, args.robot)
+    gripper = gripper_from_args(args)
+    robot = args.robot
+    if robot is not None:
+        with Store(args.db, read_only=True) as store:
+            robot = robot_with_gripper(store, robot, gripper.digest) or robot
+    r = load_planner(args.db, args.object, robot, gripper=gripper)
     scene = default_scene(r.robot.name)
     if args.table:
         t = [float(v) for v in _nums(args.table, "--table", 4)] if all(

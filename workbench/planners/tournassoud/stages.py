@@ -141,8 +141,9 @@ def _table_from_rows(rows: dict) -> GraspPlacementTable:
                                placements=rows["placements"], frame=table_frame(rows["table_point"]), timings=rows["timings"])
 
 
-def load_planner(db: str, object_name: str, robot_name: str | None = None) -> TableRun:
-    """The newest stored table of `object_name` (and robot), its classes, object and robot rebuilt from the store."""
+def load_planner(db: str, object_name: str, robot_name: str | None = None, gripper: Gripper | None = None) -> TableRun:
+    """The newest stored table of `object_name` (and robot), its classes, object and robot rebuilt from the store
+    with the planning `gripper` it was built with (default: the Franka hand)."""
     with Store(db, read_only=True) as store:
         idobject, obj = get_object(store, object_name)
         idrobot = None
@@ -152,23 +153,27 @@ def load_planner(db: str, object_name: str, robot_name: str | None = None) -> Ta
         rows = sql.load_table(store, pid)
         classes = [GraspClass(**d) for d in sql.load_classes(store, rows["idclasses"])]
         r = robot_row(store, rows["idrobot"])
-    robot = _robot(r)
+    robot = _robot(r, gripper)
     return TableRun(obj, robot, robot.gripper, classes, _table_from_rows(rows), rows["idclasses"], pid, (True, True))
 
 
-def _robot(row: dict) -> Robot:
+def _robot(row: dict, gripper: Gripper | None = None) -> Robot:
     """The stored robot rebuilt: the built-in of that name when its kinematics digest matches, else from the row."""
     name = row["name"]
     try:
-        robot = get_robot(name)
+        robot = get_robot(name, gripper=gripper)
         if robot.spec.digest == row["digest"]:
             return robot
     except WorkbenchError:
         pass
     spec = RobotSpec(name=name, urdf=row["urdf"], urdf_path="", tip_frame=row["tip_frame"], tcp_frame=row["tcp_frame"],
                      mount=row["mount"], base=row["base"], drop_geometry=tuple(row["drop_geometry"]),
-                     locked=tuple((k, float(v)) for k, v in row["locked"].items()))
-    return robot_from_spec(spec)
+                     locked=tuple((k, float(v)) for k, v in row["locked"].items()), gripper=gripper)
+    robot = robot_from_spec(spec)
+    if robot.spec.digest != row["digest"]:
+        raise WorkbenchError(f"robot {name!r} in the store was built with another gripper than {robot.gripper.name!r}; "
+                             f"give gpplan the --gripper it was built with")
+    return robot
 
 
 def plan_validator(db: str, run: TableRun, scene: Scene) -> PlanValidator:
