@@ -38,6 +38,7 @@ from workbench.viewer.scenes import (
 )
 
 OBJECT_COLOR, START_COLOR, GOAL_COLOR, TABLE_COLOR = 0xE0A030, 0xF0D040, 0x3366DD, 0x8B6B4A
+SIMULATED_COLOR = 0xD03060  # the part as MuJoCo moved it (`workbench simulate`), beside the planned one
 
 
 def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int = 5,
@@ -152,7 +153,7 @@ class PlanView:
         show_mesh(vis, f"{path}/start", obj_mesh, color=START_COLOR, opacity=0.35)
         show_mesh(vis, f"{path}/goal", obj_mesh, color=GOAL_COLOR, opacity=0.35)
         show_mesh(vis, f"{path}/object", obj_mesh, color=OBJECT_COLOR)
-        self.ghosts = 0
+        self.ghosts, self.simulated = 0, False
         self._more_ghosts(ghosts)
         self.robot_view = RobotView(vis, robot, f"{path}/robot", kind)
 
@@ -162,11 +163,12 @@ class PlanView:
             self.switches.show(f"{self.path}/placements/{self.ghosts}", False)
             self.ghosts += 1
 
-    def play(self, plan, fps: int = 30, frames: list[dict] | None = None,
-             numbers: dict[int, int] | None = None) -> manim.Animation:
+    def play(self, plan, fps: int = 30, frames: list[dict] | None = None, numbers: dict[int, int] | None = None,
+             simulated: tuple[np.ndarray, np.ndarray] | None = None) -> manim.Animation:
         """Move the ghosts to the plan's poses and attach its animation (looped); `frames`: `plan_frames(plan, robot,
-        fps)` when the caller has them already. The caption track (`caption_track`, placements named by `numbers`)
-        rides along as a property of the scene's /Captions node, for the live view's overlay."""
+        fps)` when the caller has them already; `simulated`: (t, poses (K, 4, 4)), the part as a physics replay moved
+        it, played beside the planned part (a timed plan only). The caption track (`caption_track`, placements named
+        by `numbers`) rides along as a property of the scene's /Captions node, for the live view's overlay."""
         path, vis, sw = self.path, self.vis, self.switches
         sw.move(f"{path}/start", plan.start_pose)
         sw.move(f"{path}/goal", plan.goal_pose)
@@ -178,6 +180,15 @@ class PlanView:
             sw.show(f"{path}/placements/{i}", i < len(between))
         frames = plan_frames(plan, self.robot, fps) if frames is None else frames
         tracks: dict[str, list] = {f"{path}/object": [fr["object"] for fr in frames]}
+        if simulated is not None and plan.segments:
+            if not self.simulated:
+                show_mesh(vis, f"{path}/simulated", self.mesh, color=SIMULATED_COLOR, opacity=0.6)
+                self.simulated = True
+            t_sim, p_sim = simulated
+            at = np.clip(np.searchsorted(t_sim, np.arange(len(frames)) / fps), 0, len(t_sim) - 1)
+            tracks[f"{path}/simulated"] = list(np.asarray(p_sim)[at])
+        if self.simulated:
+            sw.show(f"{path}/simulated", simulated is not None and bool(plan.segments))
         for fr in frames:
             for name, m in self.robot_view.poses(fr["q"], fr["jaw"]).items():
                 tracks.setdefault(name, []).append(m)
@@ -191,11 +202,13 @@ class PlanView:
 
 
 def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30,
-              path: str = "plan", kind: str = "visual", frames: list[dict] | None = None) -> manim.Animation:
+              path: str = "plan", kind: str = "visual", frames: list[dict] | None = None,
+              simulated: tuple[np.ndarray, np.ndarray] | None = None) -> manim.Animation:
     """Draw the plan's scene under `path` and attach its animation to `vis` (looped). The robot and the planning
     gripper are drawn by `workbench.viewer.robot.RobotView` (`kind`: the URDF's visual or collision meshes);
-    `frames`: `plan_frames(plan, robot, fps)` when the caller has them already."""
-    return PlanView(vis, robot, obj_mesh, table, path, kind).play(plan, fps, frames)
+    `frames`: `plan_frames(plan, robot, fps)` when the caller has them already. `simulated`: (t, poses (K, 4, 4)),
+    the part as a physics replay moved it, played beside the planned part (a timed plan only)."""
+    return PlanView(vis, robot, obj_mesh, table, path, kind).play(plan, fps, frames, simulated=simulated)
 
 
 def frame_plan(vis: meshcat.Visualizer, plan, robot) -> None:
@@ -252,31 +265,35 @@ def scene_table(planner) -> tuple:
 
 
 def plan_scene(plan, planner, out: str | Path | None = None, vis: meshcat.Visualizer | None = None,
-               kind: str = "collision") -> Path | meshcat.Visualizer:
+               kind: str = "collision", simulated: tuple[np.ndarray, np.ndarray] | None = None) -> Path | meshcat.Visualizer:
     """The plan's animation in a meshcat scene (a new one unless `vis`); written as static HTML when `out` is given
     (returns its path), else the visualizer is returned. `kind`: the robot's collision meshes (a file of a few MB)
-    or its visual meshes (nicer, about 15 MB for the Panda)."""
+    or its visual meshes (nicer, about 15 MB for the Panda). `simulated`: the part's poses in a physics replay
+    (t, poses), played beside the planned part."""
     if vis is None:
         vis = new_scene()
     frames = plan_frames(plan, planner.robot)  # the animation's, and the page caption's clock
     numbers = per_part_numbers(planner.free["idfreetabletopplacement"])
-    PlanView(vis, planner.robot, planner.object.mesh, scene_table(planner), kind=kind).play(plan, frames=frames,
-                                                                                         numbers=numbers)
+    PlanView(vis, planner.robot, planner.object.mesh, scene_table(planner), kind=kind).play(
+        plan, frames=frames, numbers=numbers, simulated=simulated)
     frame_plan(vis, plan, planner.robot)
     if out is None:
         return vis
     path = static_html(vis, out)
     page = path.read_text()
-    path.write_text(page.replace("</body>", plan_overlay(caption_track(plan, frames, numbers=numbers)) + "</body>", 1))
+    path.write_text(page.replace("</body>", plan_overlay(caption_track(plan, frames, numbers=numbers),
+                                                         simulated=simulated is not None) + "</body>", 1))
     return path
 
 
-def plan_overlay(track: dict) -> str:
-    """HTML for a static plan page: a colour key (top left), the caption naming the step playing (top, beside the
-    key) and its footer (bottom), both read from `caption_track` at the meshcat animation's clock."""
+def plan_overlay(track: dict, simulated: bool = False) -> str:
+    """HTML for a static plan page: a colour key (top left; `simulated`: it names the part in physics), the caption
+    naming the step playing (under the key) and its footer (bottom), both read from `caption_track` at the meshcat
+    animation's clock."""
+    keys = KEY[:1] + (((SIMULATED_COLOR, "the part in physics"),) if simulated else ()) + KEY[1:]
     legend = "".join(f"<span style='margin-right:12px;white-space:nowrap'><span style='display:inline-block;width:11px;"
                      f"height:11px;margin-right:4px;border:1px solid #555;background:#{c:06x}'></span>{t}</span>"
-                     for c, t in KEY)
+                     for c, t in keys)
     box = "position:fixed;left:0;background:rgba(255,255,255,.88);font:14px sans-serif;padding:6px 12px;z-index:10"
     return (f"<div id='wb-legend' style='{box};top:0'>{legend}<br><b id='wb-caption' style='font-size:16px'>"
             f"{html.escape(track['captions'][0])}</b></div>"
