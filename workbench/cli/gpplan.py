@@ -10,9 +10,11 @@ import sys
 
 import numpy as np
 
+from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
 from workbench.cli.plan import add_motion_arguments, exec_options
 from workbench.errors import WorkbenchError
+from workbench.params import parse_number
 from workbench.planners.tournassoud.chaining import NoSequence
 from workbench.planners.tournassoud.figures import table_html
 from workbench.planners.tournassoud.plans import (
@@ -48,9 +50,13 @@ def parse_grasp(text: str, label: str = "--initial") -> tuple[int, float]:
     """CLASS,THETA (degrees) -> (class, radians)."""
     c, t = _nums(text, label, 2)
     try:
-        return int(c), float(np.radians(float(t)))
+        cls, theta = int(c), float(t)
     except ValueError:
         raise WorkbenchError(f"{label} {text!r} must be CLASS,THETA (class index, degrees), e.g. 0,30") from None
+    if cls < 0 or not np.isfinite(theta):
+        raise WorkbenchError(f"{label} {text!r} must be CLASS,THETA with a class index >= 0 and a finite angle in degrees, "
+                             f"e.g. 0,30")
+    return cls, float(np.radians(theta))
 
 
 def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
@@ -61,6 +67,9 @@ def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
         cls = int(c)
     except ValueError:
         raise WorkbenchError(f"--goal {text!r} must be CLASS,MIN:MAX (class index, degrees), e.g. 2,60:120") from None
+    if cls < 0 or not (np.isfinite(lo) and np.isfinite(hi)):
+        raise WorkbenchError(f"--goal {text!r} must be CLASS,MIN:MAX with a class index >= 0 and finite angles in degrees, "
+                             f"e.g. 2,60:120")
     if hi < lo:
         raise WorkbenchError(f"--goal {text!r}: MAX {hi:g} is below MIN {lo:g}; give MIN:MAX with MIN <= MAX")
     return cls, (float(np.radians(lo)), float(np.radians(hi)))
@@ -102,8 +111,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--from", dest="from_", default=None, help="start placement P,PHI (degrees), instead of --initial")
     p.add_argument("--to", default=None, help="goal placement P,PHI (degrees), instead of --goal")
     p.add_argument("--table", default=None, help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
-    p.add_argument("--handx", type=float, default=0.05, help="approach distance along the hand's axis (m)")
-    p.add_argument("--worldz", type=float, default=0.05, help="lift after the approach (m)")
+    p.add_argument("--handx", type=parse_number(RETRACT, "--handx", 0.05), default=0.05, metavar="M",
+                   help=f"approach distance along the hand's axis ({RETRACT.describe(True)}; default 0.05)")
+    p.add_argument("--worldz", type=parse_number(RETRACT, "--worldz", 0.05), default=0.05, metavar="M",
+                   help=f"lift after the approach ({RETRACT.describe(True)}; default 0.05)")
     p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
     p.add_argument("--no-motion", action="store_true", help="waypoints only: do not plan and time the motions")
     add_motion_arguments(p, "conjunctions of the table")
@@ -118,9 +129,10 @@ def run(args: argparse.Namespace) -> int:
     if grasp_mode == place_mode or (grasp_mode and (args.initial is None or args.goal is None)) or \
             (place_mode and (args.from_ is None or args.to is None)):
         raise WorkbenchError("give either --initial CLASS,THETA with --goal CLASS,MIN:MAX, or --from P,PHI with --to P,PHI")
-    for label, v in (("--handx", args.handx), ("--worldz", args.worldz)):
-        if not np.isfinite(v) or v < 0:
-            raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
+    if grasp_mode:  # the query is read before the store is opened: a malformed one costs nothing
+        initial, (gc, rng) = parse_grasp(args.initial), parse_goal(args.goal)
+    else:
+        start, goal = parse_grasp(args.from_, "--from"), parse_grasp(args.to, "--to")
     r = load_planner(args.db, args.object, args.robot)
     scene = default_scene(r.robot.name)
     if args.table:
@@ -134,12 +146,8 @@ def run(args: argparse.Namespace) -> int:
     motions = None if args.no_motion else exec_options(args)
     try:
         if grasp_mode:
-            initial = parse_grasp(args.initial)
-            gc, rng = parse_goal(args.goal)
             seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng, motions)
         else:
-            start = parse_grasp(args.from_, "--from")
-            goal = parse_grasp(args.to, "--to")
             seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal, motions)
     except NoSequence as exc:
         print(f"warning: {exc}", file=sys.stderr)
