@@ -82,11 +82,9 @@ def check_urdf(root: Element, tip_frame: str, label: str = "robot URDF") -> None
     while at in by_child:
         chain.append(by_child[at])
         at = parent_link[at]
-    moving = [j for j in chain if j.get("type") in MOVING]
-    if not moving:
-        raise RobotError(f"{label}: no moving joint lies between the root and --tip {tip_frame!r}; choose a link of the arm")
+    moving = [j for j in chain if j.get("type") in MOVING]  # none: the model says the tip is not moved by any joint
     ranges = [_range(j) for j in moving if j.get("type") != "continuous"]
-    if ranges and len(ranges) == len(moving) and all(hi - lo <= 0 for lo, hi in ranges):
+    if moving and len(ranges) == len(moving) and all(hi - lo <= 0 for lo, hi in ranges):
         raise RobotError(f"{label}: every joint from the root to {tip_frame!r} has an empty range (lower = upper), so the "
                          f"arm cannot move; give its joints' <limit lower=... upper=...>")
 
