@@ -17,6 +17,7 @@ from workbench.params import add_param, bounds
 from workbench.planners.tournassoud.classes import KINDS, ClassParams, no_class_reason
 from workbench.planners.tournassoud.stages import table_stage_at
 from workbench.planners.tournassoud.table import TableParams
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.robots.model import get_robot
 
 
@@ -63,6 +64,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--db", required=True, help="DuckDB store file")
     add_table_arguments(p)
     add_param(p, PlacementParams, "min_stability")
+    add_gripper_argument(p)
     p.set_defaults(func=run)
 
 
@@ -84,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     cp, tp = params_from_args(args)
     base = parse_base(args.base) if args.base else None
-    robot = get_robot(args.robot, base=base, tip_frame=args.tip)
+    robot = get_robot(args.robot, base=base, tip_frame=args.tip, gripper=gripper_from_args(args))
     r = table_stage_at(args.db, obj, robot, cp, tp, PlacementParams(min_stability=args.min_stability),
                        progress=sys.stderr.isatty())
     for line in summary(r):

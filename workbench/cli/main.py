@@ -29,6 +29,7 @@ COMMANDS = {
     "build": "run every stage for a mesh and a robot (grasps, placements, IK, regrasp graph)",
     "catalog": "build a parts x robots catalogue on a Dask cluster, or print one",
     "plan": "plan regrasps from a start to a goal pose on the table",
+    "simulate": "replay a stored plan in MuJoCo physics: does the part stay in the hand and end at its goal?",
     "fingers": "five-finger regrasp roadmap by contact-point clustering (Tables I-III)",
     "gptable": "grasp classes and the grasp-placement table (Tournassoud et al. 1987)",
     "gpplan": "regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)",
