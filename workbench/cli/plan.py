@@ -14,6 +14,7 @@ from workbench.cli import warn
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
+from workbench.cli.simulate import INSTALL, add_sim_arguments, print_simulation, sim_params
 from workbench.errors import PlanningError
 from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
@@ -27,6 +28,7 @@ from workbench.planners.wan_harada.stages import (
 )
 from workbench.robots.motion import MotionOptions
 from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
+from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored, stored_playback
 from workbench.store import Store
 from workbench.store.robots import robot_with_gripper
 from workbench.viewer.wan_harada import plan_scene
@@ -68,6 +70,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml "
                     "(a ROS 2 trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
     add_gripper_argument(parser)
+    physics = parser.add_argument_group("physics", f"replay the best plan in MuJoCo, as `workbench simulate` does ({INSTALL})")
+    physics.add_argument("--simulate", action="store_true",
+                         help="simulate the best plan after planning, store the verdict and play the simulated part in --html")
+    physics.add_argument("--require-physics", action="store_true",
+                         help="a plan that fails in simulation counts as a failed motion: its failing step's roadmap node "
+                              "or grip is removed and the graph searched again (up to --max-removed); implies --simulate")
+    add_sim_arguments(physics)
     parser.set_defaults(func=run)
 
 
@@ -97,8 +106,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"the start is the goal ({args.start}): {args.object} is already in place; no plan to make")
             return 0
         report_graph(planner, t_load)
+        simulate = args.simulate or args.require_physics
+        params = sim_params(args) if simulate else None
+        physics = physics_check(store, planner.robot, params) if args.require_physics else None
         try:
-            plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
+            plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts, physics=physics)
         except PlanningError as exc:
             if getattr(exc, "reason", None) not in NO_RESULT:
                 raise
@@ -121,8 +133,22 @@ def run(args: argparse.Namespace) -> int:
         elif getattr(planner, "partial", False):
             print("not stored: planned on an incomplete IK stage (--allow-partial)")
         elif not args.no_save:
-            ids = save_plans(store, plans)
-            print(f"stored plan ids {ids} in {args.db}")
+            known = save_plans(store, plans)
+            print(f"stored plan ids {known} in {args.db}")
+        playback = None
+        if args.require_physics:
+            gone = [f for f in planner.last_motion.failures if f.startswith("physics:")]
+            print(f"physics: {len(gone)} plan(s) failed in simulation before this one, and their failing step's roadmap "
+                  f"node or grip was removed" + "".join(f"\n  removed after {f}" for f in gone))
+        if simulate:
+            if known[0] is not None:
+                out = simulate_stored(store, known[0], params, plan=best, robot=planner.robot)
+                print_simulation(out, known[0], args.db)
+                playback = stored_playback(store, known[0])
+            else:
+                res = simulate_in_memory(store, best, planner.robot, params)
+                print(f"physics (not stored): {res.summary() if res.confirmed else res.failure.message}")
+                playback = (res.playback_t, res.playback_pose)
     if args.json:
         write_json(plans, args.json)
         print(f"json: {Path(args.json).resolve()}")
@@ -130,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"trajectory: {write_trajectory(best, args.trajectory).resolve()}")
     if args.html:
 
-        print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes)).resolve()}")
+        print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes, simulated=playback)).resolve()}")
     return 0
 
 
