@@ -34,6 +34,10 @@ from workbench.store.robots import robot_with_gripper
 from workbench.viewer.wan_harada import plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
+ACC = cli_bound(0, 1000, lo_open=True, unit="rad/s^2", help="joint acceleration limit")
+BUDGET = cli_bound(0, 3600, lo_open=True, unit="s", help="RRT-Connect time budget per motion")
+REMOVED = cli_bound(0, 100_000, integer=True, help="motions that may fail before giving up")
+SEED = cli_bound(0, 2**32 - 1, integer=True, help="motion planner seed")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -166,21 +170,18 @@ def report_graph(planner, t_load: float) -> None:
 def add_motion_arguments(parser: argparse.ArgumentParser, removed: str) -> None:
     """--acc, --budget, --max-removed (of `removed`, what a failing motion takes out) and --seed, read by
     `exec_options`."""
-    parser.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
-    parser.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
-    parser.add_argument("--max-removed", type=int, default=10,
-                        help=f"{removed} whose motions fail to remove before giving up (default 10)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
+    parser.add_argument("--acc", type=parse_number(ACC, "--acc", DEFAULT_ACC), default=DEFAULT_ACC, metavar="X",
+                        help=f"joint acceleration limit ({ACC.describe(True)}; default {DEFAULT_ACC:g})")
+    parser.add_argument("--budget", type=parse_number(BUDGET, "--budget", 1.0), default=1.0, metavar="S",
+                        help=f"RRT-Connect time budget per motion ({BUDGET.describe(True)}; default 1)")
+    parser.add_argument("--max-removed", type=parse_number(REMOVED, "--max-removed", 10), default=10, metavar="N",
+                        help=f"{removed} whose motions fail to remove before giving up ({REMOVED.describe(True)}; default 10)")
+    parser.add_argument("--seed", type=parse_number(SEED, "--seed", 0), default=0, metavar="N",
+                        help=f"seed of the motion planner ({SEED.describe(True)}; default 0)")
 
 
 def exec_options(args: argparse.Namespace) -> ExecOptions:
-    """Motion settings from --acc, --budget, --max-removed and --seed (one-line errors on bad values)."""
-    if not (args.acc > 0 and math.isfinite(args.acc)):
-        raise PlanningError(f"--acc must be a finite acceleration > 0 rad/s^2, got {args.acc}")
-    if not (args.budget > 0 and math.isfinite(args.budget)):
-        raise PlanningError(f"--budget must be > 0 s, got {args.budget}")
-    if args.max_removed < 0:
-        raise PlanningError(f"--max-removed must be >= 0, got {args.max_removed}")
+    """Motion settings from --acc, --budget, --max-removed and --seed (their ranges checked while parsing)."""
     return ExecOptions(acc=args.acc, max_removed=args.max_removed, motion=MotionOptions(budget=args.budget, seed=args.seed))
 
 
