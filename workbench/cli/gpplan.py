@@ -16,9 +16,11 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
 from workbench.cli.plan import add_motion_arguments, exec_options
 from workbench.errors import WorkbenchError
+from workbench.params import parse_number
 from workbench.planners.tournassoud.chaining import NoSequence, in_range, nearest_sample
 from workbench.planners.tournassoud.table import runs
 from workbench.planners.tournassoud.task import Obstacle, TaskEnd, end_mask
@@ -60,9 +62,13 @@ def parse_grasp(text: str, label: str = "--initial") -> tuple[int, float]:
     """CLASS,THETA (degrees) -> (class, radians)."""
     c, t = _nums(text, label, 2)
     try:
-        return int(c), float(np.radians(float(t)))
+        cls, theta = int(c), float(t)
     except ValueError:
         raise WorkbenchError(f"{label} {text!r} must be CLASS,THETA (class index, degrees), e.g. 0,30") from None
+    if cls < 0 or not np.isfinite(theta):
+        raise WorkbenchError(f"{label} {text!r} must be CLASS,THETA with a class index >= 0 and a finite angle in degrees, "
+                             f"e.g. 0,30")
+    return cls, float(np.radians(theta))
 
 
 def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
@@ -73,6 +79,9 @@ def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
         cls = int(c)
     except ValueError:
         raise WorkbenchError(f"--goal {text!r} must be CLASS,MIN:MAX (class index, degrees), e.g. 2,60:120") from None
+    if cls < 0 or not (np.isfinite(lo) and np.isfinite(hi)):
+        raise WorkbenchError(f"--goal {text!r} must be CLASS,MIN:MAX with a class index >= 0 and finite angles in degrees, "
+                             f"e.g. 2,60:120")
     if hi < lo:
         raise WorkbenchError(f"--goal {text!r}: MAX {hi:g} is below MIN {lo:g}; give MIN:MAX with MIN <= MAX")
     return cls, (float(np.radians(lo)), float(np.radians(hi)))
@@ -104,8 +113,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the final insertion: the direction the held part moves into place (world) and its length in "
                         "metres (default 0.02); the last grasp's hand must clear the destination's obstacles all along it")
     p.add_argument("--table", default=None, help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
-    p.add_argument("--handx", type=float, default=0.05, help="approach distance along the hand's axis (m)")
-    p.add_argument("--worldz", type=float, default=0.05, help="lift after the approach (m)")
+    p.add_argument("--handx", type=parse_number(RETRACT, "--handx", 0.05), default=0.05, metavar="M",
+                   help=f"approach distance along the hand's axis ({RETRACT.describe(True)}; default 0.05)")
+    p.add_argument("--worldz", type=parse_number(RETRACT, "--worldz", 0.05), default=0.05, metavar="M",
+                   help=f"lift after the approach ({RETRACT.describe(True)}; default 0.05)")
     p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
     p.add_argument("--no-motion", action="store_true", help="waypoints only: do not plan and time the motions")
     add_motion_arguments(p, "conjunctions of the table")
@@ -208,9 +219,10 @@ def run(args: argparse.Namespace) -> int:
                           (place_mode and (args.from_ is None or args.to is None))):
         raise WorkbenchError("give either --initial CLASS,THETA with --goal CLASS,MIN:MAX, or --from P,PHI with --to P,PHI, "
                              "or a task: --pickup P,X,Y,PHI with --destination P,X,Y,PHI")
-    for label, v in (("--handx", args.handx), ("--worldz", args.worldz)):
-        if not np.isfinite(v) or v < 0:
-            raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
+    if grasp_mode:  # the query is read before the store is opened: a malformed one costs nothing
+        initial, (gc, rng) = parse_grasp(args.initial), parse_goal(args.goal)
+    elif place_mode:
+        start, goal = parse_grasp(args.from_, "--from"), parse_grasp(args.to, "--to")
     gripper = gripper_from_args(args)
     robot = args.robot
     if robot is not None:
@@ -239,12 +251,8 @@ def run(args: argparse.Namespace) -> int:
             seq, plan = plan_task_query(r.table, r.classes, realiser, r.robot, r.obj.name, pickup, destination,
                                         start_mask, goal_mask, motions)
         elif grasp_mode:
-            initial = parse_grasp(args.initial)
-            gc, rng = parse_goal(args.goal)
             seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng, motions)
         else:
-            start = parse_grasp(args.from_, "--from")
-            goal = parse_grasp(args.to, "--to")
             seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal, motions)
     except NoSequence as exc:
         print(f"warning: {exc}", file=sys.stderr)

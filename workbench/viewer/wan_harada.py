@@ -36,6 +36,7 @@ from workbench.viewer.scenes import (
 )
 
 OBJECT_COLOR, START_COLOR, GOAL_COLOR, TABLE_COLOR = 0xE0A030, 0xF0D040, 0x3366DD, 0x8B6B4A
+SIMULATED_COLOR = 0xD03060  # the part as MuJoCo moved it (`workbench simulate`), beside the planned one
 CAMERA_DIR = np.array([0.8, -0.8, 0.0]) / np.hypot(0.8, 0.8)
 """Horizontal direction from the scene toward `frame_camera`'s default camera (captions face it)."""
 
@@ -130,10 +131,12 @@ def plan_frames(plan, robot, fps: int = 30) -> list[dict]:
 
 
 def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30,
-              path: str = "plan", kind: str = "visual", frames: list[dict] | None = None) -> manim.Animation:
+              path: str = "plan", kind: str = "visual", frames: list[dict] | None = None,
+              simulated: tuple[np.ndarray, np.ndarray] | None = None) -> manim.Animation:
     """Draw the plan's scene under `path` and attach its animation to `vis` (looped). The robot and the planning
     gripper are drawn by `workbench.viewer.robot.RobotView` (`kind`: the URDF's visual or collision meshes);
-    `frames`: `plan_frames(plan, robot, fps)` when the caller has them already."""
+    `frames`: `plan_frames(plan, robot, fps)` when the caller has them already. `simulated`: (t, poses (K, 4, 4)),
+    the part as a physics replay moved it, played beside the planned part (a timed plan only)."""
 
     vis[path].delete()
     vis["/Grid"].set_property("visible", False)  # the table stands for the plane z = 0
@@ -150,9 +153,17 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
     view = RobotView(vis, robot, f"{path}/robot", kind)
     frames = plan_frames(plan, robot, fps) if frames is None else frames
     anim = manim.Animation(default_framerate=fps)
+    sim_poses = None
+    if simulated is not None and plan.segments:
+        show_mesh(vis, f"{path}/simulated", obj_mesh, color=SIMULATED_COLOR, opacity=0.6, pose=plan.start_pose)
+        t_sim, p_sim = simulated
+        at = np.clip(np.searchsorted(t_sim, np.arange(len(frames)) / fps), 0, len(t_sim) - 1)
+        sim_poses = p_sim[at]
     if plan.segments:
         key = [("part", OBJECT_COLOR), ("start pose", START_COLOR), ("goal pose", GOAL_COLOR),
                ("put down to regrasp", 0x999999), ("table", TABLE_COLOR)]
+        if sim_poses is not None:
+            key.insert(1, ("part in physics", SIMULATED_COLOR))
         add_overlays(vis, anim, frames, f"{path}/captions", caption_anchor(plan, arm_reach(plan, robot)), CAMERA_DIR, key)
     for i, fr in enumerate(frames):
         poses = view.poses(fr["q"], fr["jaw"])
@@ -161,6 +172,8 @@ def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, t
             for name, m in poses.items():
                 f[name].set_transform(m)
             f[f"{path}/object"].set_transform(obj_pose)
+            if sim_poses is not None:
+                f[f"{path}/simulated"].set_transform(sim_poses[i])
     if frames:  # the first frame as the scene's static state (shown before playing)
         view.show(frames[0]["q"], frames[0]["jaw"])
         vis[f"{path}/object"].set_transform(plan.start_pose)
@@ -205,30 +218,35 @@ def scene_table(planner) -> tuple:
 
 
 def plan_scene(plan, planner, out: str | Path | None = None, vis: meshcat.Visualizer | None = None,
-               kind: str = "collision") -> Path | meshcat.Visualizer:
+               kind: str = "collision", simulated: tuple[np.ndarray, np.ndarray] | None = None) -> Path | meshcat.Visualizer:
     """The plan's animation in a meshcat scene (a new one unless `vis`); written as static HTML when `out` is given
     (returns its path), else the visualizer is returned. `kind`: the robot's collision meshes (a file of a few MB)
-    or its visual meshes (nicer, about 15 MB for the Panda)."""
+    or its visual meshes (nicer, about 15 MB for the Panda). `simulated`: the part's poses in a physics replay
+    (t, poses), played beside the planned part."""
     if vis is None:
         vis = new_scene()
     frames = plan_frames(plan, planner.robot)  # the animation's, and the page caption's clock
-    show_plan(vis, plan, planner.robot, planner.object.mesh, scene_table(planner), kind=kind, frames=frames)
+    show_plan(vis, plan, planner.robot, planner.object.mesh, scene_table(planner), kind=kind, frames=frames,
+              simulated=simulated)
     frame_plan(vis, plan, planner.robot)
     if out is None:
         return vis
     path = static_html(vis, out)
     page = path.read_text()
-    path.write_text(page.replace("</body>", plan_overlay(plan, [f["step"] for f in frames]) + "</body>", 1))
+    path.write_text(page.replace("</body>", plan_overlay(plan, [f["step"] for f in frames], simulated=simulated is not None)
+                                 + "</body>", 1))
     return path
 
 
-def plan_overlay(plan, frame_steps: list[int], fps: int = 30) -> str:
+def plan_overlay(plan, frame_steps: list[int], fps: int = 30, simulated: bool = False) -> str:
     """HTML for a static plan page: a colour key (top left) and a caption naming the step playing (bottom), read
-    from the meshcat animation's clock (`viewer.animator`)."""
+    from the meshcat animation's clock (`viewer.animator`); `simulated`: the key names the part in physics."""
+    keys = ((OBJECT_COLOR, "the part"), *(((SIMULATED_COLOR, "the part in physics"),) if simulated else ()),
+            (START_COLOR, "start pose"), (GOAL_COLOR, "goal pose"), (0x999999, "intermediate placements"),
+            (TABLE_COLOR, "table"))
     legend = "".join(f"<span style='margin-right:12px;white-space:nowrap'><span style='display:inline-block;width:11px;"
                      f"height:11px;margin-right:4px;border:1px solid #555;background:#{c:06x}'></span>{t}</span>"
-                     for c, t in ((OBJECT_COLOR, "the part"), (START_COLOR, "start pose"), (GOAL_COLOR, "goal pose"),
-                                  (0x999999, "intermediate placements"), (TABLE_COLOR, "table")))
+                     for c, t in keys)
     captions = ["start: the part at its start pose, the robot at its first retract configuration"] + [
         f"step {i + 1} of {len(plan.steps)}: {' '.join(line.split('. ', 1)[-1].split())}"
         for i, line in enumerate(plan.lines()[:len(plan.steps)])]
