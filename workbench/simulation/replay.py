@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 from workbench.errors import SimulationError
 from workbench.params import Params, param
 from workbench.simulation.decomposition import Decomposition
-from workbench.simulation.scene import build_scene, mujoco_module
+from workbench.simulation.scene import build_scene, mass_properties, mujoco_module, part_scene
 
 MODEL_VERSION = 1  # bump when the scene or the verdict changes what a stored simulation means
 DEGREE = math.pi / 180
@@ -303,18 +303,9 @@ def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: Si
             continue
         if s.kind == "gripper":  # the open: the released part must come to rest at its placement
             a = idx_end[k]
-            w = min(len(times) - 1, a + int(round(p.settle_time / dt)))
-            lin, ang = _speeds(part, com, dt, a, w)
-            calm = np.flatnonzero((lin < p.settle_speed) & (ang < p.settle_spin))
-            if len(calm) == 0:
-                fail("roll", k, times[w], f"the released part did not settle within {p.settle_time:g} s (still "
-                                          f"{lin[-1] * 1000:.0f} mm/s, {math.degrees(ang[-1]):.0f} deg/s)")
-            else:
-                settle[k] = float(calm[0] * dt)
-                e_t, e_r = pose_error(part[a + int(calm[0])], steps[s.step].object_pose, com)
-                if e_r > p.waypoint_tol_angle or e_t > p.waypoint_tol:
-                    fail("roll", k, times[a + int(calm[0])], f"the released part rolled: it rests {e_t * 1000:.1f} mm and "
-                                                          f"{math.degrees(e_r):.1f} deg from its placement")
+            settle[k], at, what = settled(part, com, dt, a, steps[s.step].object_pose, p)
+            if what:
+                fail("roll", k, times[at], what)
         k += 1
     flagged = {f.step for f in failures}
     for k in range(len(segs)):
@@ -334,6 +325,49 @@ def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: Si
             "simulated": sim.reshape(len(segs), 16), "error": err_t, "angle": err_r, "slip": slip_t, "slip_angle": slip_r,
             "settle": settle, "touching": touching, "ok": ok}
     return rows, failures, (float(f_t), float(f_r))
+
+
+def settled(part: np.ndarray, com: np.ndarray, dt: float, a: int, placement: np.ndarray,
+            p: SimParams) -> tuple[float, int, str | None]:
+    """Whether a part released at sample `a` of its poses `part` is at rest at `placement` `settle_time` later:
+    (seconds until its speeds last fell below `settle_speed` and `settle_spin`, NaN if it still moves; the sample
+    judged; None, or why it counts as a roll: it still moves, or it rests beyond the waypoint tolerance)."""
+    w = min(len(part) - 1, a + int(round(p.settle_time / dt)))
+    lin, ang = _speeds(part, com, dt, a, w)
+    moving = np.flatnonzero((lin >= p.settle_speed) | (ang >= p.settle_spin))
+    if len(moving) and moving[-1] >= len(lin) - 1:
+        return math.nan, w, (f"the released part did not settle within {p.settle_time:g} s (still {lin[-1] * 1000:.0f} mm/s, "
+                             f"{math.degrees(ang[-1]):.0f} deg/s)")
+    calm = float((moving[-1] + 1) * dt) if len(moving) else 0.0
+    e_t, e_r = pose_error(part[w], placement, com)
+    if e_r > p.waypoint_tol_angle or e_t > p.waypoint_tol:
+        return calm, w, (f"the released part rolled: it rests {e_t * 1000:.1f} mm and {math.degrees(e_r):.1f} deg from its "
+                         f"placement")
+    return calm, w, None
+
+
+def rest_on_table(mesh, hulls: list[tuple[np.ndarray, np.ndarray]], pose: np.ndarray, scene,
+                  params: SimParams = SimParams(), friction: float = 0.5) -> tuple[str | None, np.ndarray]:
+    """A part released at rest at `pose` on the table (no robot; a placement as a plan's release leaves it), judged
+    as after a release (`settled`, over `settle_time` plus `hold_end`): (None or why it rolls, its final pose)."""
+    mujoco = mujoco_module()
+    m, body = part_scene(mesh, hulls, scene, params.density, friction, params.timestep)
+    data = mujoco.MjData(m)
+    data.qpos[:3] = pose[:3, 3]
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(pose[:3, :3]).ravel())
+    data.qpos[3:7] = quat
+    n = int(math.ceil((params.settle_time + params.hold_end) / params.timestep))
+    pos, q = np.empty((n + 1, 3)), np.empty((n + 1, 4))
+    mujoco.mj_forward(m, data)
+    pos[0], q[0] = data.xpos[body], data.xquat[body]
+    for k in range(n):
+        mujoco.mj_step(m, data)
+        pos[k + 1], q[k + 1] = data.xpos[body], data.xquat[body]
+    part = _poses(pos, q)
+    _, com, _ = mass_properties(mesh, params.density)
+    _, _, what = settled(part, com, params.timestep, 0, pose, params)
+    return what, part[-1]
 
 
 def _speeds(part: np.ndarray, com: np.ndarray, dt: float, a: int, b: int, lag: int = 10) -> tuple[np.ndarray, np.ndarray]:

@@ -95,21 +95,9 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
     """Compile the scene of the module docstring for `robot` (a workbench Robot), `gripper` (its planning
     Gripper), `scene` (the table), the part's `mesh` and convex `hulls` (part frame)."""
     mujoco = mujoco_module()
-    spec = mujoco.MjSpec()
-    spec.option.timestep = float(timestep)
-    spec.option.gravity = [0.0, 0.0, -9.81]
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    spec.option.noslip_iterations = NOSLIP
-    if hasattr(mujoco.mjtEnableBit, "mjENBL_MULTICCD"):  # several contacts per flat face pair (default from MuJoCo 3.3)
-        spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_MULTICCD)
-    spec.compiler.autolimits = True
-    spec.compiler.degree = False  # joint ranges in radians
+    spec = _spec(timestep)
 
-    lo, hi, th = np.asarray(scene.table_min), np.asarray(scene.table_max), float(scene.table_thickness)
-    spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[*(0.5 * (hi - lo)), th / 2],
-                            pos=[*(0.5 * (lo + hi)), -th / 2], friction=[table_friction, 0.0, 0.0], priority=1,
-                            condim=3, solref=SOLREF, solimp=SOLIMP)
+    _add_table(spec, scene, table_friction)
 
     base = robot.base
     parent = spec.worldbody.add_body(name="robot_base", pos=base[:3, 3], quat=_quat(base[:3, :3]))
@@ -166,18 +154,7 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
                       data=[0.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * 7)
     spec.add_exclude(bodyname1="finger_left", bodyname2="finger_right")
 
-    mass, com, inertia = mass_properties(mesh, density)
-    part = spec.worldbody.add_body(name="part")
-    part.add_freejoint(name="part")
-    part.explicitinertial = True
-    part.mass = mass
-    part.ipos = com
-    part.fullinertia = _full_inertia(inertia)
-    for k, (v, f) in enumerate(hulls):
-        spec.add_mesh(name=f"hull{k}", uservert=np.asarray(v, dtype=np.float32).ravel(),
-                      userface=np.asarray(f, dtype=np.int32).ravel())
-        part.add_geom(name=f"hull{k}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"hull{k}", condim=4,
-                      friction=[min(pad_friction, table_friction), TORSION, 0.0], solref=SOLREF, solimp=SOLIMP)
+    mass, com = _add_part(spec, mesh, hulls, density, min(pad_friction, table_friction))
 
     for name in arm_joints:
         a = spec.add_actuator(name=f"pos_{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
@@ -203,3 +180,54 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
                     finger_act=np.array([m.actuator(f"grip_{n}").id for n in fingers]),
                     hand_body=m.body("hand").id, part_body=m.body("part").id, part_mass=mass, part_com=com,
                     hulls=len(hulls))
+
+
+def _spec(timestep: float):
+    """An empty MjSpec with the scene's options: gravity, timestep, implicit integration, elliptic friction cones."""
+    mujoco = mujoco_module()
+    spec = mujoco.MjSpec()
+    spec.option.timestep = float(timestep)
+    spec.option.gravity = [0.0, 0.0, -9.81]
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.noslip_iterations = NOSLIP
+    if hasattr(mujoco.mjtEnableBit, "mjENBL_MULTICCD"):  # several contacts per flat face pair (default from MuJoCo 3.3)
+        spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_MULTICCD)
+    spec.compiler.autolimits = True
+    spec.compiler.degree = False  # joint ranges in radians
+    return spec
+
+
+def _add_table(spec, scene, friction: float) -> None:
+    mujoco = mujoco_module()
+    lo, hi, th = np.asarray(scene.table_min), np.asarray(scene.table_max), float(scene.table_thickness)
+    spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[*(0.5 * (hi - lo)), th / 2],
+                            pos=[*(0.5 * (lo + hi)), -th / 2], friction=[friction, 0.0, 0.0], priority=1,
+                            condim=3, solref=SOLREF, solimp=SOLIMP)
+
+
+def _add_part(spec, mesh: trimesh.Trimesh, hulls, density: float, friction: float) -> tuple[float, np.ndarray]:
+    """The part as a free body (frame: the part's) with its mesh's mass properties and one geom per convex hull."""
+    mujoco = mujoco_module()
+    mass, com, inertia = mass_properties(mesh, density)
+    part = spec.worldbody.add_body(name="part")
+    part.add_freejoint(name="part")
+    part.explicitinertial = True
+    part.mass = mass
+    part.ipos = com
+    part.fullinertia = _full_inertia(inertia)
+    for k, (v, f) in enumerate(hulls):
+        spec.add_mesh(name=f"hull{k}", uservert=np.asarray(v, dtype=np.float32).ravel(),
+                      userface=np.asarray(f, dtype=np.int32).ravel())
+        part.add_geom(name=f"hull{k}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"hull{k}", condim=4,
+                      friction=[friction, TORSION, 0.0], solref=SOLREF, solimp=SOLIMP)
+    return mass, com
+
+
+def part_scene(mesh: trimesh.Trimesh, hulls, scene, density: float, friction: float, timestep: float) -> tuple[object, int]:
+    """The table and the part alone (no robot): the compiled model and the part's body id."""
+    spec = _spec(timestep)
+    _add_table(spec, scene, friction)
+    _add_part(spec, mesh, hulls, density, friction)
+    m = spec.compile()
+    return m, m.body("part").id
