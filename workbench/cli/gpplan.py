@@ -27,6 +27,7 @@ from workbench.planners.tournassoud.task import Obstacle, TaskEnd, end_mask
 from workbench.planners.tournassoud.figures import table_html
 from workbench.planners.tournassoud.plans import (
     Realiser,
+    explanation,
     plan_grasp_query,
     plan_placement_query,
     plan_task_query,
@@ -84,32 +85,6 @@ def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
     if hi < lo:
         raise WorkbenchError(f"--goal {text!r}: MAX {hi:g} is below MIN {lo:g}; give MIN:MAX with MIN <= MAX")
     return cls, (float(np.radians(lo)), float(np.radians(hi)))
-
-
-def explanation(table, own, removals: list, seq=None, own_dict: dict | None = None) -> list[str]:
-    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
-    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one."""
-    if own is not None:
-        own_dict = own.as_dict(table)
-    if own_dict is None:
-        return []
-    n = own_dict["regrasps"]
-    if not removals:
-        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
-    lines = [f"  removed {x.text(table)}" for x in removals]
-    own_pairs = set()
-    g, p = own_dict["grasps"], own_dict["placements"]
-    if own_dict["kind"] == "grasp":
-        for k, pl in enumerate(p):
-            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
-    else:
-        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
-    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
-    kinds = sorted({x.motion for x in removals})
-    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
-                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
-                 f"executable one has {'none' if seq is None else seq.regrasps}")
-    return lines
 
 
 def register(sub: argparse._SubParsersAction) -> None:

@@ -365,6 +365,35 @@ def learn_removal(work: GraspPlacementTable, classes: list[GraspClass], realiser
     return before - int(work.q.sum()), (b_prev, b_bad) if b_prev is not None and b_bad is not None else None
 
 
+def explanation(table: GraspPlacementTable, own: Sequence | None, removals: list[Removal], seq: Sequence | None = None,
+                own_dict: dict | None = None) -> list[str]:
+    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
+    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one (`seq`,
+    None when there is none). `own` is the table's answer, or `own_dict` its `as_dict` (as `Sequence.extra["table"]`
+    holds it)."""
+    if own is not None:
+        own_dict = own.as_dict(table)
+    if own_dict is None:
+        return []
+    n = own_dict["regrasps"]
+    if not removals:
+        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
+    lines = [f"  removed {x.text(table)}" for x in removals]
+    own_pairs = set()
+    g, p = own_dict["grasps"], own_dict["placements"]
+    if own_dict["kind"] == "grasp":
+        for k, pl in enumerate(p):
+            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
+    else:
+        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
+    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
+    kinds = sorted({x.motion for x in removals})
+    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
+                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
+                 f"executable one has {'none' if seq is None else seq.regrasps}")
+    return lines
+
+
 def step_conjunctions(kind: str, n: int) -> tuple[list[str], list[int]]:
     """The plan's step kinds and, per step, the index of the conjunction it realises (see the module docstring)."""
     if kind == "placement":
