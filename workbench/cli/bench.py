@@ -16,6 +16,7 @@ BENCHES = {
     "fingers": "five-finger regrasp by contact-point clustering beside Tables I-III",
     "gptable": "the grasp-placement table: classes, build times, chaining, closed-form IK",
     "catalog": "catalogue build on a local Dask cluster: speed-up and the driver's load",
+    "widgets": "notebook widgets driven headless: latency from a change to the scene's update",
 }
 
 
