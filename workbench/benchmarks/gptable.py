@@ -61,6 +61,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the queries and pairs")
     parser.add_argument("--points", type=int, default=3, help="grasp points per feature pair of the second compared table")
     parser.add_argument("--dir", default="build/bench/gptable", help="folder of the roadmap planner's stores")
+    parser.add_argument("--executable", type=int, default=9,
+                        help="seeded grasp queries of the L part from the robot's default pedestal realised with their "
+                             "timed motions (0: skip)")
 
 
 def _objects(spec: str) -> list[tuple[str, ObjectModel]]:
@@ -191,6 +194,43 @@ def compare_roadmap(name: str, obj: ObjectModel, robot_name: str, tables: list, 
     return ours, theirs, why
 
 
+def executable_queries(robot, point, n: int, seed: int) -> tuple[list[str], list[float]]:
+    """`n` seeded grasp queries of the L part that the table answers (a legal initial grasp, another class's whole
+    range as the goal; queries without a table answer are drawn again) planned with their timed motions at the
+    default limit, as `gpplan` does: one outcome per query and each query's seconds."""
+    from workbench.planners.tournassoud.plans import plan_grasp_query
+    from workbench.planners.wan_harada.motions import ExecOptions
+
+    part = l_part()
+    classes = grasp_classes(part, robot.gripper)
+    table = build_table(classes, stable_placements(part).poses, robot, robot.gripper, TableParams(table_point=point),
+                        progress=False)
+    realiser = Realiser(robot, default_scene(robot.name), part.mesh)
+    rng = np.random.default_rng(seed)
+    legal = np.argwhere(table.hand_object)
+    out, secs = [], []
+    for _ in range(50 * n):
+        if len(out) == n:
+            break
+        c, t = legal[rng.integers(len(legal))]
+        goal = int((c + rng.integers(1, len(classes))) % len(classes))
+        try:
+            grasp_query(table, (int(c), float(table.theta[t])), goal, (0.0, 2 * np.pi))
+        except PlanningError:
+            continue
+        t0 = time.perf_counter()
+        try:
+            seq, _plan = plan_grasp_query(table, classes, realiser, robot, "L", (int(c), float(table.theta[t])), goal,
+                                          (0.0, 2 * np.pi), ExecOptions())
+            k = len(seq.extra.get("removed", []))
+            out.append(f"ok ({seq.regrasps} regrasps, table {seq.extra['table']['regrasps']}, {k} removed)")
+        except NoSequence as exc:
+            k = len(getattr(exc, "removals", ()))
+            out.append(f"none after {k} removals ({exc})")
+        secs.append(time.perf_counter() - t0)
+    return out, secs
+
+
 def run(args: argparse.Namespace) -> int:
     point = tuple(float(v) for v in args.table_point.split(","))
     robot = get_robot(args.robot)
@@ -259,6 +299,15 @@ def run(args: argparse.Namespace) -> int:
     print(f"closed-form IK ({args.robot}, 8 branches, joint limits, one process): {wall:,.0f} poses per second, {cpu:,.0f} per "
           f"CPU second with every branch's joints; {wall_v:,.0f} ({cpu_v:,.0f} per CPU second) validity only, the table's "
           f"pass (target >= 500,000; best of 5)")
+    if args.executable > 0:
+        outcomes, secs = executable_queries(robot, point, args.executable, args.seed)
+        ok = sum(o.startswith("ok") for o in outcomes)
+        print()
+        print(f"executable from {args.robot}'s default pedestal: {ok} of {len(outcomes)} seeded grasp queries of the L part "
+              f"that the table answers "
+              f"(motions planned, default --max-removed 10; median {statistics.median(secs):.1f} s per query, wall):")
+        for k, o in enumerate(outcomes):
+            print(f"  query {k + 1}: {o}")
     if cmp_rows:
         print()
         print_table(["object", "pairs", "regrasps (this planner)", f"this planner, {args.points} points per pair",
