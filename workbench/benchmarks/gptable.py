@@ -36,9 +36,10 @@ from workbench.planners.tournassoud.chaining import (
     placement_query,
 )
 from workbench.planners.tournassoud.classes import KINDS, ClassParams, grasp_classes
-from workbench.planners.tournassoud.plans import Realiser, plan_placement_query
+from workbench.planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
 from workbench.planners.tournassoud.shapes import l_part
 from workbench.planners.tournassoud.table import TableParams, build_table, grid, rz
+from workbench.planners.wan_harada.motions import ExecOptions
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.stages import build_all, load_planner
 from workbench.planners.wan_harada.tabletop import TabletopParams
@@ -198,9 +199,6 @@ def executable_queries(robot, point, n: int, seed: int) -> tuple[list[str], list
     """`n` seeded grasp queries of the L part that the table answers (a legal initial grasp, another class's whole
     range as the goal; queries without a table answer are drawn again) planned with their timed motions at the
     default limit, as `gpplan` does: one outcome per query and each query's seconds."""
-    from workbench.planners.tournassoud.plans import plan_grasp_query
-    from workbench.planners.wan_harada.motions import ExecOptions
-
     part = l_part()
     classes = grasp_classes(part, robot.gripper)
     table = build_table(classes, stable_placements(part).poses, robot, robot.gripper, TableParams(table_point=point),
