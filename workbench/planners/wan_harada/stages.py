@@ -343,7 +343,7 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
             return out
         t0 = time.perf_counter()
         planner = load_planner(store, obj.name, ik_ids["idrobot"], handx, worldz, idtabletop=p.idtabletop,
-                               idscene=ik_ids["idscene"], worlda=worlda)
+                               idscene=ik_ids["idscene"], worlda=worlda, gripper=robot.gripper)
         out.timings["graph"] = time.perf_counter() - t0
         out.counts.update({f"graph_{k}": v for k, v in planner.roadmap.summary().items()})
         out.counts["placement_ids"] = planner.placement_ids(gripped=True)
