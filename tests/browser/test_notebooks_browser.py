@@ -466,7 +466,7 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
             measured["part share"] = round(share, 4)
             assert share >= least, f"{name}: the part covers {share:.2%} of its view, less than {least:.2%}"
         if stem.startswith("04") and frames.count():  # the view's caption and footer name the same step
-            inner = frames.first.content_frame
+            inner = frames.first.element_handle().content_frame()
             texts = []
             for _ in range(20):
                 texts = inner.evaluate(BOTH)
