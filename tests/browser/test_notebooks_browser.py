@@ -401,7 +401,7 @@ MOVES = {
     "03": lambda page: move_slider(page, "feasible grip"),
     "04": lambda page: (move_slider(page, "start x (m)", 4), click(page, "search")),  # the view animates: numbers
     "05": lambda page: move_slider(page, "switch"),
-    "07": lambda page: (move_slider(page, "x (m)", 4), click(page, "search")),  # the explorer of the picked part
+    "07": lambda page: (move_slider(page, "start x (m)", 4), click(page, "search")),  # the explorer of the picked part
 }
 VIEW_ONLY = {"01", "02", "03", "05"}  # their move only shows, hides or moves what the view holds: no geometry is sent
 # The part's colour in the notebook's first view (None: the part is drawn in many colours, so everything drawn
