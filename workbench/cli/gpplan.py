@@ -87,8 +87,27 @@ def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
     return cls, (float(np.radians(lo)), float(np.radians(hi)))
 
 
+DESCRIPTION = """\
+Backward chaining in a grasp-placement table built by `workbench gptable` (Tournassoud, Lozano-Perez & Mazer 1987):
+the fewest placements on the table between a start and a goal. Three kinds of query:
+
+  --initial CLASS,THETA --goal CLASS,MIN:MAX   grasp to grasp (Section 6); MIN and MAX are both kept
+  --from P,PHI --to P,PHI                      the part from one placement at the table point to another
+  --pickup P,X,Y,PHI --destination P,X,Y,PHI   Fig. 1's task: the part taken where it lies among the
+                                               --pickup-obstacle meshes, put where it goes past the
+                                               --destination-obstacle meshes along --insert (Section 5.1:
+                                               the first and last grasps' angles follow from them)
+
+The answer is realised: IK with collisions, approach and lifts, and (unless --no-motion) timed motions. The table
+assumes the arm's paths away, so a conjunction it allows can fail with the arm; it is then removed, with every
+table sample needing the same change of arm configuration, and the chaining runs again (--max-removed motion
+failures at most). The output names each removed conjunction (step, motion, reason) and gives the table's own
+shortest sequence beside the executable one; --json carries both ("table_sequence", "removed")."""
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)")
+    p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)",
+                       description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", required=True, help="DuckDB store file with a table built by `workbench gptable`")
     p.add_argument("--object", required=True, help="object name in the store")
     p.add_argument("--robot", default=None, help="robot name in the store (default: the newest table's robot)")
@@ -296,6 +315,10 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict(),
                "table_sequence": seq.extra.get("table"), "removed": seq.extra.get("removed", [])}
+        if task_mode:
+            doc["task"] = {name: end.as_dict() for name, end in (("pickup", pickup), ("destination", destination))}
+            doc["task"]["pickup"]["legal"] = np.argwhere(start_mask).tolist()
+            doc["task"]["destination"]["legal"] = np.argwhere(goal_mask).tolist()
         write_text(args.json, json.dumps(doc, indent=1))
         print(f"json: {args.json}")
     if args.html:

@@ -12,7 +12,7 @@ import trimesh
 
 from workbench.geometry.objects import ObjectModel
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
-from workbench.robots.gripper import Gripper
+from workbench.robots.gripper import BUNDLED, Gripper, load_gripper
 from workbench.viewer import scenes as viz
 from workbench.viewer.live import (
     HandOutlines,
@@ -75,6 +75,11 @@ class GraspExplorer:
         self.selected = W.IntSlider(value=0, min=0, max=0, description="selected grasp (solid)", **label)
         self.layers = {name: W.Checkbox(value=on, description=name, indent=False, layout=W.Layout(width="200px"))
                        for name, on in self.LAYERS}
+        given = [] if gripper.name in BUNDLED or gripper.name == "franka_hand" else [(gripper.name, gripper)]
+        self.grippers = W.Dropdown(options=given + [(name, name) for name in BUNDLED],
+                                   value=given[0][1] if given else ("franka" if gripper.name == "franka_hand" else gripper.name),
+                                   description="gripper", style=label["style"], layout=W.Layout(width="420px"))
+        self.grippers.observe(lambda change: self.set_gripper(change["new"]), names="value")
         self.button = W.Button(description="plan grasps", button_style="primary")
         self.busy = Busy()
         self.counts = W.HTML()
@@ -86,7 +91,7 @@ class GraspExplorer:
         self.density.observe(self._density_moved, names="value")
         for w in (self.facet, self.hands, self.selected, *self.layers.values()):
             w.observe(lambda _: self.show(), names="value")
-        controls = [self.tau, self.method, self.density, self.radius, self.dist, self.rotations,
+        controls = [self.grippers, self.tau, self.method, self.density, self.radius, self.dist, self.rotations,
                     W.HTML("<b>view</b>"), self.facet, self.hands, self.selected,
                     W.GridBox(list(self.layers.values()), layout=W.Layout(grid_template_columns="200px 200px")),
                     W.HBox([self.button, self.busy.widget]), self.about, self.counts]
@@ -99,6 +104,11 @@ class GraspExplorer:
         if self._widget is None:
             self._widget = beside(self.controls.children, self.vis, self.key)
         return self._widget
+
+    def set_gripper(self, choice: Gripper | str) -> None:
+        """Plan with another gripper (a bundled name or a loaded Gripper) and show its grasps."""
+        self.gripper = choice if isinstance(choice, Gripper) else load_gripper(choice)
+        self.run()
 
     def _density_moved(self, _) -> None:
         if not self._quiet:

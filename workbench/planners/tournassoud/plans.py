@@ -7,13 +7,19 @@ planner's plans: `grasp` (TCP at the grasp), `approach` (backed off by `handx` a
 whose arm clears the object (the IK solver's collider); approach and retract start from the grasp's configuration
 (with the closed form: the branch nearest to it).
 
-The table only checks the grasp's IK (Section 5.2). A conjunction that fails here (no collision-free branch or no
-approach/retract) is removed from a copy of the table and the query is answered again, so the returned sequence is
-still the shortest among the conjunctions that can be executed.
+The table only checks the grasp's IK (Section 5.2); the paper assumes the arm's paths away (Section 1). A
+conjunction that fails here (no collision-free branch or no approach/retract) is removed from a copy of the table
+and the query is answered again, so the returned sequence is still the shortest among the conjunctions that can be
+executed. With motions, a failed motion between two conjunctions removes every sample needing the same change of arm
+configuration (`learn_removal`: the same IK branch switch over the neighbouring theta and phi samples of the same
+class and placement), not one sample at a time. Every removal is recorded (`Removal`) and the table's own answer
+kept beside the executable one (`explanation` prints both).
 
 Plan steps (validator order pick, (transfer, regrasp)*, place):
 - placement query: pick at the start placement with the first grasp, then per regrasp a transfer to an intermediate
   placement and a regrasp there, and place at the goal placement with the last grasp;
+- task query (`plan_task_query`, Fig. 1): the same with the pick at the task's pick-up and the place at its
+  destination, away from H, both checked against the task's obstacles;
 - grasp query (the object starts and ends in the hand): pick and transfer both hold the initial grasp at the first
   intermediate placement (the configuration where it is put down), then regrasp/transfer pairs, and the last regrasp
   and the place both hold the final grasp at the last placement.
