@@ -616,7 +616,7 @@ def _urdf_beside(urdf: Path) -> dict:
             if unknown:
                 raise GripperError(f"gripper spec {p}: unknown field {unknown[0]!r} (fields: name, hand_link, "
                                    f"finger_joints, tcp_frame)")
-            return {**spec, "_path": str(p)}
+            return spec
     return {}
 
 
