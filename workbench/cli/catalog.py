@@ -44,7 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--worldz", type=float, default=WORLDZ, help=f"retraction up along world z (m, default {WORLDZ})")
     b.add_argument("--worlda", type=float, default=WORLDA, help=f"lift of the held object straight up (m, default {WORLDA})")
     o = IKOptions()
-    b.add_argument("--ik-chunk", type=int, default=1024, help=f"tabletop grips per IK unit (a multiple of {o.lane})")
+    b.add_argument("--ik-chunk", type=int, default=1024, help="tabletop grips per IK unit")
     b.add_argument("--ik-library", type=int, default=o.library, help="IK seed library size")
     b.add_argument("--ik-seeds", type=int, default=o.seeds, help="library seeds tried after the warm start")
     b.add_argument("--shards", default=None, metavar="DIR",
