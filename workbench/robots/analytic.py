@@ -64,18 +64,22 @@ def chain_of(robot) -> Chain:
 
 
 def sub_chain(chain: Chain, fixed: dict[int, float]) -> Chain:
-    """`chain` with its last joints (0-based indices in `fixed`, all after the others) held at the given angles:
-    their rotations fold into the tip."""
-    keep = len(chain.chain_axis) - len(fixed)
-    if sorted(fixed) != list(range(keep, len(chain.chain_axis))):
-        raise ValueError("sub_chain fixes trailing joints only")
-    tip = np.eye(4)
-    for k in range(keep, len(chain.chain_axis)):
-        rot = np.eye(4)
-        rot[:3, :3] = _rotation(chain.chain_axis[k], fixed[k])
-        tip = tip @ chain.chain_placement[k] @ rot
-    return Chain(chain.name, chain.chain_placement[:keep].copy(), chain.chain_axis[:keep].copy(), chain.base,
-                 tip @ chain.tip_in_joint, chain.lower[:keep], chain.upper[:keep], chain.joint_names[:keep])
+    """`chain` with the joints of `fixed` (0-based index -> angle) held: a held joint's rotation folds into the next
+    joint's placement (into the base for the first joint, into the tip for the last)."""
+    pl, keep = list(chain.chain_placement), [k for k in range(chain.nq) if k not in fixed]
+    base, tip, placements, pending = chain.base, chain.tip_in_joint, [], np.eye(4)
+    for k in range(chain.nq):
+        if k in fixed:
+            rot = np.eye(4)
+            rot[:3, :3] = _rotation(chain.chain_axis[k], fixed[k])
+            pending = pending @ pl[k] @ rot
+            continue
+        if not placements:  # the first kept joint: what came before belongs to the base
+            base, pending = base @ pending, np.eye(4)
+        placements.append(pending @ pl[k])
+        pending = np.eye(4)
+    return Chain(chain.name, np.stack(placements), chain.chain_axis[keep].copy(), base, pending @ tip,
+                 chain.lower[keep].copy(), chain.upper[keep].copy(), tuple(chain.joint_names[k] for k in keep))
 
 
 def reversed_chain(chain: Chain) -> Chain:

@@ -391,10 +391,10 @@ class IKSolver:
         joints = np.full((c, nk, n), np.nan)
         for k, prev in ((0, -1), (1, 0), (2, 1), (3, 0), (4, 3))[:nk]:
             warm = joints[:, prev] if prev >= 0 else np.full((c, n), np.nan)
-            joints[:, k], feas[:, k] = self._seeded(targets[:, k], place[:, k], warm)
+            joints[:, k], feas[:, k] = self.solve_from_seeds(targets[:, k], place[:, k], warm)
         return feas, joints
 
-    def _seeded(self, targets: np.ndarray, placements: np.ndarray, warm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def solve_from_seeds(self, targets: np.ndarray, placements: np.ndarray, warm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joints (M, n) (NaN where none) and feasibility (M,) of poses that pass the reach filter, each from its own
         seeds in a fixed order (`chunk`): `warm` (rows of NaN: none) or the nearest library seed, then the others."""
         o = self.opts

@@ -147,13 +147,19 @@ def _solve_block(ik: ParallelIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndar
     n6 = apply_t(nw)                                                                        # (3, 2, 1, 1, N)
     v6 = _lin(r6.T, _rot(a5, c5, s5, m.reshape(3, 1, 1, 1, 1), inverse=True))              # (3, 2, 2, 1, N)
     c6, s6 = _sub1(a6, np.broadcast_to(n6, v6.shape), v6)
-    # 4. joint 4's frame: T (M5 R5 M6 R6)^-1
-    rg = [_lin(r5, _rot(a5, c5, s5, _lin(r6, _rot(a6, c6, s6, e.reshape(3, 1, 1, 1, 1))))) for e in np.eye(3)]
-    tg = _lin(r5, _rot(a5, c5, s5, t6.reshape(3, 1, 1, 1, 1))) + t5.reshape(3, 1, 1, 1, 1)
-    # T4_R = T_R RG^T: columns T4_R e_j = T_R (RG^T e_j) = T_R (row j of RG)
-    rg_rows = [np.stack([rg[i][j] for i in range(3)]) for j in range(3)]                  # RG^T e_j
-    t4r_cols = [sum(tr[:, i][:, None, None, None] * row[i] for i in range(3)) for row in rg_rows]
-    p4 = tt[:, None, None, None] - sum(t4r_cols[j] * tg[j] for j in range(3))               # frame-4 origin
+    # 4. joint 4's frame: T G^-1 with G = M5 R5(q5) M6 R6(q6); only its origin T_t - T_R G_R^T G_t and its rotation
+    # applied to d4 are needed, with G_R^T G_t = R6^T(q6) R6^T (R5^T(q5) R5^T t5 + t6)
+    def g_inv(v: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
+        """R6(q6)^T R6^T (R5(q5)^T v + extra) for constant vectors v and extra: (3, 2, 2, 1, N)."""
+        x = _rot(a5, c5, s5, v.reshape(3, 1, 1, 1, 1), inverse=True)
+        if extra is not None:
+            x = x + extra.reshape(3, 1, 1, 1, 1)
+        return _rot(a6, c6, s6, _lin(r6.T, x), inverse=True)
+
+    def t_apply(u: np.ndarray) -> np.ndarray:
+        return tr[:, 0][:, None, None, None] * u[0] + tr[:, 1][:, None, None, None] * u[1] + tr[:, 2][:, None, None, None] * u[2]
+
+    p4 = tt[:, None, None, None] - t_apply(g_inv(r5.T @ t5, t6))                        # frame-4 origin
     x1 = _rot(a1, c1, s1, p4, inverse=True)
     x2 = _lin(r2.T, x1 - t2.reshape(3, 1, 1, 1, 1))
     g = r3.T @ t3
@@ -165,8 +171,7 @@ def _solve_block(ik: ParallelIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndar
     c2, s2 = _sub1(a2, u, np.broadcast_to(x2, u.shape))
     # q4: R4(q4) d = R4^T R3(q3)^T R3^T R2(q2)^T R2^T R1(q1)^T T4_R d
     d = ik.d4
-    y = sum(t4r_cols[j] * d[j] for j in range(3))
-    y = _lin(r2.T, _rot(a1, c1, s1, y, inverse=True))
+    y = _lin(r2.T, _rot(a1, c1, s1, t_apply(g_inv(r5.T @ d)), inverse=True))
     y = _lin(r3.T, _rot(a2, c2, s2, y, inverse=True))
     y = _lin(r4.T, _rot(a3, c3, s3, y, inverse=True))
     c4, s4 = _sub1(a4, np.broadcast_to(d.reshape(3, 1, 1, 1, 1), y.shape), y)

@@ -25,7 +25,7 @@ from typing import Callable
 import numpy as np
 
 from workbench.robots import analytic, parallel
-from workbench.robots.analytic import Chain, chain_of, reverse_poses, reversed_chain, sub_chain
+from workbench.robots.analytic import Chain, _limit, chain_of, reverse_poses, reversed_chain, sub_chain
 
 SWEEP = 16  # samples of a 7-joint arm's last joint
 
@@ -61,13 +61,75 @@ def _six(chain: Chain, limits: bool) -> tuple[str, bool, Callable] | None:
     return None
 
 
+EAIK_BRANCHES = 16  # a general 6R arm has at most 16 solutions
+
+
+def _eaik(chain: Chain, limits: bool) -> ClosedForm | None:
+    """EAIK's subproblem decomposition of a 6R chain (its H and P vectors at q = 0, in the root frame), or None when
+    EAIK knows no decomposition of its axes. Solutions EAIK marks as least-squares are dropped, the others moved
+    into the joint limits by whole turns and checked against the chain's FK."""
+    try:
+        from eaik.IK_HP import HPRobot
+    except ImportError:  # pragma: no cover - eaik is a dependency
+        return None
+    frames, m = [], np.eye(4)
+    for k in range(6):
+        m = m @ chain.chain_placement[k]
+        frames.append(m.copy())
+    tcp0 = m @ chain.tip_in_joint
+    h = np.stack([f[:3, :3] @ a for f, a in zip(frames, chain.chain_axis)])
+    o = np.stack([f[:3, 3] for f in frames])
+    p = np.vstack([o[:1], np.diff(o, axis=0), tcp0[None, :3, 3] - o[-1:]])
+    robot = HPRobot(h, p)
+    if not robot.hasKnownDecomposition():
+        return None
+    base_inv, r0t = np.linalg.inv(chain.base), tcp0[:3, :3].T
+    lower, upper = (chain.lower, chain.upper) if limits else (np.full(6, -np.inf), np.full(6, np.inf))
+
+    def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        rel = base_inv @ poses
+        rel[:, :3, :3] = rel[:, :3, :3] @ r0t               # EAIK's end effector has the root's axes at q = 0
+        q = np.full((len(poses), EAIK_BRANCHES, 6), np.nan)
+        for i, sol in enumerate(robot.IK_batched(np.ascontiguousarray(rel), 1)):
+            qs = np.asarray(sol.Q, dtype=np.float64).reshape(-1, 6)[~np.asarray(sol.is_LS, dtype=bool)][:EAIK_BRANCHES]
+            q[i, :len(qs)] = np.angle(np.exp(1j * qs))       # into (-pi, pi]
+        for j in range(6):
+            q[..., j] = _limit(q[..., j], lower[j], upper[j])
+        valid = ~np.isnan(q).any(axis=2)
+        if valid.any():  # EAIK's exact solutions, checked: 1e-6 m and rad
+            r, b = np.nonzero(valid)
+            back = _fk(chain, q[r, b])
+            err = np.abs(back - poses[r]).max(axis=(1, 2))
+            valid[r[err > 1e-6], b[err > 1e-6]] = False
+            q[~valid] = np.nan
+        return q, valid
+    return ClosedForm(f"subproblem decomposition, EAIK {robot.getKinematicFamily()}", EAIK_BRANCHES, 6, solve)
+
+
+def _fk(chain: Chain, q: np.ndarray) -> np.ndarray:
+    """TCP poses (M, 4, 4) of joint vectors (M, 6) of a chain (the check of EAIK's solutions)."""
+    out = np.repeat(chain.base[None], len(q), axis=0)
+    for k in range(len(chain.chain_axis)):
+        rot = np.repeat(np.eye(4)[None], len(q), axis=0)
+        a = chain.chain_axis[k]
+        kx = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+        s, c = np.sin(q[:, k])[:, None, None], np.cos(q[:, k])[:, None, None]
+        rot[:, :3, :3] = np.eye(3) + s * kx + (1 - c) * (kx @ kx)
+        out = out @ chain.chain_placement[k] @ rot
+    return out @ chain.tip_in_joint
+
+
 def closed_form(robot, limits: bool = True, samples: int = SWEEP) -> ClosedForm | None:
     """The robot's fastest closed-form IK (module docstring), or None when its axes admit none."""
     if robot.chain_prismatic.any() or robot.nq not in (6, 7):
         return None
     chain = chain_of(robot)
     if robot.nq == 6:
-        angles, forms = np.zeros(0), [_six(chain, limits)]
+        six = _six(chain, limits)
+        if six is None:
+            return _eaik(chain, limits)
+        angles, forms = np.zeros(0), [six]
     else:
         lo, hi = chain.lower[6], chain.upper[6]
         angles = np.linspace(lo, hi, samples) if samples > 1 else np.array([(lo + hi) / 2])
