@@ -46,7 +46,7 @@ from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
 from workbench.robots.model import Robot, RobotSpec, robot_from_spec
 from workbench.robots.selfcollision import SelfCollision
-from workbench.robots.solvers import closed_form, describe
+from workbench.robots.solvers import closed_form, describe, nearby_form
 
 KINDS = ("grasp", "handx", "handxworldz", "worlda", "worldaworldz")
 HELD = np.array([False, False, False, True, True])  # kinds at which the object moves with the hand
@@ -295,6 +295,7 @@ class IKSolver:
         self.collider = Collider(robot, scene, obj_mesh) if opts.collide else None
         self.self_collision = SelfCollision(robot) if opts.collide and opts.self_collide else None
         self.analytic = closed_form(robot) if opts.solver == "auto" else None
+        self.nearby = nearby_form(robot) if opts.solver == "auto" and self.analytic is None else None
         self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)
 
@@ -396,7 +397,9 @@ class IKSolver:
 
     def solve_from_seeds(self, targets: np.ndarray, placements: np.ndarray, warm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Joints (M, n) (NaN where none) and feasibility (M,) of poses that pass the reach filter, each from its own
-        seeds in a fixed order (`chunk`): `warm` (rows of NaN: none) or the nearest library seed, then the others."""
+        seeds in a fixed order (`chunk`): `warm` (rows of NaN: none) or the nearest library seed; the branches of the
+        nearest decomposable model (`solvers.nearby_form`, an arm with more than 7 joints), nearest the home first;
+        the other library seeds; the restarts."""
         o = self.opts
         m, n = len(targets), self.robot.nq
         q_out = np.full((m, n), np.nan)
@@ -409,6 +412,14 @@ class IKSolver:
         cold = np.isnan(q0).any(axis=1)
         q0[cold] = self.library.q[near[cold, 0]]
         tries = [(q0, o.iters_warm, np.ones(len(live), dtype=bool))]
+        if self.nearby is not None:  # the nearest decomposable model's exact branches, nearest the home first
+            qb, vb = self.nearby.solve(targets[live])
+            dist = np.where(vb, np.abs(np.nan_to_num(qb - self.robot.home())).sum(axis=2), np.inf)
+            rank = np.argsort(dist, axis=1, kind="stable")[:, :max(1, o.seeds)]
+            for r in range(rank.shape[1]):
+                b = rank[:, r]
+                rows = np.arange(len(live))
+                tries.append((np.nan_to_num(qb[rows, b]), o.iters_warm, np.isfinite(dist[rows, b])))
         for r in range(o.seeds):  # the nearest seed was tried first where there was no warm start
             tries.append((self.library.q[near[:, r]], o.iters_seed, ~cold if r == 0 else np.ones(len(live), dtype=bool)))
         if o.restarts:

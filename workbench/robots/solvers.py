@@ -7,14 +7,15 @@ order of preference:
   meet, 8 branches (`robots.analytic`);
 - **spherical shoulder**: the same arm run backwards, axes 1-3 meet and axes 5-6 meet, 8 branches;
 - **three parallel axes** (the UR family): axes 2-4 parallel and axes 5-6 meet, 8 branches (`robots.parallel`);
-- **7 joints, the last one swept** (He & Liu 2021 for the Franka Panda): the last joint held at `samples` angles
+- **7 joints, one swept** (He & Liu 2021 for the Franka Panda): a joint (the last one first) held at `samples` angles
   evenly spread over its limits, each leaving a 6R arm with one of the forms above (the Panda: a spherical shoulder),
   8 branches per sample, of which the Panda's elbow limits (q4 < 0) mostly keep at most 4;
 - **subproblem decomposition** (EAIK, Ostermeier et al. 2024) for any other 6R arm whose axes decompose
   (intersecting or parallel), through the `eaik` package, one pose at a time in C++.
 
 Each returns every branch of many poses at once: joints (N, B, n), NaN where a branch has no real solution or leaves
-the joint limits, and valid (N, B).
+the joint limits, and valid (N, B). An arm with more joints (a humanoid's waist and arm) has no closed form, but
+`nearby_form` gives its numerical solver seeds from the nearest decomposable model.
 """
 
 from __future__ import annotations
@@ -120,41 +121,86 @@ def _fk(chain: Chain, q: np.ndarray) -> np.ndarray:
     return out @ chain.tip_in_joint
 
 
+def _swept(chain: Chain, free: int, angles: np.ndarray, limits: bool) -> ClosedForm | None:
+    """A 7-joint chain's IK with joint `free` held at each of `angles`: the 6R form of every sample (the same kind
+    for all), branches stacked sample by sample."""
+    subs = [sub_chain(chain, {free: float(a)}) for a in angles]
+    forms = [_six(c, limits) for c in subs]
+    if any(f is None for f in forms) or len({f[:2] for f in forms}) > 1:
+        return None
+    kind, rev = forms[0][:2]
+    others = [k for k in range(chain.nq) if k != free]
+
+    def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        q = np.empty((len(poses), 8 * len(angles), chain.nq))
+        valid = np.empty((len(poses), 8 * len(angles)), dtype=bool)
+        x = reverse_poses(subs[0], poses) if rev else poses
+        for k, (a, sub, f) in enumerate(zip(angles, subs, forms)):
+            if rev and free == 0 and k:  # the held first joint moves the reversed chain's target
+                x = reverse_poses(sub, poses)
+            qk, valid[:, 8 * k:8 * k + 8] = f[2](x)
+            q[:, 8 * k:8 * k + 8, others] = qk[..., ::-1] if rev else qk
+            q[:, 8 * k:8 * k + 8, free] = a
+        return q, valid
+    return ClosedForm(f"{kind}, {chain.joint_names[free]} swept over {len(angles)} samples", 8 * len(angles), chain.nq,
+                      solve)
+
+
+def _sweep7(chain: Chain, limits: bool, samples: int) -> ClosedForm | None:
+    """The first joint (the last one first) whose sweep leaves a 6R closed form at every sample."""
+    for free in (6, 0, 1, 2, 3, 4, 5):
+        lo, hi = chain.lower[free], chain.upper[free]
+        angles = np.linspace(lo, hi, samples) if samples > 1 else np.array([(lo + hi) / 2])
+        form = _swept(chain, free, angles, limits)
+        if form is not None:
+            return form
+    return None
+
+
 def closed_form(robot, limits: bool = True, samples: int = SWEEP) -> ClosedForm | None:
     """The robot's fastest closed-form IK (module docstring), or None when its axes admit none."""
     if robot.chain_prismatic.any() or robot.nq not in (6, 7):
         return None
     chain = chain_of(robot)
-    if robot.nq == 6:
-        six = _six(chain, limits)
-        if six is None:
-            return _eaik(chain, limits)
-        angles, forms = np.zeros(0), [six]
-    else:
-        lo, hi = chain.lower[6], chain.upper[6]
-        angles = np.linspace(lo, hi, samples) if samples > 1 else np.array([(lo + hi) / 2])
-        forms = [_six(sub_chain(chain, {6: float(a)}), limits) for a in angles]
-    if any(f is None for f in forms) or len({f[:2] for f in forms}) > 1:
-        return None
-    kind, rev = forms[0][:2]
-    solvers = [f[2] for f in forms]
+    if robot.nq == 7:
+        return _sweep7(chain, limits, samples)
+    six = _six(chain, limits)
+    if six is None:
+        return _eaik(chain, limits)
+    kind, rev, f = six
 
     def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
-        x = reverse_poses(chain, poses) if rev else poses  # the same for every sample: the base does not move
-        if not len(angles):
-            q, valid = solvers[0](x)
-            return (q[..., ::-1] if rev else q), valid
-        q = np.empty((len(poses), 8 * len(angles), 7))
-        valid = np.empty((len(poses), 8 * len(angles)), dtype=bool)
-        for k, (a, f) in enumerate(zip(angles, solvers)):
-            qk, valid[:, 8 * k:8 * k + 8] = f(x)
-            q[:, 8 * k:8 * k + 8, :6] = qk[..., ::-1] if rev else qk
-            q[:, 8 * k:8 * k + 8, 6] = a
+        if not rev:
+            return f(poses)
+        q, valid = f(reverse_poses(chain, poses))
+        return q[..., ::-1], valid
+    return ClosedForm(kind, 8, 6, solve)
+
+
+def nearby_form(robot, samples: int = 4) -> ClosedForm | None:
+    """Seeds for the numerical solver of an arm with more than 7 joints (a humanoid's waist and arm): the closed form
+    of the nearest decomposable model, its first joints held at the home configuration and one of the 7 others swept
+    over `samples`; joint vectors of the whole arm (the held joints at home)."""
+    if robot.chain_prismatic.any() or robot.nq <= 7:
+        return None
+    chain, home = chain_of(robot), robot.home()
+    held = {k: float(home[k]) for k in range(robot.nq - 7)}
+    inner = _sweep7(sub_chain(chain, held), True, samples)
+    if inner is None:
+        return None
+    keep = [k for k in range(robot.nq) if k not in held]
+
+    def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        qi, valid = inner.solve(poses)
+        q = np.empty(qi.shape[:2] + (robot.nq,))
+        q[..., keep] = qi
+        for k, v in held.items():
+            q[..., k] = v
         return q, valid
-    if len(angles):
-        kind = f"{kind}, last joint swept over {len(angles)} samples"
-    return ClosedForm(kind, 8 * max(1, len(angles)), robot.nq, solve)
+    names = ", ".join(robot.joint_names[k] for k in held)
+    return ClosedForm(f"{inner.kind}, {names} held at home", inner.branches, robot.nq, solve)
 
 
 def describe(robot, numerical: bool = False) -> str:
