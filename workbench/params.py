@@ -16,7 +16,7 @@ import os
 from dataclasses import MISSING, Field, asdict, dataclass, field, fields, replace
 from typing import Any, Callable
 
-__all__ = ["BUDGET_ENV", "Bound", "MemoryBudgetError", "ParameterError", "Params", "add_param", "bounds", "check_memory", "cli_bound",
+__all__ = ["BUDGET_ENV", "WAIT_ENV", "Bound", "MemoryBudgetError", "ParameterError", "Params", "add_param", "bounds", "check_memory", "cli_bound",
            "from_cli", "memory_budget", "param", "parse_number", "parse_size", "validate"]
 
 import numpy as np
@@ -25,6 +25,7 @@ from workbench.errors import MemoryBudgetError, ParameterError
 
 BOUND = "workbench.bound"
 BUDGET_ENV = "WORKBENCH_MEMORY_BUDGET"
+WAIT_ENV = "WORKBENCH_WAIT"  # seconds to wait for a store another process holds (the command line's --wait)
 
 
 @dataclass(frozen=True)
@@ -272,6 +273,7 @@ def check_memory(nbytes: float, what: str, hint: str, budget: int | str | None =
 
 
 def format_bytes(n: float) -> str:
+    """A byte count in binary units (KiB, MiB, GiB, TiB)."""
     for unit, f in (("TiB", 2**40), ("GiB", 2**30), ("MiB", 2**20), ("KiB", 2**10)):
         if n >= f:
             return f"{n / f:.1f} {unit}"

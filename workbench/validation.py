@@ -16,7 +16,7 @@ step's pose); every object pose rests on the table and is stable; the object sta
 its regrasp; the grasp (object in the TCP frame, from forward kinematics) is unchanged along each transfer;
 the object starts at the start pose and ends at the goal pose.
 
-Motions (issue 12; CONVENTIONS.md, Plans and motions), `TrajectoryValidator`: a plan is executable only with its
+Motions (CONVENTIONS.md, Plans and motions), `TrajectoryValidator`: a plan is executable only with its
 timed trajectory, checked at every knot (knots at most 1 degree apart in every joint and 5 mm of TCP travel):
 times increase and segments join without jumps, rest at both ends; positions, velocities (URDF) and
 accelerations (the plan's limits, from knot velocity differences) within limits, positions consistent with
@@ -113,17 +113,19 @@ class PlanValidator:
     `hand_links`: link-name prefixes of the robot's own hand, replaced by the planning gripper (their geometry is
     not checked); `table`: (x_min, y_min), (x_max, y_max) of the table top (z = 0) and its thickness;
     `free_poses`: {idfreetabletopplacement: rotmat} to recompute start and goal poses; `locked`: {joint: value} of
-    joints outside the plan's that are not at their neutral value (a humanoid's other arm tucked away)."""
+    joints outside the plan's that are not at their neutral value (a humanoid's other arm tucked away); `jaw`: the
+    gripper's (min, max) opening, which every step's jaw width must lie within."""
 
     def __init__(self, urdf: str, tip_frame: str, mount: np.ndarray, base: np.ndarray, joint_names: list[str],
                  table: tuple, object_vertices: np.ndarray, object_faces: np.ndarray, object_com: np.ndarray,
                  gripper_mesh: trimesh.Trimesh, hand_links: tuple[str, ...] = (), free_poses: dict | None = None,
                  package_dirs: tuple[str, ...] = (), locked: dict | None = None, tol_pos: float = 5e-4, tol_rot: float = 5e-3,
-                 tol_grasp: float = 2e-3):
+                 tol_grasp: float = 2e-3, jaw: tuple[float, float] | None = None):
         import fcl
         import pinocchio as pin
 
         self.pin, self.fcl = pin, fcl
+        self.jaw = jaw
         self.model = pin.buildModelFromXML(urdf)
         self.data = self.model.createData()
         if not self.model.existFrame(tip_frame):
@@ -282,6 +284,10 @@ class PlanValidator:
                 need(not hits, f"{tag}: at the {label} configuration {', '.join(hits)}")
             stable, why = self.stability(obj)
             need(stable, f"{tag}: the object pose is not a stable placement: {why}")
+            if self.jaw is not None:
+                need(self.jaw[0] - 1e-9 <= s.jawwidth <= self.jaw[1] + 1e-9,
+                     f"{tag}: jaw width {s.jawwidth * 1000:.1f} mm is outside the gripper's stroke "
+                     f"{self.jaw[0] * 1000:.1f}-{self.jaw[1] * 1000:.1f} mm")
         # the object stays put while released, the grasp is constant while carried
         for i in range(1, len(steps) - 1, 2):
             a, b = steps[i], steps[i + 1]
@@ -590,4 +596,4 @@ def validator_from_rows(rows: dict, free_poses: dict | None = None) -> PlanValid
                          np.asarray(obj["vertices"], dtype=np.float64), np.asarray(obj["faces"], dtype=np.int64),
                          np.asarray(obj["com"], dtype=np.float64), gripper, hand_links=tuple(r.get("drop_geometry") or ()),
                          free_poses=free_poses, package_dirs=(str(erd_share()), *(r.get("package_dirs") or ())),
-                         locked=dict(r.get("locked") or {}))
+                         locked=dict(r.get("locked") or {}), jaw=(float(grip["jaw_min"]), float(grip["jaw_max"])))

@@ -39,7 +39,7 @@ from workbench.store.catalog import ik_vectors
 ROBOTS = ("panda", "ur5")
 PARAMS = CatalogParams(tabletop=TabletopParams(x_min=0.4, x_max=0.6, nx=2, y_min=0.0, y_max=0.0, ny=1, angles=2,
                                                max_grasps=10),
-                       ik=IKOptions(library=2048, seeds=2), ik_chunk=32)
+                       ik=IKOptions(library=2048, seeds=2, self_collide=True), ik_chunk=32)
 ROOT = Path(__file__).resolve().parents[2]
 
 
@@ -82,7 +82,7 @@ def serial_db(parts, tmp_path_factory) -> Path:
             g = ensure_grasps(store, obj, hand, p.grasps)
             pl = ensure_placements(store, g.idobject, obj, g.idparamset, hand, p.placements, p.tabletop)
             for robot in ROBOTS:
-                run_ik(store, obj.name, get_robot(robot), None, p.handx, p.worldz, IKOptions(library=2048, seeds=2),
+                run_ik(store, obj.name, get_robot(robot), None, p.handx, p.worldz, p.ik,
                        workers=1, progress=False, idtabletop=pl.idtabletop)
     return db
 
@@ -275,6 +275,9 @@ def test_sharded_build_equals_serial_and_resumes(parts, serial, serial_db, clien
     (["--robots", "panda", "--ik-chunk", "0"], "IK chunk must be a positive number"),
     (["--robots", "panda", "--workers", "0"], "--workers must be at least 1"),
     (["--robots", "panda", "--scale", "-1"], "scale must be a positive"),
+    (["--robots", "arm=arm.urdf"], "give its tip frame with --tip"),
+    (["--robots", "panda,panda"], "listed twice"),
+    (["--robots", "robots.yaml"], "robots file robots.yaml does not exist"),
 ])
 def test_bad_input_is_one_line_and_status_2(parts, tmp_path, args, message):
     err = io.StringIO()

@@ -1,6 +1,6 @@
 """Catalogue build on a local Dask cluster with 1 and 2 workers, the driver writing every unit (direct) and the
 IK units' workers writing Parquet shards that the driver merges per (part, robot) (`--shards`): speed-up, time per
-unit kind, the driver's write throughput and the worker count at which the single writer saturates (issue 15).
+unit kind, the driver's write throughput and the worker count at which the single writer saturates.
 
 The bundled parts (metres) and the paper's Table I parts (millimetres, when ../shared is present) x Panda and UR5,
 on a coarser table grid than Table I's by default (`--full` for TabletopParams()), each run into a fresh store, on a

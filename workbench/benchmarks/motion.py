@@ -1,4 +1,4 @@
-"""Executable plans: motion planning and timing of searched regrasp plans (issue 12; Wan & Harada Section V as
+"""Executable plans: motion planning and timing of searched regrasp plans (Wan & Harada Section V as
 executed by wrs).
 
 For each object and robot: the store is built once under --dir (the demo grid) and reused; --pairs seeded random

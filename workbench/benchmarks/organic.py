@@ -1,4 +1,4 @@
-"""A procedural set of organic objects, the kind users bring (issue 10): smooth and noisy blobs, ellipsoids, tori
+"""A procedural set of organic objects, the kind users bring: smooth and noisy blobs, ellipsoids, tori
 (one lying flat thinner than the fingers are long), a flat pebble,
 cups (closed walls and a single open sheet), a brick with studs (manifold3d), a scan with holes and a flat-bottomed
 noisy scan. 300 to 5,000 triangles, some not watertight; metres; seeded, so every run builds the same meshes.

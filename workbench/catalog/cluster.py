@@ -102,5 +102,5 @@ def dashboard_link(client) -> str:
         return "none (the scheduler runs without a dashboard)"
     link = client.dashboard_link
     if importlib.util.find_spec("bokeh") is None:
-        return f"{link} (its pages need bokeh>=3.1: pip install bokeh)"
+        return f"{link} (its pages need bokeh: pip install 'regrasp-workbench[catalog]')"
     return link

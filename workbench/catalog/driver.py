@@ -1,4 +1,4 @@
-"""The catalogue's driver: schedules units on a Dask cluster, resumes by digest, is the single store writer (issue 15).
+"""The catalogue's driver: schedules units on a Dask cluster, resumes by digest, is the single store writer.
 
 Units: one per part (grasps, placements, tabletop grips; Wan & Harada Sections III-IV), one per chunk of a part's
 tabletop grips and robot (IK with retractions, Section IV), one per part and robot (the regrasp graph's size,
@@ -25,6 +25,8 @@ import numpy as np
 import pyarrow as pa
 
 from workbench.catalog import stages
+from workbench.catalog.progress import Progress
+from workbench.catalog.robots import CatalogRobot, parse_robots
 from workbench.catalog.units import (
     graph_unit,
     ik_unit,
@@ -32,13 +34,12 @@ from workbench.catalog.units import (
     part_unit,
     table_arrays,
 )
-from workbench.errors import RobotError, WorkbenchError
+from workbench.errors import WorkbenchError
 from workbench.geometry.objects import ObjectModel, resolve_scale
 from workbench.grasping.grasps import GraspParams
 from workbench.grasping.placements import PlacementParams
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.planners.wan_harada.tabletop import TabletopParams
-from workbench.robots.collider import Collider, default_scene
 from workbench.robots.gripper import franka_hand
 from workbench.robots.ik import (
     WORLDA,
@@ -47,7 +48,6 @@ from workbench.robots.ik import (
     chunk_bounds,
     neighbour_order,
 )
-from workbench.robots.model import Robot, get_robot
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf", ".dae")
 PART_PRIORITY = 1 << 40  # Dask priorities (higher runs first): parts, then IK chunks by their length
@@ -67,7 +67,7 @@ class CatalogParams:
     grasps: GraspParams = GraspParams()
     placements: PlacementParams = PlacementParams()
     tabletop: TabletopParams = TabletopParams()
-    ik: IKOptions = IKOptions()
+    ik: IKOptions = IKOptions(self_collide=True)  # as `workbench build` and `workbench ik` solve: the same rows
     handx: float = HANDX
     worldz: float = WORLDZ
     worlda: float = WORLDA
@@ -140,19 +140,9 @@ def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> lis
     return out
 
 
-def parse_robots(text: str | Sequence[str]) -> dict[str, Robot]:
-    """Robots by name from 'panda,ur5' (built-in names or URDF paths are handled by `get_robot`)."""
-    names = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
-    if not names:
-        raise CatalogError("--robots needs at least one robot name, e.g. panda,ur5")
-    robots = {}
-    for n in names:
-        robot = get_robot(n)
-        hit = Collider(robot, default_scene(robot.name), None).fixed_parts_hit_table()
-        if hit:
-            raise RobotError(f"the fixed links ({', '.join(hit[:3])}) of robot {robot.name!r} cut into the default table")
-        robots[robot.name] = robot
-    return robots
+def catalog_robots(robots: str | Sequence[str] | dict[str, CatalogRobot]) -> dict[str, CatalogRobot]:
+    """The catalogue's columns: given as parsed (`workbench.catalog.robots.parse_robots`), or parsed from names."""
+    return robots if isinstance(robots, dict) else parse_robots(robots)
 
 
 def _digest(*parts: object) -> str:
@@ -177,11 +167,9 @@ def one_line(exc: BaseException) -> str:
 class _Build:
     """The state of one build: the store, the client, what is stored, what runs."""
 
-    def __init__(self, store, client, robots: dict[str, Robot], params: CatalogParams, progress: bool,
+    def __init__(self, store, client, robots: dict[str, CatalogRobot], params: CatalogParams, progress: bool,
                  on_unit: Callable[[str, dict], None] | None, shards: Path | None = None):
         from distributed import as_completed
-        from tqdm.auto import tqdm
-
         self.store, self.client, self.robots, self.params = store, client, robots, params
         self.on_unit = on_unit
         self.done = stages.done_units(store)
@@ -194,7 +182,7 @@ class _Build:
         self.ik_runs: dict[str, dict] = {}  # robot name -> its run's ids in this store
         self.ac = as_completed(with_results=True, raise_errors=False)  # results fetched in the background
         self.result = CatalogResult(rows=[], failures=[])
-        self.bar = tqdm(total=0, desc="catalog", unit="unit", disable=not progress, dynamic_ncols=True)
+        self.bar = Progress(progress)
         self.hand = franka_hand()
         self.shards = shards
         self._stack: list[float] = []  # seconds of nested `charge` blocks, innermost last
@@ -223,14 +211,9 @@ class _Build:
                 self.result.write_seconds += dt
 
     # -- scheduling --------------------------------------------------------------------------------------------
-    def _count(self, n: int = 1) -> None:
-        self.bar.total += n
-        self.bar.refresh()
-
-    def _skip(self) -> None:
+    def _skip(self, kind: str) -> None:
         self.result.skipped += 1
-        self._count()
-        self.bar.update(1)
+        self.bar.skipped(kind)
 
     def _submit(self, unit: dict, fn, *args, priority: int = 0, **kwargs) -> None:
         key = f"{unit['kind']}-{unit['part']}-{unit.get('robot') or ''}-{unit.get('chunk') or 0}-{unit['digest'][:12]}"
@@ -240,7 +223,7 @@ class _Build:
         fut = self.client.submit(fn, *args, key=key, pure=False, priority=priority, **kwargs)
         self.pending[fut] = unit
         self.ac.add(fut)
-        self._count()
+        self.bar.add(unit["kind"])
 
     def submit_part(self, path: Path, scale: float | None) -> None:
         p = self.params
@@ -250,7 +233,7 @@ class _Build:
                          {**p.part_dict(), "scale": scale, "units": units})
         unit = {"digest": digest, "kind": "part", "part": path.stem, "source": str(path)}
         if digest in self.done:
-            self._skip()
+            self._skip("part")
             self.schedule_robots(self.done[digest])
             return
         size = path.stat().st_size if path.is_file() else 0
@@ -271,8 +254,8 @@ class _Build:
         places = check_poses(grips["placement_rotmat"], "object placement")
         ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
         verts, faces = np.asarray(obj.mesh.vertices, dtype=np.float64), np.asarray(obj.mesh.faces, dtype=np.int64)
-        for name, robot in self.robots.items():
-            scene = default_scene(robot.name)
+        for name, column in self.robots.items():
+            robot, scene = column.robot, column.scene
             if name not in self.ik_runs:  # robot, scene and ikret rows: once per build
                 self.ik_runs[name] = stages.ik_run(self.store, robot, scene, p.ik, p.handx, p.worldz, p.worlda)
             ids_run = self.ik_runs[name]
@@ -289,13 +272,13 @@ class _Build:
             for k, (s, e) in enumerate(chunk_bounds(n, p.ik_chunk)):
                 unit = {**_unit_ids(run), "kind": "ik", "chunk": k, "digest": _digest(run["base"], "ik", k, n)}
                 if unit["digest"] in self.done:
-                    self._skip()
+                    self._skip("ik")
                     continue
                 ix = order[s:e]
                 if self.shards is not None:
                     unit["nrows"] = int((~np.isin(ids[ix], stored)).sum())
                     if unit["digest"] in self.on_disk:  # computed by an earlier run, not merged yet
-                        self._skip()
+                        self._skip("ik")
                         self.to_merge[key].append((unit, self.on_disk.pop(unit["digest"])))
                         continue
                 left += 1
@@ -312,9 +295,9 @@ class _Build:
         do once committed."""
         unit = {**_unit_ids(run), "kind": "graph", "digest": _digest(run["base"], "graph")}
         if unit["digest"] in self.done:
-            self._skip()
+            self._skip("graph")
             return lambda: None
-        self._count()
+        self.bar.add("graph")
         with self.charge("graph", "graph"):
             rows, feasible = stages.graph_inputs(self.store, run)
             table = graph_unit(rows, feasible)
@@ -326,7 +309,7 @@ class _Build:
             self.rows.add(unit["digest"])
             meta = {k: v for k, v in unit.pop("meta", {}).items() if k not in (b"start", b"end")}  # not a worker's
             self._account(unit, meta)
-            self.bar.update(1)
+            self.bar.done("graph")
             if self.on_unit is not None:
                 self.on_unit("graph", unit)
         return after
@@ -428,7 +411,7 @@ class _Build:
             key = (unit["part"], unit["robot"])
             self.to_merge[key].append((unit, Path(meta[b"shard"].decode())))
             fut.release()
-            self.bar.update(1)
+            self.bar.done("ik")
             self._chunk_done(key)
         if self.on_unit is not None:
             self.on_unit("ik", unit)
@@ -493,21 +476,22 @@ class _Build:
             kind = unit["kind"]
             self.result.rows_written += int(unit.get("nrows") or 0)
             self._account(unit, unit.pop("meta", {}))
-            self.bar.update(1)
+            self.bar.done(kind)
             if self.on_unit is not None:
                 self.on_unit(kind, unit)
         if graph_done is not None:
             graph_done()
         self.result.batches += 1
         if self.result.write_seconds > 0:
-            self.bar.set_postfix_str(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written", refresh=False)
+            self.bar.note(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written")
 
     def fail(self, unit: dict, exc: BaseException, counted: bool = False) -> None:
         """Record a unit that raised or could not be written (`counted`: an IK unit already counted as finished)."""
         reason = one_line(exc)
         stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, reason)
         self.rows.add(unit["digest"])
-        self.bar.update(1)
+        if unit.get("chunk") is not None or unit["kind"] != "ik":  # not a part whose IK could not be scheduled
+            self.bar.done(unit["kind"])
         if unit["kind"] == "ik" and unit.get("chunk") is not None:  # not a part whose IK could not be scheduled
             key = (unit["part"], unit["robot"])  # the run's other chunks go on; its graph waits for a re-run
             self.broken.add(key)
@@ -568,7 +552,8 @@ def _unit_ids(run: dict) -> dict:
                                 "idscene", "idikret")}
 
 
-def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]], robots: str | Sequence[str], db: str | Path, client,
+def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
+                  robots: str | Sequence[str] | dict[str, CatalogRobot], db: str | Path, client,
                   params: CatalogParams = CatalogParams(), progress: bool = True,
                   on_unit: Callable[[str, dict], None] | None = None, shards: str | Path | None = None) -> CatalogResult:
     """Build (or finish) the catalogue of `parts` x `robots` in the store `db` on the Dask `client`; returns the
@@ -580,7 +565,7 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]], robots
     note, not a write. Files of a killed build are merged by the re-run; a file is whole or absent (renamed into
     place), and the merge skips grips that already have rows, so nothing is lost or duplicated."""
     paths = collect_parts(parts)
-    robot_models = parse_robots(robots)
+    robot_models = catalog_robots(robots)
     t0 = time.perf_counter()
     with stages.open_store(db) as store:
         build = _Build(store, client, robot_models, params, progress, on_unit,

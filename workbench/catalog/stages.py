@@ -1,4 +1,4 @@
-"""The catalogue's store side (issue 15): the only module of `workbench.catalog` that talks to the store.
+"""The catalogue's store side: the only module of `workbench.catalog` that talks to the store.
 
 The driver hands it finished units; each is written with the Wan & Harada stage writers of `workbench.store`
 (object, free-air grasps, placements, free tabletop grips, tabletop placements and grips, `ik` rows) together with
@@ -24,6 +24,7 @@ from workbench.robots.collider import Scene
 from workbench.robots.gripper import Gripper
 from workbench.robots.ik import IKOptions
 from workbench.robots.model import Robot
+from workbench.robots.selfcollision import allowed_pairs
 from workbench.store import Store
 from workbench.store import catalog as sql
 from workbench.store.grasps import load_grasps, save_grasps
@@ -103,7 +104,8 @@ def part_grips(store: Store, part: dict, obj: ObjectModel | None = None) -> tupl
 def ik_run(store: Store, robot: Robot, scene: Scene, opts: IKOptions, handx: float, worldz: float, worlda: float) -> dict:
     """The robot, scene and ikret rows of an IK run (created if new): idrobot, idscene, idikret, scene_params."""
     params = scene_params(robot, scene, opts)
-    rid, sid, kid = prepare_run(store, robot, params, handx, worldz, worlda)
+    # the robot row carries its allowed self-collision pairs, as `workbench ik` stores them: `plan`'s validator needs them
+    rid, sid, kid = prepare_run(store, robot, params, handx, worldz, worlda, allowed_pairs(robot).to_json())
     return {"idrobot": rid, "idscene": sid, "idikret": kid, "scene_params": params}
 
 

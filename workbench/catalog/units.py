@@ -1,4 +1,4 @@
-"""Units of work of a catalogue, run on Dask workers: pure functions from inputs to Arrow tables (issue 15).
+"""Units of work of a catalogue, run on Dask workers: pure functions from inputs to Arrow tables.
 
 - `part_unit`: load a mesh, plan free-air grasps (Wan & Harada Section III), stable placements, free tabletop
   grips and the tabletop grid (Section IV); returns the result dataclasses as Arrow tables (`part_tables`).
@@ -251,6 +251,7 @@ def stamp(table: pa.Table, t0: float, c0: float, **extra: object) -> pa.Table:
 
 
 def worker_name() -> str:
+    """This process's Dask worker address and pid (or "local pid N" outside a worker), for failure reports."""
     try:
         from distributed import get_worker
 

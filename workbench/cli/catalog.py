@@ -1,5 +1,5 @@
 """`workbench catalog build PARTS... --robots panda,ur5 --db DB`: grasps, placements, tabletop grips and IK of many
-parts for several robots on a Dask cluster (Wan & Harada's fully off-line stages, Sections III-V; issue 15), and
+parts for several robots on a Dask cluster (Wan & Harada's fully off-line stages, Sections III-V), and
 `workbench catalog report --db DB` to print the stored catalogue again."""
 
 from __future__ import annotations
@@ -16,23 +16,37 @@ from workbench.catalog.driver import (
     CatalogParams,
     build_catalog,
     collect_parts,
-    parse_robots,
     report,
     summary_table,
 )
+from workbench.catalog.robots import CatalogRobot, parse_robots
 from workbench.cli.grasps import add_grasp_arguments, grasp_params
+from workbench.cli.ik import parse_base, parse_mount
+from workbench.cli.outputs import add_output
 from workbench.cli.placements import add_placement_arguments, placement_params
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.robots.ik import WORLDA, IKOptions
+from workbench.robots.model import ROBOTS
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("catalog", help="build a parts x robots catalogue on a Dask cluster, or print one")
     inner = parser.add_subparsers(dest="action", required=True, parser_class=type(parser))
-    b = inner.add_parser("build", help="compute every part's stages and every robot's IK on a local or existing cluster")
+    b = inner.add_parser("build", help="compute every part's stages and every robot's IK on a local or existing cluster",
+                         description="Progress: a bar per unit kind (parts, IK chunks, graphs) with its rate and ETA on "
+                                     "stderr, and the Dask dashboard's address (its pages need bokeh: "
+                                     "pip install 'regrasp-workbench[catalog]').")
     b.add_argument("parts", nargs="+",
                    help="mesh files (STL, OBJ, PLY, OFF, GLB, DAE) or folders of them; the file name names the part")
-    b.add_argument("--robots", required=True, help="comma-separated robots: panda, ur5, talos")
+    b.add_argument("--robots", required=True, metavar="ROBOT,...|FILE.yaml",
+                   help=f"the catalogue's robots, one column each: built-in names ({', '.join(ROBOTS)}) and NAME=URDF "
+                        "entries (these take --tip, --mount, --base, --hand-links), comma-separated; or a YAML file "
+                        "listing robots with their URDF, tip, mount, base, hand links and table")
+    b.add_argument("--tip", default=None, help="the URDF robots' tip frame")
+    b.add_argument("--mount", default=None, help="the URDF robots' tip frame to gripper TCP: x,y,z,roll,pitch,yaw (m, rad)")
+    b.add_argument("--base", default=None, help="the URDF robots' base in the world: X,Y,Z,YAW (m, rad)")
+    b.add_argument("--hand-links", default=None, metavar="PREFIX,...",
+                   help="the URDF robots' own hand links, replaced by the planning gripper (default: the links past --tip)")
     b.add_argument("--db", required=True, help="DuckDB store file (created when missing; a re-run resumes)")
     where = b.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None, help="worker processes of a local cluster (default: all cores)")
@@ -47,9 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--ik-chunk", type=int, default=1024, help="tabletop grips per IK unit")
     b.add_argument("--ik-library", type=int, default=o.library, help="IK seed library size")
     b.add_argument("--ik-seeds", type=int, default=o.seeds, help="library seeds tried after the warm start")
-    b.add_argument("--shards", default=None, metavar="DIR",
-                   help="IK workers write their rows to Parquet files in DIR (created; on a file system every worker "
-                        "sees), merged into the store per part and robot: the driver writes less (see `workbench bench catalog`)")
+    add_output(b, "--shards", folder=True,
+               help="IK workers write their rows to Parquet files in DIR (created; on a file system every worker "
+                    "sees), merged into the store per part and robot: the driver writes less (see `workbench bench catalog`)")
     b.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_placement_arguments(b)
     add_grasp_arguments(b)
@@ -61,20 +75,27 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def catalog_params(args: argparse.Namespace) -> CatalogParams:
     pparams, tparams = placement_params(args)
-    ik = replace(IKOptions(), library=args.ik_library, seeds=args.ik_seeds)
+    ik = replace(CatalogParams().ik, library=args.ik_library, seeds=args.ik_seeds)
     return CatalogParams(grasps=grasp_params(args), placements=pparams, tabletop=tparams, ik=ik, handx=args.handx,
                          worldz=args.worldz, worlda=args.worlda, ik_chunk=args.ik_chunk, scale=args.scale, units=args.units)
+
+
+def catalog_robot_list(args: argparse.Namespace) -> dict[str, CatalogRobot]:
+    """The catalogue's columns from --robots and the URDF entries' --tip, --mount, --base, --hand-links."""
+    return parse_robots(args.robots, tip=args.tip, mount=parse_mount(args.mount) if args.mount else None,
+                        base=parse_base(args.base) if args.base else None,
+                        hand_links=tuple(h.strip() for h in (args.hand_links or "").split(",") if h.strip()))
 
 
 def run_build(args: argparse.Namespace) -> int:
     params = catalog_params(args)
     collect_parts(args.parts)  # bad input fails before a cluster starts: parts, robots, a locked or damaged store
-    parse_robots(args.robots)
+    robots = catalog_robot_list(args)
     open_store(args.db).close()
     with cluster_client(workers=args.workers, scheduler=args.scheduler) as client:
         n = len(client.scheduler_info().get("workers", {}))
         print(f"dask: {n} worker(s) at {client.scheduler.address}; dashboard {dashboard_link(client)}", file=sys.stderr)
-        res = build_catalog(args.parts, args.robots, args.db, client, params, progress=not args.no_progress,
+        res = build_catalog(args.parts, robots, args.db, client, params, progress=not args.no_progress,
                             shards=args.shards)
     print_summary(res.rows, res.failures)
     write_share = f", writing {res.write_seconds / res.wall:.0%} of it" if res.wall > 0 else ""

@@ -10,6 +10,8 @@ import sys
 
 import numpy as np
 
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.outputs import add_output, write_text
 from workbench.cli.plan import add_motion_arguments, exec_options
 from workbench.errors import WorkbenchError
 from workbench.planners.tournassoud.chaining import NoSequence
@@ -26,6 +28,8 @@ from workbench.planners.tournassoud.stages import (
     validate_stored,
 )
 from workbench.robots.collider import Scene, default_scene
+from workbench.store import Store
+from workbench.store.robots import robot_with_gripper
 
 
 def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
@@ -65,6 +69,32 @@ def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
     return cls, (float(np.radians(lo)), float(np.radians(hi)))
 
 
+def explanation(table, own, removals: list, seq=None, own_dict: dict | None = None) -> list[str]:
+    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
+    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one."""
+    if own is not None:
+        own_dict = own.as_dict(table)
+    if own_dict is None:
+        return []
+    n = own_dict["regrasps"]
+    if not removals:
+        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
+    lines = [f"  removed {x.text(table)}" for x in removals]
+    own_pairs = set()
+    g, p = own_dict["grasps"], own_dict["placements"]
+    if own_dict["kind"] == "grasp":
+        for k, pl in enumerate(p):
+            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
+    else:
+        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
+    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
+    kinds = sorted({x.motion for x in removals})
+    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
+                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
+                 f"executable one has {'none' if seq is None else seq.regrasps}")
+    return lines
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)")
     p.add_argument("--db", required=True, help="DuckDB store file with a table built by `workbench gptable`")
@@ -80,8 +110,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
     p.add_argument("--no-motion", action="store_true", help="waypoints only: do not plan and time the motions")
     add_motion_arguments(p, "conjunctions of the table")
-    p.add_argument("--json", default=None, help="write the sequence and its plan to this JSON file")
-    p.add_argument("--html", default=None, help="write the table with the sequence overlaid (Fig. 6) to this HTML file")
+    add_output(p, "--json", "write the sequence and its plan to this JSON file")
+    add_output(p, "--html", "write the table with the sequence overlaid (Fig. 6) to this HTML file")
+    add_gripper_argument(p)
     p.set_defaults(func=run)
 
 
@@ -94,7 +125,12 @@ def run(args: argparse.Namespace) -> int:
     for label, v in (("--handx", args.handx), ("--worldz", args.worldz)):
         if not np.isfinite(v) or v < 0:
             raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
-    r = load_planner(args.db, args.object, args.robot)
+    gripper = gripper_from_args(args)
+    robot = args.robot
+    if robot is not None:
+        with Store(args.db, read_only=True) as store:
+            robot = robot_with_gripper(store, robot, gripper.digest) or robot
+    r = load_planner(args.db, args.object, robot, gripper=gripper)
     scene = default_scene(r.robot.name)
     if args.table:
         t = [float(v) for v in _nums(args.table, "--table", 4)] if all(
@@ -117,12 +153,16 @@ def run(args: argparse.Namespace) -> int:
     except NoSequence as exc:
         print(f"warning: {exc}", file=sys.stderr)
         print(f"{r.obj.name} with {r.robot.name}: no regrasp sequence (0 results)")
+        removals = getattr(exc, "removals", [])
+        for line in explanation(r.table, exc.table_sequence, removals, None):
+            print(line)
         if args.json:
-            with open(args.json, "w") as fh:
-                json.dump({"sequence": None, "plan": None, "reason": str(exc)}, fh, indent=1)
+            own = exc.table_sequence
+            write_text(args.json, json.dumps({"sequence": None, "plan": None, "reason": str(exc),
+                                              "table_sequence": None if own is None else own.as_dict(r.table),
+                                              "removed": [x.as_dict() for x in removals]}, indent=1))
         if args.html:  # the table alone (Fig. 5): where the query's grasps and placements are
-            with open(args.html, "w") as fh:
-                fh.write(table_html(r.table, r.classes, None, title=f"{r.obj.name} with {r.robot.name}: no sequence"))
+            write_text(args.html, table_html(r.table, r.classes, None, title=f"{r.obj.name} with {r.robot.name}: no sequence"))
         return 0
     t = r.table
     print(f"{r.obj.name} with {r.robot.name}: {seq.regrasps} regrasp(s), chaining {seq.levels} step(s) in {seq.seconds * 1000:.2f} ms")
@@ -130,6 +170,8 @@ def run(args: argparse.Namespace) -> int:
         print(f"  grasp {k}: class {c} ({r.classes[c].kind}) theta {np.degrees(t.theta[ti]):6.1f} deg")
     for k, (j, fi) in enumerate(seq.placements):
         print(f"  placement {k}: class {j} phi {np.degrees(t.phi[fi]):6.1f} deg")
+    for line in explanation(t, None, seq.extra.get("removals", []), seq, seq.extra.get("table")):
+        print(line)
     if plan is None:
         print("the initial grasp is already in the goal range: nothing to do")
     else:
@@ -142,13 +184,12 @@ def run(args: argparse.Namespace) -> int:
             report = validate_stored(args.db, r, idplan, plan, require_motion=motions is not None)
         print("validator: " + ("ok" if report.ok else "FAILED: " + "; ".join(report.errors[:3])))
     if args.json:
-        doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict()}
-        with open(args.json, "w") as fh:
-            json.dump(doc, fh, indent=1)
+        doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict(),
+               "table_sequence": seq.extra.get("table"), "removed": seq.extra.get("removed", [])}
+        write_text(args.json, json.dumps(doc, indent=1))
         print(f"json: {args.json}")
     if args.html:
-        with open(args.html, "w") as fh:
-            fh.write(table_html(t, r.classes, seq, title=f"{r.obj.name} with {r.robot.name}"))
+        write_text(args.html, table_html(t, r.classes, seq, title=f"{r.obj.name} with {r.robot.name}"))
         print(f"html: {args.html}")
     sys.stdout.flush()
     return 0

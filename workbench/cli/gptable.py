@@ -17,6 +17,7 @@ from workbench.params import add_param
 from workbench.planners.tournassoud.classes import KINDS, ClassParams, no_class_reason
 from workbench.planners.tournassoud.stages import table_stage_at
 from workbench.planners.tournassoud.table import TableParams
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.robots.model import get_robot
 
 
@@ -46,8 +47,9 @@ def add_table_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--min-contact-area", type=float, default=c.min_contact_area,
                         help="pad area that must cover the face overlap at every legal theta (m^2, Section 5.1; 0: off)")
     parser.add_argument("--min-range", type=float, default=float(np.degrees(c.min_range)),
-                        help="drop grasp classes whose legal theta range is narrower than this (degrees; 0, the paper's "
-                             "rule: keep every class with a non-empty range)")
+                        help="what to do with narrow grasp classes: 0 (the paper's rule) keeps every class of any width "
+                             "whose legal theta range holds a sample; a positive width (degrees) drops the classes "
+                             "narrower than it, with a warning giving their count")
     parser.add_argument("--points", type=int, default=c.points,
                         help="grasp points per feature pair (1: the paper's one point per class; more: its remedy for "
                              "elongated parts, a discrete set of points as in Handey, Section 2.3)")
@@ -69,6 +71,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--db", required=True, help="DuckDB store file")
     add_table_arguments(p)
     add_param(p, PlacementParams, "min_stability")
+    add_gripper_argument(p)
     p.set_defaults(func=run)
 
 
@@ -90,11 +93,14 @@ def run(args: argparse.Namespace) -> int:
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     cp, tp = params_from_args(args)
     base = parse_base(args.base) if args.base else None
-    robot = get_robot(args.robot, base=base, tip_frame=args.tip)
+    robot = get_robot(args.robot, base=base, tip_frame=args.tip, gripper=gripper_from_args(args))
     r = table_stage_at(args.db, obj, robot, cp, tp, PlacementParams(min_stability=args.min_stability),
                        progress=sys.stderr.isatty())
     for line in summary(r):
         print(line)
+    if r.narrow[0]:
+        print(f"warning: {r.narrow[0]} grasp class(es) dropped as narrower than --min-range {args.min_range:g} deg (the "
+              f"widest of them {np.degrees(r.narrow[1]):.1f} deg); --min-range 0 keeps them", file=sys.stderr)
     if not r.classes:
         print(f"warning: no grasp class: {no_class_reason(obj, robot.gripper, cp)}", file=sys.stderr)
     elif not r.table.q.any():

@@ -8,15 +8,34 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import inspect
 import os
 import re
 import sys
 import warnings
 
 from workbench.errors import WorkbenchError
-from workbench.params import BUDGET_ENV, parse_size
+from workbench.params import BUDGET_ENV, WAIT_ENV, cli_bound, parse_number, parse_size
 
-COMMANDS = ("grasps", "placements", "ik", "build", "catalog", "plan", "fingers", "gptable", "gpplan", "demo", "bench")
+WAIT = cli_bound(0, 86400, unit="s", help="seconds to wait for a store another process holds")
+
+# Every command and its one-line help. A command's module is imported only when that command runs, so
+# `workbench --help` and each command's start-up stay fast; `tests/test_cli_startup.py` checks that each module's own
+# help matches this table.
+COMMANDS = {
+    "grasps": "plan free-air grasps of a mesh and store them",
+    "placements": "compute and store placements and the tabletop roadmap data",
+    "ik": "IK feasibility of every tabletop grip for a robot (paper Section IV: ik, ikret)",
+    "build": "run every stage for a mesh and a robot (grasps, placements, IK, regrasp graph)",
+    "catalog": "build a parts x robots catalogue on a Dask cluster, or print one",
+    "plan": "plan regrasps from a start to a goal pose on the table",
+    "simulate": "replay a stored plan in MuJoCo physics: does the part stay in the hand and end at its goal?",
+    "fingers": "five-finger regrasp roadmap by contact-point clustering (Tables I-III)",
+    "gptable": "grasp classes and the grasp-placement table (Tournassoud et al. 1987)",
+    "gpplan": "regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)",
+    "demo": "build a bundled object, plan a regrasp task and write the animation",
+    "bench": "print a benchmark table beside the papers' numbers",
+}
 
 
 # A token such as -0.3,0.3,3 or -1e-3 is a value, not an option (no option of ours starts with a digit), so
@@ -40,23 +59,45 @@ def _budget(text: str) -> int:
         raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _selected(argv: list[str]) -> str | None:
+    """The command named on the command line: the first token that is not an option."""
+    for token in argv:
+        if not token.startswith("-"):
+            return token if token in COMMANDS else None
+    return None
+
+
+def build_parser(argv: list[str] | None = None, full: bool = False) -> argparse.ArgumentParser:
+    """The command line's parser. Only the command named in `argv` is registered with its options (its module
+    imported); the others are listed with their help. `full` registers every command (the CLI reference)."""
     parser = _Parser(prog="workbench", description="Regrasp planning workbench. Negative values parse as they are "
                                                    "(--y -0.3,0.3,3) or joined with = (--y=-0.3,0.3,3).")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    for name in COMMANDS:
-        importlib.import_module(f"workbench.cli.{name}").register(sub)
-    for child in sub.choices.values():
-        child.add_argument("--memory-budget", type=_budget, default=None, metavar="SIZE",
-                           help=f"largest memory a step may plan to use, e.g. 4GiB (default: half this machine's "
-                                f"memory, or {BUDGET_ENV}); larger work is refused before it starts")
+    chosen = None if full else _selected(sys.argv[1:] if argv is None else argv)
+    for name, text in COMMANDS.items():
+        if full or name == chosen:
+            register = importlib.import_module(f"workbench.cli.{name}").register
+            if "argv" in inspect.signature(register).parameters:  # a command with lazily imported subcommands
+                register(sub, argv=None if full else (sys.argv[1:] if argv is None else argv))
+            else:
+                register(sub)
+        else:
+            sub.add_parser(name, help=text, add_help=False)
+    for name, child in sub.choices.items():
+        if full or name == chosen:
+            child.add_argument("--memory-budget", type=_budget, default=None, metavar="SIZE",
+                               help=f"largest memory a step may plan to use, e.g. 4GiB (default: half this machine's "
+                                    f"memory, or {BUDGET_ENV}); larger work is refused before it starts")
+            child.add_argument("--wait", type=parse_number(WAIT, "--wait"), default=None, metavar="SECONDS",
+                               help=f"when another process holds the store, wait up to SECONDS for it ({WAIT.describe(True)}; "
+                                    f"default 0: say it is busy and stop; or {WAIT_ENV})")
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns its exit status (2 for bad input, argparse's refusals included)."""
     try:
-        args = build_parser().parse_args(argv)
+        args = build_parser(argv).parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a refused option (2, one line already printed)
         return exc.code if isinstance(exc.code, int) else 0
 
@@ -66,6 +107,8 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = one_line
     if getattr(args, "memory_budget", None):
         os.environ[BUDGET_ENV] = str(args.memory_budget)  # inherited by worker processes
+    if getattr(args, "wait", None) is not None:
+        os.environ[WAIT_ENV] = str(args.wait)  # read where the store is opened (workbench.store.Store)
     try:
         return int(args.func(args) or 0)
     except WorkbenchError as exc:

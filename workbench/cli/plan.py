@@ -1,6 +1,6 @@
 """`workbench plan --db DB --object NAME --robot ROBOT --start P,X,Y,YAW --goal P,X,Y,YAW`: connect a start and a goal
-pose to the regrasp graph, search it, plan and time its motions, print and write the plan (Wan & Harada, Section V;
-issue 12). Yaw in degrees on the command line, radians in the library."""
+pose to the regrasp graph, search it, plan and time its motions, print and write the plan (Wan & Harada,
+Section V). Yaw in degrees on the command line, radians in the library."""
 
 from __future__ import annotations
 
@@ -11,7 +11,9 @@ import time
 from pathlib import Path
 
 from workbench.cli import warn
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.cli.ik import RETRACT
+from workbench.cli.outputs import add_output, write_text
 from workbench.errors import PlanningError
 from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
@@ -24,8 +26,9 @@ from workbench.planners.wan_harada.stages import (
     stored_plan,
 )
 from workbench.robots.motion import MotionOptions
-from workbench.robots.timing import to_csv, to_json
+from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
 from workbench.store import Store
+from workbench.store.robots import robot_with_gripper
 from workbench.viewer.wan_harada import plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
@@ -51,14 +54,16 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="use the IK run with this worldz retraction (m)")
     parser.add_argument("--allow-partial", action="store_true",
                         help="plan on an IK stage that did not complete (killed part-way), with a warning; not stored")
-    parser.add_argument("--json", default=None, metavar="OUT", help="write the plan (and its alternatives) as JSON")
-    parser.add_argument("--html", default=None, metavar="OUT", help="write a meshcat animation of the plan as static HTML")
+    add_output(parser, "--json", "write the plan (and its alternatives) as JSON")
+    add_output(parser, "--html", "write a meshcat animation of the plan as static HTML")
     parser.add_argument("--meshes", choices=["collision", "visual"], default="collision",
                         help="robot meshes in the HTML: collision (small file, default) or visual (nicer, larger)")
     parser.add_argument("--no-save", action="store_true", help="do not store the plans in the store's plan tables")
     add_motion_arguments(parser, "roadmap nodes or grips")
-    parser.add_argument("--trajectory", default=None, metavar="OUT",
-                        help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot) or OUT.json")
+    add_output(parser, "--trajectory", suffixes=(".csv", ".yaml", ".yml", ".json"),
+               help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml "
+                    "(a ROS 2 trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
+    add_gripper_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -66,17 +71,21 @@ def run(args: argparse.Namespace) -> int:
 
     start, goal = parse_pose(args.start, "--start", degrees=True), parse_pose(args.goal, "--goal", degrees=True)
     opts = exec_options(args)
-    if args.trajectory and Path(args.trajectory).suffix.lower() not in (".csv", ".json"):
-        raise PlanningError(f"--trajectory {args.trajectory!r} must end in .csv or .json")
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
+    if args.gripper == "own":
+        raise PlanningError("plan takes a robot's own hand by its URDF: --gripper ROBOT.urdf --gripper-hand TIP "
+                            "--gripper-fingers LEFT,RIGHT (as given to build)")
+    gripper = gripper_from_args(args)
     with Store(args.db, create=False) as store:
+        args.robot = robot_with_gripper(store, args.robot, gripper.digest) or args.robot
         reason = empty_stage(store, args.object, args.robot)
         if reason:
             warn(f"no plan for {args.object}: nothing to plan with; stage {reason}")
             return 0
         t0 = time.perf_counter()
-        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial)
+        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial,
+                               gripper=gripper)
         t_load = time.perf_counter() - t0
         turn = (goal.yaw - start.yaw + math.pi) % (2 * math.pi) - math.pi
         if (start.idfreetabletopplacement == goal.idfreetabletopplacement in planner.placement_ids()
@@ -150,12 +159,11 @@ def exec_options(args: argparse.Namespace) -> ExecOptions:
 
 
 def write_trajectory(plan, out: str | Path) -> Path:
-    """The plan's timed trajectory for replay: CSV (one row per knot) or JSON (per segment), by the file's suffix."""
+    """The plan's timed trajectory for replay, by the file's suffix: CSV (one row per knot), YAML (a ROS 2
+    `trajectory_msgs/JointTrajectory`) or JSON (per segment)."""
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    text = to_csv(plan.segments, plan.joint_names) if out.suffix.lower() == ".csv" else to_json(plan.segments, plan.joint_names)
-    out.write_text(text)
-    return out
+    writer = {".csv": to_csv, ".yaml": to_ros2_yaml, ".yml": to_ros2_yaml}.get(out.suffix.lower(), to_json)
+    return write_text(out, writer(plan.segments, plan.joint_names))
 
 
 def print_plan(plan) -> None:
@@ -181,8 +189,5 @@ def write_json(plans, out: str | Path, **why: str) -> Path:
     """The best plan with its alternatives as one JSON file: {"plan": ..., "alternatives": [...]}; with no plan,
     {"plan": null, "alternatives": [], ...`why`} (reason and message)."""
 
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"plan": plans[0].as_dict() if plans else None,
-                               "alternatives": [p.as_dict() for p in plans[1:]], **why}, indent=1))
-    return out
+    return write_text(out, json.dumps({"plan": plans[0].as_dict() if plans else None,
+                                       "alternatives": [p.as_dict() for p in plans[1:]], **why}, indent=1))

@@ -1,4 +1,4 @@
-"""Safe mesh repair for the meshes users bring (issue 10): scans, exports with flipped faces, open meshes.
+"""Safe mesh repair for the meshes users bring: scans, exports with flipped faces, open meshes.
 
 Only repairs that cannot change the intended shape are made, and each is reported in one line:
 merge duplicate vertices (reported for indexed meshes; an STL's per-face corners are merged silently), drop degenerate and duplicate faces, make the winding consistent and the normals point

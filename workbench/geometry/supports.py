@@ -1,4 +1,4 @@
-"""Support faces of a convex hull, merged when coplanar within a tolerance (issue 10; Wan & Harada, Section IV).
+"""Support faces of a convex hull, merged when coplanar within a tolerance (Wan & Harada, Section IV).
 
 A scanned base is flat only to a tolerance: its convex hull is many small faces whose normals differ by a degree
 or so, none of which holds the centre of mass's projection on its own. Hull faces are grouped greedily, largest

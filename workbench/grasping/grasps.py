@@ -277,6 +277,8 @@ def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, tar
     the object? (The body does not move with the fingers: it is tested at full opening.) `pads=False` skips the pad
     boxes, for grasps whose pads closed onto their first touches and so cannot overlap the object."""
     boxes = [b for k, b in enumerate(gripper.finger_poses(0.0)) if pads or k // 2 != gripper.pad]
+    if not boxes:  # fingers that are their pads only
+        return np.zeros(len(poses), dtype=bool)
     extents = np.array([np.maximum(ext - 2 * clearance, 1e-6) for ext, _ in boxes])
     local = np.array([pose for _, pose in boxes])
     side = np.sign(local[:, 1, 3])
@@ -629,7 +631,7 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
 
 def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Gripper,
                  pairs: ContactPairs | None = None) -> str | None:
-    """Which stage removed the last candidate, and what to try; None when grasps remain (issue 10). With the contact
+    """Which stage removed the last candidate, and what to try; None when grasps remain. With the contact
     `pairs`, an empty friction stage names the friction the most nearly opposed pair that fits the jaw needs: half the
     angle between one normal and the other reversed, the best any jaw axis can do."""
     if counts.get("grasps", 0) > 0:

@@ -152,7 +152,7 @@ def no_grip_hint(obj: ObjectModel, placement_poses: np.ndarray) -> str:
 def empty_placement_stage(obj: ObjectModel, params: PlacementParams, placement_poses: np.ndarray,
                           n_free_grips: int) -> str | None:
     """"placements: why" when no placement is stable, "free tabletop grips: why" when no grasp clears the table at
-    any, else None (issue 10: the stage that kept nothing, for `workbench build` and the catalogue alike)."""
+    any, else None (the stage that kept nothing, for `workbench build` and the catalogue alike)."""
     if len(placement_poses) == 0:
         return f"placements: {stability_hint(obj, params)}"
     if n_free_grips == 0:

@@ -9,7 +9,7 @@ A pose is feasible when IK converges (position within `tol_pos`, orientation wit
 limits and the arm and the gripper at that configuration do not collide with the table, nor the arm with the
 object, which rests on its placement for the first three poses and moves with the hand for the lifts (python-fcl
 on the URDF's collision geometry; the gripper's contact with the object is the grasp planner's business); nor the arm and gripper
-with themselves when `self_collide` (issue 12: `robots.selfcollision`, pinocchio + coal, allowed pairs from the
+with themselves when `self_collide` (`robots.selfcollision`, pinocchio + coal, allowed pairs from the
 SRDF or sampled).
 
 Speed (Section VI, Table I's t-tpgik): a reachability pre-filter (`ReachFilter`: distance from the
@@ -531,7 +531,7 @@ def diagnose_unreachable(robot: Robot, grips: dict[str, np.ndarray], scene: Scen
                          opts: IKOptions = IKOptions(), samples: int = 24) -> str:
     """Why no grip's grasp pose is feasible, from `samples` of them solved again without collision checks: out of
     reach; the arm's links in the part (the usual sign of a missing gripper mount on a URDF's flange); the table;
-    or self-collision. One line with what to try (issue 10: zero is a result that names its cause)."""
+    or self-collision. One line with what to try (zero is a result that names its cause)."""
     poses = check_poses(grips["rotmat"])
     places = check_poses(grips["placement_rotmat"], "object placement")
     pick = np.unique(np.linspace(0, len(poses) - 1, min(samples, len(poses))).astype(np.int64))

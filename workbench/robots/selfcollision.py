@@ -1,4 +1,4 @@
-"""Self-collision of the arm and its planning gripper (CONVENTIONS.md, Plans and motions; issue 12).
+"""Self-collision of the arm and its planning gripper (CONVENTIONS.md, Plans and motions).
 
 The collision parts are the URDF's collision geometry of the arm (pinocchio's reduced model: links moved by the
 arm's joints and the fixed ones, without the robot's own hand, `RobotSpec.drop_geometry`) plus the planning

@@ -1,4 +1,4 @@
-"""SQL of a parts x robots catalogue built on a cluster (`workbench catalog`; issue 15).
+"""SQL of a parts x robots catalogue built on a cluster (`workbench catalog`).
 
 - catalog_unit: one row per finished (or failed) unit of work, keyed by the unit's digest (the mesh file's bytes,
   its scale and name, every stage's parameters, the robot's kinematics, the scene, the retractions and the IK

@@ -7,7 +7,8 @@ Tables (created on first use, idempotent; angles in radians, lengths in metres, 
   grasp-plane normal `normal` n_i (the jaw axis, object frame), the plane basis `u`, `v`, the grasp point `point`
   C_i, `eccentricity` e_i = n_i . (C_i - centre of mass), `opening` (m), and the legal theta intervals against
   hand-object collision as parallel lists `theta_lo`, `theta_hi` (Section 5.1). The TCP in the object frame at
-  angle theta is: y = n_i, z = cos(theta) u + sin(theta) v, x = y x z, origin C_i.
+  angle theta is: y = n_i, z = cos(theta) u + sin(theta) v, x = y x z, origin C_i. Classes dropped as narrower
+  than the parameter set's `min_range` are kept with negative `idx` (-1, -2, ...): they are not in the table.
 - `tgptable`: one row per grasp-placement table (`tournassoud.table` parameter set): object, robot, the grasp
   class parameter set `idclasses`, the theta and phi grids (`ntheta`, `nphi` samples k * 2 pi / n), the table
   point H (`table_point`, world x, y on z = 0), build timings and counts.
@@ -117,19 +118,22 @@ def _lists(values: list[np.ndarray]) -> pa.Array:
 # -- grasp classes -------------------------------------------------------------------------------------------------
 
 
-def save_classes(store: Store, stage: str, params: dict, idobject: int, classes: list) -> int:
-    """Write the grasp classes of one parameter set in one transaction; returns its paramset id."""
+def save_classes(store: Store, stage: str, params: dict, idobject: int, classes: list, dropped: list = ()) -> int:
+    """Write the grasp classes of one parameter set in one transaction, the `dropped` narrow ones with negative
+    indices; returns its paramset id."""
     with store.transaction():
         pid, existed = store.paramset(stage, params, idobject)
         if existed:
             return pid
+        idx = np.concatenate([np.arange(len(classes)), -1 - np.arange(len(dropped))]).astype(np.int32)
+        classes = list(classes) + list(dropped)
         n = len(classes)
         if n:
             store.insert("tgraspclass", {
                 "idtgraspclass": store.new_ids("tgraspclass", n),
                 "idparamset": np.full(n, pid, dtype=np.int64),
                 "idobject": np.full(n, idobject, dtype=np.int64),
-                "idx": np.arange(n, dtype=np.int32),
+                "idx": idx,
                 "kind": np.array([c.kind for c in classes], dtype=object),
                 "features": np.array([json.dumps(c.features) for c in classes], dtype=object),
                 "normal": np.array([c.normal for c in classes]),
@@ -147,7 +151,7 @@ def save_classes(store: Store, stage: str, params: dict, idobject: int, classes:
 def load_classes(store: Store, pid: int) -> list[dict]:
     """The stored grasp classes of paramset `pid` as dicts of GraspClass fields, in index order."""
     rows = store.run("SELECT kind, features, normal, u, v, point, eccentricity, opening, theta_lo, theta_hi "
-                     "FROM tgraspclass WHERE idparamset = ? ORDER BY idx", [pid])
+                     "FROM tgraspclass WHERE idparamset = ? AND idx >= 0 ORDER BY idx", [pid])
     out = []
     for kind, feats, n, u, v, p, e, w, lo, hi in rows:
         out.append(dict(kind=kind, features=json.loads(feats), normal=np.asarray(n, dtype=np.float64),
@@ -157,14 +161,23 @@ def load_classes(store: Store, pid: int) -> list[dict]:
 
 
 def class_ids(store: Store, pid: int) -> np.ndarray:
-    return np.array([r[0] for r in store.run("SELECT idtgraspclass FROM tgraspclass WHERE idparamset = ? ORDER BY idx", [pid])],
-                    dtype=np.int64)
+    """The ids of a class parameter set's grasp classes, in their index order."""
+    return np.array([r[0] for r in store.run("SELECT idtgraspclass FROM tgraspclass WHERE idparamset = ? AND idx >= 0 "
+                                             "ORDER BY idx", [pid])], dtype=np.int64)
+
+
+def dropped_classes(store: Store, pid: int) -> tuple[int, float]:
+    """How many classes paramset `pid` dropped as narrow, and the widest of their legal ranges (radians; 0 if none)."""
+    rows = store.run("SELECT theta_lo, theta_hi FROM tgraspclass WHERE idparamset = ? AND idx < 0", [pid])
+    widths = [sum(b - a for a, b in zip(lo, hi)) for lo, hi in rows]
+    return len(widths), float(max(widths, default=0.0))
 
 
 # -- the table -----------------------------------------------------------------------------------------------------
 
 
 def find_paramset(store: Store, stage: str, params: dict, idobject: int) -> int | None:
+    """The id of a stored parameter set of `stage` for this object, if any."""
     return store.find_paramset(stage, params, idobject)
 
 
@@ -230,9 +243,9 @@ def load_table(store: Store, pid: int) -> dict:
         raise StoreError(f"store {store.path} has no grasp-placement table for paramset {pid}; run `workbench gptable` first")
     tid, oid, rid, cpid, t_n, f_n, point, c_n, p_n, s1, s2, s3, nik = row
     pl = store.query_arrays("SELECT idx, normal, rotmat, stability FROM tplacementclass WHERE idtgptable = ? ORDER BY idx", [tid])
-    cells = store.con.sql("SELECT g.idx AS ci, p.idx AS pj, c.itheta, c.hand_object, c.hand_table, c.phi_lo, c.phi_hi "
-                          "FROM tgpcell c JOIN tgraspclass g USING (idtgraspclass) JOIN tplacementclass p USING (idtplacementclass) "
-                          "WHERE c.idtgptable = ?", params=[int(tid)]).to_arrow_table()
+    cells = store.arrow("SELECT g.idx AS ci, p.idx AS pj, c.itheta, c.hand_object, c.hand_table, c.phi_lo, c.phi_hi "
+                        "FROM tgpcell c JOIN tgraspclass g USING (idtgraspclass) JOIN tplacementclass p USING (idtplacementclass) "
+                        "WHERE c.idtgptable = ?", [int(tid)])
     ci = cells.column("ci").to_numpy()
     pj = cells.column("pj").to_numpy()
     tk = cells.column("itheta").to_numpy()

@@ -1,4 +1,4 @@
-"""Captions and a colour key in meshcat scenes (issue 12): meshcat draws no text, so `caption_png` renders text
+"""Captions and a colour key in meshcat scenes: meshcat draws no text, so `caption_png` renders text
 (with colour swatches) as a PNG and `add_overlays` shows it on thin textured boxes facing the camera, one caption
 panel per plan step name (pick, transfer, release, regrasp, place) shown while the animation is in that step.
 """

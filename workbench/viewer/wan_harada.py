@@ -3,7 +3,7 @@ Figs. 11-12), exported as static HTML that opens without a server.
 
 The robot and the planning gripper (at the step's jaw opening) are drawn by `workbench.viewer.robot.RobotView`
 from the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper.
-A plan with motions (issue 12) plays its timed trajectory at its real speed (`timed_frames`: frames at `fps` per
+A plan with motions plays its timed trajectory at its real speed (`timed_frames`: frames at `fps` per
 second of plan time), with a caption naming the current step (pick, transfer, release, regrasp, place) and a colour
 key; a plan without motions plays its waypoints joined by straight joint lines (`keyframes`, not a motion a robot
 could execute). The object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue) poses
@@ -40,13 +40,16 @@ CAMERA_DIR = np.array([0.8, -0.8, 0.0]) / np.hypot(0.8, 0.8)
 """Horizontal direction from the scene toward `frame_camera`'s default camera (captions face it)."""
 
 
-def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int = 5, jaw_open: float = 0.08) -> list[dict]:
-    """The animation as a list of frames: joint vector `q`, jaw opening, whether the object is held, its pose when
-    resting, the grasp (TCP in the object frame) when held, and the plan step playing (-1 before the first)."""
+def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int = 5,
+              jaw_open: float | None = None) -> list[dict]:
+    """The animation as a list of frames: joint vector `q`, jaw opening (`jaw_open` when open: the planned gripper's
+    full opening, default the widest grasp), whether the object is held, its pose when resting, the grasp (TCP in the
+    object frame) when held, and the plan step playing (-1 before the first)."""
     out: list[dict] = []
     steps = plan.steps
     if not steps:
         return out
+    jaw_open = max(s.jawwidth for s in steps) if jaw_open is None else jaw_open
     q = np.asarray(steps[0].waypoints()[0].q, dtype=np.float64)
     held, rest, grasp = False, np.asarray(plan.start_pose, dtype=np.float64), np.eye(4)
 
@@ -78,12 +81,13 @@ def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int
 MOVES_TO_NEXT = ("transfer", "transit")  # motions from one step's pose to the next step's: they serve the next step
 
 
-def timed_frames(plan, segments: list[TimedSegment], tcp_pose, fps: float = 30.0, jaw_open: float = 0.08) -> list[dict]:
+def timed_frames(plan, segments: list[TimedSegment], tcp_pose, fps: float = 30.0, jaw_open: float | None = None) -> list[dict]:
     """Frames of a timed plan at `fps` frames per second of plan time (a player at `fps` plays the motion at its real
     speed): t, q, jaw, held, object (4x4 world pose), caption (the step: pick, transfer, release, regrasp, place) and
     segment index. `tcp_pose(q)` gives the TCP pose in the world (the robot's forward kinematics)."""
     if not segments:
         return []
+    jaw_open = max((s.jawwidth for s in plan.steps), default=0.0) if jaw_open is None else jaw_open
     total = segments[-1].t0 + segments[-1].duration
     times = np.arange(0.0, total + 0.5 / fps, 1.0 / fps)
     times[-1] = min(times[-1], total)

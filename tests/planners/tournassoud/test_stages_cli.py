@@ -56,14 +56,17 @@ def test_cli_gptable_and_gpplan(tmp_path, lpart, capsys):
     theta0 = float(np.degrees(run.table.theta[legal[len(legal) // 2]]))
     js = tmp_path / "plan.json"
     html = tmp_path / "plan.html"
+    assert theta0 == 130.0  # a query known to have an executable plan from the default pedestal
     code = main(["gpplan", "--db", db, "--object", "L", "--initial", f"0,{theta0:g}", "--goal", "3,0:360",
                  "--json", str(js), "--html", str(html)])
     assert code == 0
     out = capsys.readouterr().out
     doc = json.loads(js.read_text())
-    if doc["plan"] is not None:
-        assert "validator: ok" in out and "(planner tournassoud" in out
-        assert doc["sequence"]["regrasps"] == doc["plan"]["regrasps"] and doc["plan"]["planner"] == "tournassoud"
+    assert doc["plan"] is not None and doc["sequence"] is not None, out
+    assert "validator: ok" in out and "(planner tournassoud" in out
+    assert doc["sequence"]["regrasps"] == doc["plan"]["regrasps"] >= 1 and doc["plan"]["planner"] == "tournassoud"
+    assert doc["plan"]["motion"]["duration"] > 0
+    assert doc["table_sequence"]["regrasps"] <= doc["sequence"]["regrasps"]
     assert html.read_text().startswith("<!doctype html>")
     # bad input: one line, status 2
     assert main(["gpplan", "--db", db, "--object", "L", "--initial", "0,abc", "--goal", "3,0:360"]) == 2
@@ -157,3 +160,54 @@ def test_cli_gpplan_stores_an_executable_plan(tmp_path, lpart, capsys):
     assert f"stored plan id {idplan}" in capsys.readouterr().out
     assert main(["gptable", str(mesh), "--db", db, "--base", "0,0"]) == 2
     assert main(query[:-2] + ["--table", "1,0,0,1"]) == 2
+
+
+def test_removal_learns_and_explains(tmp_path, box, capsys):
+    """A placement query whose table answers need an IK branch switch the arm cannot make next to the table: each
+    failed motion removes every sample needing the same switch, so the default limit of 10 suffices; the output and
+    the JSON name every removed conjunction, why, at which step, and the table's own answer beside the executable
+    one, which the validators rebuilt from the store accept with its motions."""
+    mesh = tmp_path / "box.stl"
+    box.mesh.export(mesh)
+    db = str(tmp_path / "box.duckdb")
+    assert main(["gptable", str(mesh), "--db", db]) == 0
+    js = tmp_path / "box.json"
+    assert main(["gpplan", "--db", db, "--object", "box", "--from", "3,75", "--to", "2,25", "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    doc = json.loads(js.read_text())
+    assert doc["plan"] is not None and "validator: ok" in out, out
+    assert doc["plan"]["motion"]["removed"] == len(doc["removed"]) >= 1
+    motions = [r for r in doc["removed"] if r["motion"] in ("transfer", "transit")]
+    assert motions and all(r["previous"] is not None and r["samples"] > 1 and r["reason"] for r in motions)
+    assert out.count("  removed step ") == len(doc["removed"])
+    own = doc["table_sequence"]
+    assert own is not None and f"the table's shortest sequence has {own['regrasps']} regrasp(s)" in out
+    assert f"the shortest executable one has {doc['sequence']['regrasps']}" in out
+    # the executable sequence avoids every removed conjunction
+    used = {(tuple(g), tuple(p)) for g, p in zip(doc["sequence"]["grasps"], doc["sequence"]["placements"][:-1])}
+    used |= {(tuple(g), tuple(p)) for g, p in zip(doc["sequence"]["grasps"], doc["sequence"]["placements"][1:])}
+    assert not used & {tuple(map(tuple, r["conjunction"])) for r in doc["removed"]}
+
+
+def test_narrow_classes_are_kept_or_dropped_with_their_count(tmp_path, lpart, hand, capsys):
+    """--min-range 0 keeps every class; a width drops the narrower ones with a warning naming how many, on the first
+    run and again when the classes are reused from the store; the dropped classes are exactly those narrower."""
+    from workbench.planners.tournassoud.classes import ClassParams, grasp_classes
+
+    mesh = tmp_path / "L.stl"
+    lpart.mesh.export(mesh)
+    db = str(tmp_path / "n.duckdb")
+    every = grasp_classes(lpart, hand, ClassParams(theta_step=np.radians(10), bisection=np.radians(0.1)))
+    width = float(np.median([np.degrees(c.legal_range) for c in every]))
+    narrower = sum(np.degrees(c.legal_range) < width for c in every)
+    assert 0 < narrower < len(every)
+    base = ["gptable", str(mesh), "--db", db, "--theta-step", "10", "--phi-step", "10"]
+    assert main(base) == 0
+    cap = capsys.readouterr()
+    assert f"{len(every)} grasp classes" in cap.out and "dropped" not in cap.err
+    for _ in range(2):
+        assert main(base + ["--min-range", f"{width:g}"]) == 0
+        cap = capsys.readouterr()
+        assert f"{len(every) - narrower} grasp classes" in cap.out
+        assert f"warning: {narrower} grasp class(es) dropped as narrower than --min-range" in cap.err
+

@@ -152,6 +152,23 @@ def test_backward_chaining_is_minimal_like_bfs(seed):
             assert placement_query(t, (int(ps), float(t.phi[fs])), (int(pg), float(t.phi[fg]))).regrasps == expect
 
 
+def test_ranges_keep_both_ends():
+    """A goal range keeps the samples at both of its ends, typed in degrees or given in radians: [a, a] is the sample
+    at a, [a, a + 5] the two samples, for every 5-degree sample (float rounding put 15 of them outside before)."""
+    from workbench.cli.gpplan import parse_goal
+    from workbench.planners.tournassoud.chaining import in_range, nearest_sample
+    from workbench.planners.tournassoud.table import grid
+
+    theta = grid(np.radians(5.0))
+    for k, deg in enumerate(np.arange(0, 360, 5)):
+        for rng in ((np.radians(deg), np.radians(deg)), parse_goal(f"0,{deg}:{deg}")[1], (k * np.pi / 36, k * np.pi / 36)):
+            assert np.flatnonzero(in_range(theta, rng)).tolist() == [k]
+        both = np.flatnonzero(in_range(theta, parse_goal(f"0,{deg}:{deg + 5}")[1])).tolist()
+        assert sorted(both) == sorted([k, (k + 1) % 72])
+        assert nearest_sample(theta, np.radians(deg)) == k
+    assert in_range(theta, (0.0, 2 * np.pi)).all() and in_range(theta, parse_goal("0,-10:350")[1]).all()
+
+
 def test_runs_wrap_around():
     vals = np.arange(8.0)
     assert runs(np.array([1, 1, 0, 0, 1, 0, 1, 1], dtype=bool), vals) == [(4.0, 4.0), (6.0, 1.0)]

@@ -29,8 +29,17 @@ from workbench.errors import PlanningError
 from workbench.planners.tournassoud.table import GraspPlacementTable, runs
 
 
+ANGLE_TOL = 1e-6
+"""Radians: an angle range [lo, hi] keeps the samples within this of either end (a range typed in degrees meets
+the grid's samples only up to float rounding: 85 degrees in radians is not exactly sample 17 of 72)."""
+
+
 class NoSequence(PlanningError):
-    """A valid query without an answer: the table does not connect its start and goal (zero results)."""
+    """A valid query without an answer: the table does not connect its start and goal (zero results). When realising
+    a sequence removed conjunctions first, `removals` lists them and `table_sequence` is the table's own answer."""
+
+    removals: list = []
+    table_sequence: "Sequence | None" = None
 
 
 @dataclass
@@ -144,10 +153,12 @@ def _through(table: GraspPlacementTable, grasp: tuple[int, int], prev: np.ndarra
     return (j, f), (k, tk)
 
 
-def grasp_query(table: GraspPlacementTable, initial: tuple[int, float], goal_class: int, goal_range: tuple[float, float]) -> Sequence:
-    """Section 6: from (G_ini, theta_ini) to (G_goal, [theta_min, theta_max]) (radians); theta_ini is taken at its
-    nearest sample. Raises PlanningError when no sequence exists."""
-    t0 = time.perf_counter()
+def grasp_query(table: GraspPlacementTable, initial: tuple[int, float], goal_class: int, goal_range: tuple[float, float],
+                start_mask: np.ndarray | None = None, goal_mask: np.ndarray | None = None) -> Sequence:
+    """Section 6: from (G_ini, theta_ini) to (G_goal, [theta_min, theta_max]) (radians, both ends kept within
+    `ANGLE_TOL`); theta_ini is taken at its nearest sample. `start_mask` / `goal_mask` ((C, T) bool, from the task's
+    obstacles at the pick-up and the destination, Section 5.1) further restrict the initial and final grasps.
+    Raises PlanningError when no sequence exists."""
     c_n, t_n = table.q.shape[0], table.q.shape[2]
     ci, theta_ini = initial
     for name, c in (("initial", ci), ("goal", goal_class)):
@@ -158,24 +169,49 @@ def grasp_query(table: GraspPlacementTable, initial: tuple[int, float], goal_cla
         legal = ", ".join(f"{np.degrees(a):.0f}..{np.degrees(b):.0f}" for a, b in runs(table.hand_object[ci], table.theta)) or "none"
         raise PlanningError(f"initial grasp (class {ci}, theta {np.degrees(theta_ini):.1f} deg) collides with the object; "
                             f"choose theta in the class's legal range (deg: {legal})")
+    if start_mask is not None and not start_mask[ci, ti]:
+        legal = ", ".join(f"{np.degrees(a):.0f}..{np.degrees(b):.0f}" for a, b in runs(start_mask[ci], table.theta)) or "none"
+        raise PlanningError(f"initial grasp (class {ci}, theta {np.degrees(theta_ini):.1f} deg) is not free at the pick-up "
+                            f"(the hand hits an obstacle there or the arm cannot reach it); class {ci}'s free angles there "
+                            f"(deg): {legal}")
     start = np.zeros((c_n, t_n), dtype=bool)
     start[ci, ti] = True
     goal = np.zeros((c_n, t_n), dtype=bool)
     goal[goal_class] = in_range(table.theta, goal_range) & table.hand_object[goal_class]
+    if goal_mask is not None:
+        goal &= goal_mask
     if not goal.any():
         raise PlanningError(f"goal class {goal_class} has no legal theta in [{np.degrees(goal_range[0]):.1f}, "
-                            f"{np.degrees(goal_range[1]):.1f}] deg; widen the range")
+                            f"{np.degrees(goal_range[1]):.1f}] deg{' free at the destination' if goal_mask is not None else ''}; "
+                            f"widen the range")
+    return task_query(table, start, goal, theta_ini=float(theta_ini))
+
+
+def task_query(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, theta_ini: float | None = None) -> Sequence:
+    """Section 6 with sets of grasps at both ends: from any grasp of `start` to any of `goal` ((C, T) bool, e.g. the
+    grasps that clear the pick-up's and the destination's obstacles, Section 5.1), fewest placements. With
+    `theta_ini` the start is one grasp, realised at that exact angle."""
+    t0 = time.perf_counter()
+    c_n, t_n = table.q.shape[0], table.q.shape[2]
+    start = np.asarray(start, dtype=bool).reshape(c_n, t_n) & table.hand_object
+    goal = np.asarray(goal, dtype=bool).reshape(c_n, t_n) & table.hand_object
+    if not start.any():
+        raise NoSequence("no initial grasp: no legal (class, theta) is free at the pick-up")
+    if not goal.any():
+        raise NoSequence("no final grasp: no legal (class, theta) is free at the destination")
     levels = chain(table, start, goal)
     if levels is None:
-        raise NoSequence(f"no regrasp sequence from class {ci} at {np.degrees(theta_ini):.1f} deg to class {goal_class}: "
-                            f"the grasp-placement table does not connect them (try another table point or finer steps)")
-    grasps, placements = [(ci, ti)], []
-    cur = (ci, ti)
+        what = (f"class {int(np.argwhere(start)[0][0])} at {np.degrees(theta_ini):.1f} deg" if theta_ini is not None
+                else f"the {int(start.sum())} initial grasp sample(s)")
+        raise NoSequence(f"no regrasp sequence from {what} to the {int(goal.sum())} goal grasp sample(s): the grasp-placement "
+                         f"table does not connect them (try another table point or finer steps)")
+    cur = _pick2(levels[-1] & start)
+    grasps, placements = [cur], []
     for prev in reversed(levels[:-1]):
         pl, cur = _through(table, cur, prev)
         placements.append(pl)
         grasps.append(cur)
-    return Sequence("grasp", grasps, placements, len(levels) - 1, time.perf_counter() - t0, theta_ini=float(theta_ini))
+    return Sequence("grasp", grasps, placements, len(levels) - 1, time.perf_counter() - t0, theta_ini=theta_ini)
 
 
 def _served_angles(table: GraspPlacementTable, p: int) -> str:
@@ -262,14 +298,16 @@ def why_apart(table: GraspPlacementTable, ps: int, pg: int) -> str:
 
 
 def nearest_sample(grid: np.ndarray, angle: float) -> int:
+    """Index of the sample of the uniform circular `grid` nearest to `angle` (radians)."""
     n = len(grid)
     return int(np.round(np.mod(angle, 2 * np.pi) / (2 * np.pi / n))) % n
 
 
-def in_range(grid: np.ndarray, rng: tuple[float, float]) -> np.ndarray:
-    """Samples inside [lo, hi] (radians, hi >= lo; wraps around 2 pi)."""
+def in_range(grid: np.ndarray, rng: tuple[float, float], tol: float = ANGLE_TOL) -> np.ndarray:
+    """Samples inside [lo - tol, hi + tol] (radians, hi >= lo; wraps around 2 pi): both ends are kept, so a range
+    typed in degrees keeps the samples at its ends and [a, a] is the sample at a."""
     lo, hi = rng
-    if hi - lo >= 2 * np.pi - 1e-12:
+    if hi - lo >= 2 * np.pi - 2 * tol:
         return np.ones(len(grid), dtype=bool)
-    d = np.mod(grid - lo, 2 * np.pi)
-    return d <= (hi - lo) + 1e-9
+    d = np.mod(np.asarray(grid, dtype=np.float64) - lo + tol, 2 * np.pi)
+    return d <= (hi - lo) + 2 * tol

@@ -414,10 +414,12 @@ def no_class_reason(obj: ObjectModel, gripper: Gripper, params: ClassParams = Cl
 
 
 def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = ClassParams(),
-                  progress: bool = False) -> list[GraspClass]:
+                  progress: bool = False, dropped: list[GraspClass] | None = None) -> list[GraspClass]:
     """The grasp classes of `obj` for `gripper` with their grasp points and legal theta intervals (Sections 2, 5.1).
 
-    Classes whose legal theta range is empty are dropped."""
+    Classes whose legal theta range is empty are dropped. With `params.min_range` > 0, classes narrower than it are
+    dropped too and appended to `dropped` (for the caller's warning and count); with 0 (the default, the paper's
+    rule) every class of any width is kept."""
     feats = features(obj.mesh, params.min_face_area, params.edge_angle)
     pairs = _pairs(feats, (gripper.jaw_min, gripper.jaw_max - 2 * params.tolerance), params)
     hand = HandObject(obj, gripper, params.tolerance)
@@ -444,12 +446,15 @@ def grasp_classes(obj: ObjectModel, gripper: Gripper, params: ClassParams = Clas
             picked = [] if one is None else [one]
         n, u, v = cls["normal"], cls["u"], cls["v"]
         for k, (point, intervals) in enumerate(picked):
-            if params.min_range > 0 and sum(b - a for a, b in intervals) < params.min_range:
-                continue
             feats = cls["features"] if params.points == 1 else {**cls["features"], "point": k}
-            out.append(GraspClass(kind=cls["kind"], features=feats, normal=n.copy(), u=u, v=v, point=point.copy(),
-                                  eccentricity=float(n @ (point - obj.com)), opening=float(cls["opening"]),
-                                  intervals=intervals, candidates=cls["candidates"]))
+            g = GraspClass(kind=cls["kind"], features=feats, normal=n.copy(), u=u, v=v, point=point.copy(),
+                           eccentricity=float(n @ (point - obj.com)), opening=float(cls["opening"]),
+                           intervals=intervals, candidates=cls["candidates"])
+            if params.min_range > 0 and g.legal_range < params.min_range:
+                if dropped is not None:
+                    dropped.append(g)
+                continue
+            out.append(g)
     order = sorted(range(len(out)), key=lambda i: (KINDS.index(out[i].kind), -out[i].legal_range))
     return [out[i] for i in order]
 

@@ -36,6 +36,7 @@ from workbench.planners.tournassoud.chaining import (
 )
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable, rz
+from workbench.planners.tournassoud.task import task_query
 from workbench.planners.wan_harada.motions import ExecOptions, MotionResult, plan_motion
 from workbench.planners.wan_harada.plans import Plan, PlanStep
 from workbench.planners.wan_harada.query import PoseQuery
@@ -57,16 +58,20 @@ class Conjunction:
     tcp: np.ndarray
     q: np.ndarray  # (5, n): grasp, approach (handx), retract (handxworldz), worlda, worldaworldz
     phi: float = 0.0  # the placement's angle (the sample's, or the query's own at its start and goal)
+    position: tuple[float, float] | None = None  # where the part rests (x, y); None: the table point H
 
 
 class Realiser:
     """IK and collision checks for conjunctions through the workbench's IK solver (`robots.ik.IKSolver`): its
     closed form for spherical-wrist arms (every branch tried as a seed), its Levenberg-Marquardt tiers from library
-    seeds otherwise; its collider rejects arm or hand against the table and arm against the object."""
+    seeds otherwise; its collider rejects arm or hand against the table and arm against the object. With `obstacles`
+    ((mesh, world pose) pairs: a task's pick-up and destination, `task.Obstacle`), the five configurations of a
+    conjunction and every motion are also checked against them (the motion checker's)."""
 
     def __init__(self, robot: Robot, scene: Scene, obj_mesh, handx: float = 0.05, worldz: float = 0.05, seed: int = 0,
-                 worlda: float = WORLDA):
+                 worlda: float = WORLDA, obstacles: tuple = ()):
         self.robot, self.handx, self.worldz, self.worlda = robot, handx, worldz, worlda
+        self.obstacles = tuple(obstacles)
         self.closed = not spherical_wrist_reason(robot)
         self.opts = IKOptions(solver="auto" if self.closed else "numerical", library=8192, seed=seed, self_collide=True)
         self.solver = IKSolver(robot, scene, self.opts, obj_mesh)
@@ -74,11 +79,15 @@ class Realiser:
         self.scene, self.obj_mesh = scene, obj_mesh
         self._checker: tuple | None = None
 
+    def motion_checker_default(self) -> MotionChecker:
+        """The motion checker with the default motion options (or the last one built)."""
+        return self._checker[1] if self._checker is not None else self.motion_checker(ExecOptions())
+
     def motion_checker(self, opts: ExecOptions) -> MotionChecker:
         """The motion checker of the robot, table and object (built once per motion options)."""
         if self._checker is None or self._checker[0] != opts.motion:
             self._checker = (opts.motion, MotionChecker(self.robot, self.scene, self.obj_mesh, allowed_pairs(self.robot),
-                                                        opts.motion))
+                                                        opts.motion, self.obstacles))
         return self._checker[1]
 
     def grasp_free(self, object_poses: np.ndarray, tcps: np.ndarray) -> np.ndarray:
@@ -124,9 +133,21 @@ class Realiser:
                 if not okk[0]:
                     break
                 out.append(q[0])
-            if len(out) == 5:
+            if len(out) == 5 and self._clear(np.stack(out), object_pose, tcp):
                 return np.stack(out)
         return None
+
+    def _clear(self, q: np.ndarray, object_pose: np.ndarray, tcp: np.ndarray) -> bool:
+        """Whether the five configurations clear the obstacles (the part resting at the first three, held at the
+        lifts); True without obstacles."""
+        if not self.obstacles:
+            return True
+        checker = self.motion_checker_default()
+        checker.set_resting(object_pose, False)
+        if not all(checker.valid(x) for x in q[:3]):
+            return False
+        checker.set_holding(np.linalg.solve(object_pose, tcp))
+        return all(checker.valid(x) for x in q[3:])
 
 
 def conjunction_poses(table: GraspPlacementTable, classes: list[GraspClass], grasp: tuple[int, int], placement: tuple[int, int],
@@ -146,11 +167,48 @@ def working_copy(table: GraspPlacementTable) -> GraspPlacementTable:
                                q=table.q.copy(), placements=table.placements, frame=table.frame, timings=table.timings)
 
 
+@dataclass
+class Removal:
+    """A conjunction the table allows but the arm does not, removed while realising a query (with `samples` table
+    samples in all, itself and the neighbours that need the same thing): `motion` is what failed ("ik": no
+    collision-free IK branch with its approach and lifts; "lines": the step's straight TCP lines; "transfer" or
+    "transit": the joint motion from the previous conjunction `previous`), at plan step `step` (0-based) of the
+    sequence tried; `branches` the closed-form IK branches (bits 4 elbow, 2 shoulder, 1 wrist) of the motion's two
+    ends when they are known."""
+
+    motion: str
+    step: int
+    conjunction: tuple[tuple[int, int], tuple[int, int]]
+    reason: str
+    samples: int = 1
+    previous: tuple[tuple[int, int], tuple[int, int]] | None = None
+    branches: tuple[int, int] | None = None
+
+    def text(self, table: GraspPlacementTable) -> str:
+        """One line: which conjunction (class, theta; placement, phi in degrees), which motion at which step, why."""
+        def cj(x):
+            (c, t), (j, f) = x
+            return f"(class {c} at {np.degrees(table.theta[t]):.0f} deg, placement {j} at {np.degrees(table.phi[f]):.0f} deg)"
+        where = f"step {self.step + 1}"
+        move = {"ik": "its IK", "lines": "its approach/lift lines"}.get(self.motion, f"the {self.motion} from {cj(self.previous)}"
+                                                                           if self.previous else f"the {self.motion}")
+        switch = (f"; IK branch {self.branches[0]} -> {self.branches[1]}" if self.branches and self.branches[0] != self.branches[1]
+                  else "")
+        return f"{where}: {cj(self.conjunction)} fails {move}: {self.reason}{switch}; {self.samples} table sample(s) removed"
+
+    def as_dict(self) -> dict:
+        return {"motion": self.motion, "step": self.step, "conjunction": [list(map(int, x)) for x in self.conjunction],
+                "previous": None if self.previous is None else [list(map(int, x)) for x in self.previous],
+                "branches": None if self.branches is None else list(map(int, self.branches)),
+                "reason": self.reason, "samples": int(self.samples)}
+
+
 def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser, attempts: int = 40,
-            copy: bool = True, **kw) -> tuple[Sequence, list[Conjunction]]:
+            copy: bool = True, log: list[Removal] | None = None, **kw) -> tuple[Sequence, list[Conjunction]]:
     """Answer `query` (grasp_query or placement_query with keyword arguments `kw`) and give every conjunction its
     joint vectors; failing conjunctions are removed from a copy of the table (from `table` itself when not `copy`),
-    with the failing samples of the rest of their phi row, and the query re-run."""
+    with the failing samples of the rest of their phi row, and the query re-run. Each removal is appended to
+    `log`."""
     work = working_copy(table) if copy else table
     rows_done: set[tuple] = set()
     legal = int(work.q.sum())
@@ -170,15 +228,29 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
             theta = seq.theta_ini if (seq.kind == "grasp" and k == 0) else None
             phi = seq.extra.get("phi_start") if k == 0 else (seq.extra.get("phi_goal") if k == len(pairs) - 1 else None)
             obj, tcp, _ = conjunction_poses(work, classes, g, p, theta, phi)
+            end = _task_end(seq, k, len(pairs))
+            if end is not None:  # the task's pick-up or destination, away from H
+                obj = seq.extra[f"{end}_pose"]
+                tcp = obj @ classes[g[0]].pose(work.theta[g[1]])
             q = realiser.configurations(obj, tcp, q_prev)
             if q is None:
-                bad = (g, p)
+                bad = (k, g, p)
                 break
-            out.append(Conjunction(g, p, obj, tcp, q, work.phi[p[1]] if phi is None else phi))
+            out.append(Conjunction(g, p, obj, tcp, q, work.phi[p[1]] if phi is None else phi,
+                                   None if end is None else seq.extra[f"{end}_xy"]))
             q_prev = q[0]
         if bad is None:
             return seq, out
-        (c, t), (j, f) = bad
+        k, (c, t), (j, f) = bad
+        end = _task_end(seq, k, len(pairs))
+        if end is not None:  # not a table sample: the grasp leaves the end's set of legal grasps
+            kw[end][c, t] = False
+            if log is not None:
+                log.append(Removal("ik", _step_of(seq.kind, len(pairs), k), ((c, t), (j, f)),
+                                   f"no IK branch at the {'pick-up' if end == 'start' else 'destination'} whose grasp, "
+                                   f"approach and lifts are all free of collisions"))
+            continue
+        before = int(work.q.sum())
         work.q[c, j, t, f] = False
         # the same grasp at the same placement usually fails at its other angles too (the arm's reach and self-
         # collisions vary slowly): test the rest of its block (closed form) or phi row (numerical IK) now, once, and
@@ -198,8 +270,81 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
                 if realiser.configurations(o2, tcp2, None) is None:
                     work.q[c, j, t, f2] = False
         work._matrix = None
+        if log is not None:
+            log.append(Removal("ik", _step_of(seq.kind, len(pairs), k), ((c, t), (j, f)),
+                               "no IK branch whose grasp, approach and lifts are all free of collisions",
+                               before - int(work.q.sum())))
     raise NoSequence(f"no executable regrasp sequence after {attempts} attempts: the table's conjunctions fail their approach, "
                         f"retract or arm collision checks; try another table point or larger handx/worldz")
+
+
+def _task_end(seq: Sequence, k: int, n: int) -> str | None:
+    """"start" / "goal" when conjunction k of n is at the task's pick-up / destination (`task.task_query`)."""
+    if "start_pose" not in seq.extra:
+        return None
+    return "start" if k == 0 else ("goal" if k == n - 1 else None)
+
+
+def _step_of(kind: str, n: int, k: int) -> int:
+    """The first plan step realising conjunction k of a sequence with n conjunctions."""
+    return step_conjunctions(kind, n)[1].index(k) if n else 0
+
+
+def branch_of(realiser: Realiser, cj: Conjunction) -> int | None:
+    """The closed-form IK branch (0..7) of a conjunction's grasp configuration (None without a closed form)."""
+    if realiser.ik is None:
+        return None
+    q, ok = solve(realiser.ik, cj.tcp[None])
+    d = np.where(ok[0], np.abs(np.angle(np.exp(1j * (np.nan_to_num(q[0]) - cj.q[0])))).sum(axis=1), np.inf)
+    return int(np.argmin(d)) if np.isfinite(d).any() else None
+
+
+NEIGHBOURS = 2
+"""Theta and phi samples either side of a failed conjunction removed with it when its motion failed without a
+change of IK branch (the arm's motions vary slowly with the angles)."""
+
+
+def learn_removal(work: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser, bad: Conjunction,
+                  prev: Conjunction | None) -> tuple[int, tuple[int, int] | None]:
+    """Remove from `work` every sample that needs the same arm-configuration change as the failed motion
+    prev -> bad, not only `bad` (the next sequences would otherwise try its neighbours one at a time): with the
+    closed form, when the motion switches IK branch b_prev -> b_bad, the samples of bad's (class, placement) block
+    connected to it (theta and phi neighbours, wrapping around) at which branch b_prev is not free (joint limits,
+    collisions with the table, the resting part or itself) while b_bad is; without a switch, or without a closed
+    form, its samples within `NEIGHBOURS` in theta and phi. Returns (samples removed, (b_prev, b_bad))."""
+    (c, t), (j, f) = bad.grasp, bad.placement
+    block = work.q[c, j]
+    t_n, f_n = block.shape
+    b_bad = branch_of(realiser, bad)
+    b_prev = branch_of(realiser, prev) if prev is not None else None
+    before = int(work.q.sum())
+    block[t, f] = False
+    if b_bad is None or b_prev is None or b_prev == b_bad:
+        for dt in range(-NEIGHBOURS, NEIGHBOURS + 1):
+            block[(t + dt) % t_n, [(f + d) % f_n for d in range(-NEIGHBOURS, NEIGHBOURS + 1)]] = False
+    else:
+        checker = realiser.motion_checker_default()
+        g = classes[c]
+
+        def needs_switch(ti: int, fi: int) -> bool:
+            obj = work.object_pose(j, work.phi[fi])
+            q, ok = solve(realiser.ik, (obj @ g.pose(work.theta[ti]))[None])
+            checker.set_resting(obj, False)
+            free = [bool(ok[0, b]) and checker.valid(q[0, b]) for b in (b_prev, b_bad)]
+            return not free[0] and free[1]
+
+        seen, todo = {(t, f)}, [(t, f)]
+        while todo:
+            ti, fi = todo.pop()
+            for nt, nf in (((ti + 1) % t_n, fi), ((ti - 1) % t_n, fi), (ti, (fi + 1) % f_n), (ti, (fi - 1) % f_n)):
+                if (nt, nf) in seen or not block[nt, nf]:
+                    continue
+                seen.add((nt, nf))
+                if needs_switch(nt, nf):
+                    block[nt, nf] = False
+                    todo.append((nt, nf))
+    work._matrix = None
+    return before - int(work.q.sum()), (b_prev, b_bad) if b_prev is not None and b_bad is not None else None
 
 
 def step_conjunctions(kind: str, n: int) -> tuple[list[str], list[int]]:
@@ -224,7 +369,8 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
     def step(kind: str, cj: Conjunction, theta: float | None = None) -> PlanStep:
         (c, t), (j, _) = cj.grasp, cj.placement
         g = np.linalg.solve(cj.object_pose, cj.tcp)
-        return PlanStep(kind=kind, idfreeairgrip=int(c * t_n + t), idfreetabletopplacement=int(j), position=np.array([hx, hy, 0.0]),
+        x, y = cj.position if cj.position is not None else (hx, hy)
+        return PlanStep(kind=kind, idfreeairgrip=int(c * t_n + t), idfreetabletopplacement=int(j), position=np.array([x, y, 0.0]),
                         yaw=float(cj.phi), object_pose=cj.object_pose, tcp=cj.tcp, grasp=g,
                         jawwidth=float(classes[c].opening), q_approach=cj.q[1], q_grasp=cj.q[0], q_retract=cj.q[2],
                         q_worlda=cj.q[3], q_worldaworldz=cj.q[4])
@@ -232,8 +378,8 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
     kinds, which = step_conjunctions(seq.kind, len(conj))
     steps = [step(k, conj[i]) for k, i in zip(kinds, which)]
     first, last = steps[0], steps[-1]
-    start = PoseQuery(first.idfreetabletopplacement, float(hx), float(hy), first.yaw)
-    goal = PoseQuery(last.idfreetabletopplacement, float(hx), float(hy), last.yaw)
+    start = PoseQuery(first.idfreetabletopplacement, float(first.position[0]), float(first.position[1]), first.yaw)
+    goal = PoseQuery(last.idfreetabletopplacement, float(last.position[0]), float(last.position[1]), last.yaw)
     return Plan(object=object_name, robot=robot.name, joint_names=list(robot.joint_names), start=start, goal=goal,
                 start_pose=first.object_pose, goal_pose=last.object_pose, steps=steps, handx=handx, worldz=worldz,
                 timings={"search": seq.seconds})
@@ -260,37 +406,74 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
 
 def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: str, motions: ExecOptions | None,
           **kw) -> tuple[Sequence, Plan | None]:
-    """Answer, realise and plan a query; with `motions`, a conjunction whose motion fails (the step's lines, or the
-    move into the next step) is removed from a working copy of the table and the query answered again, at most
-    `motions.max_removed` times (as the roadmap planner removes failing nodes)."""
+    """Answer, realise and plan a query; with `motions`, when a motion between two conjunctions fails (the step's
+    lines, or the move into the next step), the failed conjunction and every sample needing the same change of arm
+    configuration are removed from a working copy of the table (`learn_removal`) and the query answered again, at
+    most `motions.max_removed` times (as the roadmap planner removes failing nodes).
+
+    The returned sequence's `extra` carries the explanation: "table" the table's own answer (its shortest sequence
+    before any removal, as a dict) and "removed" every removal (`Removal.as_dict`, in order); a NoSequence raised
+    after removals carries them too (`removals`, `table_sequence`)."""
+    try:
+        own = query(table, **kw)
+    except NoSequence as exc:
+        exc.removals, exc.table_sequence = [], None
+        raise
     work = working_copy(table)
-    removed, last = 0, ""
+    kw = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in kw.items()}  # end masks lose grasps
+    log: list[Removal] = []
+    failures, last = 0, ""
+
+    def explained(seq: Sequence) -> Sequence:
+        seq.extra["table"] = own.as_dict(table)
+        seq.extra["removed"] = [r.as_dict() for r in log]
+        seq.extra["removals"] = log
+        return seq
+
+    def give_up(text: str) -> NoSequence:
+        err = NoSequence(text)
+        err.removals, err.table_sequence = list(log), own
+        return err
+
     while True:
         try:
-            seq, conj = realise(query, work, classes, realiser, copy=False, **kw)
+            seq, conj = realise(query, work, classes, realiser, copy=False, log=log, **kw)
         except NoSequence as exc:
-            if not removed:
+            if not log:
+                exc.removals, exc.table_sequence = [], own
                 raise
-            raise NoSequence(f"after removing {removed} conjunction(s) whose motions failed (last failure: {last}): {exc}") from None
+            raise give_up(f"after removing {len(log)} conjunction(s) the arm cannot execute "
+                          f"({f'last motion failure: {last}; ' if last else ''}{exc})") from None
         if not conj:
-            return seq, None
+            return explained(seq), None
         plan = to_plan(seq, conj, work, classes, robot, object_name, realiser.handx, realiser.worldz)
         if motions is None:
-            return seq, plan
+            return explained(seq), plan
         res = add_motions(plan, realiser, motions)
         if res.ok:
-            plan.removed = removed
-            return seq, plan
+            plan.removed = len(log)
+            return explained(seq), plan
         last = res.reason
-        if removed >= motions.max_removed:
-            raise NoSequence(f"no executable regrasp sequence after removing {removed} conjunction(s) whose motions failed "
-                             f"(limit --max-removed {motions.max_removed}); last failure: {last}")
+        if failures >= motions.max_removed:
+            raise give_up(f"no executable regrasp sequence after {failures} motion failure(s), each removing the samples "
+                          f"that need the same arm motion (limit --max-removed {motions.max_removed}); last failure: {last}")
+        which = step_conjunctions(seq.kind, len(conj))[1]
         i = res.blame[1] if res.blame[0] == "step" else res.blame[2]
-        cj = conj[step_conjunctions(seq.kind, len(conj))[1][i]]
-        (c, t), (j, f) = cj.grasp, cj.placement
-        work.q[c, j, t, f] = False
-        work._matrix = None
-        removed += 1
+        bad = conj[which[i]]
+        prev = None
+        if res.blame[0] == "edge" and which[i - 1] != which[i]:
+            prev = conj[which[i - 1]]
+        end = _task_end(seq, which[i], len(conj))
+        if end is not None:
+            (c, t) = bad.grasp
+            kw[end][c, t] = False
+            n, branches = 1, None
+        else:
+            n, branches = learn_removal(work, classes, realiser, bad, prev)
+        kind = "lines" if res.blame[0] == "step" else ("transfer" if plan.steps[i - 1].kind in ("pick", "regrasp") else "transit")
+        log.append(Removal(kind, i, (bad.grasp, bad.placement), res.reason.split(": ", 1)[-1], n,
+                           None if prev is None else (prev.grasp, prev.placement), branches))
+        failures += 1
 
 
 def plan_grasp_query(table, classes, realiser: Realiser, robot: Robot, object_name: str, initial: tuple[int, float],
@@ -306,3 +489,13 @@ def plan_placement_query(table, classes, realiser: Realiser, robot: Robot, objec
     """The placement-to-placement query, realised and turned into a plan; with `motions`, an executable plan with its
     timed motions."""
     return _plan(placement_query, table, classes, realiser, robot, object_name, motions, start=start, goal=goal)
+
+
+def plan_task_query(table, classes, realiser: Realiser, robot: Robot, object_name: str, pickup, destination,
+                    start: np.ndarray, goal: np.ndarray, motions: ExecOptions | None = None) -> tuple[Sequence, Plan | None]:
+    """Fig. 1's task (Section 5.1): the part picked up where it lies among the pick-up's obstacles with a grasp of
+    `start` ((C, T), `task.end_mask`), regrasped on the table at H as often as needed, and put at the destination
+    (inserted, the hand clear of its obstacles) with a grasp of `goal`. The plan's first step takes the part at the
+    pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles."""
+    return _plan(task_query, table, classes, realiser, robot, object_name, motions, start=start, goal=goal, pickup=pickup,
+                 destination=destination)

@@ -80,19 +80,22 @@ class TableRun:
     idtable: int
     reused: tuple[bool, bool]
     seconds: float = 0.0
+    narrow: tuple[int, float] = (0, 0.0)  # classes dropped as narrower than `min_range`, the widest of them (rad)
 
 
 def classes_stage(store: Store, obj: ObjectModel, gripper: Gripper, params: ClassParams,
                   progress: bool = False) -> tuple[int, list[GraspClass], bool]:
-    """Grasp classes of `obj` (Sections 2, 5.1): (paramset, classes, reused from the store)."""
+    """Grasp classes of `obj` (Sections 2, 5.1): (paramset, classes, reused from the store). Classes dropped as
+    narrower than `params.min_range` are stored apart (`sql.dropped_classes` counts them)."""
     sql.ensure_schema(store)
     idobject = put_object(store, obj)
     key = {"classes": params.as_dict(), "gripper": gripper.digest}
     pid = store.find_paramset(CLASSES, key, idobject)
     if pid is not None:
         return pid, [GraspClass(**d) for d in sql.load_classes(store, pid)], True
-    classes = grasp_classes(obj, gripper, params, progress=progress)
-    return sql.save_classes(store, CLASSES, key, idobject, classes), classes, False
+    dropped: list[GraspClass] = []
+    classes = grasp_classes(obj, gripper, params, progress=progress, dropped=dropped)
+    return sql.save_classes(store, CLASSES, key, idobject, classes, dropped), classes, False
 
 
 def _table_key(idclasses: int, robot: Robot, params: TableParams, placement: PlacementParams) -> dict:
@@ -114,13 +117,14 @@ def table_stage(store: Store, obj: ObjectModel, robot: Robot, gripper: Gripper |
         idrobot = put_robot(store, robot)
     key = _table_key(idc, robot, params, placement)
     pid = store.find_paramset(TABLE, key, idobject)
+    narrow = sql.dropped_classes(store, idc)
     if pid is not None:
         return TableRun(obj, robot, gripper, classes, _table_from_rows(sql.load_table(store, pid)), idc, pid,
-                        (reused_c, True), time.perf_counter() - t0)
+                        (reused_c, True), time.perf_counter() - t0, narrow)
     pl = stable_placements(obj, placement)
     table = build_table(classes, pl.poses, robot, gripper, params, progress=progress)
     pid = sql.save_table(store, TABLE, key, idobject, idrobot, idc, table, pl.normals, pl.stability)
-    return TableRun(obj, robot, gripper, classes, table, idc, pid, (reused_c, False), time.perf_counter() - t0)
+    return TableRun(obj, robot, gripper, classes, table, idc, pid, (reused_c, False), time.perf_counter() - t0, narrow)
 
 
 def table_stage_at(db: str, obj: ObjectModel, robot: Robot, class_params: ClassParams = ClassParams(),
@@ -137,8 +141,9 @@ def _table_from_rows(rows: dict) -> GraspPlacementTable:
                                placements=rows["placements"], frame=table_frame(rows["table_point"]), timings=rows["timings"])
 
 
-def load_planner(db: str, object_name: str, robot_name: str | None = None) -> TableRun:
-    """The newest stored table of `object_name` (and robot), its classes, object and robot rebuilt from the store."""
+def load_planner(db: str, object_name: str, robot_name: str | None = None, gripper: Gripper | None = None) -> TableRun:
+    """The newest stored table of `object_name` (and robot), its classes, object and robot rebuilt from the store
+    with the planning `gripper` it was built with (default: the Franka hand)."""
     with Store(db, read_only=True) as store:
         idobject, obj = get_object(store, object_name)
         idrobot = None
@@ -148,23 +153,27 @@ def load_planner(db: str, object_name: str, robot_name: str | None = None) -> Ta
         rows = sql.load_table(store, pid)
         classes = [GraspClass(**d) for d in sql.load_classes(store, rows["idclasses"])]
         r = robot_row(store, rows["idrobot"])
-    robot = _robot(r)
+    robot = _robot(r, gripper)
     return TableRun(obj, robot, robot.gripper, classes, _table_from_rows(rows), rows["idclasses"], pid, (True, True))
 
 
-def _robot(row: dict) -> Robot:
+def _robot(row: dict, gripper: Gripper | None = None) -> Robot:
     """The stored robot rebuilt: the built-in of that name when its kinematics digest matches, else from the row."""
     name = row["name"]
     try:
-        robot = get_robot(name)
+        robot = get_robot(name, gripper=gripper)
         if robot.spec.digest == row["digest"]:
             return robot
     except WorkbenchError:
         pass
     spec = RobotSpec(name=name, urdf=row["urdf"], urdf_path="", tip_frame=row["tip_frame"], tcp_frame=row["tcp_frame"],
                      mount=row["mount"], base=row["base"], drop_geometry=tuple(row["drop_geometry"]),
-                     locked=tuple((k, float(v)) for k, v in row["locked"].items()))
-    return robot_from_spec(spec)
+                     locked=tuple((k, float(v)) for k, v in row["locked"].items()), gripper=gripper)
+    robot = robot_from_spec(spec)
+    if robot.spec.digest != row["digest"]:
+        raise WorkbenchError(f"robot {name!r} in the store was built with another gripper than {robot.gripper.name!r}; "
+                             f"give gpplan the --gripper it was built with")
+    return robot
 
 
 def plan_validator(db: str, run: TableRun, scene: Scene) -> PlanValidator:

@@ -68,6 +68,7 @@ def grid(step: float) -> np.ndarray:
 
 
 def table_frame(point: tuple[float, float]) -> np.ndarray:
+    """The 4x4 frame at the table point H = (x, y) on the table top, axes parallel to the world's (Section 4)."""
     out = np.eye(4)
     out[:2, 3] = point
     return out

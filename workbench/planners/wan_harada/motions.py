@@ -1,4 +1,4 @@
-"""The motions of a regrasp plan: waypoints to timed segments (Wan & Harada Section V as executed by wrs; issue 12).
+"""The motions of a regrasp plan: waypoints to timed segments (Wan & Harada Section V as executed by wrs).
 
 A plan's steps give joint waypoints (`PlanStep.waypoints()`: handxworldz, handx, grasp, worlda, worldaworldz).
 `moves_of_steps` turns them into a list of moves, each with a kind (`approach`, `retract`, `lift`, `lower`: straight
@@ -314,7 +314,7 @@ def _timed(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.
 
 def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarray | float, seed: int | None = None,
                 worlda: float = WORLDA, worldz: float = 0.10) -> tuple[MotionResult, list[StepLines | None]]:
-    """The timed motion of a whole plan (issue 12): consistent straight TCP lines at every step, then the moves in
+    """The timed motion of a whole plan: consistent straight TCP lines at every step, then the moves in
     order. On failure `result.blame` is ("step", i) when step i's lines fail (its grip is unusable) or ("edge", i, i+1)
     when the transfer or transit from step i to step i+1 fails; the lines found so far are returned too."""
     t0 = time.perf_counter()

@@ -15,7 +15,7 @@ while it is near the table, whatever the grasp's approach direction):
 - putting it down (transfer, place): worldaworldz -> worlda -> grasp (holding, lowered straight down) -> grasp
   (open) -> handx (backed off along the TCP's -z) -> handxworldz.
 
-A plan is executable only with its motions (issue 12; CONVENTIONS.md, Plans and motions): `segments` are its
+A plan is executable only with its motions (CONVENTIONS.md, Plans and motions): `segments` are its
 timed motions in order (`robots.timing.TimedSegment`: kind, the step it serves, whether the object is held, start
 time, knots t / q / qd; in the JSON and the store the knot times are plan time, from the plan's start), planned by
 `planners.wan_harada.motions`; `removed` counts the roadmap nodes or query grips removed because their motions
