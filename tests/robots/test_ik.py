@@ -344,3 +344,39 @@ def test_rows_depend_on_the_grip_alone_not_on_chunks_workers_or_order(panda):
         assert np.array_equal(feas, base.feasible)
         assert np.array_equal(joints, base.joints, equal_nan=True)
     assert OPTS.as_dict() == replace(OPTS, chunk=7).as_dict()  # the chunk is not part of the rows' parameters
+
+
+def test_closed_form_stores_the_free_branch_nearest_home_and_finds_what_the_numerical_solver_finds():
+    """The UR5 by default gets its closed form: each stored grasp configuration is the branch nearest the robot's
+    home among the collision-free ones (every nearer branch collides, by the same collider), the other branches stay
+    available (the solver returns the one nearest any seed), and it finds every grip the numerical solver finds."""
+    from workbench.robots.ik import IKSolver
+    from workbench.robots.solvers import closed_form
+
+    ur5 = get_robot("ur5")
+    grips, mesh, _ = synthetic_grips(**{**SMALL, "angles": 2})
+    scene = default_scene("ur5")
+    closed = ik_feasibility(ur5, grips, scene, HANDX, WORLDZ, mesh, IKOptions(chunk=32), workers=1, progress=False)
+    numeric = ik_feasibility(ur5, grips, scene, HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
+    assert closed.feasible[:, 0].sum() > 10
+    assert not (numeric.feasible & ~closed.feasible).any()
+    rows = np.flatnonzero(closed.feasible[:, 0])
+    stored = closed.joints[rows, 0]
+    joints, valid = closed_form(ur5).solve(grips["rotmat"][rows])
+    home = ur5.home()
+    turns = 2 * np.pi * np.round((home - joints) / (2 * np.pi))
+    joints = np.where((joints + turns >= ur5.lower) & (joints + turns <= ur5.upper), joints + turns, joints)
+    dist = np.where(valid, np.abs(np.nan_to_num(joints - home)).sum(axis=2), np.inf)
+    mine = np.abs(stored - home).sum(axis=1)
+    assert (dist.min(axis=1) <= mine + 1e-9).all()
+    solver = IKSolver(ur5, scene, IKOptions(), mesh)
+    nearer = np.argwhere(dist < mine[:, None] - 1e-9)
+    # the branches nearer home (often none) were rejected by a collision
+    hit = solver.collider.collides_q(joints[nearer[:, 0], nearer[:, 1]], grips["placement_rotmat"][rows[nearer[:, 0]]])
+    assert hit.all()
+    other = np.argwhere(valid & (dist > mine[:, None] + 1e-6))
+    free = ~solver.collider.collides_q(joints[other[:, 0], other[:, 1]], grips["placement_rotmat"][rows[other[:, 0]]])
+    assert free.any()  # another collision-free branch exists: query-time IK seeded near it gets it, not the stored one
+    r, b = other[np.argmax(free)]
+    q, ok = solver.solve(grips["rotmat"][rows[r]][None], grips["placement_rotmat"][rows[r]][None], joints[r, b][None], 1)
+    assert ok[0] and np.allclose(q[0], joints[r, b]) and not np.allclose(q[0], stored[r])

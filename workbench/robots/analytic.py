@@ -425,18 +425,23 @@ def _solve_block(ik: AnalyticIK, poses: np.ndarray, joints: bool = True) -> tupl
     return q, valid
 
 
-def nearest_branch(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,
-                   upper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Per pose, the valid branch nearest to `q_ref` ((6,) or (N, 6)): joints (N, 6) and whether one exists (N,).
-
-    With limits, each joint is first moved by whole turns toward the reference when that stays within its limits
-    (a wrist joint spanning more than a turn)."""
+def branch_distances(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,
+                     upper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Branches (N, B, n) moved by whole turns toward `q_ref` ((n,) or (N, n)) where that stays within the limits
+    (a joint spanning more than a turn), and their L1 distances to it (N, B), inf where not valid."""
     ref = np.asarray(q_ref, dtype=np.float64)
     ref = np.broadcast_to(ref[:, None] if ref.ndim == 2 else ref, joints.shape)
     if lower is not None and upper is not None:
         alt = joints + 2 * np.pi * np.round((ref - joints) / (2 * np.pi))
         joints = np.where((alt >= lower) & (alt <= upper), alt, joints)
-    dist = np.where(valid, np.abs(np.nan_to_num(joints - ref, nan=0.0)).sum(axis=2), np.inf)
+    return joints, np.where(valid, np.abs(np.nan_to_num(joints - ref, nan=0.0)).sum(axis=2), np.inf)
+
+
+def nearest_branch(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,
+                   upper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose, the valid branch nearest to `q_ref` ((6,) or (N, 6)): joints (N, 6) and whether one exists (N,)
+    (`branch_distances`)."""
+    joints, dist = branch_distances(joints, valid, q_ref, lower, upper)
     k = np.argmin(dist, axis=1)
     rows = np.arange(len(joints))
     return joints[rows, k], np.isfinite(dist[rows, k])

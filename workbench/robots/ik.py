@@ -42,6 +42,7 @@ from tqdm.auto import tqdm
 
 from workbench.errors import ParameterError, RobotError
 from workbench.params import Params, param
+from workbench.robots.analytic import branch_distances
 from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
 from workbench.robots.model import Robot, RobotSpec, robot_from_spec
@@ -328,10 +329,7 @@ class IKSolver:
         m, n = len(targets), self.robot.nq
         joints, valid = self.analytic.solve(targets)
         ref = np.where(np.isfinite(q0), q0, 0.0) if q0 is not None else np.zeros((m, n))
-        lo, hi = self.robot.lower, self.robot.upper
-        alt = joints + 2 * np.pi * np.round((ref[:, None] - joints) / (2 * np.pi))
-        joints = np.where((alt >= lo) & (alt <= hi), alt, joints)  # whole turns toward the reference, within limits
-        dist = np.where(valid, np.abs(np.nan_to_num(joints - ref[:, None])).sum(axis=2), np.inf)
+        joints, dist = branch_distances(joints, valid, ref, self.robot.lower, self.robot.upper)
         rank = np.argsort(dist, axis=1, kind="stable")
         q = np.full((m, n), np.nan)
         ok = np.zeros(m, dtype=bool)
@@ -414,7 +412,7 @@ class IKSolver:
         tries = [(q0, o.iters_warm, np.ones(len(live), dtype=bool))]
         if self.nearby is not None:  # the nearest decomposable model's exact branches, nearest the home first
             qb, vb = self.nearby.solve(targets[live])
-            dist = np.where(vb, np.abs(np.nan_to_num(qb - self.robot.home())).sum(axis=2), np.inf)
+            qb, dist = branch_distances(qb, vb, self.robot.home(), self.robot.lower, self.robot.upper)
             rank = np.argsort(dist, axis=1, kind="stable")[:, :max(1, o.seeds)]
             for r in range(rank.shape[1]):
                 b = rank[:, r]
