@@ -52,6 +52,7 @@ from workbench.robots.solvers import closed_form, describe, nearby_form
 KINDS = ("grasp", "handx", "handxworldz", "worlda", "worldaworldz")
 HELD = np.array([False, False, False, True, True])  # kinds at which the object moves with the hand
 SOLVERS = ("auto", "numerical")
+BETWEEN_TRIES = 8  # branches of a swept closed form tried as seeds where its samples miss a pose
 WORLDA = 0.05  # default lift of the held object straight up (m), the paper's ikret worlda
 
 
@@ -297,6 +298,8 @@ class IKSolver:
         self.self_collision = SelfCollision(robot) if opts.collide and opts.self_collide else None
         self.analytic = closed_form(robot) if opts.solver == "auto" else None
         self.nearby = nearby_form(robot) if opts.solver == "auto" and self.analytic is None else None
+        # a swept joint misses poses that need it between samples: its branches without the limits seed LM there
+        self.unlimited = closed_form(robot, limits=False) if self.analytic is not None and robot.nq > 6 else None
         self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)
 
@@ -311,9 +314,13 @@ class IKSolver:
         """Joint vectors (M, n) from seeds `q0` for TCP poses (M, 4, 4) of grips of the object at `placements`
         (M, 4, 4), and whether each converged within the limits and is collision-free. With the closed form: the
         collision-free branch nearest to the seed."""
-        o = self.opts
         if self.analytic is not None:
             return self._closed(targets, placements, q0)
+        return self._numeric(targets, placements, q0, iters)
+
+    def _numeric(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray, iters: int) -> tuple[np.ndarray, np.ndarray]:
+        """Levenberg-Marquardt from `q0`, then the collision checks (`solve` without the closed form)."""
+        o = self.opts
         q, ok = solve_ik(self.robot, targets, q0, iters, o.tol_pos, o.tol_rot)
         if self.collider is not None and ok.any():
             sel = np.flatnonzero(ok)
@@ -349,6 +356,28 @@ class IKSolver:
                 free[sel[self.self_collision.collides(cand[sel])]] = False
             q[left[free]], ok[left[free]] = cand[free], True
             left = left[~free]
+        if self.unlimited is not None:
+            q, ok = self._between_samples(targets, placements, valid, ref, q, ok)
+        return q, ok
+
+    def _between_samples(self, targets: np.ndarray, placements: np.ndarray, valid: np.ndarray, ref: np.ndarray,
+                         q: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Poses a swept closed form misses within the limits although the arm reaches them: Levenberg-Marquardt from
+        their branch nearest `ref` without the limits (clipped into them by the solver), which the free joint then
+        moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first."""
+        rows = np.flatnonzero(~valid.any(axis=1))
+        if not len(rows):
+            return q, ok
+        qu, vu = self.unlimited.solve(targets[rows])
+        qu, dist = branch_distances(qu, vu, ref[rows])
+        rank = np.argsort(dist, axis=1, kind="stable")[:, :BETWEEN_TRIES]
+        for r in range(rank.shape[1]):  # nearest first, each row until one converges
+            b = rank[:, r]
+            sel = np.flatnonzero(np.isfinite(dist[np.arange(len(rows)), b]) & ~ok[rows])
+            if not len(sel):
+                break
+            qn, okn = self._numeric(targets[rows[sel]], placements[rows[sel]], qu[sel, b[sel]], self.opts.iters_seed)
+            q[rows[sel[okn]]], ok[rows[sel[okn]]] = qn[okn], True
         return q, ok
 
     def _chunk_closed(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
