@@ -336,7 +336,9 @@ class TrajectoryValidator:
     GRIPPER_FINGERS = "gripper_fingers"
 
     def __init__(self, pv, hand_mesh: trimesh.Trimesh, finger_mesh: trimesh.Trimesh, allowed: list[tuple[str, str]],
-                 acc_limits: np.ndarray | float, table_tol: float = 1e-3, urdf: str | None = None):
+                 acc_limits: np.ndarray | float, table_tol: float = 1e-3, urdf: str | None = None, obstacles: tuple = ()):
+        """`obstacles`: (mesh, world pose) pairs fixed in the world (a task's pick-up and destination), which the
+        arm, the hand and the held object must not touch."""
         import fcl
 
         self.pv, self.fcl = pv, fcl
@@ -404,6 +406,11 @@ class TrajectoryValidator:
         self.table_low = fcl.CollisionObject(fcl.Box(x1 - x0, y1 - y0, thick - table_tol),
                                              fcl.Transform(np.array([(x0 + x1) / 2, (y0 + y1) / 2, -table_tol - (thick - table_tol) / 2])))
         self.request = fcl.CollisionRequest()
+        self.obstacles = []
+        for mesh, pose in obstacles:
+            pose = np.asarray(pose, dtype=np.float64)
+            self.obstacles.append(fcl.CollisionObject(_fcl_mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)),
+                                                      fcl.Transform(pose[:3, :3], pose[:3, 3])))
 
     # -- one configuration ---------------------------------------------------------------------------------------------
 
@@ -439,6 +446,9 @@ class TrajectoryValidator:
         for lk, j, o in objs:
             if j != 0 and self._hit(o, pv.table):
                 out.append(f"{lk} hits the table")
+            for i, ob in enumerate(self.obstacles):
+                if j != 0 and self._hit(o, ob):
+                    out.append(f"{lk} hits obstacle {i}")
         obj = pv.obj
         if holding:
             pose = tcp @ np.linalg.inv(grasp)
@@ -448,6 +458,7 @@ class TrajectoryValidator:
                 out.append(f"the held object is {-low * 1000:.1f} mm below the table top")
             elif self._hit(obj, self.table_low):
                 out.append("the held object hits the table")
+            out += [f"the held object hits obstacle {i}" for i, ob in enumerate(self.obstacles) if self._hit(obj, ob)]
             for lk, j, o in objs:
                 if lk not in (self.GRIPPER_HAND, self.GRIPPER_FINGERS) and self._hit(o, obj):
                     out.append(f"{lk} hits the held object")
@@ -565,9 +576,11 @@ def _in_subtree(link: str, prefix: str, parents: dict[str, str]) -> bool:
     return False
 
 
-def trajectory_validator_from_rows(rows: dict, pv: PlanValidator, acc: np.ndarray | float) -> TrajectoryValidator:
+def trajectory_validator_from_rows(rows: dict, pv: PlanValidator, acc: np.ndarray | float,
+                                   obstacles: tuple = ()) -> TrajectoryValidator:
     """The trajectory validator of stored rows: the gripper's collision mesh split into body and fingers at its
-    stored `body_faces`, the robot row's allowed self-collision pairs (JSON), `acc` the plan's acceleration limits."""
+    stored `body_faces`, the robot row's allowed self-collision pairs (JSON), `acc` the plan's acceleration limits,
+    and the task's `obstacles` ((mesh, world pose) pairs)."""
     r, grip = rows["robot"], rows.get("gripper") or {}
     nb = grip.get("body_faces")
     if nb is None or grip.get("collision_vertices") is None or not r.get("allowed_pairs"):
@@ -577,7 +590,7 @@ def trajectory_validator_from_rows(rows: dict, pv: PlanValidator, acc: np.ndarra
     body = trimesh.Trimesh(mesh.vertices, mesh.faces[:nb], process=False)
     fingers = trimesh.Trimesh(mesh.vertices, mesh.faces[nb:], process=False)
     allowed = [(a, b) for a, b, _ in json.loads(r["allowed_pairs"])["allowed"]]
-    return TrajectoryValidator(pv, body, fingers, allowed, acc, urdf=r["urdf"])
+    return TrajectoryValidator(pv, body, fingers, allowed, acc, urdf=r["urdf"], obstacles=obstacles)
 
 
 def validator_from_rows(rows: dict, free_poses: dict | None = None) -> PlanValidator:

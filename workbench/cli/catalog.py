@@ -20,13 +20,16 @@ from workbench.catalog.driver import (
     summary_table,
 )
 from workbench.catalog.robots import CatalogRobot, parse_robots
-from workbench.cli.grasps import add_grasp_arguments, grasp_params
-from workbench.cli.ik import parse_base, parse_mount
+from workbench.cli.grasps import SCALE, add_grasp_arguments, grasp_params
+from workbench.cli.ik import RETRACT, WORKERS, parse_base, parse_mount
 from workbench.cli.outputs import add_output
 from workbench.cli.placements import add_placement_arguments, placement_params
+from workbench.params import add_param, cli_bound, parse_number
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.robots.ik import WORLDA, IKOptions
 from workbench.robots.model import ROBOTS
+
+IK_CHUNK = cli_bound(1, 1 << 20, integer=True, help="tabletop grips per IK unit")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -49,18 +52,24 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the URDF robots' own hand links, replaced by the planning gripper (default: the links past --tip)")
     b.add_argument("--db", required=True, help="DuckDB store file (created when missing; a re-run resumes)")
     where = b.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, default=None, help="worker processes of a local cluster (default: all cores)")
+    where.add_argument("--workers", type=parse_number(WORKERS, "--workers"), default=None, metavar="N",
+                       help=f"worker processes of a local cluster ({WORKERS.describe(True)}, and within the memory budget; "
+                            f"default: all cores)")
     where.add_argument("--scheduler", default=None, help="address of an existing Dask scheduler, e.g. tcp://host:8786")
     unit = b.add_mutually_exclusive_group()
-    unit.add_argument("--scale", type=float, default=None, help="factor from the files' units to metres (e.g. 0.001)")
+    unit.add_argument("--scale", type=parse_number(SCALE, "--scale"), default=None, metavar="X",
+                      help=f"factor from the files' units to metres, e.g. 0.001 ({SCALE.describe(True)})")
     unit.add_argument("--units", choices=["m", "cm", "mm", "in"], default=None, help="the files' unit")
-    b.add_argument("--handx", type=float, default=HANDX, help=f"retraction along the approach axis (m, default {HANDX})")
-    b.add_argument("--worldz", type=float, default=WORLDZ, help=f"retraction up along world z (m, default {WORLDZ})")
-    b.add_argument("--worlda", type=float, default=WORLDA, help=f"lift of the held object straight up (m, default {WORLDA})")
+    for flag, default, text in (("--handx", HANDX, "retraction along the approach axis"),
+                                ("--worldz", WORLDZ, "retraction up along world z"),
+                                ("--worlda", WORLDA, "lift of the held object straight up")):
+        b.add_argument(flag, type=parse_number(RETRACT, flag), default=default, metavar="M",
+                       help=f"{text} ({RETRACT.describe(True)}; default {default})")
     o = IKOptions()
-    b.add_argument("--ik-chunk", type=int, default=1024, help="tabletop grips per IK unit")
-    b.add_argument("--ik-library", type=int, default=o.library, help="IK seed library size")
-    b.add_argument("--ik-seeds", type=int, default=o.seeds, help="library seeds tried after the warm start")
+    b.add_argument("--ik-chunk", type=parse_number(IK_CHUNK, "--ik-chunk"), default=1024, metavar="N",
+                   help=f"tabletop grips per IK unit ({IK_CHUNK.describe(True)}; default 1024)")
+    add_param(b, IKOptions, "library", "--ik-library", cli_default=o.library)
+    add_param(b, IKOptions, "seeds", "--ik-seeds", cli_default=o.seeds)
     add_output(b, "--shards", folder=True,
                help="IK workers write their rows to Parquet files in DIR (created; on a file system every worker "
                     "sees), merged into the store per part and robot: the driver writes less (see `workbench bench catalog`)")

@@ -15,7 +15,7 @@ import sys
 import warnings
 
 from workbench.errors import WorkbenchError
-from workbench.params import BUDGET_ENV, WAIT_ENV, cli_bound, parse_number, parse_size
+from workbench.params import BUDGET_ENV, WAIT_ENV, check_workers, cli_bound, parse_number, parse_size
 
 WAIT = cli_bound(0, 86400, unit="s", help="seconds to wait for a store another process holds")
 
@@ -110,6 +110,8 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "wait", None) is not None:
         os.environ[WAIT_ENV] = str(args.wait)  # read where the store is opened (workbench.store.Store)
     try:
+        if getattr(args, "workers", None):
+            check_workers(args.workers)  # every command's worker pool, before any process starts
         return int(args.func(args) or 0)
     except WorkbenchError as exc:
         print(f"workbench {args.command}: error: {exc}", file=sys.stderr)

@@ -14,6 +14,7 @@ from workbench.cli import warn
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
+from workbench.cli.simulate import INSTALL, add_sim_arguments, print_simulation, sim_params
 from workbench.errors import PlanningError
 from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
@@ -27,11 +28,16 @@ from workbench.planners.wan_harada.stages import (
 )
 from workbench.robots.motion import MotionOptions
 from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
+from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored, stored_playback
 from workbench.store import Store
 from workbench.store.robots import robot_with_gripper
 from workbench.viewer.wan_harada import plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
+ACC = cli_bound(0, 1000, lo_open=True, unit="rad/s^2", help="joint acceleration limit")
+BUDGET = cli_bound(0, 3600, lo_open=True, unit="s", help="RRT-Connect time budget per motion")
+REMOVED = cli_bound(0, 100_000, integer=True, help="motions that may fail before giving up")
+SEED = cli_bound(0, 2**32 - 1, integer=True, help="motion planner seed")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -64,6 +70,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml "
                     "(a ROS 2 trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
     add_gripper_argument(parser)
+    physics = parser.add_argument_group("physics", f"replay the best plan in MuJoCo, as `workbench simulate` does ({INSTALL})")
+    physics.add_argument("--simulate", action="store_true",
+                         help="simulate the best plan after planning, store the verdict and play the simulated part in --html")
+    physics.add_argument("--require-physics", action="store_true",
+                         help="a plan that fails in simulation counts as a failed motion: its failing step's roadmap node "
+                              "or grip is removed and the graph searched again (up to --max-removed); implies --simulate")
+    add_sim_arguments(physics)
     parser.set_defaults(func=run)
 
 
@@ -93,8 +106,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"the start is the goal ({args.start}): {args.object} is already in place; no plan to make")
             return 0
         report_graph(planner, t_load)
+        simulate = args.simulate or args.require_physics
+        params = sim_params(args) if simulate else None
+        physics = physics_check(store, planner.robot, params) if args.require_physics else None
         try:
-            plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
+            plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts, physics=physics)
         except PlanningError as exc:
             if getattr(exc, "reason", None) not in NO_RESULT:
                 raise
@@ -117,8 +133,22 @@ def run(args: argparse.Namespace) -> int:
         elif getattr(planner, "partial", False):
             print("not stored: planned on an incomplete IK stage (--allow-partial)")
         elif not args.no_save:
-            ids = save_plans(store, plans)
-            print(f"stored plan ids {ids} in {args.db}")
+            known = save_plans(store, plans)
+            print(f"stored plan ids {known} in {args.db}")
+        playback = None
+        if args.require_physics:
+            gone = [f for f in planner.last_motion.failures if f.startswith("physics:")]
+            print(f"physics: {len(gone)} plan(s) failed in simulation before this one, and their failing step's roadmap "
+                  f"node or grip was removed" + "".join(f"\n  removed after {f}" for f in gone))
+        if simulate:
+            if known[0] is not None:
+                out = simulate_stored(store, known[0], params, plan=best, robot=planner.robot)
+                print_simulation(out, known[0], args.db)
+                playback = stored_playback(store, known[0])
+            else:
+                res = simulate_in_memory(store, best, planner.robot, params)
+                print(f"physics (not stored): {res.summary() if res.confirmed else res.failure.message}")
+                playback = (res.playback_t, res.playback_pose)
     if args.json:
         write_json(plans, args.json)
         print(f"json: {Path(args.json).resolve()}")
@@ -126,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"trajectory: {write_trajectory(best, args.trajectory).resolve()}")
     if args.html:
 
-        print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes)).resolve()}")
+        print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes, simulated=playback)).resolve()}")
     return 0
 
 
@@ -140,21 +170,18 @@ def report_graph(planner, t_load: float) -> None:
 def add_motion_arguments(parser: argparse.ArgumentParser, removed: str) -> None:
     """--acc, --budget, --max-removed (of `removed`, what a failing motion takes out) and --seed, read by
     `exec_options`."""
-    parser.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
-    parser.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
-    parser.add_argument("--max-removed", type=int, default=10,
-                        help=f"{removed} whose motions fail to remove before giving up (default 10)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
+    parser.add_argument("--acc", type=parse_number(ACC, "--acc", DEFAULT_ACC), default=DEFAULT_ACC, metavar="X",
+                        help=f"joint acceleration limit ({ACC.describe(True)}; default {DEFAULT_ACC:g})")
+    parser.add_argument("--budget", type=parse_number(BUDGET, "--budget", 1.0), default=1.0, metavar="S",
+                        help=f"RRT-Connect time budget per motion ({BUDGET.describe(True)}; default 1)")
+    parser.add_argument("--max-removed", type=parse_number(REMOVED, "--max-removed", 10), default=10, metavar="N",
+                        help=f"{removed} whose motions fail to remove before giving up ({REMOVED.describe(True)}; default 10)")
+    parser.add_argument("--seed", type=parse_number(SEED, "--seed", 0), default=0, metavar="N",
+                        help=f"seed of the motion planner ({SEED.describe(True)}; default 0)")
 
 
 def exec_options(args: argparse.Namespace) -> ExecOptions:
-    """Motion settings from --acc, --budget, --max-removed and --seed (one-line errors on bad values)."""
-    if not (args.acc > 0 and math.isfinite(args.acc)):
-        raise PlanningError(f"--acc must be a finite acceleration > 0 rad/s^2, got {args.acc}")
-    if not (args.budget > 0 and math.isfinite(args.budget)):
-        raise PlanningError(f"--budget must be > 0 s, got {args.budget}")
-    if args.max_removed < 0:
-        raise PlanningError(f"--max-removed must be >= 0, got {args.max_removed}")
+    """Motion settings from --acc, --budget, --max-removed and --seed (their ranges checked while parsing)."""
     return ExecOptions(acc=args.acc, max_removed=args.max_removed, motion=MotionOptions(budget=args.budget, seed=args.seed))
 
 

@@ -46,6 +46,7 @@ import pinocchio as pin
 from workbench.errors import RobotError, RobotWarning
 from workbench.resources import ASSETS, erd_robots, erd_share
 from workbench.robots.gripper import Gripper, franka_hand
+from workbench.robots.urdfcheck import check_urdf
 
 ROBOTS = ("panda", "ur5", "talos", "puma560")
 PUMA560_URDF = ASSETS / "robots" / "puma560.urdf"
@@ -333,6 +334,7 @@ def prepare_urdf(text: str, tip_frame: str, label: str = "robot URDF") -> tuple[
         root = ElementTree.fromstring(text)
     except ElementTree.ParseError as exc:
         raise RobotError(f"{label} could not be loaded (not well-formed XML: {exc}); check the file") from None
+    check_urdf(root, tip_frame, label)  # before pinocchio: a joint loop crashes it, NaN limits flood stderr
     joints = root.findall("joint")
     links = {lk.get("name", "") for lk in root.findall("link")}
     children: dict[str, list[tuple[str, str]]] = {}  # link -> (child link, joint type)

@@ -22,12 +22,19 @@ def setup(lpart, hand, puma560):
     return classes, table
 
 
+_BVH: dict = {}
+
+
 def _coal(mesh) -> coal.BVHModelOBBRSS:
+    key = (id(mesh), len(mesh.vertices), float(np.asarray(mesh.vertices).sum()))
+    if key in _BVH:
+        return _BVH[key][1]
     m = coal.BVHModelOBBRSS()
     m.beginModel(len(mesh.faces), len(mesh.vertices))
     m.addVertices(np.asarray(mesh.vertices, dtype=np.float64))
     m.addTriangles(np.asarray(mesh.faces, dtype=np.int64))
     m.endModel()
+    _BVH[key] = (mesh, m)  # the mesh kept alive so that its id is not reused
     return m
 
 
@@ -111,3 +118,67 @@ def test_insertion_keeps_the_last_hand_clear_of_the_fixture(setup, lpart, hand, 
         TaskEnd(0, 0.45, 0.32, insertion=np.zeros(3))
     with pytest.raises(WorkbenchError, match="placement 9 does not exist"):
         TaskEnd(9, 0.45, 0.32).object_pose(table)
+
+
+def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
+    """`gpplan --pickup ... --destination ... --insert` with obstacle files: Fig. 1's task (the L part standing in a
+    pocket, laid into a slot) gives an executable plan, stored and passed by the validators (trajectory checked against
+    the obstacles too); it starts by taking the part at the pick-up and ends by putting it at the destination; every
+    knot of its motions keeps the hand and the held part clear of the obstacles, by coal on the robot's FK."""
+    import json
+
+    import trimesh
+
+    from workbench.cli.main import main
+    from workbench.robots.model import get_robot
+
+    mesh = tmp_path / "L.stl"
+    lpart.mesh.export(mesh)
+    db = str(tmp_path / "task.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--table-point", "0.45,0.1"]) == 0
+    from workbench.planners.tournassoud.stages import load_planner
+
+    run = load_planner(db, "L")
+    pick, dest = TaskEnd(2, 0.55, -0.05, np.radians(30)), TaskEnd(0, 0.35, 0.25, 0.0)
+    args, obstacles = [], []
+    for flag, end, gap, sides in (("--pickup-obstacle", pick, 0.02, "y"), ("--destination-obstacle", dest, 0.01, "x")):
+        for k, o in enumerate(walls_around(lpart.mesh, end.object_pose(run.table), gap=gap, sides=sides)):
+            f = tmp_path / f"{flag[2:6]}{k}.stl"
+            o.mesh.export(f)
+            args += [flag, f"{f}@{o.pose[0, 3]:.6f},{o.pose[1, 3]:.6f},{o.pose[2, 3]:.6f}"]
+            obstacles.append(o)
+    js = tmp_path / "task.json"
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", "2,0.55,-0.05,30", "--destination", "0,0.35,0.25,0",
+                 "--insert", "0,0,-1,0.02", *args, "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    doc = json.loads(js.read_text())
+    plan = doc["plan"]
+    assert plan is not None and "validator: ok" in out and "the pick-up" in out and "the destination" in out, out
+    assert plan["steps"][0]["kind"] == "pick" and plan["steps"][-1]["kind"] == "place"
+    assert np.allclose(np.reshape(plan["steps"][0]["object_pose"], (4, 4)), pick.object_pose(run.table), atol=1e-9)
+    assert np.allclose(np.reshape(plan["steps"][-1]["object_pose"], (4, 4)), dest.object_pose(run.table), atol=1e-9)
+    robot = get_robot("puma560")
+    body = hand.collision_mesh(hand.jaw_max)
+    held = trimesh.Trimesh(lpart.mesh.vertices, lpart.mesh.faces, process=False)
+    knots = 0
+    for seg in plan["motion"]["segments"]:
+        step = plan["steps"][seg["step"]]
+        for q in seg["q"]:
+            tcp = robot.tcp_pose(np.asarray(q))
+            assert not _hits(body, tcp[None], obstacles), (seg["kind"], seg["caption"])
+            if seg["holding"]:
+                assert not _hits(held, (tcp @ np.linalg.inv(np.reshape(step["grasp"], (4, 4))))[None], obstacles)
+            knots += 1
+    assert knots > 100
+    assert doc["task"]["destination"]["insertion"] == [0.0, 0.0, -1.0] and len(doc["task"]["pickup"]["obstacles"]) == 2
+    # bad task input: one line each, exit 2, nothing planned
+    base = ["gpplan", "--db", db, "--object", "L", "--no-motion", "--no-save"]
+    ends = ["--pickup", "2,0.55,-0.05,30", "--destination", "0,0.35,0.25,0"]
+    for bad in (["--pickup", "2,0.55,-0.05,30"], ["--pickup", "2,x,0,0", "--destination", "0,0.35,0.25,0"],
+                ends + ["--insert", "0,0,0"], ends + ["--insert", "0,0,-1,-0.1"],
+                ends + ["--pickup-obstacle", str(tmp_path / "missing.stl") + "@0,0,0"],
+                ends + ["--pickup-obstacle", "nopose.stl"], ends + ["--from", "0,0", "--to", "1,0"],
+                ["--from", "0,0", "--to", "1,0", "--insert", "0,0,-1"], ends[:2] + ["--destination", "9,0.35,0.25,0"]):
+        assert main(base + bad) == 2, bad
+    err = capsys.readouterr().err
+    assert "Traceback" not in err

@@ -7,13 +7,19 @@ planner's plans: `grasp` (TCP at the grasp), `approach` (backed off by `handx` a
 whose arm clears the object (the IK solver's collider); approach and retract start from the grasp's configuration
 (with the closed form: the branch nearest to it).
 
-The table only checks the grasp's IK (Section 5.2). A conjunction that fails here (no collision-free branch or no
-approach/retract) is removed from a copy of the table and the query is answered again, so the returned sequence is
-still the shortest among the conjunctions that can be executed.
+The table only checks the grasp's IK (Section 5.2); the paper assumes the arm's paths away (Section 1). A
+conjunction that fails here (no collision-free branch or no approach/retract) is removed from a copy of the table
+and the query is answered again, so the returned sequence is still the shortest among the conjunctions that can be
+executed. With motions, a failed motion between two conjunctions removes every sample needing the same change of arm
+configuration (`learn_removal`: the same IK branch switch over the neighbouring theta and phi samples of the same
+class and placement), not one sample at a time. Every removal is recorded (`Removal`) and the table's own answer
+kept beside the executable one (`explanation` prints both).
 
 Plan steps (validator order pick, (transfer, regrasp)*, place):
 - placement query: pick at the start placement with the first grasp, then per regrasp a transfer to an intermediate
   placement and a regrasp there, and place at the goal placement with the last grasp;
+- task query (`plan_task_query`, Fig. 1): the same with the pick at the task's pick-up and the place at its
+  destination, away from H, both checked against the task's obstacles;
 - grasp query (the object starts and ends in the hand): pick and transfer both hold the initial grasp at the first
   intermediate placement (the configuration where it is put down), then regrasp/transfer pairs, and the last regrasp
   and the place both hold the final grasp at the last placement.
@@ -304,47 +310,94 @@ NEIGHBOURS = 2
 change of IK branch (the arm's motions vary slowly with the angles)."""
 
 
+def _flood(work: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser, cj: Conjunction, lose: int,
+           need: int) -> None:
+    """Remove cj's sample and the samples of its (class, placement) block connected to it (theta and phi neighbours,
+    wrapping around) at which IK branch `lose` is not free (joint limits, collisions with the table, the resting part
+    or itself) while `need` is."""
+    (c, t), (j, f) = cj.grasp, cj.placement
+    block = work.q[c, j]
+    t_n, f_n = block.shape
+    block[t, f] = False
+    checker = realiser.motion_checker_default()
+    g = classes[c]
+
+    def needs_switch(ti: int, fi: int) -> bool:
+        obj = work.object_pose(j, work.phi[fi])
+        q, ok = solve(realiser.ik, (obj @ g.pose(work.theta[ti]))[None])
+        checker.set_resting(obj, False)
+        free = [bool(ok[0, b]) and checker.valid(q[0, b]) for b in (lose, need)]
+        return not free[0] and free[1]
+
+    seen, todo = {(t, f)}, [(t, f)]
+    while todo:
+        ti, fi = todo.pop()
+        for nt, nf in (((ti + 1) % t_n, fi), ((ti - 1) % t_n, fi), (ti, (fi + 1) % f_n), (ti, (fi - 1) % f_n)):
+            if (nt, nf) in seen or not block[nt, nf]:
+                continue
+            seen.add((nt, nf))
+            if needs_switch(nt, nf):
+                block[nt, nf] = False
+                todo.append((nt, nf))
+
+
+def _window(work: GraspPlacementTable, cj: tuple[tuple[int, int], tuple[int, int]]) -> None:
+    """Remove a sample and its neighbours within `NEIGHBOURS` theta and phi samples of the same block."""
+    (c, t), (j, f) = cj
+    block = work.q[c, j]
+    t_n, f_n = block.shape
+    for dt in range(-NEIGHBOURS, NEIGHBOURS + 1):
+        block[(t + dt) % t_n, [(f + d) % f_n for d in range(-NEIGHBOURS, NEIGHBOURS + 1)]] = False
+
+
 def learn_removal(work: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser, bad: Conjunction,
-                  prev: Conjunction | None) -> tuple[int, tuple[int, int] | None]:
+                  prev: Conjunction | None, both: bool = False) -> tuple[int, tuple[int, int] | None]:
     """Remove from `work` every sample that needs the same arm-configuration change as the failed motion
     prev -> bad, not only `bad` (the next sequences would otherwise try its neighbours one at a time): with the
     closed form, when the motion switches IK branch b_prev -> b_bad, the samples of bad's (class, placement) block
-    connected to it (theta and phi neighbours, wrapping around) at which branch b_prev is not free (joint limits,
-    collisions with the table, the resting part or itself) while b_bad is; without a switch, or without a closed
-    form, its samples within `NEIGHBOURS` in theta and phi. Returns (samples removed, (b_prev, b_bad))."""
-    (c, t), (j, f) = bad.grasp, bad.placement
-    block = work.q[c, j]
-    t_n, f_n = block.shape
+    connected to it at which b_prev is not free while b_bad is (`_flood`); with `both` (prev has failed before), also
+    prev's connected samples at which b_bad is not free while b_prev is. Without a switch, or without a closed form,
+    bad's samples within `NEIGHBOURS` in theta and phi. Returns (samples removed, (b_prev, b_bad))."""
     b_bad = branch_of(realiser, bad)
     b_prev = branch_of(realiser, prev) if prev is not None else None
     before = int(work.q.sum())
-    block[t, f] = False
     if b_bad is None or b_prev is None or b_prev == b_bad:
-        for dt in range(-NEIGHBOURS, NEIGHBOURS + 1):
-            block[(t + dt) % t_n, [(f + d) % f_n for d in range(-NEIGHBOURS, NEIGHBOURS + 1)]] = False
+        _window(work, (bad.grasp, bad.placement))
     else:
-        checker = realiser.motion_checker_default()
-        g = classes[c]
-
-        def needs_switch(ti: int, fi: int) -> bool:
-            obj = work.object_pose(j, work.phi[fi])
-            q, ok = solve(realiser.ik, (obj @ g.pose(work.theta[ti]))[None])
-            checker.set_resting(obj, False)
-            free = [bool(ok[0, b]) and checker.valid(q[0, b]) for b in (b_prev, b_bad)]
-            return not free[0] and free[1]
-
-        seen, todo = {(t, f)}, [(t, f)]
-        while todo:
-            ti, fi = todo.pop()
-            for nt, nf in (((ti + 1) % t_n, fi), ((ti - 1) % t_n, fi), (ti, (fi + 1) % f_n), (ti, (fi - 1) % f_n)):
-                if (nt, nf) in seen or not block[nt, nf]:
-                    continue
-                seen.add((nt, nf))
-                if needs_switch(nt, nf):
-                    block[nt, nf] = False
-                    todo.append((nt, nf))
+        _flood(work, classes, realiser, bad, b_prev, b_bad)
+        if both:
+            _flood(work, classes, realiser, prev, b_bad, b_prev)
     work._matrix = None
     return before - int(work.q.sum()), (b_prev, b_bad) if b_prev is not None and b_bad is not None else None
+
+
+def explanation(table: GraspPlacementTable, own: Sequence | None, removals: list[Removal], seq: Sequence | None = None,
+                own_dict: dict | None = None) -> list[str]:
+    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
+    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one (`seq`,
+    None when there is none). `own` is the table's answer, or `own_dict` its `as_dict` (as `Sequence.extra["table"]`
+    holds it)."""
+    if own is not None:
+        own_dict = own.as_dict(table)
+    if own_dict is None:
+        return []
+    n = own_dict["regrasps"]
+    if not removals:
+        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
+    lines = [f"  removed {x.text(table)}" for x in removals]
+    own_pairs = set()
+    g, p = own_dict["grasps"], own_dict["placements"]
+    if own_dict["kind"] == "grasp":
+        for k, pl in enumerate(p):
+            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
+    else:
+        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
+    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
+    kinds = sorted({x.motion for x in removals})
+    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
+                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
+                 f"executable one has {'none' if seq is None else seq.regrasps}")
+    return lines
 
 
 def step_conjunctions(kind: str, n: int) -> tuple[list[str], list[int]]:
@@ -423,6 +476,7 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
     kw = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in kw.items()}  # end masks lose grasps
     log: list[Removal] = []
     failures, last = 0, ""
+    blamed: dict = {}  # how often each conjunction was the start of a failed motion
 
     def explained(seq: Sequence) -> Sequence:
         seq.extra["table"] = own.as_dict(table)
@@ -469,7 +523,10 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
             kw[end][c, t] = False
             n, branches = 1, None
         else:
-            n, branches = learn_removal(work, classes, realiser, bad, prev)
+            key = None if prev is None else (prev.grasp, prev.placement)
+            blamed[key] = blamed.get(key, 0) + 1
+            both = key is not None and blamed[key] > 1 and _task_end(seq, which[i - 1], len(conj)) is None
+            n, branches = learn_removal(work, classes, realiser, bad, prev, both)
         kind = "lines" if res.blame[0] == "step" else ("transfer" if plan.steps[i - 1].kind in ("pick", "regrasp") else "transit")
         log.append(Removal(kind, i, (bad.grasp, bad.placement), res.reason.split(": ", 1)[-1], n,
                            None if prev is None else (prev.grasp, prev.placement), branches))

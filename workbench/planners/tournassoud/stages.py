@@ -242,7 +242,8 @@ def stored_validator(db: str, run: TableRun, idplan: int) -> PlanValidator:
     return _validators(db, run, idplan)[0]
 
 
-def _validators(db: str, run: TableRun, idplan: int, acc=None) -> tuple[PlanValidator, TrajectoryValidator | None]:
+def _validators(db: str, run: TableRun, idplan: int, acc=None,
+                obstacles: tuple = ()) -> tuple[PlanValidator, TrajectoryValidator | None]:
     with Store(db, read_only=True) as store:
         _, obj = object_row(store, run.obj.name)
         r = robot_row(store, sql.table_robot(store, run.idtable))
@@ -251,17 +252,19 @@ def _validators(db: str, run: TableRun, idplan: int, acc=None) -> tuple[PlanVali
         scene = scene_row(store, sql.plan_scene(store, idplan))
     rows = {"robot": r, "object": obj, "gripper": g, "scene": scene}
     pv = validator_from_rows(rows, free_poses=free)
-    return pv, (None if acc is None else trajectory_validator_from_rows(rows, pv, acc))
+    return pv, (None if acc is None else trajectory_validator_from_rows(rows, pv, acc, obstacles))
 
 
-def validate_stored(db: str, run: TableRun, idplan: int, plan: Plan, require_motion: bool = False) -> ValidationReport:
+def validate_stored(db: str, run: TableRun, idplan: int, plan: Plan, require_motion: bool = False,
+                    obstacles: tuple = ()) -> ValidationReport:
     """A stored plan (with the store's ids, as `save_plan` returns it) checked like the roadmap planner's plans
     (`wan_harada.planner.Planner.validate`): its waypoints, and its timed trajectory when it has one (required with
-    `require_motion`), by the independent validators rebuilt from the store's rows."""
+    `require_motion`), by the independent validators rebuilt from the store's rows, the trajectory also against the
+    task's `obstacles` ((mesh, world pose) pairs)."""
     acc = None
     if plan.segments:
         acc = np.broadcast_to(np.asarray(plan.acc or DEFAULT_ACC, dtype=np.float64), (len(plan.joint_names),))
-    pv, tv = _validators(db, run, idplan, acc)
+    pv, tv = _validators(db, run, idplan, acc, obstacles)
     report = pv.check(plan)
     if tv is not None:
         errors, knots = tv.check(plan, plan.segments)
