@@ -213,7 +213,7 @@ def test_bad_robot_inputs_name_the_input(tmp_path):
     bad.write_text("<robot name='x'><link name='a'/><joint name='j' type='revolute'></robot>")
     with pytest.raises(RobotError, match="could not be loaded"):
         robot_from_urdf(bad, "a")
-    with pytest.raises(RobotError, match="no tip frame 'nowhere'"):
+    with pytest.raises(RobotError, match="no link 'nowhere' for --tip"):
         robot_from_urdf(erd_robots() / "ur_description" / "urdf" / "ur5_robot.urdf", "nowhere")
     with pytest.raises(RobotError, match="NaN"):
         get_robot("panda", base=np.full((4, 4), np.nan))
