@@ -186,3 +186,17 @@ def test_tiago_finger_boxes_hold_its_links_along_the_stroke():
                 rel = (np.linalg.inv(pose) @ np.c_[local, np.ones(len(local))].T).T[:, :3]
                 inside |= (np.abs(rel) <= ext / 2 + 1e-6).all(axis=1)
             assert inside.all(), (go.name, i, int((~inside).sum()))
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "puma560"])
+def test_another_gripper_on_a_builtin_robot_sits_where_the_franka_hand_does(name):
+    """The Robotiq-like spec's hand frame (its TCP less its offset) is the Franka hand's, at any joint vector."""
+    from workbench.robots.model import get_robot
+
+    robotiq = load_gripper("robotiq-2f85")
+    a, b = get_robot(name), get_robot(name, gripper=robotiq)
+    assert b.gripper.digest == robotiq.digest and a.spec.digest != b.spec.digest
+    q = np.random.default_rng(0).uniform(a.lower, a.upper)
+    hand_a = a.tcp_pose(q) @ np.linalg.inv(franka_hand().tcp_in_hand)
+    hand_b = b.tcp_pose(q) @ np.linalg.inv(robotiq.tcp_in_hand)
+    assert np.allclose(hand_a, hand_b, atol=1e-9)
