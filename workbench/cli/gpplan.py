@@ -27,6 +27,7 @@ from workbench.planners.tournassoud.task import Obstacle, TaskEnd, end_mask
 from workbench.planners.tournassoud.figures import table_html
 from workbench.planners.tournassoud.plans import (
     Realiser,
+    explanation,
     plan_grasp_query,
     plan_placement_query,
     plan_task_query,
@@ -86,34 +87,27 @@ def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
     return cls, (float(np.radians(lo)), float(np.radians(hi)))
 
 
-def explanation(table, own, removals: list, seq=None, own_dict: dict | None = None) -> list[str]:
-    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
-    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one."""
-    if own is not None:
-        own_dict = own.as_dict(table)
-    if own_dict is None:
-        return []
-    n = own_dict["regrasps"]
-    if not removals:
-        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
-    lines = [f"  removed {x.text(table)}" for x in removals]
-    own_pairs = set()
-    g, p = own_dict["grasps"], own_dict["placements"]
-    if own_dict["kind"] == "grasp":
-        for k, pl in enumerate(p):
-            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
-    else:
-        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
-    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
-    kinds = sorted({x.motion for x in removals})
-    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
-                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
-                 f"executable one has {'none' if seq is None else seq.regrasps}")
-    return lines
+DESCRIPTION = """\
+Backward chaining in a grasp-placement table built by `workbench gptable` (Tournassoud, Lozano-Perez & Mazer 1987):
+the fewest placements on the table between a start and a goal. Three kinds of query:
+
+  --initial CLASS,THETA --goal CLASS,MIN:MAX   grasp to grasp (Section 6); MIN and MAX are both kept
+  --from P,PHI --to P,PHI                      the part from one placement at the table point to another
+  --pickup P,X,Y,PHI --destination P,X,Y,PHI   Fig. 1's task: the part taken where it lies among the
+                                               --pickup-obstacle meshes, put where it goes past the
+                                               --destination-obstacle meshes along --insert (Section 5.1:
+                                               the first and last grasps' angles follow from them)
+
+The answer is realised: IK with collisions, approach and lifts, and (unless --no-motion) timed motions. The table
+assumes the arm's paths away, so a conjunction it allows can fail with the arm; it is then removed, with every
+table sample needing the same change of arm configuration, and the chaining runs again (--max-removed motion
+failures at most). The output names each removed conjunction (step, motion, reason) and gives the table's own
+shortest sequence beside the executable one; --json carries both ("table_sequence", "removed")."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)")
+    p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)",
+                       description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", required=True, help="DuckDB store file with a table built by `workbench gptable`")
     p.add_argument("--object", required=True, help="object name in the store")
     p.add_argument("--robot", default=None, help="robot name in the store (default: the newest table's robot)")
@@ -136,7 +130,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="an obstacle at the destination (the fixture or hole the part goes into); repeatable")
     p.add_argument("--insert", default=None, metavar="DX,DY,DZ[,DEPTH]",
                    help="the final insertion: the direction the held part moves into place (world) and its length in "
-                        "metres (default 0.02); the last grasp's hand must clear the destination's obstacles all along it")
+                        "metres (default 0.02); the last grasp's hand must clear the destination's obstacles all along it "
+                        "(the plan itself lowers the part vertically, so 0,0,-1 is executed as checked)")
     p.add_argument("--table", default=None, help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
     p.add_argument("--handx", type=parse_number(RETRACT, "--handx", 0.05), default=0.05, metavar="M",
                    help=f"approach distance along the hand's axis ({RETRACT.describe(True)}; default 0.05)")
@@ -321,6 +316,10 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict(),
                "table_sequence": seq.extra.get("table"), "removed": seq.extra.get("removed", [])}
+        if task_mode:
+            doc["task"] = {name: end.as_dict() for name, end in (("pickup", pickup), ("destination", destination))}
+            doc["task"]["pickup"]["legal"] = np.argwhere(start_mask).tolist()
+            doc["task"]["destination"]["legal"] = np.argwhere(goal_mask).tolist()
         write_text(args.json, json.dumps(doc, indent=1))
         print(f"json: {args.json}")
     if args.html:

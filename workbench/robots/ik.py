@@ -528,9 +528,10 @@ def diagnose_unreachable(robot: Robot, grips: dict[str, np.ndarray], scene: Scen
         text = (f"{solved} of {len(pick)} sampled grasp poses have an IK solution, but {part} hits the {what} in {n} of "
                 f"them")
         if what == "object" and part != "gripper":
+            tcp = np.round(robot.gripper.tcp_in_hand[:3, 3], 6) + 0.0  # no -0 or 1e-17 in the hint
             return (f"{text}: the arm reaches into the part, so the gripper is probably mounted at the wrong place; give "
-                    f"the tip-to-TCP transform (--mount x,y,z,roll,pitch,yaw; the Franka hand on a flange: "
-                    f"--mount 0,0,0.1034,0,0,0)")
+                    f"the tip-to-TCP transform (--mount x,y,z,roll,pitch,yaw; {robot.gripper.name} on a flange: "
+                    f"--mount {tcp[0]:g},{tcp[1]:g},{tcp[2]:g},0,0,0)")
         return f"{text}; move the grid (--x, --y), the table (--table) or the robot's base (--base)"
     if opts.self_collide:
         pairs: dict[tuple[str, str], int] = {}

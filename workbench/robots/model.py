@@ -11,12 +11,13 @@ The TCP pose of a stored joint vector is, without this library::
     q[idx_q(name)] = value for name in robot.joint_names
     TCP = robot.base @ oMf(robot.tip_frame) @ robot.mount
 
-Built-in robots (all from example-robot-data, all carrying the Franka hand as planning gripper):
+Built-in robots (all from example-robot-data; the Franka hand is their planning gripper unless another is given,
+whose hand frame then sits where the Franka hand's does):
 
 - `panda`: the Franka Panda arm with its own hand, TCP `panda_hand_tcp` (tip = TCP, mount = identity),
   mounted at the world origin on the table.
-- `ur5`: UR5 (`ur5_robot.urdf`) with the Franka hand on its flange `tool0` (TCP 0.1034 m along the
-  flange's z), at the world origin on the table.
+- `ur5`: UR5 (`ur5_robot.urdf`) with the planning gripper's hand frame on its flange `tool0` (the Franka hand's
+  TCP is then 0.1034 m along the flange's z), at the world origin on the table.
 - `talos`: Talos's left arm with its two torso joints (9 DoF, like the paper's 8-DoF HRP5P arm that
   includes the waist), the Franka hand on the wrist tool flange `wrist_left_ft_tool_link`; the robot
   stands in front of the table (pelvis at x = 0.05 m, 0.25 m above the table top, the table's edge at x = 0.2 m),
@@ -65,12 +66,6 @@ def _rot_x(angle: float) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     out = np.eye(4)
     out[1:3, 1:3] = [[c, -s], [s, c]]
-    return out
-
-
-def _trans(x: float, y: float, z: float) -> np.ndarray:
-    out = np.eye(4)
-    out[:3, 3] = (x, y, z)
     return out
 
 

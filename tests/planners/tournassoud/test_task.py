@@ -170,3 +170,15 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
                 assert not _hits(held, (tcp @ np.linalg.inv(np.reshape(step["grasp"], (4, 4))))[None], obstacles)
             knots += 1
     assert knots > 100
+    assert doc["task"]["destination"]["insertion"] == [0.0, 0.0, -1.0] and len(doc["task"]["pickup"]["obstacles"]) == 2
+    # bad task input: one line each, exit 2, nothing planned
+    base = ["gpplan", "--db", db, "--object", "L", "--no-motion", "--no-save"]
+    ends = ["--pickup", "2,0.55,-0.05,30", "--destination", "0,0.35,0.25,0"]
+    for bad in (["--pickup", "2,0.55,-0.05,30"], ["--pickup", "2,x,0,0", "--destination", "0,0.35,0.25,0"],
+                ends + ["--insert", "0,0,0"], ends + ["--insert", "0,0,-1,-0.1"],
+                ends + ["--pickup-obstacle", str(tmp_path / "missing.stl") + "@0,0,0"],
+                ends + ["--pickup-obstacle", "nopose.stl"], ends + ["--from", "0,0", "--to", "1,0"],
+                ["--from", "0,0", "--to", "1,0", "--insert", "0,0,-1"], ends[:2] + ["--destination", "9,0.35,0.25,0"]):
+        assert main(base + bad) == 2, bad
+    err = capsys.readouterr().err
+    assert "Traceback" not in err

@@ -7,13 +7,19 @@ planner's plans: `grasp` (TCP at the grasp), `approach` (backed off by `handx` a
 whose arm clears the object (the IK solver's collider); approach and retract start from the grasp's configuration
 (with the closed form: the branch nearest to it).
 
-The table only checks the grasp's IK (Section 5.2). A conjunction that fails here (no collision-free branch or no
-approach/retract) is removed from a copy of the table and the query is answered again, so the returned sequence is
-still the shortest among the conjunctions that can be executed.
+The table only checks the grasp's IK (Section 5.2); the paper assumes the arm's paths away (Section 1). A
+conjunction that fails here (no collision-free branch or no approach/retract) is removed from a copy of the table
+and the query is answered again, so the returned sequence is still the shortest among the conjunctions that can be
+executed. With motions, a failed motion between two conjunctions removes every sample needing the same change of arm
+configuration (`learn_removal`: the same IK branch switch over the neighbouring theta and phi samples of the same
+class and placement), not one sample at a time. Every removal is recorded (`Removal`) and the table's own answer
+kept beside the executable one (`explanation` prints both).
 
 Plan steps (validator order pick, (transfer, regrasp)*, place):
 - placement query: pick at the start placement with the first grasp, then per regrasp a transfer to an intermediate
   placement and a regrasp there, and place at the goal placement with the last grasp;
+- task query (`plan_task_query`, Fig. 1): the same with the pick at the task's pick-up and the place at its
+  destination, away from H, both checked against the task's obstacles;
 - grasp query (the object starts and ends in the hand): pick and transfer both hold the initial grasp at the first
   intermediate placement (the configuration where it is put down), then regrasp/transfer pairs, and the last regrasp
   and the place both hold the final grasp at the last placement.
@@ -363,6 +369,35 @@ def learn_removal(work: GraspPlacementTable, classes: list[GraspClass], realiser
             _flood(work, classes, realiser, prev, b_bad, b_prev)
     work._matrix = None
     return before - int(work.q.sum()), (b_prev, b_bad) if b_prev is not None and b_bad is not None else None
+
+
+def explanation(table: GraspPlacementTable, own: Sequence | None, removals: list[Removal], seq: Sequence | None = None,
+                own_dict: dict | None = None) -> list[str]:
+    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
+    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one (`seq`,
+    None when there is none). `own` is the table's answer, or `own_dict` its `as_dict` (as `Sequence.extra["table"]`
+    holds it)."""
+    if own is not None:
+        own_dict = own.as_dict(table)
+    if own_dict is None:
+        return []
+    n = own_dict["regrasps"]
+    if not removals:
+        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
+    lines = [f"  removed {x.text(table)}" for x in removals]
+    own_pairs = set()
+    g, p = own_dict["grasps"], own_dict["placements"]
+    if own_dict["kind"] == "grasp":
+        for k, pl in enumerate(p):
+            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
+    else:
+        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
+    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
+    kinds = sorted({x.motion for x in removals})
+    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
+                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
+                 f"executable one has {'none' if seq is None else seq.regrasps}")
+    return lines
 
 
 def step_conjunctions(kind: str, n: int) -> tuple[list[str], list[int]]:
