@@ -17,6 +17,7 @@ from workbench.cli.placements import (
 )
 from workbench.geometry.objects import load_object
 from workbench.planners.wan_harada.stages import BuildResult, build_all
+from workbench.robots.ik import IKOptions, solver_kind
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -34,13 +35,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
 
     robot, scene = robot_and_scene(args)  # before any work: a bad URDF or option is refused first
+    opts = IKOptions(solver=args.ik, self_collide=True)
     pparams, tparams = placement_params(args)
     gparams = grasp_params(args)
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     t0 = time.perf_counter()
     res = build_all(args.db, obj, robot, gparams, pparams, tparams, args.handx, args.worldz, args.workers,
-                    worlda=args.worlda, scene=scene)
-    print_build(res, args.db, time.perf_counter() - t0, stored_as(robot, res.robot))
+                    worlda=args.worlda, scene=scene, ik=opts)
+    print_build(res, args.db, time.perf_counter() - t0, f"; IK {solver_kind(robot, opts)}{stored_as(robot, res.robot)}")
     return 0
 
 

@@ -630,7 +630,9 @@ def load_gripper(choice: str = "franka", hand_link: str | None = None, finger_jo
         return franka_hand()
     if choice == "own":
         if robot_urdf is None or tip is None:
-            raise GripperError("--gripper own takes the robot's own hand: give the robot as a URDF path with --tip")
+            raise GripperError("--gripper own takes the robot's own hand from --robot URDF and --tip; where there is no "
+                               "robot (grasps, placements) give its URDF itself: --gripper ROBOT.urdf --gripper-hand TIP "
+                               "--gripper-fingers LEFT,RIGHT")
         if len(finger_joints) != 2:
             raise GripperError(f"--gripper own needs --gripper-fingers LEFT,RIGHT: the two finger joints of the hand in "
                                f"{robot_urdf}")
