@@ -7,6 +7,8 @@ import argparse
 import time
 from pathlib import Path
 
+import numpy as np
+
 from workbench.cli import warn
 from workbench.cli.grasps import add_grasp_arguments, add_object_arguments, grasp_params
 from workbench.cli.ik import add_retraction_arguments, add_robot_arguments, robot_and_scene, stored_as
@@ -16,6 +18,7 @@ from workbench.cli.placements import (
     roadmap_grasps_line,
 )
 from workbench.geometry.objects import load_object
+from workbench.grasping.naming import per_part_numbers, placement_lines
 from workbench.planners.wan_harada.stages import BuildResult, build_all
 from workbench.robots.ik import IKOptions, solver_kind
 
@@ -61,6 +64,10 @@ def print_build(res: BuildResult, db, seconds: float, note: str = "") -> None:
     print(f"IK for {res.robot} ({verb('ik')}, {t['ik']:.1f} s{note}); regrasp graph: {c['graph_nodes']:,} nodes, {c['graph_transfer_edges']:,} "
           f"transfer and {c['graph_transit_edges']:,} transit edges, {c['graph_grasps']} grasps, {c['graph_placements']} placements, "
           f"{c['graph_components']} component(s) ({t['graph']:.1f} s)")
-    nogrip = f" (no grasp clears the table on {', '.join(map(str, c['placements_nogrip']))})" if c["placements_nogrip"] else ""
+    number = per_part_numbers(np.array(list(c["placement_rotmats"]), dtype=np.int64))  # the store's ids -> 1, 2, ...
+    nogrip = (f" (no grasp clears the table on {', '.join(str(number[i]) for i in c['placements_nogrip'])})"
+              if c["placements_nogrip"] else "")
     print(f"store {Path(db).resolve()} ready in {seconds:.1f} s; stable placements for --start/--goal "
-          f"(PLACEMENT,X,Y,YAW): {', '.join(map(str, c['placement_ids']))}{nogrip}")
+          f"(PLACEMENT,X,Y,YAW): {', '.join(str(number[i]) for i in c['placement_ids'])}{nogrip}")
+    for line in placement_lines(c["placement_rotmats"]):
+        print(f"  {line}")

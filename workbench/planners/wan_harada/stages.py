@@ -348,6 +348,8 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
         out.counts.update({f"graph_{k}": v for k, v in planner.roadmap.summary().items()})
         out.counts["placement_ids"] = planner.placement_ids(gripped=True)
         out.counts["placements_nogrip"] = sorted(set(planner.placement_ids()) - set(out.counts["placement_ids"]))
+        out.counts["placement_rotmats"] = {int(i): np.asarray(m) for i, m in
+                                           zip(planner.free["idfreetabletopplacement"], planner.free["rotmat"])}
         out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **planner.ids}
         return out
     finally:
