@@ -29,10 +29,14 @@ import copy
 import hashlib
 import multiprocessing as mp
 import os
+import signal
 import sys
+import threading
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
+from multiprocessing import forkserver
 from typing import Callable, Iterator
 
 import numpy as np
@@ -366,6 +370,7 @@ class IKSolver:
         their branch nearest `ref` without the limits (clipped into them by the solver), which the free joint then
         moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first."""
         rows = np.flatnonzero(~valid.any(axis=1))
+        rows = rows[self.prefilter(targets[rows])] if len(rows) else rows
         if not len(rows):
             return q, ok
         qu, vu = self.unlimited.solve(targets[rows])
@@ -498,6 +503,30 @@ def random_configurations(robot: Robot, keys: np.ndarray, rank: int) -> np.ndarr
     return robot.lower + u * (robot.upper - robot.lower)
 
 
+@contextmanager
+def children_without_sigint(other_threads: bool = False) -> Iterator[None]:
+    """Worker processes started inside never see a terminal's Ctrl-C, which reaches the whole process group: the
+    driver stops the run and says so once. SIGINT is blocked in this thread while they start (a signal mask is
+    inherited by the processes and threads started meanwhile), and a Ctrl-C in that time is delivered here at the
+    end. With `other_threads` (processes started by another thread, as Dask's nannies do), SIGINT is ignored instead,
+    which processes inherit too; a Ctrl-C while they start is then lost."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    if other_threads:
+        old_handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            yield
+        finally:
+            signal.signal(signal.SIGINT, old_handler)
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
 _WORKER_SOLVER: IKSolver | None = None  # the solver of an IKPool worker process, built by its initializer
 
 
@@ -521,6 +550,8 @@ class IKPool:
         ctx = mp.get_context("forkserver" if "forkserver" in methods else "spawn")
         if ctx.get_start_method() == "forkserver":
             ctx.set_forkserver_preload(["workbench.robots.ik"])  # the server imports the library, not the caller
+            with children_without_sigint():  # the server, and every worker it forks, inherit the mask
+                forkserver.ensure_running()
         self.key = (robot.spec.digest, scene, opts, _mesh_key(obj_mesh))
         self.workers = int(workers)
         self.executor = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_init_worker,
@@ -643,9 +674,10 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
             solver = solver or IKSolver(robot, scene, opts, obj_mesh)
             results = (solver.chunk(targets[order[s:e]], placements[order[s:e]]) for s, e in todo)
         else:
-            if pool is None:
-                pool = own_pool = IKPool(robot, scene, opts, obj_mesh, workers)
-            futures = [pool.submit(targets[order[s:e]], placements[order[s:e]]) for s, e in todo]
+            with children_without_sigint():  # a worker half-started by an interrupted submit prints a traceback
+                if pool is None:
+                    pool = own_pool = IKPool(robot, scene, opts, obj_mesh, workers)
+                futures = [pool.submit(targets[order[s:e]], placements[order[s:e]]) for s, e in todo]
             results = (_result(f) for f in futures)
         for (s, e), (feas, joints) in zip(todo, results):
             bar.update(e - s)
