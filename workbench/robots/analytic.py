@@ -431,10 +431,11 @@ def branch_distances(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, l
     (a joint spanning more than a turn), and their L1 distances to it (N, B), inf where not valid."""
     ref = np.asarray(q_ref, dtype=np.float64)
     ref = np.broadcast_to(ref[:, None] if ref.ndim == 2 else ref, joints.shape)
-    if lower is not None and upper is not None:
+    if lower is not None and upper is not None and (np.asarray(upper) - np.asarray(lower) > 2 * np.pi).any():
         alt = joints + 2 * np.pi * np.round((ref - joints) / (2 * np.pi))
         joints = np.where((alt >= lower) & (alt <= upper), alt, joints)
-    return joints, np.where(valid, np.abs(np.nan_to_num(joints - ref, nan=0.0)).sum(axis=2), np.inf)
+    with np.errstate(invalid="ignore"):  # NaN joints of invalid branches
+        return joints, np.where(valid, np.abs(joints - ref).sum(axis=2), np.inf)
 
 
 def nearest_branch(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,

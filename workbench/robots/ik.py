@@ -370,6 +370,7 @@ class IKSolver:
         their branch nearest `ref` without the limits (clipped into them by the solver), which the free joint then
         moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first."""
         rows = np.flatnonzero(~valid.any(axis=1))
+        rows = rows[self.prefilter(targets[rows])] if len(rows) else rows
         if not len(rows):
             return q, ok
         qu, vu = self.unlimited.solve(targets[rows])
