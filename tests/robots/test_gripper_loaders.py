@@ -141,6 +141,13 @@ def test_bad_urdf_gripper_exits_2(tmp_path, capsys):
         assert main(["grasps", mesh, "--db", str(db), "--gripper", urdf, *extra]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and words in err[0] and "parallel60.urdf" in err[0]
+    # a TCP frame beyond the fingertips
+    far = tmp_path / "far.urdf"
+    far.write_text(BUNDLED["parallel60"].read_text().replace('<origin xyz="0 0 0.1"/>', '<origin xyz="0 0 0.3"/>'))
+    assert main(["grasps", mesh, "--db", str(db), "--gripper", str(far), "--gripper-hand", "p60_hand",
+                 "--gripper-fingers", "p60_left_joint,p60_right_joint", "--gripper-tcp", "p60_tcp"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "far.urdf" in err[0] and "outside the hand" in err[0]
     # the fingers closing along two different axes
     skew = tmp_path / "skew.urdf"
     skew.write_text(BUNDLED["parallel60"].read_text().replace('<axis xyz="0 -1 0"/>', '<axis xyz="0 -1 1"/>').replace(

@@ -32,7 +32,7 @@ from workbench.robots.motion import MotionOptions
 from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
 from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored, stored_playback
 from workbench.store import Store
-from workbench.store.robots import robot_with_gripper
+from workbench.store.robots import robot_grippers, robot_with_gripper
 from workbench.viewer.wan_harada import caption_track, plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
@@ -94,7 +94,12 @@ def run(args: argparse.Namespace) -> int:
                             "--gripper-fingers LEFT,RIGHT (as given to build)")
     gripper = gripper_from_args(args)
     with Store(args.db, create=False) as store:
-        args.robot = robot_with_gripper(store, args.robot, gripper.digest) or args.robot
+        stored = robot_with_gripper(store, args.robot, gripper.digest)
+        others = [] if stored else robot_grippers(store, args.robot)
+        if others:
+            raise PlanningError(f"store {args.db} has robot {args.robot!r} with gripper {', '.join(others)}, not "
+                                f"{gripper.name!r}; give --gripper the one it was built with, or build it with this one")
+        args.robot = stored or args.robot
         reason = empty_stage(store, args.object, args.robot)
         if reason:
             warn(f"no plan for {args.object}: nothing to plan with; stage {reason}")

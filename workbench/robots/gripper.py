@@ -352,6 +352,11 @@ def gripper_from_urdf(urdf: str | Path, hand_link: str, tcp_frame: str | None, f
     if off > 2.0:
         raise GripperError(f"{where}: the fingers close {off:.1f} degrees off the TCP frame's y axis; the TCP's y must be "
                            f"the jaw axis")
+    between = (local[pads[1]][mid].mean(axis=1) + local[pads[-1]][mid].mean(axis=1)) / 2  # pads' midpoint, TCP frame
+    reach = np.ptp(local[pads[1]][mid], axis=1) / 2
+    if abs(between[0]) > reach[0] or abs(between[2]) > reach[2] or abs(between[1]) > 1e-3:
+        raise GripperError(f"{where}: the TCP frame {tcp_frame!r} lies outside the hand, {np.linalg.norm(between) * 1e3:.0f} "
+                           f"mm from the midpoint between the pads; the TCP lies between them")
     notes, drift = [], {}
     for sgn in (1, -1):
         k = pads[sgn]
