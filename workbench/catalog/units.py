@@ -39,7 +39,7 @@ from workbench.planners.wan_harada.tabletop import (
 )
 from workbench.robots.collider import Scene
 from workbench.robots.gripper import Gripper, franka_hand
-from workbench.robots.ik import IKOptions, IKSolver, retract
+from workbench.robots.ik import IKOptions, IKSolver, check_poses, retract
 from workbench.robots.model import RobotSpec, robot_from_spec
 
 SHAPE_KEY = b"shape"
@@ -279,6 +279,19 @@ def ik_unit(spec: RobotSpec, scene: Scene, opts: IKOptions, handx: float, worldz
     write_shard(table, shard)
     counts = pa.table({"grips": [len(feas)], "feasible": [int(feas[:, 0].sum())], "feasible_all": [int(feas.all(axis=1).sum())]})
     return stamp(counts, t0, c0, shard=shard)
+
+
+def ik_unit_files(spec: RobotSpec, scene: Scene, opts: IKOptions, handx: float, worldz: float, worlda: float,
+                  folder: str, chunk: int, shard: str) -> pa.Table:
+    """`ik_unit` of row group `chunk` of a part folder's grips in IK order (`ik_grips.parquet`, written by the part
+    unit), the part's mesh from its `object.parquet`: the worker reads what it needs, not the store or the driver."""
+    grips = table_arrays(pq.ParquetFile(f"{folder}/ik_grips.parquet").read_row_group(chunk))
+    obj = pq.read_table(f"{folder}/object.parquet", columns=["digest", "vertices", "faces"])
+    verts = obj.column("vertices").combine_chunks().flatten().flatten().to_numpy(zero_copy_only=False).reshape(-1, 3)
+    faces = obj.column("faces").combine_chunks().flatten().flatten().to_numpy(zero_copy_only=False).reshape(-1, 3)
+    return ik_unit(spec, scene, opts, handx, worldz, worlda, obj.column("digest")[0].as_py(), verts.astype(np.float64),
+                   faces.astype(np.int64), grips["idtabletopgrips"], check_poses(grips["rotmat"]),
+                   check_poses(grips["placement_rotmat"], "object placement"), shard=shard)
 
 
 def write_shard(table: pa.Table, path: str) -> None:

@@ -14,7 +14,7 @@ BENCHES = {
     "motion": "motion planning and timing of searched regrasp plans",
     "fingers": "five-finger regrasp by contact-point clustering beside Tables I-III",
     "gptable": "the grasp-placement table: classes, build times, chaining, closed-form IK",
-    "catalog": "catalogue build on a local Dask cluster: speed-up and the driver's load",
+    "catalog": "catalogue build on a local Dask cluster: speed-up, the driver's load, simulated workers, cost model",
 }
 
 

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 from dataclasses import replace
 
 from workbench.benchmarks import print_table
@@ -13,12 +14,14 @@ from workbench.catalog.cluster import cluster_client, dashboard_link
 from workbench.catalog.stages import open_store
 from workbench.catalog.driver import (
     SUMMARY_HEADERS,
+    CatalogError,
     CatalogParams,
     build_catalog,
     collect_parts,
     report,
     summary_table,
 )
+from workbench.catalog.report import wide_table, write_html
 from workbench.catalog.robots import CatalogRobot, parse_robots
 from workbench.cli.grasps import add_grasp_arguments, grasp_params
 from workbench.cli.ik import parse_base, parse_mount
@@ -69,6 +72,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.set_defaults(func=run_build)
     r = inner.add_parser("report", help="print the summary table of a stored catalogue")
     r.add_argument("--db", required=True, help="DuckDB store file")
+    r.add_argument("--html", default=None, metavar="OUT.html",
+                   help="also write the parts x robots table as a page with a thumbnail of each part")
     r.set_defaults(func=run_report)
 
 
@@ -105,8 +110,21 @@ def run_build(args: argparse.Namespace) -> int:
 
 
 def run_report(args: argparse.Namespace) -> int:
-    rows, failures = report(args.db)
+    if args.html is not None and Path(args.html).suffix.lower() != ".html":
+        raise CatalogError(f"--html {args.html!r} must end in .html")
+    rows, failures, meshes = report(args.db, meshes=args.html is not None)
     print_summary(rows, failures)
+    if rows:
+        headers, table = wide_table(rows)
+        print()
+        print_table(headers, table, title="parts x robots: reachable grips (IK-feasible at all five poses, of the tabletop "
+                                          "grips) and the regrasp graph's connected share (nodes in its largest component)")
+    if args.html is not None:
+        try:
+            out = write_html(args.html, rows, failures, meshes, f"Catalogue {Path(args.db).name}")
+        except OSError as exc:
+            raise CatalogError(f"cannot write {args.html}: {exc.strerror or exc}") from None
+        print(f"html: {out.resolve()}")
     return 0
 
 
