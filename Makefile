@@ -1,4 +1,5 @@
 # The two commands a newcomer needs: `make demo` and `make test`. Both build .venv from nothing.
+# `make docs` builds the documentation site (MkDocs Material) into build/site.
 # `make demo` installs only the runtime dependencies; `make test` adds the test extras (pytest, nbmake, MuJoCo,
 # playwright, nbstripout, pytest-xdist) on top, each behind its own stamp so one never reinstalls the other.
 PYTHON ?= python3
@@ -6,10 +7,11 @@ VENV := .venv
 BIN := $(VENV)/bin
 RUNTIME := $(VENV)/.installed-runtime
 TESTDEPS := $(VENV)/.installed-test
+DOCSDEPS := $(VENV)/.installed-docs
 # JupyterLab refuses to start as root without --allow-root; a user never needs it.
 LAB_ROOT := $(if $(filter 0,$(shell id -u)),--allow-root,)
 
-.PHONY: venv demo test lab bench clean
+.PHONY: venv demo test docs lab bench clean
 
 $(RUNTIME): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -21,6 +23,10 @@ $(TESTDEPS): $(RUNTIME) pyproject.toml
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $(TESTDEPS)
 
+$(DOCSDEPS): $(RUNTIME) pyproject.toml
+	$(BIN)/python -m pip install --quiet -e '.[docs]'
+	touch $(DOCSDEPS)
+
 venv: $(RUNTIME)
 
 demo: $(RUNTIME)
@@ -28,6 +34,11 @@ demo: $(RUNTIME)
 
 test: $(TESTDEPS)
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --nbmake tests notebooks
+
+# The documentation site, into build/site; --strict turns a broken link or a public function without a docstring
+# into a failure.
+docs: $(DOCSDEPS)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
 
 lab: $(RUNTIME)
 	$(BIN)/jupyter lab $(LAB_ROOT) --ContentsManager.pre_save_hook=workbench.widgets.saving.strip_widget_views notebooks/

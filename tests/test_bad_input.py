@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -180,6 +181,7 @@ def work(tmp_path_factory) -> Path:
     trimesh.creation.icosphere(subdivisions=3, radius=0.03).export(d / "ball.stl")
     (d / "broken.urdf").write_text("<robot name='broken'><link name='a'/>")
     (d / "afile").write_text("not a folder\n")
+    (d / "folder.csv").mkdir()
     return d
 
 
@@ -283,6 +285,31 @@ BAD_PARAMETERS = [
     ("build", ["--rotations", "1000000"], "--rotations"),
     ("demo", ["--seed", "-1"], "--seed"),
     ("demo", ["--workers", "0"], "--workers"),
+    ("gptable", ["--edge-angle", "nan"], "--edge-angle"),
+    ("gptable", ["--edge-angle=-10"], "[0, 180] deg"),
+    ("gptable", ["--min-face-area", "nan"], "--min-face-area"),
+    ("gptable", ["--min-contact-area", "nan"], "--min-contact-area"),
+    ("gptable", ["--min-range", "400"], "[0, 360] deg"),
+    ("gptable", ["--points", "0"], "--points"),
+    ("gptable", ["--theta-step", "0"], "--theta-step"),
+    ("gptable", ["--table-point", "0.4,nan"], "--table-point"),
+    ("gpplan", ["--initial", "0,nan", "--goal", "1,0:90"], "--initial"),
+    ("gpplan", ["--from", "0,0", "--to", "1,inf"], "--to"),
+    ("gpplan", ["--from", "0,0", "--to", "1,90", "--handx", "nan"], "--handx"),
+    ("gpplan", ["--from", "0,0", "--to", "1,90", "--acc", "-1"], "--acc"),
+    ("catalog", ["--workers", "1000"], "memory budget"),
+    ("catalog", ["--workers", "0"], "--workers"),
+    ("catalog", ["--ik-chunk", "0"], "--ik-chunk"),
+    ("catalog", ["--worlda", "nan"], "--worlda"),
+    ("catalog", ["--shards", "box.stl"], "not a folder"),
+    ("ik", ["--workers", "1000"], "memory budget"),
+    ("plan", ["--budget", "nan"], "--budget"),
+    ("plan", ["--json", "afile/plan.json"], "afile is a file"),
+    ("plan", ["--html", "."], "is a folder"),
+    ("plan", ["--trajectory", "."], "must end in"),
+    ("plan", ["--trajectory", "folder.csv"], "is a folder"),
+    ("grasps", ["--html", "."], "is a folder"),
+    ("fingers", ["--json", "afile/q.json"], "--json"),
 ]
 
 
@@ -297,6 +324,12 @@ def _command(cmd: str, work: Path, db: Path, extra: list[str]) -> list:
         return [cmd, "--out", db.parent / "demo", *extra]
     if cmd == "ik":
         return [cmd, "--db", db, "--object", "box", "--robot", "panda", *extra]
+    if cmd == "gptable":
+        return [cmd, work / "box.stl", "--db", db, *extra]
+    if cmd == "gpplan":
+        return [cmd, "--db", db, "--object", "box", *extra]
+    if cmd == "catalog":
+        return [cmd, "build", work / "box.stl", "--robots", "panda", "--db", db, *extra]
     return [cmd, "--db", db, "--object", "box", "--robot", "panda", *QUERY, *extra]
 
 
@@ -374,6 +407,113 @@ def test_reading_commands_do_not_create_a_store(work, tmp_path):
                  ["plan", "--db", tmp_path / "none.duckdb", "--object", "box", "--robot", "panda", *QUERY]):
         assert_refused(cli(*args, cwd=work), "does not exist")
         assert not (tmp_path / "none.duckdb").exists()
+
+
+READERS = {  # every command that opens an existing store, on the store `db`
+    "plan": ["plan", "--db", "{db}", "--object", "box", "--robot", "panda", *QUERY],
+    "ik": ["ik", "--db", "{db}", "--object", "box", "--robot", "panda", "--workers", "1"],
+    "build": ["build", "box.stl", "--db", "{db}", *BUILD],
+    "gpplan": ["gpplan", "--db", "{db}", "--object", "box", "--from", "0,0", "--to", "1,90"],
+    "catalog report": ["catalog", "report", "--db", "{db}"],
+}
+
+
+def _reader(name: str, db: Path) -> list[str]:
+    return [str(db) if a == "{db}" else a for a in READERS[name]]
+
+
+@pytest.mark.parametrize("cut", ["half", "last block"])
+def test_truncated_store_is_one_line_for_every_command(work, db, cut):
+    """A copy cut short past its header (DuckDB opens it, then fails on the first missing block) is refused at the
+    store's door, whichever command opens it; the file is left as it was."""
+    data = db.read_bytes()
+    db.write_bytes(data[: len(data) // 2] if cut == "half" else data[:-4096])
+    before = file_digest(db)
+    for name in READERS:
+        res = cli(*_reader(name, db), cwd=work)
+        assert_refused(res, str(db.name), "damaged", "truncated")
+        assert file_digest(db) == before, name
+
+
+def test_corrupt_block_is_one_line(work, db):
+    """A block whose checksum fails (the file changed outside DuckDB): one line naming the damage, file untouched."""
+    con = duckdb.connect(str(db), read_only=True)
+    block, blocks = con.execute("SELECT block_size, total_blocks FROM pragma_database_size()").fetchone()
+    con.close()
+    damaged = []
+    for k in range(blocks):  # the blocks a plan reads lie somewhere: spoil every block, each read fails its checksum
+        damaged.append((3 * 4096 + k * block + 64, b"\x55" * 256))
+    with open(db, "r+b") as fh:
+        for at, junk in damaged:
+            fh.seek(at)
+            fh.write(junk)
+    before = file_digest(db)
+    res = cli(*_reader("plan", db), cwd=work)
+    assert_refused(res, str(db.name), "damaged")
+    assert file_digest(db) == before
+
+
+def test_gpplan_on_a_store_without_a_table_names_gptable(work, db, reference):
+    res = cli(*_reader("gpplan", db), cwd=work)
+    assert_refused(res, "tgptable", "workbench gptable")
+    assert state(db) == reference
+
+
+def _hold(db: Path, seconds: float) -> subprocess.Popen:
+    """Another process holding the store read-write for `seconds` (its lock taken when it prints)."""
+    code = (f"import duckdb, sys, time; c = duckdb.connect({str(db)!r}); print('held', flush=True); "
+            f"time.sleep({seconds}); c.close()")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "held"
+    return proc
+
+
+def test_busy_store_is_one_line_or_waited_for(work, db, reference):
+    """A store another process writes: each command says so in one line (naming --wait), or waits with --wait."""
+    holder = _hold(db, 60)
+    try:
+        for name in ("plan", "ik", "catalog report"):
+            res = cli(*_reader(name, db), cwd=work)
+            assert_refused(res, "busy", f"process {holder.pid}", "--wait")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert state(db) == reference
+    holder = _hold(db, 1.5)
+    try:
+        res = cli(*_reader("plan", db), "--no-save", "--wait", "60", cwd=work)
+    finally:
+        holder.wait()
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert state(db) == reference
+
+
+URDF_FAULTS = {  # a change to UR5's URDF -> words of its one-line refusal
+    "loop": (lambda t: t.replace("</robot>", '<joint name="loop" type="revolute"><parent link="wrist_3_link"/>'
+                                             '<child link="shoulder_link"/><axis xyz="0 0 1"/><limit lower="-1" '
+                                             'upper="1" effort="1" velocity="1"/></joint></robot>'),
+             ["not a tree", "shoulder_link", "loop"]),
+    "nan": (lambda t: re.sub(r'(<joint name="elbow_joint".*?lower=")[^"]*"', r'\1nan"', t, count=1, flags=re.S),
+            ["elbow_joint", "not finite"]),
+    "inverted": (lambda t: re.sub(r'(<joint name="elbow_joint".*?lower=")[^"]*"', r'\g<1>4"', t, count=1, flags=re.S),
+                 ["elbow_joint", "inverted"]),
+    "empty": (lambda t: re.sub(r'(lower|upper)="[^"]*"', r'\1="0.5"', t), ["empty range"]),
+    "roots": (lambda t: t.replace("</robot>", '<link name="stray"/></robot>'), ["not a tree", "stray"]),
+}
+
+
+@pytest.mark.parametrize("fault", [*URDF_FAULTS, "tip is a joint"])
+def test_urdf_faults_are_named_before_pinocchio(work, db, reference, tmp_path, fault):
+    from workbench.resources import erd_robots
+
+    text = (erd_robots() / "ur_description" / "urdf" / "ur5_robot.urdf").read_text()
+    change, words = URDF_FAULTS.get(fault, (lambda t: t, ["elbow_joint", "is a joint, not a link", "forearm_link"]))
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(change(text))
+    tip = "elbow_joint" if fault == "tip is a joint" else "tool0"
+    res = cli("ik", "--db", db, "--object", "box", "--robot", urdf, "--tip", tip, "--workers", "1", cwd=work)
+    assert_refused(res, "arm.urdf", *words)
+    assert state(db) == reference
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -39,3 +39,7 @@ class PartialStageWarning(UserWarning):
 
 class RobotWarning(UserWarning):
     """A robot was loaded with a change the user should know of (bounded continuous joints, links replaced)."""
+
+
+class SimulationError(WorkbenchError):
+    """A plan that cannot be replayed in physics: no physics engine, a part whose convex decomposition fails."""

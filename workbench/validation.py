@@ -113,17 +113,19 @@ class PlanValidator:
     `hand_links`: link-name prefixes of the robot's own hand, replaced by the planning gripper (their geometry is
     not checked); `table`: (x_min, y_min), (x_max, y_max) of the table top (z = 0) and its thickness;
     `free_poses`: {idfreetabletopplacement: rotmat} to recompute start and goal poses; `locked`: {joint: value} of
-    joints outside the plan's that are not at their neutral value (a humanoid's other arm tucked away)."""
+    joints outside the plan's that are not at their neutral value (a humanoid's other arm tucked away); `jaw`: the
+    gripper's (min, max) opening, which every step's jaw width must lie within."""
 
     def __init__(self, urdf: str, tip_frame: str, mount: np.ndarray, base: np.ndarray, joint_names: list[str],
                  table: tuple, object_vertices: np.ndarray, object_faces: np.ndarray, object_com: np.ndarray,
                  gripper_mesh: trimesh.Trimesh, hand_links: tuple[str, ...] = (), free_poses: dict | None = None,
                  package_dirs: tuple[str, ...] = (), locked: dict | None = None, tol_pos: float = 5e-4, tol_rot: float = 5e-3,
-                 tol_grasp: float = 2e-3):
+                 tol_grasp: float = 2e-3, jaw: tuple[float, float] | None = None):
         import fcl
         import pinocchio as pin
 
         self.pin, self.fcl = pin, fcl
+        self.jaw = jaw
         self.model = pin.buildModelFromXML(urdf)
         self.data = self.model.createData()
         if not self.model.existFrame(tip_frame):
@@ -282,6 +284,10 @@ class PlanValidator:
                 need(not hits, f"{tag}: at the {label} configuration {', '.join(hits)}")
             stable, why = self.stability(obj)
             need(stable, f"{tag}: the object pose is not a stable placement: {why}")
+            if self.jaw is not None:
+                need(self.jaw[0] - 1e-9 <= s.jawwidth <= self.jaw[1] + 1e-9,
+                     f"{tag}: jaw width {s.jawwidth * 1000:.1f} mm is outside the gripper's stroke "
+                     f"{self.jaw[0] * 1000:.1f}-{self.jaw[1] * 1000:.1f} mm")
         # the object stays put while released, the grasp is constant while carried
         for i in range(1, len(steps) - 1, 2):
             a, b = steps[i], steps[i + 1]
@@ -330,7 +336,9 @@ class TrajectoryValidator:
     GRIPPER_FINGERS = "gripper_fingers"
 
     def __init__(self, pv, hand_mesh: trimesh.Trimesh, finger_mesh: trimesh.Trimesh, allowed: list[tuple[str, str]],
-                 acc_limits: np.ndarray | float, table_tol: float = 1e-3, urdf: str | None = None):
+                 acc_limits: np.ndarray | float, table_tol: float = 1e-3, urdf: str | None = None, obstacles: tuple = ()):
+        """`obstacles`: (mesh, world pose) pairs fixed in the world (a task's pick-up and destination), which the
+        arm, the hand and the held object must not touch."""
         import fcl
 
         self.pv, self.fcl = pv, fcl
@@ -398,6 +406,11 @@ class TrajectoryValidator:
         self.table_low = fcl.CollisionObject(fcl.Box(x1 - x0, y1 - y0, thick - table_tol),
                                              fcl.Transform(np.array([(x0 + x1) / 2, (y0 + y1) / 2, -table_tol - (thick - table_tol) / 2])))
         self.request = fcl.CollisionRequest()
+        self.obstacles = []
+        for mesh, pose in obstacles:
+            pose = np.asarray(pose, dtype=np.float64)
+            self.obstacles.append(fcl.CollisionObject(_fcl_mesh(np.asarray(mesh.vertices), np.asarray(mesh.faces)),
+                                                      fcl.Transform(pose[:3, :3], pose[:3, 3])))
 
     # -- one configuration ---------------------------------------------------------------------------------------------
 
@@ -433,6 +446,9 @@ class TrajectoryValidator:
         for lk, j, o in objs:
             if j != 0 and self._hit(o, pv.table):
                 out.append(f"{lk} hits the table")
+            for i, ob in enumerate(self.obstacles):
+                if j != 0 and self._hit(o, ob):
+                    out.append(f"{lk} hits obstacle {i}")
         obj = pv.obj
         if holding:
             pose = tcp @ np.linalg.inv(grasp)
@@ -442,6 +458,7 @@ class TrajectoryValidator:
                 out.append(f"the held object is {-low * 1000:.1f} mm below the table top")
             elif self._hit(obj, self.table_low):
                 out.append("the held object hits the table")
+            out += [f"the held object hits obstacle {i}" for i, ob in enumerate(self.obstacles) if self._hit(obj, ob)]
             for lk, j, o in objs:
                 if lk not in (self.GRIPPER_HAND, self.GRIPPER_FINGERS) and self._hit(o, obj):
                     out.append(f"{lk} hits the held object")
@@ -559,9 +576,11 @@ def _in_subtree(link: str, prefix: str, parents: dict[str, str]) -> bool:
     return False
 
 
-def trajectory_validator_from_rows(rows: dict, pv: PlanValidator, acc: np.ndarray | float) -> TrajectoryValidator:
+def trajectory_validator_from_rows(rows: dict, pv: PlanValidator, acc: np.ndarray | float,
+                                   obstacles: tuple = ()) -> TrajectoryValidator:
     """The trajectory validator of stored rows: the gripper's collision mesh split into body and fingers at its
-    stored `body_faces`, the robot row's allowed self-collision pairs (JSON), `acc` the plan's acceleration limits."""
+    stored `body_faces`, the robot row's allowed self-collision pairs (JSON), `acc` the plan's acceleration limits,
+    and the task's `obstacles` ((mesh, world pose) pairs)."""
     r, grip = rows["robot"], rows.get("gripper") or {}
     nb = grip.get("body_faces")
     if nb is None or grip.get("collision_vertices") is None or not r.get("allowed_pairs"):
@@ -571,7 +590,7 @@ def trajectory_validator_from_rows(rows: dict, pv: PlanValidator, acc: np.ndarra
     body = trimesh.Trimesh(mesh.vertices, mesh.faces[:nb], process=False)
     fingers = trimesh.Trimesh(mesh.vertices, mesh.faces[nb:], process=False)
     allowed = [(a, b) for a, b, _ in json.loads(r["allowed_pairs"])["allowed"]]
-    return TrajectoryValidator(pv, body, fingers, allowed, acc, urdf=r["urdf"])
+    return TrajectoryValidator(pv, body, fingers, allowed, acc, urdf=r["urdf"], obstacles=obstacles)
 
 
 def validator_from_rows(rows: dict, free_poses: dict | None = None) -> PlanValidator:
@@ -590,4 +609,4 @@ def validator_from_rows(rows: dict, free_poses: dict | None = None) -> PlanValid
                          np.asarray(obj["vertices"], dtype=np.float64), np.asarray(obj["faces"], dtype=np.int64),
                          np.asarray(obj["com"], dtype=np.float64), gripper, hand_links=tuple(r.get("drop_geometry") or ()),
                          free_poses=free_poses, package_dirs=(str(erd_share()), *(r.get("package_dirs") or ())),
-                         locked=dict(r.get("locked") or {}))
+                         locked=dict(r.get("locked") or {}), jaw=(float(grip["jaw_min"]), float(grip["jaw_max"])))

@@ -63,7 +63,7 @@ def test_bad_gripper_inputs(tmp_path):
     urdf = erd_robots() / "panda_description" / "urdf" / "panda.urdf"
     with pytest.raises(GripperError, match="no TCP frame"):
         gripper_from_urdf(urdf, "panda_hand", "not_a_frame", ("panda_finger_joint1", "panda_finger_joint2"))
-    with pytest.raises(GripperError, match="not prismatic"):
+    with pytest.raises(GripperError, match="moves the hand link"):
         gripper_from_urdf(urdf, "panda_hand", "panda_hand_tcp", ("panda_joint7", "panda_finger_joint2"))
     with pytest.raises(GripperError):
         parametric_gripper(jaw_range=(0.05, 0.01))

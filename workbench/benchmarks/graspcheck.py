@@ -6,9 +6,10 @@ For each grasp (TCP pose in the object frame, opening, contacts and outward cont
   distance to every triangle by `point_triangle_distance`, exact on thin triangles too);
 - both normals lie within the friction cone of the jaw axis (the TCP's y);
 - the contacts are where the pads are: at +/- half the opening along y, inside the pad rectangles;
-- the Franka hand's collision geometry, loaded by pinocchio from example-robot-data's panda.urdf and placed with
-  its TCP frame at the grasp with the fingers at the grasp's opening (and at full opening), does not penetrate the
-  object by more than 1 mm, measured with coal (not python-fcl, which the planner uses).
+- the hand's collision geometry (the Franka hand loaded by pinocchio from example-robot-data's panda.urdf, the
+  bundled parallel60 from its URDF, or a spec file's boxes built from its numbers) placed with its TCP frame at the
+  grasp with the fingers at the grasp's opening (and at full opening), does not penetrate the object by more than
+  1 mm, measured with coal (not python-fcl, which the planner uses).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import numpy as np
 import pinocchio as pin
 import trimesh
 
-from workbench.resources import erd_robots, erd_share
+from workbench.resources import ASSETS, erd_robots, erd_share
 
 
 @dataclass
@@ -41,9 +42,13 @@ class Verdict:
 def franka_geometry():
     """[(coal geometry, placement in the TCP frame as a function of the finger opening)] of the Franka hand."""
     urdf = str(erd_robots() / "panda_description" / "urdf" / "panda.urdf")
+    return _urdf_geometry(urdf, ("panda_hand", "panda_leftfinger", "panda_rightfinger"))
+
+
+@lru_cache(maxsize=4)
+def _urdf_geometry(urdf: str, keep: tuple[str, ...]):
     model = pin.buildModelFromUrdf(urdf)
     geom = pin.buildGeomFromUrdf(model, urdf, pin.COLLISION, package_dirs=[str(erd_share())])
-    keep = {"panda_hand", "panda_leftfinger", "panda_rightfinger"}
     parts = []
     for go in geom.geometryObjects:
         if model.frames[go.parentFrame].name in keep:
@@ -55,17 +60,68 @@ def franka_geometry():
     return model, geom, parts
 
 
-def hand_placements(opening: float) -> list[tuple[coal.CollisionGeometry, np.ndarray]]:
-    """Every hand collision geometry and its pose in the TCP frame with the pads `opening` apart."""
-    model, geom, parts = franka_geometry()
+# Other hands, each from its own file and nothing of the planner's loaders:
+# (URDF, hand and finger links, finger joints (opening / 2 each, pads touching at 0), TCP frame).
+URDF_HANDS = {"franka": None,
+              "parallel60": ("parallel60.urdf", ("p60_hand", "p60_left_finger", "p60_right_finger"),
+                             ("p60_left_joint", "p60_right_joint"), "p60_tcp")}
+
+
+def _box(size) -> coal.Box:
+    return coal.Box(*map(float, size))
+
+
+@lru_cache(maxsize=8)
+def _spec(path: str) -> dict:
+    import yaml
+
+    return yaml.safe_load(open(path).read())
+
+
+def _hand_model(hand: str):
+    if hand == "franka":
+        return (*franka_geometry(), ("panda_finger_joint1", "panda_finger_joint2"), "panda_hand_tcp")
+    file, keep, joints, tcp_frame = URDF_HANDS[hand]
+    return (*_urdf_geometry(str(ASSETS / "grippers" / file), keep), joints, tcp_frame)
+
+
+def full_opening(hand: str = "franka") -> float:
+    """A URDF hand's full opening: twice its finger joints' upper limit."""
+    model, _, _, joints, _ = _hand_model(hand)
+    return float(2 * model.upperPositionLimit[model.joints[model.getJointId(joints[0])].idx_q])
+
+
+def hand_placements(opening: float, hand: str = "franka") -> list[tuple[coal.CollisionGeometry, np.ndarray]]:
+    """Every hand collision geometry and its pose in the TCP frame with the pads `opening` apart: the Franka hand
+    or parallel60 from its URDF (pinocchio), or a spec file's boxes built from its numbers (CONVENTIONS.md, Gripper
+    spec: the pad's inner face at the opening, the finger box behind it with its tip flush, the palm box)."""
+    if hand.endswith((".yaml", ".yml", ".json")):
+        spec = _spec(hand)
+        from scipy.spatial.transform import Rotation
+
+        tcp = np.eye(4)
+        tcp[:3, :3] = Rotation.from_euler("xyz", spec.get("rpy", [0, 0, 0])).as_matrix()
+        tcp[:3, 3] = spec["tcp"]
+        inv = np.linalg.inv(tcp)
+        (px, pz), t, f = spec["pad"]["size"], spec["pad"]["thickness"], spec["finger"]["size"]
+        palm = np.eye(4)
+        palm[:3, 3] = spec["palm"].get("offset", [0, 0, spec["palm"]["size"][2] / 2])
+        out = [(_box(spec["palm"]["size"]), inv @ palm)]
+        for side in (1, -1):
+            for size, y, z in (((px, t, pz), opening / 2 + t / 2, 0.0), (f, opening / 2 + f[1] / 2, pz / 2 - f[2] / 2)):
+                m = np.eye(4)
+                m[:3, 3] = (0.0, side * y, z)
+                out.append((_box(size), m))
+        return out
+    model, geom, parts, joints, tcp_frame = _hand_model(hand)
     data = model.createData()
     q = pin.neutral(model)
-    for name in ("panda_finger_joint1", "panda_finger_joint2"):
+    for name in joints:
         jid = model.getJointId(name)
         q[model.joints[jid].idx_q] = opening / 2
     pin.forwardKinematics(model, data, q)
     pin.updateFramePlacements(model, data)
-    tcp_inv = data.oMf[model.getFrameId("panda_hand_tcp")].inverse()
+    tcp_inv = data.oMf[model.getFrameId(tcp_frame)].inverse()
     out = []
     for go, g in parts:
         # geometry pose = joint placement * local placement
@@ -83,13 +139,13 @@ def _object_bvh(mesh: trimesh.Trimesh) -> coal.BVHModelOBBRSS:
     return m
 
 
-def max_penetration(mesh: trimesh.Trimesh, poses: np.ndarray, openings: np.ndarray) -> np.ndarray:
-    """Deepest penetration (m, 0 when free) of the Franka hand at each TCP pose and opening into the object."""
+def max_penetration(mesh: trimesh.Trimesh, poses: np.ndarray, openings: np.ndarray, hand: str = "franka") -> np.ndarray:
+    """Deepest penetration (m, 0 when free) of the hand at each TCP pose and opening into the object."""
     obj = _object_bvh(mesh)
     ident = coal.Transform3s()
     out = np.zeros(len(poses))
     for k, (pose, w) in enumerate(zip(poses, openings)):
-        for g, local in hand_placements(float(w)):
+        for g, local in hand_placements(float(w), hand):
             M = pose @ local
             req = coal.CollisionRequest()
             req.enable_contact = True
@@ -101,10 +157,10 @@ def max_penetration(mesh: trimesh.Trimesh, poses: np.ndarray, openings: np.ndarr
     return out
 
 
-def pad_face() -> tuple[float, float, float]:
+def pad_face(hand: str = "franka") -> tuple[float, float, float]:
     """(half size x, half size z, centre z) of the pad's contact face in the TCP frame: the finger box reaching
-    farthest along the approach, from the URDF."""
-    boxes = [(np.asarray(g.halfSide), M) for g, M in hand_placements(0.04) if isinstance(g, coal.Box) and M[1, 3] > 0]
+    farthest along the approach (the first such: a spec's pad before its finger)."""
+    boxes = [(np.asarray(g.halfSide), M) for g, M in hand_placements(0.04, hand) if isinstance(g, coal.Box) and M[1, 3] > 0]
     half, M = max(boxes, key=lambda b: b[1][2, 3] + b[0][2])
     ext = np.abs(M[:3, :3]) @ half
     return float(ext[0]), float(ext[2]), float(M[2, 3])
@@ -133,9 +189,13 @@ def point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
     return np.where(inside, np.abs(h), seg)
 
 
-def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction: float, jaw_max: float = 0.08) -> Verdict:
-    """The independent verdict on each grasp (see the module docstring)."""
-    hx, hz, pad_z = pad_face()
+def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction: float, jaw_max: float | None = None,
+                 hand: str = "franka") -> Verdict:
+    """The independent verdict on each grasp (see the module docstring) for `hand`: franka, parallel60 or the path
+    of a spec file; `jaw_max` its full opening (default: the Franka hand's, from its URDF, or the spec's stroke)."""
+    if jaw_max is None:
+        jaw_max = _spec(hand)["stroke"][1] if hand.endswith((".yaml", ".yml", ".json")) else full_opening(hand)
+    hx, hz, pad_z = pad_face(hand)
     pad_half = (hx, hz)
     poses, widths = np.asarray(poses), np.asarray(widths)
     G = len(poses)
@@ -168,5 +228,5 @@ def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction:
         pads &= np.abs(local[:, 1] - side * widths / 2) <= 1e-5
         pads &= (np.abs(local[:, 0]) <= pad_half[0] + 1e-6) & (np.abs(local[:, 2] - pad_z) <= pad_half[1] + 1e-6)
     pads &= (widths >= 0) & (widths <= jaw_max + 1e-9)
-    pen = np.maximum(max_penetration(mesh, poses, widths), max_penetration(mesh, poses, np.full(G, jaw_max)))
+    pen = np.maximum(max_penetration(mesh, poses, widths, hand), max_penetration(mesh, poses, np.full(G, jaw_max), hand))
     return Verdict(surface=surface, normal=normal_ok, cone=cone, pads=pads, penetration=pen)

@@ -14,7 +14,7 @@ from workbench.benchmarks.organic import ORGANIC, min_width
 from workbench.benchmarks.paper import TABLE_I, bench_objects
 from workbench.geometry.objects import from_trimesh
 from workbench.grasping.grasps import GraspParams, plan_grasps
-from workbench.robots.gripper import franka_hand
+from workbench.robots.gripper import BUNDLED, franka_hand, load_gripper
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -24,10 +24,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "tori, cups and a studded brick")
     parser.add_argument("--objects", choices=["all", "bundled", "paper"], default="all", help="with --set paper")
     parser.add_argument("--checked", type=int, default=100, help="grasps per object given to the independent check")
+    parser.add_argument("--gripper", default=None, metavar="NAME,...",
+                        help=f"compare grippers ({', '.join(BUNDLED)}, or spec files) on the paper objects and the "
+                             f"organic set: grasps found, share valid by the independent check, time")
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.gripper:
+        return _grippers(args)
     return _organic(args) if args.set == "organic" else _paper(args)
+
+
+def _check_hand(name: str) -> str:
+    """The independent check's name for a gripper: franka, parallel60, or the spec file's path."""
+    path = BUNDLED.get(name)
+    return name if path is None or path.suffix == ".urdf" else str(path)
+
+
+def _grippers(args: argparse.Namespace) -> int:
+    names = [n.strip() for n in args.gripper.split(",") if n.strip()]
+    objects = [(label, obj) for label, _, obj in bench_objects(args.objects)]
+    objects += [(f"organic {name}", from_trimesh(make(), name)) for name, make in ORGANIC.items()]
+    rows = []
+    for name in names:
+        hand, check = load_gripper(name), _check_hand(name)
+        params = GraspParams()
+        for label, obj in objects:
+            t, plan = median_time(lambda: plan_grasps(obj, hand, params), args.repeats)
+            g = plan.grasps
+            pick = np.unique(np.linspace(0, len(g) - 1, min(len(g), args.checked)).astype(int)) if len(g) else np.zeros(0, int)
+            v = check_grasps(obj.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick],
+                             g.normal0[pick], g.normal1[pick], params.friction_coefficient, hand=check)
+            inside = bool(((g.jawwidth >= hand.jaw_min - 1e-9) & (g.jawwidth <= hand.jaw_max + 1e-9)).all())
+            rows.append([name, label, len(g), f"{int(v.ok.sum())}/{len(pick)}",
+                         f"{100.0 * v.ok.mean():.0f}%" if len(pick) else "-", "yes" if inside else "NO", t])
+    print_table(["gripper", "object", "grasps", "checked ok", "valid", "jaw in stroke", "t-fg s"], rows,
+                title=f"Grasps per gripper, pad contact model, default parameters (median of {args.repeats} runs; up to "
+                      f"{args.checked} grasps per object checked independently: trimesh closest points, the hand's "
+                      f"geometry from its URDF or spec file in coal)")
+    return 0
 
 
 def _paper(args: argparse.Namespace) -> int:

@@ -36,7 +36,8 @@ from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.stages import build_all, load_planner
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.resources import bundled_objects, erd_robots, paper_objects
-from workbench.robots.model import ROBOTS, TCP_OFFSET, get_robot, pose_xyz_yaw
+from workbench.robots.gripper import franka_hand
+from workbench.robots.model import ROBOTS, get_robot, pose_xyz_yaw
 from workbench.store import Store
 
 
@@ -134,7 +135,7 @@ def bench_robot(name: str):
     path, tip, hand = URDF_ARMS[name]
     with warnings.catch_warnings():  # the bounded joints and replaced links are as intended here
         warnings.simplefilter("ignore", RobotWarning)
-        return get_robot(str(erd_robots() / path), tip_frame=tip, mount=pose_xyz_yaw(0.0, 0.0, TCP_OFFSET, 0.0),
+        return get_robot(str(erd_robots() / path), tip_frame=tip, mount=franka_hand().tcp_in_hand,
                          hand_links=hand)
 
 

@@ -35,7 +35,7 @@ from workbench.grasping.grasps import GraspParams
 from workbench.grasping.placements import PlacementParams
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.planners.wan_harada.tabletop import TabletopParams
-from workbench.robots.gripper import franka_hand
+from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import WORLDA, IKOptions, chunk_bounds
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf", ".dae")
@@ -130,9 +130,14 @@ def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> lis
     return out
 
 
-def catalog_robots(robots: str | Sequence[str] | dict[str, CatalogRobot]) -> dict[str, CatalogRobot]:
-    """The catalogue's columns: given as parsed (`workbench.catalog.robots.parse_robots`), or parsed from names."""
-    return robots if isinstance(robots, dict) else parse_robots(robots)
+def catalog_robots(robots: str | Sequence[str] | dict[str, CatalogRobot], hand: Gripper) -> dict[str, CatalogRobot]:
+    """The catalogue's columns with gripper `hand`: given as parsed (`workbench.catalog.robots.parse_robots`), or
+    parsed from names."""
+    out = robots if isinstance(robots, dict) else parse_robots(robots, gripper=hand)
+    other = [n for n, c in out.items() if c.robot.spec.hand.digest != hand.digest]
+    if other:
+        raise CatalogError(f"robots {', '.join(other)} carry another gripper than the catalogue's {hand.name!r}")
+    return out
 
 
 def _digest(*parts: object) -> str:
@@ -158,7 +163,7 @@ class _Build:
     """The state of one build: the store, the client, what is stored, what runs, what waits to be merged."""
 
     def __init__(self, store, client, robots: dict[str, CatalogRobot], params: CatalogParams, progress: bool,
-                 on_unit: Callable[[str, dict], None] | None, folder: Path):
+                 on_unit: Callable[[str, dict], None] | None, folder: Path, hand: Gripper):
         from distributed import as_completed
 
         self.store, self.client, self.robots, self.params = store, client, robots, params
@@ -175,7 +180,7 @@ class _Build:
                                                                                               raise_errors=False)
         self.result = CatalogResult(rows=[], failures=[], shards=str(folder))
         self.bar = Progress(progress)
-        self.hand = franka_hand()
+        self.hand = hand
         self.folder = folder
         self._stack: list[float] = []  # seconds of nested `charge` blocks, innermost last
         self.on_disk = open_shards(folder, self.done)  # digest -> shard file of an IK unit computed, not merged yet
@@ -234,7 +239,7 @@ class _Build:
         priority = PART_PRIORITY + min(path.stat().st_size if path.is_file() else 0, PART_PRIORITY - 1)
         if path.stem in self.stored_names:  # the store holds this part: the driver writes it with the stage writers
             self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop,
-                         priority=priority)
+                         self.hand, priority=priority)
             return
         folder = self.folder / f"part-{digest}"
         record = stages.read_record(folder) if folder.is_dir() else None
@@ -244,7 +249,7 @@ class _Build:
             return
         unit["folder"] = folder
         self._submit(unit, stages.part_unit_files, str(path), path.stem, scale, units, p.grasps, p.placements,
-                     p.tabletop, str(folder), p.ik_chunk, priority=priority)
+                     p.tabletop, str(folder), p.ik_chunk, self.hand, priority=priority)
 
     def part_ready(self, unit: dict, record: dict, folder: Path) -> None:
         """A part unit's folder is whole: queue it for the next merge and schedule its IK units from its record."""
@@ -628,7 +633,8 @@ def _unit_ids(run: dict) -> dict:
 def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
                   robots: str | Sequence[str] | dict[str, CatalogRobot], db: str | Path, client,
                   params: CatalogParams = CatalogParams(), progress: bool = True,
-                  on_unit: Callable[[str, dict], None] | None = None, shards: str | Path | None = None) -> CatalogResult:
+                  on_unit: Callable[[str, dict], None] | None = None, shards: str | Path | None = None,
+                  gripper: Gripper | None = None) -> CatalogResult:
     """Build (or finish) the catalogue of `parts` x `robots` in the store `db` on the Dask `client`; returns the
     summary. Stored units are skipped.
 
@@ -638,13 +644,15 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
     merges what waits into the store in large batches, one transaction each (`MERGE_UNITS` units or
     `MERGE_SECONDS`), then deletes the files. `shards` is the folder of these files (default: beside the store,
     `DB.units`; with a cluster of several machines, on a file system every worker sees). Files of a killed build are
-    merged by the re-run without computing them again."""
+    merged by the re-run without computing them again. `gripper`: the catalogue's gripper (default the Franka hand;
+    the robots, when given parsed, carry the same)."""
     paths = collect_parts(parts)
-    robot_models = catalog_robots(robots)
+    hand = gripper or franka_hand()
+    robot_models = catalog_robots(robots, hand)
     folder = Path(shards) if shards is not None else Path(f"{db}.units")
     t0 = time.perf_counter()
     with stages.open_store(db) as store:
-        build = _Build(store, client, robot_models, params, progress, on_unit, folder)
+        build = _Build(store, client, robot_models, params, progress, on_unit, folder, hand)
         build.result.start = time.time()
         try:
             build.run(paths)

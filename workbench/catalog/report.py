@@ -8,7 +8,6 @@ from __future__ import annotations
 import base64
 import html
 import io
-from pathlib import Path
 
 import numpy as np
 
@@ -104,10 +103,3 @@ tabletop grips, and the regrasp graph's connected share (its nodes in the larges
 <table><tr>{head}</tr>{''.join(cells)}</table>
 {f'<h2>Failed</h2><ul>{fails}</ul>' if fails else ''}
 </body></html>"""
-
-
-def write_html(path: str | Path, rows: list[dict], failures: list[dict], meshes: dict, title: str) -> Path:
-    """Write `html_page` to `path` (.html)."""
-    out = Path(path)
-    out.write_text(html_page(rows, failures, meshes, title))
-    return out

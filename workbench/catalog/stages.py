@@ -218,13 +218,15 @@ def put_units(store: Store, units: list[dict]) -> None:
 
 
 def part_unit_files(path: str, name: str, scale: float | None, units: str | None, gparams: GraspParams,
-                    pparams: PlacementParams, tparams: TabletopParams, folder: str, ik_chunk: int) -> pa.Table:
+                    pparams: PlacementParams, tparams: TabletopParams, folder: str, ik_chunk: int,
+                    hand: Gripper | None = None) -> pa.Table:
     """The worker's task for one part: its stages (Sections III-IV, `part_stages`) written by the stage writers into a
     scratch store (ids from 1, renumbered by the merge), left as Parquet files in `folder` (created whole: written under a
-    temporary name, then renamed); returns the unit's record (ids, counts, tabletop grips) as a one-row table."""
+    temporary name, then renamed); returns the unit's record (ids, counts, tabletop grips) as a one-row table.
+    `hand`: the catalogue's gripper (default the Franka hand, built once per worker)."""
     t0, c0 = time.perf_counter(), time.thread_time()
     obj = load_object(path, scale=scale, units=units, name=name)
-    hand = worker_state().hand()
+    hand = hand or worker_state().hand()
     res = part_stages(obj, gparams, pparams, tparams, hand)
     res.seconds["load"] = time.perf_counter() - t0 - sum(res.seconds.values())
     unit: dict = {"digest": "", "kind": "part", "part": name, "fresh": True}

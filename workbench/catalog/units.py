@@ -122,11 +122,12 @@ def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams
 
 
 def part_unit(path: str, name: str, scale: float | None, units: str | None, gparams: GraspParams,
-              pparams: PlacementParams, tparams: TabletopParams) -> dict[str, pa.Table]:
-    """The worker's task for one part: `part_stages` of the mesh at `path`, returned as Arrow tables."""
+              pparams: PlacementParams, tparams: TabletopParams, hand: Gripper | None = None) -> dict[str, pa.Table]:
+    """The worker's task for one part: `part_stages` of the mesh at `path` with `hand` (default the Franka hand),
+    returned as Arrow tables."""
     t0, c0 = time.perf_counter(), time.thread_time()
     obj = load_object(path, scale=scale, units=units, name=name)
-    res = part_stages(obj, gparams, pparams, tparams, worker_state().hand())
+    res = part_stages(obj, gparams, pparams, tparams, hand or worker_state().hand())
     res.seconds["load"] = time.perf_counter() - t0 - sum(res.seconds.values())
     tables = part_tables(res)
     tables["meta"] = stamp(tables["meta"], t0, c0)
@@ -251,6 +252,7 @@ def stamp(table: pa.Table, t0: float, c0: float, **extra: object) -> pa.Table:
 
 
 def worker_name() -> str:
+    """This process's Dask worker address and pid (or "local pid N" outside a worker), for failure reports."""
     try:
         from distributed import get_worker
 

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from workbench.benchmarks import print_table
 from workbench.cli.grasps import add_object_arguments
+from workbench.cli.outputs import add_output, write_text
 from workbench.geometry.objects import load_object
 from workbench.params import add_param, cli_bound, parse_number
 from workbench.planners.phoka_sudsang.clustering import ClusterParams
@@ -50,7 +51,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--algorithm3", choices=["update", "one-off"], default="update",
                         help="update: Algorithm 3 adds to R for good, stored and reused by later queries (the paper); "
                              "one-off: each query's extension is forgotten")
-    parser.add_argument("--json", default=None, help="write the tables and every query's sequence to this JSON file")
+    add_output(parser, "--json", "write the tables and every query's sequence to this JSON file")
     parser.set_defaults(func=run)
 
 
@@ -93,8 +94,7 @@ def run(args: argparse.Namespace) -> int:
                                                              "torque_scale": params.torque_scale, "algorithm3": args.algorithm3},
                "paramsets": {"contacts": r.idcontacts, "roadmap": r.idroadmap, "queries": r.idqueries}, **tab,
                "queries": [_query_json(q, r.ids) for q in (r.stats.queries if r.stats else [])]}
-        with open(args.json, "w") as fh:
-            json.dump(doc, fh, indent=1)
+        write_text(args.json, json.dumps(doc, indent=1))
         print(f"json: {args.json}")
     return 0
 

@@ -8,11 +8,12 @@ import time
 import numpy as np
 
 from workbench.cli import warn
+from workbench.cli.outputs import add_output
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.geometry.objects import load_object
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.params import add_param, cli_bound, from_cli, parse_number
 from workbench.planners.wan_harada.stages import ensure_grasps
-from workbench.robots.gripper import franka_hand
 from workbench.viewer.scenes import grasp_scene
 
 SCALE = cli_bound(0, 1e3, lo_open=True, help="the scale")
@@ -68,16 +69,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_object_arguments(parser)
     parser.add_argument("--db", required=True, help="DuckDB store file")
     add_grasp_arguments(parser)
-    parser.add_argument("--html", default=None, help="write a meshcat scene of the grasps to this HTML file")
+    add_gripper_argument(parser)
+    add_output(parser, "--html", "write a meshcat scene of the grasps to this HTML file")
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
 
     params = grasp_params(args)
+    gripper = gripper_from_args(args)
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     t0 = time.perf_counter()
-    result = ensure_grasps(args.db, obj, franka_hand(), params)
+    result = ensure_grasps(args.db, obj, gripper, params)
     dt = time.perf_counter() - t0
     verb = "reused" if result.reused else "stored"
     print(f"{obj.name}: {obj.n_triangles} triangles, centre of mass {np.round(obj.com, 4).tolist()} m ({obj.com_method})")
@@ -85,14 +88,14 @@ def run(args: argparse.Namespace) -> int:
         print(f"repaired: {note}")
     if result.plan is not None:
         print(grasp_counts(result.plan))
-    print(f"{verb} {result.count} free-air grasps in {args.db} (parameter set {result.idparamset}) in {dt:.2f} s")
+    print(f"{verb} {result.count} free-air grasps for gripper {gripper.name} in {args.db} (parameter set {result.idparamset}) in {dt:.2f} s")
     if result.count == 0:
         reason = result.plan.empty_reason if result.plan is not None else \
-            plan_grasps(obj, franka_hand(), params).empty_reason
+            plan_grasps(obj, gripper, params).empty_reason
         warn(f"no grasp of {obj.name}; stage {reason}")
     if args.html:
 
-        path = grasp_scene(obj, franka_hand(), result.poses, result.widths, args.html)
+        path = grasp_scene(obj, gripper, result.poses, result.widths, args.html)
         print(f"scene: {path}")
     return 0
 

@@ -14,6 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from workbench.cli import warn
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.errors import RobotError
 from workbench.params import add_param, cli_bound, parse_number
 from workbench.planners.wan_harada.stages import empty_stage, run_ik
@@ -91,6 +92,7 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
                         "default: the links past --tip)")
     p.add_argument("--table", help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
     add_param(p, Scene, "table_thickness", default=None)
+    add_gripper_argument(p)
 
 
 def robot_and_scene(args: argparse.Namespace) -> tuple[Robot, Scene]:
@@ -98,7 +100,7 @@ def robot_and_scene(args: argparse.Namespace) -> tuple[Robot, Scene]:
     base = parse_base(args.base) if args.base else None
     mount = parse_mount(args.mount) if args.mount else None
     hand = tuple(h.strip() for h in (args.hand_links or "").split(",") if h.strip())
-    robot = get_robot(args.robot, base=base, tip_frame=args.tip, mount=mount, hand_links=hand)
+    robot = get_robot(args.robot, base=base, tip_frame=args.tip, mount=mount, hand_links=hand, gripper=gripper_from_args(args))
     scene = default_scene(robot.name)
     if args.table or args.table_thickness is not None:
         t = _floats(args.table, 4, "--table (XMIN,YMIN,XMAX,YMAX)") if args.table else [*scene.table_min, *scene.table_max]

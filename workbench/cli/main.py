@@ -15,7 +15,9 @@ import sys
 import warnings
 
 from workbench.errors import WorkbenchError
-from workbench.params import BUDGET_ENV, parse_size
+from workbench.params import BUDGET_ENV, WAIT_ENV, check_workers, cli_bound, parse_number, parse_size
+
+WAIT = cli_bound(0, 86400, unit="s", help="seconds to wait for a store another process holds")
 
 # Every command and its one-line help. A command's module is imported only when that command runs, so
 # `workbench --help` and each command's start-up stay fast; `tests/test_cli_startup.py` checks that each module's own
@@ -27,6 +29,7 @@ COMMANDS = {
     "build": "run every stage for a mesh and a robot (grasps, placements, IK, regrasp graph)",
     "catalog": "build a parts x robots catalogue on a Dask cluster, or print one",
     "plan": "plan regrasps from a start to a goal pose on the table",
+    "simulate": "replay a stored plan in MuJoCo physics: does the part stay in the hand and end at its goal?",
     "fingers": "five-finger regrasp roadmap by contact-point clustering (Tables I-III)",
     "gptable": "grasp classes and the grasp-placement table (Tournassoud et al. 1987)",
     "gpplan": "regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)",
@@ -85,6 +88,9 @@ def build_parser(argv: list[str] | None = None, full: bool = False) -> argparse.
             child.add_argument("--memory-budget", type=_budget, default=None, metavar="SIZE",
                                help=f"largest memory a step may plan to use, e.g. 4GiB (default: half this machine's "
                                     f"memory, or {BUDGET_ENV}); larger work is refused before it starts")
+            child.add_argument("--wait", type=parse_number(WAIT, "--wait"), default=None, metavar="SECONDS",
+                               help=f"when another process holds the store, wait up to SECONDS for it ({WAIT.describe(True)}; "
+                                    f"default 0: say it is busy and stop; or {WAIT_ENV})")
     return parser
 
 
@@ -101,7 +107,11 @@ def main(argv: list[str] | None = None) -> int:
     warnings.showwarning = one_line
     if getattr(args, "memory_budget", None):
         os.environ[BUDGET_ENV] = str(args.memory_budget)  # inherited by worker processes
+    if getattr(args, "wait", None) is not None:
+        os.environ[WAIT_ENV] = str(args.wait)  # read where the store is opened (workbench.store.Store)
     try:
+        if getattr(args, "workers", None):
+            check_workers(args.workers)  # every command's worker pool, before any process starts
         return int(args.func(args) or 0)
     except WorkbenchError as exc:
         print(f"workbench {args.command}: error: {exc}", file=sys.stderr)

@@ -15,9 +15,9 @@ from workbench.planners.wan_harada.stages import (
     get_object,
 )
 from workbench.planners.wan_harada.tabletop import TabletopParams
-from workbench.robots.gripper import franka_hand
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.store import Store
-from workbench.store.grasps import latest_grasp_paramset
+from workbench.store.grasps import STAGE as GRASP_STAGE, latest_paramset_for
 
 
 def add_placement_arguments(parser: argparse.ArgumentParser) -> None:
@@ -74,16 +74,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     parser.add_argument("--db", required=True, help="DuckDB store file")
     parser.add_argument("--object", required=True, help="object name in the store")
     add_placement_arguments(parser)
+    add_gripper_argument(parser)
     parser.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
 
     pparams, tparams = placement_params(args)
+    gripper = gripper_from_args(args)
     t0 = time.perf_counter()
     with Store(args.db, create=False) as store:
         oid, obj = get_object(store, args.object)
-        result = ensure_placements(store, oid, obj, latest_grasp_paramset(store, oid), franka_hand(), pparams, tparams)
+        grasps = latest_paramset_for(store, GRASP_STAGE, oid, gripper, "grasps")
+        result = ensure_placements(store, oid, obj, grasps, gripper, pparams, tparams)
         reason = empty_stage(store, args.object)
     print_placements(args.object, result, time.perf_counter() - t0)
     if reason:

@@ -11,7 +11,10 @@ import time
 from pathlib import Path
 
 from workbench.cli import warn
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.cli.ik import RETRACT
+from workbench.cli.outputs import add_output, write_text
+from workbench.cli.simulate import INSTALL, add_sim_arguments, print_simulation, sim_params
 from workbench.errors import PlanningError
 from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
@@ -24,11 +27,17 @@ from workbench.planners.wan_harada.stages import (
     stored_plan,
 )
 from workbench.robots.motion import MotionOptions
-from workbench.robots.timing import to_csv, to_json
+from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
+from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored, stored_playback
 from workbench.store import Store
+from workbench.store.robots import robot_with_gripper
 from workbench.viewer.wan_harada import plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
+ACC = cli_bound(0, 1000, lo_open=True, unit="rad/s^2", help="joint acceleration limit")
+BUDGET = cli_bound(0, 3600, lo_open=True, unit="s", help="RRT-Connect time budget per motion")
+REMOVED = cli_bound(0, 100_000, integer=True, help="motions that may fail before giving up")
+SEED = cli_bound(0, 2**32 - 1, integer=True, help="motion planner seed")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,14 +60,23 @@ def register(sub: argparse._SubParsersAction) -> None:
                         help="use the IK run with this worldz retraction (m)")
     parser.add_argument("--allow-partial", action="store_true",
                         help="plan on an IK stage that did not complete (killed part-way), with a warning; not stored")
-    parser.add_argument("--json", default=None, metavar="OUT", help="write the plan (and its alternatives) as JSON")
-    parser.add_argument("--html", default=None, metavar="OUT", help="write a meshcat animation of the plan as static HTML")
+    add_output(parser, "--json", "write the plan (and its alternatives) as JSON")
+    add_output(parser, "--html", "write a meshcat animation of the plan as static HTML")
     parser.add_argument("--meshes", choices=["collision", "visual"], default="collision",
                         help="robot meshes in the HTML: collision (small file, default) or visual (nicer, larger)")
     parser.add_argument("--no-save", action="store_true", help="do not store the plans in the store's plan tables")
     add_motion_arguments(parser, "roadmap nodes or grips")
-    parser.add_argument("--trajectory", default=None, metavar="OUT",
-                        help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot) or OUT.json")
+    add_output(parser, "--trajectory", suffixes=(".csv", ".yaml", ".yml", ".json"),
+               help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml "
+                    "(a ROS 2 trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
+    add_gripper_argument(parser)
+    physics = parser.add_argument_group("physics", f"replay the best plan in MuJoCo, as `workbench simulate` does ({INSTALL})")
+    physics.add_argument("--simulate", action="store_true",
+                         help="simulate the best plan after planning, store the verdict and play the simulated part in --html")
+    physics.add_argument("--require-physics", action="store_true",
+                         help="a plan that fails in simulation counts as a failed motion: its failing step's roadmap node "
+                              "or grip is removed and the graph searched again (up to --max-removed); implies --simulate")
+    add_sim_arguments(physics)
     parser.set_defaults(func=run)
 
 
@@ -66,17 +84,21 @@ def run(args: argparse.Namespace) -> int:
 
     start, goal = parse_pose(args.start, "--start", degrees=True), parse_pose(args.goal, "--goal", degrees=True)
     opts = exec_options(args)
-    if args.trajectory and Path(args.trajectory).suffix.lower() not in (".csv", ".json"):
-        raise PlanningError(f"--trajectory {args.trajectory!r} must end in .csv or .json")
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
+    if args.gripper == "own":
+        raise PlanningError("plan takes a robot's own hand by its URDF: --gripper ROBOT.urdf --gripper-hand TIP "
+                            "--gripper-fingers LEFT,RIGHT (as given to build)")
+    gripper = gripper_from_args(args)
     with Store(args.db, create=False) as store:
+        args.robot = robot_with_gripper(store, args.robot, gripper.digest) or args.robot
         reason = empty_stage(store, args.object, args.robot)
         if reason:
             warn(f"no plan for {args.object}: nothing to plan with; stage {reason}")
             return 0
         t0 = time.perf_counter()
-        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial)
+        planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial,
+                               gripper=gripper)
         t_load = time.perf_counter() - t0
         turn = (goal.yaw - start.yaw + math.pi) % (2 * math.pi) - math.pi
         if (start.idfreetabletopplacement == goal.idfreetabletopplacement in planner.placement_ids()
@@ -84,8 +106,11 @@ def run(args: argparse.Namespace) -> int:
             print(f"the start is the goal ({args.start}): {args.object} is already in place; no plan to make")
             return 0
         report_graph(planner, t_load)
+        simulate = args.simulate or args.require_physics
+        params = sim_params(args) if simulate else None
+        physics = physics_check(store, planner.robot, params) if args.require_physics else None
         try:
-            plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
+            plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts, physics=physics)
         except PlanningError as exc:
             if getattr(exc, "reason", None) not in NO_RESULT:
                 raise
@@ -108,8 +133,22 @@ def run(args: argparse.Namespace) -> int:
         elif getattr(planner, "partial", False):
             print("not stored: planned on an incomplete IK stage (--allow-partial)")
         elif not args.no_save:
-            ids = save_plans(store, plans)
-            print(f"stored plan ids {ids} in {args.db}")
+            known = save_plans(store, plans)
+            print(f"stored plan ids {known} in {args.db}")
+        playback = None
+        if args.require_physics:
+            gone = [f for f in planner.last_motion.failures if f.startswith("physics:")]
+            print(f"physics: {len(gone)} plan(s) failed in simulation before this one, and their failing step's roadmap "
+                  f"node or grip was removed" + "".join(f"\n  removed after {f}" for f in gone))
+        if simulate:
+            if known[0] is not None:
+                out = simulate_stored(store, known[0], params, plan=best, robot=planner.robot)
+                print_simulation(out, known[0], args.db)
+                playback = stored_playback(store, known[0])
+            else:
+                res = simulate_in_memory(store, best, planner.robot, params)
+                print(f"physics (not stored): {res.summary() if res.confirmed else res.failure.message}")
+                playback = (res.playback_t, res.playback_pose)
     if args.json:
         write_json(plans, args.json)
         print(f"json: {Path(args.json).resolve()}")
@@ -117,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"trajectory: {write_trajectory(best, args.trajectory).resolve()}")
     if args.html:
 
-        print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes)).resolve()}")
+        print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes, simulated=playback)).resolve()}")
     return 0
 
 
@@ -131,31 +170,27 @@ def report_graph(planner, t_load: float) -> None:
 def add_motion_arguments(parser: argparse.ArgumentParser, removed: str) -> None:
     """--acc, --budget, --max-removed (of `removed`, what a failing motion takes out) and --seed, read by
     `exec_options`."""
-    parser.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
-    parser.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
-    parser.add_argument("--max-removed", type=int, default=10,
-                        help=f"{removed} whose motions fail to remove before giving up (default 10)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
+    parser.add_argument("--acc", type=parse_number(ACC, "--acc", DEFAULT_ACC), default=DEFAULT_ACC, metavar="X",
+                        help=f"joint acceleration limit ({ACC.describe(True)}; default {DEFAULT_ACC:g})")
+    parser.add_argument("--budget", type=parse_number(BUDGET, "--budget", 1.0), default=1.0, metavar="S",
+                        help=f"RRT-Connect time budget per motion ({BUDGET.describe(True)}; default 1)")
+    parser.add_argument("--max-removed", type=parse_number(REMOVED, "--max-removed", 10), default=10, metavar="N",
+                        help=f"{removed} whose motions fail to remove before giving up ({REMOVED.describe(True)}; default 10)")
+    parser.add_argument("--seed", type=parse_number(SEED, "--seed", 0), default=0, metavar="N",
+                        help=f"seed of the motion planner ({SEED.describe(True)}; default 0)")
 
 
 def exec_options(args: argparse.Namespace) -> ExecOptions:
-    """Motion settings from --acc, --budget, --max-removed and --seed (one-line errors on bad values)."""
-    if not (args.acc > 0 and math.isfinite(args.acc)):
-        raise PlanningError(f"--acc must be a finite acceleration > 0 rad/s^2, got {args.acc}")
-    if not (args.budget > 0 and math.isfinite(args.budget)):
-        raise PlanningError(f"--budget must be > 0 s, got {args.budget}")
-    if args.max_removed < 0:
-        raise PlanningError(f"--max-removed must be >= 0, got {args.max_removed}")
+    """Motion settings from --acc, --budget, --max-removed and --seed (their ranges checked while parsing)."""
     return ExecOptions(acc=args.acc, max_removed=args.max_removed, motion=MotionOptions(budget=args.budget, seed=args.seed))
 
 
 def write_trajectory(plan, out: str | Path) -> Path:
-    """The plan's timed trajectory for replay: CSV (one row per knot) or JSON (per segment), by the file's suffix."""
+    """The plan's timed trajectory for replay, by the file's suffix: CSV (one row per knot), YAML (a ROS 2
+    `trajectory_msgs/JointTrajectory`) or JSON (per segment)."""
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    text = to_csv(plan.segments, plan.joint_names) if out.suffix.lower() == ".csv" else to_json(plan.segments, plan.joint_names)
-    out.write_text(text)
-    return out
+    writer = {".csv": to_csv, ".yaml": to_ros2_yaml, ".yml": to_ros2_yaml}.get(out.suffix.lower(), to_json)
+    return write_text(out, writer(plan.segments, plan.joint_names))
 
 
 def print_plan(plan) -> None:
@@ -181,8 +216,5 @@ def write_json(plans, out: str | Path, **why: str) -> Path:
     """The best plan with its alternatives as one JSON file: {"plan": ..., "alternatives": [...]}; with no plan,
     {"plan": null, "alternatives": [], ...`why`} (reason and message)."""
 
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"plan": plans[0].as_dict() if plans else None,
-                               "alternatives": [p.as_dict() for p in plans[1:]], **why}, indent=1))
-    return out
+    return write_text(out, json.dumps({"plan": plans[0].as_dict() if plans else None,
+                                       "alternatives": [p.as_dict() for p in plans[1:]], **why}, indent=1))

@@ -46,8 +46,8 @@ import pinocchio as pin
 from workbench.errors import RobotError, RobotWarning
 from workbench.resources import ASSETS, erd_robots, erd_share
 from workbench.robots.gripper import Gripper, franka_hand
+from workbench.robots.urdfcheck import check_urdf
 
-TCP_OFFSET = 0.1034  # panda_hand -> panda_hand_tcp along the hand's z (CONVENTIONS.md, Gripper)
 ROBOTS = ("panda", "ur5", "talos", "puma560")
 PUMA560_URDF = ASSETS / "robots" / "puma560.urdf"
 
@@ -325,6 +325,7 @@ def prepare_urdf(text: str, tip_frame: str, label: str = "robot URDF") -> tuple[
         root = ElementTree.fromstring(text)
     except ElementTree.ParseError as exc:
         raise RobotError(f"{label} could not be loaded (not well-formed XML: {exc}); check the file") from None
+    check_urdf(root, tip_frame, label)  # before pinocchio: a joint loop crashes it, NaN limits flood stderr
     joints = root.findall("joint")
     links = {lk.get("name", "") for lk in root.findall("link")}
     children: dict[str, list[tuple[str, str]]] = {}  # link -> (child link, joint type)
@@ -423,6 +424,8 @@ def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = 
         warnings.warn(f"robot URDF {path}: the planning gripper replaces the links past {tip_frame} "
                       f"({', '.join(past[:4])}{', ...' if len(past) > 4 else ''}); their geometry is not checked",
                       RobotWarning, stacklevel=2)
+    if mount is None and gripper is not None and gripper.digest != franka_hand().digest:
+        mount = gripper.tcp_in_hand  # another gripper's hand frame bolted onto the tip
     if tcp_frame is None:
         tcp_frame = tip_frame if mount is None else f"{tip_frame}_tcp"
     spec = RobotSpec(name=name or path.stem, urdf=text, urdf_path=str(path), tip_frame=tip_frame, tcp_frame=tcp_frame,
@@ -446,25 +449,31 @@ DEFAULT_BASES = {
 
 def builtin_robot(name: str, base: np.ndarray | None = None, tip_frame: str | None = None,
                   mount: np.ndarray | None = None, gripper: Gripper | None = None) -> Robot:
-    """One of the built-in robots (`panda`, `ur5`, `talos`, `puma560`), optionally at another base, tip or mount."""
+    """One of the built-in robots (`panda`, `ur5`, `talos`, `puma560`), optionally at another base, tip or mount.
+
+    The planning gripper's hand frame sits where the Franka hand's does (`panda_hand` of panda and puma560, the tool
+    flange of ur5 and talos), so another gripper's TCP is its `tcp_in_hand` from there."""
     root = erd_robots()
     base = DEFAULT_BASES[name] if base is None else base
+    hand = gripper or franka_hand()
+    if gripper is not None and gripper.digest != franka_hand().digest and name in ("panda", "puma560") and tip_frame is None:
+        tip_frame, mount = "panda_hand", gripper.tcp_in_hand if mount is None else mount
     if name == "panda":
         return robot_from_urdf(root / "panda_description" / "urdf" / "panda.urdf", tip_frame or "panda_hand_tcp", base=base,
-                               mount=mount, tcp_frame="panda_hand_tcp" if mount is None else None, name="panda",
+                               mount=mount, tcp_frame="panda_hand_tcp" if mount is None else f"{hand.name}_tcp", name="panda",
                                drop_geometry=("panda_hand", "panda_leftfinger", "panda_rightfinger"), gripper=gripper)
     if name == "ur5":
         return robot_from_urdf(root / "ur_description" / "urdf" / "ur5_robot.urdf", tip_frame or "tool0", base=base,
-                               mount=_trans(0, 0, TCP_OFFSET) if mount is None else mount, tcp_frame="franka_hand_tcp",
+                               mount=hand.tcp_in_hand if mount is None else mount, tcp_frame=f"{hand.name}_tcp",
                                name="ur5", gripper=gripper)
     if name == "talos":
         return robot_from_urdf(root / "talos_data" / "robots" / "talos_reduced.urdf", tip_frame or "wrist_left_ft_tool_link",
-                               base=base, mount=(_rot_x(np.pi) @ _trans(0, 0, TCP_OFFSET)) if mount is None else mount,
-                               tcp_frame="franka_hand_tcp", name="talos", drop_geometry=("gripper_left_",),
+                               base=base, mount=(_rot_x(np.pi) @ hand.tcp_in_hand) if mount is None else mount,
+                               tcp_frame=f"{hand.name}_tcp", name="talos", drop_geometry=("gripper_left_",),
                                locked=TALOS_RIGHT_ARM_TUCKED, gripper=gripper)
     if name == "puma560":
         return robot_from_urdf(PUMA560_URDF, tip_frame or "panda_hand_tcp", base=base, mount=mount,
-                               tcp_frame="panda_hand_tcp" if mount is None else None, name="puma560",
+                               tcp_frame="panda_hand_tcp" if mount is None else f"{hand.name}_tcp", name="puma560",
                                drop_geometry=("panda_hand", "panda_leftfinger", "panda_rightfinger"), gripper=gripper)
     raise RobotError(f"unknown robot {name!r}: use one of {', '.join(ROBOTS)} or the path of a URDF")
 

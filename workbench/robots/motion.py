@@ -90,7 +90,9 @@ class MotionChecker:
     attaches it to the TCP with `grasp` (TCP in the object frame); `set_free()` removes it."""
 
     def __init__(self, robot: Robot, scene: Scene, obj_mesh: trimesh.Trimesh | None, allowed: AllowedPairs | None = None,
-                 opts: MotionOptions = MotionOptions()):
+                 opts: MotionOptions = MotionOptions(), obstacles: tuple = ()):
+        """`obstacles`: (mesh, world pose) pairs fixed in the world (a task's tray, fixture or neighbouring parts),
+        checked against the arm, the hand and the held object."""
         self.robot, self.scene, self.opts = robot, scene, opts
         self.self_collision = SelfCollision(robot, allowed)
         parts = robot_parts(robot)
@@ -114,6 +116,9 @@ class MotionChecker:
             geo = coal_mesh(obj_mesh)
             self.k_rest = gm.addGeometryObject(pin.GeometryObject("object_resting", 0, pin.SE3.Identity(), geo))
             self.k_held = gm.addGeometryObject(pin.GeometryObject("object_held", robot.nq, pin.SE3.Identity(), geo))
+        k_obstacles = [gm.addGeometryObject(pin.GeometryObject(f"obstacle_{i}", 0, _se3(base_inv @ np.asarray(pose, dtype=np.float64)),
+                                                               coal_mesh(mesh)))
+                       for i, (mesh, pose) in enumerate(obstacles)]
         moving = [k for k, p in enumerate(parts) if p.joint > 0]
         gripper = [k for k, p in enumerate(parts) if p.link in (GRIPPER_HAND, GRIPPER_FINGERS)]
         arm_all = [k for k, p in enumerate(parts) if p.link not in (GRIPPER_HAND, GRIPPER_FINGERS)]
@@ -130,17 +135,22 @@ class MotionChecker:
                     add(i, j, "self")
         for k in moving:
             add(k, self.k_table, "table")
+            for o in k_obstacles:
+                add(k, o, "table")
         if obj_mesh is not None:
             for k in moving:
                 add(k, self.k_rest, "rest_fingers" if parts[k].link == GRIPPER_FINGERS else "rest")
             add(self.k_held, self.k_table_low, "held")
+            for o in k_obstacles:
+                add(self.k_held, o, "held")
             for k in arm_all:
                 add(k, self.k_held, "held")
         self.gripper_parts = gripper
         self.gm, self.parts = gm, parts
         self.gd = pin.GeometryData(gm)
         self.data = robot.model.createData()
-        self.names = [p.name for p in parts] + ["table", "table", "object", "object"]
+        self.names = [p.name for p in parts] + ["table", "table"] + [f"obstacle {i}" for i in range(len(k_obstacles))] + \
+            ["object", "object"]
         self._lo, self._hi = robot.lower - 1e-9, robot.upper + 1e-9
         # broad phase (dynamic AABB tree) over the same model: it honours the active pairs of `gd`
         self.broad = pin.BroadPhaseManager_DynamicAABBTreeCollisionManager(robot.model, gm, self.gd)

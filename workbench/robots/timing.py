@@ -316,3 +316,31 @@ def to_csv(segments: list[TimedSegment], joint_names: list[str]) -> str:
             w.writerow([f"{s.t0 + t:.6f}", k, s.kind, s.caption, int(s.holding), f"{s.jaw:.6f}"]
                        + [f"{x:.9f}" for x in q] + [f"{x:.9f}" for x in qd])
     return buf.getvalue()
+
+
+def to_ros2_yaml(segments: list[TimedSegment], joint_names: list[str]) -> str:
+    """The whole plan as one ROS 2 `trajectory_msgs/JointTrajectory` in YAML: `joint_names` in the URDF's names, and
+    per knot `positions`, `velocities`, `accelerations` and `time_from_start` (sec, nanosec) from the plan's start.
+
+    Consecutive segments share their boundary knot; it is written once, so `time_from_start` strictly increases, as
+    a controller requires. A knot where the arm is at rest gets zero acceleration: the segments meet at rest, and a
+    controller interpolating with accelerations must not carry the stopping segment's deceleration into the next.
+    The gripper is not a joint of the message (the jaw's dwells appear as the arm at rest).
+    """
+    import yaml
+
+    points, last = [], -math.inf
+    for s in segments:
+        acc = np.where(np.all(np.abs(s.traj.qd) < 1e-12, axis=1)[:, None], 0.0, s.traj.accelerations())
+        for t, q, qd, qdd in zip(s.traj.t + s.t0, s.traj.q, s.traj.qd, acc):
+            if t <= last + 1e-9:
+                continue
+            last = float(t)
+            sec = int(math.floor(t))
+            nanosec = min(int(round((t - sec) * 1e9)), 999_999_999)
+            points.append({"positions": [float(x) for x in q], "velocities": [float(x) for x in qd],
+                           "accelerations": [float(x) for x in qdd], "effort": [],
+                           "time_from_start": {"sec": sec, "nanosec": nanosec}})
+    msg = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}, "joint_names": list(joint_names),
+           "points": points}
+    return yaml.safe_dump(msg, sort_keys=False, default_flow_style=None, width=120)

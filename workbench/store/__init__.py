@@ -13,6 +13,7 @@ import hashlib
 import json
 import os
 import signal
+import time
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
@@ -22,14 +23,18 @@ import numpy as np
 import pyarrow as pa
 
 from workbench.errors import StoreError
+from workbench.params import WAIT_ENV
 from workbench.store.identity import (
     APPLICATION,
     META_TABLES,
     SCHEMA_VERSION,
     check_path,
+    check_size,
     inspect,
     is_disk_full,
+    is_lock_error,
     open_error,
+    read_error,
     upgrade,
 )
 from workbench.store.schema import ALL_TABLES, MIGRATIONS
@@ -54,10 +59,12 @@ class Store:
                 self.run(ddl)
         return self
 
-    def __init__(self, path: str | Path, read_only: bool = False, create: bool = True):
-        """Open (or, unless `create` is False, create) the store at `path`: its identity and version are checked
-        before anything is written (workbench.store.identity)."""
+    def __init__(self, path: str | Path, read_only: bool = False, create: bool = True, wait: float | None = None):
+        """Open (or, unless `create` is False, create) the store at `path`: its identity, version and length are
+        checked before anything is written (workbench.store.identity). A file another process holds is waited for
+        up to `wait` seconds (default: WORKBENCH_WAIT, else 0), then refused as busy."""
         self.path = Path(path)
+        self._deadline = time.monotonic() + (_wait_seconds() if wait is None else max(0.0, float(wait)))
         self._depth = 0  # open transaction() levels
         self.read_only = read_only
         check_path(self.path, read_only or not create)
@@ -83,13 +90,14 @@ class Store:
         configuration, still before anything is written."""
         checked_read_only = True
         try:
-            con = duckdb.connect(str(self.path), read_only=True, config=CONNECT_CONFIG)
+            con = self._connect(read_only=True, translate=False)
         except duckdb.Error as exc:
             if "different configuration" not in str(exc):
                 raise open_error(self.path, exc) from None
             con, checked_read_only = self._connect(read_only), read_only
         try:
             self.identity = inspect(con, self.path, ALL_TABLES + META_TABLES + MIGRATIONS)
+            check_size(con, self.path)
         except BaseException as exc:
             con.close()
             if isinstance(exc, duckdb.Error):
@@ -100,12 +108,19 @@ class Store:
             con = self._connect(read_only)
         return con
 
-    def _connect(self, read_only: bool) -> duckdb.DuckDBPyConnection:
-        try:
-            # never reach for the network: replaying a WAL that holds our DDL otherwise tries to install core_functions
-            return duckdb.connect(str(self.path), read_only=read_only, config=CONNECT_CONFIG)
-        except (duckdb.Error, OSError) as exc:
-            raise open_error(self.path, exc) from None
+    def _connect(self, read_only: bool, translate: bool = True) -> duckdb.DuckDBPyConnection:
+        """A connection, retried while another process holds the file's lock and the wait lasts."""
+        while True:
+            try:
+                # never reach for the network: replaying a WAL that holds our DDL otherwise tries to install core_functions
+                return duckdb.connect(str(self.path), read_only=read_only, config=CONNECT_CONFIG)
+            except (duckdb.Error, OSError) as exc:
+                if is_lock_error(exc) and time.monotonic() < self._deadline:
+                    time.sleep(0.1)
+                    continue
+                if not translate and isinstance(exc, duckdb.Error):
+                    raise
+                raise open_error(self.path, exc) from None
 
     def _create(self) -> None:
         """The schema and metadata of a new store, or the upgrade of an older one, in one transaction."""
@@ -171,8 +186,19 @@ class Store:
         return exc
 
     def run(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> list[tuple]:
-        """Execute one statement with bound parameters and return all its rows (DuckDB needs results finished)."""
-        return self.con.execute(sql, list(params)).fetchall()
+        """Execute one statement with bound parameters and return all its rows (DuckDB needs results finished).
+        A damaged block or a missing stage's table is a one-line StoreError (`identity.read_error`)."""
+        try:
+            return self.con.execute(sql, list(params)).fetchall()
+        except duckdb.Error as exc:
+            raise read_error(self.path, exc) from None
+
+    def arrow(self, sql: str, params: list[Any] | tuple[Any, ...] | dict[str, Any] = ()) -> pa.Table:
+        """Run a SELECT and return its rows as an Arrow table (named `$parameters` from a dict; errors as `run`)."""
+        try:
+            return self.con.sql(sql, params=params if isinstance(params, dict) else list(params)).to_arrow_table()
+        except duckdb.Error as exc:
+            raise read_error(self.path, exc) from None
 
     def one(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> tuple | None:
         """The first row of a query, or None (the result is always fully consumed)."""
@@ -228,7 +254,7 @@ class Store:
 
     def query_arrays(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> dict[str, np.ndarray]:
         """Run a SELECT and return each column as a numpy array; fixed-size list columns become (N, k) arrays."""
-        table = self.con.sql(sql, params=list(params)).to_arrow_table()
+        table = self.arrow(sql, params)
         return {name: from_arrow(table.column(name)) for name in table.column_names}
 
     def paramset(self, stage: str, params: dict[str, Any], idobject: int | None) -> tuple[int, bool]:
@@ -277,6 +303,14 @@ class Store:
         """The id of a stored parameter set of `stage` for these parameters and object, or None."""
         row = self.one("SELECT idparamset FROM paramset WHERE digest = ?", [_digest(stage, params, idobject)])
         return None if row is None else int(row[0])
+
+
+def _wait_seconds() -> float:
+    text = os.environ.get(WAIT_ENV, "")
+    try:
+        return max(0.0, float(text)) if text else 0.0
+    except ValueError:
+        return 0.0
 
 
 def _parse_fault(text: str) -> list | None:

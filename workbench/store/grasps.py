@@ -6,6 +6,7 @@ import numpy as np
 
 from workbench.grasping.grasps import GraspParams, GraspSet
 from workbench.robots.gripper import Gripper
+from workbench.errors import StoreError
 from workbench.store import Store
 from workbench.store.objects import put_gripper
 
@@ -13,6 +14,7 @@ STAGE = "grasps"
 
 
 def grasp_param_dict(params: GraspParams, gripper: Gripper) -> dict:
+    """The grasp stage's parameter set as stored: the parameters and the gripper's digest."""
     return {**params.as_dict(), "gripper": gripper.digest}
 
 
@@ -57,3 +59,29 @@ def load_grasps(store: Store, idobject: int, idparamset: int | None = None) -> d
     out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
     out["idparamset"] = pid
     return out
+
+
+def paramset_gripper(store: Store, idparamset: int) -> str | None:
+    """The digest of the gripper a parameter set depends on, following the chain tabletop -> placements -> grasps."""
+    params = store.params_of(idparamset)
+    for _ in range(4):
+        if "gripper" in params:
+            return params["gripper"]
+        upstream = params.get("placements", params.get("grasps"))
+        if not isinstance(upstream, int):
+            return None
+        params = store.params_of(upstream)
+    return None
+
+
+def latest_paramset_for(store: Store, stage: str, idobject: int, gripper: Gripper | str, command: str) -> int:
+    """The parameter set of `stage` (grasps, placements, tabletop) for an object and a gripper (or its digest)
+    produced or reused last: a store holding grasps of two grippers keeps both chains apart."""
+    digest, name = (gripper, gripper) if isinstance(gripper, str) else (gripper.digest, gripper.name)
+    rows = store.run("SELECT idparamset FROM paramset WHERE stage = ? AND idobject = ? ORDER BY used DESC, idparamset DESC",
+                     [stage, idobject])
+    for (pid,) in rows:
+        if paramset_gripper(store, int(pid)) == digest:
+            return int(pid)
+    raise StoreError(f"store {store.path} has no {stage} of object id {idobject} for gripper {name!r}; run "
+                     f"`workbench {command} --gripper ...` with that gripper first")

@@ -79,8 +79,11 @@ def open_error(path: Path, exc: BaseException) -> StoreError:
     """One line for a file DuckDB cannot open or write: what happened and what to do."""
     msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     low = msg.lower()
-    if "lock" in low:
-        return StoreError(f"store {path} is locked by another process; close it (or its notebook kernel) and retry")
+    if is_lock_error(exc):
+        held = re.search(r"\(PID (\d+)\)", msg)
+        who = f"process {held.group(1)}" if held else "another process"
+        return StoreError(f"store {path} is busy: locked by {who} that is writing it (or a notebook kernel holding it); "
+                          f"retry when it is done, or give --wait SECONDS to wait for it")
     if "different configuration" in low:
         return StoreError(f"store {path} is already open in this process in another mode (read-only or read-write); "
                           f"use the open Store, or close it first")
@@ -95,6 +98,9 @@ def open_error(path: Path, exc: BaseException) -> StoreError:
     if "could not read enough bytes" in low:
         return StoreError(f"store {path} is damaged (truncated: shorter than its own header says); restore it from a "
                           f"backup, or move it aside and rebuild it with `workbench build`")
+    if "checksum" in low:
+        return StoreError(f"store {path} is damaged (a block fails its checksum: the file was changed outside DuckDB); "
+                          f"restore it from a backup, or move it aside and rebuild it with `workbench build`")
     if any(w in low for w in ("not a valid duckdb", "could not read enough bytes", "checksum", "corrupt", "serializ",
                               "invalid", "unexpected", "magic", "failed to read", "truncat", "malformed")):
         return StoreError(f"store {path} is damaged (truncated or corrupt: {msg[:120]}); restore it from a backup, or move "
@@ -102,7 +108,52 @@ def open_error(path: Path, exc: BaseException) -> StoreError:
     return StoreError(f"store {path} could not be opened ({msg[:160]}); move it aside and rebuild it, or give another path")
 
 
+def is_lock_error(exc: BaseException) -> bool:
+    """Whether DuckDB refused the file because another process holds its lock (worth waiting for)."""
+    return "could not set lock" in str(exc).lower() or "conflicting lock" in str(exc).lower()
+
+
+HEADER_BYTES = 3 * 4096  # DuckDB's file header and its two database headers, before the first block
+
+
+def check_size(con: duckdb.DuckDBPyConnection, path: Path) -> None:
+    """Refuse a file shorter than the blocks its own header counts (a truncated copy or an interrupted transfer):
+    DuckDB would open it and fail on the first read of a missing block, deep inside a command."""
+    row = con.execute("SELECT block_size, total_blocks FROM pragma_database_size() "
+                      "WHERE database_name = current_database()").fetchone()
+    if row is None:
+        return
+    expected = HEADER_BYTES + int(row[0]) * int(row[1])
+    size = path.stat().st_size
+    if size < expected:
+        raise StoreError(f"store {path} is damaged (truncated: {size:,} of its {expected:,} bytes); restore it from a "
+                         f"backup, or move it aside and rebuild it with `workbench build`")
+
+
+# the command that makes each table created on first use (a store built by `workbench build` has none of them)
+TABLE_MAKERS = {"tgraspclass": "gptable", "tgptable": "gptable", "tplacementclass": "gptable", "tgpcell": "gptable",
+                "catalog_unit": "catalog build"}
+
+
+def read_error(path: Path, exc: BaseException) -> BaseException:
+    """One line for a query the file cannot answer: a damaged or truncated block (I/O, checksum, fatal), or a
+    table of a stage this store never ran. Other errors (our own bugs, constraint violations) pass unchanged."""
+    if isinstance(exc, duckdb.CatalogException):
+        m = re.search(r"Table with name (\w+) does not exist", str(exc))
+        if m:
+            table = m.group(1)
+            maker = TABLE_MAKERS.get(table)
+            hint = f"`workbench {maker}` makes it; run that first" if maker else "it was built by another command or version"
+            return StoreError(f"store {path} has no {table} table: {hint}")
+        return exc
+    if isinstance(exc, (duckdb.IOException, duckdb.FatalException, duckdb.InternalException, duckdb.SerializationException)) \
+            or "corrupt" in str(exc).lower() or "checksum" in str(exc).lower():
+        return open_error(path, exc)
+    return exc
+
+
 def is_disk_full(exc: BaseException) -> bool:
+    """Whether an exception from a write means the disk or the file size limit is full."""
     if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EFBIG, errno.EDQUOT):
         return True
     low = str(exc).lower()
@@ -162,6 +213,7 @@ def inspect(con: duckdb.DuckDBPyConnection, path: Path, ddl: tuple[str, ...]) ->
 
 
 def table_names(ddl: tuple[str, ...]) -> list[str]:
+    """The table names created by a tuple of CREATE TABLE statements."""
     return [m.group(1) for stmt in ddl for m in [re.search(r"CREATE TABLE IF NOT EXISTS (\w+)", stmt)] if m]
 
 

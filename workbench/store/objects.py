@@ -85,3 +85,11 @@ def gripper_row(store: Store, idgripper: int) -> dict:
             "collision_vertices": None if verts is None else np.asarray(verts, dtype=np.float64),
             "collision_faces": None if faces is None else np.asarray(faces, dtype=np.int64),
             "body_faces": None if body_faces is None else int(body_faces)}
+
+
+def object_name(store: Store, idobject: int) -> str:
+    """The name of the stored object with this id."""
+    row = store.one("SELECT name FROM object WHERE idobject = ?", [int(idobject)])
+    if row is None:
+        raise StoreError(f"store {store.path} has no object {idobject}")
+    return str(row[0])

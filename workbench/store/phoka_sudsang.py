@@ -92,6 +92,7 @@ def load_contacts(store: Store, pid: int) -> tuple[ContactSet, ContactIds]:
 
 
 def roadmap_params(params: ClusterParams, idcontacts: int) -> dict:
+    """The representative roadmap's parameter set as stored: the contacts it is built on and the clustering."""
     return {"contacts": idcontacts, "k": params.k, "mu": params.mu, "sides": params.sides, "seed": params.seed,
             "n_init": params.n_init, "torque_scale": params.torque_scale}
 

@@ -23,6 +23,7 @@ def _rotate(poses: np.ndarray, vectors: np.ndarray) -> np.ndarray:
 
 
 def find_placements(store: Store, idobject: int, grasp_pid: int, params: PlacementParams) -> int | None:
+    """The parameter set id of stored placements for these grasps and parameters, if any."""
     return store.find_paramset(PLACEMENT_STAGE, {**params.as_dict(), "grasps": grasp_pid}, idobject)
 
 
@@ -77,6 +78,7 @@ def load_free_tabletop_grips(store: Store, idplacements: int) -> dict[str, np.nd
 
 
 def find_tabletop(store: Store, idobject: int, idplacements: int, params: TabletopParams) -> int | None:
+    """The parameter set id of stored tabletop placements and grips for these placements and grid, if any."""
     return store.find_paramset(TABLETOP_STAGE, {**params.as_dict(), "placements": idplacements}, idobject)
 
 

@@ -239,7 +239,7 @@ def load_ik(store: Store, idrobot: int, idscene: int, idikret: int, idobject: in
     if idtabletop is not None:
         sql += " AND p.idparamset = ?"
         params.append(idtabletop)
-    table = store.con.sql(sql + " ORDER BY k.idtabletopgrips", params=params).to_arrow_table()
+    table = store.arrow(sql + " ORDER BY k.idtabletopgrips", params)
 
     out = {c: from_arrow(table.column(c)) for c in ("idik", "idtabletopgrips", "idtabletopplacements", "idfreeairgrip",
                                                       "jawwidth", "idangle")}
@@ -299,3 +299,11 @@ def ik_runs(store: Store, idobject: int | None = None, idtabletop: int | None = 
     sql += " GROUP BY k.idrobot, r.name, k.idscene, k.idikret, i.handx, i.worldz, i.worlda ORDER BY k.idrobot, k.idscene, k.idikret"
     keys = ("idrobot", "robot", "idscene", "idikret", "handx", "worldz", "worlda", "rows", "feasible", "feasible_all", "last")
     return [dict(zip(keys, r)) for r in store.run(sql, params)]
+
+
+def robot_with_gripper(store: Store, name: str, digest: str) -> str | None:
+    """The stored name of robot `name` planned with the gripper of this digest (NAME itself, or NAME-DIGEST when
+    another gripper or base took the name first), the newest; None when there is none."""
+    row = store.one("SELECT r.name FROM robot r JOIN gripper g ON r.idgripper = g.idgripper WHERE (r.name = ? OR "
+                    "starts_with(r.name, ?)) AND g.digest = ? ORDER BY r.idrobot DESC LIMIT 1", [name, f"{name}-", digest])
+    return None if row is None else str(row[0])

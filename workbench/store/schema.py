@@ -1,7 +1,7 @@
 """The store's schema (CONVENTIONS.md, Store; Wan & Harada Section IV, Fig. 4 and Fig. 5).
 
-The ten tables of the paper keep their names and columns (lowercase). Poses are DOUBLE[16] row-major
-4x4 transforms, points and normals DOUBLE[3], distances in metres, angles in radians.
+The ten tables of the paper keep their names and columns (lowercase). Poses are `DOUBLE[16]` row-major
+4x4 transforms, points and normals `DOUBLE[3]`, distances in metres, angles in radians.
 
 Paper tables
 - object(idobject, name, ...): one row per object; extra columns keep the scaled mesh (vertices, faces),
@@ -15,7 +15,7 @@ Paper tables
 - freeairgrip: grasps in the object frame; rotmat is the TCP pose in the object frame.
   Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y).
 - freetabletopplacement: rotmat is the object in the table frame, centre of mass above the origin, lowest
-  point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, DOUBLE[3][]).
+  point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, `DOUBLE[3][]`).
 - freetabletopgrip: free-air grasps kept at a free placement; rotmat is the TCP in the table frame.
 - angle(idangle, value): rotations about world z in radians.
 - tabletopplacements: rotmat is the object in the world; tabletopposition the (x, y, z) of the placement.
@@ -393,6 +393,61 @@ FINGER_TABLES: tuple[str, ...] = (
 )
 
 ALL_TABLES = ALL_TABLES + FINGER_TABLES
+
+# Simulation (CONVENTIONS.md, Simulation): a plan replayed in MuJoCo (workbench.simulation). simulation: one row per
+# plan and digest of every simulation parameter (params: their JSON, the defaults resolved: grip force, pad and
+# table friction, timestep, density, tolerances, the convex decomposition's settings); confirmed, and else the
+# first failure: failure (shove, slip, drop, roll, pose, goal), failure_step (planstep seq), failure_t (s from the
+# plan's start), message; final_error (m) and final_angle (rad) against the goal; simulated (s of physics), seconds
+# (s of stepping), hulls (convex parts of the part); playback_t (s) and playback_pose (4x4 row-major per sample, the
+# simulated part's pose for the animation). simulationstep: one row per waypoint (the end of each plansegment, seq
+# as there): step (planstep seq), kind and caption of the motion, t (s), planned and simulated part poses
+# (DOUBLE[16]), error (m, of the centre of mass) and angle (rad), slip and slip_angle (largest motion of the part in
+# the hand since the close, NULL when not held), settle (s after a release until the part rests, NULL otherwise),
+# touching (a pad touches the part), ok (within the waypoint tolerances).
+SIMULATION_TABLES: tuple[str, ...] = (
+    """CREATE TABLE IF NOT EXISTS simulation (
+        idsimulation BIGINT PRIMARY KEY,
+        idplan BIGINT NOT NULL REFERENCES plan(idplan),
+        digest VARCHAR NOT NULL,
+        params VARCHAR NOT NULL,
+        confirmed BOOLEAN NOT NULL,
+        failure VARCHAR,
+        failure_step INTEGER,
+        failure_t DOUBLE,
+        message VARCHAR,
+        final_error DOUBLE,
+        final_angle DOUBLE,
+        simulated DOUBLE,
+        seconds DOUBLE,
+        hulls INTEGER,
+        playback_t DOUBLE[],
+        playback_pose DOUBLE[][],
+        created TIMESTAMP DEFAULT current_timestamp,
+        UNIQUE (idplan, digest)
+    )""",
+    """CREATE TABLE IF NOT EXISTS simulationstep (
+        idsimulationstep BIGINT PRIMARY KEY,
+        idsimulation BIGINT NOT NULL REFERENCES simulation(idsimulation),
+        seq INTEGER NOT NULL,
+        step INTEGER,
+        kind VARCHAR,
+        caption VARCHAR,
+        t DOUBLE,
+        planned DOUBLE[16],
+        simulated DOUBLE[16],
+        error DOUBLE,
+        angle DOUBLE,
+        slip DOUBLE,
+        slip_angle DOUBLE,
+        settle DOUBLE,
+        touching BOOLEAN,
+        ok BOOLEAN,
+        UNIQUE (idsimulation, seq)
+    )""",
+)
+
+ALL_TABLES = ALL_TABLES + SIMULATION_TABLES
 
 # Columns added after a store format was first released; run after the CREATE statements so older files gain them.
 MIGRATIONS: tuple[str, ...] = (

@@ -161,6 +161,7 @@ def load_classes(store: Store, pid: int) -> list[dict]:
 
 
 def class_ids(store: Store, pid: int) -> np.ndarray:
+    """The ids of a class parameter set's grasp classes, in their index order."""
     return np.array([r[0] for r in store.run("SELECT idtgraspclass FROM tgraspclass WHERE idparamset = ? AND idx >= 0 "
                                              "ORDER BY idx", [pid])], dtype=np.int64)
 
@@ -176,6 +177,7 @@ def dropped_classes(store: Store, pid: int) -> tuple[int, float]:
 
 
 def find_paramset(store: Store, stage: str, params: dict, idobject: int) -> int | None:
+    """The id of a stored parameter set of `stage` for this object, if any."""
     return store.find_paramset(stage, params, idobject)
 
 
@@ -241,9 +243,9 @@ def load_table(store: Store, pid: int) -> dict:
         raise StoreError(f"store {store.path} has no grasp-placement table for paramset {pid}; run `workbench gptable` first")
     tid, oid, rid, cpid, t_n, f_n, point, c_n, p_n, s1, s2, s3, nik = row
     pl = store.query_arrays("SELECT idx, normal, rotmat, stability FROM tplacementclass WHERE idtgptable = ? ORDER BY idx", [tid])
-    cells = store.con.sql("SELECT g.idx AS ci, p.idx AS pj, c.itheta, c.hand_object, c.hand_table, c.phi_lo, c.phi_hi "
-                          "FROM tgpcell c JOIN tgraspclass g USING (idtgraspclass) JOIN tplacementclass p USING (idtplacementclass) "
-                          "WHERE c.idtgptable = ?", params=[int(tid)]).to_arrow_table()
+    cells = store.arrow("SELECT g.idx AS ci, p.idx AS pj, c.itheta, c.hand_object, c.hand_table, c.phi_lo, c.phi_hi "
+                        "FROM tgpcell c JOIN tgraspclass g USING (idtgraspclass) JOIN tplacementclass p USING (idtplacementclass) "
+                        "WHERE c.idtgptable = ?", [int(tid)])
     ci = cells.column("ci").to_numpy()
     pj = cells.column("pj").to_numpy()
     tk = cells.column("itheta").to_numpy()

@@ -35,14 +35,14 @@ def roadmap_rows(store: Store, idtabletop: int, idrobot: int, idscene: int, idik
     joints (N, 5, nq) for the five poses of `robots.ik.KINDS` (NaN where infeasible; left out, and not read, when
     `joints` is False)."""
     cols = FEASIBILITY + JOINTS if joints else FEASIBILITY
-    table = store.con.sql(
+    table = store.arrow(
         "SELECT g.idtabletopgrips, g.idtabletopplacements, g.idfreeairgrip, g.rotmat, g.jawwidth, "
         "p.rotmat AS placement_rotmat, p.idfreetabletopplacement, p.tabletopposition, a.value AS angle, "
         + ", ".join(f"k.{c}" for c in cols) + " "
         "FROM tabletopgrips g JOIN tabletopplacements p USING (idtabletopplacements) JOIN angle a USING (idangle) "
         "LEFT JOIN ik k ON k.idtabletopgrips = g.idtabletopgrips AND k.idrobot = $robot AND k.idscene = $scene AND k.idikret = $ikret "
         "WHERE p.idparamset = $tabletop ORDER BY g.idtabletopgrips",
-        params={"robot": idrobot, "scene": idscene, "ikret": idikret, "tabletop": idtabletop}).to_arrow_table()
+        {"robot": idrobot, "scene": idscene, "ikret": idikret, "tabletop": idtabletop})
 
     out = {name: from_arrow(table.column(name)) for name in
            ("idtabletopgrips", "idtabletopplacements", "idfreeairgrip", "rotmat", "jawwidth", "placement_rotmat",
@@ -122,14 +122,14 @@ def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray], 
 
 def load_plan_rows(store: Store, idplan: int) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
     """A stored plan row (as a dict) and its steps (arrays, in order)."""
-    table = store.con.sql("SELECT * FROM plan WHERE idplan = ?", params=[idplan]).to_arrow_table()
+    table = store.arrow("SELECT * FROM plan WHERE idplan = ?", [idplan])
     if table.num_rows == 0:
         raise StoreError(f"store {store.path} has no plan {idplan}")
     plan = {k: v[0] for k, v in table.to_pydict().items()}
-    steps = store.con.sql("SELECT * FROM planstep WHERE idplan = ? ORDER BY seq", params=[idplan]).to_arrow_table()
+    steps = store.arrow("SELECT * FROM planstep WHERE idplan = ? ORDER BY seq", [idplan])
     return plan, steps
 
 
 def load_plan_segments(store: Store, idplan: int):
     """A stored plan's timed motions (`plansegment` rows in order, an Arrow table; q and qd row-major K x n)."""
-    return store.con.sql("SELECT * FROM plansegment WHERE idplan = ? ORDER BY seq", params=[idplan]).to_arrow_table()
+    return store.arrow("SELECT * FROM plansegment WHERE idplan = ? ORDER BY seq", [idplan])

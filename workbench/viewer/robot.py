@@ -81,7 +81,24 @@ class RobotView:
                 vis[name].set_object(_FILES[ext].from_file(v.path),
                                      g.MeshLambertMaterial(color=ORANGE if color is None else color, opacity=opacity, transparent=opacity < 1))
             self.fingers.append((name, local, v.side))
+        self._draw_gripper_boxes(path, color, opacity)
         self._pin = pin
+
+    def _draw_gripper_boxes(self, path: str, color: int | None, opacity: float) -> None:
+        """The planned gripper's own collision geometry where it has no visual meshes (a spec gripper, a linkage's
+        fingers): its palm mesh and its finger boxes, moving with the jaw."""
+        gripper = self.robot.gripper
+        sides = {side for _, _, side in self.fingers}
+        mat = g.MeshLambertMaterial(color=ORANGE if color is None else color, opacity=opacity, transparent=opacity < 1)
+        if 0 not in sides:
+            name = f"{path}/gripper/body"
+            self.vis[name].set_object(g.TriangularMeshGeometry(gripper.body.vertices, gripper.body.faces), mat)
+            self.fingers.append((name, np.eye(4), 0))
+        if not sides & {1, -1}:
+            for i, (ext, pose) in enumerate(gripper.finger_poses(0.0)):
+                name = f"{path}/gripper/finger{i}"
+                self.vis[name].set_object(g.Box(ext.tolist()), mat)
+                self.fingers.append((name, pose, 1 if pose[1, 3] > 0 else -1))
 
     def poses(self, q: np.ndarray, width: float | None = None) -> dict[str, np.ndarray]:
         """World transforms of every drawn node at joint vector `q` with the jaw at `width` (default: full opening)."""

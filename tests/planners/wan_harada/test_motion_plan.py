@@ -220,7 +220,7 @@ def test_plan_html_caption_follows_the_timed_animation(planner, demo_result, tmp
     (a transfer or transit the step it carries the part or the hand to)."""
     plan = demo_result.plan
     page = plan_scene(plan, planner, tmp_path / "plan.html").read_text()
-    data = json.loads(re.search(r"var d = (\{.*?\}), el =", page).group(1))
+    data = json.loads(re.search(r"var d = (\{.*?\});\n", page).group(1))
     duration = plan.segments[-1].t0 + plan.segments[-1].duration
     assert abs(len(data["steps"]) - (duration * data["fps"] + 1)) <= 1
     for seg in plan.segments:
@@ -245,3 +245,39 @@ def test_knots_are_within_one_degree_and_five_mm_of_tcp_travel(planner, demo_res
         worst_mm = max(worst_mm, float(np.linalg.norm(np.diff(tcp, axis=0), axis=1).max() * 1000))
     assert worst_deg <= 1.0 + 1e-6 and worst_mm <= 5.0 + 1e-3, (worst_deg, worst_mm)
     assert worst_mm > 2.0  # the bound is reached, not trivially met by tiny steps
+
+
+def test_ros2_trajectory_export_matches_the_csv_and_its_own_kinematics(planner, demo_result):
+    """The ROS 2 JointTrajectory YAML read back with PyYAML: the URDF's joint names, strictly increasing times, the
+    CSV export's knots, and knots that are a consistent motion (trapezoids of velocities and accelerations)."""
+    import csv
+    import io
+
+    import yaml
+
+    from workbench.robots.timing import to_csv, to_ros2_yaml
+
+    segments, names = demo_result.motion.segments, list(planner.rows["robot"]["joint_names"])
+    msg = yaml.safe_load(to_ros2_yaml(segments, names))
+    assert msg["joint_names"] == names
+    pts = msg["points"]
+    assert all(0 <= p["time_from_start"]["nanosec"] < 1_000_000_000 for p in pts)
+    t = np.array([p["time_from_start"]["sec"] + p["time_from_start"]["nanosec"] * 1e-9 for p in pts])
+    assert np.all(np.diff(t) > 0), "time_from_start must strictly increase"
+    q, qd, qdd = (np.array([p[k] for p in pts]) for k in ("positions", "velocities", "accelerations"))
+    assert q.shape == qd.shape == qdd.shape == (len(pts), len(names))
+    end = segments[-1].t0 + segments[-1].duration
+    assert abs(t[0] - segments[0].t0) < 1e-9 and abs(t[-1] - end) < 1e-6
+
+    rows = list(csv.reader(io.StringIO(to_csv(segments, names))))
+    tc = np.array([float(r[0]) for r in rows[1:]])
+    qc = np.array([[float(x) for x in r[6:6 + len(names)]] for r in rows[1:]])
+    idx = np.clip(np.searchsorted(tc, t - 2e-6), 0, len(tc) - 1)  # the CSV rounds times to 1 us
+    assert np.allclose(tc[idx], t, atol=1e-6) and np.allclose(qc[idx], q, atol=1e-8)
+    assert len(np.unique(np.round(tc, 6))) == len(t)
+
+    dt = np.diff(t)[:, None]
+    assert np.abs(np.diff(q, axis=0) - (qd[1:] + qd[:-1]) / 2 * dt).max() < 2e-3
+    err = np.abs(np.diff(qd, axis=0) - (qdd[1:] + qdd[:-1]) / 2 * dt)
+    assert err.max() < 0.05
+    assert np.abs(qd).max() > 0.1

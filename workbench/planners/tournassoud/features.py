@@ -53,6 +53,8 @@ class Vertex:
 
 @dataclass(frozen=True)
 class Features:
+    """The features of a polyhedral part (Section 2.1): its faces, feature edges and vertices."""
+
     faces: list[Face]
     edges: list[Edge]
     vertices: list[Vertex]

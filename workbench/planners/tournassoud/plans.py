@@ -7,13 +7,19 @@ planner's plans: `grasp` (TCP at the grasp), `approach` (backed off by `handx` a
 whose arm clears the object (the IK solver's collider); approach and retract start from the grasp's configuration
 (with the closed form: the branch nearest to it).
 
-The table only checks the grasp's IK (Section 5.2). A conjunction that fails here (no collision-free branch or no
-approach/retract) is removed from a copy of the table and the query is answered again, so the returned sequence is
-still the shortest among the conjunctions that can be executed.
+The table only checks the grasp's IK (Section 5.2); the paper assumes the arm's paths away (Section 1). A
+conjunction that fails here (no collision-free branch or no approach/retract) is removed from a copy of the table
+and the query is answered again, so the returned sequence is still the shortest among the conjunctions that can be
+executed. With motions, a failed motion between two conjunctions removes every sample needing the same change of arm
+configuration (`learn_removal`: the same IK branch switch over the neighbouring theta and phi samples of the same
+class and placement), not one sample at a time. Every removal is recorded (`Removal`) and the table's own answer
+kept beside the executable one (`explanation` prints both).
 
 Plan steps (validator order pick, (transfer, regrasp)*, place):
 - placement query: pick at the start placement with the first grasp, then per regrasp a transfer to an intermediate
   placement and a regrasp there, and place at the goal placement with the last grasp;
+- task query (`plan_task_query`, Fig. 1): the same with the pick at the task's pick-up and the place at its
+  destination, away from H, both checked against the task's obstacles;
 - grasp query (the object starts and ends in the hand): pick and transfer both hold the initial grasp at the first
   intermediate placement (the configuration where it is put down), then regrasp/transfer pairs, and the last regrasp
   and the place both hold the final grasp at the last placement.
@@ -36,6 +42,7 @@ from workbench.planners.tournassoud.chaining import (
 )
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable, rz
+from workbench.planners.tournassoud.task import task_query
 from workbench.planners.wan_harada.motions import ExecOptions, MotionResult, plan_motion
 from workbench.planners.wan_harada.plans import Plan, PlanStep
 from workbench.planners.wan_harada.query import PoseQuery
@@ -57,16 +64,20 @@ class Conjunction:
     tcp: np.ndarray
     q: np.ndarray  # (5, n): grasp, approach (handx), retract (handxworldz), worlda, worldaworldz
     phi: float = 0.0  # the placement's angle (the sample's, or the query's own at its start and goal)
+    position: tuple[float, float] | None = None  # where the part rests (x, y); None: the table point H
 
 
 class Realiser:
     """IK and collision checks for conjunctions through the workbench's IK solver (`robots.ik.IKSolver`): its
     closed form for spherical-wrist arms (every branch tried as a seed), its Levenberg-Marquardt tiers from library
-    seeds otherwise; its collider rejects arm or hand against the table and arm against the object."""
+    seeds otherwise; its collider rejects arm or hand against the table and arm against the object. With `obstacles`
+    ((mesh, world pose) pairs: a task's pick-up and destination, `task.Obstacle`), the five configurations of a
+    conjunction and every motion are also checked against them (the motion checker's)."""
 
     def __init__(self, robot: Robot, scene: Scene, obj_mesh, handx: float = 0.05, worldz: float = 0.05, seed: int = 0,
-                 worlda: float = WORLDA):
+                 worlda: float = WORLDA, obstacles: tuple = ()):
         self.robot, self.handx, self.worldz, self.worlda = robot, handx, worldz, worlda
+        self.obstacles = tuple(obstacles)
         self.closed = not spherical_wrist_reason(robot)
         self.opts = IKOptions(closed_form=self.closed, library=8192, seed=seed, self_collide=True)
         self.solver = IKSolver(robot, scene, self.opts, obj_mesh)
@@ -82,7 +93,7 @@ class Realiser:
         """The motion checker of the robot, table and object (built once per motion options)."""
         if self._checker is None or self._checker[0] != opts.motion:
             self._checker = (opts.motion, MotionChecker(self.robot, self.scene, self.obj_mesh, allowed_pairs(self.robot),
-                                                        opts.motion))
+                                                        opts.motion, self.obstacles))
         return self._checker[1]
 
     def grasp_free(self, object_poses: np.ndarray, tcps: np.ndarray) -> np.ndarray:
@@ -128,9 +139,21 @@ class Realiser:
                 if not okk[0]:
                     break
                 out.append(q[0])
-            if len(out) == 5:
+            if len(out) == 5 and self._clear(np.stack(out), object_pose, tcp):
                 return np.stack(out)
         return None
+
+    def _clear(self, q: np.ndarray, object_pose: np.ndarray, tcp: np.ndarray) -> bool:
+        """Whether the five configurations clear the obstacles (the part resting at the first three, held at the
+        lifts); True without obstacles."""
+        if not self.obstacles:
+            return True
+        checker = self.motion_checker_default()
+        checker.set_resting(object_pose, False)
+        if not all(checker.valid(x) for x in q[:3]):
+            return False
+        checker.set_holding(np.linalg.solve(object_pose, tcp))
+        return all(checker.valid(x) for x in q[3:])
 
 
 def conjunction_poses(table: GraspPlacementTable, classes: list[GraspClass], grasp: tuple[int, int], placement: tuple[int, int],
@@ -211,15 +234,28 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
             theta = seq.theta_ini if (seq.kind == "grasp" and k == 0) else None
             phi = seq.extra.get("phi_start") if k == 0 else (seq.extra.get("phi_goal") if k == len(pairs) - 1 else None)
             obj, tcp, _ = conjunction_poses(work, classes, g, p, theta, phi)
+            end = _task_end(seq, k, len(pairs))
+            if end is not None:  # the task's pick-up or destination, away from H
+                obj = seq.extra[f"{end}_pose"]
+                tcp = obj @ classes[g[0]].pose(work.theta[g[1]])
             q = realiser.configurations(obj, tcp, q_prev)
             if q is None:
                 bad = (k, g, p)
                 break
-            out.append(Conjunction(g, p, obj, tcp, q, work.phi[p[1]] if phi is None else phi))
+            out.append(Conjunction(g, p, obj, tcp, q, work.phi[p[1]] if phi is None else phi,
+                                   None if end is None else seq.extra[f"{end}_xy"]))
             q_prev = q[0]
         if bad is None:
             return seq, out
         k, (c, t), (j, f) = bad
+        end = _task_end(seq, k, len(pairs))
+        if end is not None:  # not a table sample: the grasp leaves the end's set of legal grasps
+            kw[end][c, t] = False
+            if log is not None:
+                log.append(Removal("ik", _step_of(seq.kind, len(pairs), k), ((c, t), (j, f)),
+                                   f"no IK branch at the {'pick-up' if end == 'start' else 'destination'} whose grasp, "
+                                   f"approach and lifts are all free of collisions"))
+            continue
         before = int(work.q.sum())
         work.q[c, j, t, f] = False
         # the same grasp at the same placement usually fails at its other angles too (the arm's reach and self-
@@ -248,6 +284,13 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
                         f"retract or arm collision checks; try another table point or larger handx/worldz")
 
 
+def _task_end(seq: Sequence, k: int, n: int) -> str | None:
+    """"start" / "goal" when conjunction k of n is at the task's pick-up / destination (`task.task_query`)."""
+    if "start_pose" not in seq.extra:
+        return None
+    return "start" if k == 0 else ("goal" if k == n - 1 else None)
+
+
 def _step_of(kind: str, n: int, k: int) -> int:
     """The first plan step realising conjunction k of a sequence with n conjunctions."""
     return step_conjunctions(kind, n)[1].index(k) if n else 0
@@ -267,47 +310,94 @@ NEIGHBOURS = 2
 change of IK branch (the arm's motions vary slowly with the angles)."""
 
 
+def _flood(work: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser, cj: Conjunction, lose: int,
+           need: int) -> None:
+    """Remove cj's sample and the samples of its (class, placement) block connected to it (theta and phi neighbours,
+    wrapping around) at which IK branch `lose` is not free (joint limits, collisions with the table, the resting part
+    or itself) while `need` is."""
+    (c, t), (j, f) = cj.grasp, cj.placement
+    block = work.q[c, j]
+    t_n, f_n = block.shape
+    block[t, f] = False
+    checker = realiser.motion_checker_default()
+    g = classes[c]
+
+    def needs_switch(ti: int, fi: int) -> bool:
+        obj = work.object_pose(j, work.phi[fi])
+        q, ok = solve(realiser.ik, (obj @ g.pose(work.theta[ti]))[None])
+        checker.set_resting(obj, False)
+        free = [bool(ok[0, b]) and checker.valid(q[0, b]) for b in (lose, need)]
+        return not free[0] and free[1]
+
+    seen, todo = {(t, f)}, [(t, f)]
+    while todo:
+        ti, fi = todo.pop()
+        for nt, nf in (((ti + 1) % t_n, fi), ((ti - 1) % t_n, fi), (ti, (fi + 1) % f_n), (ti, (fi - 1) % f_n)):
+            if (nt, nf) in seen or not block[nt, nf]:
+                continue
+            seen.add((nt, nf))
+            if needs_switch(nt, nf):
+                block[nt, nf] = False
+                todo.append((nt, nf))
+
+
+def _window(work: GraspPlacementTable, cj: tuple[tuple[int, int], tuple[int, int]]) -> None:
+    """Remove a sample and its neighbours within `NEIGHBOURS` theta and phi samples of the same block."""
+    (c, t), (j, f) = cj
+    block = work.q[c, j]
+    t_n, f_n = block.shape
+    for dt in range(-NEIGHBOURS, NEIGHBOURS + 1):
+        block[(t + dt) % t_n, [(f + d) % f_n for d in range(-NEIGHBOURS, NEIGHBOURS + 1)]] = False
+
+
 def learn_removal(work: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser, bad: Conjunction,
-                  prev: Conjunction | None) -> tuple[int, tuple[int, int] | None]:
+                  prev: Conjunction | None, both: bool = False) -> tuple[int, tuple[int, int] | None]:
     """Remove from `work` every sample that needs the same arm-configuration change as the failed motion
     prev -> bad, not only `bad` (the next sequences would otherwise try its neighbours one at a time): with the
     closed form, when the motion switches IK branch b_prev -> b_bad, the samples of bad's (class, placement) block
-    connected to it (theta and phi neighbours, wrapping around) at which branch b_prev is not free (joint limits,
-    collisions with the table, the resting part or itself) while b_bad is; without a switch, or without a closed
-    form, its samples within `NEIGHBOURS` in theta and phi. Returns (samples removed, (b_prev, b_bad))."""
-    (c, t), (j, f) = bad.grasp, bad.placement
-    block = work.q[c, j]
-    t_n, f_n = block.shape
+    connected to it at which b_prev is not free while b_bad is (`_flood`); with `both` (prev has failed before), also
+    prev's connected samples at which b_bad is not free while b_prev is. Without a switch, or without a closed form,
+    bad's samples within `NEIGHBOURS` in theta and phi. Returns (samples removed, (b_prev, b_bad))."""
     b_bad = branch_of(realiser, bad)
     b_prev = branch_of(realiser, prev) if prev is not None else None
     before = int(work.q.sum())
-    block[t, f] = False
     if b_bad is None or b_prev is None or b_prev == b_bad:
-        for dt in range(-NEIGHBOURS, NEIGHBOURS + 1):
-            block[(t + dt) % t_n, [(f + d) % f_n for d in range(-NEIGHBOURS, NEIGHBOURS + 1)]] = False
+        _window(work, (bad.grasp, bad.placement))
     else:
-        checker = realiser.motion_checker_default()
-        g = classes[c]
-
-        def needs_switch(ti: int, fi: int) -> bool:
-            obj = work.object_pose(j, work.phi[fi])
-            q, ok = solve(realiser.ik, (obj @ g.pose(work.theta[ti]))[None])
-            checker.set_resting(obj, False)
-            free = [bool(ok[0, b]) and checker.valid(q[0, b]) for b in (b_prev, b_bad)]
-            return not free[0] and free[1]
-
-        seen, todo = {(t, f)}, [(t, f)]
-        while todo:
-            ti, fi = todo.pop()
-            for nt, nf in (((ti + 1) % t_n, fi), ((ti - 1) % t_n, fi), (ti, (fi + 1) % f_n), (ti, (fi - 1) % f_n)):
-                if (nt, nf) in seen or not block[nt, nf]:
-                    continue
-                seen.add((nt, nf))
-                if needs_switch(nt, nf):
-                    block[nt, nf] = False
-                    todo.append((nt, nf))
+        _flood(work, classes, realiser, bad, b_prev, b_bad)
+        if both:
+            _flood(work, classes, realiser, prev, b_bad, b_prev)
     work._matrix = None
     return before - int(work.q.sum()), (b_prev, b_bad) if b_prev is not None and b_bad is not None else None
+
+
+def explanation(table: GraspPlacementTable, own: Sequence | None, removals: list[Removal], seq: Sequence | None = None,
+                own_dict: dict | None = None) -> list[str]:
+    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
+    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one (`seq`,
+    None when there is none). `own` is the table's answer, or `own_dict` its `as_dict` (as `Sequence.extra["table"]`
+    holds it)."""
+    if own is not None:
+        own_dict = own.as_dict(table)
+    if own_dict is None:
+        return []
+    n = own_dict["regrasps"]
+    if not removals:
+        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
+    lines = [f"  removed {x.text(table)}" for x in removals]
+    own_pairs = set()
+    g, p = own_dict["grasps"], own_dict["placements"]
+    if own_dict["kind"] == "grasp":
+        for k, pl in enumerate(p):
+            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
+    else:
+        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
+    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
+    kinds = sorted({x.motion for x in removals})
+    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
+                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
+                 f"executable one has {'none' if seq is None else seq.regrasps}")
+    return lines
 
 
 def step_conjunctions(kind: str, n: int) -> tuple[list[str], list[int]]:
@@ -332,7 +422,8 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
     def step(kind: str, cj: Conjunction, theta: float | None = None) -> PlanStep:
         (c, t), (j, _) = cj.grasp, cj.placement
         g = np.linalg.solve(cj.object_pose, cj.tcp)
-        return PlanStep(kind=kind, idfreeairgrip=int(c * t_n + t), idfreetabletopplacement=int(j), position=np.array([hx, hy, 0.0]),
+        x, y = cj.position if cj.position is not None else (hx, hy)
+        return PlanStep(kind=kind, idfreeairgrip=int(c * t_n + t), idfreetabletopplacement=int(j), position=np.array([x, y, 0.0]),
                         yaw=float(cj.phi), object_pose=cj.object_pose, tcp=cj.tcp, grasp=g,
                         jawwidth=float(classes[c].opening), q_approach=cj.q[1], q_grasp=cj.q[0], q_retract=cj.q[2],
                         q_worlda=cj.q[3], q_worldaworldz=cj.q[4])
@@ -340,8 +431,8 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
     kinds, which = step_conjunctions(seq.kind, len(conj))
     steps = [step(k, conj[i]) for k, i in zip(kinds, which)]
     first, last = steps[0], steps[-1]
-    start = PoseQuery(first.idfreetabletopplacement, float(hx), float(hy), first.yaw)
-    goal = PoseQuery(last.idfreetabletopplacement, float(hx), float(hy), last.yaw)
+    start = PoseQuery(first.idfreetabletopplacement, float(first.position[0]), float(first.position[1]), first.yaw)
+    goal = PoseQuery(last.idfreetabletopplacement, float(last.position[0]), float(last.position[1]), last.yaw)
     return Plan(object=object_name, robot=robot.name, joint_names=list(robot.joint_names), start=start, goal=goal,
                 start_pose=first.object_pose, goal_pose=last.object_pose, steps=steps, handx=handx, worldz=worldz,
                 timings={"search": seq.seconds})
@@ -382,8 +473,10 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
         exc.removals, exc.table_sequence = [], None
         raise
     work = working_copy(table)
+    kw = {k: (v.copy() if isinstance(v, np.ndarray) else v) for k, v in kw.items()}  # end masks lose grasps
     log: list[Removal] = []
     failures, last = 0, ""
+    blamed: dict = {}  # how often each conjunction was the start of a failed motion
 
     def explained(seq: Sequence) -> Sequence:
         seq.extra["table"] = own.as_dict(table)
@@ -424,7 +517,16 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
         prev = None
         if res.blame[0] == "edge" and which[i - 1] != which[i]:
             prev = conj[which[i - 1]]
-        n, branches = learn_removal(work, classes, realiser, bad, prev)
+        end = _task_end(seq, which[i], len(conj))
+        if end is not None:
+            (c, t) = bad.grasp
+            kw[end][c, t] = False
+            n, branches = 1, None
+        else:
+            key = None if prev is None else (prev.grasp, prev.placement)
+            blamed[key] = blamed.get(key, 0) + 1
+            both = key is not None and blamed[key] > 1 and _task_end(seq, which[i - 1], len(conj)) is None
+            n, branches = learn_removal(work, classes, realiser, bad, prev, both)
         kind = "lines" if res.blame[0] == "step" else ("transfer" if plan.steps[i - 1].kind in ("pick", "regrasp") else "transit")
         log.append(Removal(kind, i, (bad.grasp, bad.placement), res.reason.split(": ", 1)[-1], n,
                            None if prev is None else (prev.grasp, prev.placement), branches))
@@ -444,3 +546,13 @@ def plan_placement_query(table, classes, realiser: Realiser, robot: Robot, objec
     """The placement-to-placement query, realised and turned into a plan; with `motions`, an executable plan with its
     timed motions."""
     return _plan(placement_query, table, classes, realiser, robot, object_name, motions, start=start, goal=goal)
+
+
+def plan_task_query(table, classes, realiser: Realiser, robot: Robot, object_name: str, pickup, destination,
+                    start: np.ndarray, goal: np.ndarray, motions: ExecOptions | None = None) -> tuple[Sequence, Plan | None]:
+    """Fig. 1's task (Section 5.1): the part picked up where it lies among the pick-up's obstacles with a grasp of
+    `start` ((C, T), `task.end_mask`), regrasped on the table at H as often as needed, and put at the destination
+    (inserted, the hand clear of its obstacles) with a grasp of `goal`. The plan's first step takes the part at the
+    pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles."""
+    return _plan(task_query, table, classes, realiser, robot, object_name, motions, start=start, goal=goal, pickup=pickup,
+                 destination=destination)

@@ -141,8 +141,9 @@ def _table_from_rows(rows: dict) -> GraspPlacementTable:
                                placements=rows["placements"], frame=table_frame(rows["table_point"]), timings=rows["timings"])
 
 
-def load_planner(db: str, object_name: str, robot_name: str | None = None) -> TableRun:
-    """The newest stored table of `object_name` (and robot), its classes, object and robot rebuilt from the store."""
+def load_planner(db: str, object_name: str, robot_name: str | None = None, gripper: Gripper | None = None) -> TableRun:
+    """The newest stored table of `object_name` (and robot), its classes, object and robot rebuilt from the store
+    with the planning `gripper` it was built with (default: the Franka hand)."""
     with Store(db, read_only=True) as store:
         idobject, obj = get_object(store, object_name)
         idrobot = None
@@ -152,23 +153,27 @@ def load_planner(db: str, object_name: str, robot_name: str | None = None) -> Ta
         rows = sql.load_table(store, pid)
         classes = [GraspClass(**d) for d in sql.load_classes(store, rows["idclasses"])]
         r = robot_row(store, rows["idrobot"])
-    robot = _robot(r)
+    robot = _robot(r, gripper)
     return TableRun(obj, robot, robot.gripper, classes, _table_from_rows(rows), rows["idclasses"], pid, (True, True))
 
 
-def _robot(row: dict) -> Robot:
+def _robot(row: dict, gripper: Gripper | None = None) -> Robot:
     """The stored robot rebuilt: the built-in of that name when its kinematics digest matches, else from the row."""
     name = row["name"]
     try:
-        robot = get_robot(name)
+        robot = get_robot(name, gripper=gripper)
         if robot.spec.digest == row["digest"]:
             return robot
     except WorkbenchError:
         pass
     spec = RobotSpec(name=name, urdf=row["urdf"], urdf_path="", tip_frame=row["tip_frame"], tcp_frame=row["tcp_frame"],
                      mount=row["mount"], base=row["base"], drop_geometry=tuple(row["drop_geometry"]),
-                     locked=tuple((k, float(v)) for k, v in row["locked"].items()))
-    return robot_from_spec(spec)
+                     locked=tuple((k, float(v)) for k, v in row["locked"].items()), gripper=gripper)
+    robot = robot_from_spec(spec)
+    if robot.spec.digest != row["digest"]:
+        raise WorkbenchError(f"robot {name!r} in the store was built with another gripper than {robot.gripper.name!r}; "
+                             f"give gpplan the --gripper it was built with")
+    return robot
 
 
 def plan_validator(db: str, run: TableRun, scene: Scene) -> PlanValidator:
@@ -237,7 +242,8 @@ def stored_validator(db: str, run: TableRun, idplan: int) -> PlanValidator:
     return _validators(db, run, idplan)[0]
 
 
-def _validators(db: str, run: TableRun, idplan: int, acc=None) -> tuple[PlanValidator, TrajectoryValidator | None]:
+def _validators(db: str, run: TableRun, idplan: int, acc=None,
+                obstacles: tuple = ()) -> tuple[PlanValidator, TrajectoryValidator | None]:
     with Store(db, read_only=True) as store:
         _, obj = object_row(store, run.obj.name)
         r = robot_row(store, sql.table_robot(store, run.idtable))
@@ -246,17 +252,19 @@ def _validators(db: str, run: TableRun, idplan: int, acc=None) -> tuple[PlanVali
         scene = scene_row(store, sql.plan_scene(store, idplan))
     rows = {"robot": r, "object": obj, "gripper": g, "scene": scene}
     pv = validator_from_rows(rows, free_poses=free)
-    return pv, (None if acc is None else trajectory_validator_from_rows(rows, pv, acc))
+    return pv, (None if acc is None else trajectory_validator_from_rows(rows, pv, acc, obstacles))
 
 
-def validate_stored(db: str, run: TableRun, idplan: int, plan: Plan, require_motion: bool = False) -> ValidationReport:
+def validate_stored(db: str, run: TableRun, idplan: int, plan: Plan, require_motion: bool = False,
+                    obstacles: tuple = ()) -> ValidationReport:
     """A stored plan (with the store's ids, as `save_plan` returns it) checked like the roadmap planner's plans
     (`wan_harada.planner.Planner.validate`): its waypoints, and its timed trajectory when it has one (required with
-    `require_motion`), by the independent validators rebuilt from the store's rows."""
+    `require_motion`), by the independent validators rebuilt from the store's rows, the trajectory also against the
+    task's `obstacles` ((mesh, world pose) pairs)."""
     acc = None
     if plan.segments:
         acc = np.broadcast_to(np.asarray(plan.acc or DEFAULT_ACC, dtype=np.float64), (len(plan.joint_names),))
-    pv, tv = _validators(db, run, idplan, acc)
+    pv, tv = _validators(db, run, idplan, acc, obstacles)
     report = pv.check(plan)
     if tv is not None:
         errors, knots = tv.check(plan, plan.segments)

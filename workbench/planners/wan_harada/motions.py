@@ -18,6 +18,7 @@ alternatives says so in one line.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -395,10 +396,12 @@ class ExecResult:
 
 
 def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), allowed: AllowedPairs | None = None,
-                    alternatives: int = 0) -> ExecResult:
+                    alternatives: int = 0, physics: Callable | None = None) -> ExecResult:
     """The fewest-regrasp plan whose motions are all found (see the module docstring), and up to `alternatives` next
     best executable plans. Raises the search's PlanningError when start or goal is unreachable or unconnected;
-    PlanningError(reason "exhausted") when every alternative failed or `max_removed` removals did not help."""
+    PlanningError(reason "exhausted") when every alternative failed or `max_removed` removals did not help.
+    `physics(plan)` returns None or (failing step, why): a timed plan it fails is treated like a failed motion of
+    that step (its node or grip removed, the graph searched again); alternatives are not checked by it."""
     allowed = allowed if allowed is not None else getattr(planner, "allowed", None)
     checker = motion_checker(planner, allowed, opts.motion)
     robot = planner.robot
@@ -426,8 +429,13 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
         t0 = time.perf_counter()
         motion, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz)
         seconds += time.perf_counter() - t0
+        verdict = None
         if motion.ok:
             _attach(plan, motion, lines, removed, seconds, opts.acc, robot.nq)
+            verdict = physics(plan) if physics is not None else None
+            if verdict is not None:
+                motion.reason, motion.blame = verdict[1], ("step", int(verdict[0]))
+        if motion.ok and verdict is None:
             out = ExecResult(plan, motion, removed, seconds, failures, searched, result=result)
             if alternatives > 0:
                 more = search(rm, s_side, g_side, planner.evaluate, alternatives, True)

@@ -253,14 +253,16 @@ class Planner:
         return report
 
     def plan(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True, validate: bool = True,
-             motion: bool = True, exec_opts: ExecOptions | None = None) -> list[Plan]:
+             motion: bool = True, exec_opts: ExecOptions | None = None, physics=None) -> list[Plan]:
         """The best plan and up to `alternatives` next best (Section V), each checked by `workbench.validation` when
         `validate` (a plan that fails is dropped; PlanningError when none passes). With `motion` (the default) the
         plans are executable: their motions are planned and timed, failing nodes or grips removed and the graph
-        searched again (`motions.plan_executable`); `last_motion` keeps the outcome."""
+        searched again (`motions.plan_executable`); `last_motion` keeps the outcome. `physics` (a function of a plan
+        returning None or (failing step, why), e.g. `simulation.stages.physics_check`) treats a plan that fails it
+        like a failed motion."""
 
         if motion:
-            res = plan_executable(self, start, goal, exec_opts or ExecOptions(), alternatives=alternatives)
+            res = plan_executable(self, start, goal, exec_opts or ExecOptions(), alternatives=alternatives, physics=physics)
             self.last_motion = res
             result = res.result
             plans = [res.plan, *res.alternatives]

@@ -27,7 +27,7 @@ from workbench.grasping.placements import (
     stable_placements,
 )
 from workbench.planners.wan_harada.planner import Planner
-from workbench.planners.wan_harada.plans import Plan, plan_rows
+from workbench.planners.wan_harada.plans import Plan, PlanStep, plan_rows
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.roadmap import build_roadmap, grid_index
 from workbench.planners.wan_harada.tabletop import (
@@ -39,14 +39,16 @@ from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import WORLDA, IKOptions, diagnose_unreachable, iter_ik
 from workbench.robots.model import ROBOTS, Robot, RobotSpec, builtin_robot, get_robot
 from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
+from workbench.robots.timing import TimedSegment, Trajectory
 from workbench.store import Store
 from workbench.store import robots as robot_sql
 from workbench.store import wan_harada as sql
-from workbench.store.grasps import find_grasps, load_grasps, save_grasps
-from workbench.store.objects import gripper_row, object_row, put_object
+from workbench.store.grasps import find_grasps, latest_paramset_for, load_grasps, save_grasps
+from workbench.store.objects import gripper_row, object_name, object_row, put_object
 from workbench.store.placements import (
     find_placements,
     find_tabletop,
+    TABLETOP_STAGE,
     latest_tabletop_paramset,
     load_free_tabletop_grips,
     load_placements,
@@ -69,6 +71,9 @@ if TYPE_CHECKING:  # pragma: no cover
 
 @dataclass
 class GraspsResult:
+    """The free-air grasp stage's result (Section III): its object and parameter set, whether the rows were reused,
+    and the grasps' TCP poses (N, 4, 4) in the object frame with their jaw widths (N,) in metres."""
+
     idobject: int
     idparamset: int
     reused: bool
@@ -100,6 +105,9 @@ def ensure_grasps(db: str | Path | Store, obj: ObjectModel, gripper: Gripper, pa
 
 @dataclass
 class PlacementsResult:
+    """The placement stage's result (Section IV): the parameter sets of the free and tabletop placements, whether
+    they were reused, the placements, the free tabletop grips per placement and the tabletop counts."""
+
     idplacements: int
     idtabletop: int
     reused: bool
@@ -193,8 +201,13 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
     store = db if isinstance(db, Store) else Store(db, create=False)
     try:
         oid, obj = get_object(store, object_name)
-        tt = latest_tabletop_paramset(store, oid) if idtabletop is None else int(idtabletop)
         rrow = robot_row(store, robot_name)
+        if idtabletop is not None:
+            tt = int(idtabletop)
+        elif rrow["idgripper"] is not None:  # the latest tabletop grips of the robot's gripper
+            tt = latest_paramset_for(store, TABLETOP_STAGE, oid, gripper_row(store, rrow["idgripper"])["digest"], "placements")
+        else:
+            tt = latest_tabletop_paramset(store, oid)
         # the run with the most rows (then the newest) first: (idscene, idikret)
         runs = [(int(r["idscene"]), int(r["idikret"])) for r in
                 sorted(ik_runs(store, idtabletop=tt, idrobot=rrow["idrobot"]), key=lambda r: (-r["rows"], -r["last"]))]
@@ -307,7 +320,7 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
     robot = get_robot(robot) if isinstance(robot, str) else robot
     out = BuildResult(name=obj.name, robot=robot.name)
     try:
-        hand = franka_hand()
+        hand = robot.gripper
         t0 = time.perf_counter()
         g = ensure_grasps(store, obj, hand, gparams)
         out.timings["grasps"], out.reused["grasps"], out.counts["grasps"] = time.perf_counter() - t0, g.reused, g.count
@@ -330,7 +343,7 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
             return out
         t0 = time.perf_counter()
         planner = load_planner(store, obj.name, ik_ids["idrobot"], handx, worldz, idtabletop=p.idtabletop,
-                               idscene=ik_ids["idscene"], worlda=worlda)
+                               idscene=ik_ids["idscene"], worlda=worlda, gripper=robot.gripper)
         out.timings["graph"] = time.perf_counter() - t0
         out.counts.update({f"graph_{k}": v for k, v in planner.roadmap.summary().items()})
         out.counts["placement_ids"] = planner.placement_ids(gripped=True)
@@ -392,6 +405,8 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
         raise RobotError(f"the fixed links ({', '.join(hit[:3])}) of robot {robot.name!r} cut into the table; move its base "
                          f"(--base) or the table (--table)")
     oid, obj = get_object(store, obj_name)
+    if idtabletop is None:  # the latest tabletop grips of this robot's gripper
+        idtabletop = latest_paramset_for(store, TABLETOP_STAGE, oid, robot.gripper, "placements")
     grips = load_tabletop_grips(store, oid, idtabletop)
     pid = int(np.asarray(grips["idparamset"])) if "idparamset" in grips else int(idtabletop if idtabletop is not None else -1)
     ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
@@ -527,3 +542,45 @@ def grasp_reason(store: Store, object_name: str, gripper: Gripper, params: Grasp
     """Why the stored grasp set of these parameters is empty (re-planned: the store keeps rows, not the filters)."""
     _, obj = get_object(store, object_name)
     return plan_grasps(obj, gripper, params).empty_reason
+
+
+def load_plan(store: Store, idplan: int) -> Plan:
+    """A stored plan (either planner's) rebuilt from its `plan`, `planstep` and `plansegment` rows, with its timed
+    motions (knot times from the plan's start), the grasps as TCP in the object frame."""
+    row, steps = sql.load_plan_rows(store, idplan)
+    seg = sql.load_plan_segments(store, idplan).to_pydict()
+    nq = len(robot_row(store, int(row["idrobot"]))["joint_names"])
+    ret = ikret_row(store, int(row["idikret"]))
+    s = steps.to_pydict()
+    out = []
+    for i in range(len(s["seq"])):
+        obj_pose = np.asarray(s["object"][i], dtype=np.float64).reshape(4, 4)
+        tcp = np.asarray(s["tcp"][i], dtype=np.float64).reshape(4, 4)
+        q = {k: None if s[k][i] is None else np.asarray(s[k][i], dtype=np.float64)
+             for k in ("jnt_approach", "jnt_grasp", "jnt_retract", "jnt_worlda", "jnt_worldaworldz")}
+        out.append(PlanStep(kind=s["kind"][i], idfreeairgrip=int(s["idfreeairgrip"][i]),
+                            idfreetabletopplacement=int(s["idfreetabletopplacement"][i]),
+                            position=np.asarray(s["position"][i], dtype=np.float64), yaw=float(s["yaw"][i]), object_pose=obj_pose,
+                            tcp=tcp, grasp=np.linalg.inv(obj_pose) @ tcp, jawwidth=float(s["jawwidth"][i]),
+                            q_approach=q["jnt_approach"], q_grasp=q["jnt_grasp"], q_retract=q["jnt_retract"],
+                            idtabletopgrips=s["idtabletopgrips"][i], q_worlda=q["jnt_worlda"], q_worldaworldz=q["jnt_worldaworldz"]))
+    segments = []
+    for k in range(len(seg["seq"])):
+        t = np.asarray(seg["t"][k], dtype=np.float64)
+        traj = Trajectory(t - float(seg["t0"][k]), np.asarray(seg["q"][k], dtype=np.float64).reshape(len(t), nq),
+                          np.asarray(seg["qd"][k], dtype=np.float64).reshape(len(t), nq))
+        segments.append(TimedSegment(seg["kind"][k], seg["caption"][k], int(seg["step"][k]), bool(seg["holding"][k]),
+                                     float(seg["t0"][k]), traj, seg["method"][k] or "", float(seg["jaw"][k] or 0.0)))
+    query = lambda p, xyyaw: PoseQuery(int(p), *map(float, xyyaw))  # noqa: E731
+    ids = {k: int(row[k]) for k in ("idobject", "idrobot", "idscene", "idikret", "idtabletop") if row.get(k) is not None}
+    return Plan(object=object_name(store, int(row["idobject"])), robot=robot_row(store, int(row["idrobot"]))["name"],
+                joint_names=list(robot_row(store, int(row["idrobot"]))["joint_names"]),
+                start=query(row["start_placement"], row["start_xyyaw"]), goal=query(row["goal_placement"], row["goal_xyyaw"]),
+                start_pose=out[0].object_pose.copy(), goal_pose=out[-1].object_pose.copy(), steps=out, handx=ret["handx"],
+                worldz=ret["worldz"], worlda=ret["worlda"], rank=int(row["rank"] or 0), ids=ids, segments=segments,
+                removed=int(row.get("removed") or 0), acc=list(row.get("acc") or []), planner=row.get("planner") or "wan_harada")
+
+
+def stored_robot(store: Store, idrobot: int, gripper: Gripper | None = None) -> Robot:
+    """The library robot of a stored robot row, with its planning gripper (default: the Franka hand)."""
+    return _robot_from_row(robot_row(store, int(idrobot)), gripper)

@@ -1,0 +1,63 @@
+"""The pad contact model's first touches (CONVENTIONS.md, Gripper) against computations that share none of its code."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+
+from workbench.grasping import _padkernel
+from workbench.grasping.pads import first_touches, pad_rectangle
+
+
+def _bumpy(subdivisions: int = 4) -> trimesh.Trimesh:
+    """A 60 mm sphere with smooth bumps: no face parallel to a pad, contacts off the jaw axis."""
+    m = trimesh.creation.icosphere(subdivisions=subdivisions, radius=0.03)
+    v = m.vertices
+    r = 1 + 0.08 * np.sin(5 * v[:, 0] / 0.03) * np.cos(4 * v[:, 1] / 0.03)
+    return trimesh.Trimesh(v * r[:, None], m.faces, process=False)
+
+
+def test_first_touch_is_the_highest_surface_point_in_the_pad_footprint(hand):
+    """Rays cast along -y through a dense grid over the left pad's rectangle find the surface's highest point there:
+    the first touch is at least that high, and no higher than it plus the grid's slope error."""
+    mesh = _bumpy()
+    rng = np.random.default_rng(1)
+    face = rng.choice(len(mesh.faces), 12, replace=False)
+    origins, axes = mesh.triangles_center[face], mesh.face_normals[face]
+    angles = np.array([0.0, 1.1])
+    t = first_touches(mesh, origins, axes, angles, hand)
+    assert t.hit.all()
+    cx, cz, hx, hz = pad_rectangle(hand)
+    gx, gz = np.meshgrid(np.linspace(-hx, hx, 41) + cx, np.linspace(-hz, hz, 41) + cz)
+    for h in range(len(t)):
+        frame = t.poses[h]
+        x, y, z, o = frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3]
+        starts = o + gx.reshape(-1, 1) * x + gz.reshape(-1, 1) * z + 0.2 * y
+        locs, ray, _ = mesh.ray.intersects_location(starts, np.tile(-y, (len(starts), 1)), multiple_hits=False)
+        top = ((locs - o) @ y).max()
+        touch = (t.point0[h] - o) @ y
+        # the pad's contact lies in its rectangle, on the surface
+        local = np.linalg.solve(frame[:3, :3], t.point0[h] - o)
+        assert abs(local[0] - cx) <= hx + 1e-9 and abs(local[2] - cz) <= hz + 1e-9
+        assert trimesh.proximity.closest_point(mesh, t.point0[h][None])[1][0] < 1e-9
+        assert touch >= top - 1e-7
+        assert touch <= top + 1e-3  # 1 mm: a grid step (0.5 mm) on slopes of at most about 60 degrees
+
+
+def test_grid_and_scan_give_the_same_touches(hand):
+    """The spatial index only chooses which triangles are tested: its touches equal a scan of every triangle."""
+    mesh = _bumpy(5)  # 20k triangles, above the scan threshold
+    rng = np.random.default_rng(2)
+    face = rng.choice(len(mesh.faces), 40, replace=False)
+    origins, axes = mesh.triangles_center[face], mesh.face_normals[face]
+    angles = 2 * np.pi * np.arange(4) / 4
+    grid = first_touches(mesh, origins, axes, angles, hand)
+    radius = hand.pad_radius
+    scan = _padkernel.triangle_grid(np.asarray(mesh.triangles), radius, brute=10**9)
+    assert len(scan[6]) == len(mesh.faces) and len(_padkernel.triangle_grid(np.asarray(mesh.triangles), radius)[6]) < len(mesh.faces)
+    mesh._cache[f"workbench_pad_grid_{radius!r}"] = scan
+    brute = first_touches(mesh, origins, axes, angles, hand)
+    assert grid.hit.sum() > 100
+    assert np.array_equal(grid.hit, brute.hit)
+    assert np.array_equal(grid.tri0, brute.tri0) and np.array_equal(grid.tri1, brute.tri1)
+    assert np.allclose(grid.poses, brute.poses, atol=1e-12)

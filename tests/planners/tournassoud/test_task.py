@@ -1,0 +1,184 @@
+"""The task's pick-up and destination (Tournassoud et al. 1987, Section 5.1, Fig. 1): obstacles and the insertion
+turn into the first and last grasps' legal angles; checked against coal, independently of the planner's fcl."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pytest
+
+from workbench.errors import WorkbenchError
+from workbench.grasping.placements import stable_placements
+from workbench.planners.tournassoud.classes import grasp_classes
+from workbench.planners.tournassoud.table import TableParams, build_table
+from workbench.planners.tournassoud.task import TaskEnd, end_mask, task_query, walls_around
+
+
+@pytest.fixture(scope="module")
+def setup(lpart, hand, puma560):
+    classes = grasp_classes(lpart, hand)
+    table = build_table(classes, stable_placements(lpart).poses, puma560, hand, TableParams(table_point=(0.45, 0.1)),
+                        progress=False)
+    return classes, table
+
+
+_BVH: dict = {}
+
+
+def _coal(mesh) -> coal.BVHModelOBBRSS:
+    key = (id(mesh), len(mesh.vertices), float(np.asarray(mesh.vertices).sum()))
+    if key in _BVH:
+        return _BVH[key][1]
+    m = coal.BVHModelOBBRSS()
+    m.beginModel(len(mesh.faces), len(mesh.vertices))
+    m.addVertices(np.asarray(mesh.vertices, dtype=np.float64))
+    m.addTriangles(np.asarray(mesh.faces, dtype=np.int64))
+    m.endModel()
+    _BVH[key] = (mesh, m)  # the mesh kept alive so that its id is not reused
+    return m
+
+
+def _hits(hand_mesh, poses: np.ndarray, obstacles) -> bool:
+    """coal: whether the hand mesh at any of the world poses touches any obstacle (a check sharing no code with the
+    planner's python-fcl test)."""
+    hand = _coal(hand_mesh)
+    req = coal.CollisionRequest()
+    for o in obstacles:
+        obs = _coal(o.mesh)
+        to = coal.Transform3s(o.pose[:3, :3], o.pose[:3, 3])
+        for p in poses:
+            res = coal.CollisionResult()
+            if coal.collide(hand, coal.Transform3s(p[:3, :3], p[:3, 3]), obs, to, req, res):
+                return True
+    return False
+
+
+def _path(tcp: np.ndarray, approach: float, insertion=None, depth: float = 0.0) -> np.ndarray:
+    """The test's own sweep: the grasp backed off along its -z every 5 mm, and back along the insertion every 2 mm."""
+    out = []
+    for s in np.linspace(0, approach, int(np.ceil(approach / 0.005)) + 1):
+        p = tcp.copy()
+        p[:3, 3] -= s * tcp[:3, 2]
+        out.append(p)
+    if insertion is not None:
+        for s in np.linspace(0, depth, int(np.ceil(depth / 0.002)) + 1):
+            p = tcp.copy()
+            p[:3, 3] -= s * np.asarray(insertion)
+            out.append(p)
+    return np.array(out)
+
+
+def test_pickup_obstacles_refuse_the_grasps_that_hit_them(setup, lpart, hand, puma560):
+    """The L part standing in a pocket (walls on two sides, 20 mm away): the grasps whose hand hits a wall at the grasp or
+    on its approach are refused, exactly those by coal; the chosen first grasp of a task query clears them."""
+    classes, table = setup
+    bare = TaskEnd(2, 0.45, -0.12, np.radians(30))
+    pocket = TaskEnd(2, 0.45, -0.12, np.radians(30))
+    pocket.obstacles = walls_around(lpart.mesh, pocket.object_pose(table), gap=0.02, sides="y")
+    free, _ = end_mask(table, classes, bare, puma560, hand)
+    legal, counts = end_mask(table, classes, pocket, puma560, hand)
+    refused = free & ~legal
+    assert legal.any() and refused.any() and not (legal & ~free).any()
+    assert counts["obstacles"] == int(refused.sum())
+    obj = pocket.object_pose(table)
+    mesh = hand.collision_mesh(hand.jaw_max)
+    for (c, t), expect in [((c, t), True) for c, t in np.argwhere(refused)] + [((c, t), False) for c, t in np.argwhere(legal)]:
+        tcp = obj @ classes[c].pose(table.theta[t])
+        assert _hits(mesh, _path(tcp, pocket.approach), pocket.obstacles) == expect, (c, t)
+    dest = TaskEnd(0, 0.45, 0.32, 0.0)
+    seq = task_query(table, legal, end_mask(table, classes, dest, puma560, hand)[0], pocket, dest)
+    c, t = seq.grasps[0]
+    assert legal[c, t] and not _hits(mesh, _path(obj @ classes[c].pose(table.theta[t]), pocket.approach), pocket.obstacles)
+    assert np.allclose(seq.extra["start_pose"], obj) and seq.placements[0][0] == 2
+
+
+def test_insertion_keeps_the_last_hand_clear_of_the_fixture(setup, lpart, hand, puma560):
+    """The L part lying in a slot (walls 10 mm either side along x, 20 mm taller than the part), inserted straight down
+    over 30 mm: every grasp refused at the destination hits the fixture by coal somewhere along the insertion or the
+    retract, every accepted one clears it all along, and the query's last grasp is an accepted one."""
+    classes, table = setup
+    dest = TaskEnd(0, 0.45, 0.32, 0.0, insertion=np.array([0.0, 0.0, -2.0]), depth=0.03)
+    assert np.allclose(dest.insertion, [0, 0, -1])
+    obj = dest.object_pose(table)
+    height = float(lpart.mesh.copy().apply_transform(obj).bounds[1, 2])
+    dest.obstacles = walls_around(lpart.mesh, obj, gap=0.01, height=height + 0.02, sides="x")
+    bare = TaskEnd(0, 0.45, 0.32, 0.0)
+    free, _ = end_mask(table, classes, bare, puma560, hand)
+    legal, _ = end_mask(table, classes, dest, puma560, hand)
+    assert legal.any() and (free & ~legal).any() and not (legal & ~free).any()
+    mesh = hand.collision_mesh(hand.jaw_max)
+    for (c, t) in np.argwhere(free):
+        tcp = obj @ classes[c].pose(table.theta[t])
+        assert _hits(mesh, _path(tcp, dest.approach, dest.insertion, dest.depth), dest.obstacles) == (not legal[c, t]), (c, t)
+    pick = TaskEnd(2, 0.45, -0.12, np.radians(30))
+    seq = task_query(table, end_mask(table, classes, pick, puma560, hand)[0], legal, pick, dest)
+    c, t = seq.grasps[-1]
+    assert legal[c, t] and seq.placements[-1][0] == 0 and np.allclose(seq.extra["goal_pose"], obj)
+    with pytest.raises(WorkbenchError, match="insertion direction"):
+        TaskEnd(0, 0.45, 0.32, insertion=np.zeros(3))
+    with pytest.raises(WorkbenchError, match="placement 9 does not exist"):
+        TaskEnd(9, 0.45, 0.32).object_pose(table)
+
+
+def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
+    """`gpplan --pickup ... --destination ... --insert` with obstacle files: Fig. 1's task (the L part standing in a
+    pocket, laid into a slot) gives an executable plan, stored and passed by the validators (trajectory checked against
+    the obstacles too); it starts by taking the part at the pick-up and ends by putting it at the destination; every
+    knot of its motions keeps the hand and the held part clear of the obstacles, by coal on the robot's FK."""
+    import json
+
+    import trimesh
+
+    from workbench.cli.main import main
+    from workbench.robots.model import get_robot
+
+    mesh = tmp_path / "L.stl"
+    lpart.mesh.export(mesh)
+    db = str(tmp_path / "task.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--table-point", "0.45,0.1"]) == 0
+    from workbench.planners.tournassoud.stages import load_planner
+
+    run = load_planner(db, "L")
+    pick, dest = TaskEnd(2, 0.55, -0.05, np.radians(30)), TaskEnd(0, 0.35, 0.25, 0.0)
+    args, obstacles = [], []
+    for flag, end, gap, sides in (("--pickup-obstacle", pick, 0.02, "y"), ("--destination-obstacle", dest, 0.01, "x")):
+        for k, o in enumerate(walls_around(lpart.mesh, end.object_pose(run.table), gap=gap, sides=sides)):
+            f = tmp_path / f"{flag[2:6]}{k}.stl"
+            o.mesh.export(f)
+            args += [flag, f"{f}@{o.pose[0, 3]:.6f},{o.pose[1, 3]:.6f},{o.pose[2, 3]:.6f}"]
+            obstacles.append(o)
+    js = tmp_path / "task.json"
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", "2,0.55,-0.05,30", "--destination", "0,0.35,0.25,0",
+                 "--insert", "0,0,-1,0.02", *args, "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    doc = json.loads(js.read_text())
+    plan = doc["plan"]
+    assert plan is not None and "validator: ok" in out and "the pick-up" in out and "the destination" in out, out
+    assert plan["steps"][0]["kind"] == "pick" and plan["steps"][-1]["kind"] == "place"
+    assert np.allclose(np.reshape(plan["steps"][0]["object_pose"], (4, 4)), pick.object_pose(run.table), atol=1e-9)
+    assert np.allclose(np.reshape(plan["steps"][-1]["object_pose"], (4, 4)), dest.object_pose(run.table), atol=1e-9)
+    robot = get_robot("puma560")
+    body = hand.collision_mesh(hand.jaw_max)
+    held = trimesh.Trimesh(lpart.mesh.vertices, lpart.mesh.faces, process=False)
+    knots = 0
+    for seg in plan["motion"]["segments"]:
+        step = plan["steps"][seg["step"]]
+        for q in seg["q"]:
+            tcp = robot.tcp_pose(np.asarray(q))
+            assert not _hits(body, tcp[None], obstacles), (seg["kind"], seg["caption"])
+            if seg["holding"]:
+                assert not _hits(held, (tcp @ np.linalg.inv(np.reshape(step["grasp"], (4, 4))))[None], obstacles)
+            knots += 1
+    assert knots > 100
+    assert doc["task"]["destination"]["insertion"] == [0.0, 0.0, -1.0] and len(doc["task"]["pickup"]["obstacles"]) == 2
+    # bad task input: one line each, exit 2, nothing planned
+    base = ["gpplan", "--db", db, "--object", "L", "--no-motion", "--no-save"]
+    ends = ["--pickup", "2,0.55,-0.05,30", "--destination", "0,0.35,0.25,0"]
+    for bad in (["--pickup", "2,0.55,-0.05,30"], ["--pickup", "2,x,0,0", "--destination", "0,0.35,0.25,0"],
+                ends + ["--insert", "0,0,0"], ends + ["--insert", "0,0,-1,-0.1"],
+                ends + ["--pickup-obstacle", str(tmp_path / "missing.stl") + "@0,0,0"],
+                ends + ["--pickup-obstacle", "nopose.stl"], ends + ["--from", "0,0", "--to", "1,0"],
+                ["--from", "0,0", "--to", "1,0", "--insert", "0,0,-1"], ends[:2] + ["--destination", "9,0.35,0.25,0"]):
+        assert main(base + bad) == 2, bad
+    err = capsys.readouterr().err
+    assert "Traceback" not in err

@@ -1,0 +1,152 @@
+"""Gripper loaders: spec files, URDF grippers (prismatic and a mimic linkage) and a robot's own hand, against
+pinocchio's FK and the spec's own numbers; every bad spec refused in one line, exit 2, nothing written."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import yaml
+
+from workbench.cli.main import main
+from workbench.errors import GripperError
+from workbench.resources import erd_robots
+from workbench.robots.gripper import BUNDLED, franka_hand, gripper_from_urdf, load_gripper
+
+ROBOTIQ = BUNDLED["robotiq-2f85"]
+TIAGO = erd_robots() / "tiago_pro_description" / "robots" / "tiago_pro.urdf"
+TIAGO_FINGERS = ("gripper_left_inner_finger_left_joint", "gripper_left_inner_finger_right_joint")
+
+
+def test_robotiq_spec_geometry_follows_its_fields():
+    spec = yaml.safe_load(ROBOTIQ.read_text())
+    g = load_gripper("robotiq-2f85")
+    assert (g.jaw_min, g.jaw_max) == (0.0, 0.085)
+    assert np.allclose(g.tcp_in_hand[:3, 3], spec["tcp"])
+    ext, pose = g.finger_boxes[g.pad]
+    assert np.allclose(ext, [spec["pad"]["size"][0], spec["pad"]["thickness"], spec["pad"]["size"][1]])
+    for width in (0.0, 0.03, 0.085):  # pad inner faces at +/- width / 2 around the TCP, centred on its height
+        (_, left), (_, right) = g.finger_poses(width)[2 * g.pad: 2 * g.pad + 2]
+        assert np.isclose(left[1, 3] - ext[1] / 2, width / 2) and np.isclose(right[1, 3] + ext[1] / 2, -width / 2)
+        assert np.isclose(left[2, 3], 0.0)
+    palm_top = spec["palm"]["offset"][2] + spec["palm"]["size"][2] / 2
+    assert np.isclose(g.body.bounds[1, 2], palm_top - spec["tcp"][2])  # the palm in the TCP frame
+    # every field enters the digest: a spec differing only in mass is another gripper
+    assert g.digest != franka_hand().digest
+
+
+def test_spec_digest_covers_every_field(tmp_path):
+    spec = yaml.safe_load(ROBOTIQ.read_text())
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a.write_text(json.dumps(spec))
+    b.write_text(json.dumps({**spec, "mass": 1.5}))
+    assert load_gripper(str(a)).digest == load_gripper(str(ROBOTIQ)).digest
+    assert load_gripper(str(b)).digest != load_gripper(str(a)).digest
+
+
+def test_urdf_gripper_matches_pinocchio_fk():
+    g = load_gripper("parallel60")
+    urdf = str(BUNDLED["parallel60"])
+    model = pin.buildModelFromUrdf(urdf)
+    data = model.createData()
+    q = pin.neutral(model)
+    q[:] = 0.02  # both fingers 20 mm out: pads 2 * 20 mm apart (they touch at 0)
+    pin.framesForwardKinematics(model, data, q)
+    tcp = data.oMf[model.getFrameId("p60_tcp")]
+    left = tcp.actInv(data.oMf[model.getFrameId("p60_left_finger")].translation)
+    assert np.isclose(left[1], 0.02)  # the finger link's origin is its inner face
+    assert (g.jaw_min, g.jaw_max) == pytest.approx((0.0, 0.06))
+    assert np.allclose(g.tcp_in_hand[:3, 3], [0, 0, 0.1])
+
+
+def test_tiago_own_hand_linkage_sampled_along_the_stroke():
+    """Tiago Pro's gripper: revolute four-bar fingers driven by one joint; the fingertips stay parallel."""
+    g = load_gripper("own", robot_urdf=TIAGO, tip="arm_left_tool_link", finger_joints=TIAGO_FINGERS)
+    assert 0.0 <= g.jaw_min < 0.02 and 0.06 < g.jaw_max < 0.1
+    # independent: the fingertip links' distance along the jaw axis at both ends of the driver's range
+    model = pin.buildModelFromUrdf(str(TIAGO))
+    data = model.createData()
+    tips = []
+    for s in (0.0, 0.8028514559173916):
+        q = pin.neutral(model)
+        for j in ("gripper_left_finger_joint", "gripper_left_inner_finger_left_joint", "gripper_left_inner_finger_right_joint",
+                  "gripper_left_outer_finger_right_joint"):
+            q[model.joints[model.getJointId(j)].idx_q] = s
+        for j in ("gripper_left_fingertip_left_joint", "gripper_left_fingertip_right_joint"):
+            q[model.joints[model.getJointId(j)].idx_q] = -s
+        pin.framesForwardKinematics(model, data, q)
+        a = data.oMf[model.getFrameId("gripper_left_fingertip_left_link")].translation
+        b = data.oMf[model.getFrameId("gripper_left_fingertip_right_link")].translation
+        tips.append(np.asarray(a - b))
+    axis = tips[1] / np.linalg.norm(tips[1])  # the jaw axis at full opening
+    assert abs(abs((tips[1] - tips[0]) @ axis) - (g.jaw_max - g.jaw_min)) < 2e-3
+
+
+def test_fingers_that_turn_are_refused(tmp_path):
+    """Break the linkage (the fingertip no longer counter-rotates): the pads turn, and the model says it cannot."""
+    text = TIAGO.read_text().replace('<mimic joint="gripper_left_finger_joint" multiplier="-1" offset="0"/>',
+                                     '<mimic joint="gripper_left_finger_joint" multiplier="0" offset="0"/>')
+    broken = tmp_path / "tiago_broken.urdf"
+    broken.write_text(text)
+    with pytest.raises(GripperError, match="stay parallel"):
+        gripper_from_urdf(broken, "arm_left_tool_link", None, TIAGO_FINGERS, package_dirs=[str(erd_robots().parent.parent)])
+
+
+def _spec(tmp_path, name="bad.yaml", **change):
+    spec = yaml.safe_load(ROBOTIQ.read_text())
+    for key, value in change.items():
+        cur = spec
+        *head, last = key.split("__")
+        for k in head:
+            cur = cur[k]
+        if value is None:
+            del cur[last]
+        else:
+            cur[last] = value
+    path = tmp_path / name
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+BAD = [
+    ({"stroke": [0.05, 0.05]}, "'stroke'"),
+    ({"pad__thickness": None}, "missing field 'pad.thickness'"),
+    ({"finger__size": [0.027, -0.014, 0.06]}, "'finger.size' must be positive"),
+    ({"tcp": [0.0, 0.0, 0.05]}, "outside the hand"),
+    ({"tcp": [0.2, 0.0, 0.15]}, "outside the hand"),
+]
+
+
+@pytest.mark.parametrize("change,words", BAD)
+def test_bad_spec_exits_2_in_one_line_and_writes_nothing(tmp_path, capsys, change, words):
+    bad = _spec(tmp_path, **change)
+    db = tmp_path / "s.duckdb"
+    mesh = str(BUNDLED["parallel60"].parents[1] / "objects" / "tube.stl")
+    assert main(["grasps", mesh, "--db", str(db), "--gripper", str(bad)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and words in err[0] and str(bad) in err[0]
+    assert not db.exists()
+
+
+def test_bad_urdf_gripper_exits_2(tmp_path, capsys):
+    mesh = str(BUNDLED["parallel60"].parents[1] / "objects" / "tube.stl")
+    db = tmp_path / "u.duckdb"
+    urdf = str(BUNDLED["parallel60"])
+    cases = [(["--gripper-hand", "nope"], "no hand link 'nope'"),
+             (["--gripper-fingers", "p60_left_joint,missing_joint"], "no finger joint 'missing_joint'"),
+             (["--gripper-tcp", "nowhere"], "no TCP frame 'nowhere'")]
+    for extra, words in cases:
+        assert main(["grasps", mesh, "--db", str(db), "--gripper", urdf, *extra]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0] and "parallel60.urdf" in err[0]
+    # the fingers closing along two different axes
+    skew = tmp_path / "skew.urdf"
+    skew.write_text(BUNDLED["parallel60"].read_text().replace('<axis xyz="0 -1 0"/>', '<axis xyz="0 -1 1"/>').replace(
+        '<mimic joint="p60_left_joint"/>', ""))
+    assert main(["grasps", mesh, "--db", str(db), "--gripper", str(skew), "--gripper-hand", "p60_hand",
+                 "--gripper-fingers", "p60_left_joint,p60_right_joint", "--gripper-tcp", "p60_tcp"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "skew.urdf" in err[0]
+    assert not db.exists()

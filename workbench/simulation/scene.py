@@ -1,0 +1,233 @@
+"""The MuJoCo scene of a plan (CONVENTIONS.md, Simulation): the arm, the planning gripper, the table and the part.
+
+- The arm is the robot's serial chain as the stored URDF gives it (the library's reduced pinocchio model: joint
+  placements, axes, limits, link masses and inertias), one position actuator per joint plus a velocity term that
+  follows the trajectory's velocities; the links are gravity-compensated, as an arm's own controller does. The
+  arm's links carry no collision geometry: the plan's trajectory is already checked against the table, the part
+  and itself at every knot (workbench.validation), and the physics here is the part's.
+- The gripper is the planning gripper's own geometry in its TCP frame (hand body mesh, finger boxes), its fingers
+  on two slide joints coupled to move together (as a parallel-jaw gripper's mechanism does), each driven by a
+  force-limited position actuator: closing squeezes with the grip force whatever the opening.
+- The table is a box whose top is z = 0 over the scene's table rectangle.
+- The part is a free body with the mass, centre of mass and inertia of its mesh at a density, colliding through
+  its convex decomposition (simulation.decomposition).
+Friction: the pads with the part use the plan's grasp friction, the table with the part the table friction
+(MuJoCo's geom priority picks the pad's or the table's coefficient in each pair).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+
+from workbench.errors import SimulationError
+
+ARM_KP = 4000.0  # N m / rad: position gain of every arm joint (tracking error I a / kp, under 0.1 mm at the TCP here)
+ARM_KV = 100.0  # N m s / rad: velocity gain toward the trajectory velocity (higher gains chatter the hand at 2 ms)
+ARM_ARMATURE = 0.1  # kg m^2: reflected rotor inertia, keeps stiff joints stable at a 2 ms step
+FINGER_KP = 20000.0  # N / m: finger position gain; closing aims past the closed stop so the force limit holds
+FINGER_DAMPING = 150.0  # N s / m
+FINGER_ARMATURE = 0.5  # kg: reflected inertia of the finger drive
+FINGER_MASS = 0.05  # kg per finger
+HAND_MASS = 0.7  # kg when the gripper states none
+TORSION = 0.004  # m: torsional friction of the soft pads (MuJoCo condim 4)
+SOLREF = (0.005, 1.0)  # contact time constant (s, >= 2 timesteps) and damping ratio
+NOSLIP = 0  # no-slip solver iterations: off (with it the soft pad contacts of a held part drift more, and it costs a third of the step)
+SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+
+
+@dataclass
+class SimScene:
+    """A compiled MuJoCo model and the indices the replay needs: arm joint qpos/qvel addresses, finger joints,
+    the part's free joint, the arm, finger and velocity actuators, the hand (TCP) body and the part body."""
+
+    model: object
+    arm_qpos: np.ndarray
+    arm_dof: np.ndarray
+    finger_qpos: np.ndarray
+    part_qpos: int
+    part_dof: int
+    arm_act: np.ndarray
+    vel_act: np.ndarray
+    finger_act: np.ndarray
+    hand_body: int
+    part_body: int
+    part_mass: float
+    part_com: np.ndarray
+    hulls: int
+
+
+def mujoco_module():
+    """The mujoco package, or a SimulationError saying how to install it."""
+    try:
+        import mujoco
+    except ImportError:
+        raise SimulationError("simulating plans needs MuJoCo: pip install 'regrasp-workbench[physics]' "
+                              "(mujoco and coacd)") from None
+    return mujoco
+
+
+def mass_properties(mesh: trimesh.Trimesh, density: float) -> tuple[float, np.ndarray, np.ndarray]:
+    """Mass (kg), centre of mass (3,) and inertia about it (3, 3) in the part's frame: of the solid when the mesh
+    is watertight, else of its convex hull."""
+    solid = mesh if mesh.is_volume else mesh.convex_hull
+    m = solid.copy()
+    m.density = float(density)
+    return float(m.mass), np.asarray(m.center_mass, dtype=np.float64), np.asarray(m.moment_inertia, dtype=np.float64)
+
+
+def _quat(rot: np.ndarray) -> np.ndarray:
+    mujoco = mujoco_module()
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(rot, dtype=np.float64).ravel())
+    return q
+
+
+def _full_inertia(i: np.ndarray) -> list[float]:
+    return [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2]]
+
+
+def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[np.ndarray, np.ndarray]],
+                density: float, grip_force: float, pad_friction: float, table_friction: float,
+                timestep: float) -> SimScene:
+    """Compile the scene of the module docstring for `robot` (a workbench Robot), `gripper` (its planning
+    Gripper), `scene` (the table), the part's `mesh` and convex `hulls` (part frame)."""
+    mujoco = mujoco_module()
+    spec = _spec(timestep)
+
+    _add_table(spec, scene, table_friction)
+
+    base = robot.base
+    parent = spec.worldbody.add_body(name="robot_base", pos=base[:3, 3], quat=_quat(base[:3, :3]))
+    model = robot.model
+    arm_joints = []
+    for j in range(1, model.njoints):
+        placement = robot.chain_placement[j - 1]
+        inertia = model.inertias[j]
+        body = parent.add_body(name=f"link{j}", pos=placement[:3, 3], quat=_quat(placement[:3, :3]), gravcomp=1.0)
+        mass = max(float(inertia.mass), 1e-3)
+        body.explicitinertial = True
+        body.mass = mass
+        body.ipos = np.asarray(inertia.lever, dtype=np.float64)
+        ii = np.asarray(inertia.inertia, dtype=np.float64)
+        body.fullinertia = _full_inertia(ii if np.linalg.eigvalsh(ii).min() > 1e-8 else np.eye(3) * 1e-4 * mass)
+        kind = mujoco.mjtJoint.mjJNT_SLIDE if robot.chain_prismatic[j - 1] else mujoco.mjtJoint.mjJNT_HINGE
+        name = robot.joint_names[j - 1]
+        body.add_joint(name=name, type=kind, axis=robot.chain_axis[j - 1], range=[robot.lower[j - 1], robot.upper[j - 1]],
+                       armature=ARM_ARMATURE, limited=mujoco.mjtLimited.mjLIMITED_TRUE)
+        arm_joints.append(name)
+        parent = body
+
+    tip = robot.tip_in_joint
+    hand_mass = float(getattr(gripper, "mass", None) or HAND_MASS)
+    hand = parent.add_body(name="hand", pos=tip[:3, 3], quat=_quat(tip[:3, :3]), gravcomp=1.0)
+    body_mesh = gripper.body
+    hand.explicitinertial = True
+    hand.mass = hand_mass
+    hand.ipos = np.asarray(body_mesh.bounds.mean(axis=0), dtype=np.float64)
+    hand.fullinertia = _full_inertia(np.eye(3) * hand_mass * 0.05 ** 2 / 6)
+    spec.add_mesh(name="hand_body", uservert=np.asarray(body_mesh.vertices, dtype=np.float32).ravel(),
+                  userface=np.asarray(body_mesh.faces, dtype=np.int32).ravel())
+    hand.add_geom(name="hand_body", type=mujoco.mjtGeom.mjGEOM_MESH, meshname="hand_body", condim=3,
+                  solref=SOLREF, solimp=SOLIMP)
+    mirror = np.diag([1.0, -1.0, 1.0, 1.0])
+    fingers = []
+    for side, sign in (("left", 1.0), ("right", -1.0)):
+        finger = hand.add_body(name=f"finger_{side}", gravcomp=1.0)
+        finger.explicitinertial = True
+        finger.mass = FINGER_MASS
+        finger.fullinertia = _full_inertia(np.eye(3) * 1e-5)
+        finger.add_joint(name=f"finger_{side}", type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0.0, sign, 0.0],
+                         range=[gripper.jaw_min / 2, gripper.jaw_max / 2], armature=FINGER_ARMATURE, damping=FINGER_DAMPING,
+                         limited=mujoco.mjtLimited.mjLIMITED_TRUE)
+        for k, (ext, pose) in enumerate(gripper.finger_boxes):
+            p = pose if sign > 0 else mirror @ pose @ mirror
+            pad = k == gripper.pad
+            finger.add_geom(name=f"{side}_{'pad' if pad else f'box{k}'}", type=mujoco.mjtGeom.mjGEOM_BOX,
+                            size=np.asarray(ext, dtype=np.float64) / 2, pos=p[:3, 3], quat=_quat(p[:3, :3]),
+                            friction=[pad_friction, TORSION, 0.0], priority=1, condim=4 if pad else 3,
+                            solref=SOLREF, solimp=SOLIMP)
+        fingers.append(f"finger_{side}")
+    spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="finger_left", name2="finger_right",
+                      data=[0.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * 7)
+    spec.add_exclude(bodyname1="finger_left", bodyname2="finger_right")
+
+    mass, com = _add_part(spec, mesh, hulls, density, min(pad_friction, table_friction))
+
+    for name in arm_joints:
+        a = spec.add_actuator(name=f"pos_{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        a.set_to_position(kp=ARM_KP)
+        v = spec.add_actuator(name=f"vel_{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        v.set_to_velocity(kv=ARM_KV)
+    for name in fingers:
+        a = spec.add_actuator(name=f"grip_{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
+        a.set_to_position(kp=FINGER_KP)
+        a.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
+        a.forcerange = [-float(grip_force), float(grip_force)]
+    try:
+        m = spec.compile()
+    except Exception as exc:  # MuJoCo's compiler names the element it refuses
+        raise SimulationError(f"the physics scene of robot {robot.name!r} does not compile "
+                              f"({str(exc).strip().splitlines()[0]})") from None
+    jid = [m.joint(n).id for n in arm_joints]
+    return SimScene(model=m, arm_qpos=np.array([m.jnt_qposadr[j] for j in jid]), arm_dof=np.array([m.jnt_dofadr[j] for j in jid]),
+                    finger_qpos=np.array([m.jnt_qposadr[m.joint(n).id] for n in fingers]),
+                    part_qpos=int(m.jnt_qposadr[m.joint("part").id]), part_dof=int(m.jnt_dofadr[m.joint("part").id]),
+                    arm_act=np.array([m.actuator(f"pos_{n}").id for n in arm_joints]),
+                    vel_act=np.array([m.actuator(f"vel_{n}").id for n in arm_joints]),
+                    finger_act=np.array([m.actuator(f"grip_{n}").id for n in fingers]),
+                    hand_body=m.body("hand").id, part_body=m.body("part").id, part_mass=mass, part_com=com,
+                    hulls=len(hulls))
+
+
+def _spec(timestep: float):
+    """An empty MjSpec with the scene's options: gravity, timestep, implicit integration, elliptic friction cones."""
+    mujoco = mujoco_module()
+    spec = mujoco.MjSpec()
+    spec.option.timestep = float(timestep)
+    spec.option.gravity = [0.0, 0.0, -9.81]
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.noslip_iterations = NOSLIP
+    if hasattr(mujoco.mjtEnableBit, "mjENBL_MULTICCD"):  # several contacts per flat face pair (default from MuJoCo 3.3)
+        spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_MULTICCD)
+    spec.compiler.autolimits = True
+    spec.compiler.degree = False  # joint ranges in radians
+    return spec
+
+
+def _add_table(spec, scene, friction: float) -> None:
+    mujoco = mujoco_module()
+    lo, hi, th = np.asarray(scene.table_min), np.asarray(scene.table_max), float(scene.table_thickness)
+    spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[*(0.5 * (hi - lo)), th / 2],
+                            pos=[*(0.5 * (lo + hi)), -th / 2], friction=[friction, 0.0, 0.0], priority=1,
+                            condim=3, solref=SOLREF, solimp=SOLIMP)
+
+
+def _add_part(spec, mesh: trimesh.Trimesh, hulls, density: float, friction: float) -> tuple[float, np.ndarray]:
+    """The part as a free body (frame: the part's) with its mesh's mass properties and one geom per convex hull."""
+    mujoco = mujoco_module()
+    mass, com, inertia = mass_properties(mesh, density)
+    part = spec.worldbody.add_body(name="part")
+    part.add_freejoint(name="part")
+    part.explicitinertial = True
+    part.mass = mass
+    part.ipos = com
+    part.fullinertia = _full_inertia(inertia)
+    for k, (v, f) in enumerate(hulls):
+        spec.add_mesh(name=f"hull{k}", uservert=np.asarray(v, dtype=np.float32).ravel(),
+                      userface=np.asarray(f, dtype=np.int32).ravel())
+        part.add_geom(name=f"hull{k}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"hull{k}", condim=4,
+                      friction=[friction, TORSION, 0.0], solref=SOLREF, solimp=SOLIMP)
+    return mass, com
+
+
+def part_scene(mesh: trimesh.Trimesh, hulls, scene, density: float, friction: float, timestep: float) -> tuple[object, int]:
+    """The table and the part alone (no robot): the compiled model and the part's body id."""
+    spec = _spec(timestep)
+    _add_table(spec, scene, friction)
+    _add_part(spec, mesh, hulls, density, friction)
+    m = spec.compile()
+    return m, m.body("part").id
