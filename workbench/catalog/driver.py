@@ -663,6 +663,7 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
         res.wall = time.perf_counter() - t0
         res.rows = stages.summary(store)
         res.failures = stages.failures(store)
+        stages.checkpoint(store)
     res.workers = len(client.scheduler_info().get("workers", {}))
     res.dashboard = client.dashboard_link or ""
     return res

@@ -46,20 +46,14 @@ def thumbnail(vertices: np.ndarray, faces: np.ndarray, size: float = 1.6, max_fa
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     if len(f) > max_faces:  # a thumbnail needs no more
         f = f[np.linspace(0, len(f) - 1, max_faces).astype(np.int64)]
-    tri = v[f]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
-    light = np.clip(normal @ np.array([0.3, -0.5, 0.8]) / np.linalg.norm([0.3, -0.5, 0.8]), 0, 1)
-    colour = np.c_[0.35 + 0.5 * light, 0.45 + 0.45 * light, 0.65 + 0.3 * light, np.ones(len(f))]
     fig = plt.figure(figsize=(size, size), dpi=80)
     ax = fig.add_subplot(projection="3d")
-    ax.add_collection3d(Poly3DCollection(tri, facecolors=colour, edgecolors="none"))
+    ax.plot_trisurf(v[:, 0], v[:, 1], v[:, 2], triangles=f, color=(0.55, 0.65, 0.85), shade=True, linewidth=0)
     lo, hi = v.min(axis=0), v.max(axis=0)
     mid, half = (lo + hi) / 2, (hi - lo).max() / 2 or 1.0
     for axis, m in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid):

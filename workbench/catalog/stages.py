@@ -105,8 +105,7 @@ def write_part(store: Store, unit: dict, res: PartResult, hand: Gripper, gparams
             counts["reason"] = res.reason
         nrows = ((0 if had_grasps else len(res.grasps)) + (0 if had_placements else len(res.placements) + len(res.ftg[0]))
                  + (0 if had_tabletop else len(tt.placement) + len(tt.grip_tp)))
-        unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts, nrows=nrows,
-                    new_tabletop=not had_tabletop)
+        unit.update(idobject=oid, idgrasps=gid, idplacements=pid, idtabletop=tid, counts=counts, nrows=nrows)
 
 
 def part_meshes(store: Store, names: list[str]) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -117,6 +116,11 @@ def part_meshes(store: Store, names: list[str]) -> dict[str, tuple[np.ndarray, n
         out[name] = (np.asarray(row["vertices"], dtype=np.float64).reshape(-1, 3),
                      np.asarray(row["faces"], dtype=np.int64).reshape(-1, 3))
     return out
+
+
+def checkpoint(store: Store) -> None:
+    """Write the merged rows into the store file itself (not only its write-ahead log)."""
+    sql.checkpoint(store)
 
 
 def object_names(store: Store) -> set[str]:
@@ -146,11 +150,8 @@ def ik_run(store: Store, robot: Robot, scene: Scene, opts: IKOptions, handx: flo
     return {"idrobot": rid, "idscene": sid, "idikret": kid, "scene_params": params}
 
 
-def stored_ik(store: Store, run: dict, idtabletop: int, new: bool = False) -> np.ndarray:
-    """The tabletop grips of a part (its tabletop parameter set) that already have `ik` rows for the run (none when
-    the tabletop rows are `new`: written by this build's part unit)."""
-    if new:
-        return np.zeros(0, dtype=np.int64)
+def stored_ik(store: Store, run: dict, idtabletop: int) -> np.ndarray:
+    """The tabletop grips of a part (its tabletop parameter set) that already have `ik` rows for the run."""
     return sql.stored_part_grips(store, run["idrobot"], run["idscene"], run["idikret"], idtabletop)
 
 

@@ -215,10 +215,6 @@ RENUMBERED: dict[str, tuple[str, ...]] = {
 PARAMSET_REFS = ("grasps", "placements")  # keys of a stage's parameters naming the parameter set it consumed
 
 
-def _target(column: str) -> str:
-    return column[2:]  # idfreeairgrip -> freeairgrip
-
-
 def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, int]], idgripper: int) -> list[dict[str, int]]:
     """The rows of part units left as Parquet folders (`<folder>/<table>.parquet` for `UNIT_TABLES`, each table's
     ids counting from 1, `counts` rows per table) in the caller's transaction. Ids are renumbered into the store's
@@ -310,6 +306,11 @@ def _insert_angles(store: Store, files: list[str]) -> None:
 
 def _count(rows: list[tuple]) -> int:
     return int(rows[0][0]) if rows else 0
+
+
+def checkpoint(store: Store) -> None:
+    """CHECKPOINT: the write-ahead log folded into the file."""
+    store.run("CHECKPOINT")
 
 
 def object_names(store: Store) -> set[str]:
