@@ -322,7 +322,7 @@ def test_sharded_build_equals_serial_and_resumes(parts, robots, serial, serial_d
 
 @pytest.mark.parametrize("args, message", [
     (["--robots", "nosuchrobot"], "nosuchrobot"),
-    (["--robots", "panda", "--ik-chunk", "30"], "multiple of the IK lane"),
+    (["--robots", "panda", "--ik-chunk", "0"], "tabletop grips per IK unit must be an integer"),
     (["--robots", "panda", "--workers", "0"], "--workers: 0 is out of range"),
     (["--robots", "panda", "--scale", "-1"], "--scale: -1 is out of range"),
     (["--robots", "arm=arm.urdf"], "give its tip frame with --tip"),

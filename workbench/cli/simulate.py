@@ -28,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                         f"and --density, collision from a convex decomposition cached per mesh) starts "
                                         f"resting at the start pose. A plan is confirmed when every error is within its "
                                         f"tolerance; otherwise the first failing step is named with how it failed (shove "
-                                        f"at closing, slip or drop in the hand, roll after release, pose, goal). {INSTALL}.")
+                                        f"at closing, slip or drop in the hand, roll after release, pose, goal). It {INSTALL}.")
     parser.add_argument("--db", required=True, help="DuckDB store holding the plan")
     parser.add_argument("--plan", required=True, type=int, metavar="ID", help="plan id (printed by `workbench plan`)")
     add_sim_arguments(parser)

@@ -383,7 +383,7 @@ def support_axes(normals: np.ndarray, downs: np.ndarray, rotations: int, frictio
 
     A part lying on the table is mostly gripped from above, with a level jaw axis and the approach straight down.
     The paper's axes follow the facet normals; on a curved or scanned part those are a few degrees off level, and
-    the open fingers (40 mm either side of the axis) then dip into the table. So every facet normal within the
+    the open fingers (half the stroke and a finger's thickness either side of the axis) then dip into the table. So every facet normal within the
     friction angle of level for a support's outward normal d (the direction into the table) is also tried levelled,
     y = n - (n . d) d normalised, with the approach z = d. A pair the regular rotations already give (y within
     `same` of n and a rotation within `same` of d, as on a CAD part's vertical faces) is skipped.

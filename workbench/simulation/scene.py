@@ -40,23 +40,19 @@ SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
 
 @dataclass
 class SimScene:
-    """A compiled MuJoCo model and the indices the replay needs: arm joint qpos/qvel addresses, finger joints,
-    the part's free joint, the arm, finger and velocity actuators, the hand (TCP) body and the part body."""
+    """A compiled MuJoCo model and the indices the replay needs: arm joint and finger qpos addresses, the part's
+    free joint, the arm's position and velocity actuators, the finger actuators, the hand (TCP) body and the part."""
 
     model: object
     arm_qpos: np.ndarray
-    arm_dof: np.ndarray
     finger_qpos: np.ndarray
     part_qpos: int
-    part_dof: int
     arm_act: np.ndarray
     vel_act: np.ndarray
     finger_act: np.ndarray
     hand_body: int
     part_body: int
-    part_mass: float
     part_com: np.ndarray
-    hulls: int
 
 
 def mujoco_module():
@@ -91,9 +87,10 @@ def _full_inertia(i: np.ndarray) -> list[float]:
 
 def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[np.ndarray, np.ndarray]],
                 density: float, grip_force: float, pad_friction: float, table_friction: float,
-                timestep: float) -> SimScene:
+                timestep: float, hand_mass: float | None = None) -> SimScene:
     """Compile the scene of the module docstring for `robot` (a workbench Robot), `gripper` (its planning
-    Gripper), `scene` (the table), the part's `mesh` and convex `hulls` (part frame)."""
+    Gripper), `scene` (the table), the part's `mesh` and convex `hulls` (part frame); `hand_mass` from the
+    gripper's spec, else 0.7 kg (it only loads the gravity-compensated arm)."""
     mujoco = mujoco_module()
     spec = _spec(timestep)
 
@@ -121,7 +118,7 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
         parent = body
 
     tip = robot.tip_in_joint
-    hand_mass = float(getattr(gripper, "mass", None) or HAND_MASS)
+    hand_mass = float(hand_mass or HAND_MASS)
     hand = parent.add_body(name="hand", pos=tip[:3, 3], quat=_quat(tip[:3, :3]), gravcomp=1.0)
     body_mesh = gripper.body
     hand.explicitinertial = True
@@ -154,7 +151,7 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
                       data=[0.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * 7)
     spec.add_exclude(bodyname1="finger_left", bodyname2="finger_right")
 
-    mass, com = _add_part(spec, mesh, hulls, density, min(pad_friction, table_friction))
+    _, com = _add_part(spec, mesh, hulls, density, min(pad_friction, table_friction))
 
     for name in arm_joints:
         a = spec.add_actuator(name=f"pos_{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
@@ -172,14 +169,13 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
         raise SimulationError(f"the physics scene of robot {robot.name!r} does not compile "
                               f"({str(exc).strip().splitlines()[0]})") from None
     jid = [m.joint(n).id for n in arm_joints]
-    return SimScene(model=m, arm_qpos=np.array([m.jnt_qposadr[j] for j in jid]), arm_dof=np.array([m.jnt_dofadr[j] for j in jid]),
+    return SimScene(model=m, arm_qpos=np.array([m.jnt_qposadr[j] for j in jid]),
                     finger_qpos=np.array([m.jnt_qposadr[m.joint(n).id] for n in fingers]),
-                    part_qpos=int(m.jnt_qposadr[m.joint("part").id]), part_dof=int(m.jnt_dofadr[m.joint("part").id]),
+                    part_qpos=int(m.jnt_qposadr[m.joint("part").id]),
                     arm_act=np.array([m.actuator(f"pos_{n}").id for n in arm_joints]),
                     vel_act=np.array([m.actuator(f"vel_{n}").id for n in arm_joints]),
                     finger_act=np.array([m.actuator(f"grip_{n}").id for n in fingers]),
-                    hand_body=m.body("hand").id, part_body=m.body("part").id, part_mass=mass, part_com=com,
-                    hulls=len(hulls))
+                    hand_body=m.body("hand").id, part_body=m.body("part").id, part_com=com)
 
 
 def _spec(timestep: float):
