@@ -262,10 +262,11 @@ class PlanValidator:
             back[:3, 3] -= plan.handx * tcp[:3, 2]
             up = back.copy()
             up[2, 3] += plan.worldz
-            lift = np.eye(4)
-            lift[2, 3] = plan.worlda            # the held part lifted straight up, then by worldz more
-            lift2 = np.eye(4)
-            lift2[2, 3] = plan.worlda + plan.worldz
+            # the held part lifted straight up by worlda (or back along the step's insertion, `lift`), then by worldz
+            move = np.array([0.0, 0.0, plan.worlda]) if getattr(s, "lift", None) is None else np.asarray(s.lift, dtype=np.float64)
+            lift, lift2 = np.eye(4), np.eye(4)
+            lift[:3, 3] = move
+            lift2[:3, 3] = move + [0.0, 0.0, plan.worldz]
             for label, q, target, at in (("grasp", s.q_grasp, tcp, obj), ("approach", s.q_approach, back, obj),
                                          ("retract", s.q_retract, up, obj), ("worlda", s.q_worlda, lift @ tcp, lift @ obj),
                                          ("worldaworldz", s.q_worldaworldz, lift2 @ tcp, lift2 @ obj)):

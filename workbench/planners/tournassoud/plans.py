@@ -65,6 +65,7 @@ class Conjunction:
     q: np.ndarray  # (5, n): grasp, approach (handx), retract (handxworldz), worlda, worldaworldz
     phi: float = 0.0  # the placement's angle (the sample's, or the query's own at its start and goal)
     position: tuple[float, float] | None = None  # where the part rests (x, y); None: the table point H
+    lift: np.ndarray | None = None  # world TCP move grasp -> worlda (the insertion backwards); None: up by worlda
 
 
 class Realiser:
@@ -123,10 +124,15 @@ class Realiser:
             cand = cand[np.argsort(np.abs(cand - q_prev).sum(axis=1), kind="stable")]
         return cand
 
-    def configurations(self, object_pose: np.ndarray, tcp: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray | None:
+    def configurations(self, object_pose: np.ndarray, tcp: np.ndarray, q_prev: np.ndarray | None,
+                       lift: np.ndarray | None = None) -> np.ndarray | None:
         """(5, n) joint vectors at the roadmap planner's five poses (grasp, handx, handxworldz, worlda, worldaworldz;
-        the object held at the two lifts), or None when no seed gives all five collision-free."""
+        the object held at the two lifts; with `lift`, worlda is the grasp moved by it in the world, the start of an
+        insertion), or None when no seed gives all five collision-free."""
         poses = retract(tcp[None], self.handx, self.worldz, self.worlda)[0]  # (5, 4, 4)
+        if lift is not None:
+            poses[3, :3, 3] = tcp[:3, 3] + lift
+            poses[4, :3, 3] = poses[3, :3, 3] + [0.0, 0.0, self.worldz]
         place = held_placements(poses[None], object_pose[None])[0]  # (5, 4, 4): lifted with the hand at the lifts
         o = self.opts
         for q0 in self.seeds(poses[0], q_prev):
@@ -235,15 +241,17 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
             phi = seq.extra.get("phi_start") if k == 0 else (seq.extra.get("phi_goal") if k == len(pairs) - 1 else None)
             obj, tcp, _ = conjunction_poses(work, classes, g, p, theta, phi)
             end = _task_end(seq, k, len(pairs))
+            lift = None
             if end is not None:  # the task's pick-up or destination, away from H
                 obj = seq.extra[f"{end}_pose"]
                 tcp = obj @ classes[g[0]].pose(work.theta[g[1]])
-            q = realiser.configurations(obj, tcp, q_prev)
+                lift = seq.extra.get(f"{end}_lift")
+            q = realiser.configurations(obj, tcp, q_prev, lift)
             if q is None:
                 bad = (k, g, p)
                 break
             out.append(Conjunction(g, p, obj, tcp, q, work.phi[p[1]] if phi is None else phi,
-                                   None if end is None else seq.extra[f"{end}_xy"]))
+                                   None if end is None else seq.extra[f"{end}_xy"], lift))
             q_prev = q[0]
         if bad is None:
             return seq, out
@@ -426,7 +434,7 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
         return PlanStep(kind=kind, idfreeairgrip=int(c * t_n + t), idfreetabletopplacement=int(j), position=np.array([x, y, 0.0]),
                         yaw=float(cj.phi), object_pose=cj.object_pose, tcp=cj.tcp, grasp=g,
                         jawwidth=float(classes[c].opening), q_approach=cj.q[1], q_grasp=cj.q[0], q_retract=cj.q[2],
-                        q_worlda=cj.q[3], q_worldaworldz=cj.q[4])
+                        q_worlda=cj.q[3], q_worldaworldz=cj.q[4], lift=cj.lift)
 
     kinds, which = step_conjunctions(seq.kind, len(conj))
     steps = [step(k, conj[i]) for k, i in zip(kinds, which)]

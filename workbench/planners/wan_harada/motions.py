@@ -112,7 +112,8 @@ def step_lines(checker: MotionChecker, step, worlda: float, worldz: float) -> St
     solve each pose on its own), so the lines are continued by IK from one stored configuration (the grasp, else the
     approach, else the retract): the empty hand's retract -> approach -> grasp, checked with the object resting
     (the fingers may touch it next to the grasp), then the held part's lift grasp -> worlda -> worldaworldz
-    (straight up by `worlda`, then `worldz`), checked with the object in the hand. None when no anchor works."""
+    (straight up by `worlda`, or back along the step's insertion `lift`; then up by `worldz`), checked with the object
+    in the hand. None when no anchor works."""
     robot = checker.robot
     qs = [np.asarray(step.q_retract, dtype=np.float64), np.asarray(step.q_approach, dtype=np.float64),
           np.asarray(step.q_grasp, dtype=np.float64)]
@@ -140,9 +141,10 @@ def step_lines(checker: MotionChecker, step, worlda: float, worldz: float) -> St
         lift = np.eye(4)
         lift[:3, :3], lift[:3, 3] = rg[0], tg[0]
         up, q = [], chain[2]
-        for dz in (worlda, worlda + worldz):
+        first = step.lift_vector(worlda)
+        for d in (first, first + [0.0, 0.0, worldz]):
             target = lift.copy()
-            target[2, 3] += dz
+            target[:3, 3] += d
             p = tcp_line_to(robot, checker, q, target)
             if p is None or not checker.path_free(p):
                 break

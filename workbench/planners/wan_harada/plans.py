@@ -75,6 +75,11 @@ class PlanStep:
     idtabletopplacements: int | None = None
     q_worlda: np.ndarray | None = None
     q_worldaworldz: np.ndarray | None = None
+    lift: np.ndarray | None = None  # world TCP displacement grasp -> worlda; None: straight up by the plan's worlda
+
+    def lift_vector(self, worlda: float) -> np.ndarray:
+        """(3,) the TCP's move from the grasp to the worlda pose: `lift` (an insertion run backwards), else up by worlda."""
+        return np.array([0.0, 0.0, worlda]) if self.lift is None else np.asarray(self.lift, dtype=np.float64).reshape(3)
 
     def as_dict(self) -> dict[str, Any]:
         out = {"kind": self.kind, "idfreeairgrip": int(self.idfreeairgrip), "idfreetabletopplacement": int(self.idfreetabletopplacement),
@@ -84,6 +89,8 @@ class PlanStep:
                "tcp": _list(self.tcp), "grasp": _list(self.grasp), "jawwidth": float(self.jawwidth),
                "q_approach": _list(self.q_approach), "q_grasp": _list(self.q_grasp), "q_retract": _list(self.q_retract),
                "q_worlda": _list(self.q_worlda), "q_worldaworldz": _list(self.q_worldaworldz)}
+        if self.lift is not None:
+            out["lift"] = _list(self.lift)
         return out
 
     @classmethod
@@ -94,7 +101,8 @@ class PlanStep:
                    grasp=arr("grasp", (4, 4)), jawwidth=float(d["jawwidth"]), q_approach=arr("q_approach"), q_grasp=arr("q_grasp"),
                    q_retract=arr("q_retract"), idtabletopgrips=d.get("idtabletopgrips"), idtabletopplacements=d.get("idtabletopplacements"),
                    q_worlda=arr("q_worlda") if d.get("q_worlda") is not None else None,
-                   q_worldaworldz=arr("q_worldaworldz") if d.get("q_worldaworldz") is not None else None)
+                   q_worldaworldz=arr("q_worldaworldz") if d.get("q_worldaworldz") is not None else None,
+                   lift=arr("lift", (3,)) if d.get("lift") is not None else None)
 
     def configurations(self) -> dict[str, np.ndarray]:
         return {"approach": self.q_approach, "grasp": self.q_grasp, "retract": self.q_retract,
