@@ -317,6 +317,17 @@ class Store:
         return None if row is None else int(row[0])
 
 
+def open_reader(path: str | Path, wait: float | None = None) -> Store:
+    """An existing store opened for reading only, so that other processes may read it at the same time (DuckDB lets
+    any number of readers, or one writer, hold a file); a store of an older schema is opened read-write once, to be
+    upgraded."""
+    store = Store(path, read_only=True, create=False, wait=wait)
+    if store.identity.kind == "current":
+        return store
+    store.close()
+    return Store(path, create=False, wait=wait)
+
+
 def _wait_seconds() -> float:
     text = os.environ.get(WAIT_ENV, "")
     try:
