@@ -748,3 +748,78 @@ def test_store_left_by_an_older_version(work, db, reference):
     assert state(db) == reference
     res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, "--no-save", cwd=work)
     assert res.returncode == 0, res.stderr[-2000:]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Ctrl-C as a terminal sends it: SIGINT to the whole process group while the workers run.
+
+
+def interrupt_when(args: list, marker: str, cwd: Path, delay: float = 0.0, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run `workbench ARGS` in its own process group and send SIGINT to the group once `marker` shows on its stderr
+    (then after `delay` seconds), as a terminal's Ctrl-C reaches a command and every worker it started."""
+    proc = subprocess.Popen([*CLI, *map(str, args)], cwd=cwd, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    seen, deadline = b"", time.monotonic() + timeout
+    os.set_blocking(proc.stderr.fileno(), False)
+    while marker.encode() not in seen and proc.poll() is None and time.monotonic() < deadline:
+        seen += proc.stderr.read() or b""
+        time.sleep(0.02)
+    time.sleep(delay)
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)
+    os.set_blocking(proc.stderr.fileno(), True)
+    out, err = proc.communicate(timeout=timeout)
+    return subprocess.CompletedProcess(args, proc.returncode, out.decode(), (seen + err).decode())
+
+
+def assert_interrupted(res: subprocess.CompletedProcess, command: str) -> None:
+    """Exit 130 and one line from the driver; no traceback or KeyboardInterrupt from any process."""
+    assert "Traceback" not in res.stderr and "KeyboardInterrupt" not in res.stderr, res.stderr[-3000:]
+    lines = [ln for ln in res.stderr.replace("\r", "\n").splitlines() if ln.strip() and "/s]" not in ln
+             and "it/s" not in ln and not ln.startswith("dask:")]
+    assert res.returncode == 130, (res.returncode, res.stderr[-2000:])
+    assert lines == [f"workbench {command}: interrupted; the store keeps only completed stages"], lines
+
+
+def test_ctrl_c_during_ik_workers(work, db, tmp_path):
+    """ik with two worker processes, interrupted while they start and solve: one line; the re-run resumes and ends
+    with the rows of an uninterrupted run."""
+    clean = tmp_path / "clean.duckdb"
+    shutil.copy(db, clean)
+    args = ["ik", "--object", "box", "--robot", "ur5", "--workers", "2"]
+    assert cli(*args[:1], "--db", clean, *args[1:], cwd=work).returncode == 0
+    res = interrupt_when([*args[:1], "--db", db, *args[1:]], "ik ur5", cwd=work, delay=0.5)
+    assert_interrupted(res, "ik")
+    res = cli(*args[:1], "--db", db, *args[1:], cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert state(db) == state(clean)
+
+
+def test_ctrl_c_during_build(work, tmp_path, reference):
+    db = tmp_path / "s.duckdb"
+    args = ["build", work / "box.stl", "--db", db, "--robot", "panda", "--workers", "2", *GRID]
+    assert_interrupted(interrupt_when(args, "ik panda", cwd=work, delay=0.3), "build")
+    res = cli(*args, cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert state(db) == reference
+
+
+def test_ctrl_c_during_gptable(work, tmp_path):
+    db = tmp_path / "g.duckdb"
+    res = interrupt_when(["gptable", work / "box.stl", "--db", db, "--theta-step", "2", "--phi-step", "2"], "",
+                         cwd=work, delay=4.0)
+    assert_interrupted(res, "gptable")
+
+
+def test_ctrl_c_during_catalog_build(work, tmp_path):
+    """The Dask workers never see the Ctrl-C; the driver stops with one line and records no unit as failed."""
+    db = tmp_path / "c.duckdb"
+    args = ["catalog", "build", work / "box.stl", "--robots", "panda", "--db", db, "--workers", "1", "--no-progress",
+            *GRID[:-2]]
+    assert_interrupted(interrupt_when(args, "dask:", cwd=work, delay=1.0), "catalog")
+    con = duckdb.connect(str(db), read_only=True)
+    tables = {t for (t,) in con.execute("SELECT table_name FROM information_schema.tables").fetchall()}
+    failed = con.execute("SELECT count(*) FROM catalog_unit WHERE error IS NOT NULL").fetchone()[0] \
+        if "catalog_unit" in tables else 0
+    con.close()
+    assert failed == 0

@@ -401,7 +401,7 @@ MOVES = {
     "03": lambda page: move_slider(page, "feasible grip"),
     "04": lambda page: (move_slider(page, "start x (m)", 4), click(page, "search")),  # the view animates: numbers
     "05": lambda page: move_slider(page, "switch"),
-    "07": lambda page: (move_slider(page, "x (m)", 4), click(page, "search")),  # the explorer of the picked part
+    "07": lambda page: (move_slider(page, "start x (m)", 4), click(page, "search")),  # the explorer of the picked part
 }
 VIEW_ONLY = {"01", "02", "03", "05"}  # their move only shows, hides or moves what the view holds: no geometry is sent
 # The part's colour in the notebook's first view (None: the part is drawn in many colours, so everything drawn
@@ -466,7 +466,7 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
             measured["part share"] = round(share, 4)
             assert share >= least, f"{name}: the part covers {share:.2%} of its view, less than {least:.2%}"
         if stem.startswith("04") and frames.count():  # the view's caption and footer name the same step
-            inner = frames.first.content_frame
+            inner = frames.first.element_handle().content_frame()
             texts = []
             for _ in range(20):
                 texts = inner.evaluate(BOTH)

@@ -272,7 +272,7 @@ def test_sharded_build_equals_serial_and_resumes(parts, serial, serial_db, clien
 
 @pytest.mark.parametrize("args, message", [
     (["--robots", "nosuchrobot"], "nosuchrobot"),
-    (["--robots", "panda", "--ik-chunk", "30"], "multiple of the IK lane"),
+    (["--robots", "panda", "--ik-chunk", "0"], "tabletop grips per IK unit must be an integer"),
     (["--robots", "panda", "--workers", "0"], "--workers must be at least 1"),
     (["--robots", "panda", "--scale", "-1"], "scale must be a positive"),
     (["--robots", "arm=arm.urdf"], "give its tip frame with --tip"),

@@ -61,8 +61,8 @@ class CatalogError(WorkbenchError):
 
 @dataclass(frozen=True)
 class CatalogParams:
-    """Every parameter of a catalogue build; `ik_chunk` tabletop grips per IK unit (a multiple of `ik.lane`, so the
-    rows equal those of a serial run whatever the chunk)."""
+    """Every parameter of a catalogue build; `ik_chunk` tabletop grips per IK unit (the rows equal those of a serial
+    run whatever the chunk: each grip is solved on its own)."""
 
     grasps: GraspParams = GraspParams()
     placements: PlacementParams = PlacementParams()
@@ -76,8 +76,8 @@ class CatalogParams:
     units: str | None = None
 
     def __post_init__(self) -> None:
-        if self.ik_chunk < 1 or self.ik_chunk % max(1, self.ik.lane):
-            raise CatalogError(f"IK chunk must be a positive multiple of the IK lane ({self.ik.lane}), got {self.ik_chunk}")
+        if self.ik_chunk < 1:
+            raise CatalogError(f"IK chunk must be a positive number of grips, got {self.ik_chunk}")
         for label, v in (("handx", self.handx), ("worldz", self.worldz), ("worlda", self.worlda)):
             if not (np.isfinite(v) and v >= 0):
                 raise CatalogError(f"--{label} must be a distance >= 0 m, got {v}")

@@ -67,7 +67,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                        help=f"{text} ({RETRACT.describe(True)}; default {default})")
     o = IKOptions()
     b.add_argument("--ik-chunk", type=parse_number(IK_CHUNK, "--ik-chunk"), default=1024, metavar="N",
-                   help=f"tabletop grips per IK unit, a multiple of {o.lane} ({IK_CHUNK.describe(True)}; default 1024)")
+                   help=f"tabletop grips per IK unit ({IK_CHUNK.describe(True)}; default 1024)")
     add_param(b, IKOptions, "library", "--ik-library", cli_default=o.library)
     add_param(b, IKOptions, "seeds", "--ik-seeds", cli_default=o.seeds)
     add_output(b, "--shards", folder=True,

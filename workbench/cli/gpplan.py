@@ -130,7 +130,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="an obstacle at the destination (the fixture or hole the part goes into); repeatable")
     p.add_argument("--insert", default=None, metavar="DX,DY,DZ[,DEPTH]",
                    help="the final insertion: the direction the held part moves into place (world) and its length in "
-                        "metres (default 0.02); the last grasp's hand must clear the destination's obstacles all along it")
+                        "metres (default 0.02); the last grasp's hand must clear the destination's obstacles all along it "
+                        "(the plan itself lowers the part vertically, so 0,0,-1 is executed as checked)")
     p.add_argument("--table", default=None, help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
     p.add_argument("--handx", type=parse_number(RETRACT, "--handx", 0.05), default=0.05, metavar="M",
                    help=f"approach distance along the hand's axis ({RETRACT.describe(True)}; default 0.05)")

@@ -100,6 +100,10 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser(argv).parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a refused option (2, one line already printed)
         return exc.code if isinstance(exc.code, int) else 0
+    except KeyboardInterrupt:  # Ctrl-C while the command's modules load: nothing started yet
+        name = _selected(sys.argv[1:] if argv is None else argv) or ""
+        print(f"workbench {name}: interrupted; the store keeps only completed stages".replace("  ", " "), file=sys.stderr)
+        return 130
 
     def one_line(message, category, *_args, **_kwargs) -> None:  # warnings: one line each, no source excerpt
         print(f"workbench {args.command}: warning: {message}", file=sys.stderr)

@@ -8,6 +8,7 @@ import argparse
 import json
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from workbench.cli import warn
@@ -18,7 +19,8 @@ from workbench.cli.simulate import INSTALL, add_sim_arguments, print_simulation,
 from workbench.errors import PlanningError
 from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
-from workbench.planners.wan_harada.query import parse_pose
+from workbench.grasping.naming import per_part_numbers
+from workbench.planners.wan_harada.query import PoseQuery, parse_pose
 from workbench.planners.wan_harada.roadmap import NO_RESULT
 from workbench.planners.wan_harada.stages import (
     empty_stage,
@@ -30,8 +32,8 @@ from workbench.robots.motion import MotionOptions
 from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
 from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored, stored_playback
 from workbench.store import Store
-from workbench.store.robots import robot_with_gripper
-from workbench.viewer.wan_harada import plan_scene
+from workbench.store.robots import robot_grippers, robot_with_gripper
+from workbench.viewer.wan_harada import caption_track, plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
 ACC = cli_bound(0, 1000, lo_open=True, unit="rad/s^2", help="joint acceleration limit")
@@ -42,7 +44,8 @@ SEED = cli_bound(0, 2**32 - 1, integer=True, help="motion planner seed")
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("plan", help="plan regrasps from a start to a goal pose on the table",
-                            description="Poses are PLACEMENT,X,Y,YAW: a stable placement id (idfreetabletopplacement), "
+                            description="Poses are PLACEMENT,X,Y,YAW: a stable placement's number within the part (1, 2, ... as "
+                                        "`workbench build` lists them, with how the part rests on each), "
                                         "x and y in metres on the table (top at z = 0), yaw in degrees about z (within "
                                         "[-360, 360]). Every plan comes with its motions: straight TCP lines to take and put "
                                         "down the part, collision-free joint-space transfers and transits (straight, else "
@@ -91,7 +94,12 @@ def run(args: argparse.Namespace) -> int:
                             "--gripper-fingers LEFT,RIGHT (as given to build)")
     gripper = gripper_from_args(args)
     with Store(args.db, create=False) as store:
-        args.robot = robot_with_gripper(store, args.robot, gripper.digest) or args.robot
+        stored = robot_with_gripper(store, args.robot, gripper.digest)
+        others = [] if stored else robot_grippers(store, args.robot)
+        if others:
+            raise PlanningError(f"store {args.db} has robot {args.robot!r} with gripper {', '.join(others)}, not "
+                                f"{gripper.name!r}; give --gripper the one it was built with, or build it with this one")
+        args.robot = stored or args.robot
         reason = empty_stage(store, args.object, args.robot)
         if reason:
             warn(f"no plan for {args.object}: nothing to plan with; stage {reason}")
@@ -100,6 +108,8 @@ def run(args: argparse.Namespace) -> int:
         planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial,
                                gripper=gripper)
         t_load = time.perf_counter() - t0
+        numbers = per_part_numbers(planner.free["idfreetabletopplacement"])
+        start, goal = store_placement(start, numbers, args.object, "--start"), store_placement(goal, numbers, args.object, "--goal")
         turn = (goal.yaw - start.yaw + math.pi) % (2 * math.pi) - math.pi
         if (start.idfreetabletopplacement == goal.idfreetabletopplacement in planner.placement_ids()
                 and math.hypot(goal.x - start.x, goal.y - start.y) < 1e-6 and abs(turn) < 1e-9):
@@ -120,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"json: {write_json([], args.json, reason=exc.reason, message=str(exc)).resolve()}")
             return 0
         best = plans[0]
-        print_plan(best)
+        print_plan(best, numbers)
         for p in plans[1:]:
             print(f"alternative {p.rank}: {p.regrasps} regrasp(s), {p.transfers} transfer(s), grasps {' -> '.join(map(str, p.grasps))}, "
                   f"trajectory {p.duration:.1f} s")
@@ -193,9 +203,29 @@ def write_trajectory(plan, out: str | Path) -> Path:
     return write_text(out, writer(plan.segments, plan.joint_names))
 
 
-def print_plan(plan) -> None:
-    print(f"start {plan.start.text_degrees()} -> goal {plan.goal.text_degrees()} (PLACEMENT,X,Y,YAW in m and degrees)")
-    for line in plan.lines():
+def store_placement(query: PoseQuery, numbers: dict[int, int], name: str, flag: str) -> PoseQuery:
+    """The query with its placement number (1, 2, ... within the part, as `build` lists them) as the store's id."""
+    ids = {n: i for i, n in numbers.items()}
+    if query.idfreetabletopplacement not in ids:
+        raise PlanningError(f"{flag}: {name} has no placement {query.idfreetabletopplacement}; its placements are "
+                            f"1-{len(ids)} (`workbench build` lists them, with how the part rests on each)")
+    return replace(query, idfreetabletopplacement=ids[query.idfreetabletopplacement])
+
+
+def pose_text(query: PoseQuery, numbers: dict[int, int] | None) -> str:
+    """`PLACEMENT,X,Y,YAW` (degrees) with the placement's number within the part when `numbers` are given."""
+    if numbers:
+        query = replace(query, idfreetabletopplacement=numbers.get(query.idfreetabletopplacement,
+                                                                   query.idfreetabletopplacement))
+    return query.text_degrees()
+
+
+def print_plan(plan, numbers: dict[int, int] | None = None) -> None:
+    """The plan's start, goal and steps as the plan view's footer names them (placements by `numbers`, the store's id
+    -> its number within the part), and what it took."""
+    print(f"start {pose_text(plan.start, numbers)} -> goal {pose_text(plan.goal, numbers)} "
+          f"(PLACEMENT,X,Y,YAW in m and degrees)")
+    for line in caption_track(plan, [], numbers=numbers)["footers"][1:]:
         print("  " + line)
     t = plan.timings
     print(f"{plan.regrasps} regrasp(s), {plan.transfers} transfer(s); time to connect {t.get('connect', 0) * 1000:.1f} ms, "

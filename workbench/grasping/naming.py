@@ -35,3 +35,15 @@ def describe_placement(number: int, normal: np.ndarray, stability: float | None 
 def per_part_numbers(ids: np.ndarray) -> dict[int, int]:
     """Store placement id -> its number within the part (1, 2, ... in id order)."""
     return {int(i): k + 1 for k, i in enumerate(np.sort(np.asarray(ids, dtype=np.int64)))}
+
+
+def resting_normal(rotmat: np.ndarray) -> np.ndarray:
+    """The supporting face's outward normal in the part's frame for a placement rotation (part frame -> table):
+    the part's direction that the placement turns to point straight down."""
+    return np.asarray(rotmat, dtype=np.float64)[:3, :3].T @ np.array([0.0, 0.0, -1.0])
+
+
+def placement_lines(rotmats: dict[int, np.ndarray]) -> list[str]:
+    """One description per placement (store id -> rotation), numbered within the part: "placement 1: upright, ..."."""
+    numbers = per_part_numbers(np.array(list(rotmats), dtype=np.int64))
+    return [describe_placement(numbers[i], resting_normal(rotmats[i])) for i in sorted(rotmats)]

@@ -352,6 +352,11 @@ def gripper_from_urdf(urdf: str | Path, hand_link: str, tcp_frame: str | None, f
     if off > 2.0:
         raise GripperError(f"{where}: the fingers close {off:.1f} degrees off the TCP frame's y axis; the TCP's y must be "
                            f"the jaw axis")
+    between = (local[pads[1]][mid].mean(axis=1) + local[pads[-1]][mid].mean(axis=1)) / 2  # pads' midpoint, TCP frame
+    reach = np.ptp(local[pads[1]][mid], axis=1) / 2
+    if abs(between[0]) > reach[0] or abs(between[2]) > reach[2] or abs(between[1]) > 1e-3:
+        raise GripperError(f"{where}: the TCP frame {tcp_frame!r} lies outside the hand, {np.linalg.norm(between) * 1e3:.0f} "
+                           f"mm from the midpoint between the pads; the TCP lies between them")
     notes, drift = [], {}
     for sgn in (1, -1):
         k = pads[sgn]
@@ -616,7 +621,7 @@ def _urdf_beside(urdf: Path) -> dict:
             if unknown:
                 raise GripperError(f"gripper spec {p}: unknown field {unknown[0]!r} (fields: name, hand_link, "
                                    f"finger_joints, tcp_frame)")
-            return {**spec, "_path": str(p)}
+            return spec
     return {}
 
 
@@ -630,7 +635,9 @@ def load_gripper(choice: str = "franka", hand_link: str | None = None, finger_jo
         return franka_hand()
     if choice == "own":
         if robot_urdf is None or tip is None:
-            raise GripperError("--gripper own takes the robot's own hand: give the robot as a URDF path with --tip")
+            raise GripperError("--gripper own takes the robot's own hand from --robot URDF and --tip; where there is no "
+                               "robot (grasps, placements) give its URDF itself: --gripper ROBOT.urdf --gripper-hand TIP "
+                               "--gripper-fingers LEFT,RIGHT")
         if len(finger_joints) != 2:
             raise GripperError(f"--gripper own needs --gripper-fingers LEFT,RIGHT: the two finger joints of the hand in "
                                f"{robot_urdf}")

@@ -32,6 +32,7 @@ from workbench.store.identity import (
     check_size,
     inspect,
     is_disk_full,
+    is_interrupt,
     is_lock_error,
     open_error,
     read_error,
@@ -153,10 +154,7 @@ class Store:
             yield self.con
         except BaseException as exc:
             self._depth = 0
-            try:
-                self.con.execute("ROLLBACK")
-            except duckdb.Error:
-                pass  # the failed statement already ended the transaction
+            self._rollback()
             if isinstance(exc, duckdb.Error):
                 raise self._write_error(exc) from None
             raise
@@ -164,8 +162,19 @@ class Store:
             self._depth = 0
             try:
                 self.con.execute("COMMIT")
-            except duckdb.Error as exc:
+            except (duckdb.Error, RuntimeError) as exc:  # DuckDB reports a Ctrl-C during COMMIT as RuntimeError
+                self._rollback()
+                if is_interrupt(exc):
+                    raise KeyboardInterrupt from None
+                if not isinstance(exc, duckdb.Error):
+                    raise
                 raise self._write_error(exc) from None
+
+    def _rollback(self) -> None:
+        try:
+            self.con.execute("ROLLBACK")
+        except (duckdb.Error, RuntimeError):
+            pass  # the failed statement (or COMMIT) already ended the transaction
 
     def _write_error(self, exc: BaseException) -> BaseException:
         if is_disk_full(exc) or isinstance(exc, (duckdb.IOException, duckdb.FatalException)):
@@ -177,14 +186,14 @@ class Store:
         A damaged block or a missing stage's table is a one-line StoreError (`identity.read_error`)."""
         try:
             return self.con.execute(sql, list(params)).fetchall()
-        except duckdb.Error as exc:
+        except (duckdb.Error, RuntimeError) as exc:
             raise read_error(self.path, exc) from None
 
     def arrow(self, sql: str, params: list[Any] | tuple[Any, ...] | dict[str, Any] = ()) -> pa.Table:
         """Run a SELECT and return its rows as an Arrow table (named `$parameters` from a dict; errors as `run`)."""
         try:
             return self.con.sql(sql, params=params if isinstance(params, dict) else list(params)).to_arrow_table()
-        except duckdb.Error as exc:
+        except (duckdb.Error, RuntimeError) as exc:
             raise read_error(self.path, exc) from None
 
     def one(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> tuple | None:
@@ -217,7 +226,10 @@ class Store:
         try:
             self.run(f"INSERT INTO {table} ({names}) SELECT {names} FROM _wb_rows")
         finally:
-            self.con.unregister("_wb_rows")
+            try:
+                self.con.unregister("_wb_rows")
+            except duckdb.Error:
+                pass  # the insert failed or was interrupted: its own error is the one to report
         self._after_insert(table)
         return arrow.num_rows
 

@@ -108,6 +108,11 @@ def open_error(path: Path, exc: BaseException) -> StoreError:
     return StoreError(f"store {path} could not be opened ({msg[:160]}); move it aside and rebuild it, or give another path")
 
 
+def is_interrupt(exc: BaseException) -> bool:
+    """Whether DuckDB stopped a statement for a Ctrl-C (an InterruptException, or a RuntimeError 'Query interrupted')."""
+    return isinstance(exc, duckdb.InterruptException) or (isinstance(exc, RuntimeError) and "interrupted" in str(exc).lower())
+
+
 def is_lock_error(exc: BaseException) -> bool:
     """Whether DuckDB refused the file because another process holds its lock (worth waiting for)."""
     return "could not set lock" in str(exc).lower() or "conflicting lock" in str(exc).lower()
@@ -137,7 +142,12 @@ TABLE_MAKERS = {"tgraspclass": "gptable", "tgptable": "gptable", "tplacementclas
 
 def read_error(path: Path, exc: BaseException) -> BaseException:
     """One line for a query the file cannot answer: a damaged or truncated block (I/O, checksum, fatal), or a
-    table of a stage this store never ran. Other errors (our own bugs, constraint violations) pass unchanged."""
+    table of a stage this store never ran; a query interrupted by Ctrl-C is a KeyboardInterrupt. Other errors (our
+    own bugs, constraint violations) pass unchanged."""
+    if is_interrupt(exc):
+        return KeyboardInterrupt()  # Ctrl-C inside a query: the command stops as for any other interrupt
+    if not isinstance(exc, duckdb.Error):
+        return exc
     if isinstance(exc, duckdb.CatalogException):
         m = re.search(r"Table with name (\w+) does not exist", str(exc))
         if m:

@@ -108,6 +108,7 @@ class GraspExplorer:
     def set_gripper(self, choice: Gripper | str) -> None:
         """Plan with another gripper (a bundled name or a loaded Gripper) and show its grasps."""
         self.gripper = choice if isinstance(choice, Gripper) else load_gripper(choice)
+        self.outlines = HandOutlines(self.gripper)
         self.run()
 
     def _density_moved(self, _) -> None:

@@ -67,6 +67,7 @@ class RegraspExplorer:
         self.db, self.objects, self.tparams, self.build = Path(db), dict(objects), tparams, build
         self.vis = vis if vis is not None else new_scene()
         self.planner, self.plans, self.result, self.scene = None, [], None, None
+        self.reports, self.attach = {}, {}
         names = list(self.objects)
         wide = {"style": {"description_width": "initial"}, "layout": W.Layout(width="420px")}
         self.object = W.Dropdown(options=names, value="tube" if "tube" in names else names[0], description="object", **wide)
@@ -154,19 +155,22 @@ class RegraspExplorer:
         return PoseQuery(int(p.value), float(x.value), float(y.value), float(np.radians(yaw.value)))
 
     def run(self) -> list:
-        """Search (Section V) from the widgets' start to their goal; animate the best plan."""
+        """Search (Section V) from the widgets' start to their goal; animate the best plan. Each plan is checked by
+        the independent validator when it is first shown (`animate`), not all of them before the first is seen."""
 
         if self.planner is None:
             self.load()
         try:
             with self.busy.running("searching"):
                 self.plans = self.planner.plan(self.query("start"), self.query("goal"), alternatives=self.alternatives.value,
-                                               lazy=not self.full.value)
-            self.result = self.planner.last
+                                               lazy=not self.full.value, validate=False)
+            self.result, self.reports = self.planner.last, {}
         except PlanningError as exc:
             self.plans, self.result = [], None
             self.info.value = self.graph_html() + f"<p style='color:#b00'><b>no plan:</b> {exc}</p>"
             return []
+        self.attach = show_roadmap(self.vis, self.planner, self.result)  # the graph's nodes, sent once per search
+        self.vis["roadmap"].set_property("visible", bool(self.nodes.value))  # node clouds hide the part: off by default
         self.which.options = [(f"{'best' if p.rank == 0 else f'alternative {p.rank}'}: {p.regrasps} regrasp(s)", p.rank)
                               for p in self.plans]
         self.which.value = 0
@@ -178,9 +182,14 @@ class RegraspExplorer:
             return
         plan = self.plans[self.which.value or 0]
         self.scene.play(plan, numbers=per_part_numbers(self.planner.free["idfreetabletopplacement"]))
-        attach = show_roadmap(self.vis, self.planner, self.result)
-        self.vis["roadmap"].set_property("visible", bool(self.nodes.value))  # node clouds hide the part: off by default
-        self.info.value = self.graph_html(attach) + self.plan_html(plan)
+        self.info.value = self.graph_html(self.attach) + self.plan_html(plan)
+        if plan.rank not in self.reports:
+            with self.busy.running("validating the plan"):
+                self.reports[plan.rank] = self.planner.validate(plan, require_motion=bool(plan.segments))
+        rep = self.reports[plan.rank]
+        verdict = (f"<p style='color:#185'><b>validation: ok</b> ({rep.checks:,} checks)</p>" if rep.ok else
+                   f"<p style='color:#b00'><b>validation failed:</b> {html.escape('; '.join(rep.errors[:3]))}</p>")
+        self.info.value = self.graph_html(self.attach) + verdict + self.plan_html(plan)
 
     def graph_html(self, attach: dict | None = None) -> str:
 

@@ -187,6 +187,13 @@ def test_removal_learns_and_explains(tmp_path, box, capsys):
     used = {(tuple(g), tuple(p)) for g, p in zip(doc["sequence"]["grasps"], doc["sequence"]["placements"][:-1])}
     used |= {(tuple(g), tuple(p)) for g, p in zip(doc["sequence"]["grasps"], doc["sequence"]["placements"][1:])}
     assert not used & {tuple(map(tuple, r["conjunction"])) for r in doc["removed"]}
+    # a goal range keeps its lower end: 85:85 is the 85-degree sample, and 85:90 can end at 85
+    for goal in ("1,85:85", "1,85:90"):
+        assert main(["gpplan", "--db", db, "--object", "box", "--initial", "0,30", "--goal", goal, "--no-motion",
+                     "--no-save", "--json", str(js)]) == 0
+        last = json.loads(js.read_text())["sequence"]["theta"][-1]
+        assert abs(np.degrees(last) - 85.0) < 1e-9, (goal, np.degrees(last))
+    capsys.readouterr()
 
 
 def test_narrow_classes_are_kept_or_dropped_with_their_count(tmp_path, lpart, hand, capsys):

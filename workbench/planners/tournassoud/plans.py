@@ -79,7 +79,7 @@ class Realiser:
         self.robot, self.handx, self.worldz, self.worlda = robot, handx, worldz, worlda
         self.obstacles = tuple(obstacles)
         self.closed = not spherical_wrist_reason(robot)
-        self.opts = IKOptions(closed_form=self.closed, library=8192, seed=seed, self_collide=True)
+        self.opts = IKOptions(solver="auto" if self.closed else "numerical", library=8192, seed=seed, self_collide=True)
         self.solver = IKSolver(robot, scene, self.opts, obj_mesh)
         self.ik = analytic_ik(robot) if self.closed else None
         self.scene, self.obj_mesh = scene, obj_mesh

@@ -22,6 +22,10 @@ so that a grasp legal here is one its motions can use.
 
 The chaining then starts from the (C, T) set of legal grasps at the pick-up and ends in the set legal at the
 destination (`task_query`): the theta ranges of the first and last grasps come from the obstacles, not from the user.
+The plan's motions take the part out of the pick-up and put it into the destination straight up and down (the
+roadmap planner's lift and lower, `worlda` then `worldz`), checked against the obstacles: a vertical insertion is
+executed as it is checked; another direction makes the last grasp legal for that insertion, but the plan still
+lowers the part vertically.
 The paper leaves the obstacle test's details open; this is the workbench's choice.
 """
 
