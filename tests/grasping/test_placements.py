@@ -308,8 +308,9 @@ def test_rest_probabilities_of_boxes_match_ray_statistics():
     assert np.allclose(p.probability, _ray_shares(long.mesh, long.com, p.normals), atol=0.01)
 
 
-def test_faceted_round_sides_get_no_probability_and_can_be_filtered():
+def test_faceted_round_sides_get_a_low_probability_and_rock():
     from workbench.geometry.objects import from_trimesh
+    from workbench.geometry.supports import coplanar_groups, rest_probabilities, stabilities
     from workbench.grasping.placements import PlacementParams, stable_placements
 
     # a 37 mm pin lying on its faceted round side, with two flats milled 6 mm deep
@@ -322,13 +323,16 @@ def test_faceted_round_sides_get_no_probability_and_can_be_filtered():
     facets = side & ~flats
     assert facets.sum() >= 4 and flats.sum() == 2
     assert (p.stability[facets] >= 0.1).all()  # the support-polygon score keeps the facets the part rolls off
-    assert (p.probability[facets] == 0).all() and (p.probability[~facets] > 0.05).all()
-    kept = stable_placements(obj, PlacementParams(min_probability=0.01))
+    assert (p.probability[facets] < 0.05).all() and (p.probability[facets] < p.probability[flats].min() / 4).all()
+    kept = stable_placements(obj, PlacementParams(min_probability=0.05))
     assert len(kept) == int((~facets).sum())
-    # a 12-sided bar's sides (30 degrees apart) rock; a hexagonal bar's (60 degrees) do not
+    # a 12-sided bar's sides (30 degrees apart, tipping at 15) rock; a hexagonal bar's (60 degrees) do not
     for sections, rocks in ((12, True), (6, False)):
         bar = from_trimesh(trimesh.creation.cylinder(radius=0.015, height=0.06, sections=sections), "bar")
-        q = stable_placements(bar)
-        sides = np.abs(q.normals[:, 2]) < 0.5
-        assert sides.sum() == sections
-        assert ((q.probability[sides] == 0) == rocks).all(), sections
+        hull = bar.mesh.convex_hull
+        groups, normals = coplanar_groups(hull, 5e-4, np.radians(1.0))
+        held = stabilities(hull, bar.com, groups, normals) > 0
+        prob, rocking = rest_probabilities(hull, bar.com, groups, normals, held, np.radians(35.0))
+        sides = np.abs(normals[:, 2]) < 0.5
+        assert sides.sum() == sections and np.isclose(prob.sum(), 1.0)
+        assert (rocking[sides] == rocks).all() and not rocking[~sides].any(), sections

@@ -14,8 +14,10 @@ import numpy as np
 import pytest
 
 from workbench.grasping.grasps import plan_grasps
-from workbench.viewer.scenes import new_scene
+from workbench.planners.wan_harada.tabletop import TabletopParams
+from workbench.viewer.scenes import geometry_sent, new_scene
 from workbench.widgets.grasping import GraspExplorer
+from workbench.widgets.wan_harada import PlacementExplorer
 
 
 class Browser:
@@ -133,3 +135,26 @@ def test_shutting_a_kernel_down_ends_its_meshcat_server():
         time.sleep(0.1)
     assert not _alive(pid), "the meshcat server outlived its kernel"
 
+
+
+def test_placement_view_settings_send_no_geometry_and_the_grid_reruns_only_the_roadmap(box, hand):
+    plan = plan_grasps(box, hand)
+    ex = PlacementExplorer(box, hand, plan.grasps.poses, plan.grasps.jawwidth, vis=new_scene(),
+                           tabletop=TabletopParams(nx=2, ny=2, angles=2))
+    try:
+        browser = Browser(ex.vis)
+        ex.run()
+        before = len(browser.settle())
+        sent = geometry_sent(ex.vis)
+        ex.which.value = ex.which.options[-1][1]
+        ex.hands.value = 3
+        ex.roadmap.value = True
+        got = browser.settle()[before:]
+        assert got and set(got) <= {"set_property", "set_transform"}, got
+        assert geometry_sent(ex.vis) == sent  # the window's own count agrees with what the viewer received
+        placements = ex.placements
+        ex.nx.value = 3  # the grid: the roadmap is recomputed, the placements are not
+        assert ex.placements is placements and ex.stage_cache.misses == 1 and ex.tabletop_cache.misses == 2
+        assert len(ex.tt.poses) == len(placements) * 3 * 2 * 2
+    finally:
+        ex.vis.window.close()

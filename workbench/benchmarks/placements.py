@@ -110,10 +110,10 @@ def _organic(args: argparse.Namespace) -> int:
             warnings.simplefilter("ignore")
             obj = from_trimesh(make(), name)
         t, pl = median_time(lambda: stable_placements(obj), args.repeats)
-        rolls = int((pl.probability == 0).sum())
         rows.append([name, len(pl), " ".join(f"{p:.2f}/{s:.2f}" for p, s in zip(pl.probability, pl.stability)),
-                     rolls, f"{float(np.sum(pl.probability)):.2f}", t])
-    print_table(["part", "#-fp", "probability/stability (most likely first)", "rocking (p = 0)", "sum p", "t-fp s"], rows,
-                title=f"Placements with their quasi-static rest probability (a part dropped at random; faces it rolls off, "
-                      f"rocking supports, get 0) beside the support-polygon stability (median of {args.repeats} runs)")
+                     f"{float(np.sum(pl.probability)):.2f}", t])
+    print_table(["part", "#-fp", "probability/stability (most likely first)", "sum p kept", "t-fp s"], rows,
+                title=f"Placements with their quasi-static rest probability (a part dropped at random; it rolls on from "
+                      f"a rocking support, a faceted round side, when a steadier support is within reach) beside the "
+                      f"support-polygon stability (median of {args.repeats} runs)")
     return 0

@@ -131,7 +131,8 @@ def bench_regrasp(rows: list, repeats: int, db: Path) -> None:
                  "-", "-", "-"])
     rows.append(["04", "  of which motions (last run)", "-", f"{t.get('motion', 0) * 1e3:.1f}", "-", "-", "-"])
     if len(ex.which.options) > 1:
-        _row(rows, "04", "animate another alternative", "view only", "100 ms", measure(ex.which, (1, 0), repeats, ex.vis))
+        _row(rows, "04", "animate another alternative (validated once)", "view only", "100 ms",
+             measure(ex.which, (1, 0), repeats, ex.vis))
     _row(rows, "04", "show the graph's nodes", "view only", "100 ms", measure(ex.nodes, (True, False), repeats, ex.vis))
 
 

@@ -147,10 +147,12 @@ def rest_probabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.n
     downward ray from its centre of mass meets, with probability that face's solid angle seen from the centre of
     mass over 4 pi; on a face of an unstable support it rolls over the edge beyond which the centre of mass
     projects, onto the neighbouring face, until it reaches a stable support (the drop statistics of Goldberg et al.'s
-    part feeding and of Dex-Net's stable poses). A stable support is a rocking one when the hull face beyond its
-    weakest edge (the edge nearest the centre of mass's projection) is within `rock_angle` of it: a tilt of that
-    much rolls it on (a faceted round side); the part rolls off it as off an unstable one, and its probability is
-    0. `stable` (G,) marks the supports holding the centre of mass's projection.
+    part feeding and of Dex-Net's stable poses). A stable support is a rocking one when both the tilt that tips it
+    over its weakest edge (the edge nearest the centre of mass's projection) and the angle to the hull face beyond
+    that edge are below `rock_angle`: a small tilt rolls it onto the next facet, as on a faceted round side. The
+    part rolls on from it, so that it gets no probability, unless rolling on never ends on a support that does not
+    rock (a rounded part, all of whose supports rock): then the plain quasi-static flow decides.
+    `stable` (G,) marks the supports holding the centre of mass's projection.
     """
     faces = np.asarray(hull.faces)
     tri = np.asarray(hull.triangles) - com
@@ -181,7 +183,8 @@ def rest_probabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.n
     lc = (d00 * d21 - d01 * d20) / den
     bary = np.column_stack([1 - lb - lc, lb, lc])
     # rolling over the edge opposite the most negative coordinate: edge (i + 1, i + 2) is edge index (i + 1) % 3
-    nxt = across[np.arange(T), (np.argmin(bary, axis=1) + 1) % 3]
+    plain = across[np.arange(T), (np.argmin(bary, axis=1) + 1) % 3]
+    nxt = plain.copy()
     rocking = np.zeros(len(groups), dtype=bool)
     if rock_angle > 0:
         for g in np.flatnonzero(stable):
@@ -191,7 +194,8 @@ def rest_probabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.n
                 continue
             # the boundary edge nearest the centre of mass's projection on the support's plane
             n = normals[g]
-            q = -(tri[members[0], 0] @ n) * -n
+            height = abs(float(tri[members[0], 0] @ n))
+            q = height * n
             dist = []
             for f, e in out_edges:
                 a, b = tri[f, e], tri[f, (e + 1) % 3]
@@ -199,22 +203,29 @@ def rest_probabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.n
                 dist.append(np.linalg.norm(a + t * (b - a) - q))
             f, e = out_edges[int(np.argmin(dist))]
             beyond = across[f, e]
-            if beyond >= 0 and np.arccos(np.clip(fn[beyond] @ n, -1.0, 1.0)) < rock_angle:
+            tip = np.arctan2(min(dist), height)
+            if beyond >= 0 and tip < rock_angle and np.arccos(np.clip(fn[beyond] @ n, -1.0, 1.0)) < rock_angle:
                 rocking[g] = True
                 for m in members:  # the part rolls on across that edge
                     nxt[m] = beyond
-    rest = stable & ~rocking
-    terminal = rest[group] | (nxt < 0)
-    target = np.where(terminal, np.arange(T), nxt)
-    for _ in range(int(np.ceil(np.log2(max(T, 2)))) + 2):  # pointer jumping: each round doubles the steps followed
-        target = np.where(terminal[target], target, target[target])
-    landed = terminal[target] & rest[group[target]]
+
+    def flow(rest: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """The support each face's drop ends on (-1: none, rolling on in a cycle)."""
+        terminal = rest[group] | (step < 0)
+        target = np.where(terminal, np.arange(T), step)
+        for _ in range(int(np.ceil(np.log2(max(T, 2)))) + 2):  # pointer jumping: each round doubles the steps
+            target = np.where(terminal[target], target, target[target])
+        return np.where(terminal[target] & rest[group[target]], group[target], -1)
+
+    end = flow(stable & ~rocking, nxt)
+    end = np.where(end >= 0, end, flow(stable, plain))
     a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
     la, lb_, lc_ = (np.linalg.norm(x, axis=1) for x in (a, b, c))
     num = np.abs(np.einsum("fj,fj->f", a, np.cross(b, c)))
     den = la * lb_ * lc_ + np.einsum("fj,fj->f", a, b) * lc_ + np.einsum("fj,fj->f", a, c) * lb_ \
         + np.einsum("fj,fj->f", b, c) * la
     omega = 2 * np.arctan2(num, den)  # solid angle of each face seen from the centre of mass
-    prob = np.bincount(group[target[landed]], weights=omega[landed], minlength=len(groups))
+    landed = end >= 0
+    prob = np.bincount(end[landed], weights=omega[landed], minlength=len(groups))
     total = prob.sum()
     return (prob / total if total > 0 else prob), rocking

@@ -7,7 +7,8 @@ is the distance from that projection to the polygon's boundary divided by the he
 (Section VI, "Experiences"), i.e. the tangent of the tilt it can take before tipping. Each placement also gets the
 quasi-static probability that a part dropped at random comes to rest on it (geometry/supports.py,
 `rest_probabilities`): it says where parts arriving from a feeder lie, and a face the part rolls off (a faceted round
-side, whose neighbouring facet is within `rock_angle`) gets none. Placements are ordered by probability. Free-air grasps are
+side, whose neighbouring facet is within `rock_angle`) gets little or none. Placements are ordered by probability.
+Free-air grasps are
 transformed into each placement (not re-planned) and kept when the hand and both fingers at full opening stay
 above the table.
 """
@@ -33,7 +34,7 @@ class PlacementParams(Params):
     coplanar_angle: hull faces within 0.5 mm of a support's plane and 1 degree of its normal merge into one candidate
     support. support_tolerance: once settled, the hull vertices within 0.1 mm of the table form the support polygon
     (the plan validator's flatness tolerance). min_probability: smallest quasi-static rest probability kept.
-    rock_angle: a support whose hull neighbour beyond its weakest edge is within this angle rocks (35 degrees: a
+    rock_angle: a support that tips within this angle onto a hull neighbour within this angle rocks (35 degrees: a
     round side of 11 facets or more)."""
 
     min_stability: float = param(0.1, ge=0, help="smallest stability (support margin over centre-of-mass height)")
@@ -47,8 +48,8 @@ class PlacementParams(Params):
                                      help="hull vertices within this height of the table support the part")
     min_probability: float = param(0.0, ge=0, le=1, help="smallest quasi-static probability of coming to rest on a placement")
     rock_angle: float = param(float(np.radians(35.0)), ge=0, lt=np.pi / 2, unit="rad",
-                              help="a support whose neighbouring hull face beyond its weakest edge is within this angle "
-                                   "rocks (the part rolls on): probability 0", cli_scale=180.0 / np.pi, cli_unit="deg")
+                              help="a support that tips, and whose neighbouring hull face beyond its weakest edge lies, "
+                                   "within this angle rocks (the part rolls on)", cli_scale=180.0 / np.pi, cli_unit="deg")
 
 
 @dataclass(frozen=True)

@@ -4,10 +4,12 @@ Figs. 11-12), exported as static HTML that opens without a server.
 The robot and the planning gripper (at the step's jaw opening) are drawn by `workbench.viewer.robot.RobotView`
 from the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper.
 A plan with motions plays its timed trajectory at its real speed (`timed_frames`: frames at `fps` per
-second of plan time), with a caption naming the current step (pick, transfer, release, regrasp, place) and a colour
-key; a plan without motions plays its waypoints joined by straight joint lines (`keyframes`, not a motion a robot
-could execute). The object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue) poses
-stay as ghosts, intermediate placements as faint outlines.
+second of plan time); a plan without motions plays its waypoints joined by straight joint lines (`keyframes`, not a
+motion a robot could execute). The object rests at its pose or follows the TCP while held. Start (yellow) and goal
+(blue) poses stay as ghosts, intermediate placements as faint outlines. `PlanView` sends that scene once and plays
+any plan in it by transforms. The caption naming the step playing and its footer come from one track
+(`caption_track`) and are HTML over the canvas (`plan_overlay` in a static page, `view(vis, captions=True)` live),
+never panels in the scene.
 """
 
 from __future__ import annotations

@@ -278,7 +278,7 @@ class IKBrowser:
         self.label.value = (f"{self.robot.name}: tabletop grip {int(self.rows['idtabletopgrips'][i])}, free-air grasp "
                             f"{int(self.rows['idfreeairgrip'][i])}, position "
                             f"{np.round(self.rows['tabletopposition'][i][:2], 3).tolist()} m; {self.kind.value}: "
-                            f"{'feasible' if ok else 'infeasible (showing the grasp)'}; q = {np.round(q, 3).tolist()}")
+                            f"{'feasible' if ok else 'infeasible (showing the grasp)'}; joints {np.round(np.degrees(q), 1).tolist()} deg")
         return i
 
 
