@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -180,6 +181,7 @@ def work(tmp_path_factory) -> Path:
     trimesh.creation.icosphere(subdivisions=3, radius=0.03).export(d / "ball.stl")
     (d / "broken.urdf").write_text("<robot name='broken'><link name='a'/>")
     (d / "afile").write_text("not a folder\n")
+    (d / "folder.csv").mkdir()
     return d
 
 
@@ -283,6 +285,31 @@ BAD_PARAMETERS = [
     ("build", ["--rotations", "1000000"], "--rotations"),
     ("demo", ["--seed", "-1"], "--seed"),
     ("demo", ["--workers", "0"], "--workers"),
+    ("gptable", ["--edge-angle", "nan"], "--edge-angle"),
+    ("gptable", ["--edge-angle=-10"], "[0, 180] deg"),
+    ("gptable", ["--min-face-area", "nan"], "--min-face-area"),
+    ("gptable", ["--min-contact-area", "nan"], "--min-contact-area"),
+    ("gptable", ["--min-range", "400"], "[0, 360] deg"),
+    ("gptable", ["--points", "0"], "--points"),
+    ("gptable", ["--theta-step", "0"], "--theta-step"),
+    ("gptable", ["--table-point", "0.4,nan"], "--table-point"),
+    ("gpplan", ["--initial", "0,nan", "--goal", "1,0:90"], "--initial"),
+    ("gpplan", ["--from", "0,0", "--to", "1,inf"], "--to"),
+    ("gpplan", ["--from", "0,0", "--to", "1,90", "--handx", "nan"], "--handx"),
+    ("gpplan", ["--from", "0,0", "--to", "1,90", "--acc", "-1"], "--acc"),
+    ("catalog", ["--workers", "1000"], "memory budget"),
+    ("catalog", ["--workers", "0"], "--workers"),
+    ("catalog", ["--ik-chunk", "0"], "--ik-chunk"),
+    ("catalog", ["--worlda", "nan"], "--worlda"),
+    ("catalog", ["--shards", "box.stl"], "not a folder"),
+    ("ik", ["--workers", "1000"], "memory budget"),
+    ("plan", ["--budget", "nan"], "--budget"),
+    ("plan", ["--json", "afile/plan.json"], "afile is a file"),
+    ("plan", ["--html", "."], "is a folder"),
+    ("plan", ["--trajectory", "."], "must end in"),
+    ("plan", ["--trajectory", "folder.csv"], "is a folder"),
+    ("grasps", ["--html", "."], "is a folder"),
+    ("fingers", ["--json", "afile/q.json"], "--json"),
 ]
 
 
@@ -297,6 +324,12 @@ def _command(cmd: str, work: Path, db: Path, extra: list[str]) -> list:
         return [cmd, "--out", db.parent / "demo", *extra]
     if cmd == "ik":
         return [cmd, "--db", db, "--object", "box", "--robot", "panda", *extra]
+    if cmd == "gptable":
+        return [cmd, work / "box.stl", "--db", db, *extra]
+    if cmd == "gpplan":
+        return [cmd, "--db", db, "--object", "box", *extra]
+    if cmd == "catalog":
+        return [cmd, "build", work / "box.stl", "--robots", "panda", "--db", db, *extra]
     return [cmd, "--db", db, "--object", "box", "--robot", "panda", *QUERY, *extra]
 
 
@@ -374,6 +407,146 @@ def test_reading_commands_do_not_create_a_store(work, tmp_path):
                  ["plan", "--db", tmp_path / "none.duckdb", "--object", "box", "--robot", "panda", *QUERY]):
         assert_refused(cli(*args, cwd=work), "does not exist")
         assert not (tmp_path / "none.duckdb").exists()
+
+
+READERS = {  # every command that opens an existing store, on the store `db`
+    "plan": ["plan", "--db", "{db}", "--object", "box", "--robot", "panda", *QUERY],
+    "ik": ["ik", "--db", "{db}", "--object", "box", "--robot", "panda", "--workers", "1"],
+    "build": ["build", "box.stl", "--db", "{db}", *BUILD],
+    "gpplan": ["gpplan", "--db", "{db}", "--object", "box", "--from", "0,0", "--to", "1,90"],
+    "catalog report": ["catalog", "report", "--db", "{db}"],
+}
+
+
+def _reader(name: str, db: Path) -> list[str]:
+    return [str(db) if a == "{db}" else a for a in READERS[name]]
+
+
+@pytest.mark.parametrize("cut", ["half", "last block"])
+def test_truncated_store_is_one_line_for_every_command(work, db, cut):
+    """A copy cut short past its header (DuckDB opens it, then fails on the first missing block) is refused at the
+    store's door, whichever command opens it; the file is left as it was."""
+    data = db.read_bytes()
+    db.write_bytes(data[: len(data) // 2] if cut == "half" else data[:-4096])
+    before = file_digest(db)
+    for name in READERS:
+        res = cli(*_reader(name, db), cwd=work)
+        assert_refused(res, str(db.name), "damaged", "truncated")
+        assert file_digest(db) == before, name
+
+
+def test_corrupt_block_is_one_line(work, db):
+    """A block whose checksum fails (the file changed outside DuckDB): one line naming the damage, file untouched."""
+    con = duckdb.connect(str(db), read_only=True)
+    block, blocks = con.execute("SELECT block_size, total_blocks FROM pragma_database_size()").fetchone()
+    con.close()
+    damaged = []
+    for k in range(blocks):  # the blocks a plan reads lie somewhere: spoil every block, each read fails its checksum
+        damaged.append((3 * 4096 + k * block + 64, b"\x55" * 256))
+    with open(db, "r+b") as fh:
+        for at, junk in damaged:
+            fh.seek(at)
+            fh.write(junk)
+    before = file_digest(db)
+    res = cli(*_reader("plan", db), cwd=work)
+    assert_refused(res, str(db.name), "damaged")
+    assert file_digest(db) == before
+
+
+def test_gpplan_on_a_store_without_a_table_names_gptable(work, db, reference):
+    res = cli(*_reader("gpplan", db), cwd=work)
+    assert_refused(res, "tgptable", "workbench gptable")
+    assert state(db) == reference
+
+
+def _hold(db: Path, seconds: float) -> subprocess.Popen:
+    """Another process holding the store read-write for `seconds` (its lock taken when it prints)."""
+    code = (f"import duckdb, sys, time; c = duckdb.connect({str(db)!r}); print('held', flush=True); "
+            f"time.sleep({seconds}); c.close()")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "held"
+    return proc
+
+
+def test_busy_store_is_one_line_or_waited_for(work, db, reference):
+    """A store another process writes: each command says so in one line (naming --wait), or waits with --wait."""
+    holder = _hold(db, 60)
+    try:
+        for name in ("plan", "ik", "catalog report"):
+            res = cli(*_reader(name, db), cwd=work)
+            assert_refused(res, "busy", f"process {holder.pid}", "--wait")
+    finally:
+        holder.kill()
+        holder.wait()
+    assert state(db) == reference
+    holder = _hold(db, 1.5)
+    try:
+        res = cli(*_reader("plan", db), "--no-save", "--wait", "60", cwd=work)
+    finally:
+        holder.wait()
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert state(db) == reference
+
+
+def test_four_plans_at_once(work, db):
+    """Four plans of one query at once: planning only reads (readers share the store), each stores briefly; with
+    --wait every one succeeds and the plans are stored once; without, each succeeds or says the store is busy."""
+    for wait in (["--wait", "120"], []):
+        procs = [spawn(*_reader("plan", db), *wait, cwd=work) for _ in range(4)]
+        results = [(p, *p.communicate(timeout=600)) for p in procs]
+        for p, out, err in results:
+            if wait or p.returncode == 0:
+                assert p.returncode == 0, err[-2000:]
+            else:
+                assert_refused(subprocess.CompletedProcess([], p.returncode, out, err), "busy", "--wait")
+        con = duckdb.connect(str(db), read_only=True)
+        stored = con.execute("SELECT count(*), count(DISTINCT rank) FROM plan").fetchone()
+        con.close()
+        assert stored[0] == stored[1] >= 1  # the best plan and its alternatives, each once
+
+
+def test_a_reader_beside_a_reader(work, db, reference):
+    """plan --no-save needs no writer's lock: it runs while another process reads the store."""
+    code = (f"import duckdb, time; c = duckdb.connect({str(db)!r}, read_only=True); print('held', flush=True); "
+            f"time.sleep(60)")
+    holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        res = cli(*_reader("plan", db), "--no-save", cwd=work)
+        assert res.returncode == 0, res.stderr[-2000:]
+        assert "stored plan" not in res.stdout
+    finally:
+        holder.kill()
+        holder.wait()
+    assert state(db) == reference
+
+
+URDF_FAULTS = {  # a change to UR5's URDF -> words of its one-line refusal
+    "loop": (lambda t: t.replace("</robot>", '<joint name="loop" type="revolute"><parent link="wrist_3_link"/>'
+                                             '<child link="shoulder_link"/><axis xyz="0 0 1"/><limit lower="-1" '
+                                             'upper="1" effort="1" velocity="1"/></joint></robot>'),
+             ["not a tree", "shoulder_link", "loop"]),
+    "nan": (lambda t: re.sub(r'(<joint name="elbow_joint".*?lower=")[^"]*"', r'\1nan"', t, count=1, flags=re.S),
+            ["elbow_joint", "not finite"]),
+    "inverted": (lambda t: re.sub(r'(<joint name="elbow_joint".*?lower=")[^"]*"', r'\g<1>4"', t, count=1, flags=re.S),
+                 ["elbow_joint", "inverted"]),
+    "empty": (lambda t: re.sub(r'(lower|upper)="[^"]*"', r'\1="0.5"', t), ["empty range"]),
+    "roots": (lambda t: t.replace("</robot>", '<link name="stray"/></robot>'), ["not a tree", "stray"]),
+}
+
+
+@pytest.mark.parametrize("fault", [*URDF_FAULTS, "tip is a joint"])
+def test_urdf_faults_are_named_before_pinocchio(work, db, reference, tmp_path, fault):
+    from workbench.resources import erd_robots
+
+    text = (erd_robots() / "ur_description" / "urdf" / "ur5_robot.urdf").read_text()
+    change, words = URDF_FAULTS.get(fault, (lambda t: t, ["elbow_joint", "is a joint, not a link", "forearm_link"]))
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(change(text))
+    tip = "elbow_joint" if fault == "tip is a joint" else "tool0"
+    res = cli("ik", "--db", db, "--object", "box", "--robot", urdf, "--tip", tip, "--workers", "1", cwd=work)
+    assert_refused(res, "arm.urdf", *words)
+    assert state(db) == reference
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -608,3 +781,78 @@ def test_store_left_by_an_older_version(work, db, reference):
     assert state(db) == reference
     res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, "--no-save", cwd=work)
     assert res.returncode == 0, res.stderr[-2000:]
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Ctrl-C as a terminal sends it: SIGINT to the whole process group while the workers run.
+
+
+def interrupt_when(args: list, marker: str, cwd: Path, delay: float = 0.0, timeout: float = 300) -> subprocess.CompletedProcess:
+    """Run `workbench ARGS` in its own process group and send SIGINT to the group once `marker` shows on its stderr
+    (then after `delay` seconds), as a terminal's Ctrl-C reaches a command and every worker it started."""
+    proc = subprocess.Popen([*CLI, *map(str, args)], cwd=cwd, env={**os.environ, "PYTHONPATH": str(ROOT)},
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True)
+    seen, deadline = b"", time.monotonic() + timeout
+    os.set_blocking(proc.stderr.fileno(), False)
+    while marker.encode() not in seen and proc.poll() is None and time.monotonic() < deadline:
+        seen += proc.stderr.read() or b""
+        time.sleep(0.02)
+    time.sleep(delay)
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)
+    os.set_blocking(proc.stderr.fileno(), True)
+    out, err = proc.communicate(timeout=timeout)
+    return subprocess.CompletedProcess(args, proc.returncode, out.decode(), (seen + err).decode())
+
+
+def assert_interrupted(res: subprocess.CompletedProcess, command: str) -> None:
+    """Exit 130 and one line from the driver; no traceback or KeyboardInterrupt from any process."""
+    assert "Traceback" not in res.stderr and "KeyboardInterrupt" not in res.stderr, res.stderr[-3000:]
+    lines = [ln for ln in res.stderr.replace("\r", "\n").splitlines() if ln.strip() and "/s]" not in ln
+             and "it/s" not in ln and not ln.startswith("dask:")]
+    assert res.returncode == 130, (res.returncode, res.stderr[-2000:])
+    assert lines == [f"workbench {command}: interrupted; the store keeps only completed stages"], lines
+
+
+def test_ctrl_c_during_ik_workers(work, db, tmp_path):
+    """ik with two worker processes, interrupted while they start and solve: one line; the re-run resumes and ends
+    with the rows of an uninterrupted run."""
+    clean = tmp_path / "clean.duckdb"
+    shutil.copy(db, clean)
+    args = ["ik", "--object", "box", "--robot", "ur5", "--workers", "2"]
+    assert cli(*args[:1], "--db", clean, *args[1:], cwd=work).returncode == 0
+    res = interrupt_when([*args[:1], "--db", db, *args[1:]], "ik ur5", cwd=work, delay=0.5)
+    assert_interrupted(res, "ik")
+    res = cli(*args[:1], "--db", db, *args[1:], cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert state(db) == state(clean)
+
+
+def test_ctrl_c_during_build(work, tmp_path, reference):
+    db = tmp_path / "s.duckdb"
+    args = ["build", work / "box.stl", "--db", db, "--robot", "panda", "--workers", "2", *GRID]
+    assert_interrupted(interrupt_when(args, "ik panda", cwd=work, delay=0.3), "build")
+    res = cli(*args, cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert state(db) == reference
+
+
+def test_ctrl_c_during_gptable(work, tmp_path):
+    db = tmp_path / "g.duckdb"
+    res = interrupt_when(["gptable", work / "box.stl", "--db", db, "--theta-step", "2", "--phi-step", "2"], "",
+                         cwd=work, delay=4.0)
+    assert_interrupted(res, "gptable")
+
+
+def test_ctrl_c_during_catalog_build(work, tmp_path):
+    """The Dask workers never see the Ctrl-C; the driver stops with one line and records no unit as failed."""
+    db = tmp_path / "c.duckdb"
+    args = ["catalog", "build", work / "box.stl", "--robots", "panda", "--db", db, "--workers", "1", "--no-progress",
+            *GRID[:-2]]
+    assert_interrupted(interrupt_when(args, "dask:", cwd=work, delay=1.0), "catalog")
+    con = duckdb.connect(str(db), read_only=True)
+    tables = {t for (t,) in con.execute("SELECT table_name FROM information_schema.tables").fetchall()}
+    failed = con.execute("SELECT count(*) FROM catalog_unit WHERE error IS NOT NULL").fetchone()[0] \
+        if "catalog_unit" in tables else 0
+    con.close()
+    assert failed == 0

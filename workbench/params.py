@@ -16,7 +16,7 @@ import os
 from dataclasses import MISSING, Field, asdict, dataclass, field, fields, replace
 from typing import Any, Callable
 
-__all__ = ["BUDGET_ENV", "WAIT_ENV", "Bound", "MemoryBudgetError", "ParameterError", "Params", "add_param", "bounds", "check_memory", "cli_bound",
+__all__ = ["BUDGET_ENV", "DEG", "check_workers", "WAIT_ENV", "Bound", "MemoryBudgetError", "ParameterError", "Params", "add_param", "bounds", "check_memory", "cli_bound",
            "from_cli", "memory_budget", "param", "parse_number", "parse_size", "validate"]
 
 import numpy as np
@@ -25,6 +25,7 @@ from workbench.errors import MemoryBudgetError, ParameterError
 
 BOUND = "workbench.bound"
 BUDGET_ENV = "WORKBENCH_MEMORY_BUDGET"
+DEG = 180.0 / math.pi  # radians in the library, degrees on the command line (cli_scale)
 WAIT_ENV = "WORKBENCH_WAIT"  # seconds to wait for a store another process holds (the command line's --wait)
 
 
@@ -191,15 +192,17 @@ def parse_number(bound: Bound, label: str, default: Any = MISSING) -> Callable[[
 
 
 def add_param(parser: argparse.ArgumentParser, cls: type, name: str, flag: str | None = None, default: Any = MISSING,
-              help: str | None = None, **kwargs: Any) -> argparse.Action:
+              help: str | None = None, cli_default: Any = MISSING, **kwargs: Any) -> argparse.Action:
     """Add the option of `cls.name` to `parser`: its range checked while parsing and shown in --help.
 
-    The value is in command-line units (`cli_scale`); convert with `from_cli` when building the dataclass."""
+    The value is in command-line units (`cli_scale`); convert with `from_cli` when building the dataclass.
+    `cli_default` gives the default in command-line units directly (else `default`, or the field's, scaled)."""
     bound, lib_default = bounds(cls)[name]
     flag = flag or bound.flag or "--" + name.replace("_", "-")
     shown = lib_default if default is MISSING else default
     scaled = bound.cli_scale != 1.0 and isinstance(shown, (int, float)) and not isinstance(shown, bool)
-    cli_default = shown * bound.cli_scale if scaled else shown
+    if cli_default is MISSING:
+        cli_default = shown * bound.cli_scale if scaled else shown
     text = (help if help is not None else bound.help) or name
     extra = f"; default {_fmt(cli_default)}" if cli_default is not None else ""
     if bound.lo is not None and bound.lo < 0 or bound.hi is not None and bound.hi < 0:
@@ -270,6 +273,16 @@ def check_memory(nbytes: float, what: str, hint: str, budget: int | str | None =
     if nbytes > limit:
         raise MemoryBudgetError(f"{what} needs about {format_bytes(nbytes)}, above the memory budget of {format_bytes(limit)} "
                                 f"(default half this machine's memory; --memory-budget or {BUDGET_ENV}); {hint}")
+
+
+WORKER_BYTES = 200 * 2**20  # one worker process with the library imported (numpy, pinocchio, coal, DuckDB): ~150-200 MiB RSS
+
+
+def check_workers(n: int, budget: int | str | None = None) -> None:
+    """Refuse more worker processes than the memory budget holds (each about WORKER_BYTES), before any starts."""
+    limit = memory_budget(budget)
+    check_memory(n * WORKER_BYTES, f"--workers {n} ({format_bytes(WORKER_BYTES)} per worker process)",
+                 f"give --workers {max(1, int(limit // WORKER_BYTES))} or fewer", budget)
 
 
 def format_bytes(n: float) -> str:

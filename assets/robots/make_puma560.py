@@ -7,7 +7,10 @@ T_i = Rz(q_i) Tz(d_i) Tx(a_i) Rx(alpha_i), with
     a     = (0, 0.4318, 0.0203, 0, 0, 0) m
     d     = (0, 0, 0.15005, 0.4318, 0, 0) m
     alpha = (90, 0, -90, 90, -90, 0) deg
-    limits (-160..160, -225..45, -45..225, -110..170, -100..100, -266..266) deg
+    limits (-160..160, -45..225, -225..45, -110..170, -100..100, -266..266) deg
+
+The limits are those of Corke's `mdl_puma560` (qlim, in these DH frames: q2 = 0 holds the upper arm level, q2 = 90 deg
+raises it, q3 = -90 deg straightens the elbow upward); Lee and Fu's table lists the same arm in other frames.
 
 In the URDF, link `puma_link{i}` is the frame of joint i (z = its axis); the fixed part Tz(d_i) Tx(a_i) Rx(alpha_i)
 is the origin of joint i+1 (and of the fixed joint to `puma_flange` after joint 6), so the flange is DH frame 6.
@@ -31,7 +34,7 @@ import numpy as np
 A = (0.0, 0.4318, 0.0203, 0.0, 0.0, 0.0)
 D = (0.0, 0.0, 0.15005, 0.4318, 0.0, 0.0)
 ALPHA = (90.0, 0.0, -90.0, 90.0, -90.0, 0.0)
-LIMITS = ((-160, 160), (-225, 45), (-45, 225), (-110, 170), (-100, 100), (-266, 266))
+LIMITS = ((-160, 160), (-45, 225), (-225, 45), (-110, 170), (-100, 100), (-266, 266))
 VELOCITY = (2.0, 2.0, 2.0, 4.0, 4.0, 4.0)  # rad/s
 EFFORT = (97.6, 186.4, 89.4, 24.2, 20.1, 21.3)
 SHOULDER_HEIGHT = 0.672

@@ -1,6 +1,7 @@
 """Make the documentation's pictures from the library: `python docs/images/make_images.py [OUTDIR]`.
 
-grasps.png (matplotlib: the bundled tube and the contact pairs of a sample of its grasps), gptable.png (the
+grasps.png (matplotlib: the bundled tube and the contact pairs of a sample of its grasps), grippers.png (the
+bundled bracket with a few grasps of the Franka hand and of the Robotiq 2F-85-like spec), gptable.png (the
 grasp-placement table of the L part with a chained sequence, as the paper's Fig. 6) and, when Chromium and
 Playwright are installed, plan.png (a screenshot of `workbench demo`'s plan.html).
 """
@@ -49,6 +50,21 @@ def grasps_png() -> None:
     fig.savefig(OUT / "grasps.png", dpi=90, bbox_inches="tight")
 
 
+def grippers_png() -> None:
+    from workbench.geometry.objects import load_object
+    from workbench.grasping.grasps import GraspParams, plan_grasps
+    from workbench.resources import bundled_objects
+    from workbench.robots.gripper import franka_hand, load_gripper
+    from workbench.viewer.grippers import compare_figure
+
+    part = load_object(bundled_objects()["bracket"])
+    sets = []
+    for gripper in (franka_hand(), load_gripper("robotiq-2f85")):
+        g = plan_grasps(part, gripper, GraspParams()).grasps
+        sets.append((gripper, g.poses, g.jawwidth))
+    compare_figure(part, sets, hands=3, size=(9.0, 4.0)).savefig(OUT / "grippers.png", dpi=90, bbox_inches="tight")
+
+
 def gptable_png() -> None:
     from workbench.planners.tournassoud.chaining import grasp_query
     from workbench.planners.tournassoud.figures import table_figure
@@ -86,5 +102,5 @@ def plan_png() -> None:
 
 
 if __name__ == "__main__":
-    for make in (grasps_png, gptable_png, plan_png) if len(sys.argv) < 3 else [globals()[n] for n in sys.argv[2:]]:
+    for make in (grasps_png, grippers_png, gptable_png, plan_png) if len(sys.argv) < 3 else [globals()[n] for n in sys.argv[2:]]:
         make()

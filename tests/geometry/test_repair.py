@@ -53,13 +53,121 @@ def test_several_bodies_largest_kept_or_refused():
     twins = trimesh.util.concatenate([big, big.copy().apply_translation([0.2, 0, 0])])
     with pytest.raises(MeshError, match="2 separate bodies"):
         _load(twins, "twins")
-    # overlapping pieces of one part (a bear made of convex pieces) stay together
+    # overlapping pieces of one part (a bear made of convex pieces) become one body, their union
     pieces = trimesh.util.concatenate([big, trimesh.creation.icosphere(radius=0.015).apply_translation([0.03, 0, 0])])
     obj = _load(pieces, "pieces")
-    assert len(obj.mesh.faces) == len(pieces.faces)
+    assert obj.mesh.body_count == 1 and obj.mesh.area < pieces.area
 
 
 def test_clean_mesh_reports_no_repair(tmp_path):
     path = tmp_path / "clean.stl"
     trimesh.creation.box((0.05, 0.04, 0.03)).export(path)
     assert load_object(path).repairs == ()
+
+
+def test_repaired_boxes_give_the_clean_box_grasp_rows(tmp_path, hand):
+    """A box re-wound in part, inside out, or with its vertices and faces shuffled and duplicated is the clean box:
+    the same mesh, digest and grasp rows through the store."""
+    from workbench.geometry.repair import canonical
+    from workbench.grasping.grasps import GraspParams
+    from workbench.planners.wan_harada.stages import ensure_grasps
+    from workbench.store import Store
+    from workbench.store.grasps import load_grasps
+
+    clean = trimesh.creation.box((0.05, 0.04, 0.03))
+    rng = np.random.default_rng(3)
+    rewound = clean.faces.copy()
+    rewound[::3] = rewound[::3, ::-1]
+    perm = rng.permutation(len(clean.vertices))
+    shuffled_v = clean.vertices[perm]
+    shuffled_f = np.argsort(perm)[clean.faces][rng.permutation(len(clean.faces))]
+    shuffled_f = np.roll(shuffled_f, 1, axis=1)  # each face listed from another corner, same winding
+    dup_v = np.vstack([shuffled_v, shuffled_v])
+    dup_f = np.vstack([shuffled_f, shuffled_f[:4], shuffled_f[5:9] + len(shuffled_v)])
+    variants = {"clean": (clean.vertices, clean.faces), "rewound": (clean.vertices, rewound),
+                "inside_out": (clean.vertices, clean.faces[:, ::-1]), "shuffled": (dup_v, dup_f)}
+    rows = {}
+    for label, (v, f) in variants.items():
+        obj = _load(trimesh.Trimesh(v, f, process=False), "box")
+        db = tmp_path / f"{label}.duckdb"
+        result = ensure_grasps(db, obj, hand, GraspParams())
+        with Store(db) as store:
+            g = load_grasps(store, result.idobject, result.idparamset)
+        rows[label] = (obj.digest, obj.mesh.vertices, obj.mesh.faces, g)
+    assert len({r[0] for r in rows.values()}) == 1
+    ref = rows["clean"]
+    assert len(ref[3]["jawwidth"]) > 50
+    for label, (_, v, f, g) in rows.items():
+        assert np.array_equal(v, ref[1]) and np.array_equal(f, ref[2]), label
+        for key in ("contactpoint0", "contactpoint1", "contactnormal0", "contactnormal1", "rotmat", "jawwidth"):
+            assert np.array_equal(g[key], ref[3][key]), (label, key)
+    once = canonical(clean)
+    assert np.array_equal(canonical(once).faces, once.faces) and np.isclose(once.volume, clean.volume)
+
+
+def _pieces() -> list[trimesh.Trimesh]:
+    """A part from convex pieces as a convex decomposition exports it: a block, a second block meeting it face to
+    face 4 um deep, and a peg sunk 10 mm into the first."""
+    a = trimesh.creation.box((0.04, 0.03, 0.02))
+    b = trimesh.creation.box((0.02, 0.03, 0.02)).apply_translation([0.03 - 4e-6, 0, 0])
+    c = trimesh.creation.cylinder(radius=0.006, height=0.03, sections=24).apply_translation([-0.01, 0, 0.015])
+    return [a, b, c]
+
+
+def test_touching_pieces_are_one_part_with_the_union_surface(hand):
+    from workbench.grasping.grasps import GraspParams, plan_grasps
+
+    pieces = _pieces()
+    joined = trimesh.util.concatenate(pieces)
+    obj = _load(joined, "pieces")
+    assert any("joined 3 touching bodies" in r for r in obj.repairs), obj.repairs
+    assert obj.mesh.is_watertight and obj.mesh.body_count == 1
+    assert obj.mesh.area < sum(p.area for p in pieces) - 1e-4  # the peg's sunk wall and the shared faces are gone
+    assert np.isclose(obj.mesh.volume, 0.04 * 0.03 * 0.02 + 0.02 * 0.03 * 0.02 - 4e-6 * 0.03 * 0.02
+                      + np.pi * 0.006**2 * 0.02, rtol=2e-2)
+    plan = plan_grasps(obj, hand, GraspParams())
+    assert len(plan.grasps) > 20
+    # no sample lies inside a piece (signed distance is positive inside), so none on a face the union removed
+    for p in pieces:
+        assert trimesh.proximity.signed_distance(p, plan.samples.points).max() < 1e-6
+
+
+def test_pieces_a_few_microns_apart_are_joined_and_bodies_5mm_apart_are_refused():
+    a = trimesh.creation.box((0.03, 0.03, 0.03))
+    near = trimesh.creation.box((0.03, 0.03, 0.03)).apply_translation([0.03 + 2e-6, 0, 0])
+    obj = _load(trimesh.util.concatenate([a, near]), "gap")
+    assert any("joined 2 touching bodies" in r for r in obj.repairs), obj.repairs
+    far = trimesh.creation.box((0.03, 0.03, 0.03)).apply_translation([0.035, 0, 0])
+    with pytest.raises(MeshError, match=r"nearest 5 mm apart"):
+        _load(trimesh.util.concatenate([a, far]), "apart")
+
+
+def test_exported_files_glb_scene_obj_materials_ply_colours(tmp_path):
+    """A GLB scene of two pieces placed by the scene graph, an OBJ with materials and a PLY with vertex colours load
+    as the one part they hold (metres)."""
+    a = trimesh.creation.box((0.03, 0.02, 0.02))
+    b = trimesh.creation.box((0.02, 0.02, 0.02))
+    scene = trimesh.Scene()
+    scene.add_geometry(a, node_name="base", transform=trimesh.transformations.translation_matrix([0.1, 0, 0]))
+    scene.add_geometry(b, node_name="lid", transform=trimesh.transformations.translation_matrix([0.125, 0, 0]))
+    glb = tmp_path / "part.glb"
+    glb.write_bytes(scene.export(file_type="glb"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        obj = load_object(glb)
+    assert obj.mesh.body_count == 1 and np.allclose(obj.mesh.bounds, [[0.085, -0.01, -0.01], [0.135, 0.01, 0.01]])
+    assert np.isclose(obj.mesh.volume, 0.05 * 0.02 * 0.02)
+    coloured = a.copy()
+    coloured.visual.vertex_colors = np.tile([200, 30, 30, 255], (len(a.vertices), 1))
+    ply = tmp_path / "part.ply"
+    ply.write_bytes(coloured.export(file_type="ply"))
+    objdir = tmp_path / "obj"
+    objdir.mkdir()
+    textured = a.copy()
+    textured.visual = trimesh.visual.TextureVisuals(uv=np.random.default_rng(0).random((len(a.vertices), 2)),
+                                                    material=trimesh.visual.material.SimpleMaterial(diffuse=[0, 200, 0, 255]))
+    textured.export(objdir / "part.obj")
+    assert (objdir / "material.mtl").exists() or any(p.suffix == ".mtl" for p in objdir.iterdir())
+    for path in (ply, objdir / "part.obj"):
+        got = load_object(path)
+        assert np.isclose(got.mesh.volume, a.volume) and got.mesh.is_watertight, path

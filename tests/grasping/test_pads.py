@@ -61,3 +61,21 @@ def test_grid_and_scan_give_the_same_touches(hand):
     assert np.array_equal(grid.hit, brute.hit)
     assert np.array_equal(grid.tri0, brute.tri0) and np.array_equal(grid.tri1, brute.tri1)
     assert np.allclose(grid.poses, brute.poses, atol=1e-12)
+
+
+def test_pad_offsets_place_contacts_on_the_pads(hand):
+    """On a box face parallel to the pads the contact is the sampled point on the jaw axis, at the pad's centre in x;
+    every offset lies within the pad (|offset| <= 1)."""
+    from workbench.geometry.objects import from_trimesh
+    from workbench.grasping.grasps import GraspParams, plan_grasps
+    from workbench.grasping.pads import edge_share, pad_offsets, pad_rectangle
+
+    box = from_trimesh(trimesh.creation.box((0.05, 0.04, 0.03)), "box")
+    g = plan_grasps(box, hand, GraspParams()).grasps
+    off = np.vstack([pad_offsets(g.poses, g.contact0, hand), pad_offsets(g.poses, g.contact1, hand)])
+    assert (np.abs(off) <= 1 + 1e-9).all()
+    cx, cz, hx, hz = pad_rectangle(hand)
+    on_axis = np.abs(np.einsum("gji,gj->gi", g.poses[:, :3, :3], g.contact0 - g.poses[:, :3, 3])[:, [0, 2]]).max(axis=1) < 1e-9
+    assert on_axis.sum() > 10
+    assert np.allclose(off[: len(g)][on_axis], [-cx / hx, -cz / hz])
+    assert 0.0 <= edge_share(g.poses, g.contact0, g.contact1, hand) < 0.5

@@ -279,3 +279,60 @@ def test_a_washer_lying_flat_is_gripped_from_above_by_the_fingertips(hand):
             assert -1e-9 <= z <= 0.006 + 1e-9
         # the TCP sits above the part: the hand was moved back along its approach
         assert tcp[2, 3] > 0.006
+
+
+def _ray_shares(mesh: trimesh.Trimesh, com: np.ndarray, normals: np.ndarray, n: int = 40000) -> np.ndarray:
+    """Monte Carlo: the share of uniformly random directions from the centre of mass whose ray leaves the part
+    through each support (faces within 1 degree of its normal), by ray casting, without solid-angle formulas."""
+    rng = np.random.default_rng(5)
+    d = rng.standard_normal((n, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    _, ray, tri = mesh.ray.intersects_location(np.tile(com, (n, 1)), d, multiple_hits=False)
+    face_n = mesh.face_normals[tri]
+    share = np.array([(face_n @ nn >= np.cos(np.radians(1.0))).sum() for nn in normals]) / n
+    return share
+
+
+def test_rest_probabilities_of_boxes_match_ray_statistics():
+    from workbench.geometry.objects import from_trimesh
+    from workbench.grasping.placements import stable_placements
+
+    cube = from_trimesh(trimesh.creation.box((0.04, 0.04, 0.04)), "cube")
+    p = stable_placements(cube)
+    assert len(p) == 6 and np.isclose(p.probability.sum(), 1.0)
+    assert np.ptp(p.probability) <= 0.01 * p.probability.mean()
+    long = from_trimesh(trimesh.creation.box((0.10, 0.03, 0.02)), "long")
+    p = stable_placements(long)
+    assert len(p) == 6 and np.all(np.diff(p.probability) <= 1e-12)  # ordered, most likely first
+    assert np.allclose(np.abs(p.normals[:2]), [0, 0, 1])  # the two 100 x 30 mm faces are the likeliest
+    assert np.allclose(p.probability, _ray_shares(long.mesh, long.com, p.normals), atol=0.01)
+
+
+def test_faceted_round_sides_get_a_low_probability_and_rock():
+    from workbench.geometry.objects import from_trimesh
+    from workbench.geometry.supports import coplanar_groups, rest_probabilities, stabilities
+    from workbench.grasping.placements import PlacementParams, stable_placements
+
+    # a 37 mm pin lying on its faceted round side, with two flats milled 6 mm deep
+    pin = trimesh.boolean.intersection([trimesh.creation.cylinder(radius=0.0185, height=0.05, sections=24),
+                                        trimesh.creation.box((0.04, 0.025, 0.06))], engine="manifold")
+    obj = from_trimesh(pin, "pin")
+    p = stable_placements(obj)
+    side = np.abs(p.normals[:, 2]) < 0.5  # round side or flats
+    flats = side & (np.abs(p.normals[:, 1]) > 0.999)
+    facets = side & ~flats
+    assert facets.sum() >= 4 and flats.sum() == 2
+    assert (p.stability[facets] >= 0.1).all()  # the support-polygon score keeps the facets the part rolls off
+    assert (p.probability[facets] < 0.05).all() and (p.probability[facets] < p.probability[flats].min() / 4).all()
+    kept = stable_placements(obj, PlacementParams(min_probability=0.05))
+    assert len(kept) == int((~facets).sum())
+    # a 12-sided bar's sides (30 degrees apart, tipping at 15) rock; a hexagonal bar's (60 degrees) do not
+    for sections, rocks in ((12, True), (6, False)):
+        bar = from_trimesh(trimesh.creation.cylinder(radius=0.015, height=0.06, sections=sections), "bar")
+        hull = bar.mesh.convex_hull
+        groups, normals = coplanar_groups(hull, 5e-4, np.radians(1.0))
+        held = stabilities(hull, bar.com, groups, normals) > 0
+        prob, rocking = rest_probabilities(hull, bar.com, groups, normals, held, np.radians(35.0))
+        sides = np.abs(normals[:, 2]) < 0.5
+        assert sides.sum() == sections and np.isclose(prob.sum(), 1.0)
+        assert (rocking[sides] == rocks).all() and not rocking[~sides].any(), sections

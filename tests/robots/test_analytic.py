@@ -87,8 +87,8 @@ def test_roadmap_ik_stage_closed_form_option(puma):
     and it finds at least every grip the numerical solver finds (the closed form is complete)."""
     grips, mesh, _ = synthetic_grips(xs=np.array([0.4, 0.55]), ys=np.array([-0.15, 0.15]), angles=4, approaches=4, offsets=1)
     scene = default_scene("puma560")
-    closed = ik_feasibility(puma, grips, scene, 0.05, 0.05, mesh, IKOptions(closed_form=True, chunk=64), workers=1, progress=False)
-    numeric = ik_feasibility(puma, grips, scene, 0.05, 0.05, mesh, IKOptions(chunk=64, lane=8, library=4096), workers=1,
+    closed = ik_feasibility(puma, grips, scene, 0.05, 0.05, mesh, IKOptions(chunk=64), workers=1, progress=False)
+    numeric = ik_feasibility(puma, grips, scene, 0.05, 0.05, mesh, IKOptions(chunk=64, library=4096, solver="numerical"), workers=1,
                              progress=False)
     assert closed.feasible.any()
     assert not (numeric.feasible & ~closed.feasible).any()
@@ -101,7 +101,6 @@ def test_roadmap_ik_stage_closed_form_option(puma):
         rows = np.flatnonzero(closed.feasible[:, k])
         fk = _fk(puma, closed.joints[rows, k])
         assert np.abs(fk - t[rows]).max() < 1e-9
-    assert IKOptions().as_dict() == {k: v for k, v in IKOptions(closed_form=True).as_dict().items() if k != "closed_form"}
 
 
 @pytest.mark.parametrize("limits", [True, False])
@@ -146,3 +145,36 @@ def test_the_puma_upper_arm_swings_beside_its_column():
     q[:1000, 1] = np.linspace(model.lowerPositionLimit[1], model.upperPositionLimit[1], 1000)  # the whole swing
     hits = [pin.computeCollisions(model, data, geom, gdata, qi, True) for qi in q]
     assert not any(hits)
+
+
+def test_puma_limits_and_reach_match_corkes_model():
+    """The shipped PUMA 560 has the joint limits of Corke's `mdl_puma560` (qlim, degrees) in its DH frames, so its
+    "ready" pose (upper arm and forearm straight up, q = (0, 90, -90, 0, 0, 0) deg) is within them, and over its
+    limits the wrist centre reaches sqrt(d3^2 + (a2 + sqrt(a3^2 + d4^2))^2) = 0.877 m from the shoulder (pinocchio
+    FK of the URDF file alone, a dense grid of q2 and q3)."""
+    from workbench.robots.model import PUMA560_URDF
+
+    corke = np.radians([[-160, 160], [-45, 225], [-225, 45], [-110, 170], [-100, 100], [-266, 266]])
+    model = pin.buildModelFromUrdf(str(PUMA560_URDF))
+    data = model.createData()
+    idx = [model.joints[model.getJointId(f"puma_joint{i}")].idx_q for i in range(1, 7)]
+    assert np.allclose(model.lowerPositionLimit[idx], corke[:, 0], atol=1e-12)
+    assert np.allclose(model.upperPositionLimit[idx], corke[:, 1], atol=1e-12)
+    shoulder_id, wrist_id = model.getJointId("puma_joint1"), model.getJointId("puma_joint5")
+
+    def wrist(q2: float, q3: float) -> tuple[np.ndarray, np.ndarray]:
+        q = pin.neutral(model)
+        q[idx[1]], q[idx[2]] = q2, q3
+        pin.forwardKinematics(model, data, q)
+        return np.asarray(data.oMi[wrist_id].translation).copy(), np.asarray(data.oMi[shoulder_id].translation).copy()
+
+    w, o = wrist(np.pi / 2, -np.pi / 2)  # ready: straight up
+    assert w[2] - o[2] == pytest.approx(0.4318 + 0.4318, abs=1e-9)
+    reach = np.sqrt(0.15005 ** 2 + (0.4318 + np.hypot(0.0203, 0.4318)) ** 2)
+    grid = [(a, b) for a in np.linspace(*corke[1], 91) for b in np.linspace(*corke[2], 361)]
+    dist = max(np.linalg.norm(np.subtract(*wrist(a, b))) for a, b in grid)
+    assert dist == pytest.approx(reach, abs=2e-4) and reach == pytest.approx(0.877, abs=5e-4)
+    # the mirrored limits (Lee and Fu's, in other frames) fall short of it: the elbow cannot straighten
+    mirrored = max(np.linalg.norm(np.subtract(*wrist(a, b))) for a in np.linspace(*corke[2], 61)
+                   for b in np.linspace(*corke[1], 121))
+    assert mirrored < reach - 0.03

@@ -141,6 +141,13 @@ def test_bad_urdf_gripper_exits_2(tmp_path, capsys):
         assert main(["grasps", mesh, "--db", str(db), "--gripper", urdf, *extra]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and words in err[0] and "parallel60.urdf" in err[0]
+    # a TCP frame beyond the fingertips
+    far = tmp_path / "far.urdf"
+    far.write_text(BUNDLED["parallel60"].read_text().replace('<origin xyz="0 0 0.1"/>', '<origin xyz="0 0 0.3"/>'))
+    assert main(["grasps", mesh, "--db", str(db), "--gripper", str(far), "--gripper-hand", "p60_hand",
+                 "--gripper-fingers", "p60_left_joint,p60_right_joint", "--gripper-tcp", "p60_tcp"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "far.urdf" in err[0] and "outside the hand" in err[0]
     # the fingers closing along two different axes
     skew = tmp_path / "skew.urdf"
     skew.write_text(BUNDLED["parallel60"].read_text().replace('<axis xyz="0 -1 0"/>', '<axis xyz="0 -1 1"/>').replace(
@@ -150,3 +157,53 @@ def test_bad_urdf_gripper_exits_2(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "skew.urdf" in err[0]
     assert not db.exists()
+
+
+def test_tiago_finger_boxes_hold_its_links_along_the_stroke():
+    """At three openings, every vertex of the left finger's links (pinocchio FK of the URDF and its meshes) lies in
+    the boxes `finger_poses` gives at that opening: the linkage's bars turn, and the boxes follow them."""
+    import trimesh
+
+    g = load_gripper("own", robot_urdf=TIAGO, tip="arm_left_tool_link", finger_joints=TIAGO_FINGERS)
+    model = pin.buildModelFromUrdf(str(TIAGO))
+    geom = pin.buildGeomFromUrdf(model, str(TIAGO), pin.COLLISION, package_dirs=[str(erd_robots().parent.parent)])
+    data, gdata = model.createData(), geom.createData()
+    upper = 0.8028514559173916
+    links = ("gripper_left_inner_finger_left_link", "gripper_left_outer_finger_left_link", "gripper_left_fingertip_left_link")
+    for i in (0, 20, 40):
+        s = i / 40 * upper
+        q = pin.neutral(model)
+        for j in ("gripper_left_finger_joint", "gripper_left_inner_finger_left_joint", "gripper_left_inner_finger_right_joint",
+                  "gripper_left_outer_finger_right_joint"):
+            q[model.joints[model.getJointId(j)].idx_q] = s
+        for j in ("gripper_left_fingertip_left_joint", "gripper_left_fingertip_right_joint"):
+            q[model.joints[model.getJointId(j)].idx_q] = -s
+        pin.framesForwardKinematics(model, data, q)
+        pin.updateGeometryPlacements(model, data, geom, gdata)
+        tcp = np.asarray(data.oMf[model.getFrameId("arm_left_tool_link")].homogeneous) @ g.tcp_in_hand
+        boxes = [(e, p) for e, p in g.finger_poses(float(g.stroke[0][i])) if p[1, 3] > 0]
+        for k, go in enumerate(geom.geometryObjects):
+            if model.frames[go.parentFrame].name not in links:
+                continue
+            v = np.asarray(trimesh.load(go.meshPath, force="mesh").vertices) * np.asarray(go.meshScale)
+            world = v @ np.asarray(gdata.oMg[k].rotation).T + np.asarray(gdata.oMg[k].translation)
+            local = (np.linalg.inv(tcp) @ np.c_[world, np.ones(len(world))].T).T[:, :3]
+            inside = np.zeros(len(local), dtype=bool)
+            for ext, pose in boxes:
+                rel = (np.linalg.inv(pose) @ np.c_[local, np.ones(len(local))].T).T[:, :3]
+                inside |= (np.abs(rel) <= ext / 2 + 1e-6).all(axis=1)
+            assert inside.all(), (go.name, i, int((~inside).sum()))
+
+
+@pytest.mark.parametrize("name", ["panda", "ur5", "puma560"])
+def test_another_gripper_on_a_builtin_robot_sits_where_the_franka_hand_does(name):
+    """The Robotiq-like spec's hand frame (its TCP less its offset) is the Franka hand's, at any joint vector."""
+    from workbench.robots.model import get_robot
+
+    robotiq = load_gripper("robotiq-2f85")
+    a, b = get_robot(name), get_robot(name, gripper=robotiq)
+    assert b.gripper.digest == robotiq.digest and a.spec.digest != b.spec.digest
+    q = np.random.default_rng(0).uniform(a.lower, a.upper)
+    hand_a = a.tcp_pose(q) @ np.linalg.inv(franka_hand().tcp_in_hand)
+    hand_b = b.tcp_pose(q) @ np.linalg.inv(robotiq.tcp_in_hand)
+    assert np.allclose(hand_a, hand_b, atol=1e-9)

@@ -6,6 +6,8 @@ base (not through workbench.robots). Grips are a small synthetic box set written
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -23,7 +25,7 @@ from workbench.store import Store
 from workbench.store import robots as sql
 
 SMALL = dict(xs=np.array([0.4, 0.55]), ys=np.array([-0.15, 0.15]), angles=4, approaches=4, offsets=1)
-OPTS = IKOptions(chunk=32, lane=8, library=4096)
+OPTS = IKOptions(chunk=32, library=4096, solver="numerical")
 
 
 @pytest.fixture(scope="module")
@@ -142,15 +144,6 @@ def test_rerun_reuses_and_interrupted_run_resumes(stored, tmp_path, panda, monke
     np.testing.assert_array_equal(rows["joints"], reference["joints"])
 
 
-def test_same_inputs_same_rows_with_more_workers(panda):
-    grips, mesh, _ = synthetic_grips(**SMALL)
-    scene = default_scene("panda")
-    one = ik_feasibility(panda, grips, scene, HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
-    two = ik_feasibility(panda, grips, scene, HANDX, WORLDZ, mesh, OPTS, workers=2, progress=False)
-    np.testing.assert_array_equal(one.feasible, two.feasible)
-    np.testing.assert_array_equal(one.joints, two.joints)
-
-
 def _single(pose: np.ndarray) -> dict[str, np.ndarray]:
     place = np.eye(4)
     place[:3, 3] = pose[:3, 3] - np.array([0, 0, 0.02])
@@ -220,7 +213,7 @@ def test_bad_robot_inputs_name_the_input(tmp_path):
     bad.write_text("<robot name='x'><link name='a'/><joint name='j' type='revolute'></robot>")
     with pytest.raises(RobotError, match="could not be loaded"):
         robot_from_urdf(bad, "a")
-    with pytest.raises(RobotError, match="no tip frame 'nowhere'"):
+    with pytest.raises(RobotError, match="no link 'nowhere' for --tip"):
         robot_from_urdf(erd_robots() / "ur_description" / "urdf" / "ur5_robot.urdf", "nowhere")
     with pytest.raises(RobotError, match="NaN"):
         get_robot("panda", base=np.full((4, 4), np.nan))
@@ -274,15 +267,6 @@ def test_the_gripper_enters_the_robot_digest_the_workers_and_the_ik_rows(tmp_pat
         b = run_ik(store, "box", other, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=pid)
         assert a.idrobot != b.idrobot and b.computed == b.grips > 0
         assert sql.robot_row(store, b.idrobot)["digest"] == other.spec.digest
-
-
-def test_ik_pool_workers_give_the_rows_of_the_serial_run(panda):
-    """Chunks solved by forkserver worker processes (each building the solver once) equal the in-process ones."""
-    grips, mesh, _ = synthetic_grips(**SMALL)
-    serial = ik_feasibility(panda, grips, Scene(), HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
-    pooled = ik_feasibility(panda, grips, Scene(), HANDX, WORLDZ, mesh, OPTS, workers=2, progress=False)
-    assert np.array_equal(serial.feasible, pooled.feasible)
-    assert np.allclose(np.nan_to_num(serial.joints), np.nan_to_num(pooled.joints))
 
 
 def test_a_stored_urdf_robot_is_rebuilt_from_its_row_with_every_field(tmp_path):
@@ -343,3 +327,56 @@ def test_load_ik_of_one_tabletop_grid_when_the_store_holds_two(tmp_path, panda):
             assert len(rows["idik"]) == run.grips == n > 0
         both = sql.load_ik(store, runs[0].idrobot, runs[0].idscene, runs[0].idikret, oid)
         assert len(both["idik"]) == runs[0].grips + runs[1].grips
+
+
+def test_rows_depend_on_the_grip_alone_not_on_chunks_workers_or_order(panda):
+    """The numerical solver's rows are the same, bit for bit, whatever the chunk size, the number of worker processes
+    (forkserver workers building the solver once) or the order of the grips: each grip is solved from its own seeds
+    (the library poses nearest to it, restarts hashed from its pose)."""
+    grips, mesh, _ = synthetic_grips(**{**SMALL, "angles": 2})
+    scene = default_scene("panda")
+    base = ik_feasibility(panda, grips, scene, HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
+    assert base.feasible.any() and not base.feasible.all()
+    flip = {k: v[::-1] for k, v in grips.items()}
+    for opts, workers, g in ((replace(OPTS, chunk=7), 2, grips), (replace(OPTS, chunk=10_000), 1, flip)):
+        res = ik_feasibility(panda, g, scene, HANDX, WORLDZ, mesh, opts, workers=workers, progress=False)
+        feas, joints = (res.feasible[::-1], res.joints[::-1]) if g is flip else (res.feasible, res.joints)
+        assert np.array_equal(feas, base.feasible)
+        assert np.array_equal(joints, base.joints, equal_nan=True)
+    assert OPTS.as_dict() == replace(OPTS, chunk=7).as_dict()  # the chunk is not part of the rows' parameters
+
+
+def test_closed_form_stores_the_free_branch_nearest_home_and_finds_what_the_numerical_solver_finds():
+    """The UR5 by default gets its closed form: each stored grasp configuration is the branch nearest the robot's
+    home among the collision-free ones (every nearer branch collides, by the same collider), the other branches stay
+    available (the solver returns the one nearest any seed), and it finds every grip the numerical solver finds."""
+    from workbench.robots.ik import IKSolver
+    from workbench.robots.solvers import closed_form
+
+    ur5 = get_robot("ur5")
+    grips, mesh, _ = synthetic_grips(**{**SMALL, "angles": 2})
+    scene = default_scene("ur5")
+    closed = ik_feasibility(ur5, grips, scene, HANDX, WORLDZ, mesh, IKOptions(chunk=32), workers=1, progress=False)
+    numeric = ik_feasibility(ur5, grips, scene, HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
+    assert closed.feasible[:, 0].sum() > 10
+    assert not (numeric.feasible & ~closed.feasible).any()
+    rows = np.flatnonzero(closed.feasible[:, 0])
+    stored = closed.joints[rows, 0]
+    joints, valid = closed_form(ur5).solve(grips["rotmat"][rows])
+    home = ur5.home()
+    turns = 2 * np.pi * np.round((home - joints) / (2 * np.pi))
+    joints = np.where((joints + turns >= ur5.lower) & (joints + turns <= ur5.upper), joints + turns, joints)
+    dist = np.where(valid, np.abs(np.nan_to_num(joints - home)).sum(axis=2), np.inf)
+    mine = np.abs(stored - home).sum(axis=1)
+    assert (dist.min(axis=1) <= mine + 1e-9).all()
+    solver = IKSolver(ur5, scene, IKOptions(), mesh)
+    nearer = np.argwhere(dist < mine[:, None] - 1e-9)
+    # the branches nearer home (often none) were rejected by a collision
+    hit = solver.collider.collides_q(joints[nearer[:, 0], nearer[:, 1]], grips["placement_rotmat"][rows[nearer[:, 0]]])
+    assert hit.all()
+    other = np.argwhere(valid & (dist > mine[:, None] + 1e-6))
+    free = ~solver.collider.collides_q(joints[other[:, 0], other[:, 1]], grips["placement_rotmat"][rows[other[:, 0]]])
+    assert free.any()  # another collision-free branch exists: query-time IK seeded near it gets it, not the stored one
+    r, b = other[np.argmax(free)]
+    q, ok = solver.solve(grips["rotmat"][rows[r]][None], grips["placement_rotmat"][rows[r]][None], joints[r, b][None], 1)
+    assert ok[0] and np.allclose(q[0], joints[r, b]) and not np.allclose(q[0], stored[r])

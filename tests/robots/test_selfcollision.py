@@ -130,8 +130,8 @@ def test_a_self_colliding_ik_solution_is_not_feasible(panda):
 
     target = panda.tcp_pose(FOLDED)[None]
     place = np.eye(4)[None]
-    on = IKSolver(panda, default_scene("panda"), IKOptions(self_collide=True, library=64))
-    off = IKSolver(panda, default_scene("panda"), IKOptions(self_collide=False, library=64))
+    on = IKSolver(panda, default_scene("panda"), IKOptions(self_collide=True, library=64, solver="numerical"))
+    off = IKSolver(panda, default_scene("panda"), IKOptions(self_collide=False, library=64, solver="numerical"))
     q, ok = off.solve(target, place, FOLDED[None], 30)
     assert ok[0] and np.abs(q[0] - FOLDED).max() < 1e-3  # IK converges to the folded configuration
     _, ok = on.solve(target, place, FOLDED[None], 30)

@@ -1,22 +1,28 @@
 """Plans replayed in MuJoCo: the demo plan is confirmed, a grip without force or friction loses the part at the
 first transfer (or
-squeeze it out as they close), the verdict is deterministic, results round-trip through the store, and a part whose convex
-decomposition fails is refused in one line."""
+squeeze it out as they close), a placement on a rounded base that rolls is reported, the verdict is deterministic,
+results round-trip through the store, and a part whose convex decomposition fails is refused in one line."""
 
 from __future__ import annotations
+
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import trimesh
 
 from workbench.cli.main import main
-from workbench.errors import SimulationError
-from workbench.geometry.objects import load_object
+from workbench.errors import PlanningError, SimulationError
+from workbench.geometry.objects import from_arrays, load_object
+from workbench.grasping.placements import PlacementParams, stable_placements
 from workbench.planners.wan_harada.stages import DEMO_GRID, build_all, choose_task, load_plan, load_planner, save_plan
 from workbench.resources import bundled_objects
 from workbench.simulation.decomposition import convex_parts
-from workbench.simulation.replay import SimParams, pose_error
-from workbench.simulation.stages import simulate_stored
+from workbench.robots.collider import Scene
+from workbench.simulation.replay import SimParams, pose_error, rest_on_table
+from workbench.planners.wan_harada.motions import ExecOptions
+from workbench.simulation.stages import physics_check, simulate_stored
 from workbench.store import Store
 from workbench.store.simulation import load_simulation
 
@@ -102,3 +108,48 @@ def test_simulate_refuses_an_unknown_plan_in_one_line(demo, capsys):
     assert err.count("\n") == 0 and "no plan 999" in err
     with Store(db) as store:
         assert store.one("SELECT count(*) FROM simulation")[0] == before
+
+
+def _duck() -> trimesh.Trimesh:
+    """A duck-like part: a rounded ellipsoid body with a head forward and up (its centre of mass off the body's)."""
+    body = trimesh.creation.icosphere(subdivisions=3, radius=1.0)
+    body.apply_scale((0.045, 0.032, 0.028))
+    head = trimesh.creation.icosphere(subdivisions=3, radius=0.018)
+    head.apply_translation((0.032, 0.0, 0.030))
+    return trimesh.boolean.union([body, head], engine="manifold")
+
+
+def test_a_placement_on_the_rounded_base_that_rolls_is_reported():
+    sys.path.insert(0, str(Path(__file__).parents[1] / "grasping"))
+    from physics import drop_test  # the placement tests' own MuJoCo drop test, written without our scene
+
+    duck = from_arrays(_duck().vertices, _duck().faces, scale=1.0, name="duck", source="duck")
+    placements = stable_placements(duck, PlacementParams(min_stability=0.02))  # accepted by the stability score
+    hulls = convex_parts(duck.mesh, duck.digest, "duck")
+    verdicts = []
+    for pose in placements.poses:
+        at = pose.copy()
+        at[:2, 3] += (0.5, 0.0)
+        what, final = rest_on_table(duck.mesh, hulls, at, Scene())
+        moved = np.degrees(pose_error(final, at, duck.mesh.center_mass)[1])
+        verdicts.append((what, moved, drop_test(duck.mesh, pose, seconds=1.0)[0]))
+    rolled = [v for v in verdicts if v[0] is not None]
+    assert rolled, "some accepted placement on the rounded base rolls"
+    assert all("settle" in w or "rolled" in w for w, _, _ in rolled)
+    # the reported ones turned beyond the tolerance, the others stayed; an independent drop test (the mesh's hull,
+    # an unlevel table) sees the reported ones turn too
+    assert all(moved > 5 for _, moved, _ in rolled) and all(moved < 5 for w, moved, _ in verdicts if w is None)
+    assert all(drop > 5 for _, _, drop in rolled)
+
+
+def test_require_physics_removes_the_failing_step_and_searches_again(demo):
+    """A plan that drops the part counts as a failed motion: the node or grip of the failing step is removed and the
+    graph searched again, until --max-removed."""
+    db, _, plan = demo
+    with Store(db) as store:
+        planner = load_planner(store, "tube", "panda")
+        check = physics_check(store, planner.robot, SimParams(grip_force=0.01))
+        with pytest.raises(PlanningError, match="after removing 1 node.*1 of them after failing in simulation") as err:
+            planner.plan(plan.start, plan.goal, alternatives=0, exec_opts=ExecOptions(max_removed=1), physics=check)
+    assert err.value.reason == "exhausted"
+    assert any(f"physics: {kind}: step 1 (pick" in str(err.value) for kind in ("drop", "slip", "shove")), str(err.value)

@@ -126,3 +126,12 @@ def test_plan_with_each_gripper_uses_its_rows_and_validates(store, gripper, caps
     stored = con.execute("SELECT f.jawwidth FROM freeairgrip f JOIN gripper g USING (idgripper) WHERE g.name = ? AND "
                          "f.idfreeairgrip = ?", [name, plan["steps"][0]["idfreeairgrip"]]).fetchone()
     assert stored is not None and stored[0] == pytest.approx(widths[0])
+
+
+def test_plan_with_a_gripper_the_store_lacks_is_refused_in_one_line(store, capsys):
+    _, db, out = store
+    pid = _ids(out["franka"])[0]
+    code = main(["plan", "--db", db, "--object", "bracket", "--robot", "ur10_robot", "--gripper", "parallel60",
+                 "--start", f"{pid},0.45,0.1,0", "--goal", f"{pid},0.55,-0.1,90", "--alternatives", "0", "--no-save"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "not 'parallel60'" in err[0] and "robotiq-2f85" in err[0], err

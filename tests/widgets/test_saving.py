@@ -5,8 +5,15 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbstripout import strip_output
 
 from workbench.widgets.saving import WIDGET_VIEW, strip_widget_views
+
+NOTEBOOKS = Path(__file__).resolve().parents[2] / "notebooks"
 
 
 def notebook() -> dict:
@@ -43,3 +50,38 @@ def test_jupyter_server_loads_the_hook_by_name(tmp_path):
     assert "widgets" not in saved["metadata"]
     assert all(WIDGET_VIEW not in o.get("data", {}) for o in saved["cells"][0]["outputs"])
     assert "".join(saved["cells"][0]["outputs"][0]["text"]) == "331 grasps\n"
+
+
+def executed(nb: dict) -> dict:
+    """The notebook as JupyterLab saves it after Run All: outputs, execution counts and timing metadata on every code
+    cell, a widget view, the widget state and the kernel's language_info."""
+    nb = json.loads(json.dumps(nb))
+    nb["metadata"]["language_info"] = {"codemirror_mode": {"name": "ipython", "version": 3}, "file_extension": ".py",
+                                       "mimetype": "text/x-python", "name": "python", "nbconvert_exporter": "python",
+                                       "pygments_lexer": "ipython3", "version": sys.version.split()[0]}
+    nb["metadata"]["widgets"] = {"application/vnd.jupyter.widget-state+json": {"state": {}}}
+    for i, cell in enumerate(nb["cells"]):
+        if cell["cell_type"] == "code":
+            cell["execution_count"] = i + 1
+            cell["metadata"] = {"execution": {"iopub.status.busy": "2026-01-01T00:00:00Z"}}
+            cell["outputs"] = [notebook()["cells"][0]["outputs"][0], {"output_type": "stream", "name": "stdout",
+                                                                      "text": "done\n"}]
+    return nb
+
+
+# the keys nbstripout's git filter strips besides outputs and counts (its defaults)
+NBSTRIPOUT_KEYS = ["metadata.signature", "metadata.widgets", "cell.metadata.collapsed", "cell.metadata.ExecuteTime",
+                   "cell.metadata.execution", "cell.metadata.heading_collapsed", "cell.metadata.hidden",
+                   "cell.metadata.scrolled"]
+
+
+@pytest.mark.parametrize("path", sorted(NOTEBOOKS.glob("*.ipynb")), ids=lambda p: p.name)
+def test_running_a_notebook_leaves_it_unmodified_in_git(path):
+    """What git stores of a notebook run and saved through `make lab` (its save hook, then the repository's
+    nbstripout filter) is the committed file byte for byte: cell ids, metadata and all."""
+    committed = path.read_text()
+    model = strip_widget_views({"type": "notebook", "content": executed(json.loads(committed))}, path=path.name)
+    saved = nbformat.reads(json.dumps(model["content"]), as_version=nbformat.NO_CONVERT)
+    stored = nbformat.writes(strip_output(saved, keep_output=False, keep_count=False, keep_id=False,
+                                          extra_keys=NBSTRIPOUT_KEYS)) + "\n"
+    assert stored == committed, f"{path.name}: git would see a change after a run (renumbered cell ids?)"

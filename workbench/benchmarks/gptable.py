@@ -1,12 +1,16 @@
 """Grasp-placement table (Tournassoud, Lozano-Perez & Mazer 1987): classes, build times, chaining, closed-form IK,
 and regrasp counts beside the roadmap planner's for the same start and goal placements.
 
-Per object (the L-shaped part of Fig. 1, a box, the bundled parts; the Wan-Harada objects when present): grasp
-classes by kind, placement classes, non-empty cells; the table's build time at 5 x 5 and 1 x 1 degrees (the 1 x 1
-table is skipped, with its pose count, when it would need more than --max-poses IK poses); the backward-chaining
-time of a grasp query (median over seeded random queries); and, with --compare, the regrasps of this planner and
-of the roadmap planner (Wan & Harada, built for the same robot with its IK on a one-position grid at H) for the
-same seeded start and goal placements at H. The closed-form IK throughput is measured once (poses per second).
+Per object (the L-shaped part of Fig. 1, a box, the bundled parts, the organic set; the Wan-Harada objects when
+present): grasp classes by kind, placement classes, non-empty cells; the seconds of each stage on the part's own
+classes: hand-object (Section 5.1: the feature pairs, grasp points and legal theta ranges, i.e. the grasp classes),
+hand-table and IK (Section 5.2) of the 5 x 5 degree table, and their sum; the 1 x 1 degree table (skipped, with its
+pose count, when it would need more than --max-poses IK poses); the backward-chaining time of a grasp query (median
+over seeded random queries); and, with --compare, the regrasps of this planner and of the roadmap planner (Wan &
+Harada, built for the same robot with its IK on a one-position grid at H) for the same seeded start and goal
+placements at H. Then the synthetic table of the target's size, 100 classes x 10 placements, made by repeating the
+largest real table's classes and placements (its hand-table and IK stages only: repeated classes need no new
+hand-object stage), beside the sum over every real part. The closed-form IK throughput is measured once.
 Targets: 100 classes x 10 placements at 5 x 5 degrees <= 2 s; a query <= 10 ms; IK >= 500,000 poses/s.
 """
 
@@ -21,6 +25,7 @@ import numpy as np
 import trimesh
 
 from workbench.benchmarks import print_table
+from workbench.benchmarks.organic import ORGANIC
 from workbench.benchmarks.paper import bench_objects
 from workbench.errors import PlanningError, WorkbenchError
 from workbench.geometry.objects import ObjectModel, from_trimesh
@@ -31,9 +36,10 @@ from workbench.planners.tournassoud.chaining import (
     placement_query,
 )
 from workbench.planners.tournassoud.classes import KINDS, ClassParams, grasp_classes
-from workbench.planners.tournassoud.plans import Realiser, plan_placement_query
+from workbench.planners.tournassoud.plans import Realiser, plan_grasp_query, plan_placement_query
 from workbench.planners.tournassoud.shapes import l_part
 from workbench.planners.tournassoud.table import TableParams, build_table, grid, rz
+from workbench.planners.wan_harada.motions import ExecOptions
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.stages import build_all, load_planner
 from workbench.planners.wan_harada.tabletop import TabletopParams
@@ -44,8 +50,9 @@ from workbench.store import Store
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--objects", default="L,box,tube,planebody,wheel,bracket,tail",
-                        help="comma-separated: L, box, bundled object names, paper (the Wan-Harada objects when present)")
+    parser.add_argument("--objects", default="L,box,tube,planebody,wheel,bracket,tail,organic",
+                        help="comma-separated: L, box, bundled object names, organic (the procedural organic set, or one "
+                             "of its names), paper (the Wan-Harada objects when present)")
     parser.add_argument("--robot", default="puma560", help="robot (default puma560)")
     parser.add_argument("--table-point", default="0.45,0.1", help="H as X,Y (m)")
     parser.add_argument("--queries", type=int, default=50, help="random grasp queries per object for the chaining time")
@@ -55,6 +62,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seed", type=int, default=0, help="seed of the queries and pairs")
     parser.add_argument("--points", type=int, default=3, help="grasp points per feature pair of the second compared table")
     parser.add_argument("--dir", default="build/bench/gptable", help="folder of the roadmap planner's stores")
+    parser.add_argument("--executable", type=int, default=9,
+                        help="seeded grasp queries of the L part from the robot's default pedestal realised with their "
+                             "timed motions (0: skip)")
 
 
 def _objects(spec: str) -> list[tuple[str, ObjectModel]]:
@@ -68,6 +78,10 @@ def _objects(spec: str) -> list[tuple[str, ObjectModel]]:
             out.append(("box", from_trimesh(trimesh.creation.box((0.05, 0.04, 0.03)), "box")))
         elif n == "paper":
             out += [(label, obj) for label, _, obj in bench_objects("paper")]
+        elif n == "organic":
+            out += [(f"organic {k}", from_trimesh(make(), k)) for k, make in ORGANIC.items()]
+        elif n in ORGANIC:
+            out.append((f"organic {n}", from_trimesh(ORGANIC[n](), n)))
         elif n in pool:
             out.append((n, pool[n]))
         else:
@@ -181,6 +195,40 @@ def compare_roadmap(name: str, obj: ObjectModel, robot_name: str, tables: list, 
     return ours, theirs, why
 
 
+def executable_queries(robot, point, n: int, seed: int) -> tuple[list[str], list[float]]:
+    """`n` seeded grasp queries of the L part that the table answers (a legal initial grasp, another class's whole
+    range as the goal; queries without a table answer are drawn again) planned with their timed motions at the
+    default limit, as `gpplan` does: one outcome per query and each query's seconds."""
+    part = l_part()
+    classes = grasp_classes(part, robot.gripper)
+    table = build_table(classes, stable_placements(part).poses, robot, robot.gripper, TableParams(table_point=point),
+                        progress=False)
+    realiser = Realiser(robot, default_scene(robot.name), part.mesh)
+    rng = np.random.default_rng(seed)
+    legal = np.argwhere(table.hand_object)
+    out, secs = [], []
+    for _ in range(50 * n):
+        if len(out) == n:
+            break
+        c, t = legal[rng.integers(len(legal))]
+        goal = int((c + rng.integers(1, len(classes))) % len(classes))
+        try:
+            grasp_query(table, (int(c), float(table.theta[t])), goal, (0.0, 2 * np.pi))
+        except PlanningError:
+            continue
+        t0 = time.perf_counter()
+        try:
+            seq, _plan = plan_grasp_query(table, classes, realiser, robot, "L", (int(c), float(table.theta[t])), goal,
+                                          (0.0, 2 * np.pi), ExecOptions())
+            k = len(seq.extra.get("removed", []))
+            out.append(f"ok ({seq.regrasps} regrasps, table {seq.extra['table']['regrasps']}, {k} removed)")
+        except NoSequence as exc:
+            k = len(getattr(exc, "removals", ()))
+            out.append(f"none after {k} removals ({exc})")
+        secs.append(time.perf_counter() - t0)
+    return out, secs
+
+
 def run(args: argparse.Namespace) -> int:
     point = tuple(float(v) for v in args.table_point.split(","))
     robot = get_robot(args.robot)
@@ -188,6 +236,7 @@ def run(args: argparse.Namespace) -> int:
     compare = {n.strip() for n in args.compare.split(",") if n.strip()}
     rows, cmp_rows, why = [], [], []
     biggest = None
+    total = {"classes": 0, "placements": 0, "hand_object": 0.0, "hand_table": 0.0, "ik": 0.0, "ik_poses": 0}
     for label, obj in _objects(args.objects):
         t0 = time.perf_counter()
         classes = grasp_classes(obj, hand)
@@ -211,8 +260,13 @@ def run(args: argparse.Namespace) -> int:
         if classes and len(pl) and (biggest is None or len(classes) * len(pl) > len(biggest[1]) * len(biggest[2])):
             biggest = (label, classes, pl.poses, p5)
         kinds = [sum(c.kind == k for c in classes) for k in KINDS]
+        tm = table.timings
+        for k, v in (("classes", len(classes)), ("placements", len(pl)), ("hand_object", t_cls),
+                     ("hand_table", tm.get("hand_table", 0.0)), ("ik", tm.get("ik", 0.0)), ("ik_poses", tm.get("ik_poses", 0))):
+            total[k] += v
         rows.append([label, obj.n_triangles, *kinds, len(pl), f"{int(table.q.any(axis=(2, 3)).sum())}/{len(classes) * len(pl)}",
-                     round(t_cls, 2), round(t5, 2), table.timings.get("ik_poses", 0), t1,
+                     round(t_cls, 2), round(tm.get("hand_table", 0.0), 3), round(tm.get("ik", 0.0), 3), round(t_cls + t5, 2),
+                     tm.get("ik_poses", 0), t1,
                      statistics.median(times) * 1000 if times else "-", max(times) * 1000 if times else "-"])
         if label.split(" ")[0] in compare:
             more = build_table(grasp_classes(obj, hand, ClassParams(points=args.points)), pl.poses, robot, hand, p5, progress=False)
@@ -222,21 +276,36 @@ def run(args: argparse.Namespace) -> int:
             cmp_rows.append([label, len(theirs), " ".join(map(fmt, ours[0])), f"{' '.join(map(fmt, ours[1]))} ({more.q.shape[0]} classes)",
                              " ".join(map(fmt, ours[2])), " ".join(map(fmt, theirs))])
             why += [f"{label}, {x}" for x in w]
-    print_table(["object", "#tri", "face/face", "face/edge", "face/vertex", "placements", "non-empty cells", "classes s",
-                 "table 5x5 s", "IK poses 5x5", "table 1x1 s", "chain med ms", "chain max ms"], rows,
-                title=f"Grasp-placement table for {args.robot} at H = {point} (Tournassoud et al. 1987); targets: 100 classes x 10 "
-                      "placements at 5x5 deg <= 2 s, a query <= 10 ms")
+    print_table(["object", "#tri", "face/face", "face/edge", "face/vertex", "placements", "non-empty cells",
+                 "hand-object s", "hand-table s", "IK s", "all stages 5x5 s", "IK poses 5x5", "table 1x1 s", "chain med ms",
+                 "chain max ms"], rows,
+                title=f"Grasp-placement table for {args.robot} at H = {point} (Tournassoud et al. 1987), each part's own "
+                      "classes; hand-object = the grasp classes with their legal theta ranges (Section 5.1), hand-table and "
+                      "IK at 5 x 5 deg (Section 5.2); targets: 100 classes x 10 placements at 5x5 deg <= 2 s, a query <= 10 ms")
+    print(f"every real part above together: {total['classes']} classes and {total['placements']} placements; hand-object "
+          f"{total['hand_object']:.2f} s, hand-table {total['hand_table']:.2f} s, IK {total['ik']:.2f} s for "
+          f"{total['ik_poses']:,} poses (5 x 5 deg), all stages {total['hand_object'] + total['hand_table'] + total['ik']:.2f} s")
     if biggest is not None:
         label, classes, poses, p5 = biggest
         wall_t, cpu_t, n_poses = target_table(classes, poses, robot, hand, p5)
-        print(f"target table, 100 classes x 10 placements at 5 x 5 deg ({label}'s classes and placements repeated): "
-              f"{wall_t:.2f} s wall, {cpu_t:.2f} s CPU (median of 3; {n_poses:,} IK poses; target <= 2 s)")
+        print(f"synthetic target table, 100 classes x 10 placements at 5 x 5 deg ({label}'s {len(classes)} classes and "
+              f"{len(poses)} placements repeated; hand-table and IK only, no hand-object stage): {wall_t:.2f} s wall, "
+              f"{cpu_t:.2f} s CPU (median of 3; {n_poses:,} IK poses; target <= 2 s)")
     print()
     rates = ik_throughput(robot)
     (wall, cpu), (wall_v, cpu_v) = rates["joints"], rates["validity"]
     print(f"closed-form IK ({args.robot}, 8 branches, joint limits, one process): {wall:,.0f} poses per second, {cpu:,.0f} per "
           f"CPU second with every branch's joints; {wall_v:,.0f} ({cpu_v:,.0f} per CPU second) validity only, the table's "
           f"pass (target >= 500,000; best of 5)")
+    if args.executable > 0:
+        outcomes, secs = executable_queries(robot, point, args.executable, args.seed)
+        ok = sum(o.startswith("ok") for o in outcomes)
+        print()
+        print(f"executable from {args.robot}'s default pedestal: {ok} of {len(outcomes)} seeded grasp queries of the L part "
+              f"that the table answers "
+              f"(motions planned, default --max-removed 10; median {statistics.median(secs):.1f} s per query, wall):")
+        for k, o in enumerate(outcomes):
+            print(f"  query {k + 1}: {o}")
     if cmp_rows:
         print()
         print_table(["object", "pairs", "regrasps (this planner)", f"this planner, {args.points} points per pair",

@@ -1,5 +1,9 @@
 """IK feasibility time per robot (t-tpgik) beside Table I's t-tpgikn / t-tpgikh (Wan & Harada Section VI).
 
+First, per robot, the IK it gets (`robots.solvers`: a closed form read off its axes, or the numerical solver), its
+poses per second in one process (the closed form with every branch; Levenberg-Marquardt from its seeds, no collision
+checks) and the share of reachable poses each finds, over FK of random in-limit configurations.
+
 `--protocol paper` (default) times what Table I times: the IK of every tabletop grip of each object's own roadmap
 (all grasps, 168 tabletop placements per free placement), at the five poses of the `ik` table, in a fresh store
 (cold: robot, seed library, collision models and worker processes built in the timing). `--protocol interactive`
@@ -36,11 +40,12 @@ from workbench.planners.wan_harada.stages import (
     run_ik,
 )
 from workbench.planners.wan_harada.tabletop import TabletopParams
-from workbench.robots.analytic import spherical_wrist_reason
-from workbench.robots.collider import default_scene
+from workbench.robots.chain import forward
+from workbench.robots.collider import Scene, default_scene
 from workbench.robots.gripper import franka_hand
-from workbench.robots.ik import WORLDA, IKOptions, ik_feasibility
+from workbench.robots.ik import SOLVERS, WORLDA, IKOptions, IKSolver, ik_feasibility, solver_kind
 from workbench.robots.model import get_robot
+from workbench.robots.solvers import closed_form
 from workbench.store import Store
 from workbench.store.objects import put_gripper, put_object
 from workbench.store.placements import TABLETOP_STAGE, angle_ids
@@ -220,20 +225,72 @@ def benchmark_grips(n: int = 40000, seed: int = 0) -> tuple[dict[str, np.ndarray
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--protocol", choices=["paper", "interactive"], default="paper",
-                        help="paper: each object's own tabletop grips; interactive: a synthetic box's grips")
+    parser.add_argument("--protocol", choices=["paper", "interactive", "solvers"], default="paper",
+                        help="paper: each object's own tabletop grips; interactive: a synthetic box's grips; solvers: "
+                             "only the per-robot solver table")
     parser.add_argument("--objects", default="TU,PB,PW,PS,PT",
                         help="paper protocol: comma-separated paper rows (../shared) or bundled objects")
     parser.add_argument("--robots", default="panda,ur5,talos,puma560",
-                        help="comma-separated robots (default: panda,ur5,talos,puma560); in the interactive protocol a "
-                             "robot with a spherical wrist is run with the numerical solver and with its closed form "
-                             "(Tournassoud et al. 1987)")
+                        help="comma-separated robots (default: panda,ur5,talos,puma560); a robot with a closed form is "
+                             "also run with the numerical solver, for comparison")
+    parser.add_argument("--ik", choices=SOLVERS, default="auto", help="paper protocol: the IK solver (default auto)")
     parser.add_argument("--grips", type=int, default=40000, help="interactive protocol: tabletop grips (default 40,000)")
-    parser.add_argument("--repeats", type=int, default=3, help="interactive protocol: cold runs per robot (median)")
+    parser.add_argument("--poses", type=int, default=20000,
+                        help="solver table: random configurations per robot (default 20,000; the numerical solver takes "
+                             "a tenth)")
+    parser.add_argument("--repeats", type=int, default=3, help="runs per timing (median)")
     parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
     parser.add_argument("--handx", type=float, default=0.05)
     parser.add_argument("--worldz", type=float, default=0.10)
     parser.add_argument("--worlda", type=float, default=WORLDA)
+
+
+def random_poses(robot, n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """n random in-limit configurations of `robot` and their TCP poses (N, 4, 4) (batched FK)."""
+    q = np.random.default_rng(seed).uniform(robot.lower, robot.upper, (n, robot.nq))
+    _, _, r, t = forward(robot, q)
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, :3, :3], poses[:, :3, 3] = r, t
+    return q, poses
+
+
+def _median_time(f, repeats: int) -> float:
+    times = []
+    for _ in range(max(1, repeats)):
+        t0 = time.perf_counter()
+        f()
+        times.append(time.perf_counter() - t0)
+    return statistics.median(times)
+
+
+def run_solvers(args: argparse.Namespace) -> int:
+    """Per robot: its solver, single-process poses/s and the share of reachable poses found (FK of random
+    configurations: every pose is reachable), closed form beside the numerical solver."""
+    rows = []
+    for name in [n.strip() for n in args.robots.split(",") if n.strip()]:
+        robot = get_robot(name)
+        _, poses = random_poses(robot, args.poses)
+        form = closed_form(robot)
+        closed = ("-", "-", "-")
+        if form is not None:
+            found = form.solve(poses)[1].any(axis=1).mean()
+            t = _median_time(lambda: form.solve(poses), args.repeats)
+            closed = (form.branches, f"{len(poses) / t:,.0f}", f"{100 * found:.2f}")
+        few = poses[: max(1, args.poses // 10)]
+        scene = Scene(workspace_min=(-10, -10, -10), workspace_max=(10, 10, 10))  # no reach box: every pose counts
+        solver = IKSolver(robot, scene, IKOptions(collide=False, solver="numerical"))
+        none = np.full((len(few), robot.nq), np.nan)
+        ok = solver.solve_from_seeds(few, few, none)[1]
+        t = _median_time(lambda: solver.solve_from_seeds(few, few, none), 1)
+        rows.append((robot.name, robot.nq, solver_kind(robot, IKOptions()), *closed, f"{len(few) / t:,.0f}",
+                     f"{100 * ok.mean():.2f}"))
+    print_table(["robot", "dof", "solver (default)", "branches", "closed poses/s", "closed found %", "numerical poses/s",
+                 "numerical found %"], rows,
+                title=f"IK solvers: TCP poses of {args.poses:,} random in-limit configurations per robot (the numerical "
+                      f"solver: a tenth of them), one process, no collision checks; found = some solution within the "
+                      f"limits reproduces the pose (closed form: every branch; numerical: {IKOptions().seeds} library "
+                      f"seeds and {IKOptions().restarts} restarts); median of {args.repeats} runs (numerical: one)")
+    return 0
 
 
 def run_paper(args: argparse.Namespace) -> int:
@@ -249,13 +306,14 @@ def run_paper(args: argparse.Namespace) -> int:
                 with Store(db) as store:
                     t0 = time.perf_counter()
                     robot = get_robot(name.strip())
-                    r = run_ik(store, obj.name, robot, None, args.handx, args.worldz, IKOptions(), args.workers,
+                    opts = IKOptions(solver=args.ik)
+                    r = run_ik(store, obj.name, robot, None, args.handx, args.worldz, opts, args.workers,
                                progress=False, idtabletop=p.idtabletop, worlda=args.worlda)
                     t = time.perf_counter() - t0
                 ref = paper_rows.get(row)
-                rows.append((label, robot.name, robot.nq, r.grips, t, r.feasible, r.feasible_all, f"{r.grips / t:,.0f}",
-                             *(ref[1:] if ref else ("-", "-", "-"))))
-    print_table(["object", "robot", "dof", "#-tpg", "t-tpgik (s)", "#feasible grasp", "#feasible all five", "grips/s",
+                rows.append((label, robot.name, solver_kind(robot, opts).split(" (")[0], robot.nq, r.grips, t, r.feasible,
+                             r.feasible_all, f"{r.grips / t:,.0f}", *(ref[1:] if ref else ("-", "-", "-"))))
+    print_table(["object", "robot", "ik", "dof", "#-tpg", "t-tpgik (s)", "#feasible grasp", "#feasible all five", "grips/s",
                  "paper #-tpg", "paper t-tpgikn (s)", "paper t-tpgikh (s)"], rows,
                 title=f"IK feasibility, protocol paper: every tabletop grip of each object (all grasps, 168 placements per free "
                       f"placement) at the grasp, handx {args.handx} m, + worldz {args.worldz} m, worlda {args.worlda} m and "
@@ -264,6 +322,10 @@ def run_paper(args: argparse.Namespace) -> int:
 
 
 def run(args: argparse.Namespace) -> int:
+    run_solvers(args)
+    if args.protocol == "solvers":
+        return 0
+    print()
     if args.protocol == "paper":
         return run_paper(args)
     grips, mesh = benchmark_grips(args.grips)
@@ -271,22 +333,23 @@ def run(args: argparse.Namespace) -> int:
     rows = []
     runs = []
     for name in args.robots.split(","):
-        runs.append((name.strip(), False))
-        if not spherical_wrist_reason(get_robot(name.strip())):
-            runs.append((name.strip(), True))
-    for name, closed in runs:
+        runs.append((name.strip(), "auto"))
+        if closed_form(get_robot(name.strip())) is not None:
+            runs.append((name.strip(), "numerical"))
+    for name, solver in runs:
         times, res = [], None
+        opts = IKOptions(solver=solver)
         for _ in range(max(1, args.repeats)):
             t0 = time.perf_counter()
             robot = get_robot(name)
             res = ik_feasibility(robot, grips, default_scene(robot.name), args.handx, args.worldz, mesh,
-                                 IKOptions(closed_form=closed), workers=args.workers, progress=False, worlda=args.worlda)
+                                 opts, workers=args.workers, progress=False, worlda=args.worlda)
             times.append(time.perf_counter() - t0)
         f = res.feasible
         t = statistics.median(times)
-        rows.append((robot.name + (" (closed form)" if closed else ""), robot.nq, n, t, int(f[:, 0].sum()), int(f.all(1).sum()),
-                     f"{n / t:,.0f}", f"{min(times):.1f}-{max(times):.1f}"))
-    print_table(["robot", "dof", "#-tpg", "t-tpgik (s)", "#feasible grasp", "#feasible all five", "grips/s", "range (s)"],
+        rows.append((robot.name, solver_kind(robot, opts).split(" (")[0], robot.nq, n, t, int(f[:, 0].sum()),
+                     int(f.all(1).sum()), f"{n / t:,.0f}", f"{min(times):.1f}-{max(times):.1f}"))
+    print_table(["robot", "ik", "dof", "#-tpg", "t-tpgik (s)", "#feasible grasp", "#feasible all five", "grips/s", "range (s)"],
                 rows, title=f"IK feasibility, protocol interactive (a synthetic box, not the paper's objects): {n:,} tabletop "
                             f"grips of a 4 x 6 x 12 cm box, 91 positions x 8 angles; each run cold: "
                             f"robot, seed library, collision models and worker processes built in the timing "

@@ -9,6 +9,7 @@ from typing import Iterator
 
 from workbench.catalog.units import warm_worker
 from workbench.errors import WorkbenchError
+from workbench.robots.ik import children_without_sigint
 
 
 class ClusterError(WorkbenchError):
@@ -72,8 +73,9 @@ hand before the client is handed out (`warm_worker`). Its housekeeping intervals
     if n < 1:
         raise ClusterError(f"--workers must be at least 1, got {workers}")
     with dask.config.set({"distributed.worker.multiprocessing-method": "spawn", **batch_config()}):
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                               dashboard_address="127.0.0.1:0" if dashboard else None, silence_logs=50 if quiet else 20)
+        with children_without_sigint(other_threads=True):  # Ctrl-C is the driver's: the workers never see it
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address="127.0.0.1:0" if dashboard else None, silence_logs=50 if quiet else 20)
         client = Client(cluster)
         try:
             _warm(client)  # imports and the hand: start-up, not the build's time

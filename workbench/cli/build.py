@@ -7,6 +7,8 @@ import argparse
 import time
 from pathlib import Path
 
+import numpy as np
+
 from workbench.cli import warn
 from workbench.cli.grasps import add_grasp_arguments, add_object_arguments, grasp_params
 from workbench.cli.ik import add_retraction_arguments, add_robot_arguments, robot_and_scene, stored_as
@@ -16,7 +18,9 @@ from workbench.cli.placements import (
     roadmap_grasps_line,
 )
 from workbench.geometry.objects import load_object
+from workbench.grasping.naming import per_part_numbers, placement_lines
 from workbench.planners.wan_harada.stages import BuildResult, build_all
+from workbench.robots.ik import IKOptions, solver_kind
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -34,13 +38,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
 
     robot, scene = robot_and_scene(args)  # before any work: a bad URDF or option is refused first
+    opts = IKOptions(solver=args.ik, self_collide=True)
     pparams, tparams = placement_params(args)
     gparams = grasp_params(args)
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
     t0 = time.perf_counter()
     res = build_all(args.db, obj, robot, gparams, pparams, tparams, args.handx, args.worldz, args.workers,
-                    worlda=args.worlda, scene=scene)
-    print_build(res, args.db, time.perf_counter() - t0, stored_as(robot, res.robot))
+                    worlda=args.worlda, scene=scene, ik=opts)
+    print_build(res, args.db, time.perf_counter() - t0, f"; IK {solver_kind(robot, opts)}{stored_as(robot, res.robot)}")
     return 0
 
 
@@ -59,6 +64,10 @@ def print_build(res: BuildResult, db, seconds: float, note: str = "") -> None:
     print(f"IK for {res.robot} ({verb('ik')}, {t['ik']:.1f} s{note}); regrasp graph: {c['graph_nodes']:,} nodes, {c['graph_transfer_edges']:,} "
           f"transfer and {c['graph_transit_edges']:,} transit edges, {c['graph_grasps']} grasps, {c['graph_placements']} placements, "
           f"{c['graph_components']} component(s) ({t['graph']:.1f} s)")
-    nogrip = f" (no grasp clears the table on {', '.join(map(str, c['placements_nogrip']))})" if c["placements_nogrip"] else ""
+    number = per_part_numbers(np.array(list(c["placement_rotmats"]), dtype=np.int64))  # the store's ids -> 1, 2, ...
+    nogrip = (f" (no grasp clears the table on {', '.join(str(number[i]) for i in c['placements_nogrip'])})"
+              if c["placements_nogrip"] else "")
     print(f"store {Path(db).resolve()} ready in {seconds:.1f} s; stable placements for --start/--goal "
-          f"(PLACEMENT,X,Y,YAW): {', '.join(map(str, c['placement_ids']))}{nogrip}")
+          f"(PLACEMENT,X,Y,YAW): {', '.join(str(number[i]) for i in c['placement_ids'])}{nogrip}")
+    for line in placement_lines(c["placement_rotmats"]):
+        print(f"  {line}")

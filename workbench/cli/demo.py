@@ -13,6 +13,7 @@ from workbench.cli.ik import WORKERS
 from workbench.cli.plan import print_plan, report_graph, write_json, write_trajectory
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import load_object
+from workbench.grasping.naming import per_part_numbers
 from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.stages import (
     DEMO_GRID,
@@ -61,7 +62,7 @@ def run(args: argparse.Namespace) -> int:
         start, goal = choose_task(planner, args.seed)
         plans = planner.plan(start, goal, alternatives=2)
         best = plans[0]
-        print_plan(best)
+        print_plan(best, per_part_numbers(planner.free["idfreetabletopplacement"]))
         rep = planner.validate(best, require_motion=True)
         rep.raise_if_failed()
         print(f"validation: ok ({rep.checks} checks: FK from the URDF, joint limits, arm/gripper-table and arm-object collisions, "

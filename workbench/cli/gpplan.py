@@ -16,15 +16,18 @@ import trimesh
 from scipy.spatial.transform import Rotation
 
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
 from workbench.cli.plan import add_motion_arguments, exec_options
 from workbench.errors import WorkbenchError
+from workbench.params import parse_number
 from workbench.planners.tournassoud.chaining import NoSequence, in_range, nearest_sample
 from workbench.planners.tournassoud.table import runs
 from workbench.planners.tournassoud.task import Obstacle, TaskEnd, end_mask
 from workbench.planners.tournassoud.figures import table_html
 from workbench.planners.tournassoud.plans import (
     Realiser,
+    explanation,
     plan_grasp_query,
     plan_placement_query,
     plan_task_query,
@@ -59,9 +62,13 @@ def parse_grasp(text: str, label: str = "--initial") -> tuple[int, float]:
     """CLASS,THETA (degrees) -> (class, radians)."""
     c, t = _nums(text, label, 2)
     try:
-        return int(c), float(np.radians(float(t)))
+        cls, theta = int(c), float(t)
     except ValueError:
         raise WorkbenchError(f"{label} {text!r} must be CLASS,THETA (class index, degrees), e.g. 0,30") from None
+    if cls < 0 or not np.isfinite(theta):
+        raise WorkbenchError(f"{label} {text!r} must be CLASS,THETA with a class index >= 0 and a finite angle in degrees, "
+                             f"e.g. 0,30")
+    return cls, float(np.radians(theta))
 
 
 def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
@@ -72,39 +79,35 @@ def parse_goal(text: str) -> tuple[int, tuple[float, float]]:
         cls = int(c)
     except ValueError:
         raise WorkbenchError(f"--goal {text!r} must be CLASS,MIN:MAX (class index, degrees), e.g. 2,60:120") from None
+    if cls < 0 or not (np.isfinite(lo) and np.isfinite(hi)):
+        raise WorkbenchError(f"--goal {text!r} must be CLASS,MIN:MAX with a class index >= 0 and finite angles in degrees, "
+                             f"e.g. 2,60:120")
     if hi < lo:
         raise WorkbenchError(f"--goal {text!r}: MAX {hi:g} is below MIN {lo:g}; give MIN:MAX with MIN <= MAX")
     return cls, (float(np.radians(lo)), float(np.radians(hi)))
 
 
-def explanation(table, own, removals: list, seq=None, own_dict: dict | None = None) -> list[str]:
-    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
-    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one."""
-    if own is not None:
-        own_dict = own.as_dict(table)
-    if own_dict is None:
-        return []
-    n = own_dict["regrasps"]
-    if not removals:
-        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
-    lines = [f"  removed {x.text(table)}" for x in removals]
-    own_pairs = set()
-    g, p = own_dict["grasps"], own_dict["placements"]
-    if own_dict["kind"] == "grasp":
-        for k, pl in enumerate(p):
-            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
-    else:
-        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
-    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
-    kinds = sorted({x.motion for x in removals})
-    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
-                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
-                 f"executable one has {'none' if seq is None else seq.regrasps}")
-    return lines
+DESCRIPTION = """\
+Backward chaining in a grasp-placement table built by `workbench gptable` (Tournassoud, Lozano-Perez & Mazer 1987):
+the fewest placements on the table between a start and a goal. Three kinds of query:
+
+  --initial CLASS,THETA --goal CLASS,MIN:MAX   grasp to grasp (Section 6); MIN and MAX are both kept
+  --from P,PHI --to P,PHI                      the part from one placement at the table point to another
+  --pickup P,X,Y,PHI --destination P,X,Y,PHI   Fig. 1's task: the part taken where it lies among the
+                                               --pickup-obstacle meshes, put where it goes past the
+                                               --destination-obstacle meshes along --insert (Section 5.1:
+                                               the first and last grasps' angles follow from them)
+
+The answer is realised: IK with collisions, approach and lifts, and (unless --no-motion) timed motions. The table
+assumes the arm's paths away, so a conjunction it allows can fail with the arm; it is then removed, with every
+table sample needing the same change of arm configuration, and the chaining runs again (--max-removed motion
+failures at most). The output names each removed conjunction (step, motion, reason) and gives the table's own
+shortest sequence beside the executable one; --json carries both ("table_sequence", "removed")."""
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)")
+    p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)",
+                       description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", required=True, help="DuckDB store file with a table built by `workbench gptable`")
     p.add_argument("--object", required=True, help="object name in the store")
     p.add_argument("--robot", default=None, help="robot name in the store (default: the newest table's robot)")
@@ -127,10 +130,20 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="an obstacle at the destination (the fixture or hole the part goes into); repeatable")
     p.add_argument("--insert", default=None, metavar="DX,DY,DZ[,DEPTH]",
                    help="the final insertion: the direction the held part moves into place (world) and its length in "
-                        "metres (default 0.02); the last grasp's hand must clear the destination's obstacles all along it")
+                        "metres (default 0.02); the last grasp's hand must clear the destination's obstacles all along it "
+                        "(the plan's last motion is that insertion: a straight line of the held part along it, checked "
+                        "against the destination's obstacles)")
+    p.add_argument("--start-held", action="store_true",
+                   help="with --pickup: the part is already in the hand at the pick-up (the first grasp); the motions "
+                        "begin there and lift it out, with no approach and no closing of the jaw")
+    p.add_argument("--end-held", action="store_true",
+                   help="with --destination: the part stays in the hand at the destination after the insertion; the "
+                        "motions end there, with no opening of the jaw and no retract")
     p.add_argument("--table", default=None, help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
-    p.add_argument("--handx", type=float, default=0.05, help="approach distance along the hand's axis (m)")
-    p.add_argument("--worldz", type=float, default=0.05, help="lift after the approach (m)")
+    p.add_argument("--handx", type=parse_number(RETRACT, "--handx", 0.05), default=0.05, metavar="M",
+                   help=f"approach distance along the hand's axis ({RETRACT.describe(True)}; default 0.05)")
+    p.add_argument("--worldz", type=parse_number(RETRACT, "--worldz", 0.05), default=0.05, metavar="M",
+                   help=f"lift after the approach ({RETRACT.describe(True)}; default 0.05)")
     p.add_argument("--no-save", action="store_true", help="do not store the plan in the store's plan tables")
     p.add_argument("--no-motion", action="store_true", help="waypoints only: do not plan and time the motions")
     add_motion_arguments(p, "conjunctions of the table")
@@ -227,15 +240,17 @@ def run(args: argparse.Namespace) -> int:
     if task_mode and (args.pickup is None or args.destination is None or place_mode):
         raise WorkbenchError("a task needs both --pickup P,X,Y,PHI and --destination P,X,Y,PHI (with --initial / --goal "
                              "to restrict its first and last grasps), and no --from / --to")
-    if (args.pickup_obstacle or args.destination_obstacle or args.insert) and not task_mode:
-        raise WorkbenchError("--pickup-obstacle, --destination-obstacle and --insert need --pickup and --destination")
+    if (args.pickup_obstacle or args.destination_obstacle or args.insert or args.start_held or args.end_held) and not task_mode:
+        raise WorkbenchError("--pickup-obstacle, --destination-obstacle, --insert, --start-held and --end-held need "
+                             "--pickup and --destination")
     if not task_mode and (grasp_mode == place_mode or (grasp_mode and (args.initial is None or args.goal is None)) or
                           (place_mode and (args.from_ is None or args.to is None))):
         raise WorkbenchError("give either --initial CLASS,THETA with --goal CLASS,MIN:MAX, or --from P,PHI with --to P,PHI, "
                              "or a task: --pickup P,X,Y,PHI with --destination P,X,Y,PHI")
-    for label, v in (("--handx", args.handx), ("--worldz", args.worldz)):
-        if not np.isfinite(v) or v < 0:
-            raise WorkbenchError(f"{label} {v} must be a non-negative distance in metres")
+    if grasp_mode:  # the query is read before the store is opened: a malformed one costs nothing
+        initial, (gc, rng) = parse_grasp(args.initial), parse_goal(args.goal)
+    elif place_mode:
+        start, goal = parse_grasp(args.from_, "--from"), parse_grasp(args.to, "--to")
     gripper = gripper_from_args(args)
     robot = args.robot
     if robot is not None:
@@ -262,14 +277,10 @@ def run(args: argparse.Namespace) -> int:
     try:
         if task_mode:
             seq, plan = plan_task_query(r.table, r.classes, realiser, r.robot, r.obj.name, pickup, destination,
-                                        start_mask, goal_mask, motions)
+                                        start_mask, goal_mask, motions, args.start_held, args.end_held)
         elif grasp_mode:
-            initial = parse_grasp(args.initial)
-            gc, rng = parse_goal(args.goal)
             seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng, motions)
         else:
-            start = parse_grasp(args.from_, "--from")
-            goal = parse_grasp(args.to, "--to")
             seq, plan = plan_placement_query(r.table, r.classes, realiser, r.robot, r.obj.name, start, goal, motions)
     except NoSequence as exc:
         print(f"warning: {exc}", file=sys.stderr)
@@ -303,6 +314,10 @@ def run(args: argparse.Namespace) -> int:
         print("the initial grasp is already in the goal range: nothing to do")
     else:
         print(plan.summary())
+        for held, text in ((plan.start_held, "starts with the part in the hand at the pick-up"),
+                           (plan.end_held, "ends with the part still in the hand at the destination")):
+            if held:
+                print(f"the plan {text}")
         if args.no_save:
             report = plan_validator(args.db, r, scene).check(plan)
         else:
@@ -313,6 +328,10 @@ def run(args: argparse.Namespace) -> int:
     if args.json:
         doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict(),
                "table_sequence": seq.extra.get("table"), "removed": seq.extra.get("removed", [])}
+        if task_mode:
+            doc["task"] = {name: end.as_dict() for name, end in (("pickup", pickup), ("destination", destination))}
+            doc["task"]["pickup"]["legal"] = np.argwhere(start_mask).tolist()
+            doc["task"]["destination"]["legal"] = np.argwhere(goal_mask).tolist()
         write_text(args.json, json.dumps(doc, indent=1))
         print(f"json: {args.json}")
     if args.html:

@@ -13,7 +13,7 @@ from workbench.cli.ik import parse_base
 from workbench.errors import WorkbenchError
 from workbench.geometry.objects import load_object
 from workbench.grasping.placements import PlacementParams
-from workbench.params import add_param
+from workbench.params import add_param, bounds
 from workbench.planners.tournassoud.classes import KINDS, ClassParams, no_class_reason
 from workbench.planners.tournassoud.stages import table_stage_at
 from workbench.planners.tournassoud.table import TableParams
@@ -36,23 +36,16 @@ def add_table_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", default="puma560", help="a built-in robot or the path of a URDF (then --tip)")
     parser.add_argument("--tip", default=None, help="tip frame of a URDF robot")
     parser.add_argument("--base", default=None, help="robot base in the world: X,Y,Z,YAW (m, rad); default per robot")
-    parser.add_argument("--theta-step", type=float, default=float(np.degrees(t.theta_step)), help="theta resolution (degrees)")
-    parser.add_argument("--phi-step", type=float, default=float(np.degrees(t.phi_step)), help="phi resolution (degrees)")
-    parser.add_argument("--table-point", default=",".join(f"{v:g}" for v in t.table_point),
-                        help="the table point H as X,Y in metres (world frame, in the robot's dextrous workspace)")
-    parser.add_argument("--clearance", type=float, default=t.clearance, help="hand clearance above the table (m)")
-    parser.add_argument("--edge-angle", type=float, default=float(np.degrees(c.edge_angle)),
-                        help="dihedral angle above which a mesh edge is a feature edge (degrees)")
-    parser.add_argument("--min-face-area", type=float, default=c.min_face_area, help="smallest face used by a class (m^2)")
-    parser.add_argument("--min-contact-area", type=float, default=c.min_contact_area,
-                        help="pad area that must cover the face overlap at every legal theta (m^2, Section 5.1; 0: off)")
-    parser.add_argument("--min-range", type=float, default=float(np.degrees(c.min_range)),
-                        help="what to do with narrow grasp classes: 0 (the paper's rule) keeps every class of any width "
-                             "whose legal theta range holds a sample; a positive width (degrees) drops the classes "
-                             "narrower than it, with a warning giving their count")
-    parser.add_argument("--points", type=int, default=c.points,
-                        help="grasp points per feature pair (1: the paper's one point per class; more: its remedy for "
-                             "elongated parts, a discrete set of points as in Handey, Section 2.3)")
+    for cls, name, default in ((TableParams, "theta_step", np.degrees(t.theta_step)),
+                               (TableParams, "phi_step", np.degrees(t.phi_step)), (TableParams, "clearance", t.clearance),
+                               (ClassParams, "edge_angle", np.degrees(c.edge_angle)),
+                               (ClassParams, "min_face_area", c.min_face_area),
+                               (ClassParams, "min_contact_area", c.min_contact_area),
+                               (ClassParams, "min_range", np.degrees(c.min_range)), (ClassParams, "points", c.points)):
+        add_param(parser, cls, name, cli_default=float(default) if isinstance(default, float) else default)
+    parser.add_argument("--table-point", default=",".join(f"{v:g}" for v in t.table_point), metavar="X,Y",
+                        help="the table point H as X,Y in metres (world frame, in the robot's dextrous workspace; each "
+                             f"{bounds(TableParams)['table_point'][0].describe(True)})")
 
 
 def params_from_args(args: argparse.Namespace):

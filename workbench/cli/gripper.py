@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 
+from workbench.cli import warn
 from workbench.robots.gripper import BUNDLED, Gripper, load_gripper
 
 
@@ -30,5 +31,8 @@ def gripper_from_args(args: argparse.Namespace) -> Gripper:
     """The gripper named by `add_gripper_argument`'s options (for `own`, from the command's --robot and --tip)."""
     fingers = tuple(f.strip() for f in (args.gripper_fingers or "").split(",") if f.strip())
     own = args.gripper == "own"
-    return load_gripper(args.gripper, hand_link=args.gripper_hand, finger_joints=fingers, tcp_frame=args.gripper_tcp,
-                        robot_urdf=getattr(args, "robot", None) if own else None, tip=getattr(args, "tip", None))
+    gripper = load_gripper(args.gripper, hand_link=args.gripper_hand, finger_joints=fingers, tcp_frame=args.gripper_tcp,
+                           robot_urdf=getattr(args, "robot", None) if own else None, tip=getattr(args, "tip", None))
+    for note in gripper.notes:  # what the parallel-jaw model approximates (a linkage's pads moving along the approach)
+        warn(f"gripper {gripper.name}: {note}")
+    return gripper

@@ -19,7 +19,7 @@ from workbench.errors import RobotError
 from workbench.params import add_param, cli_bound, parse_number
 from workbench.planners.wan_harada.stages import empty_stage, run_ik
 from workbench.robots.collider import Scene, default_scene
-from workbench.robots.ik import WORLDA, IKOptions
+from workbench.robots.ik import SOLVERS, WORLDA, IKOptions, solver_kind
 from workbench.robots.model import ROBOTS, Robot, get_robot, pose_xyz_yaw
 from workbench.store import Store
 
@@ -68,7 +68,7 @@ TABLETOP = cli_bound(1, None, integer=True, help="tabletop parameter set id")
 
 
 def add_retraction_arguments(p: argparse.ArgumentParser) -> None:
-    """--handx, --worldz, --worlda and --workers, shared by `ik` and `build`."""
+    """--handx, --worldz, --worlda, --workers and --ik, shared by `ik` and `build`."""
     p.add_argument("--handx", type=parse_number(RETRACT, "--handx", HANDX), default=HANDX, metavar="M",
                    help=f"retraction along the hand ({RETRACT.describe(True)}; default {HANDX})")
     p.add_argument("--worldz", type=parse_number(RETRACT, "--worldz", WORLDZ), default=WORLDZ, metavar="M",
@@ -78,6 +78,10 @@ def add_retraction_arguments(p: argparse.ArgumentParser) -> None:
                         f"then worldz more")
     p.add_argument("--workers", type=parse_number(WORKERS, "--workers"), default=None, metavar="N",
                    help=f"IK processes ({WORKERS.describe(True)}; default: all cores)")
+    p.add_argument("--ik", choices=SOLVERS, default="auto",
+                   help="auto (default): the arm's closed form where its axes admit one (all branches; spherical wrist, "
+                        "spherical shoulder, three parallel axes, a 7-joint arm's last joint swept), else the numerical "
+                        "solver; numerical: always Levenberg-Marquardt from seeds")
 
 
 def add_robot_arguments(p: argparse.ArgumentParser) -> None:
@@ -127,8 +131,6 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--tabletop", type=parse_number(TABLETOP, "--tabletop"), default=None, metavar="ID",
                    help="tabletop parameter set id (default: the latest)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--closed-form", action="store_true",
-                   help="closed-form IK (all 8 branches) for arms with a spherical wrist, e.g. puma560, instead of the numerical solver")
     p.set_defaults(func=main)
 
 
@@ -136,13 +138,13 @@ def main(args: argparse.Namespace) -> int:
 
     robot, scene = robot_and_scene(args)
     with Store(args.db, create=False) as store:
-        opts = IKOptions(closed_form=args.closed_form, self_collide=True)
+        opts = IKOptions(solver=args.ik, self_collide=True)
         run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, opts, args.workers,
                      progress=not args.no_progress, idtabletop=args.tabletop, worlda=args.worlda)
     what = "reused" if run.reused else f"computed {run.computed:,}"
     print(f"ik {run.robot}: {run.grips:,} tabletop grips ({what}); feasible grasp {run.feasible:,}, "
           f"at all five poses (retractions and lifts) {run.feasible_all:,}; robot {run.idrobot}, scene {run.idscene}, ikret {run.idikret}; "
-          f"{run.seconds:.1f} s{stored_as(robot, run.robot)}")
+          f"{run.seconds:.1f} s; IK {solver_kind(robot, opts)}{stored_as(robot, run.robot)}")
     reason = run.empty_reason()  # this run's scene and retractions; other runs may share the robot row
     if reason is None:
         with Store(args.db) as store:

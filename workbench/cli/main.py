@@ -15,7 +15,7 @@ import sys
 import warnings
 
 from workbench.errors import WorkbenchError
-from workbench.params import BUDGET_ENV, WAIT_ENV, cli_bound, parse_number, parse_size
+from workbench.params import BUDGET_ENV, WAIT_ENV, check_workers, cli_bound, parse_number, parse_size
 
 WAIT = cli_bound(0, 86400, unit="s", help="seconds to wait for a store another process holds")
 
@@ -100,6 +100,10 @@ def main(argv: list[str] | None = None) -> int:
         args = build_parser(argv).parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a refused option (2, one line already printed)
         return exc.code if isinstance(exc.code, int) else 0
+    except KeyboardInterrupt:  # Ctrl-C while the command's modules load: nothing started yet
+        name = _selected(sys.argv[1:] if argv is None else argv) or ""
+        print(f"workbench {name}: interrupted; the store keeps only completed stages".replace("  ", " "), file=sys.stderr)
+        return 130
 
     def one_line(message, category, *_args, **_kwargs) -> None:  # warnings: one line each, no source excerpt
         print(f"workbench {args.command}: warning: {message}", file=sys.stderr)
@@ -110,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "wait", None) is not None:
         os.environ[WAIT_ENV] = str(args.wait)  # read where the store is opened (workbench.store.Store)
     try:
+        if getattr(args, "workers", None):
+            check_workers(args.workers)  # every command's worker pool, before any process starts
         return int(args.func(args) or 0)
     except WorkbenchError as exc:
         print(f"workbench {args.command}: error: {exc}", file=sys.stderr)

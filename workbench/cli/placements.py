@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 import time
 
+import numpy as np
+
 from workbench.cli import warn
 from workbench.grasping.placements import PlacementParams
 from workbench.params import add_param, bounds, cli_bound, parse_number
@@ -24,6 +26,7 @@ def add_placement_arguments(parser: argparse.ArgumentParser) -> None:
     """Stability and table-grid options (metres; the grid is in the world frame, table top at z = 0)."""
     t = TabletopParams()
     add_param(parser, PlacementParams, "min_stability")
+    add_param(parser, PlacementParams, "min_probability")
     add_param(parser, PlacementParams, "clearance")
     for axis, lo, hi, n in (("x", t.x_min, t.x_max, t.nx), ("y", t.y_min, t.y_max, t.ny)):
         parser.add_argument(f"--{axis}", type=_grid(axis), default=(lo, hi, n), metavar="MIN,MAX,N",
@@ -64,7 +67,8 @@ def _grid(axis: str):
 
 
 def placement_params(args: argparse.Namespace) -> tuple[PlacementParams, TabletopParams]:
-    return (PlacementParams(min_stability=args.min_stability, clearance=args.clearance),
+    return (PlacementParams(min_stability=args.min_stability, min_probability=args.min_probability,
+                            clearance=args.clearance),
             TabletopParams(x_min=args.x[0], x_max=args.x[1], nx=args.x[2], y_min=args.y[0], y_max=args.y[1], ny=args.y[2],
                            angles=args.angles, max_grasps=args.max_grasps or None))
 
@@ -103,8 +107,10 @@ def roadmap_grasps_line(label: str, roadmap: int, usable: int) -> str:
 
 def print_placements(name: str, result, seconds: float) -> None:
     stab = result.placements["stability"]
+    prob = result.placements.get("probability", np.full(len(stab), np.nan))
     if len(stab):
-        print(f"{name}: {len(stab)} stable placements (stability {', '.join(f'{s:.2f}' for s in stab)})")
+        print(f"{name}: {len(stab)} stable placements, most likely first (probability / stability: "
+              f"{', '.join(f'{p:.2f}/{s:.2f}' for p, s in zip(prob, stab))})")
         print(f"free tabletop grips per placement: {', '.join(str(int(n)) for n in result.n_free_grips)}")
     else:
         print(f"{name}: 0 stable placements")

@@ -8,16 +8,19 @@ import argparse
 import json
 import math
 import time
+from dataclasses import replace
 from pathlib import Path
 
 from workbench.cli import warn
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
+from workbench.cli.simulate import INSTALL, add_sim_arguments, print_simulation, sim_params
 from workbench.errors import PlanningError
 from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
-from workbench.planners.wan_harada.query import parse_pose
+from workbench.grasping.naming import per_part_numbers
+from workbench.planners.wan_harada.query import PoseQuery, parse_pose
 from workbench.planners.wan_harada.roadmap import NO_RESULT
 from workbench.planners.wan_harada.stages import (
     empty_stage,
@@ -27,16 +30,22 @@ from workbench.planners.wan_harada.stages import (
 )
 from workbench.robots.motion import MotionOptions
 from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
-from workbench.store import Store
-from workbench.store.robots import robot_with_gripper
-from workbench.viewer.wan_harada import plan_scene
+from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored, stored_playback
+from workbench.store import Store, open_reader
+from workbench.store.robots import robot_grippers, robot_with_gripper
+from workbench.viewer.wan_harada import caption_track, plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
+ACC = cli_bound(0, 1000, lo_open=True, unit="rad/s^2", help="joint acceleration limit")
+BUDGET = cli_bound(0, 3600, lo_open=True, unit="s", help="RRT-Connect time budget per motion")
+REMOVED = cli_bound(0, 100_000, integer=True, help="motions that may fail before giving up")
+SEED = cli_bound(0, 2**32 - 1, integer=True, help="motion planner seed")
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     parser = sub.add_parser("plan", help="plan regrasps from a start to a goal pose on the table",
-                            description="Poses are PLACEMENT,X,Y,YAW: a stable placement id (idfreetabletopplacement), "
+                            description="Poses are PLACEMENT,X,Y,YAW: a stable placement's number within the part (1, 2, ... as "
+                                        "`workbench build` lists them, with how the part rests on each), "
                                         "x and y in metres on the table (top at z = 0), yaw in degrees about z (within "
                                         "[-360, 360]). Every plan comes with its motions: straight TCP lines to take and put "
                                         "down the part, collision-free joint-space transfers and transits (straight, else "
@@ -64,6 +73,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml "
                     "(a ROS 2 trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
     add_gripper_argument(parser)
+    physics = parser.add_argument_group("physics", f"replay the best plan in MuJoCo, as `workbench simulate` does ({INSTALL})")
+    physics.add_argument("--simulate", action="store_true",
+                         help="simulate the best plan after planning, store the verdict and play the simulated part in --html")
+    physics.add_argument("--require-physics", action="store_true",
+                         help="a plan that fails in simulation counts as a failed motion: its failing step's roadmap node "
+                              "or grip is removed and the graph searched again (up to --max-removed); implies --simulate")
+    add_sim_arguments(physics)
     parser.set_defaults(func=run)
 
 
@@ -77,8 +93,16 @@ def run(args: argparse.Namespace) -> int:
         raise PlanningError("plan takes a robot's own hand by its URDF: --gripper ROBOT.urdf --gripper-hand TIP "
                             "--gripper-fingers LEFT,RIGHT (as given to build)")
     gripper = gripper_from_args(args)
-    with Store(args.db, create=False) as store:
-        args.robot = robot_with_gripper(store, args.robot, gripper.digest) or args.robot
+    simulate = args.simulate or args.require_physics
+    save = False
+    # planning only reads: other processes may read the store meanwhile; the plans are written afterwards, briefly
+    with Store(args.db, create=False) if simulate else open_reader(args.db) as store:
+        stored = robot_with_gripper(store, args.robot, gripper.digest)
+        others = [] if stored else robot_grippers(store, args.robot)
+        if others:
+            raise PlanningError(f"store {args.db} has robot {args.robot!r} with gripper {', '.join(others)}, not "
+                                f"{gripper.name!r}; give --gripper the one it was built with, or build it with this one")
+        args.robot = stored or args.robot
         reason = empty_stage(store, args.object, args.robot)
         if reason:
             warn(f"no plan for {args.object}: nothing to plan with; stage {reason}")
@@ -87,14 +111,18 @@ def run(args: argparse.Namespace) -> int:
         planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial,
                                gripper=gripper)
         t_load = time.perf_counter() - t0
+        numbers = per_part_numbers(planner.free["idfreetabletopplacement"])
+        start, goal = store_placement(start, numbers, args.object, "--start"), store_placement(goal, numbers, args.object, "--goal")
         turn = (goal.yaw - start.yaw + math.pi) % (2 * math.pi) - math.pi
         if (start.idfreetabletopplacement == goal.idfreetabletopplacement in planner.placement_ids()
                 and math.hypot(goal.x - start.x, goal.y - start.y) < 1e-6 and abs(turn) < 1e-9):
             print(f"the start is the goal ({args.start}): {args.object} is already in place; no plan to make")
             return 0
         report_graph(planner, t_load)
+        params = sim_params(args) if simulate else None
+        physics = physics_check(store, planner.robot, params) if args.require_physics else None
         try:
-            plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts)
+            plans = planner.plan(start, goal, alternatives=args.alternatives, exec_opts=opts, physics=physics)
         except PlanningError as exc:
             if getattr(exc, "reason", None) not in NO_RESULT:
                 raise
@@ -104,7 +132,7 @@ def run(args: argparse.Namespace) -> int:
                 print(f"json: {write_json([], args.json, reason=exc.reason, message=str(exc)).resolve()}")
             return 0
         best = plans[0]
-        print_plan(best)
+        print_plan(best, numbers)
         for p in plans[1:]:
             print(f"alternative {p.rank}: {p.regrasps} regrasp(s), {p.transfers} transfer(s), grasps {' -> '.join(map(str, p.grasps))}, "
                   f"trajectory {p.duration:.1f} s")
@@ -117,8 +145,31 @@ def run(args: argparse.Namespace) -> int:
         elif getattr(planner, "partial", False):
             print("not stored: planned on an incomplete IK stage (--allow-partial)")
         elif not args.no_save:
-            ids = save_plans(store, plans)
-            print(f"stored plan ids {ids} in {args.db}")
+            save = store.read_only
+            if not save:
+                known = save_plans(store, plans)
+                print(f"stored plan ids {known} in {args.db}")
+        playback = None
+        if args.require_physics:
+            gone = [f for f in planner.last_motion.failures if f.startswith("physics:")]
+            print(f"physics: {len(gone)} plan(s) failed in simulation before this one, and their failing step's roadmap "
+                  f"node or grip was removed" + "".join(f"\n  removed after {f}" for f in gone))
+        if simulate:
+            if known[0] is not None:
+                out = simulate_stored(store, known[0], params, plan=best, robot=planner.robot)
+                print_simulation(out, known[0], args.db)
+                playback = stored_playback(store, known[0])
+            else:
+                res = simulate_in_memory(store, best, planner.robot, params)
+                print(f"physics (not stored): {res.summary() if res.confirmed else res.failure.message}")
+                playback = (res.playback_t, res.playback_pose)
+    if save:
+        with Store(args.db, create=False) as store:
+            known = [stored_plan(store, p) for p in plans]  # another process may have stored the same query meanwhile
+            if all(k is not None for k in known):
+                print(f"answered from the store: plan ids {known} in {args.db} (the same query; not stored again)")
+            else:
+                print(f"stored plan ids {save_plans(store, plans)} in {args.db}")
     if args.json:
         write_json(plans, args.json)
         print(f"json: {Path(args.json).resolve()}")
@@ -126,7 +177,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"trajectory: {write_trajectory(best, args.trajectory).resolve()}")
     if args.html:
 
-        print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes)).resolve()}")
+        print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes, simulated=playback)).resolve()}")
     return 0
 
 
@@ -140,21 +191,18 @@ def report_graph(planner, t_load: float) -> None:
 def add_motion_arguments(parser: argparse.ArgumentParser, removed: str) -> None:
     """--acc, --budget, --max-removed (of `removed`, what a failing motion takes out) and --seed, read by
     `exec_options`."""
-    parser.add_argument("--acc", type=float, default=DEFAULT_ACC, help=f"joint acceleration limit, rad/s^2 (default {DEFAULT_ACC:g})")
-    parser.add_argument("--budget", type=float, default=1.0, help="RRT-Connect time budget per motion, s (default 1)")
-    parser.add_argument("--max-removed", type=int, default=10,
-                        help=f"{removed} whose motions fail to remove before giving up (default 10)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the motion planner (default 0)")
+    parser.add_argument("--acc", type=parse_number(ACC, "--acc", DEFAULT_ACC), default=DEFAULT_ACC, metavar="X",
+                        help=f"joint acceleration limit ({ACC.describe(True)}; default {DEFAULT_ACC:g})")
+    parser.add_argument("--budget", type=parse_number(BUDGET, "--budget", 1.0), default=1.0, metavar="S",
+                        help=f"RRT-Connect time budget per motion ({BUDGET.describe(True)}; default 1)")
+    parser.add_argument("--max-removed", type=parse_number(REMOVED, "--max-removed", 10), default=10, metavar="N",
+                        help=f"{removed} whose motions fail to remove before giving up ({REMOVED.describe(True)}; default 10)")
+    parser.add_argument("--seed", type=parse_number(SEED, "--seed", 0), default=0, metavar="N",
+                        help=f"seed of the motion planner ({SEED.describe(True)}; default 0)")
 
 
 def exec_options(args: argparse.Namespace) -> ExecOptions:
-    """Motion settings from --acc, --budget, --max-removed and --seed (one-line errors on bad values)."""
-    if not (args.acc > 0 and math.isfinite(args.acc)):
-        raise PlanningError(f"--acc must be a finite acceleration > 0 rad/s^2, got {args.acc}")
-    if not (args.budget > 0 and math.isfinite(args.budget)):
-        raise PlanningError(f"--budget must be > 0 s, got {args.budget}")
-    if args.max_removed < 0:
-        raise PlanningError(f"--max-removed must be >= 0, got {args.max_removed}")
+    """Motion settings from --acc, --budget, --max-removed and --seed (their ranges checked while parsing)."""
     return ExecOptions(acc=args.acc, max_removed=args.max_removed, motion=MotionOptions(budget=args.budget, seed=args.seed))
 
 
@@ -166,9 +214,29 @@ def write_trajectory(plan, out: str | Path) -> Path:
     return write_text(out, writer(plan.segments, plan.joint_names))
 
 
-def print_plan(plan) -> None:
-    print(f"start {plan.start.text_degrees()} -> goal {plan.goal.text_degrees()} (PLACEMENT,X,Y,YAW in m and degrees)")
-    for line in plan.lines():
+def store_placement(query: PoseQuery, numbers: dict[int, int], name: str, flag: str) -> PoseQuery:
+    """The query with its placement number (1, 2, ... within the part, as `build` lists them) as the store's id."""
+    ids = {n: i for i, n in numbers.items()}
+    if query.idfreetabletopplacement not in ids:
+        raise PlanningError(f"{flag}: {name} has no placement {query.idfreetabletopplacement}; its placements are "
+                            f"1-{len(ids)} (`workbench build` lists them, with how the part rests on each)")
+    return replace(query, idfreetabletopplacement=ids[query.idfreetabletopplacement])
+
+
+def pose_text(query: PoseQuery, numbers: dict[int, int] | None) -> str:
+    """`PLACEMENT,X,Y,YAW` (degrees) with the placement's number within the part when `numbers` are given."""
+    if numbers:
+        query = replace(query, idfreetabletopplacement=numbers.get(query.idfreetabletopplacement,
+                                                                   query.idfreetabletopplacement))
+    return query.text_degrees()
+
+
+def print_plan(plan, numbers: dict[int, int] | None = None) -> None:
+    """The plan's start, goal and steps as the plan view's footer names them (placements by `numbers`, the store's id
+    -> its number within the part), and what it took."""
+    print(f"start {pose_text(plan.start, numbers)} -> goal {pose_text(plan.goal, numbers)} "
+          f"(PLACEMENT,X,Y,YAW in m and degrees)")
+    for line in caption_track(plan, [], numbers=numbers)["footers"][1:]:
         print("  " + line)
     t = plan.timings
     print(f"{plan.regrasps} regrasp(s), {plan.transfers} transfer(s); time to connect {t.get('connect', 0) * 1000:.1f} ms, "

@@ -8,6 +8,7 @@ import argparse
 import math
 from pathlib import Path
 
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.errors import PlanningError
 from workbench.params import add_param, from_cli
 from workbench.simulation.replay import SimParams
@@ -27,10 +28,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                                         f"and --density, collision from a convex decomposition cached per mesh) starts "
                                         f"resting at the start pose. A plan is confirmed when every error is within its "
                                         f"tolerance; otherwise the first failing step is named with how it failed (shove "
-                                        f"at closing, slip or drop in the hand, roll after release, pose, goal). {INSTALL}.")
+                                        f"at closing, slip or drop in the hand, roll after release, pose, goal). It {INSTALL}.")
     parser.add_argument("--db", required=True, help="DuckDB store holding the plan")
     parser.add_argument("--plan", required=True, type=int, metavar="ID", help="plan id (printed by `workbench plan`)")
     add_sim_arguments(parser)
+    add_gripper_argument(parser)
     parser.set_defaults(func=run)
 
 
@@ -48,8 +50,9 @@ def run(args: argparse.Namespace) -> int:
     params = sim_params(args)
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; make a plan with `workbench plan --db {args.db} ...` first")
+    gripper = gripper_from_args(args)
     with Store(args.db, create=False) as store:
-        out = simulate_stored(store, args.plan, params)
+        out = simulate_stored(store, args.plan, params, gripper=gripper)
     print_simulation(out, args.plan, args.db)
     return 0
 

@@ -24,6 +24,12 @@ def bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
     return model
 
 
+def mesh_distance(a: trimesh.Trimesh, b: trimesh.Trimesh) -> float:
+    """The least distance between two meshes' surfaces (0 where they touch or cross)."""
+    oa, ob = fcl.CollisionObject(bvh(a), fcl.Transform()), fcl.CollisionObject(bvh(b), fcl.Transform())
+    return max(float(fcl.distance(oa, ob, fcl.DistanceRequest(), fcl.DistanceResult())), 0.0)
+
+
 def collide_at_poses(geometry: fcl.CollisionGeometry, poses: np.ndarray, target: fcl.CollisionObject) -> np.ndarray:
     """For each 4x4 pose, whether `geometry` placed there intersects `target` (N,) bool."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)

@@ -76,17 +76,20 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
         loaded = trimesh.load(path, force=None, process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
         raise MeshError(f"object file {path} is not a readable mesh ({type(exc).__name__}: {exc})") from None
+    pieces = None
     if isinstance(loaded, trimesh.Scene):
-        geoms = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh)]
+        # each node's mesh placed by the scene graph's transforms, and which node each face came from
+        geoms = [g for g in loaded.dump() if isinstance(g, trimesh.Trimesh) and len(g.faces)]
         if not geoms:
             raise MeshError(f"object file {path} holds no triangle mesh")
+        pieces = np.repeat(np.arange(len(geoms)), [len(g.faces) for g in geoms])
         loaded = trimesh.util.concatenate(geoms)
     if isinstance(loaded, trimesh.PointCloud):
         raise MeshError(f"object file {path} has {len(loaded.vertices)} vertices but no triangle faces")
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError(f"object file {path} is not a triangle mesh (got {type(loaded).__name__})")
     return from_arrays(loaded.vertices, loaded.faces, scale=resolve_scale(scale, units),
-                       name=name or path.stem, source=str(path))
+                       name=name or path.stem, source=str(path), pieces=pieces)
 
 
 def from_trimesh(mesh: trimesh.Trimesh, name: str, scale: float = 1.0) -> ObjectModel:
@@ -94,9 +97,10 @@ def from_trimesh(mesh: trimesh.Trimesh, name: str, scale: float = 1.0) -> Object
     return from_arrays(mesh.vertices, mesh.faces, scale=scale, name=name, source="<memory>")
 
 
-def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str, source: str) -> ObjectModel:
+def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str, source: str,
+                pieces: np.ndarray | None = None) -> ObjectModel:
     """Validate vertex and face arrays, scale to metres, repair what is safe to repair (geometry/repair.py), compute
-    the centre of mass."""
+    the centre of mass. `pieces` (per face): the file's own meshes, joined as one part (geometry/repair.py)."""
     vertices = np.asarray(vertices, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
     label = source if source != "<memory>" else f"mesh {name!r}"
@@ -115,7 +119,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
                         f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {_scale_hint(extent, scale)}")
     mesh = trimesh.Trimesh(vertices * scale, faces, process=False, validate=False)
-    mesh, repairs = repair(mesh, label)
+    mesh, repairs = repair(mesh, label, pieces=pieces)
     for note in repairs:
         warnings.warn(f"{label}: {note}", MeshWarning, stacklevel=3)
     extent = float(mesh.extents.max())

@@ -4,23 +4,37 @@ Only repairs that cannot change the intended shape are made, and each is reporte
 merge duplicate vertices (reported for indexed meshes; an STL's per-face corners are merged silently), drop degenerate and duplicate faces, make the winding consistent and the normals point
 outward, fill small holes (loops of at most `hole_edges` edges and `hole_size` across, fanned from their centroid;
 trimesh.repair.fill_holes fills any three- or four-sided hole whatever its size, so a missing lid would be closed).
-A file holding several separate bodies is reduced to its largest body when the others are small debris (together
-under `debris` of its area); bodies that touch or overlap one another (a part built from pieces) stay together;
-otherwise the mesh is refused, naming the bodies, since which one is meant cannot be guessed.
+A file holding several bodies is one part when they touch, interpenetrate or nest within 1e-4 of the part's largest
+extent (CAD exports of one part as several shells, convex-piece models): the part is their union (manifold3d), so
+that sampling, the pads and placements see only its outer surface, or, when a piece is not closed, the pieces less
+their faces inside another piece. Small separate bodies (together under `debris` of the part's area) are dropped;
+bodies really apart are refused, naming their gap, since which one is meant cannot be guessed.
+
+The repaired mesh is put in a canonical order (`canonical`), so that a repaired file and the clean file it repairs
+are the same part to every later stage.
 """
 
 from __future__ import annotations
 
+import manifold3d
 import numpy as np
 import trimesh
 
 from workbench.errors import MeshError
+from workbench.geometry.collision import mesh_distance
 
 
 def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: float = 0.01,
-           debris: float = 0.1) -> tuple[trimesh.Trimesh, list[str]]:
-    """The repaired mesh and one line per repair made (empty when nothing was needed)."""
+           debris: float = 0.1, pieces: np.ndarray | None = None) -> tuple[trimesh.Trimesh, list[str]]:
+    """The repaired mesh and one line per repair made (empty when nothing was needed). `pieces` (per face, optional):
+    which of the file's meshes each face came from (a glTF scene's nodes)."""
     notes: list[str] = []
+    if pieces is not None and len(np.unique(pieces)) > 1:
+        # the file's own pieces first: merged together, coincident faces of pieces meeting face to face would be taken
+        # for duplicates and their shared corners would glue them into one body that is not closed
+        mesh, body_note = _one_body(mesh, label, debris, np.asarray(pieces))
+        if body_note:
+            notes.append(body_note)
     nv = len(mesh.vertices)
     # an STL stores every face's own corners: merging them is loading, not repairing; an indexed mesh (OBJ, PLY)
     # that repeats vertices has seams, and merging those is a repair worth reporting
@@ -38,6 +52,11 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
     if degenerate.any():
         mesh.update_faces(~degenerate)
         notes.append(f"removed {int(degenerate.sum())} degenerate faces")
+    walls = _inner_walls(mesh.faces)
+    if walls.any():
+        mesh.update_faces(~walls)
+        notes.append(f"removed {int(walls.sum()) // 2} pairs of coincident, opposite faces (the wall where two pieces "
+                     f"meet face to face)")
     nf = len(mesh.faces)
     mesh.update_faces(mesh.unique_faces())
     if len(mesh.faces) < nf:
@@ -58,39 +77,174 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
     if mesh.is_watertight and mesh.volume < 0:
         mesh.invert()
         notes.append("turned the normals outward (the mesh was inside out)")
-    return mesh, notes
+    return canonical(mesh), notes
 
 
-def _one_body(mesh: trimesh.Trimesh, label: str, debris: float) -> tuple[trimesh.Trimesh, str]:
-    """Keep every body when they form one cluster of touching bodies; else the largest when the rest is debris."""
-    labels = trimesh.graph.connected_component_labels(mesh.face_adjacency, node_count=len(mesh.faces))
-    n = int(labels.max()) + 1 if len(labels) else 0
+def canonical(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The same oriented surface with its vertices in coordinate order and its faces in index order, each face
+    starting at its lowest vertex (its winding kept): a file's vertex and face order, and which corner each face
+    lists first, then change nothing downstream (sample order, caches, the object's digest)."""
+    v = np.asarray(mesh.vertices)
+    order = np.lexsort((v[:, 2], v[:, 1], v[:, 0]))
+    rank = np.empty(len(order), dtype=np.int64)
+    rank[order] = np.arange(len(order))
+    f = rank[np.asarray(mesh.faces)]
+    first = np.argmin(f, axis=1)
+    f = np.take_along_axis(f, (first[:, None] + np.arange(3)[None, :]) % 3, axis=1)
+    f = f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
+    return trimesh.Trimesh(v[order], f, process=False, validate=False)
+
+
+def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarray | None = None,
+              touch: float = 1e-4) -> tuple[trimesh.Trimesh, str]:
+    """One part from the file's bodies: bodies that touch, interpenetrate or lie inside one another (within `touch`
+    of the part's largest extent, well above export precision) are pieces of one part and become their union;
+    small separate bodies are debris and are dropped; bodies really apart are refused, naming the gap. `pieces`
+    (per face) names the file's own pieces (a scene's meshes): each is split into bodies on its own, so that pieces
+    meeting face to face are not glued at their shared corners into one body that is not closed."""
+    bodies = []
+    for p in np.unique(pieces) if pieces is not None else [None]:
+        part = mesh if p is None else _submesh(mesh, pieces == p)
+        if p is not None:
+            part.merge_vertices()
+        labels = trimesh.graph.connected_component_labels(part.face_adjacency, node_count=len(part.faces))
+        bodies += [part] if labels.max(initial=0) == 0 else [_submesh(part, labels == i) for i in range(labels.max() + 1)]
+    n = len(bodies)
     if n <= 1:
         return mesh, ""
-    area = np.bincount(labels, weights=mesh.area_faces, minlength=n)
-    lo = np.full((n, 3), np.inf)
-    hi = np.full((n, 3), -np.inf)
-    tri = mesh.triangles
-    np.minimum.at(lo, labels, tri.min(axis=1))
-    np.maximum.at(hi, labels, tri.max(axis=1))
-    # clusters of bodies whose bounding boxes overlap (pieces of one part)
-    touch = ((lo[:, None, :] <= hi[None, :, :] + 1e-9) & (hi[:, None, :] >= lo[None, :, :] - 1e-9)).all(axis=2)
-    cluster = trimesh.graph.connected_component_labels(np.argwhere(np.triu(touch, 1)), node_count=n)
+    area = np.array([b.area for b in bodies])
+    tol = touch * float(mesh.extents.max())
+    gap = _gaps(bodies, tol)
+    cluster = trimesh.graph.connected_component_labels(np.argwhere(np.triu(gap <= tol, 1)), node_count=n)
     carea = np.bincount(cluster, weights=area)
     big = int(np.argmax(carea))
     rest = float(carea.sum() - carea[big])
-    if rest == 0:
-        return mesh, f"kept {n} overlapping bodies together as one part"
-    if rest <= debris * carea[big]:
-        keep = cluster[labels] == big
-        mesh.update_faces(keep)
-        mesh.remove_unreferenced_vertices()
-        dropped = int((cluster != big).sum())
-        return mesh, (f"kept the largest body ({carea[big] * 1e4:.3g} cm^2) and dropped {dropped} small separate "
-                      f"bodies ({rest * 1e4:.3g} cm^2 in all)")
-    sizes = ", ".join(f"{a * 1e4:.3g}" for a in sorted(carea, reverse=True)[:4])
-    raise MeshError(f"{label} holds {int(cluster.max()) + 1} separate bodies of comparable size (areas {sizes} cm^2); "
-                    f"export the one body to grasp as its own file")
+    if rest > debris * carea[big]:
+        # the nearest body to the largest piece's cluster, for the message
+        other = cluster != big
+        inner = cluster == big
+        nearest = float(gap[np.ix_(inner, other)].min())
+        sizes = ", ".join(f"{a * 1e4:.3g}" for a in sorted(carea, reverse=True)[:4])
+        raise MeshError(f"{label} holds {int(cluster.max()) + 1} separate bodies of comparable size (areas {sizes} "
+                        f"cm^2), the nearest {nearest * 1e3:.3g} mm apart (pieces within {tol * 1e3:.2g} mm are "
+                        f"joined as one part); export the one body to grasp as its own file")
+    notes = []
+    keep = np.flatnonzero(cluster == big)
+    if rest > 0:
+        notes.append(f"kept the largest body ({carea[big] * 1e4:.3g} cm^2) and dropped {n - len(keep)} small "
+                     f"separate bodies ({rest * 1e4:.3g} cm^2 in all)")
+    if len(keep) == 1:
+        return bodies[int(keep[0])], "; ".join(notes)
+    pieces = [bodies[i] for i in keep]
+    total = float(sum(p.area for p in pieces))
+    joined = _union(pieces, tol)
+    if joined is not None:
+        notes.append(f"joined {len(keep)} touching bodies into one part (their union: {joined.area * 1e4:.3g} of "
+                     f"{total * 1e4:.3g} cm^2 of surface is outside)")
+        return joined, "; ".join(notes)
+    # no union (a piece is not closed): the pieces stay together, less the faces inside another piece
+    outer = _outer_faces(pieces)
+    kept = trimesh.util.concatenate(pieces)
+    kept.update_faces(outer)
+    kept.remove_unreferenced_vertices()
+    notes.append(f"kept {len(keep)} touching bodies together as one part (no union: not every piece is closed; "
+                 f"{int((~outer).sum())} faces inside another piece dropped)")
+    return kept, "; ".join(notes)
+
+
+def _inner_walls(faces: np.ndarray) -> np.ndarray:
+    """Mask of faces that another face covers with the opposite winding (the same three vertices): both are the
+    inside wall of two pieces meeting face to face, not surface."""
+    key = np.sort(faces, axis=1)
+    # the winding's parity: an even rotation of the sorted triple, or an odd one
+    even = ((faces == np.roll(key, 0, axis=1)).all(axis=1) | (faces == np.roll(key, 1, axis=1)).all(axis=1)
+            | (faces == np.roll(key, 2, axis=1)).all(axis=1))
+    _, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    n = int(inv.max()) + 1 if len(inv) else 0
+    pos = np.bincount(inv, weights=even, minlength=n)
+    neg = np.bincount(inv, weights=~even, minlength=n)
+    return ((pos > 0) & (neg > 0))[inv]
+
+
+def _submesh(mesh: trimesh.Trimesh, faces: np.ndarray) -> trimesh.Trimesh:
+    out = trimesh.Trimesh(mesh.vertices, mesh.faces[faces], process=False, validate=False)
+    out.remove_unreferenced_vertices()
+    return out
+
+
+def _gaps(bodies: list[trimesh.Trimesh], tol: float) -> np.ndarray:
+    """Distances between bodies (n, n): 0 where they touch, cross or one lies inside the other; the bounding boxes'
+    gap where those are more than `tol` apart (a lower bound), else the surfaces' distance (python-fcl)."""
+    n = len(bodies)
+    lo = np.array([b.bounds[0] for b in bodies])
+    hi = np.array([b.bounds[1] for b in bodies])
+    box = np.linalg.norm(np.maximum(0.0, np.maximum(lo[:, None] - hi[None], lo[None] - hi[:, None])), axis=2)
+    gap = box.copy()
+    for i in range(n):
+        for j in range(i + 1, n):
+            if box[i, j] > tol:
+                continue
+            d = mesh_distance(bodies[i], bodies[j])
+            if d > 0 and any(_inside(bodies[a], bodies[b].vertices[:1]) for a, b in ((i, j), (j, i))):
+                d = 0.0
+            gap[i, j] = gap[j, i] = d
+    return gap
+
+
+def _inside(body: trimesh.Trimesh, points: np.ndarray) -> bool:
+    return bool(body.is_watertight and body.contains(points).all())
+
+
+def _union(pieces: list[trimesh.Trimesh], tol: float) -> trimesh.Trimesh | None:
+    """The pieces' boolean union (manifold3d, in double precision) as one closed body, or None when a piece is not a
+    closed manifold. Pieces that meet only within export rounding (faces 1e-9 m apart) give separate solids; they
+    are then grown about their centres by the least of 1e-3, 1e-2, 0.1 and 1 times `tol` that joins them."""
+    closed = []
+    for p in pieces:
+        if not p.is_watertight:
+            return None
+        q = p.copy()
+        if q.volume < 0:
+            q.invert()
+        closed.append(q)
+
+    def union(grow: float):
+        solids = []
+        for q in closed:
+            c = q.vertices.mean(axis=0)
+            r = float(np.linalg.norm(q.vertices - c, axis=1).max())
+            v = c + (q.vertices - c) * (1 + grow / max(r, 1e-12))
+            m = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.ascontiguousarray(v, dtype=np.float64),
+                                                      tri_verts=np.ascontiguousarray(q.faces, dtype=np.uint64)))
+            if m.status() != manifold3d.Error.NoError or m.is_empty():
+                return None
+            solids.append(m)
+        u = manifold3d.Manifold.batch_boolean(solids, manifold3d.OpType.Add)
+        if u.status() != manifold3d.Error.NoError or u.is_empty() or len(u.decompose()) > 1:
+            return None
+        out = u.to_mesh64()
+        joined = trimesh.Trimesh(np.asarray(out.vert_properties)[:, :3], np.asarray(out.tri_verts, dtype=np.int64),
+                                 process=True)
+        return joined if joined.is_watertight and joined.body_count == 1 else None
+
+    for grow in (0.0, 1e-3 * tol, 1e-2 * tol, 0.1 * tol, tol):
+        joined = union(grow)
+        if joined is not None:
+            return joined
+    return None
+
+
+def _outer_faces(pieces: list[trimesh.Trimesh]) -> np.ndarray:
+    """Mask of the pieces' faces (concatenated) whose centres lie inside no other closed piece."""
+    masks = []
+    for i, p in enumerate(pieces):
+        inside = np.zeros(len(p.faces), dtype=bool)
+        for j, q in enumerate(pieces):
+            if j != i and q.is_watertight:
+                inside |= q.contains(p.triangles_center)
+        masks.append(~inside)
+    return np.concatenate(masks)
 
 
 def _fill_loops(mesh: trimesh.Trimesh, max_edges: int, max_size: float) -> int:

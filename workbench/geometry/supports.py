@@ -136,3 +136,96 @@ def _small_stabilities(pts: np.ndarray, com: np.ndarray, normals: np.ndarray, fl
     area = np.abs(side).max(axis=(1, 2)) > tol
     ok = (height > 0) & area & (reach >= floor * height)
     return np.where(ok, dist / np.where(height > 0, height, 1.0), 0.0)
+
+
+def rest_probabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.ndarray], normals: np.ndarray,
+                       stable: np.ndarray, rock_angle: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Quasi-static stable-pose probabilities of the supports (groups of hull faces) and which of them rock:
+    (probability (G,), rocking (G,)).
+
+    A part dropped in a uniformly random orientation first lands, quasi-statically, on the hull face that the
+    downward ray from its centre of mass meets, with probability that face's solid angle seen from the centre of
+    mass over 4 pi; on a face of an unstable support it rolls over the edge beyond which the centre of mass
+    projects, onto the neighbouring face, until it reaches a stable support (the drop statistics of Goldberg et al.'s
+    part feeding and of Dex-Net's stable poses). A stable support is a rocking one when both the tilt that tips it
+    over its weakest edge (the edge nearest the centre of mass's projection) and the angle to the hull face beyond
+    that edge are below `rock_angle`: a small tilt rolls it onto the next facet, as on a faceted round side. The
+    part rolls on from it, so that it gets no probability, unless rolling on never ends on a support that does not
+    rock (a rounded part, all of whose supports rock): then the plain quasi-static flow decides.
+    `stable` (G,) marks the supports holding the centre of mass's projection.
+    """
+    faces = np.asarray(hull.faces)
+    tri = np.asarray(hull.triangles) - com
+    fn = np.asarray(hull.face_normals)
+    T = len(faces)
+    group = np.full(T, -1, dtype=np.int64)
+    for g, members in enumerate(groups):
+        group[members] = g
+    # the face across each edge (edge e of face f: vertices e and e + 1)
+    across = np.full((T, 3), -1, dtype=np.int64)
+    key = {}
+    for f in range(T):
+        for e in range(3):
+            a, b = faces[f, e], faces[f, (e + 1) % 3]
+            other = key.pop((b, a), None)
+            if other is None:
+                key[(a, b)] = (f, e)
+            else:
+                across[f, e], across[other[0], other[1]] = other[0], f
+    # the centre of mass (origin) projected on each face's plane, in barycentric coordinates
+    p = -np.einsum("fj,fj->f", tri[:, 0], fn)[:, None] * -fn
+    v0, v1 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    w = p - tri[:, 0]
+    d00, d01, d11 = (np.einsum("fj,fj->f", v0, v0), np.einsum("fj,fj->f", v0, v1), np.einsum("fj,fj->f", v1, v1))
+    d20, d21 = np.einsum("fj,fj->f", w, v0), np.einsum("fj,fj->f", w, v1)
+    den = np.where(np.abs(d00 * d11 - d01**2) > 0, d00 * d11 - d01**2, 1.0)
+    lb = (d11 * d20 - d01 * d21) / den
+    lc = (d00 * d21 - d01 * d20) / den
+    bary = np.column_stack([1 - lb - lc, lb, lc])
+    # rolling over the edge opposite the most negative coordinate: edge (i + 1, i + 2) is edge index (i + 1) % 3
+    plain = across[np.arange(T), (np.argmin(bary, axis=1) + 1) % 3]
+    nxt = plain.copy()
+    rocking = np.zeros(len(groups), dtype=bool)
+    if rock_angle > 0:
+        for g in np.flatnonzero(stable):
+            members = groups[g]
+            out_edges = [(f, e) for f in members for e in range(3) if group[across[f, e]] != g]
+            if not out_edges:
+                continue
+            # the boundary edge nearest the centre of mass's projection on the support's plane
+            n = normals[g]
+            height = abs(float(tri[members[0], 0] @ n))
+            q = height * n
+            dist = []
+            for f, e in out_edges:
+                a, b = tri[f, e], tri[f, (e + 1) % 3]
+                t = np.clip(((q - a) @ (b - a)) / max((b - a) @ (b - a), 1e-300), 0.0, 1.0)
+                dist.append(np.linalg.norm(a + t * (b - a) - q))
+            f, e = out_edges[int(np.argmin(dist))]
+            beyond = across[f, e]
+            tip = np.arctan2(min(dist), height)
+            if beyond >= 0 and tip < rock_angle and np.arccos(np.clip(fn[beyond] @ n, -1.0, 1.0)) < rock_angle:
+                rocking[g] = True
+                for m in members:  # the part rolls on across that edge
+                    nxt[m] = beyond
+
+    def flow(rest: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """The support each face's drop ends on (-1: none, rolling on in a cycle)."""
+        terminal = rest[group] | (step < 0)
+        target = np.where(terminal, np.arange(T), step)
+        for _ in range(int(np.ceil(np.log2(max(T, 2)))) + 2):  # pointer jumping: each round doubles the steps
+            target = np.where(terminal[target], target, target[target])
+        return np.where(terminal[target] & rest[group[target]], group[target], -1)
+
+    end = flow(stable & ~rocking, nxt)
+    end = np.where(end >= 0, end, flow(stable, plain))
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    la, lb_, lc_ = (np.linalg.norm(x, axis=1) for x in (a, b, c))
+    num = np.abs(np.einsum("fj,fj->f", a, np.cross(b, c)))
+    den = la * lb_ * lc_ + np.einsum("fj,fj->f", a, b) * lc_ + np.einsum("fj,fj->f", a, c) * lb_ \
+        + np.einsum("fj,fj->f", b, c) * la
+    omega = 2 * np.arctan2(num, den)  # solid angle of each face seen from the centre of mass
+    landed = end >= 0
+    prob = np.bincount(end[landed], weights=omega[landed], minlength=len(groups))
+    total = prob.sum()
+    return (prob / total if total > 0 else prob), rocking

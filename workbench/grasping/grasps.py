@@ -276,15 +276,19 @@ def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, tar
     """Do the finger boxes of both fingers at each grasp's opening, shrunk by `clearance` on every side, intersect
     the object? (The body does not move with the fingers: it is tested at full opening.) `pads=False` skips the pad
     boxes, for grasps whose pads closed onto their first touches and so cannot overlap the object."""
-    boxes = [b for k, b in enumerate(gripper.finger_poses(0.0)) if pads or k // 2 != gripper.pad]
-    if not boxes:  # fingers that are their pads only
-        return np.zeros(len(poses), dtype=bool)
-    extents = np.array([np.maximum(ext - 2 * clearance, 1e-6) for ext, _ in boxes])
-    local = np.array([pose for _, pose in boxes])
-    side = np.sign(local[:, 1, 3])
-    placed = np.repeat(local[None], len(poses), axis=0)
-    placed[:, :, 1, 3] += side[None, :] * np.asarray(widths)[:, None] / 2
-    return boxes_collide(extents, np.einsum("gij,gbjk->gbik", poses, placed), target)
+    widths = np.asarray(widths)
+    out = np.zeros(len(poses), dtype=bool)
+    for sel, shape in gripper.width_groups(widths):  # one group unless a linkage's fingers change along the stroke
+        boxes = [b for k, b in enumerate(shape) if pads or k // 2 != gripper.pad]
+        if not boxes or not len(sel):  # fingers that are their pads only
+            continue
+        extents = np.array([np.maximum(ext - 2 * clearance, 1e-6) for ext, _ in boxes])
+        local = np.array([pose for _, pose in boxes])
+        side = np.sign(local[:, 1, 3])
+        placed = np.repeat(local[None], len(sel), axis=0)
+        placed[:, :, 1, 3] += side[None, :] * widths[sel][:, None] / 2
+        out[sel] = boxes_collide(extents, np.einsum("gij,gbjk->gbik", poses[sel], placed), target)
+    return out
 
 
 def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
@@ -379,7 +383,7 @@ def support_axes(normals: np.ndarray, downs: np.ndarray, rotations: int, frictio
 
     A part lying on the table is mostly gripped from above, with a level jaw axis and the approach straight down.
     The paper's axes follow the facet normals; on a curved or scanned part those are a few degrees off level, and
-    the open fingers (40 mm either side of the axis) then dip into the table. So every facet normal within the
+    the open fingers (half the stroke and a finger's thickness either side of the axis) then dip into the table. So every facet normal within the
     friction angle of level for a support's outward normal d (the direction into the table) is also tried levelled,
     y = n - (n . d) d normalised, with the approach z = d. A pair the regular rotations already give (y within
     `same` of n and a rotation within `same` of d, as on a CAD part's vertical faces) is skipped.

@@ -68,6 +68,24 @@ def pad_rectangle(gripper: Gripper) -> tuple[float, float, float, float]:
     return float(c[0]), float(c[2]), float(ext[0] / 2), float(ext[2] / 2)
 
 
+def pad_offsets(poses: np.ndarray, contacts: np.ndarray, gripper: Gripper) -> np.ndarray:
+    """Where each contact lies on its pad: its offset (G, 2) from the pad's centre along the TCP's x and z, as a
+    fraction of the pad's half size (0 at the centre, 1 on an edge). `contacts` (G, 3) in the frame of the TCP
+    `poses` (G, 4, 4)."""
+    cx, cz, hx, hz = pad_rectangle(gripper)
+    rel = np.einsum("gji,gj->gi", poses[:, :3, :3], contacts - poses[:, :3, 3])
+    return np.column_stack([(rel[:, 0] - cx) / hx, (rel[:, 2] - cz) / hz])
+
+
+def edge_share(poses: np.ndarray, contact0: np.ndarray, contact1: np.ndarray, gripper: Gripper,
+               within: float = 0.05) -> float:
+    """The share of contacts (both pads of every grasp) within `within` of their pad's half size from its edge."""
+    if len(poses) == 0:
+        return 0.0
+    off = np.vstack([pad_offsets(poses, contact0, gripper), pad_offsets(poses, contact1, gripper)])
+    return float((np.abs(off).max(axis=1) >= 1 - within).mean())
+
+
 def axis_frames(origins: np.ndarray, axes: np.ndarray, angles: np.ndarray, ref: np.ndarray | None = None) -> np.ndarray:
     """TCP frames (K * A, 4, 4): origin on the axis, y along it, approach z = the reference z0 (the world axis least
     aligned with y, made perpendicular) rotated by +angle about y (right-handed, the stored rotation), axis-major.
@@ -121,7 +139,7 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
         windows = np.tile([-np.inf, np.inf], (len(origins), 1))
     windows = np.asarray(windows, dtype=np.float64).reshape(-1, 2)
     frames = axis_frames(origins, axes, angles, ref)
-    # the reference frames (rotation 0): `_rows` turns every triangle into each rotation's pad coordinates from them
+    # the reference frames (rotation 0): the kernel turns every triangle into each rotation's pad coordinates from them
     fr0 = axis_frames(origins, axes, np.zeros(1), ref)
     with np.errstate(divide="ignore", invalid="ignore"):
         return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows)

@@ -31,6 +31,87 @@ TOL_AXES = 1e-9  # metres: how close lines must pass to count as intersecting
 
 
 @dataclass(frozen=True)
+class Chain:
+    """A 6R (or 6-joint) serial chain as the closed forms read it, with a `Robot`'s attribute names: joint k's
+    placement in its parent joint's frame (`chain_placement`, (n, 4, 4)), its axis in its own frame, the root's pose
+    in the world (`base`) and the TCP in the last joint's frame (`tip_in_joint`). `reversed_chain` turns it around;
+    `sub_chain` fixes trailing joints."""
+
+    name: str
+    chain_placement: np.ndarray
+    chain_axis: np.ndarray
+    base: np.ndarray
+    tip_in_joint: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    joint_names: tuple[str, ...]
+
+    @property
+    def nq(self) -> int:
+        return len(self.chain_axis)
+
+    @property
+    def chain_prismatic(self) -> np.ndarray:
+        return np.zeros(self.nq, dtype=bool)
+
+
+def chain_of(robot) -> Chain:
+    """The chain of a revolute-only `Robot` (RobotError when a joint is prismatic)."""
+    if robot.chain_prismatic.any():
+        raise RobotError(f"robot {robot.name!r} has prismatic joints; the closed forms are for revolute arms")
+    return Chain(robot.name, robot.chain_placement.copy(), robot.chain_axis.copy(), robot.base.copy(),
+                 robot.tip_in_joint.copy(), robot.lower.copy(), robot.upper.copy(), tuple(robot.joint_names))
+
+
+def sub_chain(chain: Chain, fixed: dict[int, float]) -> Chain:
+    """`chain` with the joints of `fixed` (0-based index -> angle) held: a held joint's rotation folds into the next
+    joint's placement (into the base for the first joint, into the tip for the last)."""
+    pl, keep = list(chain.chain_placement), [k for k in range(chain.nq) if k not in fixed]
+    base, tip, placements, pending = chain.base, chain.tip_in_joint, [], np.eye(4)
+    for k in range(chain.nq):
+        if k in fixed:
+            rot = np.eye(4)
+            rot[:3, :3] = _rotation(chain.chain_axis[k], fixed[k])
+            pending = pending @ pl[k] @ rot
+            continue
+        if not placements:  # the first kept joint: what came before belongs to the base
+            base, pending = base @ pending, np.eye(4)
+        placements.append(pending @ pl[k])
+        pending = np.eye(4)
+    return Chain(chain.name, np.stack(placements), chain.chain_axis[keep].copy(), base, pending @ tip,
+                 chain.lower[keep].copy(), chain.upper[keep].copy(), tuple(chain.joint_names[k] for k in keep))
+
+
+def reversed_chain(chain: Chain) -> Chain:
+    """The chain run from the TCP to the root: for the pose P of the TCP, the root's pose in the TCP frame is
+    T^-1 M6^-1 R6(q6)^-1 ... M1^-1 with base^-1 P = M1 R1(q1) ... M6 R6(q6) T; joint k of the result is joint
+    n + 1 - k about the negated axis (the same angle and limits). Its TCP pose is `reverse_poses` of the original's."""
+    inv = np.linalg.inv
+    pl = chain.chain_placement
+    n = len(pl)
+    placements = [inv(chain.tip_in_joint)] + [inv(pl[k]) for k in range(n - 1, 0, -1)]
+    return Chain(chain.name + " (reversed)", np.stack(placements), -chain.chain_axis[::-1].copy(), np.eye(4),
+                 inv(pl[0]), chain.lower[::-1].copy(), chain.upper[::-1].copy(), chain.joint_names[::-1])
+
+
+def reverse_poses(chain: Chain, poses: np.ndarray) -> np.ndarray:
+    """The TCP poses of `reversed_chain(chain)` for TCP poses (N, 4, 4) of `chain`: (base^-1 P)^-1."""
+    rel = np.linalg.inv(chain.base) @ poses
+    out = np.empty_like(rel)
+    rt = rel[:, :3, :3].transpose(0, 2, 1)
+    out[:, :3, :3] = rt
+    out[:, :3, 3] = -np.einsum("nij,nj->ni", rt, rel[:, :3, 3])
+    out[:, 3] = (0.0, 0.0, 0.0, 1.0)
+    return out
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    k = np.asarray(axis, dtype=np.float64)
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * kx + (1 - np.cos(angle)) * kx @ kx
+
+
+@dataclass(frozen=True)
 class AnalyticIK:
     """Constants of the closed form for one robot (see the module docstring); build with `analytic_ik(robot)`."""
 
@@ -344,18 +425,24 @@ def _solve_block(ik: AnalyticIK, poses: np.ndarray, joints: bool = True) -> tupl
     return q, valid
 
 
-def nearest_branch(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,
-                   upper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Per pose, the valid branch nearest to `q_ref` ((6,) or (N, 6)): joints (N, 6) and whether one exists (N,).
-
-    With limits, each joint is first moved by whole turns toward the reference when that stays within its limits
-    (a wrist joint spanning more than a turn)."""
+def branch_distances(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,
+                     upper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Branches (N, B, n) moved by whole turns toward `q_ref` ((n,) or (N, n)) where that stays within the limits
+    (a joint spanning more than a turn), and their L1 distances to it (N, B), inf where not valid."""
     ref = np.asarray(q_ref, dtype=np.float64)
     ref = np.broadcast_to(ref[:, None] if ref.ndim == 2 else ref, joints.shape)
-    if lower is not None and upper is not None:
+    if lower is not None and upper is not None and (np.asarray(upper) - np.asarray(lower) > 2 * np.pi).any():
         alt = joints + 2 * np.pi * np.round((ref - joints) / (2 * np.pi))
         joints = np.where((alt >= lower) & (alt <= upper), alt, joints)
-    dist = np.where(valid, np.abs(np.nan_to_num(joints - ref, nan=0.0)).sum(axis=2), np.inf)
+    with np.errstate(invalid="ignore"):  # NaN joints of invalid branches
+        return joints, np.where(valid, np.abs(joints - ref).sum(axis=2), np.inf)
+
+
+def nearest_branch(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,
+                   upper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Per pose, the valid branch nearest to `q_ref` ((6,) or (N, 6)): joints (N, 6) and whether one exists (N,)
+    (`branch_distances`)."""
+    joints, dist = branch_distances(joints, valid, q_ref, lower, upper)
     k = np.argmin(dist, axis=1)
     rows = np.arange(len(joints))
     return joints[rows, k], np.isfinite(dist[rows, k])

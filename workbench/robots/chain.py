@@ -37,9 +37,24 @@ def _joint_terms(robot: Robot) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return cached
 
 
+# The products below are written as elementwise sums in a fixed order, not einsum: einsum picks its inner loop from
+# the strides, which change with the batch size (a batch of one is contiguous along the summed axis), and the last
+# bits of a row's result would then depend on the rows solved with it.
+
+
 def _mm(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Batched 3x3 products in entry-major layout: (3, 3, B) x (3, 3, B) -> (3, 3, B)."""
-    return np.einsum("ikb,kjb->ijb", a, b)
+    return a[:, 0, None] * b[0][None] + a[:, 1, None] * b[1][None] + a[:, 2, None] * b[2][None]
+
+
+def _mv(r: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(3, 3, B) rotations times a constant vector (3,) -> (3, B)."""
+    return r[:, 0] * v[0] + r[:, 1] * v[1] + r[:, 2] * v[2]
+
+
+def _mc(r: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """(3, 3, B) rotations times a constant matrix (3, 3) -> (3, 3, B)."""
+    return np.stack([r[:, 0] * m[0, j] + r[:, 1] * m[1, j] + r[:, 2] * m[2, j] for j in range(3)], axis=1)
 
 
 def _aligned(robot: Robot) -> list[tuple[int, float, bool]]:
@@ -70,16 +85,16 @@ def _fk(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
     t = np.repeat(robot.base[:3, 3, None], b, axis=1)
     for i in range(n):
         pl = robot.chain_placement[i]
-        t = t + np.einsum("ikb,k->ib", r, pl[:3, 3])
+        t = t + _mv(r, pl[:3, 3])
         k, sign, identity = info[i]
         if robot.chain_prismatic[i]:
-            r = np.einsum("ikb,kj->ijb", r, m0[i])
-            axes[i] = np.einsum("ikb,k->ib", r, robot.chain_axis[i])
+            r = _mc(r, m0[i])
+            axes[i] = _mv(r, robot.chain_axis[i])
             t = t + axes[i] * q[i]
             rot[i] = r
         elif k >= 0:
             if not identity:
-                r = np.einsum("ikb,kj->ijb", r, pl[:3, :3])
+                r = _mc(r, pl[:3, :3])
             u, v = (k + 1) % 3, (k + 2) % 3
             c, s_ = cq[i], sq[i] * sign
             out = rot[i]
@@ -92,11 +107,11 @@ def _fk(robot: Robot, q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray
             local = m0[i][:, :, None] + ms[i][:, :, None] * sq[i] + mc[i][:, :, None] * cq[i]
             r = _mm(r, local)
             rot[i] = r
-            axes[i] = np.einsum("ikb,k->ib", r, robot.chain_axis[i])
+            axes[i] = _mv(r, robot.chain_axis[i])
         pos[i] = t
     tip = robot.tip_in_joint
-    tcp_t = t + np.einsum("ikb,k->ib", r, tip[:3, 3])
-    tcp_r = np.einsum("ikb,kj->ijb", r, tip[:3, :3])
+    tcp_t = t + _mv(r, tip[:3, 3])
+    tcp_r = _mc(r, tip[:3, :3])
     return rot, pos, axes, tcp_r, tcp_t
 
 
@@ -194,7 +209,7 @@ def solve_ik(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, tol_
     for it in range(iters + 1):
         _, pos, axes, tcp_r, tcp_t = _fk(robot, qa)
         ep = tp - tcp_t
-        er = _rotvec_soa(np.einsum("ikb,jkb->ijb", tr, tcp_r))
+        er = _rotvec_soa(_mm(tr, tcp_r.transpose(1, 0, 2)))
         np_, nr = np.sqrt((ep * ep).sum(0)), np.sqrt((er * er).sum(0))
         conv = (np_ < tol_pos) & (nr < tol_rot)
         q[:, active] = qa
@@ -214,8 +229,13 @@ def solve_ik(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, tol_
         e = np.concatenate([ep, er], axis=0)  # (6, B)
         jac = _jacobian_soa(robot, axes, pos, tcp_t)  # (6, n, B)
         energy = 0.5 * (e * e).sum(0)
-        a = np.einsum("inb,jnb->ijb", jac, jac) + eye6 * (energy + 1e-3)
-        dq = np.einsum("inb,ib->nb", jac, _spd_solve(a, e))
+        a = eye6 * (energy + 1e-3)
+        for k in range(n):
+            a = a + jac[:, None, k] * jac[None, :, k]
+        x = _spd_solve(a, e)
+        dq = jac[0] * x[0]
+        for i in range(1, 6):
+            dq = dq + jac[i] * x[i]
         step = np.abs(dq).max(axis=0)
         dq *= np.minimum(1.0, 0.6 / np.maximum(step, 1e-12))
         qa = np.clip(qa + dq, lo, hi)

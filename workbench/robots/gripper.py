@@ -45,7 +45,10 @@ class Gripper:
     """A parallel-jaw gripper in its TCP frame.
 
     `finger_boxes` are (extents, pose) pairs of the left finger (+y) when its pad's inner face is at y=0;
-    the right finger mirrors them (y -> -y). `pad` is the index of the box that touches the object.
+    the right finger mirrors them (y -> -y). `pad` is the index of the box that touches the object. A linkage's
+    fingers change shape along the stroke: `stroke` then holds (widths (S,), extents (S, B, 3), poses (S, B, 4, 4))
+    of the same boxes sampled along it, and the boxes at an opening are those of the nearest sample.
+    `tcp_in_hand` is the TCP's pose in the hand frame (what bolts onto a robot's flange).
     """
 
     name: str
@@ -59,6 +62,7 @@ class Gripper:
     tcp_in_hand: np.ndarray = field(default_factory=lambda: np.eye(4))
     extra: str = ""
     notes: tuple[str, ...] = ()
+    stroke: tuple = ()
 
     @cached_property
     def digest(self) -> str:
@@ -72,6 +76,8 @@ class Gripper:
         h.update(np.round(np.array([self.jaw_min, self.jaw_max]), 12).tobytes())
         if self.extra:
             h.update(self.extra.encode())
+        for arr in self.stroke:
+            h.update(np.round(arr, 9).tobytes())
         return h.hexdigest()[:24]
 
     @property
@@ -106,11 +112,27 @@ class Gripper:
         ext, c = self.pad_extents, self.pad_center
         return float(np.hypot(ext[0] / 2 + abs(c[0]), ext[2] / 2 + abs(c[2])))
 
-    def finger_poses(self, width: float) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(extents, pose) of every finger box of both fingers with the pads `width` apart."""
+    def boxes_at(self, width: float) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+        """The left finger's boxes (pad inner face at y = 0) at opening `width`."""
+        if not self.stroke:
+            return self.finger_boxes
+        i = int(np.argmin(np.abs(self.stroke[0] - width)))
+        return tuple(zip(self.stroke[1][i], self.stroke[2][i]))
+
+    def width_groups(self, widths: np.ndarray) -> list[tuple[np.ndarray, list[tuple[np.ndarray, np.ndarray]]]]:
+        """Grasps grouped by the finger shape at their opening: (indices, `finger_poses(0)` of that shape)."""
+        widths = np.asarray(widths, dtype=np.float64)
+        if not self.stroke:
+            return [(np.arange(len(widths)), self.finger_poses(0.0))]
+        near = np.argmin(np.abs(widths[:, None] - self.stroke[0][None]), axis=1)
+        return [(np.flatnonzero(near == i), self.finger_poses(0.0, self.stroke[0][i])) for i in np.unique(near)]
+
+    def finger_poses(self, width: float, shape_at: float | None = None) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(extents, pose) of every finger box of both fingers with the pads `width` apart (their shape at opening
+        `shape_at`, default `width`)."""
         mirror = np.diag([1.0, -1.0, 1.0, 1.0])
         out = []
-        for ext, pose in self.finger_boxes:
+        for ext, pose in self.boxes_at(width if shape_at is None else shape_at):
             left = pose.copy()
             left[1, 3] += width / 2
             out.append((ext, left))
@@ -330,6 +352,11 @@ def gripper_from_urdf(urdf: str | Path, hand_link: str, tcp_frame: str | None, f
     if off > 2.0:
         raise GripperError(f"{where}: the fingers close {off:.1f} degrees off the TCP frame's y axis; the TCP's y must be "
                            f"the jaw axis")
+    between = (local[pads[1]][mid].mean(axis=1) + local[pads[-1]][mid].mean(axis=1)) / 2  # pads' midpoint, TCP frame
+    reach = np.ptp(local[pads[1]][mid], axis=1) / 2
+    if abs(between[0]) > reach[0] or abs(between[2]) > reach[2] or abs(between[1]) > 1e-3:
+        raise GripperError(f"{where}: the TCP frame {tcp_frame!r} lies outside the hand, {np.linalg.norm(between) * 1e3:.0f} "
+                           f"mm from the midpoint between the pads; the TCP lies between them")
     notes, drift = [], {}
     for sgn in (1, -1):
         k = pads[sgn]
@@ -360,7 +387,7 @@ def gripper_from_urdf(urdf: str | Path, hand_link: str, tcp_frame: str | None, f
     jaw_min, jaw_max = max(0.0, float(widths.min())), float(widths.max())
     if jaw_max - jaw_min < 1e-4:
         raise GripperError(f"{where}: finger joints {', '.join(finger_joints)} give a stroke of zero")
-    boxes, pad = [], 0
+    boxes, pad, shapes = [], 0, []
     for k in sorted(centre):
         if side[k] == -1 or (side[k] == 0 and local[k][mid][1].mean() < 0):
             continue
@@ -370,11 +397,25 @@ def gripper_from_urdf(urdf: str | Path, hand_link: str, tcp_frame: str | None, f
             pose = tcp_inv @ poses[k][0]
             pose[1, 3] -= inner[0]
             boxes.append((2 * np.asarray(go.geometry.halfSide, dtype=np.float64), pose))
-        else:  # its bounding box over the stroke, with the pad's inner face at y = 0
-            rel = np.concatenate([(local[k][i] - np.array([[0.0], [inner[i]], [0.0]])).T for i in range(len(steps))])
-            pose = np.eye(4)
-            pose[:3, 3] = (rel.min(axis=0) + rel.max(axis=0)) / 2
-            boxes.append((np.ptp(rel, axis=0), pose))
+            shapes.append(None)
+        else:  # at each sample, with the pad's inner face at y = 0, a box covering it and its neighbouring samples
+            rel = [(local[k][i] - np.array([[0.0], [inner[i]], [0.0]])).T for i in range(len(steps))]
+            lo, hi = points[k].min(axis=0), points[k].max(axis=0)
+            centre = np.eye(4)
+            centre[:3, 3] = (lo + hi) / 2
+            per = []
+            for i in range(len(steps)):
+                reach = max(np.linalg.norm(rel[j] - rel[i], axis=1).max() for j in range(max(0, i - 1), min(len(steps), i + 2)))
+                if k == pads[1]:  # the pad: a rectangle in the TCP frame's axes (it turns by under a degree)
+                    pose = np.eye(4)
+                    pose[:3, 3] = (rel[i].min(axis=0) + rel[i].max(axis=0)) / 2
+                    per.append((np.ptp(rel[i], axis=0) + 2 * reach, pose))
+                else:  # a linkage bar: its own bounding box, turning with it
+                    pose = tcp_inv @ poses[k][i] @ centre
+                    pose[1, 3] -= inner[i]
+                    per.append((hi - lo + 2 * reach, pose))
+            boxes.append(per[mid])
+            shapes.append(per)
         if k == pads[1]:
             pad = len(boxes) - 1
     body_parts = []
@@ -393,9 +434,14 @@ def gripper_from_urdf(urdf: str | Path, hand_link: str, tcp_frame: str | None, f
         if s:
             pose[1, 3] -= s * inner[0]
         visuals.append(Visual(go.meshPath, pose, np.asarray(go.meshScale, dtype=np.float64), s))
+    stroke = ()
+    if any(s is not None for s in shapes):  # a linkage: the boxes along the stroke
+        per = [[boxes[b] if shapes[b] is None else shapes[b][i] for b in range(len(boxes))] for i in range(len(steps))]
+        stroke = (np.maximum(widths, 0.0), np.array([[e for e, _ in row] for row in per]),
+                  np.array([[p for _, p in row] for row in per]))
     return Gripper(name=name or hand_link, body=trimesh.util.concatenate(body_parts), finger_boxes=tuple(boxes), pad=pad,
                    jaw_min=jaw_min, jaw_max=jaw_max, visuals=tuple(visuals), urdf=str(urdf),
-                   tcp_in_hand=np.linalg.inv(hand_pose) @ tcp_pose, notes=tuple(notes))
+                   tcp_in_hand=np.linalg.inv(hand_pose) @ tcp_pose, notes=tuple(notes), stroke=stroke)
 
 
 @lru_cache(maxsize=1)
@@ -575,7 +621,7 @@ def _urdf_beside(urdf: Path) -> dict:
             if unknown:
                 raise GripperError(f"gripper spec {p}: unknown field {unknown[0]!r} (fields: name, hand_link, "
                                    f"finger_joints, tcp_frame)")
-            return {**spec, "_path": str(p)}
+            return spec
     return {}
 
 
@@ -589,7 +635,9 @@ def load_gripper(choice: str = "franka", hand_link: str | None = None, finger_jo
         return franka_hand()
     if choice == "own":
         if robot_urdf is None or tip is None:
-            raise GripperError("--gripper own takes the robot's own hand: give the robot as a URDF path with --tip")
+            raise GripperError("--gripper own takes the robot's own hand from --robot URDF and --tip; where there is no "
+                               "robot (grasps, placements) give its URDF itself: --gripper ROBOT.urdf --gripper-hand TIP "
+                               "--gripper-fingers LEFT,RIGHT")
         if len(finger_joints) != 2:
             raise GripperError(f"--gripper own needs --gripper-fingers LEFT,RIGHT: the two finger joints of the hand in "
                                f"{robot_urdf}")

@@ -13,14 +13,14 @@ with themselves when `self_collide` (`robots.selfcollision`, pinocchio + coal, a
 SRDF or sampled).
 
 Speed (Section VI, Table I's t-tpgik): a reachability pre-filter (`ReachFilter`: distance from the
-shoulder, also over a humanoid's waist, and the workspace box); grips sorted so neighbours are the same
-grasp at the next position, then rotation; each chunk of the sorted grips split into lanes solved in
-lock-step, so one batched Levenberg-Marquardt iteration (numpy forward kinematics and Jacobians of the
-serial chain, entry-major arrays) serves hundreds of poses while each lane warm-starts from its previous
-grip's solution (per pose kind); fall-back seeds come from a deterministic library of table-clear sampled configurations nearest to the
-target; chunks run on all cores (an `IKPool` of forkserver worker processes, each building the solver once)
-with a tqdm progress bar. Chunk boundaries depend only on the sorted input, so a resumed run produces the same rows as
-an uninterrupted one, whatever the number of workers.
+shoulder, also over a humanoid's waist, and the workspace box); a closed form where the arm has one
+(`robots.solvers`: all branches at once, the one nearest the robot's home configuration kept); otherwise one
+batched Levenberg-Marquardt iteration (numpy forward kinematics and Jacobians of the serial chain, entry-major
+arrays) serves thousands of poses, each from its own seeds: the neighbouring pose of the same grip, the library of
+table-clear sampled configurations nearest to the target, random restarts hashed from the pose. Chunks run on all
+cores (an `IKPool` of forkserver worker processes, each building the solver once) with a tqdm progress bar. A grip's
+row depends on the grip, the robot, the scene and the options alone, never on the chunk, the worker, the order or
+the command that solved it.
 """
 
 from __future__ import annotations
@@ -29,10 +29,14 @@ import copy
 import hashlib
 import multiprocessing as mp
 import os
+import signal
 import sys
+import threading
 from concurrent.futures import ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import asdict, dataclass, field
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field, replace
+from multiprocessing import forkserver
 from typing import Callable, Iterator
 
 import numpy as np
@@ -40,17 +44,19 @@ import trimesh
 from scipy.spatial import cKDTree
 from tqdm.auto import tqdm
 
-from workbench.errors import RobotError
+from workbench.errors import ParameterError, RobotError
 from workbench.params import Params, param
-from workbench.robots.analytic import analytic_ik, nearest_branch
-from workbench.robots.analytic import solve as analytic_solve
+from workbench.robots.analytic import branch_distances
 from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
 from workbench.robots.model import Robot, RobotSpec, robot_from_spec
 from workbench.robots.selfcollision import SelfCollision
+from workbench.robots.solvers import closed_form, describe, nearby_form
 
 KINDS = ("grasp", "handx", "handxworldz", "worlda", "worldaworldz")
 HELD = np.array([False, False, False, True, True])  # kinds at which the object moves with the hand
+SOLVERS = ("auto", "numerical")
+BETWEEN_TRIES = 8  # branches of a swept closed form tried as seeds where its samples miss a pose
 WORLDA = 0.05  # default lift of the held object straight up (m), the paper's ikret worlda
 
 
@@ -61,12 +67,13 @@ class IKOptions(Params):
     tol_pos (m) and tol_rot (rad): convergence; iters_warm/iters_seed: LM iterations from a warm start and
     from a library seed; seeds: library seeds tried after the warm start, picked among the seed_pool nearest
     library poses at least seed_spread rad apart; library: size of the seed
-    library; chunk: grips per parallel task (resume unit); lane: grips per warm-start lane; seed: RNG seed;
+    library; restarts: random configurations tried last, drawn from a hash of the pose; chunk: grips per parallel
+    task (scheduling only, not in the rows); seed: RNG seed of the library and the restarts;
     collide: reject arm/gripper-table and arm-object collisions; self_collide (with collide): reject self-colliding
     solutions (the arm and the planning gripper, `robots.selfcollision`, allowed pairs from the SRDF or sampled; the
     roadmap planner's IK stage turns it on);
-    closed_form: solve with the closed form of spherical-wrist arms (`workbench.robots.analytic`, all 8 branches,
-    Tournassoud et al. 1987 Section 5.2) instead of Levenberg-Marquardt; the seeds then only pick the nearest branch."""
+    solver: "auto" solves with the arm's closed form where it has one (`robots.solvers.closed_form`: all branches,
+    the collision-free one nearest the home configuration kept), "numerical" always with Levenberg-Marquardt."""
 
     tol_pos: float = param(1e-4, gt=0, le=0.01, unit="m", help="position tolerance")
     tol_rot: float = param(1e-3, gt=0, le=0.1, unit="rad", help="rotation tolerance")
@@ -76,18 +83,26 @@ class IKOptions(Params):
     seed_pool: int = param(24, ge=1, le=100_000, integer=True, help="nearest library poses the seeds are picked from")
     seed_spread: float = param(1.0, ge=0, le=np.pi, unit="rad", help="smallest angle between picked seeds")
     library: int = param(32768, ge=1, le=10_000_000, integer=True, help="seed library size")
-    chunk: int = param(4096, ge=1, le=10_000_000, integer=True, help="grips per parallel task (resume unit)")
-    lane: int = param(16, ge=1, le=100_000, integer=True, help="grips per warm-start lane")
+    restarts: int = param(4, ge=0, le=1000, integer=True, help="random restarts (seeded by the pose) after the library seeds")
+    chunk: int = param(4096, ge=1, le=10_000_000, integer=True, help="grips per parallel task (resume unit; not in the rows)")
     seed: int = param(0, ge=0, le=2**32 - 1, integer=True, help="RNG seed")
     collide: bool = True
-    closed_form: bool = False
     self_collide: bool = False
+    solver: str = "auto"
+
+    def check(self) -> None:
+        if self.solver not in SOLVERS:
+            raise ParameterError(f"IK solver {self.solver!r} is not one of {', '.join(SOLVERS)}")
 
     def as_dict(self) -> dict:
         d = asdict(self)
-        if not self.closed_form:  # the numerical solver's rows keep their stored digest
-            d.pop("closed_form")
+        d.pop("chunk")  # scheduling only: the rows do not depend on it
         return d
+
+
+def solver_kind(robot: Robot, opts: IKOptions) -> str:
+    """The IK `opts` give `robot`, in words (stored with the scene: the rows depend on it)."""
+    return describe(robot, numerical=opts.solver == "numerical")
 
 
 @dataclass
@@ -285,7 +300,10 @@ class IKSolver:
         self.robot, self.scene, self.opts = robot, scene, opts
         self.collider = Collider(robot, scene, obj_mesh) if opts.collide else None
         self.self_collision = SelfCollision(robot) if opts.collide and opts.self_collide else None
-        self.analytic = analytic_ik(robot) if opts.closed_form else None
+        self.analytic = closed_form(robot) if opts.solver == "auto" else None
+        self.nearby = nearby_form(robot) if opts.solver == "auto" and self.analytic is None else None
+        # a swept joint misses poses that need it between samples: its branches without the limits seed LM there
+        self.unlimited = closed_form(robot, limits=False) if self.analytic is not None and robot.nq > 6 else None
         self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)
 
@@ -300,9 +318,13 @@ class IKSolver:
         """Joint vectors (M, n) from seeds `q0` for TCP poses (M, 4, 4) of grips of the object at `placements`
         (M, 4, 4), and whether each converged within the limits and is collision-free. With the closed form: the
         collision-free branch nearest to the seed."""
-        o = self.opts
         if self.analytic is not None:
             return self._closed(targets, placements, q0)
+        return self._numeric(targets, placements, q0, iters)
+
+    def _numeric(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray, iters: int) -> tuple[np.ndarray, np.ndarray]:
+        """Levenberg-Marquardt from `q0`, then the collision checks (`solve` without the closed form)."""
+        o = self.opts
         q, ok = solve_ik(self.robot, targets, q0, iters, o.tol_pos, o.tol_rot)
         if self.collider is not None and ok.any():
             sel = np.flatnonzero(ok)
@@ -313,30 +335,66 @@ class IKSolver:
         return q, ok
 
     def _closed(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The closed-form branches of every target, collision-checked, the nearest to `q0` (rows of NaN: none)."""
+        """The collision-free closed-form branch of every target nearest to `q0` (rows of NaN: none). Branches are
+        checked nearest first, each row only until one is free: the same answer as checking them all."""
         m, n = len(targets), self.robot.nq
-        joints, valid = analytic_solve(self.analytic, targets)
-        if self.collider is not None and valid.any():
-            r, b = np.nonzero(valid)
-            hit = self.collider.collides_q(joints[r, b], placements[r])
-            valid[r[hit], b[hit]] = False
-        if self.self_collision is not None and valid.any():
-            r, b = np.nonzero(valid)
-            hit = self.self_collision.collides(joints[r, b])
-            valid[r[hit], b[hit]] = False
+        joints, valid = self.analytic.solve(targets)
         ref = np.where(np.isfinite(q0), q0, 0.0) if q0 is not None else np.zeros((m, n))
-        q, ok = nearest_branch(joints, valid, ref, self.robot.lower, self.robot.upper)
-        return np.where(ok[:, None], q, np.nan), ok
+        joints, dist = branch_distances(joints, valid, ref, self.robot.lower, self.robot.upper)
+        rank = np.argsort(dist, axis=1, kind="stable")
+        q = np.full((m, n), np.nan)
+        ok = np.zeros(m, dtype=bool)
+        left = np.flatnonzero(np.isfinite(dist).any(axis=1))
+        for r in range(joints.shape[1]):
+            b = rank[left, r]
+            left = left[np.isfinite(dist[left, b])]
+            if not len(left):
+                break
+            b = rank[left, r]
+            cand = joints[left, b]
+            free = np.ones(len(left), dtype=bool)
+            if self.collider is not None:
+                free &= ~self.collider.collides_q(cand, placements[left])
+            if self.self_collision is not None and free.any():
+                sel = np.flatnonzero(free)
+                free[sel[self.self_collision.collides(cand[sel])]] = False
+            q[left[free]], ok[left[free]] = cand[free], True
+            left = left[~free]
+        if self.unlimited is not None:
+            q, ok = self._between_samples(targets, placements, valid, ref, q, ok)
+        return q, ok
+
+    def _between_samples(self, targets: np.ndarray, placements: np.ndarray, valid: np.ndarray, ref: np.ndarray,
+                         q: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Poses a swept closed form misses within the limits although the arm reaches them: Levenberg-Marquardt from
+        their branch nearest `ref` without the limits (clipped into them by the solver), which the free joint then
+        moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first."""
+        rows = np.flatnonzero(~valid.any(axis=1))
+        rows = rows[self.prefilter(targets[rows])] if len(rows) else rows
+        if not len(rows):
+            return q, ok
+        qu, vu = self.unlimited.solve(targets[rows])
+        qu, dist = branch_distances(qu, vu, ref[rows])
+        rank = np.argsort(dist, axis=1, kind="stable")[:, :BETWEEN_TRIES]
+        for r in range(rank.shape[1]):  # nearest first, each row until one converges
+            b = rank[:, r]
+            sel = np.flatnonzero(np.isfinite(dist[np.arange(len(rows)), b]) & ~ok[rows])
+            if not len(sel):
+                break
+            qn, okn = self._numeric(targets[rows[sel]], placements[rows[sel]], qu[sel, b[sel]], self.opts.iters_seed)
+            q[rows[sel[okn]]], ok[rows[sel[okn]]] = qn[okn], True
+        return q, ok
 
     def _chunk_closed(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """`chunk` with the closed form: the grasp takes its first collision-free branch, every other pose the branch
+        """`chunk` with the closed form: the grasp takes the collision-free branch nearest the robot's home
+        configuration (`Robot.home`; the others stay available to the query-time IK), every other pose the branch
         nearest to its neighbour's on the way (handx from the grasp, handxworldz from handx, worlda from the grasp,
         worldaworldz from worlda; from the grasp's when the neighbour has none). The object is held at the lifts."""
         c, nk, n = len(targets), targets.shape[1], self.robot.nq
         place = held_placements(targets, placements)  # (C, K, 4, 4)
         feas = np.zeros((c, nk), dtype=bool)
         joints = np.full((c, nk, n), np.nan)
-        q, ok = self._closed(targets[:, 0], place[:, 0], np.zeros((c, n)))
+        q, ok = self._closed(targets[:, 0], place[:, 0], np.broadcast_to(self.robot.home(), (c, n)))
         feas[:, 0], joints[:, 0] = ok, q
         grasp_ref = np.where(ok[:, None], q, 0.0)
         for k, prev in ((1, 0), (2, 1), (3, 0), (4, 3))[: nk - 1]:
@@ -353,59 +411,120 @@ class IKSolver:
     def chunk(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One chunk of sorted grips: targets (C, K, 4, 4) -> feasible (C, K), joints (C, K, n) for the K = 5 KINDS.
 
-        Pass 1 walks the lanes in lock-step: every (lane, kind) starts from its previous feasible solution, or from
-        the library seed nearest to the target; pass 2 retries the failures from up to `seeds` library seeds, one
-        seed rank at a time for the poses still unsolved."""
+        Each grip is solved on its own, so its row depends on the grip alone, never on the chunk, the worker or its
+        neighbours: the grasp from the library seed nearest to its pose, every other pose first from its neighbour's
+        solution on the way (handx from the grasp, handxworldz from handx, worlda from the grasp, worldaworldz from
+        worlda); then the failures from up to `seeds` diverse library seeds and `restarts` random configurations
+        drawn from a hash of the pose, one seed rank at a time for the poses still unsolved."""
         if self.analytic is not None:
             return self._chunk_closed(targets, placements)
-        o, robot = self.opts, self.robot
-        c, n, nk = len(targets), robot.nq, targets.shape[1]
-        flat = targets.transpose(1, 0, 2, 3).reshape(nk * c, 4, 4)  # row = kind * c + grip
-        place = held_placements(targets, placements).transpose(1, 0, 2, 3).reshape(nk * c, 4, 4)
-        pre = self.prefilter(flat)
-        q_out = np.full((nk * c, n), np.nan)
-        good = np.zeros(nk * c, dtype=bool)
-        lane = max(1, o.lane)
-        nl = -(-c // lane)
-        starts = np.arange(nl) * lane
-        prev = np.full((nk * nl, n), np.nan)
-        from_library = np.zeros(nk * c, dtype=bool)  # pass 1 already tried the nearest library seed
-        for step in range(lane):
-            idx = starts + step
-            live = idx < c
-            lanes = np.concatenate([np.nonzero(live)[0] + k * nl for k in range(nk)])
-            rows = np.concatenate([idx[live] + k * c for k in range(nk)])
-            keep = pre[rows]
-            rows, lanes = rows[keep], lanes[keep]
-            if len(rows) == 0:
+        c, n, nk = len(targets), self.robot.nq, targets.shape[1]
+        place = held_placements(targets, placements)
+        feas = np.zeros((c, nk), dtype=bool)
+        joints = np.full((c, nk, n), np.nan)
+        for k, prev in ((0, -1), (1, 0), (2, 1), (3, 0), (4, 3))[:nk]:
+            warm = joints[:, prev] if prev >= 0 else np.full((c, n), np.nan)
+            joints[:, k], feas[:, k] = self.solve_from_seeds(targets[:, k], place[:, k], warm)
+        return feas, joints
+
+    def solve_from_seeds(self, targets: np.ndarray, placements: np.ndarray, warm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Joints (M, n) (NaN where none) and feasibility (M,) of poses that pass the reach filter, each from its own
+        seeds in a fixed order (`chunk`): `warm` (rows of NaN: none) or the nearest library seed; the branches of the
+        nearest decomposable model (`solvers.nearby_form`, an arm with more than 7 joints), nearest the home first;
+        the other library seeds; the restarts."""
+        o = self.opts
+        m, n = len(targets), self.robot.nq
+        q_out = np.full((m, n), np.nan)
+        good = np.zeros(m, dtype=bool)
+        live = np.flatnonzero(self.prefilter(targets))
+        if len(live) == 0:
+            return q_out, good
+        near = self.library.nearest(targets[live], max(1, o.seeds), pool=o.seed_pool, spread=o.seed_spread)
+        q0 = warm[live].copy()
+        cold = np.isnan(q0).any(axis=1)
+        q0[cold] = self.library.q[near[cold, 0]]
+        tries = [(q0, o.iters_warm, np.ones(len(live), dtype=bool))]
+        if self.nearby is not None:  # the nearest decomposable model's exact branches, nearest the home first
+            qb, vb = self.nearby.solve(targets[live])
+            qb, dist = branch_distances(qb, vb, self.robot.home(), self.robot.lower, self.robot.upper)
+            rank = np.argsort(dist, axis=1, kind="stable")[:, :max(1, o.seeds)]
+            for r in range(rank.shape[1]):
+                b = rank[:, r]
+                rows = np.arange(len(live))
+                tries.append((np.nan_to_num(qb[rows, b]), o.iters_warm, np.isfinite(dist[rows, b])))
+        for r in range(o.seeds):  # the nearest seed was tried first where there was no warm start
+            tries.append((self.library.q[near[:, r]], o.iters_seed, ~cold if r == 0 else np.ones(len(live), dtype=bool)))
+        if o.restarts:
+            keys = pose_keys(targets[live], o.seed)
+        for r in range(o.restarts):
+            tries.append((random_configurations(self.robot, keys, r), o.iters_seed, np.ones(len(live), dtype=bool)))
+        left = np.ones(len(live), dtype=bool)
+        for seeds, iters, use in tries:
+            sel = np.flatnonzero(left & use)
+            if len(sel) == 0:
                 continue
-            q0 = prev[lanes].copy()
-            cold = np.isnan(q0).any(axis=1)
-            if cold.any():
-                q0[cold] = self.library.q[self.library.nearest(flat[rows[cold]], 1)[:, 0]]
-                from_library[rows[cold]] = True
-            q, ok = self.solve(flat[rows], place[rows], q0, o.iters_warm)
+            rows = live[sel]
+            q, ok = self.solve(targets[rows], placements[rows], seeds[sel], iters)
             q_out[rows[ok]] = q[ok]
             good[rows[ok]] = True
-            prev[lanes[ok]] = q[ok]
-        pool = np.nonzero(pre & ~good)[0]
-        if len(pool) and o.seeds > 0:
-            near = self.library_seeds(flat[pool])
-            left = np.ones(len(pool), dtype=bool)
-            for k in range(near.shape[1]):  # seed by seed, only for the poses still unsolved
-                if not left.any():
-                    break
-                sel = np.flatnonzero(left & ~from_library[pool]) if k == 0 else np.flatnonzero(left)
-                if len(sel) == 0:
-                    continue
-                rows = pool[sel]
-                q, ok = self.solve(flat[rows], place[rows], self.library.q[near[sel, k]], o.iters_seed)
-                q_out[rows[ok]] = q[ok]
-                good[rows[ok]] = True
-                left[sel[ok]] = False
-        feas = good.reshape(nk, c).T.copy()
-        joints = q_out.reshape(nk, c, n).transpose(1, 0, 2).copy()
-        return feas, joints
+            left[sel[ok]] = False
+            if not left.any():
+                break
+        return q_out, good
+
+
+_MASK64 = np.uint64(0xFFFFFFFFFFFFFFFF)
+
+
+def _mix(x: np.ndarray) -> np.ndarray:
+    """SplitMix64's finaliser on uint64 arrays (a bijective bit mixer)."""
+    with np.errstate(over="ignore"):
+        x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+        x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        return x ^ (x >> np.uint64(31))
+
+
+def pose_keys(poses: np.ndarray, seed: int = 0) -> np.ndarray:
+    """(M,) uint64 keys hashed from the bytes of poses (M, 4, 4) and `seed`: a grip's random seeds follow from its
+    pose alone, whatever chunk or process solves it."""
+    words = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(len(poses), 16)).view(np.uint64)
+    h = np.full(len(poses), np.uint64(seed) ^ np.uint64(0x9E3779B97F4A7C15), dtype=np.uint64)
+    for j in range(16):
+        h = _mix(h ^ words[:, j])
+    return h
+
+
+def random_configurations(robot: Robot, keys: np.ndarray, rank: int) -> np.ndarray:
+    """(M, n) joint vectors uniform within the limits, the `rank`-th random restart of each key (`pose_keys`)."""
+    n = robot.nq
+    with np.errstate(over="ignore"):
+        ctr = keys[:, None] + np.uint64(rank * n + 1) * np.uint64(0x9E3779B97F4A7C15) + np.arange(n, dtype=np.uint64)
+    u = (_mix(ctr) >> np.uint64(11)).astype(np.float64) * 2.0 ** -53
+    return robot.lower + u * (robot.upper - robot.lower)
+
+
+@contextmanager
+def children_without_sigint(other_threads: bool = False) -> Iterator[None]:
+    """Worker processes started inside never see a terminal's Ctrl-C, which reaches the whole process group: the
+    driver stops the run and says so once. SIGINT is blocked in this thread while they start (a signal mask is
+    inherited by the processes and threads started meanwhile), and a Ctrl-C in that time is delivered here at the
+    end. With `other_threads` (processes started by another thread, as Dask's nannies do), SIGINT is ignored instead,
+    which processes inherit too; a Ctrl-C while they start is then lost."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    if other_threads:
+        old_handler = signal.signal(signal.SIGINT, signal.SIG_IGN)
+        try:
+            yield
+        finally:
+            signal.signal(signal.SIGINT, old_handler)
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 _WORKER_SOLVER: IKSolver | None = None  # the solver of an IKPool worker process, built by its initializer
@@ -431,6 +550,8 @@ class IKPool:
         ctx = mp.get_context("forkserver" if "forkserver" in methods else "spawn")
         if ctx.get_start_method() == "forkserver":
             ctx.set_forkserver_preload(["workbench.robots.ik"])  # the server imports the library, not the caller
+            with children_without_sigint():  # the server, and every worker it forks, inherit the mask
+                forkserver.ensure_running()
         self.key = (robot.spec.digest, scene, opts, _mesh_key(obj_mesh))
         self.workers = int(workers)
         self.executor = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_init_worker,
@@ -472,7 +593,7 @@ def diagnose_unreachable(robot: Robot, grips: dict[str, np.ndarray], scene: Scen
     poses = check_poses(grips["rotmat"])
     places = check_poses(grips["placement_rotmat"], "object placement")
     pick = np.unique(np.linspace(0, len(poses) - 1, min(samples, len(poses))).astype(np.int64))
-    free = IKSolver(robot, scene, IKOptions(**{**opts.as_dict(), "collide": False, "closed_form": opts.closed_form}))
+    free = IKSolver(robot, scene, replace(opts, collide=False))
     targets, placements = poses[pick], places[pick]
     q = np.full((len(pick), robot.nq), np.nan)
     ok = np.zeros(len(pick), dtype=bool)
@@ -498,9 +619,10 @@ def diagnose_unreachable(robot: Robot, grips: dict[str, np.ndarray], scene: Scen
         text = (f"{solved} of {len(pick)} sampled grasp poses have an IK solution, but {part} hits the {what} in {n} of "
                 f"them")
         if what == "object" and part != "gripper":
+            tcp = np.round(robot.gripper.tcp_in_hand[:3, 3], 6) + 0.0  # no -0 or 1e-17 in the hint
             return (f"{text}: the arm reaches into the part, so the gripper is probably mounted at the wrong place; give "
-                    f"the tip-to-TCP transform (--mount x,y,z,roll,pitch,yaw; the Franka hand on a flange: "
-                    f"--mount 0,0,0.1034,0,0,0)")
+                    f"the tip-to-TCP transform (--mount x,y,z,roll,pitch,yaw; {robot.gripper.name} on a flange: "
+                    f"--mount {tcp[0]:g},{tcp[1]:g},{tcp[2]:g},0,0,0)")
         return f"{text}; move the grid (--x, --y), the table (--table) or the robot's base (--base)"
     if opts.self_collide:
         pairs: dict[tuple[str, str], int] = {}
@@ -552,9 +674,10 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
             solver = solver or IKSolver(robot, scene, opts, obj_mesh)
             results = (solver.chunk(targets[order[s:e]], placements[order[s:e]]) for s, e in todo)
         else:
-            if pool is None:
-                pool = own_pool = IKPool(robot, scene, opts, obj_mesh, workers)
-            futures = [pool.submit(targets[order[s:e]], placements[order[s:e]]) for s, e in todo]
+            with children_without_sigint():  # a worker half-started by an interrupted submit prints a traceback
+                if pool is None:
+                    pool = own_pool = IKPool(robot, scene, opts, obj_mesh, workers)
+                futures = [pool.submit(targets[order[s:e]], placements[order[s:e]]) for s, e in todo]
             results = (_result(f) for f in futures)
         for (s, e), (feas, joints) in zip(todo, results):
             bar.update(e - s)

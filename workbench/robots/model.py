@@ -11,12 +11,13 @@ The TCP pose of a stored joint vector is, without this library::
     q[idx_q(name)] = value for name in robot.joint_names
     TCP = robot.base @ oMf(robot.tip_frame) @ robot.mount
 
-Built-in robots (all from example-robot-data, all carrying the Franka hand as planning gripper):
+Built-in robots (all from example-robot-data; the Franka hand is their planning gripper unless another is given,
+whose hand frame then sits where the Franka hand's does):
 
 - `panda`: the Franka Panda arm with its own hand, TCP `panda_hand_tcp` (tip = TCP, mount = identity),
   mounted at the world origin on the table.
-- `ur5`: UR5 (`ur5_robot.urdf`) with the Franka hand on its flange `tool0` (TCP 0.1034 m along the
-  flange's z), at the world origin on the table.
+- `ur5`: UR5 (`ur5_robot.urdf`) with the planning gripper's hand frame on its flange `tool0` (the Franka hand's
+  TCP is then 0.1034 m along the flange's z), at the world origin on the table.
 - `talos`: Talos's left arm with its two torso joints (9 DoF, like the paper's 8-DoF HRP5P arm that
   includes the waist), the Franka hand on the wrist tool flange `wrist_left_ft_tool_link`; the robot
   stands in front of the table (pelvis at x = 0.05 m, 0.25 m above the table top, the table's edge at x = 0.2 m),
@@ -46,6 +47,7 @@ import pinocchio as pin
 from workbench.errors import RobotError, RobotWarning
 from workbench.resources import ASSETS, erd_robots, erd_share
 from workbench.robots.gripper import Gripper, franka_hand
+from workbench.robots.urdfcheck import check_urdf
 
 ROBOTS = ("panda", "ur5", "talos", "puma560")
 PUMA560_URDF = ASSETS / "robots" / "puma560.urdf"
@@ -64,12 +66,6 @@ def _rot_x(angle: float) -> np.ndarray:
     c, s = np.cos(angle), np.sin(angle)
     out = np.eye(4)
     out[1:3, 1:3] = [[c, -s], [s, c]]
-    return out
-
-
-def _trans(x: float, y: float, z: float) -> np.ndarray:
-    out = np.eye(4)
-    out[:3, 3] = (x, y, z)
     return out
 
 
@@ -92,7 +88,8 @@ class RobotSpec:
 
     `drop_geometry` lists link-name prefixes whose collision geometry is replaced by the planning gripper
     (a robot's own hand or tool); `joints` restricts the arm to these joints of the chain (None: all);
-    `locked` gives values of locked joints other than 0 (a humanoid's other arm tucked away).
+    `locked` gives values of locked joints other than 0 (a humanoid's other arm tucked away); `home` the
+    configuration the closed-form IK's stored branch is nearest to (empty: zero), stored with the IK's scene.
     """
 
     name: str
@@ -107,6 +104,7 @@ class RobotSpec:
     package_dirs: tuple[str, ...] = ()
     locked: tuple[tuple[str, float], ...] = ()
     gripper: Gripper | None = None
+    home: tuple[float, ...] = ()
 
     @cached_property
     def hand(self) -> Gripper:
@@ -297,6 +295,13 @@ class Robot:
         return best, np.asarray(data.oMi[best].translation).copy()
 
 
+    def home(self) -> np.ndarray:
+        """The configuration the closed-form IK's stored branch is nearest to: `HOMES` for a built-in robot (a
+        ready pose above the table), else the zero configuration clipped into the limits."""
+        if len(self.spec.home) != self.nq:
+            return self.neutral()
+        return np.clip(np.asarray(self.spec.home, dtype=np.float64), self.lower, self.upper)
+
     def neutral(self) -> np.ndarray:
         """The zero configuration clipped into the joint limits."""
         q = np.clip(np.zeros(self.nq), self.lower, self.upper)
@@ -324,6 +329,7 @@ def prepare_urdf(text: str, tip_frame: str, label: str = "robot URDF") -> tuple[
         root = ElementTree.fromstring(text)
     except ElementTree.ParseError as exc:
         raise RobotError(f"{label} could not be loaded (not well-formed XML: {exc}); check the file") from None
+    check_urdf(root, tip_frame, label)  # before pinocchio: a joint loop crashes it, NaN limits flood stderr
     joints = root.findall("joint")
     links = {lk.get("name", "") for lk in root.findall("link")}
     children: dict[str, list[tuple[str, str]]] = {}  # link -> (child link, joint type)
@@ -398,9 +404,10 @@ def mesh_search_dirs(urdf: str, urdf_path: str | None = None, extra: tuple[str, 
 def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = None, mount: np.ndarray | None = None,
                     tcp_frame: str | None = None, name: str | None = None, joints: tuple[str, ...] | None = None,
                     drop_geometry: tuple[str, ...] = (), package_dirs: tuple[str, ...] = (),
-                    locked: tuple[tuple[str, float], ...] = (), gripper: Gripper | None = None) -> Robot:
-    """Any robot: a URDF path, its base pose in the world, the arm's tip frame, the gripper mount (tip to TCP) and
-    the planning gripper (default: the Franka hand)."""
+                    locked: tuple[tuple[str, float], ...] = (), gripper: Gripper | None = None,
+                    home: tuple[float, ...] = ()) -> Robot:
+    """Any robot: a URDF path, its base pose in the world, the arm's tip frame, the gripper mount (tip to TCP), the
+    planning gripper (default: the Franka hand) and the home configuration of the closed-form IK's branch choice."""
     path = Path(urdf)
     if not path.is_file():
         raise RobotError(f"robot URDF {path} does not exist; give the path of a .urdf file or one of {', '.join(ROBOTS)}")
@@ -430,12 +437,20 @@ def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = 
                      mount=np.eye(4) if mount is None else np.asarray(mount, dtype=np.float64),
                      base=np.eye(4) if base is None else np.asarray(base, dtype=np.float64),
                      joints=joints, drop_geometry=tuple(drop_geometry), package_dirs=tuple(package_dirs),
-                     locked=tuple((str(k), float(v)) for k, v in locked), gripper=gripper)
+                     locked=tuple((str(k), float(v)) for k, v in locked), gripper=gripper,
+                     home=tuple(float(v) for v in home))
     return Robot(spec)
 
 
 # Talos's right arm bent with its forearm pointing outwards, clear of the table (radians).
 TALOS_RIGHT_ARM_TUCKED = (("arm_right_2_joint", -0.3), ("arm_right_3_joint", -1.5), ("arm_right_4_joint", -2.0))
+
+# Ready poses above the table (radians): Franka's, UR's elbow up with the tool down, Corke's qn for the PUMA 560.
+HOMES = {
+    "panda": (0.0, -np.pi / 4, 0.0, -3 * np.pi / 4, 0.0, np.pi / 2, np.pi / 4),
+    "ur5": (0.0, -np.pi / 2, np.pi / 2, -np.pi / 2, -np.pi / 2, 0.0),
+    "puma560": (0.0, np.pi / 4, -np.pi, 0.0, np.pi / 4, 0.0),
+}
 
 DEFAULT_BASES = {
     "panda": pose_xyz_yaw(0.0, 0.0, 0.0, 0.0),
@@ -459,11 +474,12 @@ def builtin_robot(name: str, base: np.ndarray | None = None, tip_frame: str | No
     if name == "panda":
         return robot_from_urdf(root / "panda_description" / "urdf" / "panda.urdf", tip_frame or "panda_hand_tcp", base=base,
                                mount=mount, tcp_frame="panda_hand_tcp" if mount is None else f"{hand.name}_tcp", name="panda",
-                               drop_geometry=("panda_hand", "panda_leftfinger", "panda_rightfinger"), gripper=gripper)
+                               drop_geometry=("panda_hand", "panda_leftfinger", "panda_rightfinger"), gripper=gripper,
+                               home=HOMES["panda"])
     if name == "ur5":
         return robot_from_urdf(root / "ur_description" / "urdf" / "ur5_robot.urdf", tip_frame or "tool0", base=base,
                                mount=hand.tcp_in_hand if mount is None else mount, tcp_frame=f"{hand.name}_tcp",
-                               name="ur5", gripper=gripper)
+                               name="ur5", gripper=gripper, home=HOMES["ur5"])
     if name == "talos":
         return robot_from_urdf(root / "talos_data" / "robots" / "talos_reduced.urdf", tip_frame or "wrist_left_ft_tool_link",
                                base=base, mount=(_rot_x(np.pi) @ hand.tcp_in_hand) if mount is None else mount,
@@ -472,7 +488,8 @@ def builtin_robot(name: str, base: np.ndarray | None = None, tip_frame: str | No
     if name == "puma560":
         return robot_from_urdf(PUMA560_URDF, tip_frame or "panda_hand_tcp", base=base, mount=mount,
                                tcp_frame="panda_hand_tcp" if mount is None else f"{hand.name}_tcp", name="puma560",
-                               drop_geometry=("panda_hand", "panda_leftfinger", "panda_rightfinger"), gripper=gripper)
+                               drop_geometry=("panda_hand", "panda_leftfinger", "panda_rightfinger"), gripper=gripper,
+                               home=HOMES["puma560"])
     raise RobotError(f"unknown robot {name!r}: use one of {', '.join(ROBOTS)} or the path of a URDF")
 
 

@@ -99,8 +99,13 @@ def _decompose(mesh: trimesh.Trimesh, name: str, opts: Decomposition) -> list[tu
 
 
 def _run_coacd(v: np.ndarray, f: np.ndarray, opts: Decomposition) -> list:
+    import faulthandler
+
     import coacd
 
+    faulthandler.disable()  # an abort of CoACD is reported by the parent in one line, not as a C-level dump here
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, 2)
     coacd.set_log_level("error")
     out = coacd.run_coacd(coacd.Mesh(v, f), threshold=opts.threshold, max_convex_hull=opts.max_hulls,
                           preprocess_resolution=opts.preprocess_resolution, mcts_iterations=opts.mcts_iterations, seed=opts.seed)

@@ -30,9 +30,9 @@ from scipy.spatial.transform import Rotation
 from workbench.errors import SimulationError
 from workbench.params import Params, param
 from workbench.simulation.decomposition import Decomposition
-from workbench.simulation.scene import build_scene, mujoco_module
+from workbench.simulation.scene import build_scene, mass_properties, mujoco_module, part_scene
 
-MODEL_VERSION = 1  # bump when the scene or the verdict changes what a stored simulation means
+MODEL_VERSION = 2  # bump when the scene or the verdict changes what a stored simulation means
 DEGREE = math.pi / 180
 SQUEEZE = 0.02  # m: closing aims this far past the closed stop, so the finger force sits at its limit
 DEFAULT_GRIP_FORCE = 70.0  # N: the Franka hand's continuous grasp force
@@ -92,7 +92,8 @@ class Failure:
 @dataclass
 class SimResult:
     """A simulated plan: the verdict, one row per waypoint (`steps`: arrays, see `waypoint_rows`), the final
-    errors against the goal, the simulated part's poses for playback (t, (K, 4, 4)), timings, and the resolved
+    errors against the goal, the simulated part's poses for playback (t, (K, 4, 4)), timings (wall-clock and this
+    process's CPU seconds of stepping, scene building), and the resolved
     parameters and their digest."""
 
     confirmed: bool
@@ -104,6 +105,7 @@ class SimResult:
     playback_pose: np.ndarray
     simulated: float
     seconds: float
+    cpu_seconds: float
     build_seconds: float
     digest: str
     params: dict
@@ -117,16 +119,28 @@ class SimResult:
     def summary(self) -> str:
         head = (f"confirmed: the part ends {self.final_error * 1000:.1f} mm and {math.degrees(self.final_angle):.1f} deg from "
                 f"its goal" if self.confirmed else f"not confirmed: {self.failure.message}")
-        return (f"{head}; {self.simulated:.1f} s simulated in {self.seconds:.2f} s ({self.realtime_factor:.0f}x real time, "
-                f"scene built in {self.build_seconds:.2f} s)")
+        return (f"{head}; {self.simulated:.1f} s simulated in {self.seconds:.2f} s ({self.realtime_factor:.0f}x real time; "
+                f"{self.cpu_seconds:.2f} CPU s; scene built in {self.build_seconds:.2f} s)")
 
 
 def resolve(params: SimParams, gripper, friction: float) -> tuple[float, float, float]:
     """The grip force (N; the gripper's `max_force`, else the Franka hand's continuous 70 N), the pad friction (the
     plan's grasp friction) and the table friction (the pad's) where `params` leaves them to their defaults."""
-    force = float(params.grip_force if params.grip_force is not None else getattr(gripper, "max_force", None) or DEFAULT_GRIP_FORCE)
+    force = float(params.grip_force if params.grip_force is not None else spec_value(gripper, "max_force") or DEFAULT_GRIP_FORCE)
     mu = float(params.friction if params.friction is not None else friction)
     return force, mu, float(params.table_friction if params.table_friction is not None else mu)
+
+
+def spec_value(gripper, key: str) -> float | None:
+    """An optional field of the gripper's spec (`mass`, `max_force`, `friction`; CONVENTIONS.md, Gripper spec), or
+    None when the gripper states none (a gripper from a URDF, the built-in Franka hand)."""
+    value = getattr(gripper, key, None)
+    if value is None and str(getattr(gripper, "extra", "")).startswith("{"):
+        try:  # a spec gripper keeps its spec as JSON followed by the palm mesh's sha256
+            value = json.loads(gripper.extra[:-64]).get(key)
+        except ValueError:
+            value = None
+    return None if value is None else float(value)
 
 
 def _poses(pos: np.ndarray, quat_wxyz: np.ndarray) -> np.ndarray:
@@ -156,7 +170,7 @@ def _finger_targets(segments) -> list[float]:
 
 
 def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.ndarray, np.ndarray]],
-             params: SimParams = SimParams(), decomposition: Decomposition = Decomposition(), progress: bool = False) -> SimResult:
+             params: SimParams = SimParams(), decomposition: Decomposition = Decomposition()) -> SimResult:
     """Replay `plan` (a timed Plan: steps and segments) with `robot` (its Robot, whose gripper is the planning
     gripper), the part's `mesh` and convex `hulls`, on `scene`'s table, with the plan's grasp `friction` unless
     `params.friction` overrides it; see the module docstring for the verdict."""
@@ -166,7 +180,8 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
     gripper = robot.gripper
     grip_force, mu, mu_table = resolve(params, gripper, friction)
     t_build = time.perf_counter()
-    ss = build_scene(robot, gripper, scene, mesh, hulls, params.density, grip_force, mu, mu_table, params.timestep)
+    ss = build_scene(robot, gripper, scene, mesh, hulls, params.density, grip_force, mu, mu_table, params.timestep,
+                     spec_value(gripper, "mass"))
     m = ss.model
     data = mujoco.MjData(m)
     build_seconds = time.perf_counter() - t_build
@@ -208,7 +223,7 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
     ctrl[:, ss.arm_act], ctrl[:, ss.vel_act] = q_des, qd_des
     ctrl[:, ss.finger_act] = finger[:, None]
     pb, hb = ss.part_body, ss.hand_body
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for k in range(n):
         data.ctrl[:] = ctrl[k]
         mujoco.mj_step(m, data)
@@ -216,7 +231,7 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
         hand_pos[k], hand_quat[k] = data.xpos[hb], data.xquat[hb]
         if k in events:
             touching[events[k]] = _touches(data, pads, part_geoms)
-    seconds = time.perf_counter() - t0
+    seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     if not np.isfinite(part_pos).all():
         raise SimulationError(f"the physics diverged (timestep {dt:g} s); give a smaller --timestep")
     part = _poses(part_pos, part_quat)
@@ -229,7 +244,7 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
                 "decomposition": decomposition.__dict__, "model": MODEL_VERSION}
     return SimResult(confirmed=not failures, failure=failures[0] if failures else None, steps=rows, final_error=final[0],
                      final_angle=final[1], playback_t=np.r_[0.0, times[keep]], playback_pose=np.concatenate([start[None], part[keep]]),
-                     simulated=float(n * dt), seconds=seconds, build_seconds=build_seconds,
+                     simulated=float(n * dt), seconds=seconds, cpu_seconds=cpu, build_seconds=build_seconds,
                      digest=params.digest(grip_force, mu, mu_table, decomposition), params=resolved, failures=failures)
 
 
@@ -303,18 +318,9 @@ def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: Si
             continue
         if s.kind == "gripper":  # the open: the released part must come to rest at its placement
             a = idx_end[k]
-            w = min(len(times) - 1, a + int(round(p.settle_time / dt)))
-            lin, ang = _speeds(part, com, dt, a, w)
-            calm = np.flatnonzero((lin < p.settle_speed) & (ang < p.settle_spin))
-            if len(calm) == 0:
-                fail("roll", k, times[w], f"the released part did not settle within {p.settle_time:g} s (still "
-                                          f"{lin[-1] * 1000:.0f} mm/s, {math.degrees(ang[-1]):.0f} deg/s)")
-            else:
-                settle[k] = float(calm[0] * dt)
-                e_t, e_r = pose_error(part[a + int(calm[0])], steps[s.step].object_pose, com)
-                if e_r > p.waypoint_tol_angle or e_t > p.waypoint_tol:
-                    fail("roll", k, times[a + int(calm[0])], f"the released part rolled: it rests {e_t * 1000:.1f} mm and "
-                                                          f"{math.degrees(e_r):.1f} deg from its placement")
+            settle[k], at, what = settled(part, com, dt, a, steps[s.step].object_pose, p)
+            if what:
+                fail("roll", k, times[at], what)
         k += 1
     flagged = {f.step for f in failures}
     for k in range(len(segs)):
@@ -334,6 +340,49 @@ def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: Si
             "simulated": sim.reshape(len(segs), 16), "error": err_t, "angle": err_r, "slip": slip_t, "slip_angle": slip_r,
             "settle": settle, "touching": touching, "ok": ok}
     return rows, failures, (float(f_t), float(f_r))
+
+
+def settled(part: np.ndarray, com: np.ndarray, dt: float, a: int, placement: np.ndarray,
+            p: SimParams) -> tuple[float, int, str | None]:
+    """Whether a part released at sample `a` of its poses `part` is at rest at `placement` `settle_time` later:
+    (seconds until its speeds last fell below `settle_speed` and `settle_spin`, NaN if it still moves; the sample
+    judged; None, or why it counts as a roll: it still moves, or it rests beyond the waypoint tolerance)."""
+    w = min(len(part) - 1, a + int(round(p.settle_time / dt)))
+    lin, ang = _speeds(part, com, dt, a, w)
+    moving = np.flatnonzero((lin >= p.settle_speed) | (ang >= p.settle_spin))
+    if len(moving) and moving[-1] >= len(lin) - 1:
+        return math.nan, w, (f"the released part did not settle within {p.settle_time:g} s (still {lin[-1] * 1000:.0f} mm/s, "
+                             f"{math.degrees(ang[-1]):.0f} deg/s)")
+    calm = float((moving[-1] + 1) * dt) if len(moving) else 0.0
+    e_t, e_r = pose_error(part[w], placement, com)
+    if e_r > p.waypoint_tol_angle or e_t > p.waypoint_tol:
+        return calm, w, (f"the released part rolled: it rests {e_t * 1000:.1f} mm and {math.degrees(e_r):.1f} deg from its "
+                         f"placement")
+    return calm, w, None
+
+
+def rest_on_table(mesh, hulls: list[tuple[np.ndarray, np.ndarray]], pose: np.ndarray, scene,
+                  params: SimParams = SimParams(), friction: float = 0.5) -> tuple[str | None, np.ndarray]:
+    """A part released at rest at `pose` on the table (no robot; a placement as a plan's release leaves it), judged
+    as after a release (`settled`, over `settle_time` plus `hold_end`): (None or why it rolls, its final pose)."""
+    mujoco = mujoco_module()
+    m, body = part_scene(mesh, hulls, scene, params.density, friction, params.timestep)
+    data = mujoco.MjData(m)
+    data.qpos[:3] = pose[:3, 3]
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(pose[:3, :3]).ravel())
+    data.qpos[3:7] = quat
+    n = int(math.ceil((params.settle_time + params.hold_end) / params.timestep))
+    pos, q = np.empty((n + 1, 3)), np.empty((n + 1, 4))
+    mujoco.mj_forward(m, data)
+    pos[0], q[0] = data.xpos[body], data.xquat[body]
+    for k in range(n):
+        mujoco.mj_step(m, data)
+        pos[k + 1], q[k + 1] = data.xpos[body], data.xquat[body]
+    part = _poses(pos, q)
+    _, com, _ = mass_properties(mesh, params.density)
+    _, _, what = settled(part, com, params.timestep, 0, pose, params)
+    return what, part[-1]
 
 
 def _speeds(part: np.ndarray, com: np.ndarray, dt: float, a: int, b: int, lag: int = 10) -> tuple[np.ndarray, np.ndarray]:

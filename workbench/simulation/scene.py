@@ -34,29 +34,25 @@ FINGER_MASS = 0.05  # kg per finger
 HAND_MASS = 0.7  # kg when the gripper states none
 TORSION = 0.004  # m: torsional friction of the soft pads (MuJoCo condim 4)
 SOLREF = (0.005, 1.0)  # contact time constant (s, >= 2 timesteps) and damping ratio
-NOSLIP = 10  # iterations of the no-slip solver: soft contacts creep under a steady squeeze without it
+NOSLIP = 0  # no-slip solver iterations: off (with it the soft pad contacts of a held part drift more, and it costs a third of the step)
 SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
 
 
 @dataclass
 class SimScene:
-    """A compiled MuJoCo model and the indices the replay needs: arm joint qpos/qvel addresses, finger joints,
-    the part's free joint, the arm, finger and velocity actuators, the hand (TCP) body and the part body."""
+    """A compiled MuJoCo model and the indices the replay needs: arm joint and finger qpos addresses, the part's
+    free joint, the arm's position and velocity actuators, the finger actuators, the hand (TCP) body and the part."""
 
     model: object
     arm_qpos: np.ndarray
-    arm_dof: np.ndarray
     finger_qpos: np.ndarray
     part_qpos: int
-    part_dof: int
     arm_act: np.ndarray
     vel_act: np.ndarray
     finger_act: np.ndarray
     hand_body: int
     part_body: int
-    part_mass: float
     part_com: np.ndarray
-    hulls: int
 
 
 def mujoco_module():
@@ -91,25 +87,14 @@ def _full_inertia(i: np.ndarray) -> list[float]:
 
 def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[np.ndarray, np.ndarray]],
                 density: float, grip_force: float, pad_friction: float, table_friction: float,
-                timestep: float) -> SimScene:
+                timestep: float, hand_mass: float | None = None) -> SimScene:
     """Compile the scene of the module docstring for `robot` (a workbench Robot), `gripper` (its planning
-    Gripper), `scene` (the table), the part's `mesh` and convex `hulls` (part frame)."""
+    Gripper), `scene` (the table), the part's `mesh` and convex `hulls` (part frame); `hand_mass` from the
+    gripper's spec, else 0.7 kg (it only loads the gravity-compensated arm)."""
     mujoco = mujoco_module()
-    spec = mujoco.MjSpec()
-    spec.option.timestep = float(timestep)
-    spec.option.gravity = [0.0, 0.0, -9.81]
-    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
-    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
-    spec.option.noslip_iterations = NOSLIP
-    if hasattr(mujoco.mjtEnableBit, "mjENBL_MULTICCD"):  # several contacts per flat face pair (default from MuJoCo 3.3)
-        spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_MULTICCD)
-    spec.compiler.autolimits = True
-    spec.compiler.degree = False  # joint ranges in radians
+    spec = _spec(timestep)
 
-    lo, hi, th = np.asarray(scene.table_min), np.asarray(scene.table_max), float(scene.table_thickness)
-    spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[*(0.5 * (hi - lo)), th / 2],
-                            pos=[*(0.5 * (lo + hi)), -th / 2], friction=[table_friction, 0.0, 0.0], priority=1,
-                            condim=3, solref=SOLREF, solimp=SOLIMP)
+    _add_table(spec, scene, table_friction)
 
     base = robot.base
     parent = spec.worldbody.add_body(name="robot_base", pos=base[:3, 3], quat=_quat(base[:3, :3]))
@@ -133,7 +118,7 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
         parent = body
 
     tip = robot.tip_in_joint
-    hand_mass = float(getattr(gripper, "mass", None) or HAND_MASS)
+    hand_mass = float(hand_mass or HAND_MASS)
     hand = parent.add_body(name="hand", pos=tip[:3, 3], quat=_quat(tip[:3, :3]), gravcomp=1.0)
     body_mesh = gripper.body
     hand.explicitinertial = True
@@ -166,18 +151,7 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
                       data=[0.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * 7)
     spec.add_exclude(bodyname1="finger_left", bodyname2="finger_right")
 
-    mass, com, inertia = mass_properties(mesh, density)
-    part = spec.worldbody.add_body(name="part")
-    part.add_freejoint(name="part")
-    part.explicitinertial = True
-    part.mass = mass
-    part.ipos = com
-    part.fullinertia = _full_inertia(inertia)
-    for k, (v, f) in enumerate(hulls):
-        spec.add_mesh(name=f"hull{k}", uservert=np.asarray(v, dtype=np.float32).ravel(),
-                      userface=np.asarray(f, dtype=np.int32).ravel())
-        part.add_geom(name=f"hull{k}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"hull{k}", condim=4,
-                      friction=[min(pad_friction, table_friction), TORSION, 0.0], solref=SOLREF, solimp=SOLIMP)
+    _, com = _add_part(spec, mesh, hulls, density, min(pad_friction, table_friction))
 
     for name in arm_joints:
         a = spec.add_actuator(name=f"pos_{name}", target=name, trntype=mujoco.mjtTrn.mjTRN_JOINT)
@@ -195,11 +169,61 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
         raise SimulationError(f"the physics scene of robot {robot.name!r} does not compile "
                               f"({str(exc).strip().splitlines()[0]})") from None
     jid = [m.joint(n).id for n in arm_joints]
-    return SimScene(model=m, arm_qpos=np.array([m.jnt_qposadr[j] for j in jid]), arm_dof=np.array([m.jnt_dofadr[j] for j in jid]),
+    return SimScene(model=m, arm_qpos=np.array([m.jnt_qposadr[j] for j in jid]),
                     finger_qpos=np.array([m.jnt_qposadr[m.joint(n).id] for n in fingers]),
-                    part_qpos=int(m.jnt_qposadr[m.joint("part").id]), part_dof=int(m.jnt_dofadr[m.joint("part").id]),
+                    part_qpos=int(m.jnt_qposadr[m.joint("part").id]),
                     arm_act=np.array([m.actuator(f"pos_{n}").id for n in arm_joints]),
                     vel_act=np.array([m.actuator(f"vel_{n}").id for n in arm_joints]),
                     finger_act=np.array([m.actuator(f"grip_{n}").id for n in fingers]),
-                    hand_body=m.body("hand").id, part_body=m.body("part").id, part_mass=mass, part_com=com,
-                    hulls=len(hulls))
+                    hand_body=m.body("hand").id, part_body=m.body("part").id, part_com=com)
+
+
+def _spec(timestep: float):
+    """An empty MjSpec with the scene's options: gravity, timestep, implicit integration, elliptic friction cones."""
+    mujoco = mujoco_module()
+    spec = mujoco.MjSpec()
+    spec.option.timestep = float(timestep)
+    spec.option.gravity = [0.0, 0.0, -9.81]
+    spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
+    spec.option.noslip_iterations = NOSLIP
+    if hasattr(mujoco.mjtEnableBit, "mjENBL_MULTICCD"):  # several contacts per flat face pair (default from MuJoCo 3.3)
+        spec.option.enableflags |= int(mujoco.mjtEnableBit.mjENBL_MULTICCD)
+    spec.compiler.autolimits = True
+    spec.compiler.degree = False  # joint ranges in radians
+    return spec
+
+
+def _add_table(spec, scene, friction: float) -> None:
+    mujoco = mujoco_module()
+    lo, hi, th = np.asarray(scene.table_min), np.asarray(scene.table_max), float(scene.table_thickness)
+    spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[*(0.5 * (hi - lo)), th / 2],
+                            pos=[*(0.5 * (lo + hi)), -th / 2], friction=[friction, 0.0, 0.0], priority=1,
+                            condim=3, solref=SOLREF, solimp=SOLIMP)
+
+
+def _add_part(spec, mesh: trimesh.Trimesh, hulls, density: float, friction: float) -> tuple[float, np.ndarray]:
+    """The part as a free body (frame: the part's) with its mesh's mass properties and one geom per convex hull."""
+    mujoco = mujoco_module()
+    mass, com, inertia = mass_properties(mesh, density)
+    part = spec.worldbody.add_body(name="part")
+    part.add_freejoint(name="part")
+    part.explicitinertial = True
+    part.mass = mass
+    part.ipos = com
+    part.fullinertia = _full_inertia(inertia)
+    for k, (v, f) in enumerate(hulls):
+        spec.add_mesh(name=f"hull{k}", uservert=np.asarray(v, dtype=np.float32).ravel(),
+                      userface=np.asarray(f, dtype=np.int32).ravel())
+        part.add_geom(name=f"hull{k}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"hull{k}", condim=4,
+                      friction=[friction, TORSION, 0.0], solref=SOLREF, solimp=SOLIMP)
+    return mass, com
+
+
+def part_scene(mesh: trimesh.Trimesh, hulls, scene, density: float, friction: float, timestep: float) -> tuple[object, int]:
+    """The table and the part alone (no robot): the compiled model and the part's body id."""
+    spec = _spec(timestep)
+    _add_table(spec, scene, friction)
+    _add_part(spec, mesh, hulls, density, friction)
+    m = spec.compile()
+    return m, m.body("part").id

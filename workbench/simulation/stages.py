@@ -7,6 +7,7 @@ simulation that talks to the store; the convex decomposition runs (and may fail)
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -35,12 +36,13 @@ class StoredSimulation:
 
 
 def simulate_stored(store: Store, idplan: int, params: SimParams = SimParams(), decomposition: Decomposition = Decomposition(),
-                    plan=None, robot=None, save: bool = True) -> StoredSimulation:
+                    plan=None, robot=None, save: bool = True, gripper=None) -> StoredSimulation:
     """Simulate stored plan `idplan` (or reuse its stored simulation with the same parameters) and store the result.
-    `plan` and `robot` may be given when already loaded (a plan just made by `workbench plan`)."""
+    `plan` and `robot` may be given when already loaded (a plan just made by `workbench plan`); else the robot is
+    rebuilt from its row with `gripper` (the planning gripper it was stored with; default the Franka hand)."""
     inputs = sql.plan_inputs(store, idplan)
     plan = plan if plan is not None else load_plan(store, idplan)
-    robot = robot if robot is not None else stored_robot(store, inputs["idrobot"])
+    robot = robot if robot is not None else stored_robot(store, inputs["idrobot"], gripper)
     _, obj = get_object(store, inputs["object"])
     scene = scene_row(store, inputs["idscene"]).scene
     hulls = convex_parts(obj.mesh, obj.digest, obj.name, decomposition)
@@ -64,12 +66,24 @@ def simulate_stored(store: Store, idplan: int, params: SimParams = SimParams(), 
                             f.message if f else res.summary(), res.final_error, res.final_angle, res)
 
 
-def simulate_in_memory(store: Store, plan, robot, object_name: str, idscene: int, friction: float,
-                       params: SimParams = SimParams(), decomposition: Decomposition = Decomposition()) -> SimResult:
-    """Simulate a plan that is not stored (the object, the scene from the store), nothing written."""
-    _, obj = get_object(store, object_name)
+def simulate_in_memory(store: Store, plan, robot, params: SimParams = SimParams(),
+                       decomposition: Decomposition = Decomposition()) -> SimResult:
+    """Simulate a plan that is not stored (its object, scene and grasp friction from the store); nothing written."""
+    _, obj = get_object(store, plan.object)
     hulls = convex_parts(obj.mesh, obj.digest, obj.name, decomposition)
-    return simulate(plan, robot, obj.mesh, scene_row(store, idscene).scene, friction, hulls, params, decomposition)
+    friction = sql.grasp_friction(store, plan.steps[0].idfreeairgrip)
+    return simulate(plan, robot, obj.mesh, scene_row(store, plan.ids["idscene"]).scene, friction, hulls, params, decomposition)
+
+
+def physics_check(store: Store, robot, params: SimParams = SimParams(),
+                  decomposition: Decomposition = Decomposition()) -> Callable[[object], tuple[int, str] | None]:
+    """For the planner's search (`plan --require-physics`): a function of a plan that simulates it and returns None
+    when it is confirmed, else (the failing step, why); the failing step's roadmap node or grip is then removed."""
+    def check(plan) -> tuple[int, str] | None:
+        res = simulate_in_memory(store, plan, robot, params, decomposition)
+        return None if res.confirmed else (res.failure.step, f"physics: {res.failure.kind}: {res.failure.message}")
+
+    return check
 
 
 def stored_playback(store: Store, idplan: int) -> tuple[np.ndarray, np.ndarray] | None:

@@ -32,6 +32,7 @@ from workbench.store.identity import (
     check_size,
     inspect,
     is_disk_full,
+    is_interrupt,
     is_lock_error,
     open_error,
     read_error,
@@ -45,6 +46,19 @@ FAULT_ENV = "WORKBENCH_FAULT"  # tests only: "TABLE:N:SIGNAL" sends SIGNAL to th
 
 class Store:
     """An open DuckDB store file (created with the full schema when new)."""
+
+    @classmethod
+    def scratch(cls, extra_tables: tuple[str, ...] = ()) -> "Store":
+        """An in-memory store with the full schema (and `extra_tables`' DDL): a catalogue worker writes a unit's rows
+        in it with the stage writers, then exports them as Parquet files."""
+        self = cls.__new__(cls)
+        self.path, self._depth, self.read_only, self._fault = Path(":memory:"), 0, False, None
+        self.con = duckdb.connect(":memory:", config=CONNECT_CONFIG)
+        self.con.execute("SET threads = 1")
+        with self.transaction():
+            for ddl in ALL_TABLES + MIGRATIONS + extra_tables:
+                self.run(ddl)
+        return self
 
     def __init__(self, path: str | Path, read_only: bool = False, create: bool = True, wait: float | None = None):
         """Open (or, unless `create` is False, create) the store at `path`: its identity, version and length are
@@ -153,10 +167,7 @@ class Store:
             yield self.con
         except BaseException as exc:
             self._depth = 0
-            try:
-                self.con.execute("ROLLBACK")
-            except duckdb.Error:
-                pass  # the failed statement already ended the transaction
+            self._rollback()
             if isinstance(exc, duckdb.Error):
                 raise self._write_error(exc) from None
             raise
@@ -164,8 +175,19 @@ class Store:
             self._depth = 0
             try:
                 self.con.execute("COMMIT")
-            except duckdb.Error as exc:
+            except (duckdb.Error, RuntimeError) as exc:  # DuckDB reports a Ctrl-C during COMMIT as RuntimeError
+                self._rollback()
+                if is_interrupt(exc):
+                    raise KeyboardInterrupt from None
+                if not isinstance(exc, duckdb.Error):
+                    raise
                 raise self._write_error(exc) from None
+
+    def _rollback(self) -> None:
+        try:
+            self.con.execute("ROLLBACK")
+        except (duckdb.Error, RuntimeError):
+            pass  # the failed statement (or COMMIT) already ended the transaction
 
     def _write_error(self, exc: BaseException) -> BaseException:
         if is_disk_full(exc) or isinstance(exc, (duckdb.IOException, duckdb.FatalException)):
@@ -177,14 +199,14 @@ class Store:
         A damaged block or a missing stage's table is a one-line StoreError (`identity.read_error`)."""
         try:
             return self.con.execute(sql, list(params)).fetchall()
-        except duckdb.Error as exc:
+        except (duckdb.Error, RuntimeError) as exc:
             raise read_error(self.path, exc) from None
 
     def arrow(self, sql: str, params: list[Any] | tuple[Any, ...] | dict[str, Any] = ()) -> pa.Table:
         """Run a SELECT and return its rows as an Arrow table (named `$parameters` from a dict; errors as `run`)."""
         try:
             return self.con.sql(sql, params=params if isinstance(params, dict) else list(params)).to_arrow_table()
-        except duckdb.Error as exc:
+        except (duckdb.Error, RuntimeError) as exc:
             raise read_error(self.path, exc) from None
 
     def one(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> tuple | None:
@@ -217,7 +239,10 @@ class Store:
         try:
             self.run(f"INSERT INTO {table} ({names}) SELECT {names} FROM _wb_rows")
         finally:
-            self.con.unregister("_wb_rows")
+            try:
+                self.con.unregister("_wb_rows")
+            except duckdb.Error:
+                pass  # the insert failed or was interrupted: its own error is the one to report
         self._after_insert(table)
         return arrow.num_rows
 
@@ -290,6 +315,17 @@ class Store:
         """The id of a stored parameter set of `stage` for these parameters and object, or None."""
         row = self.one("SELECT idparamset FROM paramset WHERE digest = ?", [_digest(stage, params, idobject)])
         return None if row is None else int(row[0])
+
+
+def open_reader(path: str | Path, wait: float | None = None) -> Store:
+    """An existing store opened for reading only, so that other processes may read it at the same time (DuckDB lets
+    any number of readers, or one writer, hold a file); a store of an older schema is opened read-write once, to be
+    upgraded."""
+    store = Store(path, read_only=True, create=False, wait=wait)
+    if store.identity.kind == "current":
+        return store
+    store.close()
+    return Store(path, create=False, wait=wait)
 
 
 def _wait_seconds() -> float:

@@ -108,6 +108,11 @@ def open_error(path: Path, exc: BaseException) -> StoreError:
     return StoreError(f"store {path} could not be opened ({msg[:160]}); move it aside and rebuild it, or give another path")
 
 
+def is_interrupt(exc: BaseException) -> bool:
+    """Whether DuckDB stopped a statement for a Ctrl-C (an InterruptException, or a RuntimeError 'Query interrupted')."""
+    return isinstance(exc, duckdb.InterruptException) or (isinstance(exc, RuntimeError) and "interrupted" in str(exc).lower())
+
+
 def is_lock_error(exc: BaseException) -> bool:
     """Whether DuckDB refused the file because another process holds its lock (worth waiting for)."""
     return "could not set lock" in str(exc).lower() or "conflicting lock" in str(exc).lower()
@@ -119,11 +124,12 @@ HEADER_BYTES = 3 * 4096  # DuckDB's file header and its two database headers, be
 def check_size(con: duckdb.DuckDBPyConnection, path: Path) -> None:
     """Refuse a file shorter than the blocks its own header counts (a truncated copy or an interrupted transfer):
     DuckDB would open it and fail on the first read of a missing block, deep inside a command."""
-    row = con.execute("SELECT block_size, total_blocks FROM pragma_database_size() "
+    row = con.execute("SELECT block_size, total_blocks, free_blocks FROM pragma_database_size() "
                       "WHERE database_name = current_database()").fetchone()
     if row is None:
         return
-    expected = HEADER_BYTES + int(row[0]) * int(row[1])
+    # free blocks at the end of the file are counted but never written: a sound file may be that much shorter
+    expected = HEADER_BYTES + int(row[0]) * (int(row[1]) - int(row[2]))
     size = path.stat().st_size
     if size < expected:
         raise StoreError(f"store {path} is damaged (truncated: {size:,} of its {expected:,} bytes); restore it from a "
@@ -137,7 +143,12 @@ TABLE_MAKERS = {"tgraspclass": "gptable", "tgptable": "gptable", "tplacementclas
 
 def read_error(path: Path, exc: BaseException) -> BaseException:
     """One line for a query the file cannot answer: a damaged or truncated block (I/O, checksum, fatal), or a
-    table of a stage this store never ran. Other errors (our own bugs, constraint violations) pass unchanged."""
+    table of a stage this store never ran; a query interrupted by Ctrl-C is a KeyboardInterrupt. Other errors (our
+    own bugs, constraint violations) pass unchanged."""
+    if is_interrupt(exc):
+        return KeyboardInterrupt()  # Ctrl-C inside a query: the command stops as for any other interrupt
+    if not isinstance(exc, duckdb.Error):
+        return exc
     if isinstance(exc, duckdb.CatalogException):
         m = re.search(r"Table with name (\w+) does not exist", str(exc))
         if m:

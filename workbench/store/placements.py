@@ -42,6 +42,7 @@ def save_placements(store: Store, idobject: int, grasp_pid: int, params: Placeme
         store.insert("freetabletopplacement", {
             "idfreetabletopplacement": fp_ids, "idobject": np.full(n, idobject, dtype=np.int64),
             "idparamset": np.full(n, pid, dtype=np.int64), "rotmat": placements.poses, "stability": placements.stability,
+            "probability": placements.probability,
             "support": np.array([s.tolist() for s in placements.supports] + [None], dtype=object)[:n],
         })
         p_idx, g_idx, poses = ftg
@@ -59,8 +60,10 @@ def save_placements(store: Store, idobject: int, grasp_pid: int, params: Placeme
 
 
 def load_placements(store: Store, idplacements: int) -> dict[str, np.ndarray]:
-    """Free placements of a parameter set: idfreetabletopplacement, rotmat (P, 4, 4), stability, support (objects)."""
-    out = store.query_arrays("SELECT idfreetabletopplacement, rotmat, stability, support FROM freetabletopplacement "
+    """Free placements of a parameter set: idfreetabletopplacement, rotmat (P, 4, 4), stability, support (objects),
+    probability (NaN where a store written before it has none)."""
+    out = store.query_arrays("SELECT idfreetabletopplacement, rotmat, stability, support, "
+                             "coalesce(probability, 'NaN'::DOUBLE) AS probability FROM freetabletopplacement "
                              "WHERE idparamset = ? ORDER BY idfreetabletopplacement", [idplacements])
     out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
     return out

@@ -307,3 +307,10 @@ def robot_with_gripper(store: Store, name: str, digest: str) -> str | None:
     row = store.one("SELECT r.name FROM robot r JOIN gripper g ON r.idgripper = g.idgripper WHERE (r.name = ? OR "
                     "starts_with(r.name, ?)) AND g.digest = ? ORDER BY r.idrobot DESC LIMIT 1", [name, f"{name}-", digest])
     return None if row is None else str(row[0])
+
+
+def robot_grippers(store: Store, name: str) -> list[str]:
+    """The names of the grippers robot `name` (or NAME-DIGEST) is stored with."""
+    rows = store.run("SELECT DISTINCT g.name FROM robot r JOIN gripper g ON r.idgripper = g.idgripper WHERE r.name = ? OR "
+                     "starts_with(r.name, ?) ORDER BY g.name", [name, f"{name}-"])
+    return [str(r[0]) for r in rows]

@@ -15,7 +15,8 @@ Paper tables
 - freeairgrip: grasps in the object frame; rotmat is the TCP pose in the object frame.
   Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y).
 - freetabletopplacement: rotmat is the object in the table frame, centre of mass above the origin, lowest
-  point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, `DOUBLE[3][]`).
+  point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, `DOUBLE[3][]`),
+  probability (quasi-static chance that a part dropped at random rests on it; NULL in stores written before it).
 - freetabletopgrip: free-air grasps kept at a free placement; rotmat is the TCP in the table frame.
 - angle(idangle, value): rotations about world z in radians.
 - tabletopplacements: rotmat is the object in the world; tabletopposition the (x, y, z) of the placement.
@@ -112,7 +113,8 @@ CORE_TABLES: tuple[str, ...] = (
         idparamset BIGINT NOT NULL REFERENCES paramset(idparamset),
         rotmat DOUBLE[16] NOT NULL,
         stability DOUBLE NOT NULL,
-        support DOUBLE[3][]
+        support DOUBLE[3][],
+        probability DOUBLE
     )""",
     """CREATE TABLE IF NOT EXISTS freetabletopgrip (
         idfreetabletopgrip BIGINT PRIMARY KEY,
@@ -474,6 +476,7 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS duration DOUBLE",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS removed INTEGER",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS t_motion DOUBLE",
+    "ALTER TABLE freetabletopplacement ADD COLUMN IF NOT EXISTS probability DOUBLE",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS acc DOUBLE[]",
     # the planner that answered: 'wan_harada' (the roadmap planner, every plan stored before) or 'tournassoud'
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS planner VARCHAR DEFAULT 'wan_harada'",

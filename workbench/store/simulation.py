@@ -11,20 +11,27 @@ import numpy as np
 from workbench.errors import StoreError
 from workbench.store import Store
 
+DEFAULT_FRICTION = 0.3  # GraspParams' default
 STEP_COLUMNS = ("seq", "step", "kind", "caption", "t", "planned", "simulated", "error", "angle", "slip", "slip_angle",
                 "settle", "touching", "ok")
 
 
 def plan_inputs(store: Store, idplan: int) -> dict[str, Any]:
-    """The object name, robot id, scene id and grasp friction coefficient (of the first grasp's parameter set; 0.3
-    when that set names none) of a stored plan."""
+    """The object name, robot id, scene id and grasp friction coefficient (`grasp_friction` of the first grasp) of a
+    stored plan."""
     row = store.one("SELECT o.name, p.idrobot, p.idscene FROM plan p JOIN object o USING (idobject) WHERE p.idplan = ?", [idplan])
     if row is None:
         raise StoreError(f"store {store.path} has no plan {idplan}; `workbench plan` stores plans and prints their ids")
-    params = store.one("SELECT s.params FROM planstep t JOIN freeairgrip g USING (idfreeairgrip) "
-                       "JOIN paramset s ON s.idparamset = g.idparamset WHERE t.idplan = ? ORDER BY t.seq LIMIT 1", [idplan])
-    friction = json.loads(params[0]).get("friction", 0.3) if params else 0.3
-    return {"object": row[0], "idrobot": int(row[1]), "idscene": int(row[2]), "friction": float(friction)}
+    first = store.one("SELECT idfreeairgrip FROM planstep WHERE idplan = ? ORDER BY seq LIMIT 1", [idplan])
+    return {"object": row[0], "idrobot": int(row[1]), "idscene": int(row[2]),
+            "friction": grasp_friction(store, int(first[0])) if first else DEFAULT_FRICTION}
+
+
+def grasp_friction(store: Store, idfreeairgrip: int) -> float:
+    """The friction coefficient a grasp was planned with (its parameter set's `friction`; 0.3 when it names none)."""
+    row = store.one("SELECT s.params FROM freeairgrip g JOIN paramset s ON s.idparamset = g.idparamset "
+                    "WHERE g.idfreeairgrip = ?", [idfreeairgrip])
+    return float(json.loads(row[0]).get("friction", DEFAULT_FRICTION)) if row else DEFAULT_FRICTION
 
 
 def find_simulation(store: Store, idplan: int, digest: str) -> int | None:

@@ -9,6 +9,7 @@ import meshcat.transformations as tf
 import numpy as np
 
 from workbench.planners.phoka_sudsang.contacts import ContactSet
+from workbench.viewer.live import Switches
 from workbench.viewer.scenes import palette, show_face_colors, show_points
 
 FINGER = 0x3366DD       # a finger holding a contact
@@ -57,15 +58,25 @@ def fingertip_positions(contacts: ContactSet, fingers: np.ndarray, lifted_from: 
     return out
 
 
-def show_fingers(vis: meshcat.Visualizer, path: str, contacts: ContactSet, fingers: np.ndarray, placed: int = -1,
-                 lifted: int = -1, lifted_from: np.ndarray | None = None, radius: float | None = None) -> None:
-    """The five fingertips as spheres: the placed finger green, the lifted one red, the others blue, a waiting
-    finger grey. `fingers` (5,) holds each finger's contact (-1: free); `lifted_from` the contact a free finger left."""
-    r = radius if radius is not None else 0.09 * contacts.radius
-    lifted_from = np.full(5, -1) if lifted_from is None else np.asarray(lifted_from)
-    pos = fingertip_positions(contacts, np.asarray(fingers), lifted_from, r)
-    for f in range(5):
-        color = PLACED if f == placed else LIFTED if f == lifted else FINGER if fingers[f] >= 0 else FREE
-        node = vis[f"{path}/finger{f}"]
-        node.set_object(g.Sphere(r), g.MeshLambertMaterial(color=color, opacity=0.9, transparent=True))
-        node.set_transform(tf.translation_matrix(pos[f]))
+class FingerView:
+    """The five fingertips as spheres, sent once: each switch only moves and recolours them (the placed finger
+    green, the lifted one red, the others blue, a waiting finger grey)."""
+
+    def __init__(self, vis: meshcat.Visualizer, path: str, contacts: ContactSet, radius: float | None = None):
+        self.vis, self.path, self.contacts = vis, path, contacts
+        self.radius = radius if radius is not None else 0.09 * contacts.radius
+        self.switches = Switches(vis)
+        vis[path].delete()
+        for f in range(5):
+            vis[f"{path}/finger{f}"].set_object(g.Sphere(self.radius),
+                                                g.MeshLambertMaterial(color=FREE, opacity=0.9, transparent=True))
+
+    def show(self, fingers: np.ndarray, placed: int = -1, lifted: int = -1, lifted_from: np.ndarray | None = None) -> None:
+        """`fingers` (5,) holds each finger's contact (-1: free); `lifted_from` the contact a free finger left."""
+        lifted_from = np.full(5, -1) if lifted_from is None else np.asarray(lifted_from)
+        pos = fingertip_positions(self.contacts, np.asarray(fingers), lifted_from, self.radius)
+        for f in range(5):
+            color = PLACED if f == placed else LIFTED if f == lifted else FINGER if fingers[f] >= 0 else FREE
+            name = f"{self.path}/finger{f}"
+            self.switches.set(name, "color", [((color >> s) & 255) / 255 for s in (16, 8, 0)] + [0.9])
+            self.switches.move(name, tf.translation_matrix(pos[f]))

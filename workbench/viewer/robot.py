@@ -13,6 +13,7 @@ from pathlib import Path
 import meshcat
 import meshcat.geometry as g
 import numpy as np
+import trimesh
 
 from workbench.robots.collider import Scene
 from workbench.robots.model import Robot
@@ -30,6 +31,10 @@ def _geometry(go) -> tuple[object, np.ndarray] | None:
     ext = Path(path).suffix.lower()
     scale = np.diag([*np.asarray(go.meshScale, dtype=np.float64), 1.0])
     if ext in _FILES and Path(path).is_file():
+        if np.linalg.det(scale) < 0:  # a mirrored mesh (Tiago's): into the vertices, as no rotation can mirror
+            mesh = trimesh.load(path, force="mesh")
+            mesh.apply_transform(scale)
+            return g.TriangularMeshGeometry(mesh.vertices, mesh.faces), np.eye(4)
         return _FILES[ext].from_file(path), scale
     geom = go.geometry
     if hasattr(geom, "halfSide"):

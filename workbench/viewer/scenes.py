@@ -6,14 +6,22 @@ file that opens in a browser without a running server; `grasp_scene` is a ready-
 
 from __future__ import annotations
 
-import contextlib
+import atexit
+import collections
+import ctypes
 import html
-import io
 import json
+import os
+import signal
+import subprocess
+import sys
 from pathlib import Path
+from types import SimpleNamespace
 from urllib.parse import urlparse
 
 import meshcat
+import meshcat.visualizer
+import msgpack
 import meshcat.geometry as g
 import meshcat.transformations as tf
 import numpy as np
@@ -22,18 +30,85 @@ from IPython.display import HTML
 
 from workbench.geometry.objects import ObjectModel
 from workbench.robots.gripper import Gripper
+from workbench.viewer.captions import CAPTION_SCRIPT
 
 GREEN, RED, GREY, BLUE, ORANGE, WHITE = 0x33AA55, 0xDD3333, 0xB0B0B0, 0x3366DD, 0xFF9922, 0xFFFFFF
 HIGHLIGHT = 0xFF00CC  # not in the tab20 palette the facets use
 
 
-def new_scene() -> meshcat.Visualizer:
-    """A meshcat visualizer with its own server (bound to 127.0.0.1, closed with the kernel); starts empty.
-    meshcat's "You can open the visualizer ..." line is not printed: `view(vis)` shows the scene."""
-    with contextlib.redirect_stdout(io.StringIO()):
-        vis = meshcat.Visualizer()
+class SceneWindow(meshcat.visualizer.ViewerWindow):
+    """meshcat's link to its own server, started so that it ends with this process (on Linux the kernel stops it
+    when its parent dies, so a shut-down notebook kernel leaves no server behind); it counts the commands it sends
+    by type (`sent["set_object"]`: geometry, `sent["set_transform"]`, `sent["set_property"]`: view-only changes)."""
+
+    def __init__(self) -> None:
+        self.server_proc, self.zmq_url, self.web_url = _start_server()
+        self.connect_zmq()
+        self.sent: collections.Counter = collections.Counter()
+
+    def send(self, command) -> None:
+        self.sent[type(command).__name__] += 1
+        data = command.lower()
+        self.zmq_socket.send_multipart([data["type"].encode("utf-8"), data["path"].encode("utf-8"), _pack(data)])
+        self.zmq_socket.recv()
+
+    def close(self) -> None:
+        """Stop the server (the scene cannot be used afterwards)."""
+        if self.server_proc is not None and self.server_proc.poll() is None:
+            self.server_proc.kill()
+            self.server_proc.wait()
+
+
+def _ext(obj):
+    if type(obj).__name__ == "Ext" and isinstance(getattr(obj, "type", None), int):  # meshcat's arrays (umsgpack.Ext)
+        return msgpack.ExtType(obj.type, obj.data)
+    raise TypeError(f"cannot pack {type(obj).__name__} for meshcat")
+
+
+def _pack(data: dict) -> bytes:
+    """meshcat's message bytes, packed by msgpack's compiled packer (meshcat's own is pure Python: a long animation
+    took seconds to pack)."""
+    return msgpack.packb(data, default=_ext)
+
+
+def _die_with_parent() -> None:  # runs in the child between fork and exec
+    ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def _start_server() -> tuple[subprocess.Popen, str, str]:
+    """meshcat's zmq server as a child process bound to 127.0.0.1 (as `meshcat.servers.zmqserver` starts it, plus
+    the parent-death signal)."""
+    from meshcat.servers.zmqserver import match_web_url, match_zmq_url
+
+    env = dict(os.environ, PYTHONPATH=str(Path(meshcat.__file__).resolve().parents[1]))
+    proc = subprocess.Popen([sys.executable, "-u", "-m", "meshcat.servers.zmqserver"], stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, env=env, start_new_session=True,
+                            preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None)
+    line = ""
+    while "zmq_url" not in line:
+        line = proc.stdout.readline().strip().decode("utf-8")
+        if proc.poll() is not None:
+            raise RuntimeError(f"the meshcat server exited with status {proc.returncode}")
+    zmq_url = match_zmq_url(line)
+    web_url = match_web_url(proc.stdout.readline().strip().decode("utf-8"))
+    proc.stdout.close()
+    atexit.register(SceneWindow.close, SimpleNamespace(server_proc=proc))
+    return proc, zmq_url, web_url
+
+
+def new_scene(grid: bool = False, axes: bool = False) -> meshcat.Visualizer:
+    """A meshcat visualizer with its own server (bound to 127.0.0.1, ended with the kernel); starts empty, without
+    meshcat's grid and axes unless asked for. `view(vis)` shows the scene."""
+    vis = meshcat.Visualizer(window=SceneWindow())
     vis.delete()
+    vis["/Grid"].set_property("visible", bool(grid))
+    vis["/Axes"].set_property("visible", bool(axes))
     return vis
+
+
+def geometry_sent(vis) -> int:
+    """How many geometry messages (set_object) the scene's window has sent (0 for a window that does not count)."""
+    return int(getattr(vis.window, "sent", {}).get("SetObject", 0))
 
 
 # The page shown in a notebook output: meshcat's viewer script and websocket reached through the Jupyter server
@@ -53,6 +128,7 @@ overflow:hidden}</style></head><body><div id="pane"></div><script>
   script.src = http + "static/main.min.js";
   script.onload = function () {
     window.viewer = new MeshCat.Viewer(document.getElementById("pane"));
+    window.viewer.gui.domElement.style.display = "none";  // meshcat's "Open Controls" bar would cover a corner
     window.viewer.connect(ws);
   };
   script.onerror = function () {
@@ -61,14 +137,19 @@ overflow:hidden}</style></head><body><div id="pane"></div><script>
   };
   document.head.appendChild(script);
 })();
-</script></body></html>"""
+</script>OVERLAY</body></html>"""
+_CAPTION_BOXES = ("<div style='position:fixed;left:0;top:0;background:rgba(255,255,255,.88);font:15px sans-serif;"
+                  "padding:5px 10px'><b id='wb-caption'></b></div><div id='wb-footer' style='position:fixed;right:0;"
+                  "bottom:0;background:rgba(255,255,255,.88);font:13px sans-serif;padding:4px 10px'></div>")
 
 
-def view(vis: meshcat.Visualizer, height: int = 460) -> HTML:
+def view(vis: meshcat.Visualizer, height: int = 460, captions: bool = False) -> HTML:
     """The live scene as a notebook output (an IPython HTML object): works on a remote JupyterLab through the Jupyter
-    server's proxy; the meshcat server itself listens on 127.0.0.1 only."""
+    server's proxy; the meshcat server itself listens on 127.0.0.1 only. With `captions`, the caption and footer of
+    the animation playing (the track a plan view sets on the scene) are shown over the canvas's corners."""
     port = urlparse(vis.url()).port
-    page = _VIEW_PAGE.replace("PORT", json.dumps(int(port)))
+    overlay = _CAPTION_BOXES + f"<script>{CAPTION_SCRIPT.replace('TRACK', 'null')}</script>" if captions else ""
+    page = _VIEW_PAGE.replace("PORT", json.dumps(int(port))).replace("OVERLAY", overlay)
     return HTML(f'<div class="workbench-view"><iframe srcdoc="{html.escape(page, quote=True)}" '
                 f'style="width:100%;height:{int(height)}px;border:1px solid #ddd;resize:vertical"></iframe></div>')
 
@@ -198,22 +279,40 @@ def show_frame(vis: meshcat.Visualizer, path: str, pose: np.ndarray, length: flo
     vis[path].set_transform(np.asarray(pose, dtype=np.float64))
 
 
-def frame_camera(vis: meshcat.Visualizer, center: np.ndarray, radius: float) -> None:
+VIEW_DIRECTION = np.array([0.75, -0.65, 0.55])
+"""World direction from the framed work toward the default camera: front right and above."""
+
+
+def frame_camera(vis: meshcat.Visualizer, center: np.ndarray, radius: float, direction: np.ndarray | None = None) -> None:
     """Aim the default camera at `center` so a sphere of `radius` fills the view (meshcat's 75 degree vertical field
-    of view; its camera frame is y-up), seen from the front right and above."""
+    of view), seen from `direction` (world; default `VIEW_DIRECTION`, from the front right and above)."""
     c = np.asarray(center, dtype=np.float64)
     vis["/Cameras/default"].set_transform(tf.translation_matrix(c))
     d = 1.1 * max(float(radius), 1e-3) / np.sin(np.radians(37.5))
-    direction = np.array([0.75, 0.55, 0.65])  # x, y-up, z of meshcat's rotated camera frame
-    pos = d * direction / np.linalg.norm(direction)
+    w = np.asarray(VIEW_DIRECTION if direction is None else direction, dtype=np.float64)
+    w = w / max(np.linalg.norm(w), 1e-12)
+    pos = d * np.array([w[0], w[2], -w[1]])  # meshcat's rotated camera frame is y-up: world (x, y, z) -> (x, z, -y)
     vis["/Cameras/default/rotated/<object>"].set_property("position", pos.tolist())
 
 
-def frame_points(vis: meshcat.Visualizer, points: np.ndarray) -> None:
+def frame_points(vis: meshcat.Visualizer, points: np.ndarray, direction: np.ndarray | None = None) -> None:
     """Frame the camera on everything in `points` (vertices, positions): their bounding sphere fills the view."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     lo, hi = p.min(axis=0), p.max(axis=0)
-    frame_camera(vis, (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2)
+    frame_camera(vis, (lo + hi) / 2, float(np.linalg.norm(hi - lo)) / 2, direction)
+
+
+def beside_hand(approach: np.ndarray) -> np.ndarray:
+    """A camera direction near the default that looks at a grasp from the fingers' side, not through the hand's
+    body (which lies behind the TCP along -`approach`)."""
+    a = np.asarray(approach, dtype=np.float64)
+    a = a / max(np.linalg.norm(a), 1e-12)
+    d = VIEW_DIRECTION / np.linalg.norm(VIEW_DIRECTION)
+    side = d - (d @ a) * a
+    if np.linalg.norm(side) < 1e-6:
+        side = np.cross(a, [0.0, 0.0, 1.0]) if abs(a[2]) < 0.9 else np.cross(a, [1.0, 0.0, 0.0])
+    side /= np.linalg.norm(side)
+    return side + 0.6 * a  # from the side, a little ahead of the jaw
 
 
 def static_html(vis: meshcat.Visualizer, out: str | Path) -> Path:

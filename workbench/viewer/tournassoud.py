@@ -1,6 +1,7 @@
 """meshcat views of the grasp-placement table planner (Tournassoud, Lozano-Perez & Mazer 1987, Figs. 1-4):
 a grasp class's features on the object with the hand at (G_i, theta); the object at (P_j, phi) on the table with
-the hand; and a returned sequence animated with the robot (the roadmap planner's plan animation)."""
+the hand; a task's pick-up, destination and obstacles; and a returned sequence animated with the robot (the roadmap
+planner's plan animation)."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from workbench.viewer.scenes import (
     GREY,
     ORANGE,
     RED,
+    legend,
     show_gripper,
     show_mesh,
     show_segments,
@@ -84,3 +86,19 @@ def show_conjunction(vis: meshcat.Visualizer, mesh: trimesh.Trimesh, table: Gras
 def show_sequence(vis: meshcat.Visualizer, plan, robot, mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30):
     """A realised sequence animated with the robot (the plan animation of `workbench.viz.plan`)."""
     return show_plan(vis, plan, robot, mesh, table, fps=fps)
+
+
+def show_task(vis: meshcat.Visualizer, mesh: trimesh.Trimesh, pickup_pose: np.ndarray, destination_pose: np.ndarray,
+              obstacles, insertion: np.ndarray | None = None, depth: float = 0.0) -> str:
+    """Fig. 1's task (Section 5.1): the part where it is picked up (blue) and where it goes (green), the obstacles
+    there (grey, half transparent) and the insertion as an orange segment ending at the destination; returns a
+    legend (HTML) for the colours."""
+    show_mesh(vis, "task/pickup", mesh.copy().apply_transform(pickup_pose), color=BLUE)
+    show_mesh(vis, "task/destination", mesh.copy().apply_transform(destination_pose), color=GREEN, opacity=0.6)
+    for k, o in enumerate(obstacles):
+        show_mesh(vis, f"task/obstacle_{k}", o.world_mesh(), color=GREY, opacity=0.5)
+    if insertion is not None and depth > 0:
+        end = mesh.copy().apply_transform(destination_pose).bounds.mean(axis=0)
+        show_segments(vis, "task/insertion", (end - depth * np.asarray(insertion))[None], end[None], color=ORANGE)
+    return legend([(BLUE, "part at the pick-up"), (GREEN, "part at the destination"), (GREY, "obstacles"),
+                   (ORANGE, "insertion")], "Fig. 1's task")

@@ -4,10 +4,12 @@ Figs. 11-12), exported as static HTML that opens without a server.
 The robot and the planning gripper (at the step's jaw opening) are drawn by `workbench.viewer.robot.RobotView`
 from the URDF's visual (or collision) meshes, the robot's own hand replaced by the planning gripper.
 A plan with motions plays its timed trajectory at its real speed (`timed_frames`: frames at `fps` per
-second of plan time), with a caption naming the current step (pick, transfer, release, regrasp, place) and a colour
-key; a plan without motions plays its waypoints joined by straight joint lines (`keyframes`, not a motion a robot
-could execute). The object rests at its pose or follows the TCP while held. Start (yellow) and goal (blue) poses
-stay as ghosts, intermediate placements as faint outlines.
+second of plan time); a plan without motions plays its waypoints joined by straight joint lines (`keyframes`, not a
+motion a robot could execute). The object rests at its pose or follows the TCP while held. Start (yellow) and goal
+(blue) poses stay as ghosts, intermediate placements as faint outlines. `PlanView` sends that scene once and plays
+any plan in it by transforms. The caption naming the step playing and its footer come from one track
+(`caption_track`) and are HTML over the canvas (`plan_overlay` in a static page, `view(vis, captions=True)` live),
+never panels in the scene.
 """
 
 from __future__ import annotations
@@ -21,10 +23,12 @@ import meshcat.animation as manim
 import numpy as np
 import trimesh
 
+from workbench.grasping.naming import per_part_numbers
 from workbench.planners.wan_harada.plans import inverse_pose
 from workbench.robots.chain import forward
 from workbench.robots.timing import TimedSegment
-from workbench.viewer.captions import add_overlays, overlay_corners
+from workbench.viewer.captions import CAPTION_SCRIPT, CAPTION_TEXT
+from workbench.viewer.live import Switches, transform_animation
 from workbench.viewer.robot import RobotView
 from workbench.viewer.scenes import (
     frame_points,
@@ -36,8 +40,7 @@ from workbench.viewer.scenes import (
 )
 
 OBJECT_COLOR, START_COLOR, GOAL_COLOR, TABLE_COLOR = 0xE0A030, 0xF0D040, 0x3366DD, 0x8B6B4A
-CAMERA_DIR = np.array([0.8, -0.8, 0.0]) / np.hypot(0.8, 0.8)
-"""Horizontal direction from the scene toward `frame_camera`'s default camera (captions face it)."""
+SIMULATED_COLOR = 0xD03060  # the part as MuJoCo moved it (`workbench simulate`), beside the planned one
 
 
 def keyframes(plan, frames_move: int = 14, frames_line: int = 7, frames_jaw: int = 5,
@@ -129,52 +132,96 @@ def plan_frames(plan, robot, fps: int = 30) -> list[dict]:
     return frames
 
 
+PLAN_VIEW = np.array([0.35, -0.9, 0.6])
+"""World direction toward the camera of a plan: from the side of the arm's reach, so that the arm stands beside the
+part rather than in front of it."""
+
+
+class PlanView:
+    """A plan's scene, sent once per robot and part: the table, the robot, the part, its start and goal ghosts and
+    ghosts for intermediate placements (more are sent only when a plan needs more). `play(plan)` then only moves
+    them and sets the animation, so a new search or another alternative sends no geometry."""
+
+    def __init__(self, vis: meshcat.Visualizer, robot, obj_mesh: trimesh.Trimesh, table: tuple | None = None,
+                 path: str = "plan", kind: str = "visual", ghosts: int = 4):
+        self.vis, self.robot, self.mesh, self.path = vis, robot, obj_mesh, path
+        self.switches = Switches(vis)
+        vis[path].delete()
+        if table is not None:
+            (x0, y0), (x1, y1), thick = table
+            box = trimesh.creation.box(extents=(x1 - x0, y1 - y0, thick))
+            box.apply_translation(((x0 + x1) / 2, (y0 + y1) / 2, -thick / 2))
+            show_mesh(vis, f"{path}/table", box, color=TABLE_COLOR, opacity=0.5)
+        show_mesh(vis, f"{path}/start", obj_mesh, color=START_COLOR, opacity=0.35)
+        show_mesh(vis, f"{path}/goal", obj_mesh, color=GOAL_COLOR, opacity=0.35)
+        show_mesh(vis, f"{path}/object", obj_mesh, color=OBJECT_COLOR)
+        self.ghosts, self.simulated = 0, False
+        self._more_ghosts(ghosts)
+        self.robot_view = RobotView(vis, robot, f"{path}/robot", kind)
+
+    def _more_ghosts(self, n: int) -> None:
+        while self.ghosts < n:
+            show_mesh(self.vis, f"{self.path}/placements/{self.ghosts}", self.mesh, color=0x999999, opacity=0.15)
+            self.switches.show(f"{self.path}/placements/{self.ghosts}", False)
+            self.ghosts += 1
+
+    def play(self, plan, fps: int = 30, frames: list[dict] | None = None, numbers: dict[int, int] | None = None,
+             simulated: tuple[np.ndarray, np.ndarray] | None = None) -> manim.Animation:
+        """Move the ghosts to the plan's poses and attach its animation (looped); `frames`: `plan_frames(plan, robot,
+        fps)` when the caller has them already; `simulated`: (t, poses (K, 4, 4)), the part as a physics replay moved
+        it, played beside the planned part (a timed plan only). The caption track (`caption_track`, placements named
+        by `numbers`) rides along as a property of the scene's /Captions node, for the live view's overlay."""
+        path, vis, sw = self.path, self.vis, self.switches
+        sw.move(f"{path}/start", plan.start_pose)
+        sw.move(f"{path}/goal", plan.goal_pose)
+        between = plan.steps[1:-1:2]
+        self._more_ghosts(len(between))
+        for i in range(self.ghosts):
+            if i < len(between):
+                sw.move(f"{path}/placements/{i}", between[i].object_pose)
+            sw.show(f"{path}/placements/{i}", i < len(between))
+        frames = plan_frames(plan, self.robot, fps) if frames is None else frames
+        tracks: dict[str, list] = {f"{path}/object": [fr["object"] for fr in frames]}
+        if simulated is not None and plan.segments:
+            if not self.simulated:
+                show_mesh(vis, f"{path}/simulated", self.mesh, color=SIMULATED_COLOR, opacity=0.6)
+                self.simulated = True
+            t_sim, p_sim = simulated
+            at = np.clip(np.searchsorted(t_sim, np.arange(len(frames)) / fps), 0, len(t_sim) - 1)
+            tracks[f"{path}/simulated"] = list(np.asarray(p_sim)[at])
+        if self.simulated:
+            sw.show(f"{path}/simulated", simulated is not None and bool(plan.segments))
+        for fr in frames:
+            for name, m in self.robot_view.poses(fr["q"], fr["jaw"]).items():
+                tracks.setdefault(name, []).append(m)
+        anim = transform_animation(vis, {k: np.array(v) for k, v in tracks.items()}, fps)
+        if frames:  # the first frame as the scene's static state (shown before playing)
+            self.robot_view.show(frames[0]["q"], frames[0]["jaw"])
+            vis[f"{path}/object"].set_transform(plan.start_pose)
+        vis["/Captions"].set_property("workbench_captions", caption_track(plan, frames, fps, numbers))
+        vis.set_animation(anim, play=True, repetitions=1000)
+        return anim
+
+
 def show_plan(vis: meshcat.Visualizer, plan, robot, obj_mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30,
-              path: str = "plan", kind: str = "visual", frames: list[dict] | None = None) -> manim.Animation:
+              path: str = "plan", kind: str = "visual", frames: list[dict] | None = None,
+              simulated: tuple[np.ndarray, np.ndarray] | None = None) -> manim.Animation:
     """Draw the plan's scene under `path` and attach its animation to `vis` (looped). The robot and the planning
     gripper are drawn by `workbench.viewer.robot.RobotView` (`kind`: the URDF's visual or collision meshes);
-    `frames`: `plan_frames(plan, robot, fps)` when the caller has them already."""
-
-    vis[path].delete()
-    vis["/Grid"].set_property("visible", False)  # the table stands for the plane z = 0
-    if table is not None:
-        (x0, y0), (x1, y1), thick = table
-        box = trimesh.creation.box(extents=(x1 - x0, y1 - y0, thick))
-        box.apply_translation(((x0 + x1) / 2, (y0 + y1) / 2, -thick / 2))
-        show_mesh(vis, f"{path}/table", box, color=TABLE_COLOR, opacity=0.5)
-    show_mesh(vis, f"{path}/start", obj_mesh, color=START_COLOR, opacity=0.35, pose=plan.start_pose)
-    show_mesh(vis, f"{path}/goal", obj_mesh, color=GOAL_COLOR, opacity=0.35, pose=plan.goal_pose)
-    for i, s in enumerate(plan.steps[1:-1:2]):
-        show_mesh(vis, f"{path}/placements/{i}", obj_mesh, color=0x999999, opacity=0.15, pose=s.object_pose)
-    show_mesh(vis, f"{path}/object", obj_mesh, color=OBJECT_COLOR)
-    view = RobotView(vis, robot, f"{path}/robot", kind)
-    frames = plan_frames(plan, robot, fps) if frames is None else frames
-    anim = manim.Animation(default_framerate=fps)
-    if plan.segments:
-        key = [("part", OBJECT_COLOR), ("start pose", START_COLOR), ("goal pose", GOAL_COLOR),
-               ("put down to regrasp", 0x999999), ("table", TABLE_COLOR)]
-        add_overlays(vis, anim, frames, f"{path}/captions", caption_anchor(plan, arm_reach(plan, robot)), CAMERA_DIR, key)
-    for i, fr in enumerate(frames):
-        poses = view.poses(fr["q"], fr["jaw"])
-        obj_pose = fr["object"]
-        with anim.at_frame(vis, i) as f:
-            for name, m in poses.items():
-                f[name].set_transform(m)
-            f[f"{path}/object"].set_transform(obj_pose)
-    if frames:  # the first frame as the scene's static state (shown before playing)
-        view.show(frames[0]["q"], frames[0]["jaw"])
-        vis[f"{path}/object"].set_transform(plan.start_pose)
-    vis.set_animation(anim, play=True, repetitions=1000)
-    return anim
+    `frames`: `plan_frames(plan, robot, fps)` when the caller has them already. `simulated`: (t, poses (K, 4, 4)),
+    the part as a physics replay moved it, played beside the planned part (a timed plan only)."""
+    return PlanView(vis, robot, obj_mesh, table, path, kind).play(plan, fps, frames, simulated=simulated)
 
 
 def frame_plan(vis: meshcat.Visualizer, plan, robot) -> None:
-    """Camera on every pose the part takes (start, placements, goal), the robot's base and its joints at every
-    waypoint (so that a large arm stays in view as well as a small one) and the captions above them."""
-    reach = arm_reach(plan, robot)
+    """Camera on the work: every pose the part takes (start, placements, goal), the table patch around them and the
+    arm's joints along the plan (so that a large arm stays in view as well as a small one)."""
     parts = [plan.start_pose[:3, 3], plan.goal_pose[:3, 3], robot.base[:3, 3]]
     parts += [np.asarray(s.object_pose)[:3, 3] for s in plan.steps]
-    frame_points(vis, np.vstack([parts, reach, overlay_corners(caption_anchor(plan, reach), CAMERA_DIR)]))
+    parts = np.vstack(parts)
+    patch = np.vstack([parts[:, :2].min(0) - 0.1, parts[:, :2].max(0) + 0.1])
+    patch = np.column_stack([patch, np.zeros(2)])
+    frame_points(vis, np.vstack([parts, patch, arm_reach(plan, robot)]), PLAN_VIEW)
 
 
 def arm_reach(plan, robot) -> np.ndarray:
@@ -190,12 +237,27 @@ def arm_reach(plan, robot) -> np.ndarray:
     return np.vstack([joints.reshape(-1, 3), tcp])
 
 
-def caption_anchor(plan, reach: np.ndarray) -> np.ndarray:
-    """Where `show_plan` stands the captions: behind the part's start and goal as the camera sees them, 0.25 m above
-    the highest the arm reaches (`arm_reach`), so that the arm never hides them, and at least 0.62 m up."""
-    anchor = 0.5 * (plan.start_pose[:3, 3] + plan.goal_pose[:3, 3]) + CAMERA_DIR * -0.3
-    anchor[2] = max(0.62, float(reach[:, 2].max()) + 0.25)
-    return anchor
+STEP_NAMES = {"pick": "pick", "transfer": "release", "regrasp": "regrasp", "place": "place"}
+"""A plan step by what the hand does there (a "transfer" step puts the part down at an intermediate placement)."""
+
+
+def caption_track(plan, frames: list[dict], fps: int = 30, numbers: dict[int, int] | None = None) -> dict:
+    """The one source of every caption of a plan's animation: per frame, the index of the text naming its step
+    (`steps`: 0 before the first step, k for step k), the texts (`captions`: "step k of n: what the hand does"),
+    the footers (`footers`: the same step's grasp, pose and jaw; placements by their number within the part,
+    `numbers`: store id -> number, else by store id), and the frame rate."""
+    n = len(plan.steps)
+    numbers = numbers or {}
+    captions = ["start: the part at its start pose, the robot at its first retract configuration"]
+    footers = ["start"]
+    for i, s in enumerate(plan.steps):
+        where = "start" if i == 0 else ("goal" if i == n - 1 else f"placement {numbers.get(int(s.idfreetabletopplacement), s.idfreetabletopplacement)}")
+        what = CAPTION_TEXT[STEP_NAMES.get(s.kind, s.kind)] if STEP_NAMES.get(s.kind, s.kind) in CAPTION_TEXT else s.kind
+        captions.append(f"step {i + 1} of {n}: {what}")
+        footers.append(f"step {i + 1} of {n}: {STEP_NAMES.get(s.kind, s.kind)} with grasp {s.idfreeairgrip} at {where}, "
+                       f"x {s.position[0]:+.3f} m, y {s.position[1]:+.3f} m, yaw {np.degrees(s.yaw):+.1f} deg, "
+                       f"jaw {s.jawwidth * 1000:.1f} mm")
+    return {"steps": [int(f["step"]) + 1 for f in frames], "captions": captions, "footers": footers, "fps": fps}
 
 
 def scene_table(planner) -> tuple:
@@ -205,42 +267,44 @@ def scene_table(planner) -> tuple:
 
 
 def plan_scene(plan, planner, out: str | Path | None = None, vis: meshcat.Visualizer | None = None,
-               kind: str = "collision") -> Path | meshcat.Visualizer:
+               kind: str = "collision", simulated: tuple[np.ndarray, np.ndarray] | None = None) -> Path | meshcat.Visualizer:
     """The plan's animation in a meshcat scene (a new one unless `vis`); written as static HTML when `out` is given
     (returns its path), else the visualizer is returned. `kind`: the robot's collision meshes (a file of a few MB)
-    or its visual meshes (nicer, about 15 MB for the Panda)."""
+    or its visual meshes (nicer, about 15 MB for the Panda). `simulated`: the part's poses in a physics replay
+    (t, poses), played beside the planned part."""
     if vis is None:
         vis = new_scene()
     frames = plan_frames(plan, planner.robot)  # the animation's, and the page caption's clock
-    show_plan(vis, plan, planner.robot, planner.object.mesh, scene_table(planner), kind=kind, frames=frames)
+    numbers = per_part_numbers(planner.free["idfreetabletopplacement"])
+    PlanView(vis, planner.robot, planner.object.mesh, scene_table(planner), kind=kind).play(
+        plan, frames=frames, numbers=numbers, simulated=simulated)
     frame_plan(vis, plan, planner.robot)
     if out is None:
         return vis
     path = static_html(vis, out)
     page = path.read_text()
-    path.write_text(page.replace("</body>", plan_overlay(plan, [f["step"] for f in frames]) + "</body>", 1))
+    path.write_text(page.replace("</body>", plan_overlay(caption_track(plan, frames, numbers=numbers),
+                                                         simulated=simulated is not None) + "</body>", 1))
     return path
 
 
-def plan_overlay(plan, frame_steps: list[int], fps: int = 30) -> str:
-    """HTML for a static plan page: a colour key (top left) and a caption naming the step playing (bottom), read
-    from the meshcat animation's clock (`viewer.animator`)."""
+def plan_overlay(track: dict, simulated: bool = False) -> str:
+    """HTML for a static plan page: a colour key (top left; `simulated`: it names the part in physics), the caption
+    naming the step playing (under the key) and its footer (bottom), both read from `caption_track` at the meshcat
+    animation's clock."""
+    keys = KEY[:1] + (((SIMULATED_COLOR, "the part in physics"),) if simulated else ()) + KEY[1:]
     legend = "".join(f"<span style='margin-right:12px;white-space:nowrap'><span style='display:inline-block;width:11px;"
                      f"height:11px;margin-right:4px;border:1px solid #555;background:#{c:06x}'></span>{t}</span>"
-                     for c, t in ((OBJECT_COLOR, "the part"), (START_COLOR, "start pose"), (GOAL_COLOR, "goal pose"),
-                                  (0x999999, "intermediate placements"), (TABLE_COLOR, "table")))
-    captions = ["start: the part at its start pose, the robot at its first retract configuration"] + [
-        f"step {i + 1} of {len(plan.steps)}: {' '.join(line.split('. ', 1)[-1].split())}"
-        for i, line in enumerate(plan.lines()[:len(plan.steps)])]
-    data = json.dumps({"steps": [s + 1 for s in frame_steps], "captions": captions, "fps": fps})
+                     for c, t in keys)
     box = "position:fixed;left:0;background:rgba(255,255,255,.88);font:14px sans-serif;padding:6px 12px;z-index:10"
-    return (f"<div id='wb-legend' style='{box};top:0'>{legend}</div>"
-            f"<div id='wb-caption' style='{box};bottom:0;right:0;font-size:15px'>{html.escape(captions[0])}</div>"
-            "<script>(function () { var d = " + data + ", el = document.getElementById('wb-caption');"
-            " function tick() { var a = window.viewer && viewer.animator && viewer.animator.actions[0];"
-            " var f = a ? Math.min(Math.floor(a.time * d.fps + 1e-6), d.steps.length - 1) : 0;"
-            " var t = d.captions[d.steps[Math.max(f, 0)]]; if (el.textContent !== t) el.textContent = t;"
-            " requestAnimationFrame(tick); } tick(); })();</script>")
+    return (f"<div id='wb-legend' style='{box};top:0'>{legend}<br><b id='wb-caption' style='font-size:16px'>"
+            f"{html.escape(track['captions'][0])}</b></div>"
+            f"<div id='wb-footer' style='{box};bottom:0;right:0;font-size:13px'>{html.escape(track['footers'][0])}</div>"
+            f"<script>{CAPTION_SCRIPT.replace('TRACK', json.dumps(track))}</script>")
+
+
+KEY = ((OBJECT_COLOR, "the part"), (START_COLOR, "start pose"), (GOAL_COLOR, "goal pose"),
+       (0x999999, "intermediate placements"), (TABLE_COLOR, "table"))
 
 
 def show_roadmap(vis: meshcat.Visualizer, planner, result=None, path: str = "roadmap", limit: int = 20000) -> dict:

@@ -4,7 +4,6 @@ these classes only read widgets, call the library and draw with `workbench.viewe
 
 from __future__ import annotations
 
-import re
 from dataclasses import replace
 
 import ipywidgets as W
@@ -13,8 +12,21 @@ import trimesh
 
 from workbench.geometry.objects import ObjectModel
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
-from workbench.robots.gripper import Gripper
+from workbench.robots.gripper import BUNDLED, Gripper, load_gripper
 from workbench.viewer import scenes as viz
+from workbench.viewer.live import (
+    HandOutlines,
+    SolidHand,
+    Switches,
+    finger_corners,
+    mesh_object,
+    pick_evenly,
+    points_object,
+    send_group,
+)
+from workbench.widgets.panel import Busy, StageCache, beside, digest
+
+HAND_COLOR = 0x55AA77
 
 
 def counts_table(counts: dict, title: str = "") -> str:
@@ -25,7 +37,14 @@ def counts_table(counts: dict, title: str = "") -> str:
 
 
 class GraspExplorer:
-    """Tune segmentation, sampling, filters and rotations; see facets, samples, pairs and hands (Section III)."""
+    """Tune segmentation, sampling, filters and rotations; see facets, samples, pairs and hands (Section III).
+
+    A parameter slider replans (results cached by parameter digest: going back to a value is instant) and sends the
+    scene's geometry once; the layer boxes, the highlighted facet, the number of hands and the selected grasp only
+    show, hide and move what was sent."""
+
+    LAYERS = (("facets", True), ("all samples", False), ("after neighbour filter", False),
+              ("after distance filter", True), ("contact pairs", True), ("collided hands", False))
 
     def __init__(self, obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspParams(), vis=None,
                  max_hands: int = 40):
@@ -33,106 +52,166 @@ class GraspExplorer:
         self.base = params  # parameters without a widget (merge_angle, parallel_angle, com_max, seed, ...) stay as given
         self.vis = vis if vis is not None else viz.new_scene()
         self.plan: GraspPlan | None = None
-        label = {"style": {"description_width": "initial"}, "layout": W.Layout(width="430px")}
+        self.cache = StageCache()
+        self.switches = Switches(self.vis)
+        self.solid: SolidHand | None = None
+        self.outlines = HandOutlines(gripper)
+        label = {"style": {"description_width": "initial"}, "layout": W.Layout(width="420px"), "continuous_update": False}
         self.tau = W.FloatSlider(value=np.degrees(params.tau), min=2, max=45, step=1,
                                  description="segmentation threshold τ (deg)", **label)
         self.method = W.ToggleButtons(options=[("over-segmentation", "over"), ("conventional", "conventional")],
-                                      value=params.segmentation)
+                                      value=params.segmentation, style={"button_width": "140px"})
+        # the library's default density (samples per neighbour disc) unless the parameters give one
         self.density = W.FloatLogSlider(value=params.density or 8.0 / params.neighbour_radius**2, base=10, min=3, max=6,
                                         description="sampling density (samples/m²)", **label)
+        self.density_given, self._quiet = params.density is not None, False
         self.dist = W.FloatRangeSlider(value=(params.dist_min * 1e3, params.dist_max * 1e3), min=0, max=50, step=0.5,
                                        description="distance to facet boundary (mm)", **label)
         self.radius = W.FloatSlider(value=params.neighbour_radius * 1e3, min=0, max=30, step=0.5,
                                     description="near-neighbour radius (mm)", **label)
         self.rotations = W.IntSlider(value=params.rotations, min=1, max=24, description="hand rotations per pair", **label)
         self.facet = W.IntSlider(value=0, min=0, max=0, description="highlighted facet", **label)
-        self.hands = W.IntSlider(value=3, min=0, max=max_hands, description="free hands drawn", **label)
-        self.layers = {name: W.Checkbox(value=on, description=name, indent=False, layout=W.Layout(width="auto", margin="0 14px 0 0"))
-                       for name, on in (("facets", True), ("all samples", False), ("after neighbour filter", False),
-                                        ("after distance filter", True), ("contact pairs", True), ("collided hands", False))}
+        self.hands = W.IntSlider(value=3, min=0, max=max_hands, description="hands drawn (outlines)", **label)
+        self.selected = W.IntSlider(value=0, min=0, max=0, description="selected grasp (solid)", **label)
+        self.layers = {name: W.Checkbox(value=on, description=name, indent=False, layout=W.Layout(width="200px"))
+                       for name, on in self.LAYERS}
+        given = [] if gripper.name in BUNDLED or gripper.name == "franka_hand" else [(gripper.name, gripper)]
+        self.grippers = W.Dropdown(options=given + [(name, name) for name in BUNDLED],
+                                   value=given[0][1] if given else ("franka" if gripper.name == "franka_hand" else gripper.name),
+                                   description="gripper", style=label["style"], layout=W.Layout(width="420px"))
+        self.grippers.observe(lambda change: self.set_gripper(change["new"]), names="value")
         self.button = W.Button(description="plan grasps", button_style="primary")
+        self.busy = Busy()
         self.counts = W.HTML()
         self.key = W.HTML()
+        self.about = W.HTML()
         self.button.on_click(lambda _: self.run())
-        self.facet.observe(lambda _: self.draw_facet(), names="value")
-        self.hands.observe(lambda _: self.draw(), names="value")
-        for box in self.layers.values():
-            box.observe(lambda _: self.draw(), names="value")
-        self.widget = W.VBox([W.HBox([self.tau, self.method]), W.HBox([self.density, self.radius]),
-                              W.HBox([self.dist, self.rotations]), W.HBox(list(self.layers.values())),
-                              W.HBox([self.button, self.facet, self.hands]), self.key, self.counts])
+        for w in (self.tau, self.method, self.radius, self.dist, self.rotations):
+            w.observe(lambda _: self.run(), names="value")
+        self.density.observe(self._density_moved, names="value")
+        for w in (self.facet, self.hands, self.selected, *self.layers.values()):
+            w.observe(lambda _: self.show(), names="value")
+        controls = [self.grippers, self.tau, self.method, self.density, self.radius, self.dist, self.rotations,
+                    W.HTML("<b>view</b>"), self.facet, self.hands, self.selected,
+                    W.GridBox(list(self.layers.values()), layout=W.Layout(grid_template_columns="200px 200px")),
+                    W.HBox([self.button, self.busy.widget]), self.about, self.counts]
+        self.controls = W.VBox(controls)
+        self._widget = None
+
+    @property
+    def widget(self) -> W.Widget:
+        """The controls beside the live 3D view and its colour key."""
+        if self._widget is None:
+            self._widget = beside(self.controls.children, self.vis, self.key)
+        return self._widget
+
+    def set_gripper(self, choice: Gripper | str) -> None:
+        """Plan with another gripper (a bundled name or a loaded Gripper) and show its grasps."""
+        self.gripper = choice if isinstance(choice, Gripper) else load_gripper(choice)
+        self.outlines = HandOutlines(self.gripper)
+        self.run()
+
+    def _density_moved(self, _) -> None:
+        if not self._quiet:
+            self.density_given = True
+            self.run()
 
     def params(self) -> GraspParams:
         """The given parameters with the widgets' values; the others are kept."""
+        density = self.density.value if self.density_given else self.base.density
         return replace(self.base, tau=float(np.radians(self.tau.value)), segmentation=self.method.value,
-                       density=self.density.value, neighbour_radius=self.radius.value / 1e3,
+                       density=density, neighbour_radius=self.radius.value / 1e3,
                        dist_min=self.dist.value[0] / 1e3, dist_max=self.dist.value[1] / 1e3, rotations=self.rotations.value)
 
     def run(self) -> GraspPlan:
-        self.plan = plan_grasps(self.obj, self.gripper, self.params())
-        self.facet.max = max(len(self.plan.facets) - 1, 0)
-        self.counts.value = counts_table(self.plan.counts, "counts at every stage") + \
-            counts_table({k: f"{v * 1e3:.1f} ms" for k, v in self.plan.timings.items()}, "time per stage")
-        self.draw()
-        return self.plan
+        """Replan with the widgets' parameters (or take the cached plan for them) and send its scene."""
+        params = self.params()
+        with self.busy.running("planning grasps"):
+            self.plan = self.cache.get(digest(self.obj.digest or self.obj.name, self.gripper.digest, params),
+                                       lambda: plan_grasps(self.obj, self.gripper, params))
+            self.send()
+        plan = self.plan
+        if not self.density_given:  # show the density the library chose (its default scales with the part)
+            self._quiet = True
+            self.density.value = 8.0 / plan.lengths["neighbour_radius"] ** 2
+            self._quiet = False
+        self.counts.value = counts_table(plan.counts, "counts at every stage") + \
+            counts_table({k: f"{v * 1e3:.1f} ms" for k, v in plan.timings.items()}, "time per stage (when computed)")
+        return plan
 
-    def draw(self) -> None:
-        plan, vis, on = self.plan, self.vis, {k: w.value for k, w in self.layers.items()}
+    def send(self) -> None:
+        """Send the plan's geometry: everything any view setting can show, hidden where it is off."""
+        plan, vis, mesh = self.plan, self.vis, self.obj.mesh
+        vis["grasps"].delete()
+        self.switches.forget("grasps")
+        fid, tid = plan.facets.membership()
+        first = np.full(len(mesh.faces), -1)
+        first[tid[::-1]] = fid[::-1]  # colour each triangle by the first facet holding it
+        viz.show_face_colors(vis, "grasps/part/facets", mesh, viz.palette(len(plan.facets))[first])
+        viz.show_mesh(vis, "grasps/part/plain", mesh, color=viz.GREY, opacity=0.5)
+        s, p = plan.samples, plan.pairs
+        viz.show_points(vis, "grasps/layers/all samples", s.points, viz.WHITE, size=0.002)
+        viz.show_points(vis, "grasps/layers/after neighbour filter", s.points[s.kept], viz.BLUE, size=0.003)
+        viz.show_points(vis, "grasps/layers/after distance filter", s.points[np.unique(s.pair_sample[s.pair_ok])],
+                        viz.GREEN, size=0.004)
+        live = p.level1_ok
+        dead = (p.width_ok & p.com_ok) & ~live
+        viz.show_segments(vis, "grasps/layers/contact pairs/free", p.point0[live], p.point1[live], viz.GREEN)
+        viz.show_segments(vis, "grasps/layers/contact pairs/level1", p.point0[dead], p.point1[dead], viz.RED)
+        collided = np.flatnonzero(~plan.candidate_free)
+        pick = collided[pick_evenly(len(collided), self.max_hands)]
+        self.outlines.send(vis, "grasps/layers/collided hands", plan.candidate_poses[pick],
+                           p.width[plan.candidate_pair[pick]], viz.RED)
+        g = plan.grasps
+        self.hand_pick = pick_evenly(len(g), self.max_hands)
+        self.outlines.send(vis, "grasps/hands", g.poses[self.hand_pick], g.jawwidth[self.hand_pick], HAND_COLOR)
+        self.solid = SolidHand(vis, "grasps/selected", self.gripper, viz.GREEN)
+        lift = 0.004 * float(mesh.scale) * np.asarray(plan.facets.normals)
+        size = 0.02 * float(mesh.scale)
+        self.facet_paths = []
+        for f in range(len(plan.facets)):  # each facet lifted in magenta with its samples, shown by the slider
+            sub = trimesh.Trimesh(mesh.vertices + lift[f], mesh.faces[plan.facets.triangles_of(f)], process=False)
+            mine = s.pair_facet == f
+            kept, removed = s.pair_sample[mine & s.pair_ok], s.pair_sample[mine & ~s.pair_ok]
+            pts = np.vstack([s.points[kept], s.points[removed]]) + 2 * lift[f]
+            colors = np.r_[np.full(len(kept), viz.GREEN), np.full(len(removed), viz.WHITE)]
+            children = [mesh_object(sub, viz.HIGHLIGHT)] + ([points_object(pts, colors, size)] if len(pts) else [])
+            self.facet_paths.append(send_group(vis, f"grasps/facet/{f}", children))
+            self.switches.visible[self.facet_paths[-1]] = False
+        self.facet.max = max(len(plan.facets) - 1, 0)
+        self.selected.max = max(len(g) - 1, 0)
+        self.show()
+        jaw = [finger_corners(self.gripper, g.poses[i], g.jawwidth[i]) for i in range(min(len(g), 1))]
+        # the part and the selected hand's jaw, seen from beside the hand rather than through its body
+        viz.frame_points(vis, np.vstack([mesh.bounds, *jaw]), viz.beside_hand(g.poses[0][:3, 2]) if len(g) else None)
+
+    def show(self) -> None:
+        """View-only: which layers, facet, hands and grasp are visible; no geometry is sent."""
+        plan = self.plan
         if plan is None:
             return
-        vis["grasps"].delete()
-        mesh = self.obj.mesh
-        if on["facets"]:
-            fid, tid = plan.facets.membership()
-            first = np.full(len(mesh.faces), -1)
-            first[tid[::-1]] = fid[::-1]  # colour each triangle by the first facet holding it
-            viz.show_face_colors(vis, "grasps/facets", mesh, viz.palette(len(plan.facets))[first])
-        else:
-            viz.show_mesh(vis, "grasps/facets", mesh, color=viz.GREY, opacity=0.5)
-        s = plan.samples
-        if on["all samples"]:
-            viz.show_points(vis, "grasps/samples/all", s.points, viz.WHITE, size=0.002)
-        if on["after neighbour filter"]:
-            viz.show_points(vis, "grasps/samples/neighbour", s.points[s.kept], viz.BLUE, size=0.003)
-        if on["after distance filter"]:
-            viz.show_points(vis, "grasps/samples/distance", s.points[np.unique(s.pair_sample[s.pair_ok])], viz.GREEN, size=0.004)
-        p = plan.pairs
-        live = p.level1_ok
-        if on["contact pairs"]:
-            viz.show_segments(vis, "grasps/pairs/free", p.point0[live], p.point1[live], viz.GREEN)
-            dead = (p.width_ok & p.com_ok) & ~live
-            viz.show_segments(vis, "grasps/pairs/level1", p.point0[dead], p.point1[dead], viz.RED)
-        if on["collided hands"]:
-            viz.show_grippers(vis, "grasps/hands/collided", self.gripper, plan.candidate_poses[~plan.candidate_free],
-                              p.width[plan.candidate_pair[~plan.candidate_free]], viz.RED, 0.12, self.hands.value)
+        on = {k: w.value for k, w in self.layers.items()}
+        sw = self.switches
+        sw.show("grasps/part/facets", on["facets"])
+        sw.show("grasps/part/plain", not on["facets"])
+        for name in list(self.layers)[1:]:
+            sw.show(f"grasps/layers/{name}", on[name])
+        shown = set(pick_evenly(len(self.hand_pick), self.hands.value).tolist())
+        for i in range(len(self.hand_pick)):
+            sw.show(f"grasps/hands/{i}", i in shown)
+        for i in range(min(self.max_hands, int((~plan.candidate_free).sum()))):
+            sw.show(f"grasps/layers/collided hands/{i}", i in shown)
+        f = self.facet.value
+        for i, path in enumerate(self.facet_paths):
+            sw.show(path, i == f)
         g = plan.grasps
-        shown = min(self.hands.value, len(g.poses))
-        if shown:  # a few hands, evenly picked, light and translucent: the part stays visible
-            viz.show_grippers(vis, "grasps/hands/free", self.gripper, g.poses, g.jawwidth, viz.GREEN, 0.12, shown)
-        self.draw_facet()
-        viz.frame_points(vis, mesh.bounds)
+        i = self.selected.value
+        self.solid.place(g.poses[i] if len(g) else None, g.jawwidth[i] if len(g) else None)
         self.key.value = viz.legend(
-            [(viz.HIGHLIGHT, f"facet {self.facet.value} (slider)"), (viz.GREEN, "its samples kept / contact pairs kept"),
+            [(viz.HIGHLIGHT, f"facet {f} (slider)"), (viz.GREEN, "its samples kept / contact pairs kept"),
              (viz.WHITE, "its samples removed by the distance filter"), (viz.RED, "pairs removed by the swept-pad check"),
              (viz.BLUE, "samples after the neighbour filter"),
-             (0x88CC99, f"free hands: {shown} drawn of {len(g.poses):,}")],
-            "colour key:") + "<small>other facets: one colour each (over-segmentation) on the part</small>"
-
-    def draw_facet(self) -> None:
-        """The slider's facet in magenta, lifted off the surface, with its samples: kept by the distance filter
-        (green) or removed (white)."""
-        plan = self.plan
-        if plan is None or len(plan.facets) == 0:
-            return
-        f = self.facet.value
-        tris = plan.facets.triangles_of(f)
-        sub = trimesh.Trimesh(self.obj.mesh.vertices, self.obj.mesh.faces[tris], process=False)
-        lift = 0.004 * float(self.obj.mesh.scale) * np.asarray(plan.facets.normals[f])
-        viz.show_mesh(self.vis, "grasps/facet/mesh", sub.copy().apply_translation(lift), color=viz.HIGHLIGHT)
-        s = plan.samples
-        mine = s.pair_facet == f
-        size = 0.02 * float(self.obj.mesh.scale)
-        viz.show_points(self.vis, "grasps/facet/kept", s.points[s.pair_sample[mine & s.pair_ok]] + 2 * lift, viz.GREEN, size)
-        viz.show_points(self.vis, "grasps/facet/removed", s.points[s.pair_sample[mine & ~s.pair_ok]] + 2 * lift, viz.WHITE, size)
-        if self.key.value:
-            self.key.value = re.sub(r"facet \d+ \(slider\)", f"facet {f} (slider)", self.key.value)
+             (HAND_COLOR, f"hands: {len(shown)} outlines of {len(g):,} grasps"), (viz.GREEN, "the selected grasp")],
+            "colour key:") + "<small>other facets: one colour each on the part</small>"
+        self.about.value = (f"<small>selected grasp {i}: jaw {g.jawwidth[i] * 1e3:.1f} mm, facets {int(g.facet0[i])} and "
+                            f"{int(g.facet1[i])}</small>" if len(g) else "<small>no grasp</small>")

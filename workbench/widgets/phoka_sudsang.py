@@ -21,6 +21,7 @@ from workbench.planners.phoka_sudsang.query import QueryResult, finger_assignmen
 from workbench.planners.phoka_sudsang.switching import FingerPlanner, build_planner
 from workbench.viewer import phoka_sudsang as vf
 from workbench.viewer import scenes as viz
+from workbench.widgets.panel import beside
 
 
 class FingersExplorer:
@@ -35,6 +36,7 @@ class FingersExplorer:
         self.planner: FingerPlanner | None = None
         self.result: QueryResult | None = None
         self._grasps: np.ndarray | None = None
+        self.hand: vf.FingerView | None = None
         n = len(self.contacts)
         label = {"style": {"description_width": "initial"}, "layout": W.Layout(width="380px")}
         self.k = W.IntSlider(value=min(params.k, n), min=4, max=min(120, n), description="clusters k", **label)
@@ -54,9 +56,16 @@ class FingersExplorer:
         self.build_button.on_click(lambda _: self.build())
         self.query_button.on_click(lambda _: self.run_query())
         self.step.observe(lambda _: self.show_step(self.step.value), names="value")
-        self.widget = W.VBox([W.HBox([self.k, self.mu]), W.HBox([self.sides, self.seed]),
-                              W.HBox([self.build_button, self.query_button, self.step]), self.key, self.info,
-                              self.step_info])
+        self.controls = W.VBox([self.k, self.mu, self.sides, self.seed, W.HBox([self.build_button, self.query_button]),
+                                self.step, self.info, self.step_info])
+        self._widget = None
+
+    @property
+    def widget(self) -> W.Widget:
+        """The controls beside the live 3D view and its colour key."""
+        if self._widget is None:
+            self._widget = beside(self.controls.children, self.vis, self.key)
+        return self._widget
 
     def params(self) -> ClusterParams:
         return ClusterParams(k=self.k.value, mu=self.mu.value, sides=self.sides.value, seed=self.seed.value)
@@ -74,6 +83,7 @@ class FingersExplorer:
                            + (f" (largest {int(sizes.max()):,})" if len(sizes) else "") + "<br>"
                            f"clustering {self.planner.times['clustering']:.2f} s, roadmap {self.planner.times['roadmap']:.2f} s")
         self.vis["fingers"].delete()
+        self.hand = None
         vf.show_clusters(self.vis, "fingers/clusters", self.contacts, cl.labels, cl.reps)
         viz.frame_points(self.vis, self.contacts.mesh.bounds)
         self.step.max, self.step.value = 0, 0
@@ -113,8 +123,9 @@ class FingersExplorer:
         lifted_from = np.full(5, -1)
         if lifted >= 0:
             lifted_from[lifted] = fingers[i - 1][lifted]
-        vf.show_fingers(self.vis, "fingers/hand", self.contacts, fingers[i], placed=placed, lifted=lifted,
-                        lifted_from=lifted_from)
+        if self.hand is None:
+            self.hand = vf.FingerView(self.vis, "fingers/hand", self.contacts)
+        self.hand.show(fingers[i], placed=placed, lifted=lifted, lifted_from=lifted_from)
         grasp = r.sequence[i].tolist()
         move = "start grasp" if i == 0 else (f"finger {placed} placed on contact {int(fingers[i][placed])}, "
                                               f"finger {lifted} lifted from contact {int(lifted_from[lifted])}")

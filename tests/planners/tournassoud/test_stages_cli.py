@@ -187,6 +187,13 @@ def test_removal_learns_and_explains(tmp_path, box, capsys):
     used = {(tuple(g), tuple(p)) for g, p in zip(doc["sequence"]["grasps"], doc["sequence"]["placements"][:-1])}
     used |= {(tuple(g), tuple(p)) for g, p in zip(doc["sequence"]["grasps"], doc["sequence"]["placements"][1:])}
     assert not used & {tuple(map(tuple, r["conjunction"])) for r in doc["removed"]}
+    # a goal range keeps its lower end: 85:85 is the 85-degree sample, and 85:90 can end at 85
+    for goal in ("1,85:85", "1,85:90"):
+        assert main(["gpplan", "--db", db, "--object", "box", "--initial", "0,30", "--goal", goal, "--no-motion",
+                     "--no-save", "--json", str(js)]) == 0
+        last = json.loads(js.read_text())["sequence"]["theta"][-1]
+        assert abs(np.degrees(last) - 85.0) < 1e-9, (goal, np.degrees(last))
+    capsys.readouterr()
 
 
 def test_narrow_classes_are_kept_or_dropped_with_their_count(tmp_path, lpart, hand, capsys):
@@ -211,3 +218,30 @@ def test_narrow_classes_are_kept_or_dropped_with_their_count(tmp_path, lpart, ha
         assert f"{len(every) - narrower} grasp classes" in cap.out
         assert f"warning: {narrower} grasp class(es) dropped as narrower than --min-range" in cap.err
 
+
+
+def test_notebook_query_names_its_removals_and_the_tables_answer(tmp_path, lpart, capsys):
+    """Notebook 06's query (the PUMA 0.3 m low, class 0 at the middle of its legal range to class 3 at 60-120 degrees):
+    the table's own answer has 2 regrasps, some of its conjunctions fail with the arm, and the output names each removed
+    conjunction with its step and reason beside the executable answer, which exists and passes the validators."""
+    mesh = tmp_path / "L.stl"
+    lpart.mesh.export(mesh)
+    db = str(tmp_path / "nb.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--table-point", "0.45,0.1", "--base", "0,0,-0.3,0"]) == 0
+    run = load_planner(db, "L")
+    legal = np.flatnonzero(run.table.hand_object[0])
+    theta0 = float(np.degrees(run.table.theta[legal[len(legal) // 2]]))
+    js = tmp_path / "nb.json"
+    assert main(["gpplan", "--db", db, "--object", "L", "--initial", f"0,{theta0:g}", "--goal", "3,60:120",
+                 "--table", "0.15,-0.8,1,0.8", "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    doc = json.loads(js.read_text())
+    assert doc["table_sequence"]["regrasps"] == 2 and doc["removed"], out
+    assert "the table's shortest sequence has 2 regrasp(s)" in out
+    lines = [ln for ln in out.splitlines() if ln.startswith("  removed step ")]
+    assert len(lines) == len(doc["removed"]) and all(" fails " in ln and "table sample(s) removed" in ln for ln in lines)
+    assert doc["plan"] is not None and "validator: ok" in out
+    assert f"the shortest executable one has {doc['sequence']['regrasps']}" in out
+    # the last grasp is in the goal class and range, both ends kept
+    c, t = doc["sequence"]["grasps"][-1]
+    assert c == 3 and 60 - 1e-6 <= np.degrees(run.table.theta[t]) <= 120 + 1e-6

@@ -278,6 +278,39 @@ def test_executable_plan_with_motions(box_setup, low_puma):
     assert not errors and knots > 0
 
 
+def test_grasp_query_motions_pass_the_trajectory_validator(box_setup, low_puma):
+    """Section 6's grasp-to-grasp query realised with its timed motions (as `gpplan` plans by default): the
+    independent trajectory validator replays every knot (self-collision, table and object contacts, limits, knot
+    spacing), not only the waypoints; the plan keeps the sequence's regrasps and its step grasps are the sequence's."""
+    from workbench.planners.wan_harada.motions import ExecOptions
+    from workbench.robots.selfcollision import allowed_pairs
+    from workbench.validation import TrajectoryValidator
+
+    classes, table, realiser, validator = box_setup
+    hand = low_puma.gripper
+    tv = None
+    done = 0
+    for a, b in [(0, 1), (1, 2), (2, 0), (0, 2)]:
+        try:
+            seq, plan = plan_grasp_query(table, classes, realiser, low_puma, "box", (a, np.radians(15)), b,
+                                         (np.radians(60), np.radians(120)), ExecOptions())
+        except NoSequence:
+            continue
+        if tv is None:
+            tv = TrajectoryValidator(validator, hand.body, trimesh.Trimesh(*_fingers(hand)),
+                                     list(allowed_pairs(low_puma).allowed), np.array(plan.acc), urdf=low_puma.spec.urdf)
+        assert plan.segments and plan.regrasps == seq.regrasps >= 1
+        assert validator.check(plan).ok
+        errors, knots = tv.check(plan, plan.segments)
+        assert not errors and knots > 100, errors
+        t_n = len(table.theta)
+        assert {s.idfreeairgrip for s in plan.steps} == {c * t_n + t for c, t in seq.grasps}
+        done += 1
+        if done == 2:
+            break
+    assert done >= 1
+
+
 def _fingers(hand):
     boxes = [trimesh.creation.box(extents=e, transform=p) for e, p in hand.finger_poses(hand.jaw_max)]
     m = trimesh.util.concatenate(boxes)

@@ -38,7 +38,7 @@ class NoSequence(PlanningError):
     """A valid query without an answer: the table does not connect its start and goal (zero results). When realising
     a sequence removed conjunctions first, `removals` lists them and `table_sequence` is the table's own answer."""
 
-    removals: list = []
+    removals: tuple = ()
     table_sequence: "Sequence | None" = None
 
 
@@ -184,10 +184,10 @@ def grasp_query(table: GraspPlacementTable, initial: tuple[int, float], goal_cla
         raise PlanningError(f"goal class {goal_class} has no legal theta in [{np.degrees(goal_range[0]):.1f}, "
                             f"{np.degrees(goal_range[1]):.1f}] deg{' free at the destination' if goal_mask is not None else ''}; "
                             f"widen the range")
-    return task_query(table, start, goal, theta_ini=float(theta_ini))
+    return grasp_set_query(table, start, goal, theta_ini=float(theta_ini))
 
 
-def task_query(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, theta_ini: float | None = None) -> Sequence:
+def grasp_set_query(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, theta_ini: float | None = None) -> Sequence:
     """Section 6 with sets of grasps at both ends: from any grasp of `start` to any of `goal` ((C, T) bool, e.g. the
     grasps that clear the pick-up's and the destination's obstacles, Section 5.1), fewest placements. With
     `theta_ini` the start is one grasp, realised at that exact angle."""

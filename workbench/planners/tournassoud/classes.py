@@ -41,7 +41,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from workbench.errors import WorkbenchError
+from workbench.params import DEG, Params, param
 from workbench.geometry.collision import bvh, collide_at_poses, object_collider
 from workbench.geometry.objects import ObjectModel
 from workbench.planners.tournassoud.features import (
@@ -61,29 +61,33 @@ KINDS = ("face/face", "face/edge", "face/vertex")
 
 
 @dataclass(frozen=True)
-class ClassParams:
-    """Parameters of the grasp classes (Sections 2 and 5.1); angles in radians, lengths in metres."""
+class ClassParams(Params):
+    """Parameters of the grasp classes (Sections 2 and 5.1); angles in radians, lengths in metres (ranges declared
+    once here, shown by `workbench gptable --help`)."""
 
-    min_face_area: float = 2e-5
-    edge_angle: float = np.radians(30.0)
-    parallel_tol: float = np.radians(2.0)
-    theta_step: float = np.radians(5.0)
-    bisection: float = np.radians(0.1)
-    tolerance: float = 5e-4
-    min_contact_area: float = 0.0
-    candidates: int = 5
-    min_overlap: float = 1e-6
-    min_range: float = 0.0
-    points: int = 1
+    min_face_area: float = param(2e-5, ge=0, le=1.0, unit="m^2", help="smallest planar face used by a class")
+    edge_angle: float = param(np.radians(30.0), ge=0, le=np.pi, unit="rad", cli_scale=DEG, cli_unit="deg",
+                              help="dihedral angle above which a mesh edge is a feature edge")
+    parallel_tol: float = param(np.radians(2.0), ge=0, le=np.radians(45.0), unit="rad", cli_scale=DEG, cli_unit="deg",
+                                help="angle within which two features count as parallel")
+    theta_step: float = param(np.radians(5.0), gt=0, le=np.pi / 2, unit="rad", cli_scale=DEG, cli_unit="deg",
+                              help="theta step (grasp angle resolution)")
+    bisection: float = param(np.radians(0.1), gt=0, le=np.pi / 2, unit="rad", cli_scale=DEG, cli_unit="deg",
+                             help="bisection resolution of a legal theta range's ends")
+    tolerance: float = param(5e-4, ge=0, le=0.01, unit="m", help="hand-object collision tolerance")
+    min_contact_area: float = param(0.0, ge=0, le=0.01, unit="m^2",
+                                    help="pad area that must cover the face overlap at every legal theta (Section 5.1; 0: off)")
+    candidates: int = param(5, ge=1, le=100, integer=True, help="grasp point candidates tried per class")
+    min_overlap: float = param(1e-6, ge=0, le=1.0, unit="m^2", help="smallest face overlap of a face/face class")
+    min_range: float = param(0.0, ge=0, le=2 * np.pi, unit="rad", cli_scale=DEG, cli_unit="deg",
+                             help="narrowest legal theta range a class keeps (0, the paper's rule: any non-empty range)")
+    points: int = param(1, ge=1, le=100, integer=True,
+                        help="grasp points per feature pair (1: the paper's one point per class; more: its remedy for "
+                             "elongated parts, a discrete set of points as in Handey, Section 2.3)")
 
-    def __post_init__(self) -> None:
-        if not (0 < self.theta_step <= np.pi / 2):
-            raise WorkbenchError(f"theta step must be in (0, 90] degrees, got {np.degrees(self.theta_step):g}")
-        if not (0 < self.bisection <= self.theta_step):
-            raise WorkbenchError("bisection resolution must be positive and at most the theta step")
-        if min(self.min_face_area, self.tolerance, self.min_contact_area, self.min_overlap, self.min_range) < 0 \
-                or self.candidates < 1 or self.points < 1 or not np.isfinite(self.min_range):
-            raise WorkbenchError(f"grasp class parameters must be non-negative (and candidates >= 1), got {self}")
+    def check(self) -> None:
+        self.require(self.bisection <= self.theta_step, ("bisection", "theta_step"),
+                     "the bisection resolution must be at most the theta step")
 
     def as_dict(self) -> dict:
         return {k: float(v) if not isinstance(v, int) else v for k, v in asdict(self).items()}

@@ -7,13 +7,21 @@ planner's plans: `grasp` (TCP at the grasp), `approach` (backed off by `handx` a
 whose arm clears the object (the IK solver's collider); approach and retract start from the grasp's configuration
 (with the closed form: the branch nearest to it).
 
-The table only checks the grasp's IK (Section 5.2). A conjunction that fails here (no collision-free branch or no
-approach/retract) is removed from a copy of the table and the query is answered again, so the returned sequence is
-still the shortest among the conjunctions that can be executed.
+The table only checks the grasp's IK (Section 5.2); the paper assumes the arm's paths away (Section 1). A
+conjunction that fails here (no collision-free branch or no approach/retract) is removed from a copy of the table
+and the query is answered again, so the returned sequence is still the shortest among the conjunctions that can be
+executed. With motions, a failed motion between two conjunctions removes every sample needing the same change of arm
+configuration (`learn_removal`: the same IK branch switch over the neighbouring theta and phi samples of the same
+class and placement), not one sample at a time. Every removal is recorded (`Removal`) and the table's own answer
+kept beside the executable one (`explanation` prints both).
 
 Plan steps (validator order pick, (transfer, regrasp)*, place):
 - placement query: pick at the start placement with the first grasp, then per regrasp a transfer to an intermediate
   placement and a regrasp there, and place at the goal placement with the last grasp;
+- task query (`plan_task_query`, Fig. 1): the same with the pick at the task's pick-up and the place at its
+  destination, away from H, both checked against the task's obstacles; the plan may start with the part already
+  in the hand at the pick-up and end with it still held at the destination (`Plan.start_held`, `end_held`: the
+  motions begin with the lift out of the pick-up, end with the insertion);
 - grasp query (the object starts and ends in the hand): pick and transfer both hold the initial grasp at the first
   intermediate placement (the configuration where it is put down), then regrasp/transfer pairs, and the last regrasp
   and the place both hold the final grasp at the last placement.
@@ -59,6 +67,7 @@ class Conjunction:
     q: np.ndarray  # (5, n): grasp, approach (handx), retract (handxworldz), worlda, worldaworldz
     phi: float = 0.0  # the placement's angle (the sample's, or the query's own at its start and goal)
     position: tuple[float, float] | None = None  # where the part rests (x, y); None: the table point H
+    lift: np.ndarray | None = None  # world TCP move grasp -> worlda (the insertion backwards); None: up by worlda
 
 
 class Realiser:
@@ -73,7 +82,7 @@ class Realiser:
         self.robot, self.handx, self.worldz, self.worlda = robot, handx, worldz, worlda
         self.obstacles = tuple(obstacles)
         self.closed = not spherical_wrist_reason(robot)
-        self.opts = IKOptions(closed_form=self.closed, library=8192, seed=seed, self_collide=True)
+        self.opts = IKOptions(solver="auto" if self.closed else "numerical", library=8192, seed=seed, self_collide=True)
         self.solver = IKSolver(robot, scene, self.opts, obj_mesh)
         self.ik = analytic_ik(robot) if self.closed else None
         self.scene, self.obj_mesh = scene, obj_mesh
@@ -117,10 +126,15 @@ class Realiser:
             cand = cand[np.argsort(np.abs(cand - q_prev).sum(axis=1), kind="stable")]
         return cand
 
-    def configurations(self, object_pose: np.ndarray, tcp: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray | None:
+    def configurations(self, object_pose: np.ndarray, tcp: np.ndarray, q_prev: np.ndarray | None,
+                       lift: np.ndarray | None = None) -> np.ndarray | None:
         """(5, n) joint vectors at the roadmap planner's five poses (grasp, handx, handxworldz, worlda, worldaworldz;
-        the object held at the two lifts), or None when no seed gives all five collision-free."""
+        the object held at the two lifts; with `lift`, worlda is the grasp moved by it in the world, the start of an
+        insertion), or None when no seed gives all five collision-free."""
         poses = retract(tcp[None], self.handx, self.worldz, self.worlda)[0]  # (5, 4, 4)
+        if lift is not None:
+            poses[3, :3, 3] = tcp[:3, 3] + lift
+            poses[4, :3, 3] = poses[3, :3, 3] + [0.0, 0.0, self.worldz]
         place = held_placements(poses[None], object_pose[None])[0]  # (5, 4, 4): lifted with the hand at the lifts
         o = self.opts
         for q0 in self.seeds(poses[0], q_prev):
@@ -229,15 +243,17 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
             phi = seq.extra.get("phi_start") if k == 0 else (seq.extra.get("phi_goal") if k == len(pairs) - 1 else None)
             obj, tcp, _ = conjunction_poses(work, classes, g, p, theta, phi)
             end = _task_end(seq, k, len(pairs))
+            lift = None
             if end is not None:  # the task's pick-up or destination, away from H
                 obj = seq.extra[f"{end}_pose"]
                 tcp = obj @ classes[g[0]].pose(work.theta[g[1]])
-            q = realiser.configurations(obj, tcp, q_prev)
+                lift = seq.extra.get(f"{end}_lift")
+            q = realiser.configurations(obj, tcp, q_prev, lift)
             if q is None:
                 bad = (k, g, p)
                 break
             out.append(Conjunction(g, p, obj, tcp, q, work.phi[p[1]] if phi is None else phi,
-                                   None if end is None else seq.extra[f"{end}_xy"]))
+                                   None if end is None else seq.extra[f"{end}_xy"], lift))
             q_prev = q[0]
         if bad is None:
             return seq, out
@@ -365,6 +381,35 @@ def learn_removal(work: GraspPlacementTable, classes: list[GraspClass], realiser
     return before - int(work.q.sum()), (b_prev, b_bad) if b_prev is not None and b_bad is not None else None
 
 
+def explanation(table: GraspPlacementTable, own: Sequence | None, removals: list[Removal], seq: Sequence | None = None,
+                own_dict: dict | None = None) -> list[str]:
+    """Lines explaining how the executable answer differs from the table's own: each conjunction removed (which motion
+    or collision, at which step, why), then the table's shortest sequence beside the shortest executable one (`seq`,
+    None when there is none). `own` is the table's answer, or `own_dict` its `as_dict` (as `Sequence.extra["table"]`
+    holds it)."""
+    if own is not None:
+        own_dict = own.as_dict(table)
+    if own_dict is None:
+        return []
+    n = own_dict["regrasps"]
+    if not removals:
+        return [f"the table's shortest sequence has {n} regrasp(s); the arm executes it as it is"] if seq is not None else []
+    lines = [f"  removed {x.text(table)}" for x in removals]
+    own_pairs = set()
+    g, p = own_dict["grasps"], own_dict["placements"]
+    if own_dict["kind"] == "grasp":
+        for k, pl in enumerate(p):
+            own_pairs |= {(tuple(g[k]), tuple(pl)), (tuple(g[k + 1]), tuple(pl))}
+    else:
+        own_pairs = {(tuple(a), tuple(b)) for a, b in zip(g, p)} | {(tuple(a), tuple(b)) for a, b in zip(g, p[1:])}
+    mine = sum(tuple(map(tuple, x.conjunction)) in own_pairs for x in removals)
+    kinds = sorted({x.motion for x in removals})
+    lines.append(f"the table's shortest sequence has {n} regrasp(s); {mine} of its conjunctions and "
+                 f"{len(removals) - mine} of the later tries' fail with the arm ({', '.join(kinds)}); the shortest "
+                 f"executable one has {'none' if seq is None else seq.regrasps}")
+    return lines
+
+
 def step_conjunctions(kind: str, n: int) -> tuple[list[str], list[int]]:
     """The plan's step kinds and, per step, the index of the conjunction it realises (see the module docstring)."""
     if kind == "placement":
@@ -391,7 +436,7 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
         return PlanStep(kind=kind, idfreeairgrip=int(c * t_n + t), idfreetabletopplacement=int(j), position=np.array([x, y, 0.0]),
                         yaw=float(cj.phi), object_pose=cj.object_pose, tcp=cj.tcp, grasp=g,
                         jawwidth=float(classes[c].opening), q_approach=cj.q[1], q_grasp=cj.q[0], q_retract=cj.q[2],
-                        q_worlda=cj.q[3], q_worldaworldz=cj.q[4])
+                        q_worlda=cj.q[3], q_worldaworldz=cj.q[4], lift=cj.lift)
 
     kinds, which = step_conjunctions(seq.kind, len(conj))
     steps = [step(k, conj[i]) for k, i in zip(kinds, which)]
@@ -411,7 +456,8 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
     checker = realiser.motion_checker(opts)
     vlim = np.asarray(robot.model.velocityLimit, dtype=np.float64)
     t0 = time.perf_counter()
-    res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz)
+    res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz,
+                             plan.start_held, plan.end_held)
     if res.ok:
         for st, ln in zip(plan.steps, lines):
             st.q_retract, st.q_approach, st.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp
@@ -423,7 +469,7 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
 
 
 def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: str, motions: ExecOptions | None,
-          **kw) -> tuple[Sequence, Plan | None]:
+          held: tuple[bool, bool] = (False, False), **kw) -> tuple[Sequence, Plan | None]:
     """Answer, realise and plan a query; with `motions`, when a motion between two conjunctions fails (the step's
     lines, or the move into the next step), the failed conjunction and every sample needing the same change of arm
     configuration are removed from a working copy of the table (`learn_removal`) and the query answered again, at
@@ -466,6 +512,7 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
         if not conj:
             return explained(seq), None
         plan = to_plan(seq, conj, work, classes, robot, object_name, realiser.handx, realiser.worldz)
+        plan.start_held, plan.end_held = held
         if motions is None:
             return explained(seq), plan
         res = add_motions(plan, realiser, motions)
@@ -514,10 +561,13 @@ def plan_placement_query(table, classes, realiser: Realiser, robot: Robot, objec
 
 
 def plan_task_query(table, classes, realiser: Realiser, robot: Robot, object_name: str, pickup, destination,
-                    start: np.ndarray, goal: np.ndarray, motions: ExecOptions | None = None) -> tuple[Sequence, Plan | None]:
+                    start: np.ndarray, goal: np.ndarray, motions: ExecOptions | None = None, start_held: bool = False,
+                    end_held: bool = False) -> tuple[Sequence, Plan | None]:
     """Fig. 1's task (Section 5.1): the part picked up where it lies among the pick-up's obstacles with a grasp of
     `start` ((C, T), `task.end_mask`), regrasped on the table at H as often as needed, and put at the destination
     (inserted, the hand clear of its obstacles) with a grasp of `goal`. The plan's first step takes the part at the
-    pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles."""
-    return _plan(task_query, table, classes, realiser, robot, object_name, motions, start=start, goal=goal, pickup=pickup,
-                 destination=destination)
+    pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles. With `start_held`
+    the part is already in the hand at the pick-up (Fig. 1 (a)): the motions begin there, at the first grasp, and lift
+    it out; with `end_held` they end with it still held at the destination (Fig. 1 (d)), after the insertion."""
+    return _plan(task_query, table, classes, realiser, robot, object_name, motions, (start_held, end_held), start=start,
+                 goal=goal, pickup=pickup, destination=destination)

@@ -22,8 +22,8 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from workbench.errors import WorkbenchError
 from workbench.grasping.placements import grips_above_table
+from workbench.params import DEG, Params, param
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.robots.analytic import analytic_ik, spherical_wrist_reason
 from workbench.robots.analytic import reachable as closed_reachable
@@ -33,27 +33,23 @@ from workbench.robots.model import Robot
 
 
 @dataclass(frozen=True)
-class TableParams:
+class TableParams(Params):
     """Resolutions (radians), the table point H = (x, y) on the table top in the world, the hand's clearance above
     the table (m; negative lets the hand go that far below the table plane, i.e. a table that far away), whether
     IK applies the joint limits, and the IK batch size."""
 
-    theta_step: float = np.radians(5.0)
-    phi_step: float = np.radians(5.0)
-    table_point: tuple[float, float] = (0.45, 0.0)
-    clearance: float = 0.002
+    theta_step: float = param(np.radians(5.0), gt=0, le=np.pi / 2, unit="rad", cli_scale=DEG, cli_unit="deg",
+                              help="theta step (grasp angle resolution)")
+    phi_step: float = param(np.radians(5.0), gt=0, le=np.pi / 2, unit="rad", cli_scale=DEG, cli_unit="deg",
+                            help="phi step (placement angle resolution)")
+    table_point: tuple[float, float] = param((0.45, 0.0), ge=-10.0, le=10.0, unit="m",
+                                             help="each coordinate of the table point H")
+    clearance: float = param(0.002, ge=-10.0, le=1.0, unit="m", help="hand clearance above the table")
     limits: bool = True
-    chunk: int = 20000
+    chunk: int = param(20000, ge=1, le=10_000_000, integer=True, help="IK batch size")
 
-    def __post_init__(self) -> None:
-        for name in ("theta_step", "phi_step"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and 0 < v <= np.pi / 2):
-                raise WorkbenchError(f"{name.replace('_', ' ')} must be in (0, 90] degrees, got {np.degrees(v):g}")
-        if len(self.table_point) != 2 or not np.isfinite(self.table_point).all():
-            raise WorkbenchError(f"table point must be two finite numbers X,Y in metres, got {self.table_point}")
-        if not np.isfinite(self.clearance):
-            raise WorkbenchError(f"clearance must be finite, got {self.clearance}")
+    def check(self) -> None:
+        self.require(len(self.table_point) == 2, ("table_point",), "the table point is two numbers X,Y in metres")
 
     def as_dict(self) -> dict:
         d = asdict(self)

@@ -22,6 +22,11 @@ so that a grasp legal here is one its motions can use.
 
 The chaining then starts from the (C, T) set of legal grasps at the pick-up and ends in the set legal at the
 destination (`task_query`): the theta ranges of the first and last grasps come from the obstacles, not from the user.
+The plan's motions take the part out of the pick-up straight up (the roadmap planner's lift, `worlda` then
+`worldz`) and put it into the destination along the insertion: the held part comes down by `worldz` to the start of
+the insertion, `depth` back along its direction, then moves along it in a straight TCP line into place (without an
+insertion, straight down by `worlda`), every motion checked against the obstacles; so a slot entered sideways or at
+a slant is executed as it is checked.
 The paper leaves the obstacle test's details open; this is the workbench's choice.
 """
 
@@ -35,7 +40,7 @@ import trimesh
 
 from workbench.errors import WorkbenchError
 from workbench.geometry.collision import bvh, collide_at_poses, object_collider
-from workbench.planners.tournassoud.chaining import NoSequence, Sequence, _pick2, _through, chain
+from workbench.planners.tournassoud.chaining import NoSequence, Sequence, _pick2, _through, chain, nearest_sample
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable, reachable, rz
 from workbench.robots.gripper import Gripper
@@ -88,6 +93,18 @@ class TaskEnd:
                 raise WorkbenchError(f"insertion direction {self.insertion} must be a non-zero vector DX,DY,DZ")
             self.insertion = d / n
 
+    def lift(self) -> np.ndarray | None:
+        """(3,) the hand's move from the final pose back to the start of the insertion (world), None without one: the
+        plan's last straight line runs it forwards, along the insertion direction for `depth`."""
+        return None if self.insertion is None or self.depth <= 0 else -self.depth * self.insertion
+
+    def as_dict(self) -> dict:
+        """The end as JSON-ready values (angles in radians, obstacle poses row-major)."""
+        return {"placement": int(self.placement), "x": float(self.x), "y": float(self.y), "phi": float(self.phi),
+                "obstacles": [{"name": o.name, "pose": o.pose.reshape(-1).tolist()} for o in self.obstacles],
+                "insertion": None if self.insertion is None else [float(v) for v in self.insertion],
+                "depth": float(self.depth), "approach": float(self.approach)}
+
     def object_pose(self, table: GraspPlacementTable) -> np.ndarray:
         """The part in the world: translate(x, y) Rz(phi) P_j (as the table's placements at H)."""
         if not 0 <= self.placement < len(table.placements):
@@ -139,13 +156,6 @@ def end_mask(table: GraspPlacementTable, classes: list[GraspClass], end: TaskEnd
     return out, counts
 
 
-def why_none(name: str, counts: dict[str, int]) -> str:
-    """Why no grasp is legal at an end, from `end_mask`'s counts."""
-    return (f"no grasp is legal at the {name}: of the grasps legal on the part, {counts.get('table', 0)} put the fingers "
-            f"into the table, {counts.get('ik', 0)} are out of the arm's reach and {counts.get('obstacles', 0)} hit an "
-            f"obstacle there")
-
-
 def task_query(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, pickup: TaskEnd,
                destination: TaskEnd) -> Sequence:
     """Fewest placements from the part held at the pick-up to the part held at the destination (Sections 5.1, 6):
@@ -162,19 +172,19 @@ def task_query(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, 
         raise NoSequence(f"no regrasp sequence from the {int(start.sum())} grasp sample(s) legal at the pick-up to the "
                          f"{int(goal.sum())} legal at the destination: the grasp-placement table does not connect them "
                          f"(try another table point, finer steps or --points)")
-    f_n = len(table.phi)
     cur = _pick2(levels[-1] & start)
-    grasps, placements = [cur], [(pickup.placement, int(np.round(np.mod(pickup.phi, 2 * np.pi) / (2 * np.pi / f_n))) % f_n)]
+    grasps, placements = [cur], [(pickup.placement, nearest_sample(table.phi, pickup.phi))]
     for prev in reversed(levels[:-1]):
         pl, cur = _through(table, cur, prev)
         placements.append(pl)
         grasps.append(cur)
-    placements.append((destination.placement, int(np.round(np.mod(destination.phi, 2 * np.pi) / (2 * np.pi / f_n))) % f_n))
+    placements.append((destination.placement, nearest_sample(table.phi, destination.phi)))
     return Sequence("placement", grasps, placements, len(levels) - 1, time.perf_counter() - t0,
                     extra={"phi_start": float(pickup.phi), "phi_goal": float(destination.phi),
                            "start_pose": pickup.object_pose(table), "goal_pose": destination.object_pose(table),
                            "start_xy": (float(pickup.x), float(pickup.y)),
-                           "goal_xy": (float(destination.x), float(destination.y))})
+                           "goal_xy": (float(destination.x), float(destination.y)),
+                           "goal_lift": destination.lift()})
 
 
 def walls_around(part: trimesh.Trimesh, pose: np.ndarray, gap: float = 0.01, height: float | None = None,

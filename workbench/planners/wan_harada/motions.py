@@ -18,6 +18,7 @@ alternatives says so in one line.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -111,7 +112,8 @@ def step_lines(checker: MotionChecker, step, worlda: float, worldz: float) -> St
     solve each pose on its own), so the lines are continued by IK from one stored configuration (the grasp, else the
     approach, else the retract): the empty hand's retract -> approach -> grasp, checked with the object resting
     (the fingers may touch it next to the grasp), then the held part's lift grasp -> worlda -> worldaworldz
-    (straight up by `worlda`, then `worldz`), checked with the object in the hand. None when no anchor works."""
+    (straight up by `worlda`, or back along the step's insertion `lift`; then up by `worldz`), checked with the object
+    in the hand. None when no anchor works."""
     robot = checker.robot
     qs = [np.asarray(step.q_retract, dtype=np.float64), np.asarray(step.q_approach, dtype=np.float64),
           np.asarray(step.q_grasp, dtype=np.float64)]
@@ -139,9 +141,10 @@ def step_lines(checker: MotionChecker, step, worlda: float, worldz: float) -> St
         lift = np.eye(4)
         lift[:3, :3], lift[:3, 3] = rg[0], tg[0]
         up, q = [], chain[2]
-        for dz in (worlda, worlda + worldz):
+        first = step.lift_vector(worlda)
+        for d in (first, first + [0.0, 0.0, worldz]):
             target = lift.copy()
-            target[2, 3] += dz
+            target[:3, 3] += d
             p = tcp_line_to(robot, checker, q, target)
             if p is None or not checker.path_free(p):
                 break
@@ -174,12 +177,15 @@ def _taking(step) -> bool:
     return step.kind in ("pick", "regrasp")
 
 
-def moves_of_steps(steps, lines: list[StepLines], jaw_open: float) -> list[Move]:
+def moves_of_steps(steps, lines: list[StepLines], jaw_open: float, start_held: bool = False,
+                   end_held: bool = False) -> list[Move]:
     """The waypoint scheme of `PlanStep.waypoints()`: taking the part (pick, regrasp), the empty hand goes retract ->
     approach -> grasp, closes, and lifts the part straight up grasp -> worlda -> worldaworldz; putting it down
     (transfer, place), the held part goes worldaworldz -> worlda -> grasp, the hand opens and backs off grasp ->
     approach -> retract. A transfer (held) joins a taking step's worldaworldz to the next step's; a transit (empty,
-    the part where it was released) joins a putting step's retract to the next step's."""
+    the part where it was released) joins a putting step's retract to the next step's. With `start_held` the first
+    step begins with the part already in the hand at its grasp (no approach, no closing); with `end_held` the last
+    ends there with it still in the hand (no opening, no retract)."""
     out: list[Move] = []
     for i, (s, ln) in enumerate(zip(steps, lines)):
         taking = _taking(s)
@@ -192,9 +198,10 @@ def moves_of_steps(steps, lines: list[StepLines], jaw_open: float) -> list[Move]
                             grasp if holding else None, jaw, how, path, at_grasp))
 
         if taking:
-            mv("approach", ln.down[0], False, jaw_open)
-            mv("approach", ln.down[1], False, jaw_open, at_grasp=True)
-            mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), True, jaw_shut, "dwell", at_grasp=True)
+            if not (start_held and i == 0):
+                mv("approach", ln.down[0], False, jaw_open)
+                mv("approach", ln.down[1], False, jaw_open, at_grasp=True)
+                mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), True, jaw_shut, "dwell", at_grasp=True)
             mv("lift", ln.up[0], True, jaw_shut)
             mv("lift", ln.up[1], True, jaw_shut)
             if i + 1 < len(steps):
@@ -203,6 +210,8 @@ def moves_of_steps(steps, lines: list[StepLines], jaw_open: float) -> list[Move]
         else:
             mv("lower", ln.up[1][::-1].copy(), True, jaw_shut)
             mv("lower", ln.up[0][::-1].copy(), True, jaw_shut)
+            if end_held and i == len(steps) - 1:
+                continue
             mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), False, jaw_open, "dwell", at_grasp=True)
             mv("retract", ln.down[1][::-1].copy(), False, jaw_open, at_grasp=True)
             mv("retract", ln.down[0][::-1].copy(), False, jaw_open)
@@ -313,9 +322,10 @@ def _timed(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.
 
 
 def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarray | float, seed: int | None = None,
-                worlda: float = WORLDA, worldz: float = 0.10) -> tuple[MotionResult, list[StepLines | None]]:
+                worlda: float = WORLDA, worldz: float = 0.10, start_held: bool = False,
+                end_held: bool = False) -> tuple[MotionResult, list[StepLines | None]]:
     """The timed motion of a whole plan: consistent straight TCP lines at every step, then the moves in
-    order. On failure `result.blame` is ("step", i) when step i's lines fail (its grip is unusable) or ("edge", i, i+1)
+    order (`moves_of_steps`, with the part in the hand at the start or the end when told). On failure `result.blame` is ("step", i) when step i's lines fail (its grip is unusable) or ("edge", i, i+1)
     when the transfer or transit from step i to step i+1 fails; the lines found so far are returned too."""
     t0 = time.perf_counter()
     lines: list[StepLines | None] = []
@@ -333,7 +343,7 @@ def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarra
             lines[i] = unwrap_lines(checker.robot, lines[i], lines[i].q_worldaworldz, prev.q_worldaworldz)
         else:
             lines[i] = unwrap_lines(checker.robot, lines[i], lines[i].q_retract, prev.q_retract)
-    moves = moves_of_steps(steps, lines, checker.robot.gripper.jaw_max)
+    moves = moves_of_steps(steps, lines, checker.robot.gripper.jaw_max, start_held, end_held)
     res = solve_moves(checker, moves, vlim, alim, seed)
     res.seconds = time.perf_counter() - t0
     if not res.ok:
@@ -395,10 +405,12 @@ class ExecResult:
 
 
 def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), allowed: AllowedPairs | None = None,
-                    alternatives: int = 0) -> ExecResult:
+                    alternatives: int = 0, physics: Callable | None = None) -> ExecResult:
     """The fewest-regrasp plan whose motions are all found (see the module docstring), and up to `alternatives` next
     best executable plans. Raises the search's PlanningError when start or goal is unreachable or unconnected;
-    PlanningError(reason "exhausted") when every alternative failed or `max_removed` removals did not help."""
+    PlanningError(reason "exhausted") when every alternative failed or `max_removed` removals did not help.
+    `physics(plan)` returns None or (failing step, why): a timed plan it fails is treated like a failed motion of
+    that step (its node or grip removed, the graph searched again); alternatives are not checked by it."""
     allowed = allowed if allowed is not None else getattr(planner, "allowed", None)
     checker = motion_checker(planner, allowed, opts.motion)
     robot = planner.robot
@@ -426,8 +438,13 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
         t0 = time.perf_counter()
         motion, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz)
         seconds += time.perf_counter() - t0
+        verdict = None
         if motion.ok:
             _attach(plan, motion, lines, removed, seconds, opts.acc, robot.nq)
+            verdict = physics(plan) if physics is not None else None
+            if verdict is not None:
+                motion.reason, motion.blame = verdict[1], ("step", int(verdict[0]))
+        if motion.ok and verdict is None:
             out = ExecResult(plan, motion, removed, seconds, failures, searched, result=result)
             if alternatives > 0:
                 more = search(rm, s_side, g_side, planner.evaluate, alternatives, True)
@@ -446,7 +463,8 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
         failures.append(motion.reason)
         if removed >= opts.max_removed:
             err = PlanningError(f"no executable plan from {s_side.query.text()} to {g_side.query.text()} after removing "
-                                f"{removed} node(s) or grip(s) (limit --max-removed {opts.max_removed}); last failure: {motion.reason}")
+                                f"{removed} node(s) or grip(s) (limit --max-removed {opts.max_removed}"
+                                f"{_physics_share(failures[:-1])}); last failure: {motion.reason}")
             err.reason = "exhausted"
             raise err
         # what the failing motion used: the step's node or grip, or for a transfer / transit the next step's
@@ -462,6 +480,12 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
             keep[gone] = False
             rm = build_roadmap(_node_rows(full), keep)
         removed += 1
+
+
+def _physics_share(failures: list[str]) -> str:
+    """', N of them after failing in simulation' when physics checks removed any (their reasons start 'physics:')."""
+    n = sum(f.startswith("physics:") for f in failures)
+    return f", {n} of them after failing in simulation" if n else ""
 
 
 def _attach(plan, motion: MotionResult, lines: list[StepLines], removed: int, seconds: float, acc, nq: int) -> None:

@@ -13,6 +13,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from workbench.errors import PlanningError
+from workbench.grasping.naming import per_part_numbers
 from workbench.planners.wan_harada.motions import (
     DEFAULT_ACC,
     ExecOptions,
@@ -98,8 +99,9 @@ class Planner:
         ids = self.free["idfreetabletopplacement"]
         hit = np.flatnonzero(ids == query.idfreetabletopplacement)
         if len(hit) == 0:
-            raise _failure("unstable", f"{label} placement {query.idfreetabletopplacement} is not a stable placement of {self.object.name} "
-                                f"(its placements: {', '.join(str(int(i)) for i in ids)}); give one of those ids")
+            raise _failure("unstable", f"{label} placement id {query.idfreetabletopplacement} is not a stable placement of "
+                                f"{self.object.name} (its placements' store ids: {', '.join(str(int(i)) for i in ids)}, "
+                                f"numbered 1-{len(ids)} within the part); give one of those")
         lo, hi = self.scene.table_min, self.scene.table_max
         if not (lo[0] <= query.x <= hi[0] and lo[1] <= query.y <= hi[1]):
             raise PlanningError(f"{label} position ({query.x:g}, {query.y:g}) is off the table (x {lo[0]:g}..{hi[0]:g}, "
@@ -118,8 +120,11 @@ class Planner:
         hi = np.searchsorted(self._ftg_keys, query.idfreetabletopplacement, side="right")
         rows = self._ftg_order[lo:hi]
         if len(rows) == 0:
-            raise _failure("nogrip", f"{label} placement {query.idfreetabletopplacement} of {self.object.name} has no grasp that clears "
-                                f"the table; choose a placement that has one ({', '.join(map(str, self.placement_ids(gripped=True))) or 'none has'})")
+            number = per_part_numbers(self.free["idfreetabletopplacement"])
+            has = ", ".join(str(number[i]) for i in self.placement_ids(gripped=True)) or "none has"
+            raise _failure("nogrip", f"{label} placement {number[query.idfreetabletopplacement]} of {self.object.name} "
+                                f"(store id {query.idfreetabletopplacement}) has no grasp that clears the table; choose a "
+                                f"placement that has one (numbered within the part: {has})")
         grasp = np.asarray(self.ftg["idfreeairgrip"])[rows].astype(np.int64)
         order = np.argsort(grasp, kind="stable")
         rows, grasp = rows[order], grasp[order]
@@ -253,14 +258,16 @@ class Planner:
         return report
 
     def plan(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True, validate: bool = True,
-             motion: bool = True, exec_opts: ExecOptions | None = None) -> list[Plan]:
+             motion: bool = True, exec_opts: ExecOptions | None = None, physics=None) -> list[Plan]:
         """The best plan and up to `alternatives` next best (Section V), each checked by `workbench.validation` when
         `validate` (a plan that fails is dropped; PlanningError when none passes). With `motion` (the default) the
         plans are executable: their motions are planned and timed, failing nodes or grips removed and the graph
-        searched again (`motions.plan_executable`); `last_motion` keeps the outcome."""
+        searched again (`motions.plan_executable`); `last_motion` keeps the outcome. `physics` (a function of a plan
+        returning None or (failing step, why), e.g. `simulation.stages.physics_check`) treats a plan that fails it
+        like a failed motion."""
 
         if motion:
-            res = plan_executable(self, start, goal, exec_opts or ExecOptions(), alternatives=alternatives)
+            res = plan_executable(self, start, goal, exec_opts or ExecOptions(), alternatives=alternatives, physics=physics)
             self.last_motion = res
             result = res.result
             plans = [res.plan, *res.alternatives]

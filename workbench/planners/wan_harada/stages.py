@@ -36,7 +36,7 @@ from workbench.planners.wan_harada.tabletop import (
 )
 from workbench.robots.collider import Collider, Scene, default_scene
 from workbench.robots.gripper import Gripper, franka_hand
-from workbench.robots.ik import WORLDA, IKOptions, diagnose_unreachable, iter_ik
+from workbench.robots.ik import WORLDA, IKOptions, diagnose_unreachable, iter_ik, solver_kind
 from workbench.robots.model import ROBOTS, Robot, RobotSpec, builtin_robot, get_robot
 from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
 from workbench.robots.timing import TimedSegment, Trajectory
@@ -311,7 +311,7 @@ class BuildResult:
 def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(), pparams: PlacementParams = PlacementParams(),
               tparams: TabletopParams = TabletopParams(), handx: float = HANDX, worldz: float = WORLDZ,
               workers: int | None = None, progress: bool = True, worlda: float = WORLDA,
-              scene: Scene | None = None) -> BuildResult:
+              scene: Scene | None = None, ik: IKOptions | None = None) -> BuildResult:
     """Grasps, placements, tabletop grips, IK and the regrasp graph of `obj` (an ObjectModel) for `robot` (a Robot, or a
     built-in robot's name; on `scene`, default the robot's table) in the store `db` (path or Store), each stage reused
     when stored with the same inputs and parameters. `BuildResult.robot` is the robot's name in the store."""
@@ -332,7 +332,7 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
                           grasps_label=p.grasps_label)
         t0 = time.perf_counter()
         run = ensure_ik(store, g.idobject, obj, p.idtabletop, robot, handx, worldz, workers, progress, worlda=worlda,
-                        scene=scene)
+                        scene=scene, opts=ik)
         ik_ids = {"idrobot": run.idrobot, "idscene": run.idscene, "idikret": run.idikret}
         out.robot = run.robot
         out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, run.reused
@@ -348,6 +348,8 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
         out.counts.update({f"graph_{k}": v for k, v in planner.roadmap.summary().items()})
         out.counts["placement_ids"] = planner.placement_ids(gripped=True)
         out.counts["placements_nogrip"] = sorted(set(planner.placement_ids()) - set(out.counts["placement_ids"]))
+        out.counts["placement_rotmats"] = {int(i): np.asarray(m) for i, m in
+                                           zip(planner.free["idfreetabletopplacement"], planner.free["rotmat"])}
         out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **planner.ids}
         return out
     finally:
@@ -387,7 +389,7 @@ class IKRun:
 
 def scene_params(robot: Robot, scene: Scene, opts: IKOptions) -> dict:
     """Everything besides the robot row and the grips that changes the `ik` rows (stored in `scene.params`)."""
-    return {**scene.as_dict(), "ik": opts.as_dict(),
+    return {**scene.as_dict(), "ik": opts.as_dict(), "ik_solver": solver_kind(robot, opts), "home": robot.home().tolist(),
             "robot": {"locked": {k: v for k, v in robot.spec.locked}, "drop_geometry": list(robot.spec.drop_geometry),
                       "gripper": robot.gripper.digest}}
 
@@ -431,10 +433,12 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
 
 
 def ensure_ik(store, idobject: int, obj, idtabletop: int, robot: str | Robot, handx: float = HANDX, worldz: float = WORLDZ,
-              workers: int | None = None, progress: bool = True, worlda: float = WORLDA, scene: Scene | None = None) -> IKRun:
-    """`run_ik` for a robot (or a built-in robot's name), with the signature `workbench build` expects."""
+              workers: int | None = None, progress: bool = True, worlda: float = WORLDA, scene: Scene | None = None,
+              opts: IKOptions | None = None) -> IKRun:
+    """`run_ik` for a robot (or a built-in robot's name), with the signature `workbench build` expects (default
+    options: the fastest solver, self-collisions rejected)."""
     robot = get_robot(robot) if isinstance(robot, str) else robot
-    return run_ik(store, obj.name, robot, scene, handx, worldz, IKOptions(self_collide=True), workers, progress,
+    return run_ik(store, obj.name, robot, scene, handx, worldz, opts or IKOptions(self_collide=True), workers, progress,
                   idtabletop, worlda=worlda)
 
 

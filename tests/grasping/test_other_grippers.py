@@ -1,0 +1,62 @@
+"""The Robotiq-like spec and the URDF gripper plan grasps on a bundled part and an organic one: every jaw width
+within that gripper's stroke, and every checked grasp valid by the independent check (contacts on the surface,
+normals in the cone, contacts on the pads), and no box of the hand, built from its own URDF or from the spec file's
+numbers, meeting the part in coal beyond the 0.5 mm tolerance."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import pytest
+
+from workbench.benchmarks.graspcheck import check_grasps, hand_placements
+from workbench.benchmarks.organic import ORGANIC
+from workbench.geometry.objects import from_trimesh, load_object
+from workbench.grasping.grasps import GraspParams, plan_grasps
+from workbench.resources import bundled_objects
+from workbench.robots.gripper import BUNDLED, load_gripper
+
+HANDS = {"robotiq-2f85": str(BUNDLED["robotiq-2f85"]), "parallel60": "parallel60"}
+
+
+def boxes_hit(mesh, poses, widths, hand: str, shrink: float) -> np.ndarray:
+    """Per grasp: does any box of the hand (from its URDF or spec file), shrunk by `shrink` on every side, meet the
+    part's surface (coal, boolean)?"""
+    part = coal.BVHModelOBBRSS()
+    part.beginModel(len(mesh.faces), len(mesh.vertices))
+    part.addVertices(np.asarray(mesh.vertices, dtype=np.float64))
+    part.addTriangles(np.asarray(mesh.faces, dtype=np.int64))
+    part.endModel()
+    out = np.zeros(len(poses), dtype=bool)
+    for i, (pose, w) in enumerate(zip(poses, widths)):
+        for box, local in hand_placements(float(w), hand):
+            m = pose @ local
+            small = coal.Box(*np.maximum(2 * np.asarray(box.halfSide) - 2 * shrink, 1e-6))
+            out[i] |= coal.collide(part, coal.Transform3s(), small, coal.Transform3s(m[:3, :3], m[:3, 3]),
+                                   coal.CollisionRequest(), coal.CollisionResult()) > 0
+    return out
+
+
+@pytest.mark.parametrize("name", sorted(HANDS))
+@pytest.mark.parametrize("part", ["tube", "blob_coarse"])
+def test_grasps_of_another_gripper_are_valid_by_an_independent_check(name, part):
+    obj = load_object(bundled_objects()[part]) if part in bundled_objects() else from_trimesh(ORGANIC[part](), part)
+    gripper = load_gripper(name)
+    g = plan_grasps(obj, gripper, GraspParams()).grasps
+    assert len(g) >= 20
+    assert (g.jawwidth >= gripper.jaw_min - 1e-9).all() and (g.jawwidth <= gripper.jaw_max + 1e-9).all()
+    pick = np.unique(np.linspace(0, len(g) - 1, 25).astype(int))
+    v = check_grasps(obj.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick], g.normal0[pick],
+                     g.normal1[pick], GraspParams().friction_coefficient, hand=HANDS[name])
+    assert v.ok.all(), (int(v.ok.sum()), len(pick), v.penetration.max())
+    tol = GraspParams().finger_clearance + 1e-6
+    for widths in (g.jawwidth[pick], np.full(len(pick), gripper.jaw_max)):  # at the grasp and fully open
+        assert not boxes_hit(obj.mesh, g.poses[pick], widths, HANDS[name], tol).any()
+
+
+def test_the_boxes_check_sees_pads_closed_into_the_part():
+    """The same boxes, with the pads 6 mm closer than the grasp's opening, meet the part at every grasp."""
+    obj = load_object(bundled_objects()["tube"])
+    g = plan_grasps(obj, load_gripper("robotiq-2f85"), GraspParams()).grasps
+    pick = np.unique(np.linspace(0, len(g) - 1, 10).astype(int))
+    assert boxes_hit(obj.mesh, g.poses[pick], g.jawwidth[pick] - 0.006, HANDS["robotiq-2f85"], 5e-4).all()

@@ -1,0 +1,208 @@
+"""Which inverse kinematics a robot gets: the fastest valid closed form its model admits, else the numerical solver.
+
+`closed_form(robot)` reads the joint axes and offsets off the robot model (never a table of names) and returns, in
+order of preference:
+
+- **spherical wrist** (Tournassoud et al. 1987 Section 5.2; PUMA 560, KUKA, ABB, Staubli): axes 4-6 meet and axes 1-2
+  meet, 8 branches (`robots.analytic`);
+- **spherical shoulder**: the same arm run backwards, axes 1-3 meet and axes 5-6 meet, 8 branches;
+- **three parallel axes** (the UR family): axes 2-4 parallel and axes 5-6 meet, 8 branches (`robots.parallel`);
+- **7 joints, one swept** (He & Liu 2021 for the Franka Panda): a joint (the last one first) held at `samples` angles
+  evenly spread over its limits, each leaving a 6R arm with one of the forms above (the Panda: a spherical shoulder),
+  8 branches per sample, of which the Panda's elbow limits (q4 < 0) mostly keep at most 4;
+- **subproblem decomposition** (EAIK, Ostermeier et al. 2024) for any other 6R arm whose axes decompose
+  (intersecting or parallel), through the `eaik` package, one pose at a time in C++.
+
+Each returns every branch of many poses at once: joints (N, B, n), NaN where a branch has no real solution or leaves
+the joint limits, and valid (N, B). An arm with more joints (a humanoid's waist and arm) has no closed form, but
+`nearby_form` gives its numerical solver seeds from the nearest decomposable model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from workbench.robots import analytic, parallel
+from workbench.robots.analytic import Chain, _limit, chain_of, reverse_poses, reversed_chain, sub_chain
+
+SWEEP = 16  # samples of a 7-joint arm's swept joint
+
+
+@dataclass(frozen=True)
+class ClosedForm:
+    """A robot's closed-form IK: its `kind` (said when the robot loads), the number of branches per pose, and
+    `solve(poses) -> (joints (N, branches, nq), valid (N, branches))`."""
+
+    kind: str
+    branches: int
+    nq: int
+    solve: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def _six(chain: Chain, limits: bool) -> tuple[str, bool, Callable] | None:
+    """The fastest closed form of a 6R chain as (kind, reversed, solve), or None. With `reversed`, `solve` takes
+    `reverse_poses(chain, poses)` and returns the joints in reversed order."""
+    if not analytic.spherical_wrist_reason(chain):
+        ik = analytic.analytic_ik(chain, limits=limits)
+        return "spherical wrist", False, lambda poses: analytic.solve(ik, poses)
+    rev = reversed_chain(chain)
+    if not analytic.spherical_wrist_reason(rev):
+        ik = analytic.analytic_ik(rev, limits=limits)
+        return "spherical shoulder", True, lambda poses: analytic.solve(ik, poses)
+    if not parallel.parallel_axes_reason(chain):
+        ik = parallel.parallel_ik(chain, limits=limits)
+        return "three parallel axes", False, lambda poses: parallel.solve(ik, poses)
+    return None
+
+
+EAIK_BRANCHES = 16  # a general 6R arm has at most 16 solutions
+
+
+def _eaik(chain: Chain, limits: bool) -> ClosedForm | None:
+    """EAIK's subproblem decomposition of a 6R chain (its H and P vectors at q = 0, in the root frame), or None when
+    EAIK knows no decomposition of its axes. Solutions EAIK marks as least-squares are dropped, the others moved
+    into the joint limits by whole turns and checked against the chain's FK."""
+    try:
+        from eaik.IK_HP import HPRobot
+    except ImportError:  # pragma: no cover - eaik is a dependency
+        return None
+    frames, m = [], np.eye(4)
+    for k in range(6):
+        m = m @ chain.chain_placement[k]
+        frames.append(m.copy())
+    tcp0 = m @ chain.tip_in_joint
+    h = np.stack([f[:3, :3] @ a for f, a in zip(frames, chain.chain_axis)])
+    o = np.stack([f[:3, 3] for f in frames])
+    p = np.vstack([o[:1], np.diff(o, axis=0), tcp0[None, :3, 3] - o[-1:]])
+    robot = HPRobot(h, p)
+    if not robot.hasKnownDecomposition():
+        return None
+    base_inv, r0t = np.linalg.inv(chain.base), tcp0[:3, :3].T
+    lower, upper = (chain.lower, chain.upper) if limits else (np.full(6, -np.inf), np.full(6, np.inf))
+
+    def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        rel = base_inv @ poses
+        rel[:, :3, :3] = rel[:, :3, :3] @ r0t               # EAIK's end effector has the root's axes at q = 0
+        q = np.full((len(poses), EAIK_BRANCHES, 6), np.nan)
+        for i, sol in enumerate(robot.IK_batched(np.ascontiguousarray(rel), 1)):
+            qs = np.asarray(sol.Q, dtype=np.float64).reshape(-1, 6)[~np.asarray(sol.is_LS, dtype=bool)][:EAIK_BRANCHES]
+            q[i, :len(qs)] = np.angle(np.exp(1j * qs))       # into (-pi, pi]
+        for j in range(6):
+            q[..., j] = _limit(q[..., j], lower[j], upper[j])
+        valid = ~np.isnan(q).any(axis=2)
+        if valid.any():  # EAIK's exact solutions, checked: 1e-6 m and rad
+            r, b = np.nonzero(valid)
+            back = _fk(chain, q[r, b])
+            err = np.abs(back - poses[r]).max(axis=(1, 2))
+            valid[r[err > 1e-6], b[err > 1e-6]] = False
+            q[~valid] = np.nan
+        return q, valid
+    return ClosedForm(f"subproblem decomposition, EAIK {robot.getKinematicFamily()}", EAIK_BRANCHES, 6, solve)
+
+
+def _fk(chain: Chain, q: np.ndarray) -> np.ndarray:
+    """TCP poses (M, 4, 4) of joint vectors (M, 6) of a chain (the check of EAIK's solutions)."""
+    out = np.repeat(chain.base[None], len(q), axis=0)
+    for k in range(len(chain.chain_axis)):
+        rot = np.repeat(np.eye(4)[None], len(q), axis=0)
+        a = chain.chain_axis[k]
+        kx = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+        s, c = np.sin(q[:, k])[:, None, None], np.cos(q[:, k])[:, None, None]
+        rot[:, :3, :3] = np.eye(3) + s * kx + (1 - c) * (kx @ kx)
+        out = out @ chain.chain_placement[k] @ rot
+    return out @ chain.tip_in_joint
+
+
+def _swept(chain: Chain, free: int, angles: np.ndarray, limits: bool) -> ClosedForm | None:
+    """A 7-joint chain's IK with joint `free` held at each of `angles`: the 6R form of every sample (the same kind
+    for all), branches stacked sample by sample."""
+    subs = [sub_chain(chain, {free: float(a)}) for a in angles]
+    forms = [_six(c, limits) for c in subs]
+    if any(f is None for f in forms) or len({f[:2] for f in forms}) > 1:
+        return None
+    kind, rev = forms[0][:2]
+    others = [k for k in range(chain.nq) if k != free]
+
+    def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        q = np.empty((len(poses), 8 * len(angles), chain.nq))
+        valid = np.empty((len(poses), 8 * len(angles)), dtype=bool)
+        x = reverse_poses(subs[0], poses) if rev else poses
+        for k, (a, sub, f) in enumerate(zip(angles, subs, forms)):
+            if rev and free == 0 and k:  # the held first joint moves the reversed chain's target
+                x = reverse_poses(sub, poses)
+            qk, valid[:, 8 * k:8 * k + 8] = f[2](x)
+            q[:, 8 * k:8 * k + 8, others] = qk[..., ::-1] if rev else qk
+            q[:, 8 * k:8 * k + 8, free] = a
+        return q, valid
+    return ClosedForm(f"{kind}, {chain.joint_names[free]} swept over {len(angles)} samples", 8 * len(angles), chain.nq,
+                      solve)
+
+
+def _sweep7(chain: Chain, limits: bool, samples: int) -> ClosedForm | None:
+    """The first joint (the last one first) whose sweep leaves a 6R closed form at every sample."""
+    for free in (6, 0, 1, 2, 3, 4, 5):
+        lo, hi = chain.lower[free], chain.upper[free]
+        angles = np.linspace(lo, hi, samples) if samples > 1 else np.array([(lo + hi) / 2])
+        form = _swept(chain, free, angles, limits)
+        if form is not None:
+            return form
+    return None
+
+
+def closed_form(robot, limits: bool = True, samples: int = SWEEP) -> ClosedForm | None:
+    """The robot's fastest closed-form IK (module docstring), or None when its axes admit none."""
+    if robot.chain_prismatic.any() or robot.nq not in (6, 7):
+        return None
+    chain = chain_of(robot)
+    if robot.nq == 7:
+        return _sweep7(chain, limits, samples)
+    six = _six(chain, limits)
+    if six is None:
+        return _eaik(chain, limits)
+    kind, rev, f = six
+
+    def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        if not rev:
+            return f(poses)
+        q, valid = f(reverse_poses(chain, poses))
+        return q[..., ::-1], valid
+    return ClosedForm(kind, 8, 6, solve)
+
+
+def nearby_form(robot, samples: int = 4) -> ClosedForm | None:
+    """Seeds for the numerical solver of an arm with more than 7 joints (a humanoid's waist and arm): the closed form
+    of the nearest decomposable model, its first joints held at the home configuration and one of the 7 others swept
+    over `samples`; joint vectors of the whole arm (the held joints at home)."""
+    if robot.chain_prismatic.any() or robot.nq <= 7:
+        return None
+    chain, home = chain_of(robot), robot.home()
+    held = {k: float(home[k]) for k in range(robot.nq - 7)}
+    inner = _sweep7(sub_chain(chain, held), True, samples)
+    if inner is None:
+        return None
+    keep = [k for k in range(robot.nq) if k not in held]
+
+    def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        qi, valid = inner.solve(poses)
+        q = np.empty(qi.shape[:2] + (robot.nq,))
+        q[..., keep] = qi
+        for k, v in held.items():
+            q[..., k] = v
+        return q, valid
+    names = ", ".join(robot.joint_names[k] for k in held)
+    return ClosedForm(f"{inner.kind}, {names} held at home", inner.branches, robot.nq, solve)
+
+
+def describe(robot, numerical: bool = False) -> str:
+    """The IK the robot gets, in words: 'closed form (KIND, B branches)' or 'numerical (...)'."""
+    form = None if numerical else closed_form(robot)
+    if form is None:
+        why = "forced" if numerical else "no closed form for its axes"
+        return f"numerical (Levenberg-Marquardt from seeds; {why})"
+    return f"closed form ({form.kind}, {form.branches} branches)"
