@@ -488,6 +488,39 @@ def test_busy_store_is_one_line_or_waited_for(work, db, reference):
     assert state(db) == reference
 
 
+def test_four_plans_at_once(work, db):
+    """Four plans of one query at once: planning only reads (readers share the store), each stores briefly; with
+    --wait every one succeeds and the plans are stored once; without, each succeeds or says the store is busy."""
+    for wait in (["--wait", "120"], []):
+        procs = [spawn(*_reader("plan", db), *wait, cwd=work) for _ in range(4)]
+        results = [(p, *p.communicate(timeout=600)) for p in procs]
+        for p, out, err in results:
+            if wait or p.returncode == 0:
+                assert p.returncode == 0, err[-2000:]
+            else:
+                assert_refused(subprocess.CompletedProcess([], p.returncode, out, err), "busy", "--wait")
+        con = duckdb.connect(str(db), read_only=True)
+        stored = con.execute("SELECT count(*), count(DISTINCT rank) FROM plan").fetchone()
+        con.close()
+        assert stored[0] == stored[1] >= 1  # the best plan and its alternatives, each once
+
+
+def test_a_reader_beside_a_reader(work, db, reference):
+    """plan --no-save needs no writer's lock: it runs while another process reads the store."""
+    code = (f"import duckdb, time; c = duckdb.connect({str(db)!r}, read_only=True); print('held', flush=True); "
+            f"time.sleep(60)")
+    holder = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        res = cli(*_reader("plan", db), "--no-save", cwd=work)
+        assert res.returncode == 0, res.stderr[-2000:]
+        assert "stored plan" not in res.stdout
+    finally:
+        holder.kill()
+        holder.wait()
+    assert state(db) == reference
+
+
 URDF_FAULTS = {  # a change to UR5's URDF -> words of its one-line refusal
     "loop": (lambda t: t.replace("</robot>", '<joint name="loop" type="revolute"><parent link="wrist_3_link"/>'
                                              '<child link="shoulder_link"/><axis xyz="0 0 1"/><limit lower="-1" '

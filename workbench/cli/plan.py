@@ -31,7 +31,7 @@ from workbench.planners.wan_harada.stages import (
 from workbench.robots.motion import MotionOptions
 from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
 from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored, stored_playback
-from workbench.store import Store
+from workbench.store import Store, open_reader
 from workbench.store.robots import robot_grippers, robot_with_gripper
 from workbench.viewer.wan_harada import caption_track, plan_scene
 
@@ -93,7 +93,10 @@ def run(args: argparse.Namespace) -> int:
         raise PlanningError("plan takes a robot's own hand by its URDF: --gripper ROBOT.urdf --gripper-hand TIP "
                             "--gripper-fingers LEFT,RIGHT (as given to build)")
     gripper = gripper_from_args(args)
-    with Store(args.db, create=False) as store:
+    simulate = args.simulate or args.require_physics
+    save = False
+    # planning only reads: other processes may read the store meanwhile; the plans are written afterwards, briefly
+    with Store(args.db, create=False) if simulate else open_reader(args.db) as store:
         stored = robot_with_gripper(store, args.robot, gripper.digest)
         others = [] if stored else robot_grippers(store, args.robot)
         if others:
@@ -116,7 +119,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"the start is the goal ({args.start}): {args.object} is already in place; no plan to make")
             return 0
         report_graph(planner, t_load)
-        simulate = args.simulate or args.require_physics
         params = sim_params(args) if simulate else None
         physics = physics_check(store, planner.robot, params) if args.require_physics else None
         try:
@@ -143,8 +145,10 @@ def run(args: argparse.Namespace) -> int:
         elif getattr(planner, "partial", False):
             print("not stored: planned on an incomplete IK stage (--allow-partial)")
         elif not args.no_save:
-            known = save_plans(store, plans)
-            print(f"stored plan ids {known} in {args.db}")
+            save = store.read_only
+            if not save:
+                known = save_plans(store, plans)
+                print(f"stored plan ids {known} in {args.db}")
         playback = None
         if args.require_physics:
             gone = [f for f in planner.last_motion.failures if f.startswith("physics:")]
@@ -159,6 +163,13 @@ def run(args: argparse.Namespace) -> int:
                 res = simulate_in_memory(store, best, planner.robot, params)
                 print(f"physics (not stored): {res.summary() if res.confirmed else res.failure.message}")
                 playback = (res.playback_t, res.playback_pose)
+    if save:
+        with Store(args.db, create=False) as store:
+            known = [stored_plan(store, p) for p in plans]  # another process may have stored the same query meanwhile
+            if all(k is not None for k in known):
+                print(f"answered from the store: plan ids {known} in {args.db} (the same query; not stored again)")
+            else:
+                print(f"stored plan ids {save_plans(store, plans)} in {args.db}")
     if args.json:
         write_json(plans, args.json)
         print(f"json: {Path(args.json).resolve()}")

@@ -28,7 +28,7 @@ import numpy as np
 from workbench.robots import analytic, parallel
 from workbench.robots.analytic import Chain, _limit, chain_of, reverse_poses, reversed_chain, sub_chain
 
-SWEEP = 16  # samples of a 7-joint arm's last joint
+SWEEP = 16  # samples of a 7-joint arm's swept joint
 
 
 @dataclass(frozen=True)
@@ -40,10 +40,6 @@ class ClosedForm:
     branches: int
     nq: int
     solve: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
-
-    def reachable(self, poses: np.ndarray) -> np.ndarray:
-        """(N,) bool: whether some branch of each pose is within the joint limits."""
-        return self.solve(poses)[1].any(axis=1)
 
 
 def _six(chain: Chain, limits: bool) -> tuple[str, bool, Callable] | None:

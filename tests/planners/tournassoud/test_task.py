@@ -12,6 +12,11 @@ from workbench.grasping.placements import stable_placements
 from workbench.planners.tournassoud.classes import grasp_classes
 from workbench.planners.tournassoud.table import TableParams, build_table
 from workbench.planners.tournassoud.task import TaskEnd, end_mask, task_query, walls_around
+from workbench.planners.tournassoud.shapes import l_part
+
+STANDING = next(j for j, p in enumerate(stable_placements(l_part()).poses)
+                if np.allclose(p[:3, :3] @ [0.0, 0.0, 1.0], [-1.0, 0.0, 0.0], atol=1e-6))
+"""The L part's placement standing on one leg with its other leg upright (the pick-up of Fig. 1)."""
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +77,8 @@ def test_pickup_obstacles_refuse_the_grasps_that_hit_them(setup, lpart, hand, pu
     """The L part standing in a pocket (walls on two sides, 20 mm away): the grasps whose hand hits a wall at the grasp or
     on its approach are refused, exactly those by coal; the chosen first grasp of a task query clears them."""
     classes, table = setup
-    bare = TaskEnd(2, 0.45, -0.12, np.radians(30))
-    pocket = TaskEnd(2, 0.45, -0.12, np.radians(30))
+    bare = TaskEnd(STANDING, 0.45, -0.12, np.radians(30))
+    pocket = TaskEnd(STANDING, 0.45, -0.12, np.radians(30))
     pocket.obstacles = walls_around(lpart.mesh, pocket.object_pose(table), gap=0.02, sides="y")
     free, _ = end_mask(table, classes, bare, puma560, hand)
     legal, counts = end_mask(table, classes, pocket, puma560, hand)
@@ -89,7 +94,7 @@ def test_pickup_obstacles_refuse_the_grasps_that_hit_them(setup, lpart, hand, pu
     seq = task_query(table, legal, end_mask(table, classes, dest, puma560, hand)[0], pocket, dest)
     c, t = seq.grasps[0]
     assert legal[c, t] and not _hits(mesh, _path(obj @ classes[c].pose(table.theta[t]), pocket.approach), pocket.obstacles)
-    assert np.allclose(seq.extra["start_pose"], obj) and seq.placements[0][0] == 2
+    assert np.allclose(seq.extra["start_pose"], obj) and seq.placements[0][0] == STANDING
 
 
 def test_insertion_keeps_the_last_hand_clear_of_the_fixture(setup, lpart, hand, puma560):
@@ -110,7 +115,7 @@ def test_insertion_keeps_the_last_hand_clear_of_the_fixture(setup, lpart, hand, 
     for (c, t) in np.argwhere(free):
         tcp = obj @ classes[c].pose(table.theta[t])
         assert _hits(mesh, _path(tcp, dest.approach, dest.insertion, dest.depth), dest.obstacles) == (not legal[c, t]), (c, t)
-    pick = TaskEnd(2, 0.45, -0.12, np.radians(30))
+    pick = TaskEnd(STANDING, 0.45, -0.12, np.radians(30))
     seq = task_query(table, end_mask(table, classes, pick, puma560, hand)[0], legal, pick, dest)
     c, t = seq.grasps[-1]
     assert legal[c, t] and seq.placements[-1][0] == 0 and np.allclose(seq.extra["goal_pose"], obj)
@@ -139,7 +144,7 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
     from workbench.planners.tournassoud.stages import load_planner
 
     run = load_planner(db, "L")
-    pick, dest = TaskEnd(2, 0.55, -0.05, np.radians(30)), TaskEnd(0, 0.35, 0.25, 0.0)
+    pick, dest = TaskEnd(STANDING, 0.55, -0.05, np.radians(30)), TaskEnd(0, 0.35, 0.25, 0.0)
     args, obstacles = [], []
     for flag, end, gap, sides in (("--pickup-obstacle", pick, 0.02, "y"), ("--destination-obstacle", dest, 0.01, "x")):
         for k, o in enumerate(walls_around(lpart.mesh, end.object_pose(run.table), gap=gap, sides=sides)):
@@ -148,7 +153,7 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
             args += [flag, f"{f}@{o.pose[0, 3]:.6f},{o.pose[1, 3]:.6f},{o.pose[2, 3]:.6f}"]
             obstacles.append(o)
     js = tmp_path / "task.json"
-    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", "2,0.55,-0.05,30", "--destination", "0,0.35,0.25,0",
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0",
                  "--insert", "0,0,-1,0.02", *args, "--json", str(js)]) == 0
     out = capsys.readouterr().out
     doc = json.loads(js.read_text())
@@ -173,12 +178,162 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
     assert doc["task"]["destination"]["insertion"] == [0.0, 0.0, -1.0] and len(doc["task"]["pickup"]["obstacles"]) == 2
     # bad task input: one line each, exit 2, nothing planned
     base = ["gpplan", "--db", db, "--object", "L", "--no-motion", "--no-save"]
-    ends = ["--pickup", "2,0.55,-0.05,30", "--destination", "0,0.35,0.25,0"]
-    for bad in (["--pickup", "2,0.55,-0.05,30"], ["--pickup", "2,x,0,0", "--destination", "0,0.35,0.25,0"],
+    ends = ["--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0"]
+    for bad in (["--pickup", f"{STANDING},0.55,-0.05,30"], ["--pickup", f"{STANDING},x,0,0", "--destination", "0,0.35,0.25,0"],
                 ends + ["--insert", "0,0,0"], ends + ["--insert", "0,0,-1,-0.1"],
                 ends + ["--pickup-obstacle", str(tmp_path / "missing.stl") + "@0,0,0"],
                 ends + ["--pickup-obstacle", "nopose.stl"], ends + ["--from", "0,0", "--to", "1,0"],
-                ["--from", "0,0", "--to", "1,0", "--insert", "0,0,-1"], ends[:2] + ["--destination", "9,0.35,0.25,0"]):
+                ["--from", "0,0", "--to", "1,0", "--insert", "0,0,-1"], ["--from", "0,0", "--to", "1,0", "--end-held"], ends[:2] + ["--destination", "9,0.35,0.25,0"]):
         assert main(base + bad) == 2, bad
     err = capsys.readouterr().err
     assert "Traceback" not in err
+
+
+def _pin_fk(robot):
+    """The test's own forward kinematics: pinocchio on the robot's URDF, TCP = base @ oMf(tip) @ mount."""
+    import pinocchio as pin
+
+    model = pin.buildModelFromXML(robot.spec.urdf)
+    data = model.createData()
+    tip = model.getFrameId(robot.spec.tip_frame)
+    idx = [model.joints[model.getJointId(j)].idx_q for j in robot.joint_names]
+
+    def fk(q: np.ndarray) -> np.ndarray:
+        full = pin.neutral(model)
+        full[idx] = q
+        pin.framesForwardKinematics(model, data, full)
+        return robot.base @ np.asarray(data.oMf[tip].homogeneous) @ robot.mount
+    return fk
+
+
+@pytest.fixture(scope="module")
+def slot(tmp_path_factory, lpart):
+    """A store with the L part's table, and obstacle files: a pocket at the pick-up (the part standing, walls along y)
+    and a slot open along x at the destination (the part lying, walls along y), with their `--*-obstacle` flags."""
+    from workbench.cli.main import main
+    from workbench.planners.tournassoud.stages import load_planner
+
+    tmp = tmp_path_factory.mktemp("slot")
+    mesh = tmp / "L.stl"
+    lpart.mesh.export(mesh)
+    db = str(tmp / "slot.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--table-point", "0.45,0.1"]) == 0
+    run = load_planner(db, "L")
+    ends = {"pickup": TaskEnd(STANDING, 0.55, -0.05, np.radians(30)), "destination": TaskEnd(0, 0.35, 0.25, 0.0)}
+    walls, flags = {}, {}
+    for name, gap in (("pickup", 0.02), ("destination", 0.01)):
+        walls[name] = walls_around(lpart.mesh, ends[name].object_pose(run.table), gap=gap, sides="y")
+        flags[name] = []
+        for k, o in enumerate(walls[name]):
+            f = tmp / f"{name}{k}.stl"
+            o.mesh.export(f)
+            flags[name] += [f"--{name}-obstacle", f"{f}@{o.pose[0, 3]:.6f},{o.pose[1, 3]:.6f},{o.pose[2, 3]:.6f}"]
+    return db, run, walls, flags, tmp
+
+
+def _stored_segments(db: str, idplan: int) -> list[dict]:
+    from workbench.store import Store
+    from workbench.store.wan_harada import load_plan_segments
+
+    with Store(db) as store:
+        return load_plan_segments(store, idplan).to_pylist()
+
+
+def _clear_everywhere(segs, steps, fk, nq, hand, lpart, walls) -> None:
+    """coal: at every stored knot (pinocchio FK), the hand and, while held, the part clear every wall."""
+    import trimesh
+
+    grasps = [np.linalg.inv(np.reshape(x["grasp"], (4, 4))) for x in steps]
+    held = trimesh.Trimesh(lpart.mesh.vertices, lpart.mesh.faces, process=False)
+    body = hand.collision_mesh(hand.jaw_max)
+    for s in segs:
+        for x in np.reshape(s["q"], (-1, nq)):
+            p = fk(x)
+            assert not _hits(body, p[None], walls), (s["kind"], s["caption"])
+            if s["holding"]:
+                assert not _hits(held, (p @ grasps[s["step"]])[None], walls), (s["kind"], s["caption"])
+
+
+def test_slanted_insertion_is_the_plans_last_straight_line(slot, lpart, hand, capsys):
+    """`gpplan --insert 1,0,-1,0.03` into a slot open along x (walls either side along y): the stored plan's last
+    motion with the part in the hand is a straight TCP line of 30 mm along the insertion direction ending at the
+    destination (pinocchio FK of the stored knots, not the planner's), every knot of which keeps the hand and the
+    held part clear of the slot's walls (coal); the plan passes the validators."""
+    import json
+
+    from workbench.cli.main import main
+    from workbench.robots.model import get_robot
+
+    db, run, walls, flags, tmp = slot
+    capsys.readouterr()
+    js = tmp / "slant.json"
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0",
+                 "--insert", "1,0,-1,0.03", *flags["destination"], "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    assert "validator: ok" in out, out
+    idplan = int(out.split("stored plan id ")[1].split()[0])
+    segs = _stored_segments(db, idplan)
+    robot = get_robot("puma560")
+    fk = _pin_fk(robot)
+    last = [s for s in segs if s["kind"] == "lower"][-1]
+    tcp = np.array([fk(x) for x in np.reshape(last["q"], (-1, robot.nq))])
+    d = np.array([1.0, 0.0, -1.0]) / np.sqrt(2)
+    move = tcp[-1, :3, 3] - tcp[0, :3, 3]
+    assert np.allclose(move, 0.03 * d, atol=1e-3), move
+    rel = tcp[:, :3, 3] - tcp[0, :3, 3]
+    off_line = np.linalg.norm(rel - np.outer(rel @ d, d), axis=1)
+    assert off_line.max() < 1e-3 and np.all(np.diff(rel @ d) > -1e-6), off_line.max()
+    assert np.allclose(tcp[:, :3, :3], tcp[0, :3, :3], atol=1e-3)  # the hand translates along the line
+    after = segs[segs.index(last) + 1]
+    assert after["kind"] == "gripper" and not after["holding"]  # the part is released in place
+    steps = json.loads(js.read_text())["plan"]["steps"]
+    assert last["step"] == len(steps) - 1 and np.allclose(tcp[-1], np.reshape(steps[-1]["tcp"], (4, 4)), atol=1e-3)
+    _clear_everywhere(segs, steps, fk, robot.nq, hand, lpart, walls["destination"])
+
+
+def test_plan_starts_and_ends_in_the_hand(slot, lpart, hand, capsys):
+    """`--start-held --end-held` (Fig. 1 (a) and (d)): the stored trajectory begins with the part held at the first
+    grasp at the pick-up, lifting it out of the pocket, and ends with it still held at the last grasp at the
+    destination after the insertion (pinocchio FK of the stored knots); hand and part clear both ends' walls (coal);
+    the validators rebuilt from the store accept it because the plan says so, and refuse the same trajectory when
+    the plan claims to release the part at the end or to start with an empty hand."""
+    import json
+
+    from workbench.cli.main import main
+    from workbench.planners.tournassoud.stages import validate_stored
+    from workbench.planners.wan_harada.plans import Plan
+    from workbench.robots.model import get_robot
+
+    db, run, walls, flags, tmp = slot
+    capsys.readouterr()
+    js = tmp / "held.json"
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0",
+                 "--insert", "1,0,-1,0.03", *flags["pickup"], *flags["destination"], "--start-held", "--end-held",
+                 "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    assert "validator: ok" in out and "starts with the part in the hand" in out and "still in the hand" in out, out
+    idplan = int(out.split("stored plan id ")[1].split()[0])
+    doc = json.loads(js.read_text())["plan"]
+    assert doc["start_held"] and doc["end_held"]
+    steps = doc["steps"]
+    segs = _stored_segments(db, idplan)
+    robot = get_robot("puma560")
+    fk = _pin_fk(robot)
+    first, last = segs[0], segs[-1]
+    assert first["kind"] == "lift" and first["holding"] and last["kind"] == "lower" and last["holding"]
+    q0, q1 = np.reshape(first["q"], (-1, robot.nq))[0], np.reshape(last["q"], (-1, robot.nq))[-1]
+    assert np.allclose(fk(q0), np.reshape(steps[0]["tcp"], (4, 4)), atol=1e-3)
+    assert np.allclose(fk(q1), np.reshape(steps[-1]["tcp"], (4, 4)), atol=1e-3)
+    # the jaw acts only at the regrasps in between: once to release, once to take, per regrasp on the table
+    assert sum(s["kind"] == "gripper" for s in segs) == 2 * doc["regrasps"]
+    assert not any(s["kind"] in ("approach", "retract") and s["step"] in (0, len(steps) - 1) for s in segs)
+    _clear_everywhere(segs, steps, fk, robot.nq, hand, lpart, walls["pickup"] + walls["destination"])
+    obstacles = [(o.mesh, o.pose) for o in walls["pickup"] + walls["destination"]]
+    plan = Plan.from_dict(doc)
+    assert validate_stored(db, run, idplan, plan, require_motion=True, obstacles=obstacles).ok
+    plan.end_held = False
+    report = validate_stored(db, run, idplan, plan, require_motion=True, obstacles=obstacles)
+    assert not report.ok and any("still in the hand" in e for e in report.errors), report.errors
+    plan.end_held, plan.start_held = True, False
+    report = validate_stored(db, run, idplan, plan, require_motion=True, obstacles=obstacles)
+    assert not report.ok and any("held" in e for e in report.errors), report.errors

@@ -19,7 +19,9 @@ Plan steps (validator order pick, (transfer, regrasp)*, place):
 - placement query: pick at the start placement with the first grasp, then per regrasp a transfer to an intermediate
   placement and a regrasp there, and place at the goal placement with the last grasp;
 - task query (`plan_task_query`, Fig. 1): the same with the pick at the task's pick-up and the place at its
-  destination, away from H, both checked against the task's obstacles;
+  destination, away from H, both checked against the task's obstacles; the plan may start with the part already
+  in the hand at the pick-up and end with it still held at the destination (`Plan.start_held`, `end_held`: the
+  motions begin with the lift out of the pick-up, end with the insertion);
 - grasp query (the object starts and ends in the hand): pick and transfer both hold the initial grasp at the first
   intermediate placement (the configuration where it is put down), then regrasp/transfer pairs, and the last regrasp
   and the place both hold the final grasp at the last placement.
@@ -65,6 +67,7 @@ class Conjunction:
     q: np.ndarray  # (5, n): grasp, approach (handx), retract (handxworldz), worlda, worldaworldz
     phi: float = 0.0  # the placement's angle (the sample's, or the query's own at its start and goal)
     position: tuple[float, float] | None = None  # where the part rests (x, y); None: the table point H
+    lift: np.ndarray | None = None  # world TCP move grasp -> worlda (the insertion backwards); None: up by worlda
 
 
 class Realiser:
@@ -123,10 +126,15 @@ class Realiser:
             cand = cand[np.argsort(np.abs(cand - q_prev).sum(axis=1), kind="stable")]
         return cand
 
-    def configurations(self, object_pose: np.ndarray, tcp: np.ndarray, q_prev: np.ndarray | None) -> np.ndarray | None:
+    def configurations(self, object_pose: np.ndarray, tcp: np.ndarray, q_prev: np.ndarray | None,
+                       lift: np.ndarray | None = None) -> np.ndarray | None:
         """(5, n) joint vectors at the roadmap planner's five poses (grasp, handx, handxworldz, worlda, worldaworldz;
-        the object held at the two lifts), or None when no seed gives all five collision-free."""
+        the object held at the two lifts; with `lift`, worlda is the grasp moved by it in the world, the start of an
+        insertion), or None when no seed gives all five collision-free."""
         poses = retract(tcp[None], self.handx, self.worldz, self.worlda)[0]  # (5, 4, 4)
+        if lift is not None:
+            poses[3, :3, 3] = tcp[:3, 3] + lift
+            poses[4, :3, 3] = poses[3, :3, 3] + [0.0, 0.0, self.worldz]
         place = held_placements(poses[None], object_pose[None])[0]  # (5, 4, 4): lifted with the hand at the lifts
         o = self.opts
         for q0 in self.seeds(poses[0], q_prev):
@@ -235,15 +243,17 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
             phi = seq.extra.get("phi_start") if k == 0 else (seq.extra.get("phi_goal") if k == len(pairs) - 1 else None)
             obj, tcp, _ = conjunction_poses(work, classes, g, p, theta, phi)
             end = _task_end(seq, k, len(pairs))
+            lift = None
             if end is not None:  # the task's pick-up or destination, away from H
                 obj = seq.extra[f"{end}_pose"]
                 tcp = obj @ classes[g[0]].pose(work.theta[g[1]])
-            q = realiser.configurations(obj, tcp, q_prev)
+                lift = seq.extra.get(f"{end}_lift")
+            q = realiser.configurations(obj, tcp, q_prev, lift)
             if q is None:
                 bad = (k, g, p)
                 break
             out.append(Conjunction(g, p, obj, tcp, q, work.phi[p[1]] if phi is None else phi,
-                                   None if end is None else seq.extra[f"{end}_xy"]))
+                                   None if end is None else seq.extra[f"{end}_xy"], lift))
             q_prev = q[0]
         if bad is None:
             return seq, out
@@ -426,7 +436,7 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
         return PlanStep(kind=kind, idfreeairgrip=int(c * t_n + t), idfreetabletopplacement=int(j), position=np.array([x, y, 0.0]),
                         yaw=float(cj.phi), object_pose=cj.object_pose, tcp=cj.tcp, grasp=g,
                         jawwidth=float(classes[c].opening), q_approach=cj.q[1], q_grasp=cj.q[0], q_retract=cj.q[2],
-                        q_worlda=cj.q[3], q_worldaworldz=cj.q[4])
+                        q_worlda=cj.q[3], q_worldaworldz=cj.q[4], lift=cj.lift)
 
     kinds, which = step_conjunctions(seq.kind, len(conj))
     steps = [step(k, conj[i]) for k, i in zip(kinds, which)]
@@ -446,7 +456,8 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
     checker = realiser.motion_checker(opts)
     vlim = np.asarray(robot.model.velocityLimit, dtype=np.float64)
     t0 = time.perf_counter()
-    res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz)
+    res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz,
+                             plan.start_held, plan.end_held)
     if res.ok:
         for st, ln in zip(plan.steps, lines):
             st.q_retract, st.q_approach, st.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp
@@ -458,7 +469,7 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
 
 
 def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: str, motions: ExecOptions | None,
-          **kw) -> tuple[Sequence, Plan | None]:
+          held: tuple[bool, bool] = (False, False), **kw) -> tuple[Sequence, Plan | None]:
     """Answer, realise and plan a query; with `motions`, when a motion between two conjunctions fails (the step's
     lines, or the move into the next step), the failed conjunction and every sample needing the same change of arm
     configuration are removed from a working copy of the table (`learn_removal`) and the query answered again, at
@@ -501,6 +512,7 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
         if not conj:
             return explained(seq), None
         plan = to_plan(seq, conj, work, classes, robot, object_name, realiser.handx, realiser.worldz)
+        plan.start_held, plan.end_held = held
         if motions is None:
             return explained(seq), plan
         res = add_motions(plan, realiser, motions)
@@ -549,10 +561,13 @@ def plan_placement_query(table, classes, realiser: Realiser, robot: Robot, objec
 
 
 def plan_task_query(table, classes, realiser: Realiser, robot: Robot, object_name: str, pickup, destination,
-                    start: np.ndarray, goal: np.ndarray, motions: ExecOptions | None = None) -> tuple[Sequence, Plan | None]:
+                    start: np.ndarray, goal: np.ndarray, motions: ExecOptions | None = None, start_held: bool = False,
+                    end_held: bool = False) -> tuple[Sequence, Plan | None]:
     """Fig. 1's task (Section 5.1): the part picked up where it lies among the pick-up's obstacles with a grasp of
     `start` ((C, T), `task.end_mask`), regrasped on the table at H as often as needed, and put at the destination
     (inserted, the hand clear of its obstacles) with a grasp of `goal`. The plan's first step takes the part at the
-    pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles."""
-    return _plan(task_query, table, classes, realiser, robot, object_name, motions, start=start, goal=goal, pickup=pickup,
-                 destination=destination)
+    pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles. With `start_held`
+    the part is already in the hand at the pick-up (Fig. 1 (a)): the motions begin there, at the first grasp, and lift
+    it out; with `end_held` they end with it still held at the destination (Fig. 1 (d)), after the insertion."""
+    return _plan(task_query, table, classes, realiser, robot, object_name, motions, (start_held, end_held), start=start,
+                 goal=goal, pickup=pickup, destination=destination)

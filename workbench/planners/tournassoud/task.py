@@ -22,10 +22,11 @@ so that a grasp legal here is one its motions can use.
 
 The chaining then starts from the (C, T) set of legal grasps at the pick-up and ends in the set legal at the
 destination (`task_query`): the theta ranges of the first and last grasps come from the obstacles, not from the user.
-The plan's motions take the part out of the pick-up and put it into the destination straight up and down (the
-roadmap planner's lift and lower, `worlda` then `worldz`), checked against the obstacles: a vertical insertion is
-executed as it is checked; another direction makes the last grasp legal for that insertion, but the plan still
-lowers the part vertically.
+The plan's motions take the part out of the pick-up straight up (the roadmap planner's lift, `worlda` then
+`worldz`) and put it into the destination along the insertion: the held part comes down by `worldz` to the start of
+the insertion, `depth` back along its direction, then moves along it in a straight TCP line into place (without an
+insertion, straight down by `worlda`), every motion checked against the obstacles; so a slot entered sideways or at
+a slant is executed as it is checked.
 The paper leaves the obstacle test's details open; this is the workbench's choice.
 """
 
@@ -91,6 +92,11 @@ class TaskEnd:
             if not np.isfinite(n) or n < 1e-9:
                 raise WorkbenchError(f"insertion direction {self.insertion} must be a non-zero vector DX,DY,DZ")
             self.insertion = d / n
+
+    def lift(self) -> np.ndarray | None:
+        """(3,) the hand's move from the final pose back to the start of the insertion (world), None without one: the
+        plan's last straight line runs it forwards, along the insertion direction for `depth`."""
+        return None if self.insertion is None or self.depth <= 0 else -self.depth * self.insertion
 
     def as_dict(self) -> dict:
         """The end as JSON-ready values (angles in radians, obstacle poses row-major)."""
@@ -177,7 +183,8 @@ def task_query(table: GraspPlacementTable, start: np.ndarray, goal: np.ndarray, 
                     extra={"phi_start": float(pickup.phi), "phi_goal": float(destination.phi),
                            "start_pose": pickup.object_pose(table), "goal_pose": destination.object_pose(table),
                            "start_xy": (float(pickup.x), float(pickup.y)),
-                           "goal_xy": (float(destination.x), float(destination.y))})
+                           "goal_xy": (float(destination.x), float(destination.y)),
+                           "goal_lift": destination.lift()})
 
 
 def walls_around(part: trimesh.Trimesh, pose: np.ndarray, gap: float = 0.01, height: float | None = None,

@@ -75,6 +75,11 @@ class PlanStep:
     idtabletopplacements: int | None = None
     q_worlda: np.ndarray | None = None
     q_worldaworldz: np.ndarray | None = None
+    lift: np.ndarray | None = None  # world TCP displacement grasp -> worlda; None: straight up by the plan's worlda
+
+    def lift_vector(self, worlda: float) -> np.ndarray:
+        """(3,) the TCP's move from the grasp to the worlda pose: `lift` (an insertion run backwards), else up by worlda."""
+        return np.array([0.0, 0.0, worlda]) if self.lift is None else np.asarray(self.lift, dtype=np.float64).reshape(3)
 
     def as_dict(self) -> dict[str, Any]:
         out = {"kind": self.kind, "idfreeairgrip": int(self.idfreeairgrip), "idfreetabletopplacement": int(self.idfreetabletopplacement),
@@ -84,6 +89,8 @@ class PlanStep:
                "tcp": _list(self.tcp), "grasp": _list(self.grasp), "jawwidth": float(self.jawwidth),
                "q_approach": _list(self.q_approach), "q_grasp": _list(self.q_grasp), "q_retract": _list(self.q_retract),
                "q_worlda": _list(self.q_worlda), "q_worldaworldz": _list(self.q_worldaworldz)}
+        if self.lift is not None:
+            out["lift"] = _list(self.lift)
         return out
 
     @classmethod
@@ -94,7 +101,8 @@ class PlanStep:
                    grasp=arr("grasp", (4, 4)), jawwidth=float(d["jawwidth"]), q_approach=arr("q_approach"), q_grasp=arr("q_grasp"),
                    q_retract=arr("q_retract"), idtabletopgrips=d.get("idtabletopgrips"), idtabletopplacements=d.get("idtabletopplacements"),
                    q_worlda=arr("q_worlda") if d.get("q_worlda") is not None else None,
-                   q_worldaworldz=arr("q_worldaworldz") if d.get("q_worldaworldz") is not None else None)
+                   q_worldaworldz=arr("q_worldaworldz") if d.get("q_worldaworldz") is not None else None,
+                   lift=arr("lift", (3,)) if d.get("lift") is not None else None)
 
     def configurations(self) -> dict[str, np.ndarray]:
         return {"approach": self.q_approach, "grasp": self.q_grasp, "retract": self.q_retract,
@@ -135,6 +143,8 @@ class Plan:
     removed: int = 0
     acc: list[float] = field(default_factory=list)
     planner: str = "wan_harada"
+    start_held: bool = False  # the motions begin with the part already in the hand at the first step's grasp
+    end_held: bool = False  # they end with it still in the hand at the last step's grasp (Tournassoud Fig. 1 (a), (d))
 
     @property
     def duration(self) -> float:
@@ -161,7 +171,8 @@ class Plan:
                 "regrasps": self.regrasps, "transfers": self.transfers, "timings": {k: float(v) for k, v in self.timings.items()},
                 "ids": {k: int(v) for k, v in self.ids.items()}, "steps": [s.as_dict() for s in self.steps],
                 "motion": {"duration": self.duration, "removed": self.removed, "acc": [float(a) for a in self.acc],
-                           "segments": [s.as_dict() for s in self.segments]}}
+                           "segments": [s.as_dict() for s in self.segments]},
+                "start_held": self.start_held, "end_held": self.end_held}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Plan":
@@ -174,7 +185,8 @@ class Plan:
                    rank=int(d.get("rank", 0)), timings=dict(d.get("timings", {})), ids=dict(d.get("ids", {})),
                    segments=[TimedSegment.from_dict(s) for s in (d.get("motion") or {}).get("segments", [])],
                    removed=int((d.get("motion") or {}).get("removed", 0)), acc=list((d.get("motion") or {}).get("acc", [])),
-                   planner=str(d.get("planner", "wan_harada")))
+                   planner=str(d.get("planner", "wan_harada")), start_held=bool(d.get("start_held", False)),
+                   end_held=bool(d.get("end_held", False)))
 
     def to_json(self, path: str | Path | None = None) -> str:
         """The plan as JSON (written to `path` when given)."""
