@@ -11,7 +11,8 @@ Checks, per plan: the step sequence (pick, then transfer / regrasp pairs, then p
 finite, within limits and reproduces its TCP pose (grasp, approach = backed off by handx along the TCP's -z,
 retract = approach raised by worldz, worlda = the grasp raised by worlda along world z with the part held,
 worldaworldz = that raised by worldz; the part moves with the hand at the last two, so it leaves and reaches the
-table only vertically); no arm-table, gripper-table or arm-object collision (the object at the
+table only vertically, except where a step names its own `lift`, an insertion run backwards: worlda is then the
+grasp moved by it); no arm-table, gripper-table or arm-object collision (the object at the
 step's pose); every object pose rests on the table and is stable; the object stays put between a transfer and
 its regrasp; the grasp (object in the TCP frame, from forward kinematics) is unchanged along each transfer;
 the object starts at the start pose and ends at the goal pose.
@@ -25,7 +26,9 @@ of the robot row, extended with the links joined by one URDF joint and links tha
 other); arm, gripper and held object clear of the table (the held object may touch it within 1 mm); with an empty
 hand, arm and gripper clear of the object where it rests (the fingers may touch it on the segments that reach or
 leave the step's grasp pose, as CONVENTIONS.md allows); the object is held exactly between a pick / regrasp and
-the next transfer / place; the jaw acts at the step's grasp pose. The only planner output it takes as data is the
+the next transfer / place (or from the first knot, at the first grasp, when the plan says it starts holding the
+part, and to the last knot, at the last grasp, when it says it ends holding it); the jaw acts at the step's grasp
+pose. The only planner output it takes as data is the
 robot row's allowed pairs.
 """
 
@@ -480,7 +483,13 @@ class TrajectoryValidator:
         n = len(pv.joint_names)
         knots = 0
         prev_end_t, prev_end_q = None, None
-        holding = False
+        start_held, end_held = bool(getattr(plan, "start_held", False)), bool(getattr(plan, "end_held", False))
+        holding = start_held  # a plan may begin with the part already in the hand at its first grasp
+        if start_held and segments and steps:
+            q0 = np.asarray(segments[0].traj.q)[0]
+            d = float(np.linalg.norm(self._place(q0)[:3, 3] - np.asarray(steps[0].tcp)[:3, 3]))
+            if d > pv.tol_pos:
+                errs.append(f"the plan starts holding the part but its first knot is {d * 1000:.1f} mm from the first grasp")
         for si, seg in enumerate(segments):
             tag = f"segment {si + 1} ({seg.kind}, {seg.caption})"
             t, q, qd = np.asarray(seg.traj.t), np.asarray(seg.traj.q), np.asarray(seg.traj.qd)
@@ -550,8 +559,14 @@ class TrajectoryValidator:
                                 f"apart, beyond the check resolution (1 degree and 5 mm)")
             if len(errs) >= max_errors:
                 break
-        if holding:
+        if holding and not end_held:
             errs.append("the trajectory ends with the object still in the hand")
+        elif end_held and not holding:
+            errs.append("the plan says it ends holding the part, but the trajectory releases it")
+        elif end_held and segments and steps:
+            d = float(np.linalg.norm(self._place(np.asarray(segments[-1].traj.q)[-1])[:3, 3] - np.asarray(steps[-1].tcp)[:3, 3]))
+            if d > pv.tol_pos:
+                errs.append(f"the plan ends holding the part {d * 1000:.1f} mm from its last grasp")
         return errs, knots
 
 

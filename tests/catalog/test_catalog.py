@@ -10,6 +10,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -31,12 +32,17 @@ from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.resources import bundled_objects
 from workbench.robots.gripper import franka_hand
 from workbench.robots.ik import IKOptions
-from workbench.robots.model import get_robot
+from workbench.catalog.robots import parse_robots
+from workbench.resources import erd_robots
+from workbench.robots.model import get_robot, pose_xyz_yaw
 from workbench.store import Store
 from workbench.store import catalog as sql
 from workbench.store.catalog import ik_vectors
 
-ROBOTS = ("panda", "ur5")
+UR5 = erd_robots() / "ur_description" / "urdf" / "ur5_robot.urdf"
+ROBOTS = ("panda", "ur5_robot")  # a built-in robot and a user's URDF robot (the Franka hand on its flange)
+ROBOT_ARGS = ["--robots", f"panda,ur5_robot={UR5}", "--tip", "tool0", "--mount", "0,0,0.1034,0,0,0"]
+MOUNT = pose_xyz_yaw(0.0, 0.0, 0.1034, 0.0)
 PARAMS = CatalogParams(tabletop=TabletopParams(x_min=0.4, x_max=0.6, nx=2, y_min=0.0, y_max=0.0, ny=1, angles=2,
                                                max_grasps=10),
                        ik=IKOptions(library=2048, seeds=2, self_collide=True), ik_chunk=32)
@@ -70,6 +76,25 @@ def _rows(db: Path) -> dict:
     return out
 
 
+PAPER_TABLES = ("object", "robot", "freeairgrip", "freetabletopplacement", "freetabletopgrip", "angle", "tabletopplacements",
+                "tabletopgrips", "ikret", "ik", "gripper", "scene")
+
+
+def _content(db: Path) -> dict[str, list]:
+    """Every row of the paper's tables (and the gripper and scene) without its ids, timestamps and IK joint vectors
+    (compared to 1e-12 by `_joints`; BLAS sums in another order), sorted: what two builds of the same inputs share
+    whatever order they wrote in."""
+    out = {}
+    with Store(db, read_only=True) as s:
+        for t in PAPER_TABLES:
+            cols = [c for c, kind in s.run("SELECT column_name, data_type FROM information_schema.columns WHERE "
+                                           "table_name = ? ORDER BY ordinal_position", [t])
+                    if not c.startswith("id") and not c.startswith("jnt_") and "TIMESTAMP" not in kind
+                    and c not in ("used", "created")]
+            out[t] = sorted(map(repr, s.run(f"SELECT {', '.join(cols)} FROM {t}")))
+    return out
+
+
 @pytest.fixture(scope="module")
 def serial_db(parts, tmp_path_factory) -> Path:
     """A serial build through the stage runners `workbench build` uses, one part and robot at a time."""
@@ -81,8 +106,8 @@ def serial_db(parts, tmp_path_factory) -> Path:
             obj = load_object(path)
             g = ensure_grasps(store, obj, hand, p.grasps)
             pl = ensure_placements(store, g.idobject, obj, g.idparamset, hand, p.placements, p.tabletop)
-            for robot in ROBOTS:
-                run_ik(store, obj.name, get_robot(robot), None, p.handx, p.worldz, p.ik,
+            for robot in (get_robot("panda"), get_robot(str(UR5), tip_frame="tool0", mount=MOUNT)):
+                run_ik(store, obj.name, robot, None, p.handx, p.worldz, p.ik,
                        workers=1, progress=False, idtabletop=pl.idtabletop)
     return db
 
@@ -90,6 +115,12 @@ def serial_db(parts, tmp_path_factory) -> Path:
 @pytest.fixture(scope="module")
 def serial(serial_db) -> dict:
     return _rows(serial_db)
+
+
+@pytest.fixture(scope="module")
+def robots() -> dict:
+    """The catalogue's columns, as `--robots panda,ur5_robot=UR5 --tip tool0 --mount ...` gives them."""
+    return parse_robots(f"panda,ur5_robot={UR5}", tip="tool0", mount=MOUNT)
 
 
 @pytest.fixture(scope="module")
@@ -108,13 +139,16 @@ def _same(a: dict, b: dict) -> None:
             assert a[k] == b[k], k
 
 
-def test_cluster_build_equals_serial_and_reports_broken_part(parts, serial, client, tmp_path):
+def test_cluster_build_equals_serial_and_reports_broken_part(parts, robots, serial, serial_db, client, tmp_path):
     db = tmp_path / "catalog.duckdb"
-    res = build_catalog(parts, ",".join(ROBOTS), db, client, PARAMS, progress=False)
+    res = build_catalog(parts, robots, db, client, PARAMS, progress=False)
     assert res.workers == 2 and res.dashboard.startswith("http://127.0.0.1:")
     rows = _rows(db)
     _same(rows, serial)
     assert rows["ik rows"][0] == rows["ik rows"][1] == sum(len(v) for k, v in rows.items() if isinstance(k, tuple))
+    mine, theirs = _content(db), _content(serial_db)
+    for t in PAPER_TABLES:  # every table, row for row
+        assert mine[t] == theirs[t] and mine[t], t
     assert [(f["part"], f["kind"]) for f in res.failures] == [("broken", "part")]
     assert "holds no triangle mesh" in res.failures[0]["error"] and "\n" not in res.failures[0]["error"]
     assert {(r["part"], r["robot"]) for r in res.rows} == {(p.stem, r) for p in parts[:-1] for r in ROBOTS}
@@ -122,37 +156,51 @@ def test_cluster_build_equals_serial_and_reports_broken_part(parts, serial, clie
         assert r["ik_rows"] == r["tabletop_grips"] == serial[r["part"]][2] > 0
         assert r["ik_feasible"] == int(serial[r["part"], r["robot"]].all(axis=1).sum())
         assert r["graph"]["components"] >= 1 and r["graph"]["grips"] == r["tabletop_grips"]
-    again = build_catalog(parts, ",".join(ROBOTS), db, client, PARAMS, progress=False)
+    again = build_catalog(parts, robots, db, client, PARAMS, progress=False)
     assert sum(again.computed.values()) == 0 and again.skipped == sum(res.computed.values())
     _same(_rows(db), serial)
 
 
-@pytest.mark.parametrize("sharded", [False, True], ids=["direct", "shards"])
-def test_worker_killed_mid_run_loses_nothing(parts, serial, client, tmp_path, sharded):
+@pytest.mark.parametrize("during", ["part", "ik"])
+def test_worker_killed_mid_run_loses_nothing(parts, robots, serial, client, tmp_path, during):
+    """A worker killed by PID while it runs a part unit (or an IK unit): Dask runs the unit again elsewhere, and the
+    rows equal a serial build's; every unit file is merged and deleted."""
     pids = list(client.run(os.getpid).values())
     killed = []
 
-    def kill_one(kind: str, unit: dict) -> None:
-        busy = client.processing()  # kill a worker that is running a task right now
-        if kind == "ik" and not killed:
-            addr = next((a for a, keys in busy.items() if keys), None)
-            if addr is not None:
-                pid = client.run(os.getpid, workers=[addr])[addr]
-                os.kill(pid, signal.SIGKILL)
-                killed.append(pid)
+    def kill_busy(prefix: str) -> None:
+        busy = client.processing()  # kill a worker that is running a unit of this kind right now
+        addr = next((a for a, keys in busy.items() if any(str(k).startswith(prefix) for k in keys)), None)
+        if addr is not None and not killed:
+            pid = client.run(os.getpid, workers=[addr])[addr]
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
 
-    res = build_catalog(parts[:-1], ",".join(ROBOTS), tmp_path / "c.duckdb", client, PARAMS, progress=False,
-                        on_unit=kill_one, shards=tmp_path / "shards" if sharded else None)
+    stop = threading.Event()
+
+    def watch_parts() -> None:
+        while not stop.is_set() and not killed:
+            kill_busy("part-")
+            time.sleep(0.05)
+
+    watcher = threading.Thread(target=watch_parts, daemon=True)
+    if during == "part":
+        watcher.start()
+    try:
+        res = build_catalog(parts[:-1], robots, tmp_path / "c.duckdb", client, PARAMS, progress=False,
+                            on_unit=(lambda kind, unit: kind == "ik" and kill_busy("ik-")) if during == "ik" else None,
+                            shards=tmp_path / "units")
+    finally:
+        stop.set()
     assert killed and killed[0] in pids
     assert res.failures == []
     _same(_rows(tmp_path / "c.duckdb"), serial)
-    if sharded:  # every shard merged and deleted (a killed writer's temporary file is cleaned by the next run)
-        assert not list((tmp_path / "shards").glob("*.parquet"))
+    assert not list((tmp_path / "units").iterdir())  # every file merged and deleted
     client.wait_for_workers(2, timeout=60)  # the nanny restarted it
     assert killed[0] not in client.run(os.getpid).values()
 
 
-def test_unit_that_kills_its_worker_is_reported_and_rerun_finishes(parts, serial, tmp_path):
+def test_unit_that_kills_its_worker_is_reported_and_rerun_finishes(parts, robots, serial, tmp_path):
     """With no retries allowed, the IK units on a killed worker fail (Dask's KilledWorker): each is reported with its
     part, robot and one-line reason while its run's other chunks are stored; that run gets no graph; a re-run
     computes the failed chunks and the graph only, and the rows equal a serial build's."""
@@ -171,7 +219,7 @@ def test_unit_that_kills_its_worker_is_reported_and_rerun_finishes(parts, serial
                     os.kill(pid, signal.SIGKILL)
                     killed.append(pid)
 
-        res = build_catalog(parts[:-1], ",".join(ROBOTS), db, client, PARAMS, progress=False, on_unit=kill_one)
+        res = build_catalog(parts[:-1], robots, db, client, PARAMS, progress=False, on_unit=kill_one)
         assert killed
         failed = {(f["part"], f["robot"]) for f in res.failures}
         assert failed and all(f["kind"] == "ik" and f["error"].startswith("KilledWorker") and "\n" not in f["error"]
@@ -181,43 +229,44 @@ def test_unit_that_kills_its_worker_is_reported_and_rerun_finishes(parts, serial
             chunks = s.one("SELECT count(*) FROM catalog_unit WHERE kind = 'ik' AND status = 'done'")[0]
         assert chunks > 0 and graphs == {(p.stem, r) for p in parts[:-1] for r in ROBOTS} - failed
         client.wait_for_workers(2, timeout=60)
-        again = build_catalog(parts[:-1], ",".join(ROBOTS), db, client, PARAMS, progress=False)
+        again = build_catalog(parts[:-1], robots, db, client, PARAMS, progress=False)
     assert again.failures == [] and again.computed["part"] == 0
     assert again.computed["ik"] == len(res.failures) and again.computed["graph"] == len(failed)
     _same(_rows(db), serial)
 
 
-def test_driver_killed_then_rerun_finishes(parts, serial, tmp_path):
+def test_driver_killed_during_a_merge_then_rerun_finishes(parts, serial, tmp_path):
+    """The driver killed (SIGKILL) inside its first merge transaction, with 2 workers: the store holds no part, the
+    units' files wait on disk; the re-run merges them without computing a part again and the rows equal a serial
+    build's; `catalog report` prints them."""
     db = tmp_path / "d.duckdb"
-    cmd = [sys.executable, "-m", "workbench.cli", "catalog", "build", *map(str, parts[:-1]), "--robots", ",".join(ROBOTS),
-           "--db", str(db), "--workers", "1", "--x", "0.4,0.6,2", "--y", "0,0,1", "--angles", "2", "--max-grasps", "10", "--ik-library", "2048",
-           "--ik-seeds", "2", "--ik-chunk", "32"]
+    cmd = [sys.executable, "-m", "workbench.cli", "catalog", "build", *map(str, parts[:-1]), *ROBOT_ARGS,
+           "--db", str(db), "--workers", "2", "--x", "0.4,0.6,2", "--y", "0,0,1", "--angles", "2", "--max-grasps", "10",
+           "--ik-library", "2048", "--ik-seeds", "2", "--ik-chunk", "32", "--no-progress"]
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    err = tmp_path / "stderr"
-    with open(err, "w") as fh:
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=fh, env=env, start_new_session=True)
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                            env={**env, "WORKBENCH_FAULT": "tabletopgrips:1:SIGKILL"})
     try:
-        deadline = time.monotonic() + 240
-        while time.monotonic() < deadline and proc.poll() is None:
-            bar = err.read_text().replace("\r", "\n").splitlines()
-            done = [int(line.split("|")[2].split("/")[0]) for line in bar if line.startswith("catalog:") and line.count("|") >= 2]
-            if done and done[-1] >= 6:
-                break
-            time.sleep(0.2)
-        assert proc.poll() is None, "the build finished before it could be killed"
+        assert proc.wait(timeout=600) == -signal.SIGKILL
     finally:
-        os.kill(proc.pid, signal.SIGKILL)  # the driver only; its worker processes exit when it is gone
-        proc.wait()
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)  # the cluster it started
     with Store(db, read_only=True) as s:
-        stored = s.one("SELECT count(*) FROM catalog_unit WHERE status = 'done'")[0]
-    assert stored >= 6
+        assert s.one("SELECT count(*) FROM object")[0] == 0  # the merge's transaction was rolled back whole
+    waiting = [f for f in (tmp_path / "d.duckdb.units").glob("part-*") if f.is_dir()]
+    assert waiting
     out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
-    assert f"{stored} skipped" in out.stdout
+    computed = int(out.stdout.split("units computed (")[1].split(" part")[0])
+    assert computed == len(parts[:-1]) - len(waiting)  # the parts on disk are merged, not computed again
     _same(_rows(db), serial)
-    rep = subprocess.run([sys.executable, "-m", "workbench.cli", "catalog", "report", "--db", str(db)], capture_output=True,
-                         text=True, env=env, timeout=120)
+    page = tmp_path / "catalogue.html"
+    rep = subprocess.run([sys.executable, "-m", "workbench.cli", "catalog", "report", "--db", str(db), "--html", str(page)],
+                         capture_output=True, text=True, env=env, timeout=120)
     assert rep.returncode == 0, rep.stderr
+    text = page.read_text()  # a thumbnail per part, a column pair per robot
+    assert text.count('<img src="data:image/png;base64,') == len(parts[:-1])
+    assert all(f"{r} reachable" in text and f"{r} connected" in text for r in ROBOTS)
     lines = [line.split() for line in rep.stdout.splitlines()]
     shown = {(w[0], w[1]): w for w in lines if len(w) == 8 and w[1] in ROBOTS}
     assert set(shown) == {(p.stem, r) for p in parts[:-1] for r in ROBOTS}
@@ -239,7 +288,7 @@ def _joints(db: Path) -> dict:
     return out
 
 
-def test_sharded_build_equals_serial_and_resumes(parts, serial, serial_db, client, tmp_path):
+def test_sharded_build_equals_serial_and_resumes(parts, robots, serial, serial_db, client, tmp_path):
     """IK workers write Parquet shards that the driver merges per (part, robot): the rows (and joint vectors) equal
     the serial build's. A driver stopped with shards on disk, not merged yet, leaves them to the re-run, which
     merges them without computing them again; stale files are cleaned; nothing is duplicated."""
@@ -250,11 +299,12 @@ def test_sharded_build_equals_serial_and_resumes(parts, serial, serial_db, clien
             raise KeyboardInterrupt  # the driver stops with shards on disk, not merged yet
 
     with pytest.raises(KeyboardInterrupt):
-        build_catalog(parts[:-1], ",".join(ROBOTS), db, client, PARAMS, progress=False, shards=shards, on_unit=stop)
+        build_catalog(parts[:-1], robots, db, client, PARAMS, progress=False, shards=shards, on_unit=stop)
     waiting = sorted(p.name for p in shards.glob("*.parquet"))
     assert waiting, "no shard waits for its merge"
     (shards / f"{waiting[0]}.999.tmp").write_bytes(b"half a file")  # a worker killed while writing
-    res = build_catalog(parts[:-1], ",".join(ROBOTS), db, client, PARAMS, progress=False, shards=shards)
+    (shards / "part-0123.999.tmp").mkdir()  # a part unit's folder half written
+    res = build_catalog(parts[:-1], robots, db, client, PARAMS, progress=False, shards=shards)
     assert res.failures == [] and res.merges > 0
     assert res.skipped >= len(waiting)  # the shards on disk are merged, not computed again
     assert not list(shards.iterdir())  # merged and deleted, the temporary file too
@@ -273,8 +323,8 @@ def test_sharded_build_equals_serial_and_resumes(parts, serial, serial_db, clien
 @pytest.mark.parametrize("args, message", [
     (["--robots", "nosuchrobot"], "nosuchrobot"),
     (["--robots", "panda", "--ik-chunk", "0"], "tabletop grips per IK unit must be an integer"),
-    (["--robots", "panda", "--workers", "0"], "--workers must be at least 1"),
-    (["--robots", "panda", "--scale", "-1"], "scale must be a positive"),
+    (["--robots", "panda", "--workers", "0"], "--workers: 0 is out of range"),
+    (["--robots", "panda", "--scale", "-1"], "--scale: -1 is out of range"),
     (["--robots", "arm=arm.urdf"], "give its tip frame with --tip"),
     (["--robots", "panda,panda"], "listed twice"),
     (["--robots", "robots.yaml"], "robots file robots.yaml does not exist"),
@@ -307,11 +357,11 @@ def test_part_without_grasps_is_stored_with_zero_counts(client, tmp_path):
     assert "warning: bigcube has no free-air grasps; stage pads_width: every contact pair is wider" in err.getvalue()
 
 
-def test_catalog_over_a_serial_store_duplicates_nothing(parts, serial, serial_db, client, tmp_path):
+def test_catalog_over_a_serial_store_duplicates_nothing(parts, robots, serial, serial_db, client, tmp_path):
     """Parts and IK rows stored by `workbench build` are reused: the catalogue adds its unit rows and no stage row."""
     db = tmp_path / "both.duckdb"
     shutil.copy(serial_db, db)
-    res = build_catalog(parts[:-1], ",".join(ROBOTS), db, client, PARAMS, progress=False)
+    res = build_catalog(parts[:-1], robots, db, client, PARAMS, progress=False)
     assert res.failures == [] and res.computed["part"] == 3 and res.computed["ik"] > 0
     assert res.rows_written == 0  # every stage row and IK row was there already
     _same(_rows(db), serial)

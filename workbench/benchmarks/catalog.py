@@ -1,17 +1,23 @@
-"""Catalogue build on a local Dask cluster with 1 and 2 workers, the driver writing every unit (direct) and the
-IK units' workers writing Parquet shards that the driver merges per (part, robot) (`--shards`): speed-up, time per
-unit kind, the driver's write throughput and the worker count at which the single writer saturates.
+"""Catalogue build on a local Dask cluster with 1 and 2 workers (workers write Parquet files, the driver merges them
+in batches): speed-up, time per unit kind, the driver's share; and, with `--simulate-workers`, the driver fed at the
+rate N workers would feed it, with a cost model for a factory's part list.
 
 The bundled parts (metres) and the paper's Table I parts (millimetres, when ../shared is present) x Panda and UR5,
 on a coarser table grid than Table I's by default (`--full` for TabletopParams()), each run into a fresh store, on a
 fresh cluster whose workers have imported the library before the timed region (`cluster_client`).
 
-The single writer saturates when the workers finish units faster than the driver handles them: with W workers busy
-the driver spends W x (driver seconds / worker second), so it saturates at W* = worker seconds / driver seconds
-(the driver's time on finished units: decoding the Arrow results, writing rows, committing, scheduling the next
-units, merging shards). CPU seconds are measured per process (the driver, which also runs the scheduler, and each
-worker) and per unit (the thread that ran it): wall seconds inside units above their CPU seconds mean the cores were
-shared (with the driver, or with other processes: the load average is printed beside each run).
+The driver saturates when the workers finish units faster than it handles them: with W workers busy it spends
+W x (driver seconds / worker second), so it saturates at W* = worker seconds / driver seconds. CPU seconds are
+measured per process (the driver, which also runs the scheduler, and each worker) and per unit (the thread that ran
+it): wall seconds inside units above their CPU seconds mean the cores were shared (with the driver, or with other
+processes: the load average is printed beside each run).
+
+`--simulate-workers 16,64,256,1024` records every unit of the parts once (run here, one after the other: their
+files, results and seconds), then replays them into the real driver and a real store through `ReplayClient`: each
+unit finishes its recorded seconds after a simulated worker of N starts it, and the parts are copied under new names
+until N workers have `--units-per-worker` units each. The driver's utilisation is the share of the replay's wall
+time it was not waiting for a unit; on this shared machine its wall seconds stretch with the load, so the table also
+gives it from the driver's CPU seconds (as on a core of its own).
 """
 
 from __future__ import annotations
@@ -21,11 +27,14 @@ import os
 import resource
 import statistics
 import tempfile
+import time
 from pathlib import Path
 
 from workbench.benchmarks import print_table
 from workbench.catalog.cluster import cluster_client
-from workbench.catalog.driver import CatalogParams, build_catalog
+from workbench.catalog.driver import CatalogParams, build_catalog, collect_parts
+from workbench.catalog.replay import ReplayClient, copies_for, record_units
+from workbench.catalog.robots import parse_robots
 from workbench.errors import WorkbenchError
 from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.resources import bundled_objects, paper_objects
@@ -38,8 +47,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--objects", choices=["all", "bundled", "paper"], default="all")
     parser.add_argument("--robots", default="panda,ur5")
     parser.add_argument("--workers", default="1,2", help="worker counts to compare (comma-separated)")
-    parser.add_argument("--paths", default="direct,shards",
-                        help="write paths: direct (the driver writes every unit), shards (Parquet per IK unit, merged)")
+    parser.add_argument("--simulate-workers", default=None, metavar="N,...",
+                        help="replay recorded units into the driver as N workers would produce them, e.g. 16,64,256,1024")
+    parser.add_argument("--units-per-worker", type=float, default=4.0, help="units per simulated worker (parts copied)")
+    parser.add_argument("--cost-parts", type=int, default=10_000, help="parts of the cost model")
+    parser.add_argument("--cost-robots", type=int, default=4, help="robots of the cost model")
+    parser.add_argument("--cost-cores", type=int, default=256, help="cores of the cost model's wall time")
     parser.add_argument("--repeats", type=int, default=1, help="runs of each configuration (the median run is shown)")
     parser.add_argument("--full", action="store_true", help="Table I's grid (21 positions x 8 angles, 80 grasps)")
     parser.add_argument("--ik-chunk", type=int, default=1024, help="tabletop grips per IK unit")
@@ -60,13 +73,12 @@ def _cpu() -> float:
     return r.ru_utime + r.ru_stime
 
 
-def one_run(parts, robots: str, params: CatalogParams, workers: int, shards: bool, tmp: Path):
+def one_run(parts, robots: str, params: CatalogParams, workers: int, tmp: Path):
     """One build on a fresh cluster: (result, driver process CPU s, workers' process CPU s, load before, after)."""
     with cluster_client(workers=workers) as client:
         load0 = os.getloadavg()[0]
         w0, d0 = client.run(_cpu), _cpu()
-        res = build_catalog(parts, robots, tmp / "catalog.duckdb", client, params, progress=False,
-                            shards=tmp / "shards" if shards else None)
+        res = build_catalog(parts, robots, tmp / "catalog.duckdb", client, params, progress=False)
         w1, d1 = client.run(_cpu), _cpu()
         load1 = os.getloadavg()[0]
     return res, d1 - d0, sum(w1[k] - w0.get(k, 0.0) for k in w1), load0, load1
@@ -76,10 +88,15 @@ def run(args: argparse.Namespace) -> int:
     parts = bench_parts(args.objects)
     tparams = TabletopParams() if args.full else TabletopParams(nx=3, ny=3, angles=4, max_grasps=40)
     params = CatalogParams(tabletop=tparams, ik_chunk=args.ik_chunk)
-    counts = [int(w) for w in args.workers.split(",")]
-    paths = [p.strip() for p in args.paths.split(",") if p.strip()]
-    if not paths or set(paths) - {"direct", "shards"}:
-        raise WorkbenchError(f"--paths takes direct and/or shards, got {args.paths!r}")
+    if args.simulate_workers:
+        simulated = _counts(args.simulate_workers, "--simulate-workers")
+        with tempfile.TemporaryDirectory() as tmp:
+            rec, rows = simulate(parts, args.robots, params, simulated, args.units_per_worker, Path(tmp))
+            print_simulation(rec, rows, args)
+        if args.workers in ("", "none"):
+            return 0
+    counts = _counts(args.workers, "--workers")
+    paths = ["files"]
     # the first worker count on the first path is the base; every path then runs with the other worker counts
     configs = [(counts[0], paths[0])] + [(w, path) for path in paths for w in counts[1:]]
     runs = {}
@@ -87,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
         done = []
         for _ in range(max(1, args.repeats)):
             with tempfile.TemporaryDirectory() as tmp:
-                done.append(one_run(parts, args.robots, params, w, path == "shards", Path(tmp)))
+                done.append(one_run(parts, args.robots, params, w, Path(tmp)))
         done.sort(key=lambda r: r[0].wall)
         runs[w, path] = done[len(done) // 2]  # the median run
     print(f"catalogue: {len(parts)} parts x {args.robots} ({'Table I grid' if args.full else 'grid 3x3 positions, 4 angles, 40 grasps'}), "
@@ -161,3 +178,68 @@ def run(args: argparse.Namespace) -> int:
               f"were shared (the driver and scheduler, or other processes; see the load), so part of the missing "
               f"speed-up is the machine's, not the design's.")
     return 0
+
+
+def _counts(text: str, option: str) -> list[int]:
+    try:
+        out = [int(w) for w in text.split(",") if w.strip()]
+    except ValueError:
+        raise WorkbenchError(f"{option} takes comma-separated worker counts, got {text!r}") from None
+    if not out or min(out) < 1:
+        raise WorkbenchError(f"{option} takes worker counts >= 1, got {text!r}")
+    return out
+
+
+def simulate(parts, robots: str, params: CatalogParams, counts: list[int], per_worker: float, tmp: Path):
+    """Record every unit once, then replay them into the driver for each simulated worker count: (recording, rows)."""
+    catalog = parse_robots(robots)
+    rec = record_units(collect_parts(parts), catalog, params, tmp / "recorded")
+    rows = []
+    for n in counts:
+        client = ReplayClient(rec, n, copies_for(rec, n, per_worker), tmp / f"staging-{n}")
+        db = tmp / f"replay-{n}.duckdb"
+        load0, c0 = os.getloadavg()[0], time.process_time()
+        res = build_catalog(client.parts(), catalog, db, client, params, progress=False)
+        client.stop()
+        cpu = time.process_time() - c0
+        rows.append({"workers": n, "parts": len(client.parts()), "units": client.units, "unit_s": client.unit_seconds,
+                     "bound": client.lower_bound(), "wall": client.wall, "idle": client.idle, "cpu": cpu,
+                     "util": client.utilisation(), "own": cpu / (cpu + client.idle) if cpu + client.idle else 0.0,
+                     "merges": res.merges, "rows": res.rows_written, "bytes": db.stat().st_size,
+                     "failed": len(res.failures), "load": f"{load0:.1f}-{os.getloadavg()[0]:.1f}"})
+        client.close()
+        db.unlink()
+    return rec, rows
+
+
+def print_simulation(rec, rows: list[dict], args: argparse.Namespace) -> None:
+    print(f"recorded units: {len(rec.parts)} parts x {args.robots}: {len(rec.parts)} part, {len(rec.ik)} IK, "
+          f"{len(rec.graphs)} graph units, {sum(s for *_, s in rec.parts.values()) + sum(s for *_, s in rec.ik.values()) + sum(s for _, s in rec.graphs.values()):.1f} s "
+          f"(run here one after the other)")
+    print_table(("simulated workers", "parts", "units", "unit s", "at least s", "wall s", "driver idle s", "driver cpu s",
+                 "utilisation", "utilisation (own core)", "merges", "rows", "failed", "load"),
+                [(r["workers"], r["parts"], r["units"], round(r["unit_s"], 1), round(r["bound"], 1), round(r["wall"], 1),
+                  round(r["idle"], 1), round(r["cpu"], 1), f"{r['util']:.0%}", f"{r['own']:.0%}", r["merges"],
+                  f"{r['rows']:,}", r["failed"], r["load"]) for r in rows],
+                title="the driver fed by N simulated workers (target: below 50% at 256)")
+    # the cost model: per part and robot from the recorded units, the driver's and the disk's from the replays
+    nparts, nrobots = len(rec.parts), max(1, len({r for _, r, _ in rec.ik} | {r for _, r in rec.graphs}))
+    part_s = sum(s for *_, s in rec.parts.values()) / nparts
+    run_s = (sum(s for *_, s in rec.ik.values()) + sum(s for _, s in rec.graphs.values())) / (nparts * nrobots)
+    units_part = 1 + (len(rec.ik) + len(rec.graphs)) / nparts / nrobots * args.cost_robots
+    big = max(rows, key=lambda r: r["parts"])
+    rows_part = big["rows"] / big["parts"] / nrobots  # rows of one part and one robot's IK rows, measured
+    driver_unit = big["cpu"] / big["units"]
+    p, k, cores = args.cost_parts, args.cost_robots, args.cost_cores
+    cpu_s = p * (part_s + k * run_s)
+    units = p * units_part
+    total_rows = p * k * rows_part
+    bytes_ = big["bytes"] / big["rows"] * total_rows if big["rows"] else 0
+    wall = max(cpu_s / cores, units * driver_unit)
+    print_table(("parts", "robots", "units", "CPU-hours", "rows", "bytes on disk", f"wall on {cores} cores",
+                 "bound by", "driver s per unit"),
+                [(f"{p:,}", k, f"{units:,.0f}", round(cpu_s / 3600, 1), f"{total_rows:,.0f}", f"{bytes_ / 1e9:.1f} GB",
+                  f"{wall / 3600:.2f} h", "workers" if cpu_s / cores >= units * driver_unit else "driver",
+                  f"{driver_unit * 1000:.1f} ms")],
+                title=f"cost model: per part {part_s:.1f} s of part unit and {run_s:.1f} s of IK and graph per robot "
+                      f"(recorded here), rows and bytes per part from the largest replay")

@@ -1,20 +1,21 @@
-"""The catalogue's driver: schedules units on a Dask cluster, resumes by digest, is the single store writer.
+"""The catalogue's driver: schedules units on a Dask cluster, resumes by digest, merges what the workers wrote.
 
 Units: one per part (grasps, placements, tabletop grips; Wan & Harada Sections III-IV), one per chunk of a part's
 tabletop grips and robot (IK with retractions, Section IV), one per part and robot (the regrasp graph's size,
-Section V, a few milliseconds: the driver computes it from the run's stored rows when its last IK chunk is in, in
-the transaction of the run's shard merge when there is one, cheaper than a worker's round trip). Workers return Arrow tables; the driver writes each finished unit and its `catalog_unit` row in one
-transaction through the stage writers of `workbench.store`, so a unit is stored whole or not at all (a part and
-robot's IK chunks are held and written together with its graph, one commit per run). Units whose
-digest is stored are skipped, so a re-run after a crash computes only the rest. A task on a worker that dies is
-rescheduled by the Dask scheduler on another worker; a unit that raises (a broken mesh) is recorded as failed with
-its one-line reason and the others go on.
+Section V, a few milliseconds: the driver computes it from the merged rows in the merge's transaction, cheaper than
+a worker's round trip). Workers write their rows as Parquet files (a folder per part unit, a file per IK unit) and
+return a small record; the driver schedules a part's IK units from its record and merges the files of many units
+into the store in one transaction, with their `catalog_unit` rows, so a unit is stored whole or not at all. Units
+whose digest is stored are skipped, and files on disk are merged without computing them again, so a re-run after a
+crash computes only the rest. A task on a worker that dies is rescheduled by the Dask scheduler on another worker;
+a unit that raises (a broken mesh) is recorded as failed with its one-line reason and the others go on.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import shutil
 import time
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -27,31 +28,20 @@ import pyarrow as pa
 from workbench.catalog import stages
 from workbench.catalog.progress import Progress
 from workbench.catalog.robots import CatalogRobot, parse_robots
-from workbench.catalog.units import (
-    graph_unit,
-    ik_unit,
-    part_from_tables,
-    part_unit,
-    table_arrays,
-)
+from workbench.catalog.units import graph_unit, ik_unit_files, part_from_tables, part_unit
 from workbench.errors import WorkbenchError
-from workbench.geometry.objects import ObjectModel, resolve_scale
+from workbench.geometry.objects import resolve_scale
 from workbench.grasping.grasps import GraspParams
 from workbench.grasping.placements import PlacementParams
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ
 from workbench.planners.wan_harada.tabletop import TabletopParams
-from workbench.robots.gripper import franka_hand
-from workbench.robots.ik import (
-    WORLDA,
-    IKOptions,
-    check_poses,
-    chunk_bounds,
-    neighbour_order,
-)
+from workbench.robots.gripper import Gripper, franka_hand
+from workbench.robots.ik import WORLDA, IKOptions, chunk_bounds
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".glb", ".gltf", ".dae")
 PART_PRIORITY = 1 << 40  # Dask priorities (higher runs first): parts, then IK chunks by their length
-HOLD_MAX = 16  # IK units of one (part, robot) held in memory at most before they are written without its graph
+MERGE_UNITS = 256  # units waiting on disk that start a merge ...
+MERGE_SECONDS = 5.0  # ... or seconds since the last merge
 SHARD_SUFFIX = ".parquet"
 
 
@@ -140,9 +130,14 @@ def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> lis
     return out
 
 
-def catalog_robots(robots: str | Sequence[str] | dict[str, CatalogRobot]) -> dict[str, CatalogRobot]:
-    """The catalogue's columns: given as parsed (`workbench.catalog.robots.parse_robots`), or parsed from names."""
-    return robots if isinstance(robots, dict) else parse_robots(robots)
+def catalog_robots(robots: str | Sequence[str] | dict[str, CatalogRobot], hand: Gripper) -> dict[str, CatalogRobot]:
+    """The catalogue's columns with gripper `hand`: given as parsed (`workbench.catalog.robots.parse_robots`), or
+    parsed from names."""
+    out = robots if isinstance(robots, dict) else parse_robots(robots, gripper=hand)
+    other = [n for n, c in out.items() if c.robot.spec.hand.digest != hand.digest]
+    if other:
+        raise CatalogError(f"robots {', '.join(other)} carry another gripper than the catalogue's {hand.name!r}")
+    return out
 
 
 def _digest(*parts: object) -> str:
@@ -165,11 +160,12 @@ def one_line(exc: BaseException) -> str:
 
 
 class _Build:
-    """The state of one build: the store, the client, what is stored, what runs."""
+    """The state of one build: the store, the client, what is stored, what runs, what waits to be merged."""
 
     def __init__(self, store, client, robots: dict[str, CatalogRobot], params: CatalogParams, progress: bool,
-                 on_unit: Callable[[str, dict], None] | None, shards: Path | None = None):
+                 on_unit: Callable[[str, dict], None] | None, folder: Path, hand: Gripper):
         from distributed import as_completed
+
         self.store, self.client, self.robots, self.params = store, client, robots, params
         self.on_unit = on_unit
         self.done = stages.done_units(store)
@@ -177,20 +173,24 @@ class _Build:
         self.pending: dict = {}  # future -> unit dict
         self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not finished yet
         self.broken: set[tuple[str, str]] = set()  # runs with a failed IK chunk: their graph waits for a re-run
-        self.held: dict[tuple[str, str], list] = {}  # (part, robot) -> finished IK units not written yet (direct path)
         self.runs: dict[tuple[str, str], dict] = {}
         self.ik_runs: dict[str, dict] = {}  # robot name -> its run's ids in this store
-        self.ac = as_completed(with_results=True, raise_errors=False)  # results fetched in the background
-        self.result = CatalogResult(rows=[], failures=[])
+        # results fetched in the background (a replay of recorded units brings its own)
+        self.ac = client.as_completed() if hasattr(client, "as_completed") else as_completed(with_results=True,
+                                                                                              raise_errors=False)
+        self.result = CatalogResult(rows=[], failures=[], shards=str(folder))
         self.bar = Progress(progress)
-        self.hand = franka_hand()
-        self.shards = shards
+        self.hand = hand
+        self.folder = folder
         self._stack: list[float] = []  # seconds of nested `charge` blocks, innermost last
-        self.on_disk: dict[str, Path] = {}  # digest -> shard file of an IK unit computed but not merged yet
+        self.on_disk = open_shards(folder, self.done)  # digest -> shard file of an IK unit computed, not merged yet
         self.to_merge: dict[tuple[str, str], list[tuple[dict, Path]]] = {}  # (part, robot) -> its IK units on disk
-        if shards is not None:
-            self.on_disk = open_shards(shards, self.done)
-            self.result.shards = str(shards)
+        self.stored_names = stages.object_names(store)  # parts the store holds already: written by the stage writers
+        self.idgripper = stages.gripper_id(store, self.hand)
+        self.queue_parts: list[tuple[dict, Path]] = []  # part units on disk, waiting for the next merge
+        self.queue_runs: list[dict] = []  # (part, robot) runs whose IK units are all on disk
+        self.readers: dict[str, int] = {}  # part digest -> its runs still reading its folder
+        self.last_merge = time.monotonic()
 
     @contextmanager
     def charge(self, kind: str, what: str) -> Iterator[None]:
@@ -219,7 +219,7 @@ class _Build:
         key = f"{unit['kind']}-{unit['part']}-{unit.get('robot') or ''}-{unit.get('chunk') or 0}-{unit['digest'][:12]}"
         # pure=False: a retry after a crash must not reuse a result the cluster still holds under the same key.
         # priority: parts first (they unlock the IK units; the largest file first), then IK chunks longest first, so
-        # the last units to run are the short ones (a run's graph is computed by the driver when its last chunk is in).
+        # the last units to run are the short ones.
         fut = self.client.submit(fn, *args, key=key, pure=False, priority=priority, **kwargs)
         self.pending[fut] = unit
         self.ac.add(fut)
@@ -234,175 +234,294 @@ class _Build:
         unit = {"digest": digest, "kind": "part", "part": path.stem, "source": str(path)}
         if digest in self.done:
             self._skip("part")
-            self.schedule_robots(self.done[digest])
+            self.schedule_stored(self.done[digest])
             return
-        size = path.stat().st_size if path.is_file() else 0
-        self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop,
-                     priority=PART_PRIORITY + min(size, PART_PRIORITY - 1))
+        priority = PART_PRIORITY + min(path.stat().st_size if path.is_file() else 0, PART_PRIORITY - 1)
+        if path.stem in self.stored_names:  # the store holds this part: the driver writes it with the stage writers
+            self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop,
+                         self.hand, priority=priority)
+            return
+        folder = self.folder / f"part-{digest}"
+        record = stages.read_record(folder) if folder.is_dir() else None
+        if record is not None:  # computed by a run that stopped before merging it
+            self._skip("part")
+            self.part_ready(unit, record, folder)
+            return
+        unit["folder"] = folder
+        self._submit(unit, stages.part_unit_files, str(path), path.stem, scale, units, p.grasps, p.placements,
+                     p.tabletop, str(folder), p.ik_chunk, self.hand, priority=priority)
 
-    def schedule_robots(self, part: dict, obj: ObjectModel | None = None) -> None:
-        """IK chunk units of a stored part for every robot (and the graph units of runs already complete)."""
+    def part_ready(self, unit: dict, record: dict, folder: Path) -> None:
+        """A part unit's folder is whole: queue it for the next merge and schedule its IK units from its record."""
         with self.charge("part", "schedule"):
-            self._schedule_robots(part, obj)
+            unit.update({k: v for k, v in record.items() if k != "grips"})
+            self.queue_parts.append((unit, folder))
+            self.schedule_runs(unit, folder, int(record["grips"]), stored=False)
 
-    def _schedule_robots(self, part: dict, obj: ObjectModel | None) -> None:
+    def schedule_stored(self, part: dict) -> None:
+        """IK units of a part the store holds (a resumed build, or a part `workbench build` stored): its grips are
+        read back once and left in a folder for the IK units."""
+        with self.charge("part", "schedule"):
+            bases = self._run_bases(part)
+            if all(_digest(b, "graph") in self.done for b in bases):  # every run is stored: nothing to read back
+                n = int(part["counts"].get("tabletop_grips", 0))
+                for b in bases:
+                    for k in range(len(chunk_bounds(n, self.params.ik_chunk))):
+                        if _digest(b, "ik", k, n) in self.done:
+                            self._skip("ik")
+                    self._skip("graph")
+                return
+            folder = self.folder / f"stored-{part['digest']}"
+            n = stages.stored_part_folder(self.store, part, folder, self.params.ik_chunk)
+            self.schedule_runs(part, folder, n, stored=True)
+
+    def _run_bases(self, part: dict) -> list[str]:
+        return [self._run(part, name)["base"] for name in self.robots]
+
+    def _run(self, part: dict, name: str) -> dict:
+        p, column = self.params, self.robots[name]
+        if name not in self.ik_runs:  # robot, scene and ikret rows: once per build
+            self.ik_runs[name] = stages.ik_run(self.store, column.robot, column.scene, p.ik, p.handx, p.worldz, p.worlda)
+        ids = self.ik_runs[name]
+        return {"part": part["part"], "robot": name, "idobject": part["idobject"], "idtabletop": part["idtabletop"],
+                "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "source": part.get("source"),
+                "idrobot": ids["idrobot"], "idscene": ids["idscene"], "idikret": ids["idikret"], "nq": column.robot.nq,
+                "part_digest": part["digest"],
+                "base": _digest(part["digest"], column.robot.spec.digest, ids["scene_params"], p.handx, p.worldz,
+                                p.worlda, p.ik_chunk)}
+
+    def schedule_runs(self, part: dict, folder: Path, n: int, stored: bool) -> None:
+        """The IK chunk units of a part for every robot, reading the part's grips from `folder` (`stored`: some grips
+        may have `ik` rows already, kept by the merge)."""
         p = self.params
-        grips, obj = stages.part_grips(self.store, part, obj)
-        n = len(grips["idtabletopgrips"])
-        order = neighbour_order(grips)
-        poses = check_poses(grips["rotmat"])
-        places = check_poses(grips["placement_rotmat"], "object placement")
-        ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
-        verts, faces = np.asarray(obj.mesh.vertices, dtype=np.float64), np.asarray(obj.mesh.faces, dtype=np.int64)
         for name, column in self.robots.items():
-            robot, scene = column.robot, column.scene
-            if name not in self.ik_runs:  # robot, scene and ikret rows: once per build
-                self.ik_runs[name] = stages.ik_run(self.store, robot, scene, p.ik, p.handx, p.worldz, p.worlda)
-            ids_run = self.ik_runs[name]
-            stored = stages.stored_ik(self.store, ids_run, part["idtabletop"], part.get("new_tabletop", False))
-            run = {"part": part["part"], "robot": name, "idobject": part["idobject"], "idtabletop": part["idtabletop"],
-                   "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "source": part.get("source"),
-                   "idrobot": ids_run["idrobot"], "idscene": ids_run["idscene"], "idikret": ids_run["idikret"],
-                   "stored": stored, "base": _digest(part["digest"], robot.spec.digest, ids_run["scene_params"], p.handx,
-                                                     p.worldz, p.worlda, p.ik_chunk)}
-            self.runs[(part["part"], name)] = run
-            run["nq"] = robot.nq
-            left, key = 0, (part["part"], name)
-            self.to_merge[key] = []
+            run = self._run(part, name)
+            run["stored"] = (stages.stored_ik(self.store, self.ik_runs[name], part["idtabletop"]) if stored
+                             else np.zeros(0, dtype=np.int64))
+            key = (part["part"], name)
+            self.runs[key], self.to_merge[key], left = run, [], 0
+            self.readers[part["digest"]] = self.readers.get(part["digest"], 0) + 1
+            run["folder"] = folder
             for k, (s, e) in enumerate(chunk_bounds(n, p.ik_chunk)):
-                unit = {**_unit_ids(run), "kind": "ik", "chunk": k, "digest": _digest(run["base"], "ik", k, n)}
+                unit = {**_unit_ids(run), "kind": "ik", "chunk": k, "digest": _digest(run["base"], "ik", k, n),
+                        "nrows": 0 if stored else e - s}
                 if unit["digest"] in self.done:
                     self._skip("ik")
                     continue
-                ix = order[s:e]
-                if self.shards is not None:
-                    unit["nrows"] = int((~np.isin(ids[ix], stored)).sum())
-                    if unit["digest"] in self.on_disk:  # computed by an earlier run, not merged yet
-                        self._skip("ik")
-                        self.to_merge[key].append((unit, self.on_disk.pop(unit["digest"])))
-                        continue
+                if unit["digest"] in self.on_disk:  # computed by an earlier run, not merged yet
+                    self._skip("ik")
+                    self.to_merge[key].append((unit, self.on_disk.pop(unit["digest"])))
+                    continue
                 left += 1
-                extra = {} if self.shards is None else {"shard": str(shard_path(self.shards, unit["digest"]))}
-                self._submit(unit, ik_unit, robot.spec, scene, p.ik, p.handx, p.worldz, p.worlda, obj.digest, verts,
-                             faces, ids[ix], poses[ix], places[ix], priority=len(ix), **extra)
+                self._submit(unit, ik_unit_files, column.robot.spec, column.scene, p.ik, p.handx, p.worldz, p.worlda,
+                             str(folder), k, str(shard_path(self.folder, unit["digest"])), priority=e - s)
             self.left[key] = left
             if left == 0:
                 self.finish_run(run)
 
-    def graph(self, run: dict) -> Callable[[], None]:
-        """The run's regrasp-graph sizes (a few milliseconds), computed here from the rows the caller's transaction
-        can read and written in it: a worker round trip and a commit of their own would cost more. Returns what to
-        do once committed."""
+    def graph(self, run: dict) -> tuple[dict | None, Callable[[], None]]:
+        """The run's regrasp-graph sizes (Section V; a few milliseconds), computed from the rows the caller's
+        transaction can read: its unit (None when stored) for the batch's catalog_unit rows, and what to do once
+        committed."""
         unit = {**_unit_ids(run), "kind": "graph", "digest": _digest(run["base"], "graph")}
         if unit["digest"] in self.done:
             self._skip("graph")
-            return lambda: None
+            return None, lambda: None
         self.bar.add("graph")
         with self.charge("graph", "graph"):
             rows, feasible = stages.graph_inputs(self.store, run)
             table = graph_unit(rows, feasible)
-        with self.charge("graph", "rows"):
-            self.write_rows(unit, table)
+        unit.update(counts={k: v[0] for k, v in table.to_pydict().items()}, nrows=0, fresh=unit["digest"] not in self.rows)
+        meta = {k: v for k, v in (table.schema.metadata or {}).items() if k not in (b"start", b"end")}  # not a worker's
+        unit["seconds"] = float(meta.get(b"seconds", b"0"))
 
         def after() -> None:
             self.done[unit["digest"]] = unit
             self.rows.add(unit["digest"])
-            meta = {k: v for k, v in unit.pop("meta", {}).items() if k not in (b"start", b"end")}  # not a worker's
             self._account(unit, meta)
             self.bar.done("graph")
             if self.on_unit is not None:
                 self.on_unit("graph", unit)
-        return after
+        return unit, after
 
-    def finish_run(self, run: dict) -> None:
-        """Every IK chunk of a (part, robot) is finished: write the held ones (direct path) or merge the shards, and
-        the graph, in one transaction; a run with a failed chunk gets no graph (shards stay on disk for a re-run)."""
-        key = (run["part"], run["robot"])
-        if self.shards is None:
-            self.write_batch(self.held.pop(key, []), None if key in self.broken else run)
-            return
-        if key in self.broken:
-            return
-        units = self.to_merge.pop(key, [])
-        if units:
-            for unit, _ in units:
-                unit["fresh"] = unit["digest"] not in self.rows
-            try:
-                with self.charge("ik", "merge"), stages.batch(self.store):  # the merge and its graph commit together
-                    n = stages.merge_ik_shards(self.store, run, units)
-                    then = self.graph(run)
-            except WorkbenchError as exc:  # an unreadable shard: the run's chunks are computed again by a re-run
-                for unit, path in units:
-                    path.unlink(missing_ok=True)
-                    stages.record_failure(self.store, {**unit, "fresh": False}, one_line(exc))
-                    self.rows.add(unit["digest"])
-                self.broken.add(key)
-                return
-            self.result.merges += 1
-            self.result.rows_written += n
-            for unit, path in units:
-                self.done[unit["digest"]] = unit
-                self.rows.add(unit["digest"])
-                path.unlink(missing_ok=True)
-            then()
-            return
-        with self.charge("graph", "commit"), stages.batch(self.store):
-            then = self.graph(run)
-        then()
-
-    # -- writing -------------------------------------------------------------------------------------------------
-    def write_rows(self, unit: dict, result) -> Callable[[], None]:
-        """Write a part or graph unit's rows and its catalog_unit row (joining the caller's transaction); returns what
-        to do once committed (schedule the units that depend on it). IK units go through `write_iks`."""
-        if self._stamp(unit, result) == "part":
-            return self.write_part(unit, result)
-        stages.write_graph(self.store, unit, {k: v[0] for k, v in result.to_pydict().items()})
-        return lambda: None
-
-    def _stamp(self, unit: dict, result) -> str:
-        """Note whether the unit's row is new and its worker's timings; returns its kind."""
-        kind = unit["kind"]
-        unit["fresh"] = unit["digest"] not in self.rows
-        meta = (result["meta"] if kind == "part" else result).schema.metadata or {}
-        unit.update(seconds=float(meta.get(b"seconds", b"0")), worker=meta.get(b"worker", b"").decode(), meta=meta)
-        return kind
-
-    def write_part(self, unit: dict, tables: dict[str, pa.Table]) -> Callable[[], None]:
-        with self.charge("part", "decode"):
-            res = part_from_tables(tables)
-        p = self.params
-        stages.write_part(self.store, unit, res, self.hand, p.grasps, p.placements, p.tabletop)
+    def _graph_computed(self, run: dict) -> tuple[dict, Callable[[], None]]:
+        unit = run.pop("graph_unit")
+        unit.update({k: run[k] for k in ("idobject", "idgrasps", "idplacements", "idtabletop")},
+                    fresh=unit["digest"] not in self.rows)
 
         def after() -> None:
             self.done[unit["digest"]] = unit
-            self.schedule_robots(unit, res.obj)  # the mesh as stored (its digest is the stored one)
-        return after
+            self.rows.add(unit["digest"])
+            if self.on_unit is not None:
+                self.on_unit("graph", unit)
+        return unit, after
 
-    def write_iks(self, units: list[dict], tables: list[pa.Table]) -> None:
-        """IK units (stamped) of one part and robot: their rows in one `ik` insert, and their catalog_unit rows."""
-        with self.charge("ik", "decode"):
-            cols = [table_arrays(t) for t in tables]
-        run = self.runs[(units[0]["part"], units[0]["robot"])]
-        stages.write_ik(self.store, units, [(c["idtabletopgrips"], c["feasible"], c["joints"]) for c in cols],
-                        run["stored"])
+    def finish_run(self, run: dict) -> None:
+        """Every IK chunk of a (part, robot) is finished: queue its shards and graph for the next merge (a run with a
+        failed chunk gets no graph; its shards stay on disk for a re-run)."""
+        key = (run["part"], run["robot"])
+        if key in self.broken:
+            self._run_over(run)
+            return
+        unit = {**_unit_ids(run), "kind": "graph", "digest": _digest(run["base"], "graph")}
+        if run["folder"].name.startswith("part-") and unit["digest"] not in self.done:  # its worker reads the files
+            self._submit(unit, stages.graph_unit_files, str(run["folder"]), [str(p) for _, p in self.to_merge[key]],
+                         run["robot"], priority=PART_PRIORITY // 2)
+            return
+        self.queue_runs.append(run)
 
-    def hold(self, fut, unit: dict, result) -> None:
-        """A finished IK unit (direct path): held until its run's last chunk is in, then written with the others and
-        the run's graph in one transaction (one commit per run, not per chunk); `HOLD_MAX` bounds what a killed
-        driver loses (units not written are computed again by the re-run)."""
-        key = (unit["part"], unit["robot"])
-        self.held.setdefault(key, []).append((fut, unit, result))
-        self._chunk_done(key)
-        if key in self.held and len(self.held[key]) >= HOLD_MAX:
-            self.write_batch(self.held.pop(key))
+    def graph_done(self, fut, unit: dict, table: pa.Table) -> None:
+        """A run's graph unit came back: the run waits for the next merge with it."""
+        meta = table.schema.metadata or {}
+        unit.update(counts={k: v[0] for k, v in table.to_pydict().items()}, nrows=0)
+        self._account(unit, meta)
+        fut.release()
+        self.bar.done("graph")
+        run = self.runs[(unit["part"], unit["robot"])]
+        run["graph_unit"] = unit
+        self.queue_runs.append(run)
 
-    def _chunk_done(self, key: tuple[str, str]) -> None:
-        self.left[key] -= 1
-        if self.left[key] == 0:
-            self.finish_run(self.runs[key])
+    def _run_over(self, run: dict) -> None:
+        """A run no longer reads its part's folder: the folder goes when the part's last run is over."""
+        d = run["part_digest"]
+        self.readers[d] -= 1
+        if self.readers[d] == 0 and all(u["digest"] != d for u, _ in self.queue_parts):
+            shutil.rmtree(run["folder"], ignore_errors=True)
+
+    # -- merging -------------------------------------------------------------------------------------------------
+    def merge(self, force: bool = False) -> None:
+        """Merge what waits (part folders, then the shards and graphs of complete runs) in one transaction, when
+        `MERGE_UNITS` units wait, `MERGE_SECONDS` passed since the last merge, or `force`."""
+        waiting = len(self.queue_parts) + sum(len(self.to_merge[(r["part"], r["robot"])]) for r in self.queue_runs)
+        if not (self.queue_parts or self.queue_runs):
+            return
+        if not force and waiting < MERGE_UNITS and time.monotonic() - self.last_merge < MERGE_SECONDS:
+            return
+        parts, runs = self.queue_parts, self.queue_runs
+        self.queue_parts, self.queue_runs = [], []
+        try:
+            self._merge(parts, runs)
+        except WorkbenchError as exc:
+            if len(parts) + len(runs) == 1:
+                self._merge_failed(parts, runs, exc)
+                return
+            for item in parts:  # one at a time: the unit that cannot be merged is reported, the others stored
+                self.queue_parts = [item]
+                self.merge(force=True)
+            for run in runs:
+                if run["part_digest"] not in self.done:  # its part could not be merged
+                    self._merge_failed([], [run], WorkbenchError("its part unit could not be merged"))
+                    continue
+                self.queue_runs = [run]
+                self.merge(force=True)
+        self.last_merge = time.monotonic()
+
+    def _merge(self, parts: list[tuple[dict, Path]], runs: list[dict]) -> None:
+        after: list[Callable[[], None]] = []
+        n = 0
+        with self.charge("part" if parts else "ik", "merge"), stages.batch(self.store):
+            if parts:
+                for unit, _ in parts:
+                    unit["fresh"] = unit["digest"] not in self.rows
+                n += stages.merge_units(self.store, parts, self.idgripper)
+            merged = {u["digest"]: u for u, _ in parts}
+            for run in runs:
+                part = merged.get(run["part_digest"]) or self.done[run["part_digest"]]
+                ids = {k: part[k] for k in ("idobject", "idgrasps", "idplacements", "idtabletop")}  # the store's
+                run.update(ids, offset=part["counts"].get("offset", 0))
+                for unit, _ in self.to_merge[(run["part"], run["robot"])]:
+                    unit.update(ids, fresh=unit["digest"] not in self.rows)
+            if runs:
+                with self.charge("ik", "merge"):
+                    n += stages.merge_runs(self.store, runs, [self.to_merge[(r["part"], r["robot"])] for r in runs])
+                graphs = [self.graph(run) if "graph_unit" not in run else self._graph_computed(run) for run in runs]
+                with self.charge("graph", "rows"):
+                    stages.put_units(self.store, [u for u, _ in graphs if u is not None])
+                after = [then for _, then in graphs]
+        self.result.merges += 1
+        self.result.batches += 1
+        self.result.rows_written += n
+        for unit, _ in parts:
+            self.done[unit["digest"]] = unit
+            self.rows.add(unit["digest"])
+            if self.on_unit is not None:
+                self.on_unit("part", unit)
+        for run in runs:
+            for unit, path in self.to_merge.pop((run["part"], run["robot"])):
+                self.done[unit["digest"]] = unit
+                self.rows.add(unit["digest"])
+                path.unlink(missing_ok=True)
+            self._run_over(run)
+        for then in after:
+            then()
+        for unit, folder in parts:
+            if self.readers.get(unit["digest"], 0) == 0:
+                shutil.rmtree(folder, ignore_errors=True)
+        if self.result.write_seconds > 0:
+            self.bar.note(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s merged")
+
+    def _merge_failed(self, parts: list[tuple[dict, Path]], runs: list[dict], exc: BaseException) -> None:
+        """A part folder or a run's shards that cannot be merged: recorded as failed and deleted (a re-run computes
+        them again)."""
+        for unit, folder in parts:
+            shutil.rmtree(folder, ignore_errors=True)
+            stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, one_line(exc))
+            self.rows.add(unit["digest"])
+        for run in runs:
+            key = (run["part"], run["robot"])
+            for unit, path in self.to_merge.pop(key, []):
+                path.unlink(missing_ok=True)
+                stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, one_line(exc))
+                self.rows.add(unit["digest"])
+            self.broken.add(key)
+            self._run_over(run)
+
+    # -- results -------------------------------------------------------------------------------------------------
+    def part_done(self, fut, unit: dict, table: pa.Table) -> None:
+        """A part unit whose worker left its folder: a note, then its IK units."""
+        meta = table.schema.metadata or {}
+        self._account(unit, meta)
+        fut.release()
+        self.bar.done("part")
+        self.part_ready(unit, json.loads(table.column("record")[0].as_py()), unit.pop("folder"))
+
+    def write_parts(self, items: list[tuple[object, dict, dict]]) -> None:
+        """Part units of names the store holds, written by the stage writers (which reuse what is stored) in one
+        transaction; if one cannot be written, one by one."""
+        try:
+            with stages.batch(self.store):
+                for _, unit, tables in items:
+                    unit["fresh"] = unit["digest"] not in self.rows
+                    with self.charge("part", "decode"):
+                        res = part_from_tables(tables)
+                    with self.charge("part", "rows"):
+                        p = self.params
+                        stages.write_part(self.store, unit, res, self.hand, p.grasps, p.placements, p.tabletop)
+        except Exception as exc:  # noqa: BLE001 - one part's rows that cannot be stored must not stop the others
+            if len(items) > 1:
+                for item in items:
+                    self.write_parts([item])
+                return
+            self.fail(items[0][1], exc, counted=True)
+            items[0][0].release()
+            return
+        self.result.batches += 1
+        for fut, unit, tables in items:
+            self.done[unit["digest"]] = unit
+            self.rows.add(unit["digest"])
+            self.result.rows_written += int(unit.get("nrows") or 0)
+            self._account(unit, tables["meta"].schema.metadata or {})
+            fut.release()
+            self.bar.done("part")
+            if self.on_unit is not None:
+                self.on_unit("part", unit)
+            try:
+                self.schedule_stored(unit)
+            except WorkbenchError as exc:  # e.g. a part whose tabletop grips are not rigid poses: its IK cannot start
+                self.fail({**unit, "kind": "ik", "digest": unit["digest"] + "-schedule"}, exc)
 
     def shard_done(self, fut, unit: dict, table: pa.Table) -> None:
-        """An IK unit whose worker wrote its rows to a shard: note it; merge its run when it is the run's last."""
+        """An IK unit whose worker wrote its rows to a shard: note it; queue its run when it is the run's last."""
         with self.charge("ik", "schedule"):
             meta = table.schema.metadata or {}
             row = table.to_pylist()[0]
@@ -416,6 +535,11 @@ class _Build:
         if self.on_unit is not None:
             self.on_unit("ik", unit)
 
+    def _chunk_done(self, key: tuple[str, str]) -> None:
+        self.left[key] -= 1
+        if self.left[key] == 0:
+            self.finish_run(self.runs[key])
+
     def _account(self, unit: dict, meta: dict) -> None:
         """A computed unit's worker seconds, CPU seconds and place on the workers' timeline."""
         kind = unit["kind"]
@@ -426,117 +550,71 @@ class _Build:
         if b"start" in meta:
             self.result.timeline.append((unit["worker"], kind, float(meta[b"start"]), float(meta[b"end"])))
 
-    def write_batch(self, items: list[tuple[object, dict, object]], run: dict | None = None) -> None:
-        """Write finished units in one transaction (each unit whole, so they share the commit's cost), with `run`'s
-        graph when given (its IK chunks are all among them or stored); if one of them cannot be written, write them
-        one by one (and leave the graph to a re-run)."""
-        graph_done = None
-        try:
-            with stages.batch(self.store):
-                after: list = []
-                iks: dict[tuple[str, str], list] = {}  # IK units by part and robot: one insert each
-                for _, unit, result in items:
-                    if unit["kind"] == "ik":
-                        self._stamp(unit, result)
-                        iks.setdefault((unit["part"], unit["robot"]), []).append((unit, result))
-                        after.append(lambda: None)
-                        continue
-                    with self.charge(unit["kind"], "rows"):
-                        after.append(self.write_rows(unit, result))
-                for group in iks.values():
-                    with self.charge("ik", "rows"):
-                        self.write_iks([u for u, _ in group], [r for _, r in group])
-                if run is not None:
-                    graph_done = self.graph(run)
-                t1 = time.perf_counter()
-        except Exception as exc:  # noqa: BLE001 - one part's rows that cannot be stored must not stop the others
-            if len(items) > 1:
-                for item in items:
-                    self.write_batch([item])
-                return
-            if not items:  # the graph alone
-                raise
-            self.fail(items[0][1], exc, counted=True)
-            items[0][0].release()
-            return
-        commit = time.perf_counter() - t1  # shared by the batch's units
-        self.rows.update(unit["digest"] for _, unit, _ in items)
-        self.result.driver["commit"] += commit
-        self.result.write_seconds += commit
-        kinds = [unit["kind"] for _, unit, _ in items] + (["graph"] if run is not None else [])
-        for kind in kinds:
-            self.result.driver_kind[kind] += commit / len(kinds)
-        for (fut, unit, _), then in zip(items, after):
-            try:
-                with self.charge(unit["kind"], "schedule"):
-                    then()
-            except WorkbenchError as exc:  # e.g. a part whose tabletop grips are not rigid poses: its IK cannot start
-                self.fail({**unit, "kind": "ik", "digest": unit["digest"] + "-schedule"}, exc)
-            fut.release()
-            kind = unit["kind"]
-            self.result.rows_written += int(unit.get("nrows") or 0)
-            self._account(unit, unit.pop("meta", {}))
-            self.bar.done(kind)
-            if self.on_unit is not None:
-                self.on_unit(kind, unit)
-        if graph_done is not None:
-            graph_done()
-        self.result.batches += 1
-        if self.result.write_seconds > 0:
-            self.bar.note(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s written")
-
     def fail(self, unit: dict, exc: BaseException, counted: bool = False) -> None:
-        """Record a unit that raised or could not be written (`counted`: an IK unit already counted as finished)."""
+        """Record a unit that raised or could not be written (`counted`: already counted as finished)."""
         reason = one_line(exc)
+        unit.pop("folder", None)
         stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, reason)
         self.rows.add(unit["digest"])
-        if unit.get("chunk") is not None or unit["kind"] != "ik":  # not a part whose IK could not be scheduled
+        scheduling = unit["kind"] == "ik" and unit.get("chunk") is None  # a part whose IK could not be scheduled
+        if not (counted or scheduling):
             self.bar.done(unit["kind"])
-        if unit["kind"] == "ik" and unit.get("chunk") is not None:  # not a part whose IK could not be scheduled
+        if unit["kind"] == "ik" and not scheduling:
             key = (unit["part"], unit["robot"])  # the run's other chunks go on; its graph waits for a re-run
             self.broken.add(key)
-            if not counted:
-                self._chunk_done(key)
+            self._chunk_done(key)
+        if unit["kind"] == "graph":  # its run's shards stay on disk; the re-run merges them and computes the graph
+            key = (unit["part"], unit["robot"])
+            self.broken.add(key)
+            self._run_over(self.runs[key])
 
     # -- the loop ------------------------------------------------------------------------------------------------
     def run(self, parts: Sequence[tuple[Path, float | None]]) -> None:
         for path, scale in parts:
             self.submit_part(path, scale)
         for batch in self.ac.batches():
-            items = []
+            direct = []
             for fut, result in batch:
                 unit = self.pending.pop(fut)
                 if fut.status == "error" or isinstance(result, BaseException):
                     self.fail(unit, result[1] if isinstance(result, tuple) else result)
                     fut.release()
-                elif unit["kind"] == "ik" and self.shards is not None:
-                    self.shard_done(fut, unit, result)
                 elif unit["kind"] == "ik":
-                    self.hold(fut, unit, result)
+                    self.shard_done(fut, unit, result)
+                elif unit["kind"] == "graph":
+                    self.graph_done(fut, unit, result)
+                elif "folder" in unit:
+                    self.part_done(fut, unit, result)
                 else:
-                    items.append((fut, unit, result))
-            if items:
-                self.write_batch(items)
-        for key in list(self.held):  # runs cut short (none when every unit came back)
-            self.write_batch(self.held.pop(key))
+                    direct.append((fut, unit, result))
+            if direct:
+                self.write_parts(direct)
+            self.merge()
+        self.merge(force=True)
         self.bar.close()
 
 
 def shard_path(folder: Path, digest: str) -> Path:
-    """The Parquet file of an IK unit's rows in the shard folder."""
+    """The Parquet file of an IK unit's rows in the units folder."""
     return folder / f"ik-{digest}{SHARD_SUFFIX}"
 
 
 def open_shards(folder: Path, done: dict) -> dict[str, Path]:
-    """The shard folder (created when missing): the files of IK units computed but not merged yet, by digest.
-    Temporary files of killed writers, and files of units already stored (a driver killed after the merge's commit),
-    are deleted."""
+    """The units folder (created when missing): the files of IK units computed but not merged yet, by digest.
+    Temporary files and folders of killed writers, and files of units already stored (a driver killed after the
+    merge's commit), are deleted."""
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise CatalogError(f"cannot create the shard folder {folder}: {exc.strerror or exc}") from None
-    for tmp in folder.glob(f"ik-*{SHARD_SUFFIX}.*.tmp"):
-        tmp.unlink(missing_ok=True)
+        raise CatalogError(f"cannot create the units folder {folder}: {exc.strerror or exc}") from None
+    for tmp in folder.glob("*.tmp"):
+        if tmp.is_dir():
+            shutil.rmtree(tmp, ignore_errors=True)
+        else:
+            tmp.unlink(missing_ok=True)
+    for old in folder.glob("part-*"):
+        if old.name[5:] in done:
+            shutil.rmtree(old, ignore_errors=True)
     out = {}
     for path in folder.glob(f"ik-*{SHARD_SUFFIX}"):
         digest = path.name[3:-len(SHARD_SUFFIX)]
@@ -555,21 +633,26 @@ def _unit_ids(run: dict) -> dict:
 def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
                   robots: str | Sequence[str] | dict[str, CatalogRobot], db: str | Path, client,
                   params: CatalogParams = CatalogParams(), progress: bool = True,
-                  on_unit: Callable[[str, dict], None] | None = None, shards: str | Path | None = None) -> CatalogResult:
+                  on_unit: Callable[[str, dict], None] | None = None, shards: str | Path | None = None,
+                  gripper: Gripper | None = None) -> CatalogResult:
     """Build (or finish) the catalogue of `parts` x `robots` in the store `db` on the Dask `client`; returns the
-    summary. Stored units are skipped; each finished unit is written in one transaction.
+    summary. Stored units are skipped.
 
-    With `shards` (a folder, created when missing; on a file system every worker sees), the IK units' workers write
-    their rows to one Parquet file per unit there, and the driver merges the files of each (part, robot) into the
-    store in one transaction once all its chunks are on disk, then deletes them: the driver's per-unit work is a
-    note, not a write. Files of a killed build are merged by the re-run; a file is whole or absent (renamed into
-    place), and the merge skips grips that already have rows, so nothing is lost or duplicated."""
+    Workers write: a part unit leaves its rows as Parquet files in its own folder (ids from the unit's own range),
+    an IK unit reads its chunk of the part's grips from there and leaves its rows as one Parquet file; every file
+    is written under a temporary name and renamed, so it is whole or absent. The driver notes each finished unit and
+    merges what waits into the store in large batches, one transaction each (`MERGE_UNITS` units or
+    `MERGE_SECONDS`), then deletes the files. `shards` is the folder of these files (default: beside the store,
+    `DB.units`; with a cluster of several machines, on a file system every worker sees). Files of a killed build are
+    merged by the re-run without computing them again. `gripper`: the catalogue's gripper (default the Franka hand;
+    the robots, when given parsed, carry the same)."""
     paths = collect_parts(parts)
-    robot_models = catalog_robots(robots)
+    hand = gripper or franka_hand()
+    robot_models = catalog_robots(robots, hand)
+    folder = Path(shards) if shards is not None else Path(f"{db}.units")
     t0 = time.perf_counter()
     with stages.open_store(db) as store:
-        build = _Build(store, client, robot_models, params, progress, on_unit,
-                       None if shards is None else Path(shards))
+        build = _Build(store, client, robot_models, params, progress, on_unit, folder, hand)
         build.result.start = time.time()
         try:
             build.run(paths)
@@ -580,15 +663,18 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
         res.wall = time.perf_counter() - t0
         res.rows = stages.summary(store)
         res.failures = stages.failures(store)
+        stages.checkpoint(store)
     res.workers = len(client.scheduler_info().get("workers", {}))
     res.dashboard = client.dashboard_link or ""
     return res
 
 
-def report(db: str | Path) -> tuple[list[dict], list[dict]]:
-    """The stored catalogue's summary rows and failures (for `workbench catalog report`)."""
+def report(db: str | Path, meshes: bool = False) -> tuple[list[dict], list[dict], dict]:
+    """The stored catalogue's summary rows, failures and (with `meshes`) each part's mesh (for `workbench catalog
+    report`)."""
     with stages.open_store(db, read_only=True) as store:
-        return stages.summary(store), stages.failures(store)
+        rows, failures = stages.summary(store), stages.failures(store)
+        return rows, failures, stages.part_meshes(store, sorted({r["part"] for r in rows})) if meshes else {}
 
 
 SUMMARY_HEADERS = ("part", "robot", "grasps", "placements", "tabletop grips", "IK-feasible", "components", "time s")

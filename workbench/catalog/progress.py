@@ -34,6 +34,8 @@ class Progress:
     def skipped(self, kind: str) -> None:
         """A unit of `kind` found in the store: counted, not timed."""
         for bar in self._bars(kind):
+            if bar.disable:
+                continue
             bar.total += 1
             bar.n += 1
             bar.initial += 1

@@ -25,6 +25,7 @@ from scipy.spatial.transform import Rotation
 
 from workbench.errors import RobotError, WorkbenchError
 from workbench.robots.collider import Collider, Scene, default_scene
+from workbench.robots.gripper import Gripper
 from workbench.robots.model import Robot, get_robot, pose_xyz_yaw, robot_from_spec
 
 ROBOT_FILE_SUFFIXES = (".yaml", ".yml")
@@ -86,13 +87,14 @@ def table_scene(name: str, table: Any | None) -> Scene:
 
 
 def make_robot(name: str, urdf: str | None = None, tip: str | None = None, mount: np.ndarray | None = None,
-               base: np.ndarray | None = None, hand_links: Sequence[str] = (), table: Any | None = None) -> CatalogRobot:
-    """A catalogue column: a built-in robot by name, or a URDF robot stored under `name`; refused when its fixed
-    links cut into its table."""
+               base: np.ndarray | None = None, hand_links: Sequence[str] = (), table: Any | None = None,
+               gripper: Gripper | None = None) -> CatalogRobot:
+    """A catalogue column: a built-in robot by name, or a URDF robot stored under `name`, with `gripper` (default
+    the Franka hand); refused when its fixed links cut into its table."""
     if urdf is None:
-        robot = get_robot(name, base=base, tip_frame=tip, mount=mount)
+        robot = get_robot(name, base=base, tip_frame=tip, mount=mount, gripper=gripper)
     else:
-        robot = get_robot(str(urdf), base=base, tip_frame=tip, mount=mount, hand_links=tuple(hand_links))
+        robot = get_robot(str(urdf), base=base, tip_frame=tip, mount=mount, hand_links=tuple(hand_links), gripper=gripper)
         if robot.name != name:  # the URDF's file name names it otherwise
             robot = robot_from_spec(replace(robot.spec, name=name))
     scene = table_scene(robot.name, table)
@@ -103,7 +105,7 @@ def make_robot(name: str, urdf: str | None = None, tip: str | None = None, mount
     return CatalogRobot(robot.name, robot, scene)
 
 
-def robots_file(path: Path) -> list[CatalogRobot]:
+def robots_file(path: Path, gripper: Gripper | None = None) -> list[CatalogRobot]:
     """The robots listed in a YAML file (see the module's docstring)."""
     import yaml
 
@@ -120,7 +122,7 @@ def robots_file(path: Path) -> list[CatalogRobot]:
     known = {"name", "urdf", "tip", "mount", "base", "hand_links", "table"}
     for i, e in enumerate(entries):
         if isinstance(e, str):
-            out.append(make_robot(e))
+            out.append(make_robot(e, gripper=gripper))
             continue
         if not isinstance(e, dict) or "name" not in e:
             raise RobotListError(f"robots file {path}: entry {i + 1} must be a name or a mapping with `name`")
@@ -135,14 +137,16 @@ def robots_file(path: Path) -> list[CatalogRobot]:
         out.append(make_robot(str(e["name"]), None if urdf is None else str(urdf), e.get("tip"),
                               None if e.get("mount") is None else mount_pose(e["mount"], f"mount of {what}"),
                               None if e.get("base") is None else base_pose(e["base"], f"base of {what}"),
-                              tuple(e.get("hand_links") or ()), e.get("table")))
+                              tuple(e.get("hand_links") or ()), e.get("table"), gripper))
     return out
 
 
 def parse_robots(text: str | Sequence[str], tip: str | None = None, mount: np.ndarray | None = None,
-                 base: np.ndarray | None = None, hand_links: Sequence[str] = ()) -> dict[str, CatalogRobot]:
+                 base: np.ndarray | None = None, hand_links: Sequence[str] = (),
+                 gripper: Gripper | None = None) -> dict[str, CatalogRobot]:
     """The catalogue's columns by name from 'panda,ur5,arm=arm.urdf' (the URDF entries take `tip`, `mount`, `base`
-    and `hand_links`), a list of such entries, or the path of a YAML robots file."""
+    and `hand_links`), a list of such entries, or the path of a YAML robots file; every robot carries `gripper`
+    (default the Franka hand)."""
     items = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
     if not items:
         raise RobotListError("--robots needs at least one robot, e.g. panda,ur5 or arm=arm.urdf (with --tip)")
@@ -151,16 +155,16 @@ def parse_robots(text: str | Sequence[str], tip: str | None = None, mount: np.nd
         if Path(item).suffix.lower() in ROBOT_FILE_SUFFIXES and "=" not in item:
             if not Path(item).is_file():
                 raise RobotListError(f"robots file {item} does not exist")
-            robots += robots_file(Path(item))
+            robots += robots_file(Path(item), gripper)
         elif "=" in item:
             name, urdf = (s.strip() for s in item.split("=", 1))
             if not name or not urdf:
                 raise RobotListError(f"--robots entry {item!r} must be NAME=URDF")
             if tip is None:
                 raise RobotListError(f"--robots entry {item!r} is a URDF robot: give its tip frame with --tip")
-            robots.append(make_robot(name, urdf, tip, mount, base, hand_links))
+            robots.append(make_robot(name, urdf, tip, mount, base, hand_links, gripper=gripper))
         else:
-            robots.append(make_robot(item))
+            robots.append(make_robot(item, gripper=gripper))
     out: dict[str, CatalogRobot] = {}
     for r in robots:
         if r.name in out:

@@ -39,7 +39,7 @@ from workbench.planners.wan_harada.tabletop import (
 )
 from workbench.robots.collider import Scene
 from workbench.robots.gripper import Gripper, franka_hand
-from workbench.robots.ik import IKOptions, IKSolver, retract
+from workbench.robots.ik import IKOptions, IKSolver, check_poses, retract
 from workbench.robots.model import RobotSpec, robot_from_spec
 
 SHAPE_KEY = b"shape"
@@ -122,11 +122,12 @@ def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams
 
 
 def part_unit(path: str, name: str, scale: float | None, units: str | None, gparams: GraspParams,
-              pparams: PlacementParams, tparams: TabletopParams) -> dict[str, pa.Table]:
-    """The worker's task for one part: `part_stages` of the mesh at `path`, returned as Arrow tables."""
+              pparams: PlacementParams, tparams: TabletopParams, hand: Gripper | None = None) -> dict[str, pa.Table]:
+    """The worker's task for one part: `part_stages` of the mesh at `path` with `hand` (default the Franka hand),
+    returned as Arrow tables."""
     t0, c0 = time.perf_counter(), time.thread_time()
     obj = load_object(path, scale=scale, units=units, name=name)
-    res = part_stages(obj, gparams, pparams, tparams, worker_state().hand())
+    res = part_stages(obj, gparams, pparams, tparams, hand or worker_state().hand())
     res.seconds["load"] = time.perf_counter() - t0 - sum(res.seconds.values())
     tables = part_tables(res)
     tables["meta"] = stamp(tables["meta"], t0, c0)
@@ -282,6 +283,19 @@ def ik_unit(spec: RobotSpec, scene: Scene, opts: IKOptions, handx: float, worldz
     write_shard(table, shard)
     counts = pa.table({"grips": [len(feas)], "feasible": [int(feas[:, 0].sum())], "feasible_all": [int(feas.all(axis=1).sum())]})
     return stamp(counts, t0, c0, shard=shard)
+
+
+def ik_unit_files(spec: RobotSpec, scene: Scene, opts: IKOptions, handx: float, worldz: float, worlda: float,
+                  folder: str, chunk: int, shard: str) -> pa.Table:
+    """`ik_unit` of row group `chunk` of a part folder's grips in IK order (`ik_grips.parquet`, written by the part
+    unit), the part's mesh from its `object.parquet`: the worker reads what it needs, not the store or the driver."""
+    grips = table_arrays(pq.ParquetFile(f"{folder}/ik_grips.parquet").read_row_group(chunk))
+    obj = pq.read_table(f"{folder}/object.parquet", columns=["digest", "vertices", "faces"])
+    verts = obj.column("vertices").combine_chunks().flatten().flatten().to_numpy(zero_copy_only=False).reshape(-1, 3)
+    faces = obj.column("faces").combine_chunks().flatten().flatten().to_numpy(zero_copy_only=False).reshape(-1, 3)
+    return ik_unit(spec, scene, opts, handx, worldz, worlda, obj.column("digest")[0].as_py(), verts.astype(np.float64),
+                   faces.astype(np.int64), grips["idtabletopgrips"], check_poses(grips["rotmat"]),
+                   check_poses(grips["placement_rotmat"], "object placement"), shard=shard)
 
 
 def write_shard(table: pa.Table, path: str) -> None:

@@ -15,7 +15,7 @@ BENCHES = {
     "simulate": "searched regrasp plans replayed in MuJoCo: share confirmed, failures by kind, speed",
     "fingers": "five-finger regrasp by contact-point clustering beside Tables I-III",
     "gptable": "the grasp-placement table: classes, build times, chaining, closed-form IK",
-    "catalog": "catalogue build on a local Dask cluster: speed-up and the driver's load",
+    "catalog": "catalogue build on a local Dask cluster: speed-up, the driver's load, simulated workers, cost model",
     "widgets": "notebook widgets driven headless: latency from a change to the scene's update",
 }
 

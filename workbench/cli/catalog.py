@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 from workbench.benchmarks import print_table
 from workbench.catalog.cluster import cluster_client, dashboard_link
@@ -19,10 +20,12 @@ from workbench.catalog.driver import (
     report,
     summary_table,
 )
+from workbench.catalog.report import html_page, wide_table
 from workbench.catalog.robots import CatalogRobot, parse_robots
 from workbench.cli.grasps import SCALE, add_grasp_arguments, grasp_params
 from workbench.cli.ik import RETRACT, WORKERS, parse_base, parse_mount
-from workbench.cli.outputs import add_output
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.outputs import add_output, write_text
 from workbench.cli.placements import add_placement_arguments, placement_params
 from workbench.params import add_param, cli_bound, parse_number
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ
@@ -71,14 +74,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_param(b, IKOptions, "library", "--ik-library", cli_default=o.library)
     add_param(b, IKOptions, "seeds", "--ik-seeds", cli_default=o.seeds)
     add_output(b, "--shards", folder=True,
-               help="IK workers write their rows to Parquet files in DIR (created; on a file system every worker "
-                    "sees), merged into the store per part and robot: the driver writes less (see `workbench bench catalog`)")
+               help="the folder of the units' Parquet files, which the driver merges into the store in batches (default "
+                    "DB.units beside the store; with a cluster of several machines, on a file system every worker "
+                    "sees); files a killed build left there are merged by the re-run")
     b.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_placement_arguments(b)
     add_grasp_arguments(b)
+    add_gripper_argument(b)
     b.set_defaults(func=run_build)
     r = inner.add_parser("report", help="print the summary table of a stored catalogue")
     r.add_argument("--db", required=True, help="DuckDB store file")
+    add_output(r, "--html", suffixes=(".html",), metavar="OUT.html",
+               help="also write the parts x robots table as a page with a thumbnail of each part")
     r.set_defaults(func=run_report)
 
 
@@ -93,19 +100,21 @@ def catalog_robot_list(args: argparse.Namespace) -> dict[str, CatalogRobot]:
     """The catalogue's columns from --robots and the URDF entries' --tip, --mount, --base, --hand-links."""
     return parse_robots(args.robots, tip=args.tip, mount=parse_mount(args.mount) if args.mount else None,
                         base=parse_base(args.base) if args.base else None,
-                        hand_links=tuple(h.strip() for h in (args.hand_links or "").split(",") if h.strip()))
+                        hand_links=tuple(h.strip() for h in (args.hand_links or "").split(",") if h.strip()),
+                        gripper=gripper_from_args(args))
 
 
 def run_build(args: argparse.Namespace) -> int:
     params = catalog_params(args)
     collect_parts(args.parts)  # bad input fails before a cluster starts: parts, robots, a locked or damaged store
     robots = catalog_robot_list(args)
+    hand = next(iter(robots.values())).robot.spec.hand
     open_store(args.db).close()
     with cluster_client(workers=args.workers, scheduler=args.scheduler) as client:
         n = len(client.scheduler_info().get("workers", {}))
         print(f"dask: {n} worker(s) at {client.scheduler.address}; dashboard {dashboard_link(client)}", file=sys.stderr)
         res = build_catalog(args.parts, robots, args.db, client, params, progress=not args.no_progress,
-                            shards=args.shards)
+                            shards=args.shards, gripper=hand)
     print_summary(res.rows, res.failures)
     write_share = f", writing {res.write_seconds / res.wall:.0%} of it" if res.wall > 0 else ""
     print(f"{sum(res.computed.values())} units computed ({res.computed['part']} part, {res.computed['ik']} IK, "
@@ -115,8 +124,16 @@ def run_build(args: argparse.Namespace) -> int:
 
 
 def run_report(args: argparse.Namespace) -> int:
-    rows, failures = report(args.db)
+    rows, failures, meshes = report(args.db, meshes=args.html is not None)
     print_summary(rows, failures)
+    if rows:
+        headers, table = wide_table(rows)
+        print()
+        print_table(headers, table, title="parts x robots: reachable grips (IK-feasible at all five poses, of the tabletop "
+                                          "grips) and the regrasp graph's connected share (nodes in its largest component)")
+    if args.html is not None:
+        out = write_text(args.html, html_page(rows, failures, meshes, f"Catalogue {Path(args.db).name}"))
+        print(f"html: {out.resolve()}")
     return 0
 
 

@@ -133,6 +133,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "metres (default 0.02); the last grasp's hand must clear the destination's obstacles all along it "
                         "(the plan's last motion is that insertion: a straight line of the held part along it, checked "
                         "against the destination's obstacles)")
+    p.add_argument("--start-held", action="store_true",
+                   help="with --pickup: the part is already in the hand at the pick-up (the first grasp); the motions "
+                        "begin there and lift it out, with no approach and no closing of the jaw")
+    p.add_argument("--end-held", action="store_true",
+                   help="with --destination: the part stays in the hand at the destination after the insertion; the "
+                        "motions end there, with no opening of the jaw and no retract")
     p.add_argument("--table", default=None, help="table top corners in the world: XMIN,YMIN,XMAX,YMAX (m); default per robot")
     p.add_argument("--handx", type=parse_number(RETRACT, "--handx", 0.05), default=0.05, metavar="M",
                    help=f"approach distance along the hand's axis ({RETRACT.describe(True)}; default 0.05)")
@@ -234,8 +240,9 @@ def run(args: argparse.Namespace) -> int:
     if task_mode and (args.pickup is None or args.destination is None or place_mode):
         raise WorkbenchError("a task needs both --pickup P,X,Y,PHI and --destination P,X,Y,PHI (with --initial / --goal "
                              "to restrict its first and last grasps), and no --from / --to")
-    if (args.pickup_obstacle or args.destination_obstacle or args.insert) and not task_mode:
-        raise WorkbenchError("--pickup-obstacle, --destination-obstacle and --insert need --pickup and --destination")
+    if (args.pickup_obstacle or args.destination_obstacle or args.insert or args.start_held or args.end_held) and not task_mode:
+        raise WorkbenchError("--pickup-obstacle, --destination-obstacle, --insert, --start-held and --end-held need "
+                             "--pickup and --destination")
     if not task_mode and (grasp_mode == place_mode or (grasp_mode and (args.initial is None or args.goal is None)) or
                           (place_mode and (args.from_ is None or args.to is None))):
         raise WorkbenchError("give either --initial CLASS,THETA with --goal CLASS,MIN:MAX, or --from P,PHI with --to P,PHI, "
@@ -270,7 +277,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         if task_mode:
             seq, plan = plan_task_query(r.table, r.classes, realiser, r.robot, r.obj.name, pickup, destination,
-                                        start_mask, goal_mask, motions)
+                                        start_mask, goal_mask, motions, args.start_held, args.end_held)
         elif grasp_mode:
             seq, plan = plan_grasp_query(r.table, r.classes, realiser, r.robot, r.obj.name, initial, gc, rng, motions)
         else:
@@ -307,6 +314,10 @@ def run(args: argparse.Namespace) -> int:
         print("the initial grasp is already in the goal range: nothing to do")
     else:
         print(plan.summary())
+        for held, text in ((plan.start_held, "starts with the part in the hand at the pick-up"),
+                           (plan.end_held, "ends with the part still in the hand at the destination")):
+            if held:
+                print(f"the plan {text}")
         if args.no_save:
             report = plan_validator(args.db, r, scene).check(plan)
         else:

@@ -47,6 +47,19 @@ FAULT_ENV = "WORKBENCH_FAULT"  # tests only: "TABLE:N:SIGNAL" sends SIGNAL to th
 class Store:
     """An open DuckDB store file (created with the full schema when new)."""
 
+    @classmethod
+    def scratch(cls, extra_tables: tuple[str, ...] = ()) -> "Store":
+        """An in-memory store with the full schema (and `extra_tables`' DDL): a catalogue worker writes a unit's rows
+        in it with the stage writers, then exports them as Parquet files."""
+        self = cls.__new__(cls)
+        self.path, self._depth, self.read_only, self._fault = Path(":memory:"), 0, False, None
+        self.con = duckdb.connect(":memory:", config=CONNECT_CONFIG)
+        self.con.execute("SET threads = 1")
+        with self.transaction():
+            for ddl in ALL_TABLES + MIGRATIONS + extra_tables:
+                self.run(ddl)
+        return self
+
     def __init__(self, path: str | Path, read_only: bool = False, create: bool = True, wait: float | None = None):
         """Open (or, unless `create` is False, create) the store at `path`: its identity, version and length are
         checked before anything is written (workbench.store.identity). A file another process holds is waited for

@@ -20,9 +20,11 @@ from typing import Any, Iterator
 
 import duckdb
 import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
 
 from workbench.errors import StoreError
-from workbench.store import Store
+from workbench.store import Store, _digest
 from workbench.store.robots import ALL_FEASIBLE, FEASIBILITY, JOINTS
 
 CATALOG_TABLES: tuple[str, ...] = (
@@ -99,6 +101,60 @@ def _put_unit(store: Store, unit: dict[str, Any]) -> None:
               [_plain(row[k]) for k in UNIT_COLUMNS])
 
 
+def put_units(store: Store, units: list[dict[str, Any]]) -> None:
+    """The catalog_unit rows of many finished units (status `done`), replacing earlier rows of their digests (a
+    recorded failure), in one insert inside the caller's transaction."""
+    if not units:
+        return
+    rows = {k: [_plain(u.get(k)) for u in units] for k in UNIT_COLUMNS}
+    rows["status"] = ["done"] * len(units)
+    rows["counts"] = [json.dumps(c or {}, sort_keys=True, default=_plain) for c in rows["counts"]]
+    rows["nrows"] = [int(n or 0) for n in rows["nrows"]]
+    types = {"chunk": pa.int32(), "nrows": pa.int64(), "seconds": pa.float64(), "write_seconds": pa.float64(),
+             **{k: pa.int64() for k in UNIT_COLUMNS if k.startswith("id")}}
+    table = pa.table({k: pa.array(v, type=types.get(k, pa.string())) for k, v in rows.items()})
+    with store.transaction():
+        store.con.register("_wb_units", table)
+        try:
+            if not all(u.get("fresh") for u in units):
+                store.run("DELETE FROM catalog_unit WHERE digest IN (SELECT digest FROM _wb_units)")
+            store.run(f"INSERT INTO catalog_unit ({', '.join(UNIT_COLUMNS)}) SELECT {', '.join(UNIT_COLUMNS)} FROM _wb_units")
+        finally:
+            store.con.unregister("_wb_units")
+
+
+def merge_ik_runs(store: Store, runs: list[dict[str, Any]]) -> int:
+    """The `ik` rows of many IK runs' shard files whose grips have no row yet (`paths`, `idrobot`, `idscene`,
+    `idikret`, `nq`, `offset` per run; see `merge_ik_shards`), in one insert per joint count inside the caller's
+    transaction; ids follow the runs' order, then the grips'. Returns the rows inserted."""
+    n = 0
+    for nq in sorted({r["nq"] for r in runs}):
+        group = [(k, r) for k, r in enumerate(runs) if r["nq"] == nq and r["paths"]]
+        if not group:
+            continue
+        files = [(str(p), k, r) for k, r in group for p in r["paths"]]
+        table = pa.table({"file": [f for f, _, _ in files], "ord": [k for _, k, _ in files],
+                          **{c: [int(r[c]) for _, _, r in files] for c in ("idrobot", "idscene", "idikret", "offset")}})
+        feas = ", ".join(f"f[{k + 1}]" for k in range(len(FEASIBILITY)))
+        jnts = ", ".join(f"CASE WHEN f[{k + 1}] THEN j[{k * nq + 1}:{(k + 1) * nq}] END" for k in range(len(JOINTS)))
+        first = store.next_id("ik", "idik")
+        with store.transaction():
+            store.con.register("_wb_runs", table)
+            try:
+                n += _count(store.run(
+                    f"INSERT INTO ik (idik, idrobot, idtabletopgrips, idikret, idscene, {', '.join(FEASIBILITY)}, "
+                    f"{', '.join(JOINTS)}) SELECT ? - 1 + row_number() OVER (ORDER BY r.ord, s.idtabletopgrips + r.offset), "
+                    f"r.idrobot, s.idtabletopgrips + r.offset, r.idikret, r.idscene, {feas}, {jnts} FROM "
+                    "(SELECT filename, idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j "
+                    "FROM read_parquet(?, filename = true)) s JOIN _wb_runs r ON r.file = s.filename",
+                    [first, [f for f, _, _ in files]]))
+            except duckdb.IOException as exc:
+                raise StoreError(f"a shard of an IK run cannot be read ({str(exc).splitlines()[0]})") from None
+            finally:
+                store.con.unregister("_wb_runs")
+    return n
+
+
 @contextmanager
 def unit_transaction(store: Store, unit: dict[str, Any]) -> Iterator[dict[str, Any]]:
     """One unit's writes and its catalog_unit row in one transaction. The body fills `unit` (ids, nrows, counts)
@@ -111,35 +167,155 @@ def unit_transaction(store: Store, unit: dict[str, Any]) -> Iterator[dict[str, A
         _put_unit(store, unit)
 
 
-def merge_ik_shards(store: Store, idrobot: int, idscene: int, idikret: int, nq: int, units: list[dict[str, Any]],
-                    paths: list[str], stored: bool = True) -> int:
+def merge_ik_shards(store: Store, idrobot: int, idscene: int, idikret: int, nq: int, paths: list[str],
+                    offset: int = 0) -> int:
     """The `ik` rows of one IK run's shard files (Parquet, one per unit: idtabletopgrips, feasible (5) and joints
-    (5 x nq, NaN where infeasible), as `workbench.catalog.units.ik_unit` writes them) and the units' catalog_unit
-    rows, in one transaction; grips that already have a row for the run are left as they are (`stored`: the run may
-    have rows already; when False the anti-join is skipped, and the UNIQUE key still refuses a duplicate). Returns
-    the rows inserted. A shard that cannot be read is a StoreError naming it."""
+    (5 x nq, NaN where infeasible), as `workbench.catalog.units.ik_unit` writes them) in one transaction; grips that
+    already have a row for the run (stored by `workbench ik`) are left as they are. Returns the rows inserted. The shards of a part unit merged from its folder name its tabletop grips by their ids in the
+    unit's range: `offset` moves them to the store's ids. A shard that cannot be read is a StoreError naming it."""
     if not paths:
         return 0
     feas = ", ".join(f"f[{k + 1}]" for k in range(len(FEASIBILITY)))
     jnts = ", ".join(f"CASE WHEN f[{k + 1}] THEN j[{k * nq + 1}:{(k + 1) * nq}] END" for k in range(len(JOINTS)))
-    t0 = time.perf_counter()
     with store.transaction():
         first = store.next_id("ik", "idik")
         try:
             store.run(
                 f"INSERT INTO ik (idik, idrobot, idtabletopgrips, idikret, idscene, {', '.join(FEASIBILITY)}, {', '.join(JOINTS)}) "
                 f"SELECT ? - 1 + row_number() OVER (ORDER BY idtabletopgrips), ?, idtabletopgrips, ?, ?, {feas}, {jnts} "
-                "FROM (SELECT idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j FROM read_parquet(?)) s "
-                + ("WHERE idtabletopgrips NOT IN (SELECT idtabletopgrips FROM ik WHERE idrobot = ? AND idscene = ? AND idikret = ?)"
-                   if stored else ""),
-                [first, idrobot, idikret, idscene, list(paths)] + ([idrobot, idscene, idikret] if stored else []))
+                "FROM (SELECT idtabletopgrips + ? AS idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j "
+                "FROM read_parquet(?)) s "
+                "WHERE idtabletopgrips NOT IN (SELECT idtabletopgrips FROM ik WHERE idrobot = ? AND idscene = ? AND idikret = ?)",
+                [first, idrobot, idikret, idscene, int(offset), list(paths), idrobot, idscene, idikret])
         except duckdb.IOException as exc:
             raise StoreError(f"a shard of this IK run cannot be read ({str(exc).splitlines()[0]})") from None
-        n = store.next_id("ik", "idik") - first
-        seconds = (time.perf_counter() - t0) / len(units)
-        for unit in units:
-            _put_unit(store, {**unit, "status": "done", "write_seconds": seconds})
-    return n
+        return store.next_id("ik", "idik") - first
+
+
+UNIT_TABLES = ("object", "paramset", "freeairgrip", "freetabletopplacement", "freetabletopgrip", "angle",
+               "tabletopplacements", "tabletopgrips")  # a part unit's rows, in the order their foreign keys need
+
+
+def export_tables(store: Store, tables: tuple[str, ...] = UNIT_TABLES) -> dict[str, pa.Table]:
+    """Every row of `tables` as Arrow tables (a scratch store's unit, to be written as Parquet files)."""
+    return {t: store.con.sql(f"SELECT * FROM {t} ORDER BY 1").to_arrow_table() for t in tables}
+
+
+# a part unit's rows, numbered from 1 in its scratch store, are renumbered at the merge into the store's sequences;
+# the columns naming them
+RENUMBERED: dict[str, tuple[str, ...]] = {
+    "object": ("idobject",),
+    "paramset": ("idparamset", "idobject"),
+    "freeairgrip": ("idfreeairgrip", "idobject", "idparamset"),
+    "freetabletopplacement": ("idfreetabletopplacement", "idobject", "idparamset"),
+    "freetabletopgrip": ("idfreetabletopgrip", "idfreetabletopplacement", "idfreeairgrip"),
+    "tabletopplacements": ("idtabletopplacements", "idfreetabletopplacement", "idparamset"),
+    "tabletopgrips": ("idtabletopgrips", "idtabletopplacements", "idfreeairgrip", "idfreetabletopgrip"),
+}
+PARAMSET_REFS = ("grasps", "placements")  # keys of a stage's parameters naming the parameter set it consumed
+
+
+def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, int]], idgripper: int) -> list[dict[str, int]]:
+    """The rows of part units left as Parquet folders (`<folder>/<table>.parquet` for `UNIT_TABLES`, each table's
+    ids counting from 1, `counts` rows per table) in the caller's transaction. Ids are renumbered into the store's
+    sequences (each unit's ids move by one offset per table, returned per unit), the parameter sets' digests are
+    computed again with their new ids, the free-air grasps take the store's gripper row `idgripper`, and angles
+    already stored are reused by value. An unreadable file is a StoreError naming the problem."""
+    if not folders:
+        return []
+    files = {t: [f"{d}/{t}.parquet" for d in folders] for t in UNIT_TABLES}
+    nxt = {t: store.next_id(t, f"id{t}") for t in RENUMBERED}
+    offsets = []
+    for c in counts:
+        offsets.append({t: nxt[t] - 1 for t in RENUMBERED})
+        for t in RENUMBERED:
+            nxt[t] += int(c.get(t, 0))
+    rows = [(f"{d}/{t}.parquet", *(o[r] for r in RENUMBERED)) for d, o in zip(folders, offsets) for t in UNIT_TABLES]
+    table = pa.table({"file": [r[0] for r in rows], **{f"d_{t}": [r[k + 1] for r in rows] for k, t in enumerate(RENUMBERED)}})
+    try:
+        with store.transaction():
+            store.con.register("_wb_offsets", table)
+            try:
+                for t in ("object", "freeairgrip", "freetabletopplacement", "freetabletopgrip", "tabletopplacements",
+                          "tabletopgrips"):
+                    if t == "freeairgrip":
+                        _insert_renumbered(store, "paramset", folders, offsets)
+                    if t == "tabletopplacements":
+                        _insert_angles(store, files["angle"])
+                    swap = [f"x.{c} + o.d_{c[2:]} AS {c}" for c in RENUMBERED[t]]
+                    angle, args = "", [files[t]]
+                    if t == "freeairgrip":
+                        swap.append("?::BIGINT AS idgripper")
+                        args.insert(0, idgripper)
+                    if t == "tabletopplacements":  # the unit's angle ids -> the store's, by value
+                        swap.append("a.idangle AS idangle")
+                        angle = ("JOIN read_parquet(?, filename = true) u ON u.idangle = x.idangle AND "
+                                 "replace(u.filename, '/angle.parquet', '') = replace(x.filename, '/tabletopplacements.parquet', '') "
+                                 "JOIN (SELECT value, min(idangle) AS idangle FROM angle GROUP BY value) a "
+                                 "ON abs(a.value - u.value) < 1e-9 ")
+                        args.append(files["angle"])
+                    store.run(f"INSERT INTO {t} BY NAME SELECT x.* EXCLUDE (filename) REPLACE ({', '.join(swap)}) "
+                              f"FROM read_parquet(?, filename = true) x JOIN _wb_offsets o ON o.file = x.filename {angle}", args)
+                    store._after_insert(t)
+            finally:
+                store.con.unregister("_wb_offsets")
+    except duckdb.IOException as exc:
+        raise StoreError(f"a part unit's file cannot be read ({str(exc).splitlines()[0]})") from None
+    return offsets
+
+
+def _insert_renumbered(store: Store, table: str, folders: list[str], offsets: list[dict[str, int]]) -> None:
+    """The units' parameter sets with their ids renumbered and their digests computed again (a stage's parameters
+    name the parameter set it consumed, and the digest covers them and the object)."""
+    rows, unit = [], []
+    for k, d in enumerate(folders):
+        part = pq.read_table(f"{d}/{table}.parquet").to_pylist()
+        rows += part
+        unit += [offsets[k]] * len(part)
+    out: dict[str, list] = {"idparamset": [], "stage": [], "digest": [], "params": [], "idobject": [], "created": []}
+    for r, o in zip(rows, unit):
+        params = json.loads(r["params"])
+        for key in PARAMSET_REFS:
+            if isinstance(params.get(key), int):
+                params[key] += o["paramset"]
+        oid = None if r["idobject"] is None else int(r["idobject"]) + o["object"]
+        out["idparamset"].append(int(r["idparamset"]) + o["paramset"])
+        out["stage"].append(r["stage"])
+        out["digest"].append(_digest(r["stage"], params, oid))
+        out["params"].append(json.dumps(params, sort_keys=True))
+        out["idobject"].append(oid)
+        out["created"].append(r["created"])
+    extra = [k for k in rows[0] if k not in out] if rows else []
+    for k in extra:  # columns added by later schema versions (the stage's use counter), as written
+        out[k] = [r[k] for r in rows]
+    arrow = pa.table(out)
+    store.con.register("_wb_rows", arrow)
+    try:
+        store.run(f"INSERT INTO {table} BY NAME SELECT * FROM _wb_rows")
+    finally:
+        store.con.unregister("_wb_rows")
+
+
+def _insert_angles(store: Store, files: list[str]) -> None:
+    """Angle values not stored yet, with new ids."""
+    first = store.next_id("angle", "idangle")
+    store.run("INSERT INTO angle (idangle, value) SELECT ? - 1 + row_number() OVER (ORDER BY value), value FROM "
+              "(SELECT DISTINCT value FROM read_parquet(?) u WHERE NOT EXISTS "
+              "(SELECT 1 FROM angle a WHERE abs(a.value - u.value) < 1e-9))", [first, files])
+
+
+def _count(rows: list[tuple]) -> int:
+    return int(rows[0][0]) if rows else 0
+
+
+def checkpoint(store: Store) -> None:
+    """CHECKPOINT: the write-ahead log folded into the file."""
+    store.run("CHECKPOINT")
+
+
+def object_names(store: Store) -> set[str]:
+    """The names of the stored objects."""
+    return {r[0] for r in store.run("SELECT name FROM object")}
 
 
 def record_failure(store: Store, unit: dict[str, Any], error: str) -> None:

@@ -183,7 +183,7 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
                 ends + ["--insert", "0,0,0"], ends + ["--insert", "0,0,-1,-0.1"],
                 ends + ["--pickup-obstacle", str(tmp_path / "missing.stl") + "@0,0,0"],
                 ends + ["--pickup-obstacle", "nopose.stl"], ends + ["--from", "0,0", "--to", "1,0"],
-                ["--from", "0,0", "--to", "1,0", "--insert", "0,0,-1"], ends[:2] + ["--destination", "9,0.35,0.25,0"]):
+                ["--from", "0,0", "--to", "1,0", "--insert", "0,0,-1"], ["--from", "0,0", "--to", "1,0", "--end-held"], ends[:2] + ["--destination", "9,0.35,0.25,0"]):
         assert main(base + bad) == 2, bad
     err = capsys.readouterr().err
     assert "Traceback" not in err
@@ -206,48 +206,77 @@ def _pin_fk(robot):
     return fk
 
 
-def test_slanted_insertion_is_the_plans_last_straight_line(tmp_path, lpart, hand, capsys):
+@pytest.fixture(scope="module")
+def slot(tmp_path_factory, lpart):
+    """A store with the L part's table, and obstacle files: a pocket at the pick-up (the part standing, walls along y)
+    and a slot open along x at the destination (the part lying, walls along y), with their `--*-obstacle` flags."""
+    from workbench.cli.main import main
+    from workbench.planners.tournassoud.stages import load_planner
+
+    tmp = tmp_path_factory.mktemp("slot")
+    mesh = tmp / "L.stl"
+    lpart.mesh.export(mesh)
+    db = str(tmp / "slot.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--table-point", "0.45,0.1"]) == 0
+    run = load_planner(db, "L")
+    ends = {"pickup": TaskEnd(STANDING, 0.55, -0.05, np.radians(30)), "destination": TaskEnd(0, 0.35, 0.25, 0.0)}
+    walls, flags = {}, {}
+    for name, gap in (("pickup", 0.02), ("destination", 0.01)):
+        walls[name] = walls_around(lpart.mesh, ends[name].object_pose(run.table), gap=gap, sides="y")
+        flags[name] = []
+        for k, o in enumerate(walls[name]):
+            f = tmp / f"{name}{k}.stl"
+            o.mesh.export(f)
+            flags[name] += [f"--{name}-obstacle", f"{f}@{o.pose[0, 3]:.6f},{o.pose[1, 3]:.6f},{o.pose[2, 3]:.6f}"]
+    return db, run, walls, flags, tmp
+
+
+def _stored_segments(db: str, idplan: int) -> list[dict]:
+    from workbench.store import Store
+    from workbench.store.wan_harada import load_plan_segments
+
+    with Store(db) as store:
+        return load_plan_segments(store, idplan).to_pylist()
+
+
+def _clear_everywhere(segs, steps, fk, nq, hand, lpart, walls) -> None:
+    """coal: at every stored knot (pinocchio FK), the hand and, while held, the part clear every wall."""
+    import trimesh
+
+    grasps = [np.linalg.inv(np.reshape(x["grasp"], (4, 4))) for x in steps]
+    held = trimesh.Trimesh(lpart.mesh.vertices, lpart.mesh.faces, process=False)
+    body = hand.collision_mesh(hand.jaw_max)
+    for s in segs:
+        for x in np.reshape(s["q"], (-1, nq)):
+            p = fk(x)
+            assert not _hits(body, p[None], walls), (s["kind"], s["caption"])
+            if s["holding"]:
+                assert not _hits(held, (p @ grasps[s["step"]])[None], walls), (s["kind"], s["caption"])
+
+
+def test_slanted_insertion_is_the_plans_last_straight_line(slot, lpart, hand, capsys):
     """`gpplan --insert 1,0,-1,0.03` into a slot open along x (walls either side along y): the stored plan's last
     motion with the part in the hand is a straight TCP line of 30 mm along the insertion direction ending at the
     destination (pinocchio FK of the stored knots, not the planner's), every knot of which keeps the hand and the
     held part clear of the slot's walls (coal); the plan passes the validators."""
     import json
 
-    import trimesh
-
     from workbench.cli.main import main
-    from workbench.planners.tournassoud.stages import load_planner
     from workbench.robots.model import get_robot
-    from workbench.store import Store
-    from workbench.store.wan_harada import load_plan_segments
 
-    mesh = tmp_path / "L.stl"
-    lpart.mesh.export(mesh)
-    db = str(tmp_path / "slant.duckdb")
-    assert main(["gptable", str(mesh), "--db", db, "--table-point", "0.45,0.1"]) == 0
-    run = load_planner(db, "L")
-    dest = TaskEnd(0, 0.35, 0.25, 0.0)
-    walls = walls_around(lpart.mesh, dest.object_pose(run.table), gap=0.01, sides="y")
-    args = []
-    for k, o in enumerate(walls):
-        f = tmp_path / f"wall{k}.stl"
-        o.mesh.export(f)
-        args += ["--destination-obstacle", f"{f}@{o.pose[0, 3]:.6f},{o.pose[1, 3]:.6f},{o.pose[2, 3]:.6f}"]
+    db, run, walls, flags, tmp = slot
     capsys.readouterr()
-    js = tmp_path / "slant.json"
+    js = tmp / "slant.json"
     assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0",
-                 "--insert", "1,0,-1,0.03", *args, "--json", str(js)]) == 0
+                 "--insert", "1,0,-1,0.03", *flags["destination"], "--json", str(js)]) == 0
     out = capsys.readouterr().out
     assert "validator: ok" in out, out
     idplan = int(out.split("stored plan id ")[1].split()[0])
-    with Store(db) as store:
-        segs = load_plan_segments(store, idplan).to_pylist()
+    segs = _stored_segments(db, idplan)
     robot = get_robot("puma560")
     fk = _pin_fk(robot)
-    lowers = [s for s in segs if s["kind"] == "lower"]
-    last = lowers[-1]
-    q = np.reshape(last["q"], (-1, robot.nq))
-    tcp = np.array([fk(x) for x in q])
+    last = [s for s in segs if s["kind"] == "lower"][-1]
+    tcp = np.array([fk(x) for x in np.reshape(last["q"], (-1, robot.nq))])
     d = np.array([1.0, 0.0, -1.0]) / np.sqrt(2)
     move = tcp[-1, :3, 3] - tcp[0, :3, 3]
     assert np.allclose(move, 0.03 * d, atol=1e-3), move
@@ -255,16 +284,56 @@ def test_slanted_insertion_is_the_plans_last_straight_line(tmp_path, lpart, hand
     off_line = np.linalg.norm(rel - np.outer(rel @ d, d), axis=1)
     assert off_line.max() < 1e-3 and np.all(np.diff(rel @ d) > -1e-6), off_line.max()
     assert np.allclose(tcp[:, :3, :3], tcp[0, :3, :3], atol=1e-3)  # the hand translates along the line
-    step = segs.index(last)
-    assert segs[step + 1]["kind"] == "gripper" and not segs[step + 1]["holding"]  # the part is released in place
+    after = segs[segs.index(last) + 1]
+    assert after["kind"] == "gripper" and not after["holding"]  # the part is released in place
     steps = json.loads(js.read_text())["plan"]["steps"]
-    grasps = [np.linalg.inv(np.reshape(x["grasp"], (4, 4))) for x in steps]
     assert last["step"] == len(steps) - 1 and np.allclose(tcp[-1], np.reshape(steps[-1]["tcp"], (4, 4)), atol=1e-3)
-    held = trimesh.Trimesh(lpart.mesh.vertices, lpart.mesh.faces, process=False)
-    body = hand.collision_mesh(hand.jaw_max)
-    for s in segs:
-        for x in np.reshape(s["q"], (-1, robot.nq)):
-            p = fk(x)
-            assert not _hits(body, p[None], walls), (s["kind"], s["caption"])
-            if s["holding"]:
-                assert not _hits(held, (p @ grasps[s["step"]])[None], walls), (s["kind"], s["caption"])
+    _clear_everywhere(segs, steps, fk, robot.nq, hand, lpart, walls["destination"])
+
+
+def test_plan_starts_and_ends_in_the_hand(slot, lpart, hand, capsys):
+    """`--start-held --end-held` (Fig. 1 (a) and (d)): the stored trajectory begins with the part held at the first
+    grasp at the pick-up, lifting it out of the pocket, and ends with it still held at the last grasp at the
+    destination after the insertion (pinocchio FK of the stored knots); hand and part clear both ends' walls (coal);
+    the validators rebuilt from the store accept it because the plan says so, and refuse the same trajectory when
+    the plan claims to release the part at the end or to start with an empty hand."""
+    import json
+
+    from workbench.cli.main import main
+    from workbench.planners.tournassoud.stages import validate_stored
+    from workbench.planners.wan_harada.plans import Plan
+    from workbench.robots.model import get_robot
+
+    db, run, walls, flags, tmp = slot
+    capsys.readouterr()
+    js = tmp / "held.json"
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0",
+                 "--insert", "1,0,-1,0.03", *flags["pickup"], *flags["destination"], "--start-held", "--end-held",
+                 "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    assert "validator: ok" in out and "starts with the part in the hand" in out and "still in the hand" in out, out
+    idplan = int(out.split("stored plan id ")[1].split()[0])
+    doc = json.loads(js.read_text())["plan"]
+    assert doc["start_held"] and doc["end_held"]
+    steps = doc["steps"]
+    segs = _stored_segments(db, idplan)
+    robot = get_robot("puma560")
+    fk = _pin_fk(robot)
+    first, last = segs[0], segs[-1]
+    assert first["kind"] == "lift" and first["holding"] and last["kind"] == "lower" and last["holding"]
+    q0, q1 = np.reshape(first["q"], (-1, robot.nq))[0], np.reshape(last["q"], (-1, robot.nq))[-1]
+    assert np.allclose(fk(q0), np.reshape(steps[0]["tcp"], (4, 4)), atol=1e-3)
+    assert np.allclose(fk(q1), np.reshape(steps[-1]["tcp"], (4, 4)), atol=1e-3)
+    # the jaw acts only at the regrasps in between: once to release, once to take, per regrasp on the table
+    assert sum(s["kind"] == "gripper" for s in segs) == 2 * doc["regrasps"]
+    assert not any(s["kind"] in ("approach", "retract") and s["step"] in (0, len(steps) - 1) for s in segs)
+    _clear_everywhere(segs, steps, fk, robot.nq, hand, lpart, walls["pickup"] + walls["destination"])
+    obstacles = [(o.mesh, o.pose) for o in walls["pickup"] + walls["destination"]]
+    plan = Plan.from_dict(doc)
+    assert validate_stored(db, run, idplan, plan, require_motion=True, obstacles=obstacles).ok
+    plan.end_held = False
+    report = validate_stored(db, run, idplan, plan, require_motion=True, obstacles=obstacles)
+    assert not report.ok and any("still in the hand" in e for e in report.errors), report.errors
+    plan.end_held, plan.start_held = True, False
+    report = validate_stored(db, run, idplan, plan, require_motion=True, obstacles=obstacles)
+    assert not report.ok and any("held" in e for e in report.errors), report.errors

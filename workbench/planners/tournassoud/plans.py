@@ -19,7 +19,9 @@ Plan steps (validator order pick, (transfer, regrasp)*, place):
 - placement query: pick at the start placement with the first grasp, then per regrasp a transfer to an intermediate
   placement and a regrasp there, and place at the goal placement with the last grasp;
 - task query (`plan_task_query`, Fig. 1): the same with the pick at the task's pick-up and the place at its
-  destination, away from H, both checked against the task's obstacles;
+  destination, away from H, both checked against the task's obstacles; the plan may start with the part already
+  in the hand at the pick-up and end with it still held at the destination (`Plan.start_held`, `end_held`: the
+  motions begin with the lift out of the pick-up, end with the insertion);
 - grasp query (the object starts and ends in the hand): pick and transfer both hold the initial grasp at the first
   intermediate placement (the configuration where it is put down), then regrasp/transfer pairs, and the last regrasp
   and the place both hold the final grasp at the last placement.
@@ -454,7 +456,8 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
     checker = realiser.motion_checker(opts)
     vlim = np.asarray(robot.model.velocityLimit, dtype=np.float64)
     t0 = time.perf_counter()
-    res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz)
+    res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz,
+                             plan.start_held, plan.end_held)
     if res.ok:
         for st, ln in zip(plan.steps, lines):
             st.q_retract, st.q_approach, st.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp
@@ -466,7 +469,7 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
 
 
 def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: str, motions: ExecOptions | None,
-          **kw) -> tuple[Sequence, Plan | None]:
+          held: tuple[bool, bool] = (False, False), **kw) -> tuple[Sequence, Plan | None]:
     """Answer, realise and plan a query; with `motions`, when a motion between two conjunctions fails (the step's
     lines, or the move into the next step), the failed conjunction and every sample needing the same change of arm
     configuration are removed from a working copy of the table (`learn_removal`) and the query answered again, at
@@ -509,6 +512,7 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
         if not conj:
             return explained(seq), None
         plan = to_plan(seq, conj, work, classes, robot, object_name, realiser.handx, realiser.worldz)
+        plan.start_held, plan.end_held = held
         if motions is None:
             return explained(seq), plan
         res = add_motions(plan, realiser, motions)
@@ -557,10 +561,13 @@ def plan_placement_query(table, classes, realiser: Realiser, robot: Robot, objec
 
 
 def plan_task_query(table, classes, realiser: Realiser, robot: Robot, object_name: str, pickup, destination,
-                    start: np.ndarray, goal: np.ndarray, motions: ExecOptions | None = None) -> tuple[Sequence, Plan | None]:
+                    start: np.ndarray, goal: np.ndarray, motions: ExecOptions | None = None, start_held: bool = False,
+                    end_held: bool = False) -> tuple[Sequence, Plan | None]:
     """Fig. 1's task (Section 5.1): the part picked up where it lies among the pick-up's obstacles with a grasp of
     `start` ((C, T), `task.end_mask`), regrasped on the table at H as often as needed, and put at the destination
     (inserted, the hand clear of its obstacles) with a grasp of `goal`. The plan's first step takes the part at the
-    pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles."""
-    return _plan(task_query, table, classes, realiser, robot, object_name, motions, start=start, goal=goal, pickup=pickup,
-                 destination=destination)
+    pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles. With `start_held`
+    the part is already in the hand at the pick-up (Fig. 1 (a)): the motions begin there, at the first grasp, and lift
+    it out; with `end_held` they end with it still held at the destination (Fig. 1 (d)), after the insertion."""
+    return _plan(task_query, table, classes, realiser, robot, object_name, motions, (start_held, end_held), start=start,
+                 goal=goal, pickup=pickup, destination=destination)

@@ -177,12 +177,15 @@ def _taking(step) -> bool:
     return step.kind in ("pick", "regrasp")
 
 
-def moves_of_steps(steps, lines: list[StepLines], jaw_open: float) -> list[Move]:
+def moves_of_steps(steps, lines: list[StepLines], jaw_open: float, start_held: bool = False,
+                   end_held: bool = False) -> list[Move]:
     """The waypoint scheme of `PlanStep.waypoints()`: taking the part (pick, regrasp), the empty hand goes retract ->
     approach -> grasp, closes, and lifts the part straight up grasp -> worlda -> worldaworldz; putting it down
     (transfer, place), the held part goes worldaworldz -> worlda -> grasp, the hand opens and backs off grasp ->
     approach -> retract. A transfer (held) joins a taking step's worldaworldz to the next step's; a transit (empty,
-    the part where it was released) joins a putting step's retract to the next step's."""
+    the part where it was released) joins a putting step's retract to the next step's. With `start_held` the first
+    step begins with the part already in the hand at its grasp (no approach, no closing); with `end_held` the last
+    ends there with it still in the hand (no opening, no retract)."""
     out: list[Move] = []
     for i, (s, ln) in enumerate(zip(steps, lines)):
         taking = _taking(s)
@@ -195,9 +198,10 @@ def moves_of_steps(steps, lines: list[StepLines], jaw_open: float) -> list[Move]
                             grasp if holding else None, jaw, how, path, at_grasp))
 
         if taking:
-            mv("approach", ln.down[0], False, jaw_open)
-            mv("approach", ln.down[1], False, jaw_open, at_grasp=True)
-            mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), True, jaw_shut, "dwell", at_grasp=True)
+            if not (start_held and i == 0):
+                mv("approach", ln.down[0], False, jaw_open)
+                mv("approach", ln.down[1], False, jaw_open, at_grasp=True)
+                mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), True, jaw_shut, "dwell", at_grasp=True)
             mv("lift", ln.up[0], True, jaw_shut)
             mv("lift", ln.up[1], True, jaw_shut)
             if i + 1 < len(steps):
@@ -206,6 +210,8 @@ def moves_of_steps(steps, lines: list[StepLines], jaw_open: float) -> list[Move]
         else:
             mv("lower", ln.up[1][::-1].copy(), True, jaw_shut)
             mv("lower", ln.up[0][::-1].copy(), True, jaw_shut)
+            if end_held and i == len(steps) - 1:
+                continue
             mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), False, jaw_open, "dwell", at_grasp=True)
             mv("retract", ln.down[1][::-1].copy(), False, jaw_open, at_grasp=True)
             mv("retract", ln.down[0][::-1].copy(), False, jaw_open)
@@ -316,9 +322,10 @@ def _timed(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.
 
 
 def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarray | float, seed: int | None = None,
-                worlda: float = WORLDA, worldz: float = 0.10) -> tuple[MotionResult, list[StepLines | None]]:
+                worlda: float = WORLDA, worldz: float = 0.10, start_held: bool = False,
+                end_held: bool = False) -> tuple[MotionResult, list[StepLines | None]]:
     """The timed motion of a whole plan: consistent straight TCP lines at every step, then the moves in
-    order. On failure `result.blame` is ("step", i) when step i's lines fail (its grip is unusable) or ("edge", i, i+1)
+    order (`moves_of_steps`, with the part in the hand at the start or the end when told). On failure `result.blame` is ("step", i) when step i's lines fail (its grip is unusable) or ("edge", i, i+1)
     when the transfer or transit from step i to step i+1 fails; the lines found so far are returned too."""
     t0 = time.perf_counter()
     lines: list[StepLines | None] = []
@@ -336,7 +343,7 @@ def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarra
             lines[i] = unwrap_lines(checker.robot, lines[i], lines[i].q_worldaworldz, prev.q_worldaworldz)
         else:
             lines[i] = unwrap_lines(checker.robot, lines[i], lines[i].q_retract, prev.q_retract)
-    moves = moves_of_steps(steps, lines, checker.robot.gripper.jaw_max)
+    moves = moves_of_steps(steps, lines, checker.robot.gripper.jaw_max, start_held, end_held)
     res = solve_moves(checker, moves, vlim, alim, seed)
     res.seconds = time.perf_counter() - t0
     if not res.ok:
@@ -456,7 +463,8 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
         failures.append(motion.reason)
         if removed >= opts.max_removed:
             err = PlanningError(f"no executable plan from {s_side.query.text()} to {g_side.query.text()} after removing "
-                                f"{removed} node(s) or grip(s) (limit --max-removed {opts.max_removed}); last failure: {motion.reason}")
+                                f"{removed} node(s) or grip(s) (limit --max-removed {opts.max_removed}"
+                                f"{_physics_share(failures[:-1])}); last failure: {motion.reason}")
             err.reason = "exhausted"
             raise err
         # what the failing motion used: the step's node or grip, or for a transfer / transit the next step's
@@ -472,6 +480,12 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
             keep[gone] = False
             rm = build_roadmap(_node_rows(full), keep)
         removed += 1
+
+
+def _physics_share(failures: list[str]) -> str:
+    """', N of them after failing in simulation' when physics checks removed any (their reasons start 'physics:')."""
+    n = sum(f.startswith("physics:") for f in failures)
+    return f", {n} of them after failing in simulation" if n else ""
 
 
 def _attach(plan, motion: MotionResult, lines: list[StepLines], removed: int, seconds: float, acc, nq: int) -> None:

@@ -143,6 +143,8 @@ class Plan:
     removed: int = 0
     acc: list[float] = field(default_factory=list)
     planner: str = "wan_harada"
+    start_held: bool = False  # the motions begin with the part already in the hand at the first step's grasp
+    end_held: bool = False  # they end with it still in the hand at the last step's grasp (Tournassoud Fig. 1 (a), (d))
 
     @property
     def duration(self) -> float:
@@ -169,7 +171,8 @@ class Plan:
                 "regrasps": self.regrasps, "transfers": self.transfers, "timings": {k: float(v) for k, v in self.timings.items()},
                 "ids": {k: int(v) for k, v in self.ids.items()}, "steps": [s.as_dict() for s in self.steps],
                 "motion": {"duration": self.duration, "removed": self.removed, "acc": [float(a) for a in self.acc],
-                           "segments": [s.as_dict() for s in self.segments]}}
+                           "segments": [s.as_dict() for s in self.segments]},
+                "start_held": self.start_held, "end_held": self.end_held}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Plan":
@@ -182,7 +185,8 @@ class Plan:
                    rank=int(d.get("rank", 0)), timings=dict(d.get("timings", {})), ids=dict(d.get("ids", {})),
                    segments=[TimedSegment.from_dict(s) for s in (d.get("motion") or {}).get("segments", [])],
                    removed=int((d.get("motion") or {}).get("removed", 0)), acc=list((d.get("motion") or {}).get("acc", [])),
-                   planner=str(d.get("planner", "wan_harada")))
+                   planner=str(d.get("planner", "wan_harada")), start_held=bool(d.get("start_held", False)),
+                   end_held=bool(d.get("end_held", False)))
 
     def to_json(self, path: str | Path | None = None) -> str:
         """The plan as JSON (written to `path` when given)."""
