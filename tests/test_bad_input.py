@@ -873,3 +873,15 @@ def test_ctrl_c_during_catalog_build(work, tmp_path):
         if "catalog_unit" in tables else 0
     con.close()
     assert failed == 0
+
+
+def test_catalog_of_only_broken_parts_is_a_failure(work, tmp_path):
+    """Every part broken: each named with its reason, and the build exits 2 (it built nothing)."""
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    (parts / "a.stl").write_text("solid nothing\n")
+    (parts / "b.stl").write_bytes((work / "box.stl").read_bytes()[:300])
+    res = cli("catalog", "build", parts, "--robots", "panda", "--db", tmp_path / "c.duckdb", "--workers", "1",
+              "--no-progress", cwd=work)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-2000:]
+    assert res.stdout.count("failed: ") == 2 and "no part of" in res.stderr
