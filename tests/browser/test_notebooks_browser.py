@@ -365,8 +365,10 @@ def view_image(frame_el, timeout: float = 30.0) -> np.ndarray:
 
 
 def numbers(page) -> list[str]:
-    """What the widgets report: every HTML/label widget's and printed output's text, without slider readouts."""
-    return page.eval_on_selector_all(".jp-OutputArea-output .widget-html, .jp-OutputArea-output .widget-label-basic",
+    """What the widgets report: every HTML/label widget's and printed output's text, without slider readouts and
+    busy indicators."""
+    return page.eval_on_selector_all(".jp-OutputArea-output .widget-html:not(.workbench-busy), "
+                                     ".jp-OutputArea-output .widget-label-basic",
                                      "els => els.map(e => e.innerText)")
 
 

@@ -139,7 +139,7 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
         windows = np.tile([-np.inf, np.inf], (len(origins), 1))
     windows = np.asarray(windows, dtype=np.float64).reshape(-1, 2)
     frames = axis_frames(origins, axes, angles, ref)
-    # the reference frames (rotation 0): `_rows` turns every triangle into each rotation's pad coordinates from them
+    # the reference frames (rotation 0): the kernel turns every triangle into each rotation's pad coordinates from them
     fr0 = axis_frames(origins, axes, np.zeros(1), ref)
     with np.errstate(divide="ignore", invalid="ignore"):
         return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows)

@@ -463,7 +463,8 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
         failures.append(motion.reason)
         if removed >= opts.max_removed:
             err = PlanningError(f"no executable plan from {s_side.query.text()} to {g_side.query.text()} after removing "
-                                f"{removed} node(s) or grip(s) (limit --max-removed {opts.max_removed}); last failure: {motion.reason}")
+                                f"{removed} node(s) or grip(s) (limit --max-removed {opts.max_removed}"
+                                f"{_physics_share(failures[:-1])}); last failure: {motion.reason}")
             err.reason = "exhausted"
             raise err
         # what the failing motion used: the step's node or grip, or for a transfer / transit the next step's
@@ -479,6 +480,12 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
             keep[gone] = False
             rm = build_roadmap(_node_rows(full), keep)
         removed += 1
+
+
+def _physics_share(failures: list[str]) -> str:
+    """', N of them after failing in simulation' when physics checks removed any (their reasons start 'physics:')."""
+    n = sum(f.startswith("physics:") for f in failures)
+    return f", {n} of them after failing in simulation" if n else ""
 
 
 def _attach(plan, motion: MotionResult, lines: list[StepLines], removed: int, seconds: float, acc, nq: int) -> None:
