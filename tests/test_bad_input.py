@@ -626,6 +626,23 @@ def test_speck_names_its_size_and_a_scale(work, tmp_path):
     assert not (tmp_path / "s.duckdb").exists()
 
 
+def test_a_part_read_in_metres_that_is_not_hand_sized(work, tmp_path):
+    """A 1.65 m part given without units is refused, naming the units that make it hand-sized; --accept-size keeps
+    it in metres (a result: the hand spans nothing), --units cm reads it as a 16.5 mm part."""
+    big = tmp_path / "duck.stl"
+    trimesh.creation.box((1.65, 0.8, 1.0)).export(big)
+    db = tmp_path / "s.duckdb"
+    for extra in (["grasps"], ["gptable"], ["build", "--robot", "panda"]):
+        res = cli(extra[0], big, "--db", db, *extra[1:], cwd=work)
+        assert_refused(res, "duck.stl", "1.65 m across", "--units cm", "--accept-size")
+        assert not db.exists()
+    res = cli("grasps", big, "--db", db, "--accept-size", cwd=work)
+    assert res.returncode == 0 and "0 free-air grasps" in res.stdout, res.stderr[-2000:]
+    assert "80 mm opening" in res.stderr  # the zero names the size that causes it
+    res = cli("grasps", big, "--db", tmp_path / "cm.duckdb", "--units", "cm", cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
 def test_build_with_a_broken_urdf_is_refused_before_any_work(work, tmp_path):
     res = cli("build", work / "box.stl", "--db", tmp_path / "s.duckdb", "--robot", work / "broken.urdf", cwd=work)
     assert_refused(res, "broken.urdf", "--tip")
@@ -856,3 +873,15 @@ def test_ctrl_c_during_catalog_build(work, tmp_path):
         if "catalog_unit" in tables else 0
     con.close()
     assert failed == 0
+
+
+def test_catalog_of_only_broken_parts_is_a_failure(work, tmp_path):
+    """Every part broken: each named with its reason, and the build exits 2 (it built nothing)."""
+    parts = tmp_path / "parts"
+    parts.mkdir()
+    (parts / "a.stl").write_text("solid nothing\n")
+    (parts / "b.stl").write_bytes((work / "box.stl").read_bytes()[:300])
+    res = cli("catalog", "build", parts, "--robots", "panda", "--db", tmp_path / "c.duckdb", "--workers", "1",
+              "--no-progress", cwd=work)
+    assert res.returncode == 2 and "Traceback" not in res.stderr, res.stderr[-2000:]
+    assert res.stdout.count("failed: ") == 2 and "no part of" in res.stderr

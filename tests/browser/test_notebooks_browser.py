@@ -365,8 +365,10 @@ def view_image(frame_el, timeout: float = 30.0) -> np.ndarray:
 
 
 def numbers(page) -> list[str]:
-    """What the widgets report: every HTML/label widget's and printed output's text, without slider readouts."""
-    return page.eval_on_selector_all(".jp-OutputArea-output .widget-html, .jp-OutputArea-output .widget-label-basic",
+    """What the widgets report: every HTML/label widget's and printed output's text, without slider readouts and
+    busy indicators."""
+    return page.eval_on_selector_all(".jp-OutputArea-output .widget-html:not(.workbench-busy), "
+                                     ".jp-OutputArea-output .widget-label-basic",
                                      "els => els.map(e => e.innerText)")
 
 
@@ -406,8 +408,9 @@ MOVES = {
 VIEW_ONLY = {"01", "02", "03", "05"}  # their move only shows, hides or moves what the view holds: no geometry is sent
 # The part's colour in the notebook's first view (None: the part is drawn in many colours, so everything drawn
 # counts) and the least share of the frame it covers: the camera frames the work, not the room.
-PART = {"01": (None, 0.08), "02": (0xE0C040, 0.001), "03": (None, 0.04), "04": (0xE0A030, 0.001),
-        "05": (None, 0.06)}  # 03's blue part is the sky's hue: there everything drawn (robot, table, part) counts
+PART = {"01": (None, 0.08), "02": (0xE0C040, 0.001), "03": (None, 0.04), "04": (0xE0A030, 0.0003),
+        "05": (None, 0.06)}  # 03's blue part is the sky's hue: there everything drawn (robot, table, part) counts;
+# 04's part is small beside the whole arm, and the hand hides some of it while it is held
 LATENCIES = ROOT / "build" / "screenshots" / "latencies.json"
 
 

@@ -263,7 +263,8 @@ def test_stl_obj_and_ply_load(tmp_path, ext):
 
 def test_unit_hints_name_every_unit_giving_a_gripper_sized_part(tmp_path):
     """A 5-unit can is 50 mm in centimetres and 127 mm in inches: the error names both, with the sizes; a 2 m part
-    read in metres is accepted with a warning that names the units that would make it hand-sized."""
+    read in metres is refused naming the units that would make it hand-sized, and accepted with a warning when its size
+    is accepted (--accept-size)."""
     can = tmp_path / "can.stl"
     trimesh.creation.cylinder(radius=2.0, height=5.0, sections=24).export(can)
     with pytest.raises(WorkbenchError) as err:
@@ -272,8 +273,10 @@ def test_unit_hints_name_every_unit_giving_a_gripper_sized_part(tmp_path):
     assert "--units cm (50 mm across)" in msg and "--units in (127 mm across)" in msg and "--units mm" not in msg
     bar = tmp_path / "bar.stl"
     trimesh.creation.box((2.0, 1.0, 1.0)).export(bar)
+    with pytest.raises(WorkbenchError, match=r"2 m across read in metres.*--units in \(50.8 mm across\).*--accept-size"):
+        load_object(bar)
     with pytest.warns(MeshWarning, match=r"2 m across read in metres.*--units in \(50.8 mm across\)"):
-        obj = load_object(bar)
+        obj = load_object(bar, accept_size=True)
     assert obj.mesh.extents.max() == pytest.approx(2.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error", MeshWarning)

@@ -41,7 +41,7 @@ def run(args: argparse.Namespace) -> int:
     opts = IKOptions(solver=args.ik, self_collide=True)
     pparams, tparams = placement_params(args)
     gparams = grasp_params(args)
-    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
+    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name, accept_size=args.accept_size)
     t0 = time.perf_counter()
     res = build_all(args.db, obj, robot, gparams, pparams, tparams, args.handx, args.worldz, args.workers,
                     worlda=args.worlda, scene=scene, ik=opts)

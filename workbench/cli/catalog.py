@@ -120,6 +120,10 @@ def run_build(args: argparse.Namespace) -> int:
     print(f"{sum(res.computed.values())} units computed ({res.computed['part']} part, {res.computed['ik']} IK, "
           f"{res.computed['graph']} graph), {res.skipped} skipped (already stored), {len(res.failures)} failed; "
           f"{res.rows_written:,} rows written in {res.wall:.1f} s on {res.workers} worker(s){write_share}; store {args.db}")
+    if res.failures and not res.rows:  # nothing was built: a failure, not a result
+        print(f"workbench catalog: error: no part of {' '.join(map(str, args.parts))} could be built "
+              f"({len(res.failures)} failed, each listed above with its reason)", file=sys.stderr)
+        return 2
     return 0
 
 

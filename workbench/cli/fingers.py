@@ -59,7 +59,7 @@ def run(args: argparse.Namespace) -> int:
     import sklearn.cluster  # noqa: F401  (loaded before the clock starts on clustering)
 
 
-    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
+    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name, accept_size=args.accept_size)
     params = ClusterParams(k=args.clusters, mu=args.friction, sides=args.pyramid, seed=args.seed, torque_scale=args.torque_scale)
     t0 = time.perf_counter()
     r = run_pipeline(args.db, obj, ContactParams(faces=args.faces or None), params, args.samples, args.picks, args.queries,

@@ -83,7 +83,7 @@ def summary(run) -> list[str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
+    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name, accept_size=args.accept_size)
     cp, tp = params_from_args(args)
     base = parse_base(args.base) if args.base else None
     robot = get_robot(args.robot, base=base, tip_frame=args.tip, gripper=gripper_from_args(args))

@@ -26,6 +26,9 @@ def add_object_arguments(parser: argparse.ArgumentParser) -> None:
     unit.add_argument("--scale", type=parse_number(SCALE, "--scale"), default=None, metavar="X",
                       help=f"factor from the file's units to metres, e.g. 0.001 ({SCALE.describe(True)})")
     unit.add_argument("--units", choices=["m", "cm", "mm", "in"], default=None, help="the file's unit")
+    parser.add_argument("--accept-size", action="store_true",
+                        help="read in metres (no --units or --scale), a part over 0.5 m across is refused as a likely "
+                             "unit mistake; this plans it in metres anyway (up to 2 m)")
     parser.add_argument("--name", default=None, help="object name in the store (default: the file's stem)")
 
 
@@ -78,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
 
     params = grasp_params(args)
     gripper = gripper_from_args(args)
-    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name)
+    obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name, accept_size=args.accept_size)
     t0 = time.perf_counter()
     result = ensure_grasps(args.db, obj, gripper, params)
     dt = time.perf_counter() - t0

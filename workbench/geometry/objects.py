@@ -62,9 +62,10 @@ def resolve_scale(scale: float | None, units: str | None) -> float:
 
 
 def load_object(path: str | Path, scale: float | None = None, units: str | None = None,
-                name: str | None = None) -> ObjectModel:
+                name: str | None = None, accept_size: bool = False) -> ObjectModel:
     """Load a mesh file (STL, OBJ, PLY, OFF, glTF/GLB, COLLADA) as an object in metres (CONVENTIONS.md: scaled once,
-    at load)."""
+    at load). Read in metres because neither `scale` nor `units` is given, a part larger than a hand-sized one
+    (TYPICAL) is refused with the units that would make it so, unless `accept_size`."""
     path = Path(path)
     if not path.exists():
         raise MeshError(f"object file {path} does not exist")
@@ -88,6 +89,11 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
         raise MeshError(f"object file {path} has {len(loaded.vertices)} vertices but no triangle faces")
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError(f"object file {path} is not a triangle mesh (got {type(loaded).__name__})")
+    if scale is None and units is None and not accept_size and len(loaded.faces):
+        extent = float(np.ptp(np.asarray(loaded.vertices)[np.unique(loaded.faces)], axis=0).max())
+        if TYPICAL[1] < extent <= MAX_EXTENT:  # larger: refused as implausible below, whatever is accepted
+            raise MeshError(f"object file {path} is {extent:.4g} m across read in metres (no --units or --scale), not a "
+                            f"hand-sized part; {_scale_hint(extent)}; or give --accept-size to plan it in metres")
     return from_arrays(loaded.vertices, loaded.faces, scale=resolve_scale(scale, units),
                        name=name or path.stem, source=str(path), pieces=pieces)
 
