@@ -36,3 +36,13 @@ def test_a_store_with_free_blocks_at_its_end_opens(tmp_path):
     with pytest.raises(StoreError, match="truncated"):
         with Store(path):
             pass
+
+
+def test_a_store_opened_read_only_answers_queries(tmp_path):
+    """The door's checks leave no unfinished result on the connection a read-only store keeps."""
+    path = tmp_path / "r.duckdb"
+    with Store(path) as store:
+        store.run("CREATE TABLE t AS SELECT range AS x FROM range(5)")
+    with Store(path, read_only=True) as store:
+        assert store.arrow("SELECT x FROM t WHERE x > ?", [1]).column("x").to_pylist() == [2, 3, 4]
+        assert store.one("SELECT count(*) FROM t")[0] == 5

@@ -124,10 +124,11 @@ HEADER_BYTES = 3 * 4096  # DuckDB's file header and its two database headers, be
 def check_size(con: duckdb.DuckDBPyConnection, path: Path) -> None:
     """Refuse a file shorter than the blocks its own header counts (a truncated copy or an interrupted transfer):
     DuckDB would open it and fail on the first read of a missing block, deep inside a command."""
-    row = con.execute("SELECT block_size, total_blocks, free_blocks FROM pragma_database_size() "
-                      "WHERE database_name = current_database()").fetchone()
-    if row is None:
+    rows = con.execute("SELECT block_size, total_blocks, free_blocks FROM pragma_database_size() "
+                       "WHERE database_name = current_database()").fetchall()  # fetched whole: DuckDB refuses new
+    if not rows:                                                                # work while a result is unfinished
         return
+    row = rows[0]
     # free blocks at the end of the file are counted but never written: a sound file may be that much shorter
     expected = HEADER_BYTES + int(row[0]) * (int(row[1]) - int(row[2]))
     size = path.stat().st_size
