@@ -147,11 +147,13 @@ def send_group(vis: meshcat.Visualizer, path: str, children: list[g.Object], vis
 
 
 def mesh_object(mesh: trimesh.Trimesh, color: int, opacity: float = 1.0) -> g.Mesh:
+    """A meshcat mesh object of `mesh` in one colour (0xRRGGBB), translucent below opacity 1."""
     return g.Mesh(g.TriangularMeshGeometry(mesh.vertices, mesh.faces),
                   g.MeshLambertMaterial(color=int(color), opacity=opacity, transparent=opacity < 1))
 
 
 def points_object(points: np.ndarray, colors: np.ndarray, size: float) -> g.Points:
+    """A meshcat point cloud of (N, 3) `points`, one colour or one per point, `size` in metres."""
     pts = np.asarray(points, dtype=np.float32).reshape(-1, 3)
     return g.Points(g.PointsGeometry(pts.T, color=_rgb(colors, len(pts)).T), g.PointsMaterial(size=size))
 
