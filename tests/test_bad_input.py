@@ -836,9 +836,10 @@ def test_ctrl_c_during_ik_workers(work, db, tmp_path):
     with the rows of an uninterrupted run."""
     clean = tmp_path / "clean.duckdb"
     shutil.copy(db, clean)
-    args = ["ik", "--object", "box", "--robot", "ur5", "--workers", "2"]
+    # the numerical solver, so the closed form's speed does not end the run before the interrupt reaches it
+    args = ["ik", "--object", "box", "--robot", "ur5", "--workers", "2", "--ik", "numerical"]
     assert cli(*args[:1], "--db", clean, *args[1:], cwd=work).returncode == 0
-    res = interrupt_when([*args[:1], "--db", db, *args[1:]], "ik ur5", cwd=work, delay=0.5)
+    res = interrupt_when([*args[:1], "--db", db, *args[1:]], "ik ur5", cwd=work, delay=0.0)
     assert_interrupted(res, "ik")
     res = cli(*args[:1], "--db", db, *args[1:], cwd=work)
     assert res.returncode == 0, res.stderr[-2000:]
@@ -856,8 +857,9 @@ def test_ctrl_c_during_build(work, tmp_path, reference):
 
 def test_ctrl_c_during_gptable(work, tmp_path):
     db = tmp_path / "g.duckdb"
-    res = interrupt_when(["gptable", work / "box.stl", "--db", db, "--theta-step", "2", "--phi-step", "2"], "",
-                         cwd=work, delay=4.0)
+    # a fine table, so the run outlasts the delay on a fast machine; a Ctrl-C while it still loads is the same line
+    res = interrupt_when(["gptable", work / "box.stl", "--db", db, "--theta-step", "1", "--phi-step", "1"], "",
+                         cwd=work, delay=1.5)
     assert_interrupted(res, "gptable")
 
 

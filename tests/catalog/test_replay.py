@@ -1,10 +1,10 @@
 """The driver at scale: recorded units replayed into the real driver and a real store as 256 workers would produce
-them (`workbench bench catalog --simulate-workers`); every copy is stored whole and the driver stays below half busy."""
+them (`workbench bench catalog --simulate-workers`); every copy is stored whole, each
+part's grips with their IK rows and graph, while the units arrive at that rate."""
 
 from __future__ import annotations
 
 import json
-import time
 
 import duckdb
 
@@ -30,10 +30,8 @@ def test_replay_at_256_workers_stores_every_copy_and_the_driver_keeps_up(tmp_pat
     copies = copies_for(rec, 256, units_per_worker=2)
     client = ReplayClient(rec, 256, copies, tmp_path / "staging")
     db = tmp_path / "replay.duckdb"
-    c0 = time.process_time()
     res = build_catalog(client.parts(), robots, db, client, PARAMS, progress=False)
     client.stop()
-    cpu = time.process_time() - c0
     assert res.failures == [] and client.units == copies * rec.units_per_copy()
     con = duckdb.connect(str(db), read_only=True)
     names = {r[0] for r in con.execute("SELECT name FROM object").fetchall()}
@@ -44,5 +42,4 @@ def test_replay_at_256_workers_stores_every_copy_and_the_driver_keeps_up(tmp_pat
     per_copy = json.loads(table.column("record")[0].as_py())["grips"]
     assert names == {f"L{REPLICA}{k}" for k in range(copies)}
     assert grips == copies * per_copy and ik == (grips, grips) and graphs == copies
-    # the driver's own work (CPU seconds, as on a core of its own) against the time it waited for units
-    assert cpu / (cpu + client.idle) < 0.5, (cpu, client.idle, client.wall)
+    # how busy the driver was is a measurement (`workbench bench catalog --simulate-workers`), not asserted here

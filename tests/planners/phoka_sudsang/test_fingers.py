@@ -89,7 +89,11 @@ def test_contacts_are_centroids_with_inward_normals_after_decimation():
     assert 250 <= len(cs) <= 300 < len(ell.faces)
     assert np.allclose(cs.points, cs.mesh.triangles_center[cs.face])
     assert np.allclose(np.linalg.norm(cs.normals, axis=1), 1)
-    assert (np.einsum("nc,nc->n", cs.normals, -cs.points) > 0).all()   # inward: toward the centre
+    # inward: the decimated mesh is closed with outward faces (positive volume), and each contact's normal is its
+    # face's normal turned in; on this thin ellipsoid a few decimated slivers tilt away from the centre itself
+    assert cs.mesh.is_watertight and cs.mesh.is_winding_consistent and cs.mesh.volume > 0
+    assert np.allclose(cs.normals, -cs.mesh.face_normals[cs.face])
+    assert (np.einsum("nc,nc->n", cs.normals, -cs.points) > 0).mean() > 0.97
 
 
 def test_bad_contact_inputs():
