@@ -857,9 +857,10 @@ def test_ctrl_c_during_build(work, tmp_path, reference):
 
 def test_ctrl_c_during_gptable(work, tmp_path):
     db = tmp_path / "g.duckdb"
-    # a fine table, so the run outlasts the delay on a fast machine; a Ctrl-C while it still loads is the same line
-    res = interrupt_when(["gptable", work / "box.stl", "--db", db, "--theta-step", "1", "--phi-step", "1"], "",
-                         cwd=work, delay=1.5)
+    # the bundled tube's 94 grasp classes, so the run outlasts the delay on a fast machine; a Ctrl-C while it still
+    # loads is the same line
+    tube = ROOT / "workbench" / "assets" / "objects" / "tube.stl"
+    res = interrupt_when(["gptable", tube, "--db", db, "--theta-step", "2", "--phi-step", "2"], "", cwd=work, delay=1.5)
     assert_interrupted(res, "gptable")
 
 
