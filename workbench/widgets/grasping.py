@@ -24,7 +24,7 @@ from workbench.viewer.live import (
     points_object,
     send_group,
 )
-from workbench.widgets.panel import Busy, StageCache, beside, digest
+from workbench.widgets.panel import BesideView, Busy, StageCache, digest
 
 HAND_COLOR = 0x55AA77
 
@@ -36,7 +36,7 @@ def counts_table(counts: dict, title: str = "") -> str:
     return f"<b>{title}</b><table>{rows}</table>"
 
 
-class GraspExplorer:
+class GraspExplorer(BesideView):
     """Tune segmentation, sampling, filters and rotations; see facets, samples, pairs and hands (Section III).
 
     A parameter slider replans (results cached by parameter digest: going back to a value is instant) and sends the
@@ -98,12 +98,6 @@ class GraspExplorer:
         self.controls = W.VBox(controls)
         self._widget = None
 
-    @property
-    def widget(self) -> W.Widget:
-        """The controls beside the live 3D view and its colour key."""
-        if self._widget is None:
-            self._widget = beside(self.controls.children, self.vis, self.key)
-        return self._widget
 
     def set_gripper(self, choice: Gripper | str) -> None:
         """Plan with another gripper (a bundled name or a loaded Gripper) and show its grasps."""

@@ -80,3 +80,18 @@ def beside(controls: list, vis, key: W.HTML | None = None, height: int = VIEW_HE
     right = W.VBox([view_widget(vis, height, captions)] + ([key] if key is not None else []),
                    layout=W.Layout(flex="1 1 auto"))
     return W.HBox([column, right], layout=W.Layout(width="100%", align_items="flex-start"))
+
+
+class BesideView:
+    """An explorer whose `widget` is its `controls` beside its live 3D view `vis` and colour key `key`, built once on
+    first use; `captions` puts the step's caption and footer over the view."""
+
+    captions = False
+    _widget = None
+
+    @property
+    def widget(self) -> W.Widget:
+        """The controls beside the live 3D view and its colour key."""
+        if self._widget is None:
+            self._widget = beside(self.controls.children, self.vis, self.key, captions=self.captions)
+        return self._widget

@@ -21,10 +21,10 @@ from workbench.planners.phoka_sudsang.query import QueryResult, finger_assignmen
 from workbench.planners.phoka_sudsang.switching import FingerPlanner, build_planner
 from workbench.viewer import phoka_sudsang as vf
 from workbench.viewer import scenes as viz
-from workbench.widgets.panel import beside
+from workbench.widgets.panel import BesideView
 
 
-class FingersExplorer:
+class FingersExplorer(BesideView):
     """Build the clusters and the representative-level roadmap, run a query, step through the finger switches."""
 
     def __init__(self, obj: ObjectModel, params: ClusterParams = ClusterParams(), faces: int = 500, vis=None,
@@ -60,12 +60,6 @@ class FingersExplorer:
                                 self.step, self.info, self.step_info])
         self._widget = None
 
-    @property
-    def widget(self) -> W.Widget:
-        """The controls beside the live 3D view and its colour key."""
-        if self._widget is None:
-            self._widget = beside(self.controls.children, self.vis, self.key)
-        return self._widget
 
     def params(self) -> ClusterParams:
         return ClusterParams(k=self.k.value, mu=self.mu.value, sides=self.sides.value, seed=self.seed.value)

@@ -53,15 +53,17 @@ from workbench.viewer.wan_harada import (
 )
 from workbench.viewer.live import HandOutlines, Switches, pick_evenly
 from workbench.widgets.grasping import counts_table
-from workbench.widgets.panel import Busy, StageCache, beside, digest
+from workbench.widgets.panel import BesideView, Busy, StageCache, digest
 
 
-class RegraspExplorer:
+class RegraspExplorer(BesideView):
     """ipywidgets front-end of notebook 04: choose object, robot, start and goal (placement, x, y, yaw in degrees),
     search, animate the plan in meshcat, and report the graph (size, components, where start and goal attach).
 
     Loading draws the table, robot, part and its ghosts once (`PlanView`); a search or another alternative then only
     moves them and sets the animation. Placements are numbered within the part and named by how it rests."""
+
+    captions = True  # the step's caption and footer over the view
 
     def __init__(self, db, objects: dict, robots=("panda", "ur5", "talos"), tparams=None, vis=None, build=None):
         self.db, self.objects, self.tparams, self.build = Path(db), dict(objects), tparams, build
@@ -102,12 +104,6 @@ class RegraspExplorer:
                                 self.nodes, self.info])
         self._widget = None
 
-    @property
-    def widget(self) -> W.Widget:
-        """The controls beside the live 3D view (caption and footer of the step playing over it) and its key."""
-        if self._widget is None:
-            self._widget = beside(self.controls.children, self.vis, self.key, captions=True)
-        return self._widget
 
     def placement_options(self) -> list[tuple[str, int]]:
         """(label, store id) per stable placement with a grip: numbered within the part, named by how it rests."""
@@ -323,7 +319,7 @@ def plot_feasibility(rows: dict[str, np.ndarray], title: str = ""):
     return fig
 
 
-class PlacementExplorer:
+class PlacementExplorer(BesideView):
     """Tune the stability threshold and the table grid; inspect placements, their grips and the roadmap (Section IV).
 
     The threshold reruns the placement and free-grip stages, the grid sliders only the tabletop roadmap (each cached
@@ -362,12 +358,6 @@ class PlacementExplorer:
                                 self.nx, self.ny, self.angles, self.busy.widget, self.info])
         self.placements, self.params, self.tt, self._widget = None, self.base, None, None
 
-    @property
-    def widget(self) -> W.Widget:
-        """The controls beside the live 3D view and its colour key."""
-        if self._widget is None:
-            self._widget = beside(self.controls.children, self.vis, self.key)
-        return self._widget
 
     def grid(self) -> TabletopParams:
         return replace(self.base_grid, nx=self.nx.value, ny=self.ny.value, angles=self.angles.value)
