@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import signal
 import time
 from contextlib import contextmanager
@@ -41,6 +42,8 @@ from workbench.store.identity import (
 from workbench.store.schema import ALL_TABLES, MIGRATIONS
 
 CONNECT_CONFIG = {"autoinstall_known_extensions": False}
+DATASET_FILE = "catalog.duckdb"  # a Parquet catalogue folder's shared tables and bookkeeping (workbench.store.catalog)
+DATASET_TABLES = '"catalog".main'  # ... its own tables, past the views of the same names
 FAULT_ENV = "WORKBENCH_FAULT"  # tests only: "TABLE:N:SIGNAL" sends SIGNAL to this process after the N-th insert into TABLE
 
 
@@ -53,6 +56,7 @@ class Store:
         in it with the stage writers, then exports them as Parquet files."""
         self = cls.__new__(cls)
         self.path, self._depth, self.read_only, self._fault = Path(":memory:"), 0, False, None
+        self.dataset = None
         self.con = duckdb.connect(":memory:", config=CONNECT_CONFIG)
         self.con.execute("SET threads = 1")
         with self.transaction():
@@ -65,6 +69,9 @@ class Store:
         checked before anything is written (workbench.store.identity). A file another process holds is waited for
         up to `wait` seconds (default: WORKBENCH_WAIT, else 0), then refused as busy."""
         self.path = Path(path)
+        self.dataset: Path | None = None  # a Parquet catalogue folder: its partitioned tables are read as views
+        if self.path.is_dir() and (self.path / DATASET_FILE).is_file():
+            self.dataset, self.path = self.path, self.path / DATASET_FILE
         self._deadline = time.monotonic() + (_wait_seconds() if wait is None else max(0.0, float(wait)))
         self._depth = 0  # open transaction() levels
         self.read_only = read_only
@@ -84,6 +91,10 @@ class Store:
                 if isinstance(exc, duckdb.Error):
                     raise open_error(self.path, exc) from None
                 raise
+        if self.dataset is not None:
+            from workbench.store.catalog import dataset_views
+
+            dataset_views(self)
 
     def _open_checked(self, read_only: bool) -> duckdb.DuckDBPyConnection:
         """A connection to an existing file whose identity and version were checked first, on a read-only connection
@@ -197,6 +208,8 @@ class Store:
     def run(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> list[tuple]:
         """Execute one statement with bound parameters and return all its rows (DuckDB needs results finished).
         A damaged block or a missing stage's table is a one-line StoreError (`identity.read_error`)."""
+        if self.dataset is not None and sql.lstrip().startswith("CREATE TABLE"):
+            sql = without_references(sql)  # a Parquet catalogue's rows named by a foreign key are in its partitions
         try:
             return self.con.execute(sql, list(params)).fetchall()
         except (duckdb.Error, RuntimeError) as exc:
@@ -235,9 +248,10 @@ class Store:
             return 0  # zero rows: nothing to write (and nothing to reshape)
         arrow = pa.table({name: to_arrow(v) for name, v in columns.items()})
         names = ", ".join(_check_name(c) for c in arrow.column_names)
+        target = table if self.dataset is None else f"{DATASET_TABLES}.{table}"  # the view of a Parquet catalogue reads it too
         self.con.register("_wb_rows", arrow)
         try:
-            self.run(f"INSERT INTO {table} ({names}) SELECT {names} FROM _wb_rows")
+            self.run(f"INSERT INTO {target} ({names}) SELECT {names} FROM _wb_rows")
         finally:
             try:
                 self.con.unregister("_wb_rows")
@@ -315,6 +329,11 @@ class Store:
         """The id of a stored parameter set of `stage` for these parameters and object, or None."""
         row = self.one("SELECT idparamset FROM paramset WHERE digest = ?", [_digest(stage, params, idobject)])
         return None if row is None else int(row[0])
+
+
+def without_references(ddl: str) -> str:
+    """A CREATE TABLE statement without its foreign keys."""
+    return re.sub(r"\s+REFERENCES\s+\w+\s*\([^)]*\)", "", ddl)
 
 
 def open_reader(path: str | Path, wait: float | None = None) -> Store:
