@@ -12,7 +12,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import re
 import signal
 import time
 from contextlib import contextmanager
@@ -24,6 +23,7 @@ import numpy as np
 import pyarrow as pa
 
 from workbench.errors import StoreError
+from workbench.store.dataset import DATASET_FILE, DATASET_TABLES, dataset_views, without_references
 from workbench.params import WAIT_ENV
 from workbench.store.identity import (
     APPLICATION,
@@ -42,8 +42,6 @@ from workbench.store.identity import (
 from workbench.store.schema import ALL_TABLES, MIGRATIONS
 
 CONNECT_CONFIG = {"autoinstall_known_extensions": False}
-DATASET_FILE = "catalog.duckdb"  # a Parquet catalogue folder's shared tables and bookkeeping (workbench.store.catalog)
-DATASET_TABLES = '"catalog".main'  # ... its own tables, past the views of the same names
 FAULT_ENV = "WORKBENCH_FAULT"  # tests only: "TABLE:N:SIGNAL" sends SIGNAL to this process after the N-th insert into TABLE
 
 
@@ -92,8 +90,6 @@ class Store:
                     raise open_error(self.path, exc) from None
                 raise
         if self.dataset is not None:
-            from workbench.store.catalog import dataset_views
-
             dataset_views(self)
 
     def _open_checked(self, read_only: bool) -> duckdb.DuckDBPyConnection:
@@ -329,11 +325,6 @@ class Store:
         """The id of a stored parameter set of `stage` for these parameters and object, or None."""
         row = self.one("SELECT idparamset FROM paramset WHERE digest = ?", [_digest(stage, params, idobject)])
         return None if row is None else int(row[0])
-
-
-def without_references(ddl: str) -> str:
-    """A CREATE TABLE statement without its foreign keys."""
-    return re.sub(r"\s+REFERENCES\s+\w+\s*\([^)]*\)", "", ddl)
 
 
 def open_reader(path: str | Path, wait: float | None = None) -> Store:

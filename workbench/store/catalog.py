@@ -36,7 +36,15 @@ import pyarrow.parquet as pq
 from workbench.errors import StoreError
 from pathlib import Path
 
-from workbench.store import CONNECT_CONFIG, DATASET_FILE, DATASET_TABLES, Store, _digest, without_references
+from workbench.store import CONNECT_CONFIG, Store, _digest
+from workbench.store.dataset import (
+    DATASET_FILE,
+    DATASET_TABLES,
+    PARTITIONED,
+    dataset_files,
+    dataset_views,
+    without_references,
+)
 from workbench.store.identity import APPLICATION, META_TABLES, SCHEMA_VERSION
 from workbench.store.schema import ALL_TABLES, MIGRATIONS
 from workbench.store.robots import ALL_FEASIBLE, FEASIBILITY, JOINTS
@@ -71,11 +79,6 @@ CATALOG_TABLES: tuple[str, ...] = (
     )""",
 )
 
-# a Parquet catalogue's partitioned tables and their Hive keys
-PARTITIONED: dict[str, tuple[str, ...]] = {
-    "object": ("part",), "freeairgrip": ("part",), "freetabletopplacement": ("part",), "freetabletopgrip": ("part",),
-    "tabletopplacements": ("part",), "tabletopgrips": ("part",), "ik": ("part", "robot"),
-}
 
 UNIT_COLUMNS = ("digest", "kind", "part", "source", "robot", "chunk", "idobject", "idgrasps", "idplacements", "idtabletop",
                 "idrobot", "idscene", "idikret", "status", "error", "nrows", "counts", "seconds", "write_seconds", "worker")
@@ -103,24 +106,6 @@ def create_dataset(folder: Path) -> None:
     finally:
         con.close()
     os.replace(tmp, folder / DATASET_FILE)
-
-
-def _files(store: Store, table: str) -> str:
-    return f"{store.dataset}/{table}/{'/'.join('*' for _ in PARTITIONED[table])}/*.parquet"
-
-
-def dataset_views(store: Store, tables: tuple[str, ...] | None = None) -> None:
-    """A Parquet catalogue's partitioned tables as views (temporary, on this connection) with the tables' own column
-    names and types, over their files and the rows other commands (`gpplan`) added to the table of the same name in
-    catalog.duckdb (`Store.insert` writes there); a table with no file yet is that table alone."""
-    for table in tables or tuple(PARTITIONED):
-        if next(iter(store.dataset.glob(f"{table}/{'/'.join('*' for _ in PARTITIONED[table])}/*.parquet")), None) is None:
-            continue
-        cols = store.run("SELECT column_name, data_type FROM duckdb_columns() WHERE table_name = ? AND schema_name = 'main' "
-                         "AND database_name = current_database() ORDER BY column_index", [table])
-        select = ", ".join(f"CAST({c} AS {t}) AS {c}" for c, t in cols)
-        store.run(f"CREATE OR REPLACE TEMP VIEW {table} AS SELECT {', '.join(c for c, _ in cols)} FROM {DATASET_TABLES}.{table} "
-                  f"UNION ALL SELECT {select} FROM read_parquet('{_files(store, table)}', hive_partitioning = true)")
 
 
 def sweep_dataset(store: Store) -> int:
