@@ -322,3 +322,11 @@ def robot_grippers(store: Store, name: str) -> list[str]:
     rows = store.run("SELECT DISTINCT g.name FROM robot r JOIN gripper g ON r.idgripper = g.idgripper WHERE r.name = ? OR "
                      "starts_with(r.name, ?) ORDER BY g.name", [name, f"{name}-"])
     return [str(r[0]) for r in rows]
+
+
+def robot_ids(store: Store, name: str) -> list[int]:
+    """The ids of robot `name` and of its NAME-DIGEST rows (the same name with another gripper, base or mount), the
+    newest first."""
+    rows = store.run("SELECT idrobot FROM robot WHERE name = ? OR starts_with(name, ?) ORDER BY idrobot DESC",
+                     [name, f"{name}-"])
+    return [int(r[0]) for r in rows]

@@ -44,7 +44,7 @@ from workbench.store import Store
 from workbench.store import robots as robot_sql
 from workbench.store import wan_harada as sql
 from workbench.store.grasps import find_grasps, latest_paramset_for, load_grasps, save_grasps
-from workbench.store.objects import gripper_row, object_name, object_row, put_object
+from workbench.store.objects import gripper_row, object_name, object_row, put_object, stored_grippers
 from workbench.store.placements import (
     find_placements,
     find_tabletop,
@@ -58,7 +58,7 @@ from workbench.store.placements import (
     tabletop_counts,
     tabletop_grasp_count,
 )
-from workbench.store.robots import ik_runs, ikret_row, robot_row, scene_row
+from workbench.store.robots import ik_runs, ikret_row, robot_row, robot_with_gripper, scene_row
 
 if TYPE_CHECKING:  # pragma: no cover
 
@@ -592,3 +592,20 @@ def load_plan(store: Store, idplan: int) -> Plan:
 def stored_robot(store: Store, idrobot: int, gripper: Gripper | None = None) -> Robot:
     """The library robot of a stored robot row, with its planning gripper (default: the Franka hand)."""
     return _robot_from_row(robot_row(store, int(idrobot)), gripper)
+
+
+def grippers_in_store(db: str | Path) -> list[dict]:
+    """The grippers with grasps or robots in store `db` (name, digest, objects, robots), none when it does not exist yet."""
+    if not Path(db).is_file():
+        return []
+    with Store(db, read_only=True) as store:
+        return stored_grippers(store)
+
+
+def robot_name_for(db: str | Path, robot: str, gripper: Gripper) -> str:
+    """The stored name of robot `robot` built with `gripper` (NAME, or NAME-DIGEST when another gripper took the name
+    first); `robot` itself when the store has none (loading then says what is missing)."""
+    if not Path(db).is_file():
+        return robot
+    with Store(db, read_only=True) as store:
+        return robot_with_gripper(store, robot, gripper.digest) or robot
