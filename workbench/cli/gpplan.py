@@ -15,7 +15,7 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args, stored_robot_gripper
 from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
 from workbench.cli.plan import add_motion_arguments, exec_options
@@ -40,7 +40,6 @@ from workbench.planners.tournassoud.stages import (
 )
 from workbench.robots.collider import Scene, default_scene
 from workbench.store import Store
-from workbench.store.robots import robot_with_gripper
 
 
 def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
@@ -251,11 +250,13 @@ def run(args: argparse.Namespace) -> int:
         initial, (gc, rng) = parse_grasp(args.initial), parse_goal(args.goal)
     elif place_mode:
         start, goal = parse_grasp(args.from_, "--from"), parse_grasp(args.to, "--to")
-    gripper = gripper_from_args(args)
     robot = args.robot
     if robot is not None:
         with Store(args.db, read_only=True) as store:
-            robot = robot_with_gripper(store, robot, gripper.digest) or robot
+            gripper, stored = stored_robot_gripper(store, robot, args)
+            robot = stored or robot
+    else:
+        gripper = gripper_from_args(args)
     r = load_planner(args.db, args.object, robot, gripper=gripper)
     scene = default_scene(r.robot.name)
     if args.table:

@@ -13,11 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.planners.wan_harada.stages import get_object, load_plan, stored_robot
+from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
 from workbench.simulation.decomposition import Decomposition, convex_parts
 from workbench.simulation.replay import SimParams, SimResult, resolve, simulate
 from workbench.store import Store
 from workbench.store import simulation as sql
-from workbench.store.robots import scene_row
+from workbench.store.robots import robot_row, scene_row
 
 
 @dataclass
@@ -52,7 +53,8 @@ def simulate_stored(store: Store, idplan: int, params: SimParams = SimParams(), 
         row, _ = sql.load_simulation(store, found)
         return StoredSimulation(found, True, bool(row["confirmed"]), row["failure"], row["failure_step"], row["message"] or "",
                                 float(row["final_error"]), float(row["final_angle"]), None)
-    res = simulate(plan, robot, obj.mesh, scene, inputs["friction"], hulls, params, decomposition)
+    res = simulate(plan, robot, obj.mesh, scene, inputs["friction"], hulls, params, decomposition,
+                   self_pairs(store, inputs["idrobot"], robot))
     f = res.failure
     sid = -1
     if save:
@@ -72,7 +74,15 @@ def simulate_in_memory(store: Store, plan, robot, params: SimParams = SimParams(
     _, obj = get_object(store, plan.object)
     hulls = convex_parts(obj.mesh, obj.digest, obj.name, decomposition)
     friction = sql.grasp_friction(store, plan.steps[0].idfreeairgrip)
-    return simulate(plan, robot, obj.mesh, scene_row(store, plan.ids["idscene"]).scene, friction, hulls, params, decomposition)
+    return simulate(plan, robot, obj.mesh, scene_row(store, plan.ids["idscene"]).scene, friction, hulls, params, decomposition,
+                    self_pairs(store, plan.ids["idrobot"], robot))
+
+
+def self_pairs(store: Store, idrobot: int, robot) -> list[tuple[str, str]]:
+    """The link pairs the self-collision check tests for a stored robot (its row's allowed pairs; computed for
+    rows stored without them)."""
+    text = robot_row(store, int(idrobot))["allowed_pairs"]
+    return (AllowedPairs.from_json(text) if text else allowed_pairs(robot)).checked
 
 
 def physics_check(store: Store, robot, params: SimParams = SimParams(),
