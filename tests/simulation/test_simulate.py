@@ -217,3 +217,23 @@ def test_an_arm_driven_into_the_table_is_a_collision_where_fk_and_coal_find_it(d
     urdf_name = {"gripper_hand": "panda_hand", "gripper_fingers": "panda_leftfinger"}
     assert f.links and {urdf_name.get(x, x) for x in f.links} <= first[1] | {"panda_rightfinger"}, (f.links, first)
     assert "the table" in f.message and "\n" not in f.message
+
+
+def _table_rows(db) -> dict[str, int]:
+    with Store(db) as store:
+        names = [r[0] for r in store.run("SELECT table_name FROM information_schema.tables ORDER BY table_name")]
+        return {n: store.one(f'SELECT count(*) FROM "{n}"')[0] for n in names}
+
+
+def test_a_decomposition_that_fails_leaves_the_store_as_it_was(demo, capsys, tmp_path, monkeypatch):
+    """Through the command line against the demo's store: CoACD aborts on the tube remeshed at resolution 2; the
+    command prints one line naming the mesh, exits 2, and no table of the store gains or loses a row."""
+    db, idplan, _ = demo
+    monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path / "cache"))
+    before = _table_rows(db)
+    assert main(["simulate", "--db", str(db), "--plan", str(idplan), "--hull-resolution", "2"]) == 2
+    out, err = capsys.readouterr()
+    assert err.strip().count("\n") == 0 and "convex decomposition of mesh 'tube' failed" in err, err
+    assert "Traceback" not in out + err and "stored in" not in out
+    assert _table_rows(db) == before
+    assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").rglob("*.npz"))
