@@ -46,7 +46,7 @@ class SimParams(Params):
     """Every parameter of a simulation; their digest keys the stored result (with the plan)."""
 
     timestep: float = param(0.002, gt=0, le=0.01, unit="s", help="physics timestep")
-    impratio: float = param(1.0, ge=1, le=100, help="ratio of frictional to normal contact impedance (MuJoCo's impratio)")
+    impratio: float = param(10.0, ge=1, le=100, help="ratio of frictional to normal contact impedance (MuJoCo's impratio)")
     density: float = param(1000.0, gt=0, le=30000, unit="kg/m^3", help="density of the part")
     grip_force: float | None = param(None, ge=0, le=2000, optional=True, unit="N",
                                      help="force of each finger when closed (default: the gripper's, 70 N for the Franka hand)")
