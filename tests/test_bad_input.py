@@ -864,6 +864,14 @@ def test_ctrl_c_during_gptable(work, tmp_path):
     assert_interrupted(res, "gptable")
 
 
+@pytest.mark.parametrize("delay", [0.3, 0.6])
+def test_ctrl_c_while_modules_load(work, tmp_path, delay):
+    """A Ctrl-C in the first second, while the command imports scipy and the planners (a library that catches
+    everything there would swallow it): the command still stops, with one line and exit 130."""
+    res = interrupt_when(["gptable", work / "box.stl", "--db", tmp_path / "g.duckdb"], "", cwd=work, delay=delay)
+    assert_interrupted(res, "gptable")
+
+
 def test_ctrl_c_during_catalog_build(work, tmp_path):
     """The Dask workers never see the Ctrl-C; the driver stops with one line and records no unit as failed."""
     db = tmp_path / "c.duckdb"
