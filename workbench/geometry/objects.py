@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -18,6 +19,7 @@ NAMES = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "in": "inches"
 MAX_EXTENT = 2.0
 MIN_EXTENT = 0.005
 TYPICAL = (0.01, 0.5)  # the sizes (m) of parts a hand-sized gripper usually meets, for the unit hints
+MAX_TRIANGLES = 2**31 - 1  # the store keeps vertex indices as 32-bit integers (object.faces INTEGER[3][])
 
 
 class MeshWarning(UserWarning):
@@ -73,6 +75,7 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
         raise MeshError(f"object file {path} is a folder; give a mesh file (STL, OBJ, PLY, OFF, GLB, DAE)")
     if path.stat().st_size == 0:
         raise MeshError(f"object file {path} is empty")
+    check_declared_size(path)
     try:
         loaded = trimesh.load(path, force=None, process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
@@ -98,6 +101,39 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
                        name=name or path.stem, source=str(path), pieces=pieces)
 
 
+def check_triangle_count(triangles: int, label: str, vertices: int = 0, verb: str = "has") -> None:
+    """Refuse a mesh of more triangles (or vertices) than the store's 32-bit indices hold, before any array is built."""
+    for count, what in ((triangles, "triangles"), (vertices, "vertices")):
+        if count > MAX_TRIANGLES:
+            raise MeshError(f"{label} {verb} {count:,} {what}, more than the {MAX_TRIANGLES:,} a store holds (32-bit "
+                            f"indices); decimate it (e.g. to a million triangles) first")
+
+
+def check_declared_size(path: Path) -> None:
+    """The triangle count a binary STL's or a PLY's header declares, checked before the mesh is read: above the
+    store's limit, or more triangles than the file's bytes can hold (a damaged or truncated file), it is refused
+    in one line instead of failing inside the reader."""
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(4096)
+    suffix = path.suffix.lower()
+    ascii_stl = head.lstrip().lower().startswith(b"solid") and b"facet" in head.lower()
+    if suffix == ".stl" and len(head) >= 84 and not ascii_stl:  # a binary header may begin with "solid" too
+        n = int.from_bytes(head[80:84], "little")
+        check_triangle_count(n, f"object file {path}", verb="declares in its binary STL header")
+        if size < 84 + 50 * n:
+            raise MeshError(f"object file {path} is a binary STL whose header declares {n:,} triangles ({84 + 50 * n:,} "
+                            f"bytes) but holds {size:,} bytes: it is truncated or damaged; export it again")
+    elif suffix == ".ply" and head.startswith(b"ply"):
+        m = re.search(rb"^element\s+face\s+(\d+)", head, re.MULTILINE)
+        if m:
+            n = int(m.group(1))
+            check_triangle_count(n, f"object file {path}", verb="declares in its PLY header")
+            if size < 3 * n:  # at least a count byte and two more per face, whatever the format
+                raise MeshError(f"object file {path} declares {n:,} faces in its PLY header but holds {size:,} bytes: it is "
+                                f"truncated or damaged; export it again")
+
+
 def from_trimesh(mesh: trimesh.Trimesh, name: str, scale: float = 1.0) -> ObjectModel:
     """Wrap a mesh built in code (already in metres unless `scale` says otherwise)."""
     return from_arrays(mesh.vertices, mesh.faces, scale=scale, name=name, source="<memory>")
@@ -114,6 +150,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         raise MeshError(f"{label} has no vertices")
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise MeshError(f"{label} has no triangle faces")
+    check_triangle_count(len(faces), label, len(vertices))
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices)).any(axis=1).sum())
         raise MeshError(f"{label} has {bad} vertices with NaN or infinite coordinates; repair the file")

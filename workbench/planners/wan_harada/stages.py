@@ -91,7 +91,8 @@ def ensure_grasps(db: str | Path | Store, obj: ObjectModel, gripper: Gripper, pa
         pid = find_grasps(store, oid, gripper, params)
         plan = None
         if pid is None:
-            plan = plan_grasps(obj, gripper, params)
+            with store.released():  # other processes may write the store while this one plans
+                plan = plan_grasps(obj, gripper, params)
             pid, _ = save_grasps(store, oid, gripper, params, plan.grasps)
         else:
             store.mark_used(pid)
@@ -134,8 +135,9 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
             reused = False
             t0 = time.perf_counter()
             grasps = load_grasps(store, idobject, grasp_pid)
-            placements = stable_placements(obj, pparams)
-            ftg = free_tabletop_grips(placements, grasps["rotmat"], gripper, pparams)
+            with store.released():
+                placements = stable_placements(obj, pparams)
+                ftg = free_tabletop_grips(placements, grasps["rotmat"], gripper, pparams)
             timings["placements"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             pl_pid = save_placements(store, idobject, grasp_pid, pparams, placements, grasps, ftg)
@@ -149,7 +151,8 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
             t0 = time.perf_counter()
             grasps = load_grasps(store, idobject, grasp_pid) if grasps is None else grasps
             g_index = np.searchsorted(grasps["idfreeairgrip"], ftg["idfreeairgrip"])
-            tt = plan_tabletop(stored["rotmat"], fp_index, g_index, ftg["rotmat"], grasps["rotmat"], tparams)
+            with store.released():
+                tt = plan_tabletop(stored["rotmat"], fp_index, g_index, ftg["rotmat"], grasps["rotmat"], tparams)
             timings["tabletop"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             tt_pid = save_tabletop(store, idobject, pl_pid, tparams, tt, ftg, stored["idfreetabletopplacement"])
@@ -421,10 +424,11 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
 
     computed = 0
     arrays = {k: v for k, v in grips.items() if isinstance(v, np.ndarray) and v.shape[:1] == ids.shape}
-    for ix, feas, joints in iter_ik(robot, arrays, scene, handx, worldz, obj.mesh, opts, workers, skip=skip, progress=progress,
-                                    worlda=worlda):
-        todo = ~np.isin(ids[ix], done)
-        computed += robot_sql.insert_ik(store, rid, sid, kid, ids[ix][todo], feas[todo], joints[todo])
+    with store.released():  # each chunk's write takes the store briefly: another process's stages run beside
+        for ix, feas, joints in iter_ik(robot, arrays, scene, handx, worldz, obj.mesh, opts, workers, skip=skip,
+                                        progress=progress, worlda=worlda):
+            todo = ~np.isin(ids[ix], done)
+            computed += robot_sql.insert_ik(store, rid, sid, kid, ids[ix][todo], feas[todo], joints[todo])
     robot_sql.mark_ik_complete(store, pid, rid, sid, kid)
     counts = robot_sql.run_counts(store, rid, sid, kid, pid)
     reason = diagnose_unreachable(robot, arrays, scene, obj.mesh, opts) if len(ids) and counts[0] == 0 else None
