@@ -41,8 +41,11 @@ def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--contact-model", choices=["pads", "paper"], default=GraspParams().contact_model,
                         help="pads: each pad closes until it first touches (CONVENTIONS.md); paper: parallel facet pairs "
                              "and swept cylinders")
-    for name in ("friction", "finger_clearance", "fingertip_margin"):
+    for name in ("friction", "finger_clearance", "fingertip_margin", "pregrasp_margin", "approach_length"):
         add_param(parser, GraspParams, name)
+    parser.add_argument("--full-opening", action="store_true",
+                        help="approach every grasp with the jaw fully open instead of at the grasp's opening plus "
+                             "--pregrasp-margin")
     parser.add_argument("--no-fingertip", action="store_true",
                         help="centre-of-pad grasps only (no fingertip grasps of thin parts)")
     parser.add_argument("--no-support-grasps", action="store_true",
@@ -64,6 +67,8 @@ def grasp_params(args: argparse.Namespace) -> GraspParams:
                        friction=args.friction, finger_clearance=args.finger_clearance,
                        fingertip_margin=None if args.no_fingertip else args.fingertip_margin,
                        support_grasps=not args.no_support_grasps, gap_grasps=not args.no_gap_grasps,
+                       pregrasp_margin=None if args.full_opening else args.pregrasp_margin,
+                       approach_length=args.approach_length,
                        lengths="fixed" if args.fixed_lengths else "adaptive")
 
 
@@ -110,10 +115,10 @@ def grasp_counts(plan: GraspPlan) -> str:
             f"{c['facet_samples_distance']} of {c['facet_samples']} facet samples after the boundary distance")
     if "pads_width" in c:
         body = (f"hand poses {c['hand_poses']} -> {c['pads_width']} opening fits -> {c['pads_cone']} friction cone -> "
-                f"{c['pads_com']} near the centre of mass -> {c['hand_open']} open hand free -> {c['grasps']} fingers free")
+                f"{c['pads_com']} near the centre of mass -> {c['hand_open']} approach free -> {c['grasps']} fingers free")
     else:
         body = (f"contact pairs {c['contact_pairs']} -> {c['pairs_width']} jaw -> {c['pairs_com']} com -> "
-                f"{c['pairs_level1']} level 1; hand poses {c['hand_poses']} -> {c['hand_open']} open hand free -> "
+                f"{c['pairs_level1']} level 1; hand poses {c['hand_poses']} -> {c['hand_open']} approach free -> "
                 f"{c['grasps']} fingers free")
     lengths = (f"lengths x{L['scale']:.2f}: neighbour radius {L['neighbour_radius'] * 1e3:.3g} mm, boundary distance "
                f"{L['dist_min'] * 1e3:.3g}-{L['dist_max'] * 1e3:.3g} mm, centre-of-mass distance {L['com_max'] * 1e3:.3g} mm")
