@@ -33,7 +33,7 @@ import trimesh
 from scipy.spatial.transform import Rotation, Slerp
 
 from workbench.errors import PlanningError
-from workbench.robots.chain import forward
+from workbench.robots.chain import forward, tcp_positions
 from workbench.robots.collider import Scene
 from workbench.robots.ik import converge
 from workbench.robots.model import Robot
@@ -254,7 +254,7 @@ class MotionChecker:
 
     def tcp_gap(self, q: np.ndarray) -> float:
         """The largest TCP travel (m) between consecutive joint vectors of q (K, n), K >= 2 (batched FK)."""
-        return float(np.linalg.norm(np.diff(forward(self.robot, q)[3], axis=0), axis=1).max())
+        return float(np.linalg.norm(np.diff(tcp_positions(self.robot, q), axis=0), axis=1).max())
 
     def line_free(self, qa: np.ndarray, qb: np.ndarray) -> bool:
         """Whether the straight joint line qa -> qb is valid at every sample (checked coarse-to-fine)."""

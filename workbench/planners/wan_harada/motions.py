@@ -139,8 +139,8 @@ def step_lines(checker: MotionChecker, step, worlda: float, worldz: float,
         ok = True
         for a, b in [(i, i - 1) for i in range(anchor, 0, -1)] + [(i, i + 1) for i in range(anchor, 2)]:
             _mode(checker, resting, fingers=2 not in (a, b))  # the fingers may touch the part next to the grasp
-            p = tcp_line_to(robot, checker, chain[a], poses[b])
-            if p is None or not checker.path_free(p):
+            p = tcp_line_to(robot, checker, chain[a], poses[b])  # checked collision-free at the resolution
+            if p is None:
                 ok = False
                 break
             chain[b] = p[-1]
@@ -158,7 +158,7 @@ def step_lines(checker: MotionChecker, step, worlda: float, worldz: float,
             target = lift.copy()
             target[:3, 3] += d
             p = tcp_line_to(robot, checker, q, target)
-            if p is None or not checker.path_free(p):
+            if p is None:
                 break
             up.append(p)
             q = p[-1]
