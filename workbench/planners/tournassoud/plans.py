@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.errors import PlanningError
+from workbench.grasping.grasps import PREGRASP_MARGIN
 from workbench.planners.tournassoud.chaining import (
     NoSequence,
     Sequence,
@@ -457,7 +458,7 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
     vlim = np.asarray(robot.model.velocityLimit, dtype=np.float64)
     t0 = time.perf_counter()
     res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz,
-                             plan.start_held, plan.end_held)
+                             plan.start_held, plan.end_held, pregrasp_margin=PREGRASP_MARGIN)
     if res.ok:
         for st, ln in zip(plan.steps, lines):
             st.q_retract, st.q_approach, st.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp

@@ -253,6 +253,10 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
         planner = Planner(roadmap, free, ftg, obj, robot, scene, ret["handx"], ret["worldz"], ids, opts, grid=grid_index(rows),
                           worlda=ret["worlda"])
         planner.partial = not complete
+        # the grasps' parameters (via the placements that consumed them): grasps stored before the pre-grasp
+        # opening existed were checked fully open, and are approached so
+        gparams = store.params_of(int(store.params_of(pl).get("grasps", -1)))
+        planner.pregrasp_margin = gparams.get("pregrasp_margin")
         roadmap.key = key
         _, orow = object_row(store, object_name)
         gid = rrow["idgripper"]
