@@ -1,14 +1,21 @@
 """The shared `--gripper` option of every command that plans grasps or motions (CONVENTIONS.md, Gripper).
 
 `add_gripper_argument(parser)` adds `--gripper` and the options naming a URDF gripper's parts;
-`gripper_from_args(args)` loads the gripper they name (one line and exit 2 on a bad file or field)."""
+`gripper_from_args(args)` loads the gripper they name (one line and exit 2 on a bad file or field);
+`stored_robot_gripper(store, name, args)` does so for a command planning on a stored robot, where `own` is the hand
+in the stored robot's URDF."""
 
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 
 from workbench.cli import warn
+from workbench.errors import GripperError, StoreError
 from workbench.robots.gripper import BUNDLED, Gripper, load_gripper
+from workbench.store import Store
+from workbench.store.objects import gripper_row
+from workbench.store.robots import robot_grippers, robot_ids, robot_row, robot_with_gripper
 
 
 def add_gripper_argument(parser: argparse.ArgumentParser) -> None:
@@ -29,10 +36,55 @@ def add_gripper_argument(parser: argparse.ArgumentParser) -> None:
 
 def gripper_from_args(args: argparse.Namespace) -> Gripper:
     """The gripper named by `add_gripper_argument`'s options (for `own`, from the command's --robot and --tip)."""
-    fingers = tuple(f.strip() for f in (args.gripper_fingers or "").split(",") if f.strip())
+    fingers = _fingers(args)
     own = args.gripper == "own"
     gripper = load_gripper(args.gripper, hand_link=args.gripper_hand, finger_joints=fingers, tcp_frame=args.gripper_tcp,
                            robot_urdf=getattr(args, "robot", None) if own else None, tip=getattr(args, "tip", None))
+    return _noted(gripper)
+
+
+def _noted(gripper: Gripper) -> Gripper:
     for note in gripper.notes:  # what the parallel-jaw model approximates (a linkage's pads moving along the approach)
         warn(f"gripper {gripper.name}: {note}")
     return gripper
+
+
+def _fingers(args: argparse.Namespace) -> tuple[str, ...]:
+    return tuple(f.strip() for f in (args.gripper_fingers or "").split(",") if f.strip())
+
+
+def stored_robot_gripper(store: Store, name: str, args: argparse.Namespace) -> tuple[Gripper, str | None]:
+    """The gripper of `add_gripper_argument`'s options for planning on stored robot `name`, and the stored name of
+    that robot with this gripper (NAME, or NAME-DIGEST when another gripper took the name first; None when none is).
+
+    `own` is the robot's own hand rebuilt from each stored row of the robot (its URDF text, mesh folders and tip,
+    or --gripper-hand) with --gripper-fingers, the newest row whose gripper digest it reproduces; so
+    `build --gripper own` and `plan --gripper own` name the same rows, as the URDF form would."""
+    if args.gripper != "own":
+        gripper = gripper_from_args(args)
+        return gripper, robot_with_gripper(store, name, gripper.digest)
+    ids = robot_ids(store, name)
+    if not ids:
+        raise StoreError(f"store {store.path} has no robot {name!r} to take its own hand from; build it first "
+                         f"(`workbench build MESH --robot URDF --tip LINK --gripper own --gripper-fingers LEFT,RIGHT`)")
+    fingers, first, loaded = _fingers(args), None, False
+    for idrobot in ids:
+        row = robot_row(store, idrobot)
+        if row["idgripper"] is None:
+            continue
+        stored = gripper_row(store, row["idgripper"])
+        try:
+            gripper = load_gripper("own", hand_link=args.gripper_hand, finger_joints=fingers, tcp_frame=args.gripper_tcp,
+                                   robot_urdf=f"robot {row['name']!r} in store {store.path}", tip=row["tip_frame"],
+                                   package_dirs=row["package_dirs"], robot_text=row["urdf"])
+        except GripperError as exc:  # this row's URDF has no such hand (another robot took the name): try the next
+            first = first or exc
+            continue
+        loaded = True
+        if gripper.digest == stored["digest"]:
+            return _noted(replace(gripper, name=stored["name"])), row["name"]
+    if first is not None and not loaded:  # no stored URDF has this hand: say why, for the newest
+        raise first
+    raise GripperError(f"store {store.path} has robot {name!r} with gripper {', '.join(robot_grippers(store, name))}, "
+                       f"not its own hand at {args.gripper_hand or 'its tip'} with finger joints {', '.join(fingers)}; "
+                       f"give --gripper and --gripper-fingers as given to build")

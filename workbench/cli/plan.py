@@ -12,7 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from workbench.cli import warn
-from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.gripper import add_gripper_argument, stored_robot_gripper
 from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
 from workbench.cli.simulate import INSTALL, add_sim_arguments, print_simulation, sim_params
@@ -32,7 +32,7 @@ from workbench.robots.motion import MotionOptions
 from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
 from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored, stored_playback
 from workbench.store import Store, open_reader
-from workbench.store.robots import robot_grippers, robot_with_gripper
+from workbench.store.robots import robot_grippers
 from workbench.viewer.wan_harada import caption_track, plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
@@ -89,15 +89,11 @@ def run(args: argparse.Namespace) -> int:
     opts = exec_options(args)
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
-    if args.gripper == "own":
-        raise PlanningError("plan takes a robot's own hand by its URDF: --gripper ROBOT.urdf --gripper-hand TIP "
-                            "--gripper-fingers LEFT,RIGHT (as given to build)")
-    gripper = gripper_from_args(args)
     simulate = args.simulate or args.require_physics
     save = False
     # planning only reads: other processes may read the store meanwhile; the plans are written afterwards, briefly
     with Store(args.db, create=False) if simulate else open_reader(args.db) as store:
-        stored = robot_with_gripper(store, args.robot, gripper.digest)
+        gripper, stored = stored_robot_gripper(store, args.robot, args)
         others = [] if stored else robot_grippers(store, args.robot)
         if others:
             raise PlanningError(f"store {args.db} has robot {args.robot!r} with gripper {', '.join(others)}, not "

@@ -149,14 +149,15 @@ class Gripper:
             parts.append(trimesh.creation.box(extents=ext, transform=pose))
         return trimesh.util.concatenate(parts)
 
-    def pad_sweep(self, width: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    def pad_sweep(self, width: np.ndarray, opening: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
         """Level-1 swept volume of the left pad for grasps of `width`: (radius, y_start, y_end) along the TCP's y.
 
-        The cylinder runs from just outside the contact (y = width/2 + 0.5 mm) to the pad's outer face at full
-        opening; the right pad's cylinder is its mirror image.
+        The cylinder runs from just outside the contact (y = width/2 + 0.5 mm) to the pad's outer face at `opening`
+        (the pre-grasp opening; default full opening); the right pad's cylinder is its mirror image.
         """
         y0 = np.asarray(width, dtype=np.float64) / 2 + 5e-4
-        y1 = np.maximum(self.jaw_max / 2 + self.pad_extents[1], y0 + 1e-4)
+        start = self.jaw_max if opening is None else np.asarray(opening, dtype=np.float64)
+        y1 = np.maximum(start / 2 + self.pad_extents[1], y0 + 1e-4)
         return self.pad_radius, y0, y1
 
 
@@ -207,24 +208,27 @@ def _body_frame(model, name: str) -> int:
     return model.getFrameId(name)
 
 
-def _local_points(go) -> np.ndarray:
-    """Vertices of a collision geometry in its own frame (box corners, or the mesh's scaled vertices)."""
-    if hasattr(go.geometry, "halfSide"):
-        h = np.asarray(go.geometry.halfSide, dtype=np.float64)
-        return np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
-    if go.meshPath and go.meshPath != "BOX":
-        return np.asarray(trimesh.load(go.meshPath, force="mesh").vertices, dtype=np.float64) * np.asarray(go.meshScale)
-    return np.zeros((0, 3))
-
-
 def _local_mesh(go) -> trimesh.Trimesh | None:
-    if hasattr(go.geometry, "halfSide"):
-        return trimesh.creation.box(extents=2 * np.asarray(go.geometry.halfSide))
-    if go.meshPath and go.meshPath != "BOX":
+    """A collision geometry in its own frame: a box, cylinder, sphere or capsule primitive, or the scaled mesh file."""
+    g = go.geometry
+    if hasattr(g, "halfSide"):
+        return trimesh.creation.box(extents=2 * np.asarray(g.halfSide))
+    if hasattr(g, "halfLength") and hasattr(g, "radius"):  # URDF cylinders (coal's Cylinder; a Capsule likewise)
+        make = trimesh.creation.capsule if type(g).__name__ == "Capsule" else trimesh.creation.cylinder
+        return make(radius=float(g.radius), height=2 * float(g.halfLength))
+    if hasattr(g, "radius"):
+        return trimesh.creation.icosphere(subdivisions=2, radius=float(g.radius))
+    if go.meshPath and go.meshPath not in ("BOX", "CYLINDER", "SPHERE", "CAPSULE"):
         part = trimesh.load(go.meshPath, force="mesh")
         part.apply_scale(np.asarray(go.meshScale))
         return part
     return None
+
+
+def _local_points(go) -> np.ndarray:
+    """Vertices of a collision geometry in its own frame (box corners, a primitive's mesh, a mesh's scaled vertices)."""
+    part = _local_mesh(go)
+    return np.zeros((0, 3)) if part is None else np.asarray(part.vertices, dtype=np.float64)
 
 
 def _angle(r: np.ndarray) -> float:
@@ -232,7 +236,8 @@ def _angle(r: np.ndarray) -> float:
 
 
 def gripper_from_urdf(urdf: str | Path, hand_link: str, tcp_frame: str | None, finger_joints: tuple[str, ...],
-                      package_dirs: list[str] | None = None, name: str | None = None) -> Gripper:
+                      package_dirs: list[str] | None = None, name: str | None = None,
+                      text: str | None = None) -> Gripper:
     """Load a parallel-jaw gripper from a URDF (CONVENTIONS.md, Gripper): the collision geometry on the hand link (and
     links fixed to it), the two fingers (the links moved by the left and right finger joints, with the joints that
     `<mimic>` them), the TCP frame and the stroke.
@@ -241,20 +246,27 @@ def gripper_from_urdf(urdf: str | Path, hand_link: str, tcp_frame: str | None, f
     load alike; the pads must stay parallel and close along one axis, else the gripper is refused. Box collision
     geometry that only translates is kept exact; other finger geometry (meshes, linkage bars) becomes its bounding
     box in the TCP frame over the whole stroke, relative to the pad. Without `tcp_frame` the TCP is placed midway
-    between the pads at mid-stroke, +y toward the left pad, +z away from the hand link's origin."""
+    between the pads at mid-stroke, +y toward the left pad, +z away from the hand link's origin.
+
+    `text`, when given, is the URDF itself (a stored robot's) and `urdf` only names it; its meshes are found in
+    `package_dirs`."""
     import pinocchio as pin
 
     urdf = Path(urdf)
-    if not urdf.is_file():
+    if text is None and not urdf.is_file():
         raise GripperError(f"gripper URDF {urdf} does not exist")
     where = f"gripper URDF {urdf}"
     dirs = [str(erd_share())] + list(package_dirs or []) + [str(urdf.parent), str(urdf.parent.parent)]
     try:
-        text = urdf.read_text()
+        if text is None:
+            text = urdf.read_text()
+            model = pin.buildModelFromUrdf(str(urdf))  # from the file: relative mesh paths are the file's
+            geom, vis = (pin.buildGeomFromUrdf(model, str(urdf), kind, package_dirs=dirs) for kind in (pin.COLLISION, pin.VISUAL))
+        else:
+            model = pin.buildModelFromXML(text)
+            geom, vis = (pin.buildGeomFromUrdfString(model, text, kind, package_dirs=dirs)
+                         for kind in (pin.COLLISION, pin.VISUAL))
         mimic = _mimics(text)
-        model = pin.buildModelFromUrdf(str(urdf))
-        geom = pin.buildGeomFromUrdf(model, str(urdf), pin.COLLISION, package_dirs=dirs)
-        vis = pin.buildGeomFromUrdf(model, str(urdf), pin.VISUAL, package_dirs=dirs)
     except Exception as exc:
         raise GripperError(f"{where} could not be parsed: {_first_line(exc)}") from None
     for label, frame in (("hand link", hand_link), ("TCP frame", tcp_frame)):
@@ -627,10 +639,11 @@ def _urdf_beside(urdf: Path) -> dict:
 
 def load_gripper(choice: str = "franka", hand_link: str | None = None, finger_joints: tuple[str, ...] = (),
                  tcp_frame: str | None = None, robot_urdf: str | Path | None = None, tip: str | None = None,
-                 package_dirs: list[str] | None = None) -> Gripper:
+                 package_dirs: list[str] | None = None, robot_text: str | None = None) -> Gripper:
     """The gripper a user names: `franka`, a bundled name (`robotiq-2f85`, `parallel60`), a spec file (.json, .yaml),
     a URDF file (hand link, finger joints and TCP frame given, or read from `NAME.gripper.yaml` beside it), or `own`:
-    the robot's own hand in `robot_urdf`, mounted at `tip` (the hand link, default the tip; the finger joints named)."""
+    the robot's own hand in `robot_urdf`, mounted at `tip` (the hand link, default the tip; the finger joints named;
+    `robot_text` the URDF itself when `robot_urdf` only names it, as for a stored robot)."""
     if choice == "franka":
         return franka_hand()
     if choice == "own":
@@ -642,7 +655,7 @@ def load_gripper(choice: str = "franka", hand_link: str | None = None, finger_jo
             raise GripperError(f"--gripper own needs --gripper-fingers LEFT,RIGHT: the two finger joints of the hand in "
                                f"{robot_urdf}")
         return gripper_from_urdf(robot_urdf, hand_link or tip, tcp_frame, tuple(finger_joints), package_dirs,
-                                 name=f"{Path(robot_urdf).stem}-hand")
+                                 name=f"{Path(robot_urdf).stem}-hand", text=robot_text)
     path = BUNDLED.get(choice) or Path(choice)
     suffix = path.suffix.lower()
     if suffix in (".json", ".yaml", ".yml"):

@@ -256,7 +256,6 @@ def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, in
                         args.append(files["angle"])
                     store.run(f"INSERT INTO {t} BY NAME SELECT x.* EXCLUDE (filename) REPLACE ({', '.join(swap)}) "
                               f"FROM read_parquet(?, filename = true) x JOIN _wb_offsets o ON o.file = x.filename {angle}", args)
-                    store._after_insert(t)
             finally:
                 store.con.unregister("_wb_offsets")
     except duckdb.IOException as exc:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import io
 from dataclasses import replace
+from typing import Callable, Sequence
 
 import ipywidgets as W
 import matplotlib.pyplot as plt
@@ -18,16 +19,19 @@ from workbench.geometry.objects import ObjectModel
 from workbench.planners.tournassoud.figures import table_figure
 from workbench.planners.tournassoud.stages import TableRun, table_stage_at
 from workbench.planners.tournassoud.table import TableParams
-from workbench.robots.model import Robot
+from workbench.robots.gripper import Gripper
+from workbench.robots.model import Robot, get_robot
 from workbench.viewer import scenes as viewer
 from workbench.viewer.tournassoud import show_class, show_conjunction
+from workbench.widgets.grippers import GripperMenu
 
 
 class TableExplorer:
     """The table of `obj` for `robot` stored in `db`; `widget` holds the controls, `vis` the meshcat scene."""
 
-    def __init__(self, db: str, obj: ObjectModel, robot: Robot, params: TableParams = TableParams(), vis=None):
-        self.db, self.obj, self.robot, self.params = db, obj, robot, params
+    def __init__(self, db: str, obj: ObjectModel, robot: Robot, params: TableParams = TableParams(), vis=None,
+                 grippers: Sequence[Gripper] = (), robot_for: Callable[[Gripper], Robot] | None = None):
+        self.db, self.obj, self.robot, self.params, self.robot_for = db, obj, robot, params, robot_for
         self.vis = vis if vis is not None else viewer.new_scene()
         self.run: TableRun | None = None
         self.cls = W.Dropdown(description="class G_i")
@@ -44,9 +48,20 @@ class TableExplorer:
             w.observe(lambda _: self.show(), names="value")
         for w in (self.theta_step, self.phi_step):
             w.observe(lambda _: self.build(), names="value")
-        self.widget = W.VBox([W.HBox([self.cls, self.theta]), W.HBox([self.place, self.phi]),
+        # the store's grippers or another to build for: the robot with it (`robot_for`, default a built-in robot's)
+        self.grippers = GripperMenu(db, grippers, value=robot.gripper, on_change=self.set_gripper)
+        self.widget = W.VBox([W.HBox([self.grippers.widget, self.grippers.note]), W.HBox([self.cls, self.theta]),
+                              W.HBox([self.place, self.phi]),
                               W.HBox([self.theta_step, self.phi_step]), self.info, self.plot])
         self.build()
+
+    def set_gripper(self, gripper: Gripper) -> TableRun:
+        """The table with another gripper on the same robot and base."""
+        self.robot = (self.robot_for(gripper) if self.robot_for is not None else
+                      get_robot(self.robot.name, base=self.robot.base, gripper=gripper))
+        run = self.build()
+        self.grippers.refresh(gripper.digest)
+        return run
 
     def build(self) -> TableRun:
         """(Re)build or load the table at the current resolutions and redraw."""
