@@ -8,7 +8,8 @@ For each grasp (TCP pose in the object frame, opening, contacts and outward cont
 - the contacts are where the pads are: at +/- half the opening along y, inside the pad rectangles;
 - the hand's collision geometry (the Franka hand loaded by pinocchio from example-robot-data's panda.urdf, the
   bundled parallel60 from its URDF, or a spec file's boxes built from its numbers) placed with its TCP frame at the
-  grasp with the fingers at the grasp's opening (and at full opening), shrunk inward by 1 mm (each box by 1 mm on
+  grasp with the fingers at the grasp's opening and at its pre-grasp opening (the opening plus a margin, 10 mm by
+  default, capped at the stroke; full opening without a margin), shrunk inward by 1 mm (each box by 1 mm on
   every side, the hand body's convex hull with every face moved 1 mm in), neither meets a triangle of the object
   (coal's boolean collision test, not python-fcl, which the planner uses) nor lies inside a closed object (its
   centre, by trimesh's ray test). No penetration depth enters: coal's box-against-mesh depth under-reports
@@ -46,7 +47,8 @@ class Verdict:
 INTRUSION_TOL = 1e-3  # m the hand may reach into the object's surface before a grasp is invalid
 CHECKS = ("contacts on the surface (0.5 mm) with a nearby triangle's normal, inside the friction cone and on the pads; "
           "the hand's solids (from its URDF by pinocchio, or the spec file's boxes) shrunk 1 mm meet no triangle of "
-          "the part and do not lie in it, at the grasp's and at full opening (coal's boolean test, no penetration depth)")
+          "the part and do not lie in it, at the grasp's and at the pre-grasp opening (coal's boolean test, no penetration "
+          "depth)")
 
 
 def failures(v: Verdict) -> str:
@@ -246,9 +248,10 @@ def point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
 
 
 def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction: float, jaw_max: float | None = None,
-                 hand: str = "franka") -> Verdict:
+                 hand: str = "franka", pregrasp_margin: float | None = 0.010) -> Verdict:
     """The independent verdict on each grasp (see the module docstring) for `hand`: franka, parallel60 or the path
-    of a spec file; `jaw_max` its full opening (default: the Franka hand's, from its URDF, or the spec's stroke)."""
+    of a spec file; `jaw_max` its full opening (default: the Franka hand's, from its URDF, or the spec's stroke);
+    the hand is also checked at the pre-grasp opening, min(width + `pregrasp_margin`, jaw_max) (None: jaw_max)."""
     if jaw_max is None:
         jaw_max = _spec(hand)["stroke"][1] if hand.endswith((".yaml", ".yml", ".json")) else full_opening(hand)
     hx, hz, pad_z = pad_face(hand)
@@ -284,5 +287,6 @@ def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction:
         pads &= np.abs(local[:, 1] - side * widths / 2) <= 1e-5
         pads &= (np.abs(local[:, 0]) <= pad_half[0] + 1e-6) & (np.abs(local[:, 2] - pad_z) <= pad_half[1] + 1e-6)
     pads &= (widths >= 0) & (widths <= jaw_max + 1e-9)
-    clear = ~(hand_intrudes(mesh, poses, widths, hand) | hand_intrudes(mesh, poses, np.full(G, jaw_max), hand))
+    pre = np.full(G, jaw_max) if pregrasp_margin is None else np.minimum(widths + pregrasp_margin, jaw_max)
+    clear = ~(hand_intrudes(mesh, poses, widths, hand) | hand_intrudes(mesh, poses, pre, hand))
     return Verdict(surface=surface, normal=normal_ok, cone=cone, pads=pads, clear=clear)

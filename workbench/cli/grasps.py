@@ -12,11 +12,10 @@ from workbench.cli.outputs import add_output
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.geometry.objects import load_object
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
-from workbench.params import add_param, cli_bound, from_cli, parse_number
+from workbench.params import HAND_SIZED, PART_SIZE, SCALE, add_param, from_cli, parse_number
 from workbench.planners.wan_harada.stages import ensure_grasps
 from workbench.viewer.scenes import grasp_scene
 
-SCALE = cli_bound(0, 1e3, lo_open=True, help="the scale")
 
 
 def add_object_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,8 +26,8 @@ def add_object_arguments(parser: argparse.ArgumentParser) -> None:
                       help=f"factor from the file's units to metres, e.g. 0.001 ({SCALE.describe(True)})")
     unit.add_argument("--units", choices=["m", "cm", "mm", "in"], default=None, help="the file's unit")
     parser.add_argument("--accept-size", action="store_true",
-                        help="read in metres (no --units or --scale), a part over 0.5 m across is refused as a likely "
-                             "unit mistake; this plans it in metres anyway (up to 2 m)")
+                        help=f"read in metres (no --units or --scale), a part over {HAND_SIZED.hi:g} m across is refused "
+                             f"as a likely unit mistake; this plans it in metres anyway (up to {PART_SIZE.hi:g} m)")
     parser.add_argument("--name", default=None, help="object name in the store (default: the file's stem)")
 
 

@@ -13,12 +13,12 @@ import trimesh
 
 from workbench.errors import MeshError
 from workbench.geometry.repair import repair
+from workbench.params import HAND_SIZED, PART_SIZE, SCALE
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254}
 NAMES = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "in": "inches"}
-MAX_EXTENT = 2.0
-MIN_EXTENT = 0.005
-TYPICAL = (0.01, 0.5)  # the sizes (m) of parts a hand-sized gripper usually meets, for the unit hints
+MIN_EXTENT, MAX_EXTENT = PART_SIZE.lo, PART_SIZE.hi  # declared in workbench.params, quoted by every size message
+TYPICAL = (HAND_SIZED.lo, HAND_SIZED.hi)  # the sizes (m) of parts a hand-sized gripper usually meets, for the unit hints
 MAX_TRIANGLES = 2**31 - 1  # the store keeps vertex indices as 32-bit integers (object.faces INTEGER[3][])
 
 
@@ -58,8 +58,8 @@ def resolve_scale(scale: float | None, units: str | None) -> float:
             raise MeshError(f"unknown unit {units!r}: use one of {', '.join(UNITS)}")
         return UNITS[units]
     s = 1.0 if scale is None else float(scale)
-    if not np.isfinite(s) or s <= 0:
-        raise MeshError(f"scale must be a positive finite number, got {scale!r}")
+    if SCALE.problem(s) is not None:
+        raise MeshError(f"scale must be a positive finite number, {SCALE.describe()}, got {scale!r}")
     return s
 
 
@@ -96,7 +96,8 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
         extent = float(np.ptp(np.asarray(loaded.vertices)[np.unique(loaded.faces)], axis=0).max())
         if TYPICAL[1] < extent <= MAX_EXTENT:  # larger: refused as implausible below, whatever is accepted
             raise MeshError(f"object file {path} is {extent:.4g} m across read in metres (no --units or --scale), not a "
-                            f"hand-sized part; {_scale_hint(extent)}; or give --accept-size to plan it in metres")
+                            f"hand-sized part ({HAND_SIZED.describe()}); {_scale_hint(extent)}; or give --accept-size "
+                            f"to plan it in metres")
     return from_arrays(loaded.vertices, loaded.faces, scale=resolve_scale(scale, units),
                        name=name or path.stem, source=str(path), pieces=pieces)
 
@@ -160,7 +161,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     extent = float(np.ptp(vertices[np.unique(faces)] * scale, axis=0).max())
     if extent > MAX_EXTENT or (MIN_EXTENT > extent > 0):
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
-                        f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {_scale_hint(extent, scale)}")
+                        f"(allowed: {PART_SIZE.describe()}); {_scale_hint(extent, scale)}")
     mesh = trimesh.Trimesh(vertices * scale, faces, process=False, validate=False)
     mesh, repairs = repair(mesh, label, pieces=pieces)
     for note in repairs:
@@ -169,7 +170,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     if extent > MAX_EXTENT or extent < MIN_EXTENT:
         hint = _scale_hint(extent, scale)
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
-                        f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {hint}")
+                        f"(allowed: {PART_SIZE.describe()}); {hint}")
     if extent > TYPICAL[1] and scale == 1.0:
         warnings.warn(f"{label} is {extent:.3g} m across read in metres, larger than a gripper-sized part; "
                       f"{_scale_hint(extent, scale)}", MeshWarning, stacklevel=3)
@@ -193,8 +194,14 @@ def _scale_hint(extent: float, scale: float = 1.0) -> str:
     if typical or fits:
         return "; ".join(f"if the file is in {NAMES[u]}, pass --units {u} ({raw * f * 1000:.3g} mm across)"
                          for u, f in (typical or fits))
+    need = MIN_EXTENT / raw if extent < MIN_EXTENT else MAX_EXTENT / raw
+    side = "or more" if extent < MIN_EXTENT else "or less"
+    if SCALE.problem(need) is not None:
+        what = "at least" if extent < MIN_EXTENT else "at most"
+        return (f"no unit or --scale ({SCALE.describe()}) makes it {what} {(MIN_EXTENT if extent < MIN_EXTENT else MAX_EXTENT) * 1000:g} "
+                f"mm across (it would take --scale {need:.3g} {side}); check the file, or the part cannot be gripped")
     if extent < MIN_EXTENT:
-        need = MIN_EXTENT / raw
-        return (f"no unit makes it at least {MIN_EXTENT * 1000:g} mm across: it would take --scale {need:.3g} or more; "
-                f"check the file's units, or the part is too small to grip")
-    return f"it would take --scale {MAX_EXTENT / raw:.3g} or less; pass the scale that converts the file's units to metres"
+        return (f"no unit makes it at least {MIN_EXTENT * 1000:g} mm across: it would take --scale {need:.3g} or more "
+                f"({SCALE.describe()}); check the file's units, or the part is too small to grip")
+    return (f"it would take --scale {need:.3g} or less ({SCALE.describe()}); pass the scale that converts the file's "
+            f"units to metres")

@@ -43,10 +43,12 @@ from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
 from workbench.grasping.pads import Touches, axis_frames, fingertip_shifts, first_touches, gap_windows
 from workbench.grasping.placements import stable_placements
-from workbench.params import Params, check_memory, param
+from workbench.params import Params, bounds, check_memory, param
 from workbench.robots.gripper import Gripper
 
 DEG = 180.0 / np.pi  # radians in the library, degrees on the command line
+PREGRASP_MARGIN = 0.010
+"""How much wider than the grasp the jaw opens to approach it (m), CONVENTIONS.md (Gripper)."""
 
 
 @dataclass(frozen=True)
@@ -101,7 +103,7 @@ class GraspParams(Params):
     fingertip_margin: float | None = param(0.003, ge=0, le=0.05, optional=True, unit="m",
                                            help="fingertip grasps of thin parts: the hand moved back so the fingertips "
                                                 "end this far short of the part's far side")
-    pregrasp_margin: float | None = param(0.010, ge=0, le=0.5, optional=True, unit="m",
+    pregrasp_margin: float | None = param(PREGRASP_MARGIN, ge=0, le=0.5, optional=True, unit="m",
                                           help="the hand approaches with the jaw open to the grasp's opening plus this "
                                                "margin, capped at the stroke")
     approach_length: float = param(0.05, ge=0, le=1.0, unit="m",
@@ -172,6 +174,7 @@ class ContactPairs:
     width_ok: np.ndarray
     com_ok: np.ndarray
     level1_ok: np.ndarray
+    axis: np.ndarray | None = None  # the jaw axis (+y of the TCP) of each row, with the pad model
 
     def __len__(self) -> int:
         return len(self.sample)
@@ -413,7 +416,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                          facet0=np.where(sampled, samples.pair_facet[source], _facet_of(facets, touch.tri0, y)),
                          facet1=_facet_of(facets, touch.tri1, -y), point0=touch.point0, point1=touch.point1,
                          normal0=touch.normal0, normal1=touch.normal1, width=touch.width, width_ok=width_ok,
-                         com_ok=com_ok, level1_ok=com_ok)
+                         com_ok=com_ok, level1_ok=com_ok, axis=y)
     live = np.flatnonzero(com_ok)
     target = object_collider(mesh)
     free = _level2(gripper, touch.poses[live], touch.width[live], target, params, counts, timings, pads=False)
@@ -699,19 +702,45 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     return out
 
 
+def friction_hint(mu: float, pairs: ContactPairs | None) -> str:
+    """What --friction would change an empty friction cone, quoting its declared range: the friction the contacts
+    tried need with their own jaw axes (the smallest over the pairs that fit the jaw: the cone half-angle of the
+    normal further from its axis), and the bound no jaw axis can beat (half the angle between one normal and the
+    other reversed, over the same pairs). Beyond the range, it says no friction in it would do."""
+    bound = bounds(GraspParams)["friction"][0]
+    if pairs is None or not pairs.width_ok.any():
+        return f"raise --friction ({bound.describe(True)})"
+    n0, n1 = pairs.normal0[pairs.width_ok], pairs.normal1[pairs.width_ok]
+    half = 0.5 * np.arccos(np.clip(-np.einsum("ij,ij->i", n0, n1), -1.0, 1.0)).min()
+    least = f"the most nearly opposed pair that fits needs at least {np.tan(half):.2g} ({np.degrees(half):.3g} degrees)"
+    if pairs.axis is None:
+        tried = np.tan(half)
+    else:
+        y = pairs.axis[pairs.width_ok]
+        worst = np.maximum(np.arccos(np.clip(np.einsum("ij,ij->i", n0, y), -1.0, 1.0)),
+                           np.arccos(np.clip(-np.einsum("ij,ij->i", n1, y), -1.0, 1.0)))
+        tried = float(np.tan(min(worst.min(), np.pi / 2 - 1e-9)))
+    if bound.problem(tried) is not None and bound.problem(np.tan(half)) is not None:
+        return f"no --friction in its range ({bound.describe(True)}) would do: {least}"
+    if bound.problem(tried) is not None:
+        return (f"the jaw axes tried need a friction beyond --friction's range ({bound.describe(True)}); {least}, so only "
+                f"other jaw axes could (a finer --density or --tau-deg)")
+    return f"--friction {_ceil(tried)} passes the cone for the jaw axes tried ({bound.describe(True)}); {least}"
+
+
+def _ceil(value: float) -> str:
+    """`value` rounded up to two significant digits, as text: a friction that passes, not one just below."""
+    digits = 1 - int(np.floor(np.log10(abs(value)))) if value > 0 else 2
+    return f"{np.ceil(value * 10**digits) / 10**digits:.{max(digits, 0)}f}"
+
+
 def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Gripper,
                  pairs: ContactPairs | None = None) -> str | None:
-    """Which stage removed the last candidate, and what to try; None when grasps remain. With the contact
-    `pairs`, an empty friction stage names the friction the most nearly opposed pair that fits the jaw needs: half the
-    angle between one normal and the other reversed, the best any jaw axis can do."""
+    """Which stage removed the last candidate, and what to try; None when grasps remain. An empty friction stage
+    (`friction_hint`) names the friction its contacts need, within --friction's declared range or beyond it."""
     if counts.get("grasps", 0) > 0:
         return None
     mu = params.friction_coefficient
-    need = ""
-    if pairs is not None and pairs.width_ok.any():
-        n0, n1 = pairs.normal0[pairs.width_ok], pairs.normal1[pairs.width_ok]
-        half = 0.5 * np.arccos(np.clip(-np.einsum("ij,ij->i", n0, n1), -1.0, 1.0)).min()
-        need = f" (the most nearly opposed pair that fits needs at least {np.tan(half):.2g}: {np.degrees(half):.3g} degrees)"
     stages = [
         ("facets", "the mesh has no facets"),
         ("samples_neighbour", "the surface got no samples; raise --density"),
@@ -725,7 +754,7 @@ def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Grip
         ("pairs_width", f"every facet pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
         ("pads_width", f"every contact pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
         ("pads_cone", f"no pad contact has both normals within the friction cone (friction {mu:.2g}, "
-                      f"{np.degrees(np.arctan(mu)):.3g} degrees); raise --friction{need}"),
+                      f"{np.degrees(np.arctan(mu)):.3g} degrees); {friction_hint(mu, pairs)}"),
         ("pairs_com", f"every contact pair is more than {lengths['com_max'] * 1e3:.3g} mm from the centre of mass; "
                       f"raise --com-max"),
         ("pads_com", f"every grasp centre is more than {lengths['com_max'] * 1e3:.3g} mm from the centre of mass; "
