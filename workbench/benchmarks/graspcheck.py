@@ -7,12 +7,13 @@ For each grasp (TCP pose in the object frame, opening, contacts and outward cont
 - both normals lie within the friction cone of the jaw axis (the TCP's y);
 - the contacts are where the pads are: at +/- half the opening along y, inside the pad rectangles;
 - the hand's collision geometry (the Franka hand loaded by pinocchio from example-robot-data's panda.urdf, the
-  bundled parallel60 from its URDF, or a spec file's boxes built from its numbers) placed with its TCP frame at the
+  bundled parallel60 from its URDF, or a spec file's boxes built from its numbers and its palm mesh's convex hull)
+  placed with its TCP frame at the
   grasp with the fingers at the grasp's opening and at its pre-grasp opening (the opening plus a margin, 10 mm by
   default, capped at the stroke; full opening without a margin), shrunk inward by 1 mm (each box by 1 mm on
   every side, the hand body's convex hull with every face moved 1 mm in), neither meets a triangle of the object
-  (coal's boolean collision test, not python-fcl, which the planner uses) nor lies inside a closed object (its
-  centre, by trimesh's ray test). No penetration depth enters: coal's box-against-mesh depth under-reports
+  (coal's boolean collision test, not python-fcl, which the planner uses) nor lies inside a closed object (a point
+  inside it, by trimesh's ray test). No penetration depth enters: coal's box-against-mesh depth under-reports
   (3 mm reads as 0.5 mm), the boolean test of the shrunk solid does not.
 """
 
