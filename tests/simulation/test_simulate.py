@@ -5,6 +5,8 @@ results round-trip through the store, and a part whose convex decomposition fail
 
 from __future__ import annotations
 
+import base64
+import re
 import sys
 from pathlib import Path
 
@@ -217,3 +219,51 @@ def test_an_arm_driven_into_the_table_is_a_collision_where_fk_and_coal_find_it(d
     urdf_name = {"gripper_hand": "panda_hand", "gripper_fingers": "panda_leftfinger"}
     assert f.links and {urdf_name.get(x, x) for x in f.links} <= first[1] | {"panda_rightfinger"}, (f.links, first)
     assert "the table" in f.message and "\n" not in f.message
+
+
+def _table_rows(db) -> dict[str, int]:
+    with Store(db) as store:
+        names = [r[0] for r in store.run("SELECT table_name FROM information_schema.tables ORDER BY table_name")]
+        return {n: store.one(f'SELECT count(*) FROM "{n}"')[0] for n in names}
+
+
+def test_a_decomposition_that_fails_leaves_the_store_as_it_was(demo, capsys, tmp_path, monkeypatch):
+    """Through the command line against the demo's store: CoACD aborts on the tube remeshed at resolution 2; the
+    command prints one line naming the mesh, exits 2, and no table of the store gains or loses a row."""
+    db, idplan, _ = demo
+    monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path / "cache"))
+    before = _table_rows(db)
+    assert main(["simulate", "--db", str(db), "--plan", str(idplan), "--hull-resolution", "2"]) == 2
+    out, err = capsys.readouterr()
+    assert err.strip().count("\n") == 0 and "convex decomposition of mesh 'tube' failed" in err, err
+    assert "Traceback" not in out + err and "stored in" not in out
+    assert _table_rows(db) == before
+    assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").rglob("*.npz"))
+
+
+def test_plan_simulate_and_require_physics_from_the_command_line(demo, capsys, tmp_path):
+    """`plan --simulate` stores the verdict of the best plan and plays the simulated part in the HTML; with
+    `--require-physics` and no grip force every plan drops the part, so nodes are removed and none is left."""
+    from workbench.grasping.naming import per_part_numbers
+
+    db, idplan, plan = demo
+    with Store(db) as store:
+        numbers = per_part_numbers(load_planner(store, "tube", "panda").free["idfreetabletopplacement"])
+
+    def query(q) -> str:
+        return f"{numbers[q.idfreetabletopplacement]},{q.x!r},{q.y!r},{float(np.degrees(q.yaw))!r}"
+
+    task = ["plan", "--db", str(db), "--object", "tube", "--robot", "panda", "--start", query(plan.start),
+            "--goal", query(plan.goal), "--alternatives", "0"]
+    html = tmp_path / "plan.html"
+    assert main([*task, "--simulate", "--html", str(html)]) == 0
+    out = capsys.readouterr().out
+    assert f"plan {idplan}: confirmed" in out, out
+    with Store(db) as store:
+        assert store.one("SELECT count(*) FROM simulation WHERE idplan = ? AND confirmed", [idplan])[0] >= 1
+    # the meshcat commands are embedded base64: the simulated part is among the animated objects
+    blobs = re.findall(r"base64,([A-Za-z0-9+/=]+)", html.read_text())
+    assert any(b"/simulated" in base64.b64decode(b) for b in blobs)
+    assert main([*task, "--require-physics", "--grip-force", "0.01", "--max-removed", "1", "--no-save"]) == 0
+    out = capsys.readouterr()
+    assert "0 plans (exhausted)" in out.out and "physics:" in out.err + out.out, out

@@ -46,7 +46,7 @@ class SimParams(Params):
     """Every parameter of a simulation; their digest keys the stored result (with the plan)."""
 
     timestep: float = param(0.002, gt=0, le=0.01, unit="s", help="physics timestep")
-    impratio: float = param(1.0, ge=1, le=100, help="ratio of frictional to normal contact impedance (MuJoCo's impratio)")
+    impratio: float = param(10.0, ge=1, le=100, help="ratio of frictional to normal contact impedance (MuJoCo's impratio)")
     density: float = param(1000.0, gt=0, le=30000, unit="kg/m^3", help="density of the part")
     grip_force: float | None = param(None, ge=0, le=2000, optional=True, unit="N",
                                      help="force of each finger when closed (default: the gripper's, 70 N for the Franka hand)")
@@ -70,12 +70,23 @@ class SimParams(Params):
     hold_end: float = param(1.0, ge=0, le=30, unit="s", help="time simulated after the trajectory, the arm at rest")
     collision_depth: float = param(0.0005, gt=0, le=0.1, unit="m",
                                    help="penetration of the robot into the table, the part or itself counted as a collision")
+    hull_concavity: float = param(0.1, ge=0.01, le=1,
+                                  help="concavity each convex part of the part's collision shape may keep, relative to its size "
+                                       "(CoACD's threshold)")
+    max_hulls: int = param(16, ge=1, le=256, integer=True, help="most convex parts of the part's collision shape")
+    hull_resolution: int = param(30, ge=2, le=200, integer=True,
+                                 help="voxel resolution of CoACD's remeshing of the part before it cuts it")
 
-    def digest(self, grip_force: float, friction: float, table_friction: float, decomposition: Decomposition) -> str:
+    @property
+    def decomposition(self) -> Decomposition:
+        """The convex decomposition's settings these parameters ask for."""
+        return Decomposition(threshold=self.hull_concavity, max_hulls=self.max_hulls, preprocess_resolution=self.hull_resolution)
+
+    def digest(self, grip_force: float, friction: float, table_friction: float) -> str:
         """The digest of every simulation parameter, the defaults resolved (grip force, frictions), the convex
-        decomposition's settings and the model version."""
+        decomposition's remaining settings and the model version."""
         d = {**self.as_dict(), "grip_force": grip_force, "friction": friction, "table_friction": table_friction,
-             "decomposition": decomposition.__dict__, "model": MODEL_VERSION}
+             "decomposition": self.decomposition.__dict__, "model": MODEL_VERSION}
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:24]
 
 
@@ -176,8 +187,7 @@ def _finger_targets(segments) -> list[float]:
 
 
 def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.ndarray, np.ndarray]],
-             params: SimParams = SimParams(), decomposition: Decomposition = Decomposition(),
-             self_pairs: list[tuple[str, str]] | None = None) -> SimResult:
+             params: SimParams = SimParams(), self_pairs: list[tuple[str, str]] | None = None) -> SimResult:
     """Replay `plan` (a timed Plan: steps and segments) with `robot` (its Robot, whose gripper is the planning
     gripper), the part's `mesh` and convex `hulls`, on `scene`'s table, with the plan's grasp `friction` unless
     `params.friction` overrides it; `self_pairs`: the robot's link pairs that may collide (the stored robot's
@@ -260,11 +270,11 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
     every = max(1, int(round(1.0 / (PLAYBACK_HZ * dt))))
     keep = np.r_[np.arange(0, n, every), n - 1] if (n - 1) % every else np.arange(0, n, every)
     resolved = {**params.as_dict(), "grip_force": grip_force, "friction": mu, "table_friction": mu_table,
-                "decomposition": decomposition.__dict__, "model": MODEL_VERSION}
+                "decomposition": params.decomposition.__dict__, "model": MODEL_VERSION}
     return SimResult(confirmed=not failures, failure=failures[0] if failures else None, steps=rows, final_error=final[0],
                      final_angle=final[1], playback_t=np.r_[0.0, times[keep]], playback_pose=np.concatenate([start[None], part[keep]]),
                      simulated=float(n * dt), seconds=seconds, cpu_seconds=cpu, build_seconds=build_seconds,
-                     digest=params.digest(grip_force, mu, mu_table, decomposition), params=resolved, failures=failures)
+                     digest=params.digest(grip_force, mu, mu_table), params=resolved, failures=failures)
 
 
 def _forbidden(m, ss, part_geoms: set[int]) -> np.ndarray:
