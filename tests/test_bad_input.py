@@ -313,6 +313,12 @@ BAD_PARAMETERS = [
     ("plan", ["--trajectory", "folder.csv"], "is a folder"),
     ("grasps", ["--html", "."], "is a folder"),
     ("fingers", ["--json", "afile/q.json"], "--json"),
+    # /proc takes no new file, even from root (whom a read-only mode does not stop)
+    ("plan", ["--json", "/proc/plan.json"], "folder /proc is not writable"),
+    ("gpplan", ["--from", "0,0", "--to", "1,90", "--json", "/proc/q.json"], "folder /proc is not writable"),
+    ("gpplan", ["--from", "0,0", "--to", "1,90", "--html", "."], "is a folder"),
+    ("gpplan", ["--from", "0,0", "--to", "1,90", "--html", "afile/t.html"], "afile is a file"),
+    ("catalog", ["--shards", "/proc/units"], "folder /proc is not writable"),
 ]
 
 
@@ -999,6 +1005,21 @@ def test_gpplan_with_unknown_ids_names_the_valid_range(work, gp_built, tmp_path,
     before = state(db)
     res = cli("gpplan", "--db", db, "--object", "box", "--no-motion", *query, cwd=work)
     assert_refused(res, *words)
+    assert state(db) == before
+
+
+def test_gpplan_writes_its_json_into_a_folder_it_creates(work, gp_built, tmp_path):
+    """--json and --html into folders that do not exist yet: created, the files written whole; the store keeps
+    its rows (a plan stored only without --no-save)."""
+    db = tmp_path / "gp.duckdb"
+    shutil.copy(gp_built, db)
+    before = state(db)
+    out = tmp_path / "new" / "deeper"
+    res = cli("gpplan", "--db", db, "--object", "box", "--from", "0,0", "--to", "1,90", "--no-motion", "--no-save",
+              "--json", out / "q.json", "--html", out / "t.html", cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    assert json.loads((out / "q.json").read_text())["sequence"] is not None
+    assert (out / "t.html").read_text().lstrip().lower().startswith("<")
     assert state(db) == before
 
 
