@@ -47,6 +47,8 @@ from workbench.params import Params, bounds, check_memory, param
 from workbench.robots.gripper import Gripper
 
 DEG = 180.0 / np.pi  # radians in the library, degrees on the command line
+PREGRASP_MARGIN = 0.010
+"""How much wider than the grasp the jaw opens to approach it (m), CONVENTIONS.md (Gripper)."""
 
 
 @dataclass(frozen=True)
@@ -101,7 +103,7 @@ class GraspParams(Params):
     fingertip_margin: float | None = param(0.003, ge=0, le=0.05, optional=True, unit="m",
                                            help="fingertip grasps of thin parts: the hand moved back so the fingertips "
                                                 "end this far short of the part's far side")
-    pregrasp_margin: float | None = param(0.010, ge=0, le=0.5, optional=True, unit="m",
+    pregrasp_margin: float | None = param(PREGRASP_MARGIN, ge=0, le=0.5, optional=True, unit="m",
                                           help="the hand approaches with the jaw open to the grasp's opening plus this "
                                                "margin, capped at the stroke")
     approach_length: float = param(0.05, ge=0, le=1.0, unit="m",

@@ -62,6 +62,7 @@ class Planner:
         self.roadmap, self.free, self.ftg = roadmap, free, ftg
         self.grid = grid
         self.rows: dict = {}
+        self.pregrasp_margin: float | None = None  # the grasps' pre-grasp margin (None: approached fully open)
         self._validator: PlanValidator | None = None
         self._trajectory_validators: dict = {}
         self.allowed: AllowedPairs | None = None  # self-collision pairs of the robot row (set by load_planner)
