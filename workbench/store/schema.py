@@ -210,6 +210,14 @@ ALL_TABLES: tuple[str, ...] = CORE_TABLES
 # set) or 'tournassoud' (the grasp-placement table, Tournassoud et al. 1987; idtabletop the `tournassoud.table`
 # parameter set, its placements and grasps are `freetabletopplacement` / `freeairgrip` rows written for the plan, see
 # store.tournassoud). Both go through the same plan validator.
+# A task's plan (the grasp-placement table's Fig. 1 task): plan.start_held / plan.end_held (the motions begin with
+# the part already in the hand at the first step's grasp / end with it still held at the last's), plan.insertion
+# (the final insertion's world direction, unit; NULL without one) and plan.insertion_depth (m), plan.obstacles (a
+# digest of its obstacles, NULL without any: a query among other obstacles is another plan); planstep.lift (the TCP's
+# world move from the grasp to the worlda pose, DOUBLE[3]: the insertion run backwards; NULL: straight up by the
+# retraction set's worlda); planobstacle: one row per obstacle fixed in the world (seq, task_end 'pickup' or
+# 'destination', name, the mesh's vertices (m, its own frame) and faces, pose its world pose), which the motions
+# were checked against and the validator checks again.
 PLAN_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS plan (
         idplan BIGINT PRIMARY KEY,
@@ -264,6 +272,17 @@ PLAN_TABLES: tuple[str, ...] = (
         t DOUBLE[] NOT NULL,
         q DOUBLE[] NOT NULL,
         qd DOUBLE[] NOT NULL,
+        UNIQUE (idplan, seq)
+    )""",
+    """CREATE TABLE IF NOT EXISTS planobstacle (
+        idplanobstacle BIGINT PRIMARY KEY,
+        idplan BIGINT NOT NULL REFERENCES plan(idplan),
+        seq INTEGER NOT NULL,
+        task_end VARCHAR NOT NULL,
+        name VARCHAR NOT NULL,
+        vertices DOUBLE[3][] NOT NULL,
+        faces INTEGER[3][] NOT NULL,
+        pose DOUBLE[16] NOT NULL,
         UNIQUE (idplan, seq)
     )""",
 )
@@ -489,4 +508,11 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS acc DOUBLE[]",
     # the planner that answered: 'wan_harada' (the roadmap planner, every plan stored before) or 'tournassoud'
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS planner VARCHAR DEFAULT 'wan_harada'",
+    # a task's plan: the part in the hand at the start or the end, the insertion, the obstacles; the held part's lift
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS start_held BOOLEAN DEFAULT false",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS end_held BOOLEAN DEFAULT false",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS insertion DOUBLE[3]",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS insertion_depth DOUBLE",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS obstacles VARCHAR",
+    "ALTER TABLE planstep ADD COLUMN IF NOT EXISTS lift DOUBLE[3]",
 )

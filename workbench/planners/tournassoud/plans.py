@@ -47,7 +47,7 @@ from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable, rz
 from workbench.planners.tournassoud.task import task_query
 from workbench.planners.wan_harada.motions import ExecOptions, MotionResult, plan_motion
-from workbench.planners.wan_harada.plans import Plan, PlanStep
+from workbench.planners.wan_harada.plans import Plan, PlanObstacle, PlanStep
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
 from workbench.robots.collider import Scene
@@ -469,8 +469,15 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
     return res
 
 
+def task_obstacles(pickup, destination) -> list[PlanObstacle]:
+    """The obstacles of a task's two ends (`task.TaskEnd`) as the plan carries and the store keeps them."""
+    return [PlanObstacle(o.name, end, np.asarray(o.mesh.vertices, dtype=np.float64), np.asarray(o.mesh.faces, dtype=np.int64),
+                         o.pose.copy())
+            for end, e in (("pickup", pickup), ("destination", destination)) for o in e.obstacles]
+
+
 def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: str, motions: ExecOptions | None,
-          held: tuple[bool, bool] = (False, False), **kw) -> tuple[Sequence, Plan | None]:
+          held: tuple[bool, bool] = (False, False), task: dict | None = None, **kw) -> tuple[Sequence, Plan | None]:
     """Answer, realise and plan a query; with `motions`, when a motion between two conjunctions fails (the step's
     lines, or the move into the next step), the failed conjunction and every sample needing the same change of arm
     configuration are removed from a working copy of the table (`learn_removal`) and the query answered again, at
@@ -478,7 +485,8 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
 
     The returned sequence's `extra` carries the explanation: "table" the table's own answer (its shortest sequence
     before any removal, as a dict) and "removed" every removal (`Removal.as_dict`, in order); a NoSequence raised
-    after removals carries them too (`removals`, `table_sequence`)."""
+    after removals carries them too (`removals`, `table_sequence`). `task`: the plan's `obstacles`, `insertion` and
+    `insertion_depth` (a task query's)."""
     try:
         own = query(table, **kw)
     except NoSequence as exc:
@@ -514,6 +522,8 @@ def _plan(query, table, classes, realiser: Realiser, robot: Robot, object_name: 
             return explained(seq), None
         plan = to_plan(seq, conj, work, classes, robot, object_name, realiser.handx, realiser.worldz)
         plan.start_held, plan.end_held = held
+        for k, v in (task or {}).items():
+            setattr(plan, k, v)
         if motions is None:
             return explained(seq), plan
         res = add_motions(plan, realiser, motions)
@@ -570,5 +580,8 @@ def plan_task_query(table, classes, realiser: Realiser, robot: Robot, object_nam
     pick-up, its last puts it at the destination; the realiser should carry both ends' obstacles. With `start_held`
     the part is already in the hand at the pick-up (Fig. 1 (a)): the motions begin there, at the first grasp, and lift
     it out; with `end_held` they end with it still held at the destination (Fig. 1 (d)), after the insertion."""
-    return _plan(task_query, table, classes, realiser, robot, object_name, motions, (start_held, end_held), start=start,
-                 goal=goal, pickup=pickup, destination=destination)
+    task = {"obstacles": task_obstacles(pickup, destination),
+            "insertion": None if destination.lift() is None else destination.insertion.copy(),
+            "insertion_depth": float(destination.depth) if destination.lift() is not None else 0.0}
+    return _plan(task_query, table, classes, realiser, robot, object_name, motions, (start_held, end_held), task,
+                 start=start, goal=goal, pickup=pickup, destination=destination)

@@ -27,7 +27,7 @@ from workbench.grasping.placements import (
     stable_placements,
 )
 from workbench.planners.wan_harada.planner import Planner
-from workbench.planners.wan_harada.plans import Plan, PlanStep, plan_rows
+from workbench.planners.wan_harada.plans import Plan, PlanObstacle, PlanStep, plan_rows
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.roadmap import build_roadmap, grid_index
 from workbench.planners.wan_harada.tabletop import (
@@ -557,8 +557,9 @@ def grasp_reason(store: Store, object_name: str, gripper: Gripper, params: Grasp
 
 
 def load_plan(store: Store, idplan: int) -> Plan:
-    """A stored plan (either planner's) rebuilt from its `plan`, `planstep` and `plansegment` rows, with its timed
-    motions (knot times from the plan's start), the grasps as TCP in the object frame."""
+    """A stored plan (either planner's) rebuilt from its `plan`, `planstep`, `plansegment` and `planobstacle` rows,
+    with its timed motions (knot times from the plan's start), the grasps as TCP in the object frame, and a task's
+    held ends, lifts, insertion and obstacles."""
     row, steps = sql.load_plan_rows(store, idplan)
     seg = sql.load_plan_segments(store, idplan).to_pydict()
     nq = len(robot_row(store, int(row["idrobot"]))["joint_names"])
@@ -575,7 +576,8 @@ def load_plan(store: Store, idplan: int) -> Plan:
                             position=np.asarray(s["position"][i], dtype=np.float64), yaw=float(s["yaw"][i]), object_pose=obj_pose,
                             tcp=tcp, grasp=np.linalg.inv(obj_pose) @ tcp, jawwidth=float(s["jawwidth"][i]),
                             q_approach=q["jnt_approach"], q_grasp=q["jnt_grasp"], q_retract=q["jnt_retract"],
-                            idtabletopgrips=s["idtabletopgrips"][i], q_worlda=q["jnt_worlda"], q_worldaworldz=q["jnt_worldaworldz"]))
+                            idtabletopgrips=s["idtabletopgrips"][i], q_worlda=q["jnt_worlda"], q_worldaworldz=q["jnt_worldaworldz"],
+                            lift=None if s.get("lift", [None] * (i + 1))[i] is None else np.asarray(s["lift"][i], dtype=np.float64)))
     segments = []
     for k in range(len(seg["seq"])):
         t = np.asarray(seg["t"][k], dtype=np.float64)
@@ -590,7 +592,11 @@ def load_plan(store: Store, idplan: int) -> Plan:
                 start=query(row["start_placement"], row["start_xyyaw"]), goal=query(row["goal_placement"], row["goal_xyyaw"]),
                 start_pose=out[0].object_pose.copy(), goal_pose=out[-1].object_pose.copy(), steps=out, handx=ret["handx"],
                 worldz=ret["worldz"], worlda=ret["worlda"], rank=int(row["rank"] or 0), ids=ids, segments=segments,
-                removed=int(row.get("removed") or 0), acc=list(row.get("acc") or []), planner=row.get("planner") or "wan_harada")
+                removed=int(row.get("removed") or 0), acc=list(row.get("acc") or []), planner=row.get("planner") or "wan_harada",
+                start_held=bool(row.get("start_held") or False), end_held=bool(row.get("end_held") or False),
+                obstacles=[PlanObstacle(**o) for o in sql.load_plan_obstacles(store, idplan)],
+                insertion=None if row.get("insertion") is None else np.asarray(row["insertion"], dtype=np.float64),
+                insertion_depth=float(row.get("insertion_depth") or 0.0))
 
 
 def stored_robot(store: Store, idrobot: int, gripper: Gripper | None = None) -> Robot:
