@@ -288,6 +288,9 @@ def converge(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, opts
     return solve_ik(robot, targets, q0, iters, opts.tol_pos, opts.tol_rot)
 
 
+CLOSED_BLOCK = 1024  # targets per closed-form pass: all their branches stay in the CPU caches
+
+
 class IKSolver:
     """One robot's IK engine for a scene and an object (Section IV): the robot, its seed library, its collider
     (arm and gripper against the table, arm against the object) and the reachability pre-filter, built once.
@@ -335,8 +338,19 @@ class IKSolver:
         return q, ok
 
     def _closed(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The collision-free closed-form branch of every target nearest to `q0` (rows of NaN: none). Branches are
-        checked nearest first, each row only until one is free: the same answer as checking them all."""
+        """The collision-free closed-form branch of every target nearest to `q0` (rows of NaN: none), CLOSED_BLOCK
+        targets at a time (a 7-joint arm's 128 branches of a whole chunk would fill hundreds of MB; each row depends
+        on its own target alone)."""
+        if len(targets) <= CLOSED_BLOCK:
+            return self._closed_block(targets, placements, q0)
+        parts = [self._closed_block(targets[s:s + CLOSED_BLOCK], placements[s:s + CLOSED_BLOCK],
+                                    None if q0 is None else q0[s:s + CLOSED_BLOCK])
+                 for s in range(0, len(targets), CLOSED_BLOCK)]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def _closed_block(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`_closed` of one block. Branches are checked nearest first, each row only until one is free: the same
+        answer as checking them all."""
         m, n = len(targets), self.robot.nq
         joints, valid = self.analytic.solve(targets)
         ref = np.where(np.isfinite(q0), q0, 0.0) if q0 is not None else np.zeros((m, n))
