@@ -82,3 +82,29 @@ def test_the_hand_body_hull_moves_in_by_the_tolerance():
     assert lost == pytest.approx(hull.area * 1e-3, rel=0.05)  # first order in the offset
     pts = np.array([inner.point(i) for i in range(inner.num_points)])
     assert (trimesh.proximity.signed_distance(hull, pts) >= 1e-3 - 1e-7).all()  # every vertex 1 mm inside
+
+
+def test_a_spec_with_a_palm_mesh_is_checked_by_the_meshs_hull(tmp_path):
+    """A gripper never seen before, its palm a cylinder mesh (spec `palm.mesh`): lowered palm-first into a slab, it
+    intrudes exactly when the mesh's deepest vertex is more than the tolerance in (trimesh's signed distance)."""
+    import yaml
+
+    from workbench.robots.gripper import load_gripper
+
+    palm = trimesh.creation.cylinder(radius=0.04, height=0.05, sections=24)
+    palm.apply_translation([0, 0, 0.025])
+    palm.export(tmp_path / "round_palm.stl")
+    spec = {"name": "round-palm", "stroke": [0.0, 0.05], "tcp": [0.0, 0.0, 0.09],
+            "pad": {"size": [0.015, 0.02], "thickness": 0.005}, "finger": {"size": [0.015, 0.01, 0.05]},
+            "palm": {"mesh": "round_palm.stl"}}
+    path = tmp_path / "round_palm.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    assert load_gripper(str(path)).name == "round-palm"  # the workbench's loader takes it too
+    slab = trimesh.creation.box((0.4, 0.4, 0.02))  # top face at z = 0.01
+    depths = np.array([0.0, 5e-4, 1.5e-3, 4e-3])
+    poses = np.repeat(np.eye(4)[None], len(depths), axis=0)
+    poses[:, 2, 3] = 0.01 + 0.09 - depths  # the palm's base face (hand z = 0) `depth` below the slab's top
+    got = hand_intrudes(slab, poses, np.full(len(poses), 0.03), str(path))
+    truth = np.array([trimesh.proximity.signed_distance(slab, palm.vertices + [0, 0, p[2, 3] - 0.09]).max() for p in poses])
+    assert np.allclose(truth, depths, atol=1e-6)
+    assert (got == (truth > INTRUSION_TOL)).all(), (got, truth)

@@ -267,3 +267,31 @@ def test_plan_simulate_and_require_physics_from_the_command_line(demo, capsys, t
     assert main([*task, "--require-physics", "--grip-force", "0.01", "--max-removed", "1", "--no-save"]) == 0
     out = capsys.readouterr()
     assert "0 plans (exhausted)" in out.out and "physics:" in out.err + out.out, out
+
+
+def test_links_far_from_convex_take_no_part_in_self_collision():
+    """MuJoCo collides meshes as hulls: the UR5's forearm hull touches the hand where the meshes keep 2 mm apart, so
+    bent links (hull volume > 1.1 x mesh volume, measured here with trimesh) leave the self-collision pairs; the
+    Panda's convex links keep theirs, and every robot link still collides with the table."""
+    from workbench.geometry.collision import pinocchio_geometry
+    from workbench.robots.model import get_robot
+    from workbench.robots.selfcollision import allowed_pairs
+    from workbench.simulation.scene import build_scene
+
+    box = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
+    for name in ("panda", "ur5"):
+        robot = get_robot(name)
+        bent = set()
+        for k in robot.arm_geometry():
+            go = robot.geom.geometryObjects[k]
+            _, mesh = pinocchio_geometry(go)
+            if mesh.convex_hull.volume > 1.1 * mesh.volume:
+                bent.add(robot.model.frames[go.parentFrame].name)
+        ss = build_scene(robot, robot.gripper, Scene(), box, [(box.vertices, box.faces)], 1000.0, 70.0, 0.3, 0.3, 0.002,
+                         self_pairs=allowed_pairs(robot).checked)
+        in_pairs = {ss.robot_geoms[g] for pair in ss.self_pairs for g in pair}
+        assert (name == "ur5") == bool(bent), bent
+        assert not bent & in_pairs and in_pairs, (bent, in_pairs)
+        m = ss.model
+        arm = [g for g in ss.robot_geoms if g not in ss.gripper_geoms]
+        assert all(m.geom_contype[ss.table_geom] & m.geom_conaffinity[g] for g in arm)

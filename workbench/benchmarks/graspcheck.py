@@ -7,12 +7,13 @@ For each grasp (TCP pose in the object frame, opening, contacts and outward cont
 - both normals lie within the friction cone of the jaw axis (the TCP's y);
 - the contacts are where the pads are: at +/- half the opening along y, inside the pad rectangles;
 - the hand's collision geometry (the Franka hand loaded by pinocchio from example-robot-data's panda.urdf, the
-  bundled parallel60 from its URDF, or a spec file's boxes built from its numbers) placed with its TCP frame at the
+  bundled parallel60 from its URDF, or a spec file's boxes built from its numbers and its palm mesh's convex hull)
+  placed with its TCP frame at the
   grasp with the fingers at the grasp's opening and at its pre-grasp opening (the opening plus a margin, 10 mm by
   default, capped at the stroke; full opening without a margin), shrunk inward by 1 mm (each box by 1 mm on
   every side, the hand body's convex hull with every face moved 1 mm in), neither meets a triangle of the object
-  (coal's boolean collision test, not python-fcl, which the planner uses) nor lies inside a closed object (its
-  centre, by trimesh's ray test). No penetration depth enters: coal's box-against-mesh depth under-reports
+  (coal's boolean collision test, not python-fcl, which the planner uses) nor lies inside a closed object (a point
+  inside it, by trimesh's ray test). No penetration depth enters: coal's box-against-mesh depth under-reports
   (3 mm reads as 0.5 mm), the boolean test of the shrunk solid does not.
 """
 
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import coal
 import numpy as np
@@ -111,10 +113,23 @@ def full_opening(hand: str = "franka") -> float:
     return float(2 * model.upperPositionLimit[model.joints[model.getJointId(joints[0])].idx_q])
 
 
+@lru_cache(maxsize=8)
+def _palm_hull(path: str) -> coal.CollisionGeometry:
+    return _convex(np.asarray(trimesh.load(path, force="mesh").convex_hull.vertices, dtype=np.float64))
+
+
+def _convex(points: np.ndarray) -> coal.CollisionGeometry:
+    vec = coal.StdVec_Vec3s()
+    for p in points:
+        vec.append(p)
+    return coal.Convex.convexHull(vec, True, "Qt")
+
+
 def hand_placements(opening: float, hand: str = "franka") -> list[tuple[coal.CollisionGeometry, np.ndarray]]:
     """Every hand collision geometry and its pose in the TCP frame with the pads `opening` apart: the Franka hand
     or parallel60 from its URDF (pinocchio), or a spec file's boxes built from its numbers (CONVENTIONS.md, Gripper
-    spec: the pad's inner face at the opening, the finger box behind it with its tip flush, the palm box)."""
+    spec: the pad's inner face at the opening, the finger box behind it with its tip flush, the palm box or the
+    convex hull of its mesh)."""
     if hand.endswith((".yaml", ".yml", ".json")):
         spec = _spec(hand)
         from scipy.spatial.transform import Rotation
@@ -124,9 +139,12 @@ def hand_placements(opening: float, hand: str = "franka") -> list[tuple[coal.Col
         tcp[:3, 3] = spec["tcp"]
         inv = np.linalg.inv(tcp)
         (px, pz), t, f = spec["pad"]["size"], spec["pad"]["thickness"], spec["finger"]["size"]
-        palm = np.eye(4)
-        palm[:3, 3] = spec["palm"].get("offset", [0, 0, spec["palm"]["size"][2] / 2])
-        out = [(_box(spec["palm"]["size"]), inv @ palm)]
+        if "mesh" in spec["palm"]:  # a palm mesh, checked as its convex hull (trimesh reads it, coal holds it)
+            out = [(_palm_hull(str(Path(hand).parent / spec["palm"]["mesh"])), inv)]
+        else:
+            palm = np.eye(4)
+            palm[:3, 3] = spec["palm"].get("offset", [0, 0, spec["palm"]["size"][2] / 2])
+            out = [(_box(spec["palm"]["size"]), inv @ palm)]
         for side in (1, -1):
             for size, y, z in (((px, t, pz), opening / 2 + t / 2, 0.0), (f, opening / 2 + f[1] / 2, pz / 2 - f[2] / 2)):
                 m = np.eye(4)
@@ -175,39 +193,40 @@ def shrunk(geometry: coal.CollisionGeometry, tol: float) -> coal.CollisionGeomet
     if (eq[:, :3] @ centre + eq[:, 3] >= 0).any():
         return None
     inner = HalfspaceIntersection(eq, centre).intersections
-    vec = coal.StdVec_Vec3s()
-    for p in np.unique(np.round(inner, 10), axis=0):
-        vec.append(p)
-    return coal.Convex.convexHull(vec, True, "Qt")
+    return _convex(np.unique(np.round(inner, 10), axis=0))
 
 
 @lru_cache(maxsize=64)
 def _shrunk_parts(hand: str, opening: float, tol: float) -> tuple:
+    """The hand's solids shrunk by `tol`, their poses in the TCP frame and a point inside each (its own frame)."""
     out = []
     for g, local in hand_placements(opening, hand):
         inner = shrunk(g, tol)
         if inner is not None:
-            out.append((inner, local))
+            centre = (np.zeros(3) if isinstance(inner, coal.Box) else
+                      np.mean([inner.point(i) for i in range(inner.num_points)], axis=0))
+            out.append((inner, local, centre))
     return tuple(out)
 
 
 def hand_intrudes(mesh: trimesh.Trimesh, poses: np.ndarray, openings: np.ndarray, hand: str = "franka",
                   tol: float = INTRUSION_TOL) -> np.ndarray:
     """Whether the hand at each TCP pose and opening reaches more than `tol` into the object: some collision
-    geometry shrunk by `tol` meets a triangle of the object (coal's boolean test), or, for a closed object, has its
-    centre inside it. No penetration depth is used."""
+    geometry shrunk by `tol` meets a triangle of the object (coal's boolean test), or, for a closed object, has a
+    point of its interior inside it (then it lies wholly inside, as it meets no triangle). No penetration depth is
+    used."""
     obj = _object_bvh(mesh)
     ident = coal.Transform3s()
     poses, openings = np.asarray(poses, dtype=np.float64), np.asarray(openings, dtype=np.float64)
     out = np.zeros(len(poses), dtype=bool)
     centres = []
     for k, (pose, w) in enumerate(zip(poses, openings)):
-        for g, local in _shrunk_parts(hand, round(float(w), 9), tol):
+        for g, local, inside in _shrunk_parts(hand, round(float(w), 9), tol):
             M = pose @ local
             if not out[k]:
                 out[k] = coal.collide(obj, ident, g, coal.Transform3s(M[:3, :3], M[:3, 3]), coal.CollisionRequest(),
                                       coal.CollisionResult()) > 0
-            centres.append((k, M[:3, 3]))
+            centres.append((k, M[:3, :3] @ inside + M[:3, 3]))
     if centres and mesh.is_watertight:
         idx = np.array([k for k, _ in centres])
         inside = mesh.contains(np.array([c for _, c in centres]))

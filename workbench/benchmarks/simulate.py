@@ -153,6 +153,7 @@ def run(args: argparse.Namespace) -> int:
                          round(1.0 / statistics.median(per_second), 1) if n else "-",
                          round(1.0 / statistics.median(per_cpu), 1) if n else "-",
                          round(statistics.median(per_plan), 2) if n else "-", decomp])
+            bar.write("  " + " | ".join(map(str, rows[-1])), file=sys.stderr)  # each row as it is done, for long runs
     bar.close()
     print_table(["part", "robot", "pairs", "plans", "confirmed", "failures (first per plan)", "s per sim s", "x real time",
                  "x (CPU)", "s per plan", "decomposition s"], rows,

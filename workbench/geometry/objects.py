@@ -194,14 +194,14 @@ def _scale_hint(extent: float, scale: float = 1.0) -> str:
     if typical or fits:
         return "; ".join(f"if the file is in {NAMES[u]}, pass --units {u} ({raw * f * 1000:.3g} mm across)"
                          for u, f in (typical or fits))
-    need = MIN_EXTENT / raw if extent < MIN_EXTENT else MAX_EXTENT / raw
-    side = "or more" if extent < MIN_EXTENT else "or less"
-    if SCALE.problem(need) is not None:
-        what = "at least" if extent < MIN_EXTENT else "at most"
-        return (f"no unit or --scale ({SCALE.describe()}) makes it {what} {(MIN_EXTENT if extent < MIN_EXTENT else MAX_EXTENT) * 1000:g} "
-                f"mm across (it would take --scale {need:.3g} {side}); check the file, or the part cannot be gripped")
-    if extent < MIN_EXTENT:
-        return (f"no unit makes it at least {MIN_EXTENT * 1000:g} mm across: it would take --scale {need:.3g} or more "
+    small = extent < MIN_EXTENT
+    limit = MIN_EXTENT if small else MAX_EXTENT
+    need, side = limit / raw, "or more" if small else "or less"
+    if SCALE.problem(need) is not None:  # beyond --scale's declared range: no value of it would do
+        return (f"no unit or --scale ({SCALE.describe()}) makes it {'at least' if small else 'at most'} {limit * 1000:g} mm "
+                f"across (it would take --scale {need:.3g} {side}); check the file, or the part cannot be gripped")
+    if small:
+        return (f"no unit makes it at least {limit * 1000:g} mm across: it would take --scale {need:.3g} or more "
                 f"({SCALE.describe()}); check the file's units, or the part is too small to grip")
     return (f"it would take --scale {need:.3g} or less ({SCALE.describe()}); pass the scale that converts the file's "
             f"units to metres")

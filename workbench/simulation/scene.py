@@ -6,7 +6,8 @@
   link collides through the URDF's collision shapes (primitives as they are, meshes as their convex hulls, as
   MuJoCo convexifies every mesh), without the robot's own hand: against the table and the part, and against the
   other links and the gripper in the pairs the self-collision check tests (`robots.selfcollision`; never
-  adjacent links, never pairs that cannot move relative to each other).
+  adjacent links, never pairs that cannot move relative to each other, never a link whose hull is much larger than
+  its mesh: that hull would touch where the mesh keeps clear, and the kinematic check tests its exact mesh).
 - The gripper is the planning gripper's own geometry in its TCP frame (hand body mesh, finger boxes), its fingers
   on two slide joints coupled to move together (as a parallel-jaw gripper's mechanism does), each driven by a
   force-limited position actuator: closing squeezes with the grip force whatever the opening.
@@ -42,6 +43,7 @@ SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
 # contype / conaffinity: the table and the part raise contacts with everything, the robot's geoms only with them;
 # robot-robot contacts are the explicit self-collision pairs
 ENV_TYPE, ENV_AFFINITY, ROBOT_TYPE, ROBOT_AFFINITY = 1, 1, 0, 1
+CONVEX_RATIO = 1.1  # a link mesh whose hull exceeds its volume this much takes no part in self-collision here
 
 
 @dataclass
@@ -169,8 +171,9 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
                       data=[0.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * 7)
     spec.add_exclude(bodyname1="finger_left", bodyname2="finger_right")
 
-    links.update(_add_link_geoms(spec, robot, bodies))
-    pairs = _self_pairs(robot, links, self_pairs)
+    arm, bent = _add_link_geoms(spec, robot, bodies)
+    links.update(arm)
+    pairs = _self_pairs(robot, links, self_pairs, bent)
     for a, b in pairs:
         spec.add_pair(geomname1=a, geomname2=b, condim=3, solref=SOLREF, solimp=SOLIMP)
 
@@ -205,11 +208,12 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
                     table_geom=m.geom("table").id)
 
 
-def _add_link_geoms(spec, robot, bodies: dict[int, object]) -> dict[str, str]:
+def _add_link_geoms(spec, robot, bodies: dict[int, object]) -> tuple[dict[str, str], set[str]]:
     """The URDF's collision shapes of the arm (without the robot's own hand) and of its fixed base on their bodies
-    (`bodies`: reduced-model joint -> MjsBody, 0 the base); returns geom name -> link name."""
+    (`bodies`: reduced-model joint -> MjsBody, 0 the base); returns geom name -> link name, and the links with a
+    mesh far from convex (its hull more than `CONVEX_RATIO` times its volume)."""
     mujoco = mujoco_module()
-    out = {}
+    out, bent = {}, set()
     for k in robot.fixed_geometry() + robot.arm_geometry():
         go = robot.geom.geometryObjects[k]
         body = bodies.get(int(go.parentJoint))
@@ -230,24 +234,29 @@ def _add_link_geoms(spec, robot, bodies: dict[int, object]) -> dict[str, str]:
         else:
             _, tm = pinocchio_geometry(go)
             hull = tm.convex_hull  # MuJoCo collides a mesh as its convex hull; handing it the hull compiles faster
+            if not tm.is_volume or hull.volume > CONVEX_RATIO * tm.volume:
+                bent.add(robot.model.frames[go.parentFrame].name)
             spec.add_mesh(name=name, uservert=np.asarray(hull.vertices, dtype=np.float32).ravel(),
                           userface=np.asarray(hull.faces, dtype=np.int32).ravel())
             body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, **kw)
         out[name] = robot.model.frames[go.parentFrame].name
-    return out
+    return out, bent
 
 
-def _self_pairs(robot, links: dict[str, str], checked: list[tuple[str, str]] | None) -> list[tuple[str, str]]:
+def _self_pairs(robot, links: dict[str, str], checked: list[tuple[str, str]] | None,
+                bent: set[str]) -> list[tuple[str, str]]:
     """Geom pairs (names) of the link pairs that may collide: `checked` link pairs, else every pair of links whose
-    joints are neither the same nor adjacent (the gripper's two pseudo-links ride the last joint)."""
+    joints are neither the same nor adjacent (the gripper's two pseudo-links ride the last joint); never with a
+    `bent` link, whose hull touches its neighbours where its mesh keeps clear (a UR5's forearm and the hand: 2 mm
+    apart, hulls touching), and whose exact mesh the kinematic self-collision check tests at every knot."""
     if checked is None:
-        joint = {lk: int(robot.geom.geometryObjects[int(g[3:])].parentJoint) for g, lk in links.items() if g.startswith("arm")}
+        joint = {robot.model.frames[go.parentFrame].name: int(go.parentJoint) for go in robot.geom.geometryObjects}
         joint["gripper_hand"] = joint["gripper_fingers"] = robot.nq
         parents = np.asarray(robot.model.parents)
         names = sorted(joint)
         checked = [(a, b) for i, a in enumerate(names) for b in names[i + 1:]
                    if joint[a] != joint[b] and parents[max(joint[a], joint[b])] != min(joint[a], joint[b])]
-    want = {tuple(sorted(p)) for p in checked}
+    want = {tuple(sorted(p)) for p in checked if not bent & set(p)}
     geoms = sorted(links)
     return [(a, b) for i, a in enumerate(geoms) for b in geoms[i + 1:] if tuple(sorted((links[a], links[b]))) in want]
 

@@ -32,6 +32,8 @@ from workbench.viewer.scenes import (
 from workbench.viewer.wan_harada import PlanView, caption_track, frame_plan, plan_frames, plan_overlay, show_plan
 
 FEATURE_COLOR = 0xDD3333
+PART_AT_H = 0xE0A030
+"""The part's colour at (P_j, phi) on the table (`show_conjunction`)."""
 
 
 def feature_meshes(mesh: trimesh.Trimesh, cls: GraspClass, params: ClassParams = ClassParams()) -> list[trimesh.Trimesh]:
@@ -80,7 +82,7 @@ def show_conjunction(vis: meshcat.Visualizer, mesh: trimesh.Trimesh, table: Gras
     f = int(np.round(np.mod(phi, 2 * np.pi) / (2 * np.pi / len(table.phi)))) % len(table.phi)
     vis[path].delete()
     show_spheres(vis, f"{path}/H", table.frame[:3, 3][None], 0.004, color=BLUE)
-    show_mesh(vis, f"{path}/object", mesh, color=0xE0A030, pose=obj)
+    show_mesh(vis, f"{path}/object", mesh, color=PART_AT_H, pose=obj)
     legal = bool(table.q[index, placement, t, f])
     show_gripper(vis, f"{path}/hand", gripper, obj @ cls.pose(theta), width=min(cls.opening + 1e-3, gripper.jaw_max),
                  color=GREEN if legal else ORANGE)
