@@ -143,3 +143,36 @@ def test_a_disc_cannot_be_flipped_and_plan_says_no_robot_could(tmp_path):
     con = duckdb.connect(str(tmp_path / "d.duckdb"), read_only=True)
     assert con.execute("SELECT count(*) FROM plan").fetchall()[0][0] == 0
     con.close()
+
+
+def test_the_friction_hint_is_a_friction_that_passes_within_the_declared_range(hand):
+    """The cone's empty friction stage names a --friction within its declared range that passes the cone test for
+    the jaw axes tried (planned again with it, some contacts pass), beside the bound no jaw axis beats."""
+    from workbench.params import bounds
+
+    bound = bounds(GraspParams)["friction"][0]
+    obj = from_trimesh(trimesh.creation.cone(0.03, 0.08, sections=48), "cone")
+    reason = plan_grasps(obj, hand, GraspParams(friction=0.3)).empty_reason
+    assert f"({bound.describe(True)})" in reason, reason
+    tried = float(re.search(r"--friction ([0-9.]+) passes the cone", reason).group(1))
+    least = float(re.search(r"needs at least ([0-9.]+)", reason).group(1))
+    assert bound.problem(tried) is None and 0.3 < least <= tried
+    again = plan_grasps(obj, hand, GraspParams(friction=tried))
+    assert again.counts["pads_cone"] > 0 and len(again.grasps) > 0
+
+
+def test_a_friction_beyond_the_declared_range_is_named_as_none_would_do():
+    """Contacts whose normals point the same way (no jaw axis has them opposed): no friction in --friction's range
+    passes, and the hint says so rather than asking to raise it."""
+    from workbench.grasping.grasps import ContactPairs, friction_hint
+    from workbench.params import bounds
+
+    n = np.tile([[0.0, 1.0, 0.0]], (3, 1)) + np.array([[0.0, 0.0, 0.05], [0.05, 0.0, 0.0], [0.0, 0.0, -0.05]])
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    ok = np.ones(3, dtype=bool)
+    pairs = ContactPairs(sample=np.arange(3), facet0=np.zeros(3, int), facet1=np.zeros(3, int), point0=np.zeros((3, 3)),
+                         point1=np.zeros((3, 3)), normal0=n, normal1=n, width=np.full(3, 0.03), width_ok=ok,
+                         com_ok=ok, level1_ok=ok, axis=np.tile([[0.0, 1.0, 0.0]], (3, 1)))
+    hint = friction_hint(0.3, pairs)
+    assert hint.startswith(f"no --friction in its range ({bounds(GraspParams)['friction'][0].describe(True)}) would do")
+    assert "raise --friction" not in hint

@@ -16,7 +16,7 @@ import os
 from dataclasses import MISSING, Field, asdict, dataclass, field, fields, replace
 from typing import Any, Callable
 
-__all__ = ["BUDGET_ENV", "DEG", "check_workers", "WAIT_ENV", "Bound", "MemoryBudgetError", "ParameterError", "Params", "add_param", "bounds", "check_memory", "cli_bound",
+__all__ = ["BUDGET_ENV", "DEG", "HAND_SIZED", "PART_SIZE", "SCALE", "check_workers", "WAIT_ENV", "Bound", "MemoryBudgetError", "ParameterError", "Params", "add_param", "bounds", "check_memory", "cli_bound",
            "from_cli", "memory_budget", "param", "parse_number", "parse_size", "validate"]
 
 import numpy as np
@@ -97,6 +97,14 @@ class Bound:
             shown = default * self.cli_scale if cli and isinstance(default, (int, float)) else default
             text += f"; try {_fmt(shown)} (the default)"
         return text
+
+
+# Sizes a part may have, in metres after scaling (CONVENTIONS.md, Units): outside PART_SIZE a mesh is refused as
+# implausible for a gripper; read in metres without units, one above HAND_SIZED is refused as a likely unit mistake
+# unless --accept-size. SCALE: the factor from a file's units to metres (--scale).
+PART_SIZE = Bound(lo=0.005, hi=2.0, unit="m", help="a part's largest extent")
+HAND_SIZED = Bound(lo=0.01, hi=0.5, unit="m", help="a hand-sized part's largest extent")
+SCALE = Bound(lo=0.0, hi=1e3, lo_open=True, help="the scale", flag="--scale")
 
 
 def param(default: Any = MISSING, *, ge: float | None = None, gt: float | None = None, le: float | None = None,

@@ -25,7 +25,8 @@ velocities; no self-collision of the arm and gripper (the gripper's body and fin
 of the robot row, extended with the links joined by one URDF joint and links that never move relative to each
 other); arm, gripper and held object clear of the table (the held object may touch it within 1 mm); with an empty
 hand, arm and gripper clear of the object where it rests (the fingers may touch it on the segments that reach or
-leave the step's grasp pose, as CONVENTIONS.md allows); the object is held exactly between a pick / regrasp and
+leave the step's grasp pose, as CONVENTIONS.md allows), the fingers at each segment's jaw width (the empty hand's
+pre-grasp opening, never narrower than the grasp's); the object is held exactly between a pick / regrasp and
 the next transfer / place (or from the first knot, at the first grasp, when the plan says it starts holding the
 part, and to the last knot, at the last grasp, when it says it ends holding it); the jaw acts at the step's grasp
 pose. The only planner output it takes as data is the
@@ -333,14 +334,16 @@ TCP_STEP = 0.005  # m
 
 class TrajectoryValidator:
     """Checks timed segments against a `PlanValidator` (URDF model, table, object) plus the gripper's body and
-    fingers (meshes in the TCP frame at full opening), the allowed self-collision link pairs, and the acceleration
-    limits (rad/s^2) the plan was timed with."""
+    fingers (meshes in the TCP frame at full opening `jaw_max`; each segment's fingers are moved to its jaw width,
+    the left one (+y) and the right one apart), the allowed self-collision link pairs, and the acceleration limits
+    (rad/s^2) the plan was timed with."""
 
     GRIPPER_HAND = "gripper_hand"
     GRIPPER_FINGERS = "gripper_fingers"
 
     def __init__(self, pv, hand_mesh: trimesh.Trimesh, finger_mesh: trimesh.Trimesh, allowed: list[tuple[str, str]],
-                 acc_limits: np.ndarray | float, table_tol: float = 1e-3, urdf: str | None = None, obstacles: tuple = ()):
+                 acc_limits: np.ndarray | float, table_tol: float = 1e-3, urdf: str | None = None, obstacles: tuple = (),
+                 jaw_max: float | None = None):
         """`obstacles`: (mesh, world pose) pairs fixed in the world (a task's pick-up and destination), which the
         arm, the hand and the held object must not touch."""
         import fcl
@@ -370,7 +373,13 @@ class TrajectoryValidator:
             self.parts.append((k, link, j, obj))
         tip_joint = max(set(model.supports[model.frames[pv.tip].parentJoint]) & arm)
         self.hand = fcl.CollisionObject(_fcl_mesh(hand_mesh.vertices, hand_mesh.faces), fcl.Transform())
-        self.fingers = fcl.CollisionObject(_fcl_mesh(finger_mesh.vertices, finger_mesh.faces), fcl.Transform())
+        faces = np.asarray(finger_mesh.faces)
+        left = np.asarray(finger_mesh.vertices)[faces].mean(axis=1)[:, 1] > 0
+        halves = [(sign, part) for sign, part in ((1.0, left), (-1.0, ~left)) if part.any()]
+        self.finger_side = [sign for sign, _ in halves]
+        self.fingers = [fcl.CollisionObject(_fcl_mesh(finger_mesh.vertices, faces[part]), fcl.Transform())
+                        for _, part in halves]
+        self.jaw_max = jaw_max
         moving_of[self.GRIPPER_HAND] = moving_of[self.GRIPPER_FINGERS] = tip_joint
         # adjacency from the URDF XML: links joined by one joint (fixed joints merged into their parent)
         root = ET.fromstring(urdf) if urdf else None
@@ -418,7 +427,8 @@ class TrajectoryValidator:
 
     # -- one configuration ---------------------------------------------------------------------------------------------
 
-    def _place(self, q: np.ndarray) -> np.ndarray:
+    def _place(self, q: np.ndarray, jaw: float | None = None) -> np.ndarray:
+        """Place every part at joint vector `q`, the fingers `jaw` apart (None or 0: full opening); the TCP pose."""
         pv, pin, fcl = self.pv, self.pv.pin, self.fcl
         full = pv.full_q(q)
         pin.forwardKinematics(pv.model, pv.data, full)
@@ -428,9 +438,11 @@ class TrajectoryValidator:
             m = pv.base @ np.asarray(pv.gdata.oMg[k].homogeneous)
             obj.setTransform(fcl.Transform(m[:3, :3], m[:3, 3]))
         tcp = pv.base @ np.asarray(pv.data.oMf[pv.tip].homogeneous) @ pv.mount
-        t = fcl.Transform(tcp[:3, :3], tcp[:3, 3])
-        self.hand.setTransform(t)
-        self.fingers.setTransform(t)
+        self.hand.setTransform(fcl.Transform(tcp[:3, :3], tcp[:3, 3]))
+        shut = 0.0 if not jaw or self.jaw_max is None else (self.jaw_max - float(jaw)) / 2  # each finger's move inward
+        for side, finger in zip(self.finger_side, self.fingers):
+            at = tcp[:3, 3] - side * shut * tcp[:3, 1]
+            finger.setTransform(fcl.Transform(tcp[:3, :3], at))
         return tcp
 
     def _hit(self, a, b) -> bool:
@@ -442,7 +454,8 @@ class TrajectoryValidator:
         `fingers` False the fingers may touch the resting object (on the way to or from the grasp)."""
         pv = self.pv
         out = []
-        objs = [(lk, j, o) for _, lk, j, o in self.parts] + [(self.GRIPPER_HAND, -1, self.hand), (self.GRIPPER_FINGERS, -1, self.fingers)]
+        objs = [(lk, j, o) for _, lk, j, o in self.parts] + [(self.GRIPPER_HAND, -1, self.hand)] + \
+            [(self.GRIPPER_FINGERS, -1, f) for f in self.fingers]
         for i, (a, _, oa) in enumerate(objs):
             for b, _, ob in objs[i + 1:]:
                 if frozenset((a, b)) in self.pairs and self._hit(oa, ob):
@@ -483,6 +496,7 @@ class TrajectoryValidator:
         n = len(pv.joint_names)
         knots = 0
         prev_end_t, prev_end_q = None, None
+        jaw_before = None
         start_held, end_held = bool(getattr(plan, "start_held", False)), bool(getattr(plan, "end_held", False))
         holding = start_held  # a plan may begin with the part already in the hand at its first grasp
         if start_held and segments and steps:
@@ -539,10 +553,17 @@ class TrajectoryValidator:
             # the fingers may touch the resting part on the segment that reaches or leaves the step's grasp pose
             at_grasp = seg.kind in ("approach", "retract", "gripper") and min(
                 float(np.linalg.norm(self._place(q[e])[:3, 3] - np.asarray(s.tcp)[:3, 3])) for e in (0, -1)) <= pv.tol_pos
+            # the empty hand approaches and leaves at its pre-grasp opening, at least the grasp's; while the jaw acts
+            # the fingers are checked at the wider of its two openings
+            if seg.kind in ("approach", "retract") and seg.jaw and seg.jaw < float(s.jawwidth) - 1e-9:
+                errs.append(f"{tag}: the jaw is open {seg.jaw * 1000:.1f} mm, narrower than the grasp's "
+                            f"{float(s.jawwidth) * 1000:.1f} mm")
+            jaw = max(seg.jaw, jaw_before) if seg.kind == "gripper" and seg.jaw and jaw_before else seg.jaw
+            jaw_before = seg.jaw
             tcp_at = np.zeros((len(q), 3))  # every knot is placed once: its TCP for the spacing, its parts for collisions
             found = False
             for k, x in enumerate(q):
-                tcp = self._place(x)
+                tcp = self._place(x, jaw)
                 tcp_at[k] = tcp[:3, 3]
                 if found:
                     continue
@@ -606,7 +627,8 @@ def trajectory_validator_from_rows(rows: dict, pv: PlanValidator, acc: np.ndarra
     body = trimesh.Trimesh(mesh.vertices, mesh.faces[:nb], process=False)
     fingers = trimesh.Trimesh(mesh.vertices, mesh.faces[nb:], process=False)
     allowed = [(a, b) for a, b, _ in json.loads(r["allowed_pairs"])["allowed"]]
-    return TrajectoryValidator(pv, body, fingers, allowed, acc, urdf=r["urdf"], obstacles=obstacles)
+    return TrajectoryValidator(pv, body, fingers, allowed, acc, urdf=r["urdf"], obstacles=obstacles,
+                               jaw_max=grip.get("jaw_max"))
 
 
 def validator_from_rows(rows: dict, free_poses: dict | None = None) -> PlanValidator:

@@ -281,3 +281,38 @@ def test_unit_hints_name_every_unit_giving_a_gripper_sized_part(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error", MeshWarning)
         assert load_object(bar, units="in").mesh.extents.max() == pytest.approx(0.0508)
+
+
+# ---------------------------------------------------------------- size hints quote the declared ranges
+
+
+def test_size_hints_quote_the_declared_ranges_and_a_scale_that_works(tmp_path, capsys):
+    """The size refusals quote PART_SIZE, HAND_SIZED and --scale's range as workbench.params declares them; a
+    suggested --scale within that range makes the part load, and where none within it would, the hint says so
+    (the largest allowed scale is still refused)."""
+    from workbench.cli.main import build_parser
+    from workbench.params import HAND_SIZED, PART_SIZE, SCALE
+
+    speck = _export(box(np.array(BOX) * 0.002), tmp_path / "speck.stl")  # 0.16 mm across in metres
+    with pytest.raises(MeshError) as info:
+        load_object(speck)
+    text = str(info.value)
+    assert f"allowed: {PART_SIZE.describe()}" in text and SCALE.describe() in text
+    scale = float(re.search(r"--scale ([0-9.e+]+) or more", text).group(1))
+    assert SCALE.problem(scale) is None
+    loaded = load_quietly(speck, scale=scale * 1.01)  # the hint's scale, rounded to three digits
+    assert loaded.mesh.extents.max() >= PART_SIZE.lo
+    dust = _export(box(np.array(BOX) * 2e-6), tmp_path / "dust.stl")  # 0.16 um: no scale in range reaches 5 mm
+    with pytest.raises(MeshError, match=re.escape(f"no unit or --scale ({SCALE.describe()}) makes it at least 5 mm")):
+        load_object(dust)
+    with pytest.raises(MeshError, match="implausible"):
+        load_object(dust, scale=SCALE.hi)
+    big = _export(box(np.array(BOX) * 12), tmp_path / "big.stl")  # 0.96 m across, read in metres
+    with pytest.raises(MeshError, match=re.escape(f"not a hand-sized part ({HAND_SIZED.describe()})")):
+        load_object(big)
+    with pytest.raises(MeshError, match=re.escape(SCALE.describe())):
+        load_object(big, scale=0.0)
+    with pytest.raises(SystemExit):
+        build_parser(["grasps"]).parse_args(["grasps", "--help"])
+    helptext = " ".join(capsys.readouterr().out.split())
+    assert f"over {HAND_SIZED.hi:g} m across is refused" in helptext and f"(up to {PART_SIZE.hi:g} m)" in helptext

@@ -233,7 +233,7 @@ def test_stored_rotation_is_the_right_handed_angle_about_the_jaw_axis(box, hand)
 
 
 def test_fingers_at_the_grasps_opening_are_checked(hand):
-    """A plate with a flange 30 mm behind its edge: the open hand straddles the flange, but fingers closed on the
+    """A plate with a flange 30 mm behind its edge: the fully open hand straddles the flange, but fingers closed on the
     10 mm plate would cut into it. Those poses are removed by level 2 at the grasp's opening, and every kept grasp
     passes the independent check (coal via pinocchio, fingers at the grasp's opening)."""
     from workbench.benchmarks.graspcheck import check_grasps
@@ -244,14 +244,15 @@ def test_fingers_at_the_grasps_opening_are_checked(hand):
     stem = trimesh.creation.box((0.06, 0.010, 0.032))
     stem.apply_translation([0, 0, -0.025 - 0.014])
     part = from_trimesh(trimesh.util.concatenate([plate, stem, flange]), "flanged_plate")
-    plan = plan_grasps(part, hand, GraspParams())
+    # at full opening the approach straddles the flange (the pre-grasp opening removes these poses before)
+    plan = plan_grasps(part, hand, GraspParams(pregrasp_margin=None))
     c = plan.counts
     assert c["hand_open"] > c["grasps"] > 0, c  # some poses fail only with the fingers at the grasp's opening
     g = plan.grasps
     pick = np.unique(np.linspace(0, len(g) - 1, 40).astype(int))
     v = check_grasps(part.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick], g.normal0[pick],
                      g.normal1[pick], plan.params.friction_coefficient)
-    assert v.ok.all(), (v.penetration.max(), (~v.surface).sum(), (~v.cone).sum(), (~v.pads).sum())
+    assert v.ok.all(), ((~v.clear).sum(), (~v.surface).sum(), (~v.cone).sum(), (~v.pads).sum())
 
 
 def test_pad_model_keeps_the_paper_pairs_on_the_papers_tube(tube_paper, hand):

@@ -44,23 +44,23 @@ def test_first_touch_is_the_highest_surface_point_in_the_pad_footprint(hand):
         assert touch <= top + 1e-3  # 1 mm: a grid step (0.5 mm) on slopes of at most about 60 degrees
 
 
-def test_grid_and_scan_give_the_same_touches(hand):
-    """The spatial index only chooses which triangles are tested: its touches equal a scan of every triangle."""
-    mesh = _bumpy(5)  # 20k triangles, above the scan threshold
-    rng = np.random.default_rng(2)
-    face = rng.choice(len(mesh.faces), 40, replace=False)
-    origins, axes = mesh.triangles_center[face], mesh.face_normals[face]
-    angles = 2 * np.pi * np.arange(4) / 4
-    grid = first_touches(mesh, origins, axes, angles, hand)
-    radius = hand.pad_radius
-    scan = _padkernel.triangle_grid(np.asarray(mesh.triangles), radius, brute=10**9)
-    assert len(scan[6]) == len(mesh.faces) and len(_padkernel.triangle_grid(np.asarray(mesh.triangles), radius)[6]) < len(mesh.faces)
-    mesh._cache[f"workbench_pad_grid_{radius!r}"] = scan
-    brute = first_touches(mesh, origins, axes, angles, hand)
-    assert grid.hit.sum() > 100
-    assert np.array_equal(grid.hit, brute.hit)
-    assert np.array_equal(grid.tri0, brute.tri0) and np.array_equal(grid.tri1, brute.tri1)
-    assert np.allclose(grid.poses, brute.poses, atol=1e-12)
+def test_hierarchy_and_scan_give_the_same_touches(hand):
+    """The triangle hierarchy only chooses which triangles are tested: its touches equal a scan of every triangle
+    (one leaf holding them all), on a curved mesh and on a flat-subdivided one where many triangles tie."""
+    for mesh in (_bumpy(5), trimesh.creation.box((0.04, 0.05, 0.03)).subdivide().subdivide().subdivide()):
+        rng = np.random.default_rng(2)
+        face = rng.choice(len(mesh.faces), 40, replace=False)
+        origins, axes = mesh.triangles_center[face], mesh.face_normals[face]
+        angles = 2 * np.pi * np.arange(4) / 4
+        tree = first_touches(mesh, origins, axes, angles, hand)
+        scan = _padkernel.triangle_bvh(np.asarray(mesh.triangles), np.asarray(mesh.face_normals), leaf=len(mesh.faces))
+        assert len(scan[0]) == 2  # one leaf: the root
+        mesh._cache["workbench_pad_bvh"] = scan
+        brute = first_touches(mesh, origins, axes, angles, hand)
+        assert tree.hit.sum() > 100
+        assert np.array_equal(tree.hit, brute.hit)
+        assert np.array_equal(tree.tri0, brute.tri0) and np.array_equal(tree.tri1, brute.tri1)
+        assert np.allclose(tree.poses, brute.poses, atol=1e-12)
 
 
 def test_pad_offsets_place_contacts_on_the_pads(hand):

@@ -5,6 +5,8 @@ results round-trip through the store, and a part whose convex decomposition fail
 
 from __future__ import annotations
 
+import base64
+import re
 import sys
 from pathlib import Path
 
@@ -22,7 +24,7 @@ from workbench.simulation.decomposition import convex_parts
 from workbench.robots.collider import Scene
 from workbench.simulation.replay import SimParams, pose_error, rest_on_table
 from workbench.planners.wan_harada.motions import ExecOptions
-from workbench.simulation.stages import physics_check, simulate_stored
+from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored
 from workbench.store import Store
 from workbench.store.simulation import load_simulation
 
@@ -153,3 +155,143 @@ def test_require_physics_removes_the_failing_step_and_searches_again(demo):
             planner.plan(plan.start, plan.goal, alternatives=0, exec_opts=ExecOptions(max_removed=1), physics=check)
     assert err.value.reason == "exhausted"
     assert any(f"physics: {kind}: step 1 (pick" in str(err.value) for kind in ("drop", "slip", "shove")), str(err.value)
+
+
+def _table_hits(urdf: str, dirs, joint_names, q: np.ndarray, scene: Scene) -> set[str]:
+    """Links of the full URDF (pinocchio FK, coal) whose collision geometry cuts into the table slab at joint
+    vector `q`: written here without the workbench's robot model, collider or scene."""
+    import coal
+    import pinocchio as pin
+
+    full = pin.buildModelFromXML(urdf)
+    geom = pin.buildGeomFromUrdfString(full, urdf, pin.COLLISION, package_dirs=list(dirs))
+    data, gdata = full.createData(), geom.createData()
+    x = pin.neutral(full)
+    for name, v in zip(joint_names, q):
+        x[full.joints[full.getJointId(name)].idx_q] = v
+    pin.updateGeometryPlacements(full, data, geom, gdata, x)
+    lo, hi, th = np.asarray(scene.table_min), np.asarray(scene.table_max), scene.table_thickness
+    table = coal.Box(*(hi - lo), th)
+    at = coal.Transform3s(np.eye(3), np.array([*(0.5 * (lo + hi)), -th / 2]))
+    out = set()
+    for k, go in enumerate(geom.geometryObjects):
+        m = gdata.oMg[k]
+        if coal.collide(go.geometry, coal.Transform3s(m.rotation, m.translation), table, at, coal.CollisionRequest(),
+                        coal.CollisionResult()):
+            out.add(full.frames[go.parentFrame].name)
+    return out
+
+
+def test_an_arm_driven_into_the_table_is_a_collision_where_fk_and_coal_find_it(demo):
+    """The demo plan with its regrasp transit bent down through the table (shoulder and elbow 1.1 rad further): the
+    simulation reports a collision at that step, at the time and with the link that FK + coal find first along the
+    commanded motion; the plan as planned has no robot contact with the table, the part or itself at all."""
+    import copy
+    import dataclasses
+
+    from workbench.robots.timing import time_stops
+
+    db, _, plan = demo
+    with Store(db) as store:
+        robot = load_planner(store, "tube", "panda").robot
+        clean = simulate_in_memory(store, plan, robot, SimParams(collision_depth=1e-6))
+        k = next(i for i, s in enumerate(plan.segments) if s.kind == "transit" and not s.holding)
+        seg = plan.segments[k]
+        qa, qb = seg.traj.q[0], seg.traj.q[-1]
+        low = qa.copy()
+        low[1] += 1.1
+        low[3] = min(low[3] + 1.1, robot.upper[3])
+        bent = time_stops(np.array([qa, low, qb]), np.full(robot.nq, 1.0), np.full(robot.nq, 3.0))
+        bad = copy.deepcopy(plan)
+        bad.segments[k] = dataclasses.replace(seg, traj=bent)
+        for s in bad.segments[k + 1:]:
+            s.t0 += bent.duration - seg.duration
+        out = simulate_in_memory(store, bad, robot, SimParams())
+    assert clean.confirmed and not any(f.kind == "collision" for f in clean.failures), clean.failures
+    f = out.failure
+    assert not out.confirmed and f.kind == "collision" and f.step == seg.step, out.failures
+    # independently: the first time along the commanded bent motion that a moving link cuts into the table
+    spec, scene = robot.spec, Scene()
+    ts = np.arange(0.0, bent.duration, 0.005)
+    first = next((t, hits) for t, q in zip(ts, bent.sample(ts)[0])
+                 if (hits := _table_hits(spec.urdf, robot.package_dirs, robot.joint_names, q, scene) - {"panda_link0"}))
+    assert abs(f.t - (seg.t0 + first[0])) < 0.05, (f.t, seg.t0 + first[0])
+    urdf_name = {"gripper_hand": "panda_hand", "gripper_fingers": "panda_leftfinger"}
+    assert f.links and {urdf_name.get(x, x) for x in f.links} <= first[1] | {"panda_rightfinger"}, (f.links, first)
+    assert "the table" in f.message and "\n" not in f.message
+
+
+def _table_rows(db) -> dict[str, int]:
+    with Store(db) as store:
+        names = [r[0] for r in store.run("SELECT table_name FROM information_schema.tables ORDER BY table_name")]
+        return {n: store.one(f'SELECT count(*) FROM "{n}"')[0] for n in names}
+
+
+def test_a_decomposition_that_fails_leaves_the_store_as_it_was(demo, capsys, tmp_path, monkeypatch):
+    """Through the command line against the demo's store: CoACD aborts on the tube remeshed at resolution 2; the
+    command prints one line naming the mesh, exits 2, and no table of the store gains or loses a row."""
+    db, idplan, _ = demo
+    monkeypatch.setenv("WORKBENCH_CACHE", str(tmp_path / "cache"))
+    before = _table_rows(db)
+    assert main(["simulate", "--db", str(db), "--plan", str(idplan), "--hull-resolution", "2"]) == 2
+    out, err = capsys.readouterr()
+    assert err.strip().count("\n") == 0 and "convex decomposition of mesh 'tube' failed" in err, err
+    assert "Traceback" not in out + err and "stored in" not in out
+    assert _table_rows(db) == before
+    assert not (tmp_path / "cache").exists() or not any((tmp_path / "cache").rglob("*.npz"))
+
+
+def test_plan_simulate_and_require_physics_from_the_command_line(demo, capsys, tmp_path):
+    """`plan --simulate` stores the verdict of the best plan and plays the simulated part in the HTML; with
+    `--require-physics` and no grip force every plan drops the part, so nodes are removed and none is left."""
+    from workbench.grasping.naming import per_part_numbers
+
+    db, idplan, plan = demo
+    with Store(db) as store:
+        numbers = per_part_numbers(load_planner(store, "tube", "panda").free["idfreetabletopplacement"])
+
+    def query(q) -> str:
+        return f"{numbers[q.idfreetabletopplacement]},{q.x!r},{q.y!r},{float(np.degrees(q.yaw))!r}"
+
+    task = ["plan", "--db", str(db), "--object", "tube", "--robot", "panda", "--start", query(plan.start),
+            "--goal", query(plan.goal), "--alternatives", "0"]
+    html = tmp_path / "plan.html"
+    assert main([*task, "--simulate", "--html", str(html)]) == 0
+    out = capsys.readouterr().out
+    assert f"plan {idplan}: confirmed" in out, out
+    with Store(db) as store:
+        assert store.one("SELECT count(*) FROM simulation WHERE idplan = ? AND confirmed", [idplan])[0] >= 1
+    # the meshcat commands are embedded base64: the simulated part is among the animated objects
+    blobs = re.findall(r"base64,([A-Za-z0-9+/=]+)", html.read_text())
+    assert any(b"/simulated" in base64.b64decode(b) for b in blobs)
+    assert main([*task, "--require-physics", "--grip-force", "0.01", "--max-removed", "1", "--no-save"]) == 0
+    out = capsys.readouterr()
+    assert "0 plans (exhausted)" in out.out and "physics:" in out.err + out.out, out
+
+
+def test_links_far_from_convex_take_no_part_in_self_collision():
+    """MuJoCo collides meshes as hulls: the UR5's forearm hull touches the hand where the meshes keep 2 mm apart, so
+    bent links (hull volume > 1.1 x mesh volume, measured here with trimesh) leave the self-collision pairs; the
+    Panda's convex links keep theirs, and every robot link still collides with the table."""
+    from workbench.geometry.collision import pinocchio_geometry
+    from workbench.robots.model import get_robot
+    from workbench.robots.selfcollision import allowed_pairs
+    from workbench.simulation.scene import build_scene
+
+    box = trimesh.creation.box(extents=(0.04, 0.04, 0.04))
+    for name in ("panda", "ur5"):
+        robot = get_robot(name)
+        bent = set()
+        for k in robot.arm_geometry():
+            go = robot.geom.geometryObjects[k]
+            _, mesh = pinocchio_geometry(go)
+            if mesh.convex_hull.volume > 1.1 * mesh.volume:
+                bent.add(robot.model.frames[go.parentFrame].name)
+        ss = build_scene(robot, robot.gripper, Scene(), box, [(box.vertices, box.faces)], 1000.0, 70.0, 0.3, 0.3, 0.002,
+                         self_pairs=allowed_pairs(robot).checked)
+        in_pairs = {ss.robot_geoms[g] for pair in ss.self_pairs for g in pair}
+        assert (name == "ur5") == bool(bent), bent
+        assert not bent & in_pairs and in_pairs, (bent, in_pairs)
+        m = ss.model
+        arm = [g for g in ss.robot_geoms if g not in ss.gripper_geoms]
+        assert all(m.geom_contype[ss.table_geom] & m.geom_conaffinity[g] for g in arm)

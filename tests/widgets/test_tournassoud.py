@@ -35,3 +35,31 @@ def test_table_explorer_rebuilds_at_new_resolutions_and_keeps_parameters(tmp_pat
     i = int(round(np.radians(180.0) / (2 * np.pi / 24))) % 24
     assert legal == bool(ex.run.table.q[0, 0, i, 0])
     assert "G0: face/face" in ex.info.value
+
+
+class View(Sink):
+    """A meshcat stand-in with a server address (for the live view's widget)."""
+
+    def url(self):
+        return "http://127.0.0.1:7001/static/"
+
+
+def test_table_explorer_puts_its_controls_beside_its_view(tmp_path):
+    """One output: the controls (the table plot and a busy line among them) in a column, the live view and its colour
+    key beside them; the busy line names the rebuild while a resolution change rebuilds the table, then clears."""
+    import ipywidgets as W
+
+    db = str(tmp_path / "t.duckdb")
+    params = TableParams(theta_step=np.radians(30), phi_step=np.radians(30), table_point=(0.45, 0.1))
+    ex = TableExplorer(db, l_part(), get_robot("puma560"), params, vis=View())
+    w = ex.widget
+    assert isinstance(w, W.HBox) and ex.widget is w
+    column, right = w.children
+    for c in (ex.cls, ex.theta, ex.place, ex.phi, ex.theta_step, ex.phi_step, ex.busy.widget, ex.info, ex.plot):
+        assert c in column.children
+    assert "7001" in right.children[0].value and right.children[-1] is ex.key and "the part at H" in ex.key.value
+    seen = []
+    ex.busy.widget.observe(lambda ch: seen.append(ch["new"]), names="value")
+    ex.theta_step.value = 20.0
+    assert ex.run.table.q.shape[2] == 18
+    assert any("building the grasp-placement table" in v for v in seen) and ex.busy.widget.value == ""

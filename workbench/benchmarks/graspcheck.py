@@ -7,15 +7,21 @@ For each grasp (TCP pose in the object frame, opening, contacts and outward cont
 - both normals lie within the friction cone of the jaw axis (the TCP's y);
 - the contacts are where the pads are: at +/- half the opening along y, inside the pad rectangles;
 - the hand's collision geometry (the Franka hand loaded by pinocchio from example-robot-data's panda.urdf, the
-  bundled parallel60 from its URDF, or a spec file's boxes built from its numbers) placed with its TCP frame at the
-  grasp with the fingers at the grasp's opening (and at full opening), does not penetrate the object by more than
-  1 mm, measured with coal (not python-fcl, which the planner uses).
+  bundled parallel60 from its URDF, or a spec file's boxes built from its numbers and its palm mesh's convex hull)
+  placed with its TCP frame at the
+  grasp with the fingers at the grasp's opening and at its pre-grasp opening (the opening plus a margin, 10 mm by
+  default, capped at the stroke; full opening without a margin), shrunk inward by 1 mm (each box by 1 mm on
+  every side, the hand body's convex hull with every face moved 1 mm in), neither meets a triangle of the object
+  (coal's boolean collision test, not python-fcl, which the planner uses) nor lies inside a closed object (a point
+  inside it, by trimesh's ray test). No penetration depth enters: coal's box-against-mesh depth under-reports
+  (3 mm reads as 0.5 mm), the boolean test of the shrunk solid does not.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 
 import coal
 import numpy as np
@@ -27,15 +33,31 @@ from workbench.resources import ASSETS, erd_robots, erd_share
 
 @dataclass
 class Verdict:
+    """Per grasp, whether it passes each criterion of the module docstring; `ok` when it passes all."""
+
     surface: np.ndarray
     normal: np.ndarray
     cone: np.ndarray
     pads: np.ndarray
-    penetration: np.ndarray  # deepest penetration (m) at the grasp's opening or at full opening
+    clear: np.ndarray  # no hand geometry, shrunk by INTRUSION_TOL, meets or lies in the object at either opening
 
     @property
     def ok(self) -> np.ndarray:
-        return self.surface & self.normal & self.cone & self.pads & (self.penetration <= 1e-3)
+        return self.surface & self.normal & self.cone & self.pads & self.clear
+
+
+INTRUSION_TOL = 1e-3  # m the hand may reach into the object's surface before a grasp is invalid
+CHECKS = ("contacts on the surface (0.5 mm) with a nearby triangle's normal, inside the friction cone and on the pads; "
+          "the hand's solids (from its URDF by pinocchio, or the spec file's boxes) shrunk 1 mm meet no triangle of "
+          "the part and do not lie in it, at the grasp's and at the pre-grasp opening (coal's boolean test, no penetration "
+          "depth)")
+
+
+def failures(v: Verdict) -> str:
+    """How many grasps fail each criterion, e.g. 'hand 3, cone 1' ('-' when none fails)."""
+    parts = [(k, int((~getattr(v, a)).sum())) for k, a in (("surface", "surface"), ("normal", "normal"), ("cone", "cone"),
+                                                           ("pads", "pads"), ("hand", "clear"))]
+    return ", ".join(f"{k} {n}" for k, n in parts if n) or "-"
 
 
 @lru_cache(maxsize=1)
@@ -91,10 +113,23 @@ def full_opening(hand: str = "franka") -> float:
     return float(2 * model.upperPositionLimit[model.joints[model.getJointId(joints[0])].idx_q])
 
 
+@lru_cache(maxsize=8)
+def _palm_hull(path: str) -> coal.CollisionGeometry:
+    return _convex(np.asarray(trimesh.load(path, force="mesh").convex_hull.vertices, dtype=np.float64))
+
+
+def _convex(points: np.ndarray) -> coal.CollisionGeometry:
+    vec = coal.StdVec_Vec3s()
+    for p in points:
+        vec.append(p)
+    return coal.Convex.convexHull(vec, True, "Qt")
+
+
 def hand_placements(opening: float, hand: str = "franka") -> list[tuple[coal.CollisionGeometry, np.ndarray]]:
     """Every hand collision geometry and its pose in the TCP frame with the pads `opening` apart: the Franka hand
     or parallel60 from its URDF (pinocchio), or a spec file's boxes built from its numbers (CONVENTIONS.md, Gripper
-    spec: the pad's inner face at the opening, the finger box behind it with its tip flush, the palm box)."""
+    spec: the pad's inner face at the opening, the finger box behind it with its tip flush, the palm box or the
+    convex hull of its mesh)."""
     if hand.endswith((".yaml", ".yml", ".json")):
         spec = _spec(hand)
         from scipy.spatial.transform import Rotation
@@ -104,9 +139,12 @@ def hand_placements(opening: float, hand: str = "franka") -> list[tuple[coal.Col
         tcp[:3, 3] = spec["tcp"]
         inv = np.linalg.inv(tcp)
         (px, pz), t, f = spec["pad"]["size"], spec["pad"]["thickness"], spec["finger"]["size"]
-        palm = np.eye(4)
-        palm[:3, 3] = spec["palm"].get("offset", [0, 0, spec["palm"]["size"][2] / 2])
-        out = [(_box(spec["palm"]["size"]), inv @ palm)]
+        if "mesh" in spec["palm"]:  # a palm mesh, checked as its convex hull (trimesh reads it, coal holds it)
+            out = [(_palm_hull(str(Path(hand).parent / spec["palm"]["mesh"])), inv)]
+        else:
+            palm = np.eye(4)
+            palm[:3, 3] = spec["palm"].get("offset", [0, 0, spec["palm"]["size"][2] / 2])
+            out = [(_box(spec["palm"]["size"]), inv @ palm)]
         for side in (1, -1):
             for size, y, z in (((px, t, pz), opening / 2 + t / 2, 0.0), (f, opening / 2 + f[1] / 2, pz / 2 - f[2] / 2)):
                 m = np.eye(4)
@@ -139,21 +177,60 @@ def _object_bvh(mesh: trimesh.Trimesh) -> coal.BVHModelOBBRSS:
     return m
 
 
-def max_penetration(mesh: trimesh.Trimesh, poses: np.ndarray, openings: np.ndarray, hand: str = "franka") -> np.ndarray:
-    """Deepest penetration (m, 0 when free) of the hand at each TCP pose and opening into the object."""
+def shrunk(geometry: coal.CollisionGeometry, tol: float) -> coal.CollisionGeometry | None:
+    """The solid `geometry` with its surface moved `tol` inward (None when nothing is left): a box's half sizes less
+    `tol`, a convex body's every face plane moved in by `tol` (the halfspace intersection, exact for a polytope)."""
+    if isinstance(geometry, coal.Box):
+        half = np.asarray(geometry.halfSide, dtype=np.float64) - tol
+        return coal.Box(*(2 * half)) if (half > 0).all() else None
+    from scipy.spatial import ConvexHull, HalfspaceIntersection
+
+    pts = np.array([geometry.point(i) for i in range(geometry.num_points)], dtype=np.float64)
+    hull = ConvexHull(pts)
+    eq = hull.equations.copy()  # n . x + d <= 0 inside, |n| = 1
+    eq[:, 3] += tol
+    centre = pts[hull.vertices].mean(axis=0)
+    if (eq[:, :3] @ centre + eq[:, 3] >= 0).any():
+        return None
+    inner = HalfspaceIntersection(eq, centre).intersections
+    return _convex(np.unique(np.round(inner, 10), axis=0))
+
+
+@lru_cache(maxsize=64)
+def _shrunk_parts(hand: str, opening: float, tol: float) -> tuple:
+    """The hand's solids shrunk by `tol`, their poses in the TCP frame and a point inside each (its own frame)."""
+    out = []
+    for g, local in hand_placements(opening, hand):
+        inner = shrunk(g, tol)
+        if inner is not None:
+            centre = (np.zeros(3) if isinstance(inner, coal.Box) else
+                      np.mean([inner.point(i) for i in range(inner.num_points)], axis=0))
+            out.append((inner, local, centre))
+    return tuple(out)
+
+
+def hand_intrudes(mesh: trimesh.Trimesh, poses: np.ndarray, openings: np.ndarray, hand: str = "franka",
+                  tol: float = INTRUSION_TOL) -> np.ndarray:
+    """Whether the hand at each TCP pose and opening reaches more than `tol` into the object: some collision
+    geometry shrunk by `tol` meets a triangle of the object (coal's boolean test), or, for a closed object, has a
+    point of its interior inside it (then it lies wholly inside, as it meets no triangle). No penetration depth is
+    used."""
     obj = _object_bvh(mesh)
     ident = coal.Transform3s()
-    out = np.zeros(len(poses))
+    poses, openings = np.asarray(poses, dtype=np.float64), np.asarray(openings, dtype=np.float64)
+    out = np.zeros(len(poses), dtype=bool)
+    centres = []
     for k, (pose, w) in enumerate(zip(poses, openings)):
-        for g, local in hand_placements(float(w), hand):
+        for g, local, inside in _shrunk_parts(hand, round(float(w), 9), tol):
             M = pose @ local
-            req = coal.CollisionRequest()
-            req.enable_contact = True
-            req.num_max_contacts = 200
-            res = coal.CollisionResult()
-            if coal.collide(obj, ident, g, coal.Transform3s(M[:3, :3], M[:3, 3]), req, res):
-                depth = max(c.penetration_depth for c in res.getContacts())
-                out[k] = max(out[k], abs(depth))
+            if not out[k]:
+                out[k] = coal.collide(obj, ident, g, coal.Transform3s(M[:3, :3], M[:3, 3]), coal.CollisionRequest(),
+                                      coal.CollisionResult()) > 0
+            centres.append((k, M[:3, :3] @ inside + M[:3, 3]))
+    if centres and mesh.is_watertight:
+        idx = np.array([k for k, _ in centres])
+        inside = mesh.contains(np.array([c for _, c in centres]))
+        out[np.unique(idx[inside])] = True
     return out
 
 
@@ -190,9 +267,10 @@ def point_triangle_distance(p: np.ndarray, tris: np.ndarray) -> np.ndarray:
 
 
 def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction: float, jaw_max: float | None = None,
-                 hand: str = "franka") -> Verdict:
+                 hand: str = "franka", pregrasp_margin: float | None = 0.010) -> Verdict:
     """The independent verdict on each grasp (see the module docstring) for `hand`: franka, parallel60 or the path
-    of a spec file; `jaw_max` its full opening (default: the Franka hand's, from its URDF, or the spec's stroke)."""
+    of a spec file; `jaw_max` its full opening (default: the Franka hand's, from its URDF, or the spec's stroke);
+    the hand is also checked at the pre-grasp opening, min(width + `pregrasp_margin`, jaw_max) (None: jaw_max)."""
     if jaw_max is None:
         jaw_max = _spec(hand)["stroke"][1] if hand.endswith((".yaml", ".yml", ".json")) else full_opening(hand)
     hx, hz, pad_z = pad_face(hand)
@@ -201,7 +279,7 @@ def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction:
     G = len(poses)
     if G == 0:
         z = np.zeros(0, dtype=bool)
-        return Verdict(surface=z, normal=z, cone=z, pads=z, penetration=np.zeros(0))
+        return Verdict(surface=z, normal=z, cone=z, pads=z, clear=z)
     pts = np.vstack([c0, c1])
     nrm = np.vstack([n0, n1])
     _, dist, _ = trimesh.proximity.closest_point(mesh, pts)
@@ -228,5 +306,6 @@ def check_grasps(mesh: trimesh.Trimesh, poses, widths, c0, c1, n0, n1, friction:
         pads &= np.abs(local[:, 1] - side * widths / 2) <= 1e-5
         pads &= (np.abs(local[:, 0]) <= pad_half[0] + 1e-6) & (np.abs(local[:, 2] - pad_z) <= pad_half[1] + 1e-6)
     pads &= (widths >= 0) & (widths <= jaw_max + 1e-9)
-    pen = np.maximum(max_penetration(mesh, poses, widths, hand), max_penetration(mesh, poses, np.full(G, jaw_max), hand))
-    return Verdict(surface=surface, normal=normal_ok, cone=cone, pads=pads, penetration=pen)
+    pre = np.full(G, jaw_max) if pregrasp_margin is None else np.minimum(widths + pregrasp_margin, jaw_max)
+    clear = ~(hand_intrudes(mesh, poses, widths, hand) | hand_intrudes(mesh, poses, pre, hand))
+    return Verdict(surface=surface, normal=normal_ok, cone=cone, pads=pads, clear=clear)

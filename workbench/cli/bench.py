@@ -17,6 +17,7 @@ BENCHES = {
     "gptable": "the grasp-placement table: classes, build times, chaining, closed-form IK",
     "catalog": "catalogue build on a local Dask cluster: speed-up, the driver's load, simulated workers, cost model",
     "widgets": "notebook widgets driven headless: latency from a change to the scene's update",
+    "grippers": "a real gripper model (MJCF, driven in MuJoCo) beside the bundled spec that stands for it",
 }
 
 

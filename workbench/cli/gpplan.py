@@ -18,7 +18,7 @@ from scipy.spatial.transform import Rotation
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args, stored_robot_gripper
 from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
-from workbench.cli.plan import add_motion_arguments, exec_options
+from workbench.cli.plan import add_motion_arguments, exec_options, write_trajectory
 from workbench.errors import WorkbenchError
 from workbench.params import parse_number
 from workbench.planners.tournassoud.chaining import NoSequence, in_range, nearest_sample
@@ -34,10 +34,13 @@ from workbench.planners.tournassoud.plans import (
 )
 from workbench.planners.tournassoud.stages import (
     load_planner,
+    load_stored,
     plan_validator,
     save_plan,
+    stored_scene,
     validate_stored,
 )
+from workbench.viewer.tournassoud import plan_page
 from workbench.robots.collider import Scene, default_scene
 from workbench.store import Store
 
@@ -108,7 +111,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("gpplan", help="regrasp sequence by backward chaining in the grasp-placement table (Tournassoud et al.)",
                        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--db", required=True, help="DuckDB store file with a table built by `workbench gptable`")
-    p.add_argument("--object", required=True, help="object name in the store")
+    p.add_argument("--object", default=None, help="object name in the store (needed unless --plan)")
+    p.add_argument("--plan", type=int, default=None, metavar="ID",
+                   help="reload a stored plan of this planner from the store alone (its steps, timed motions, the part "
+                        "held at either end, the insertion and the obstacles), print it and validate it again; with "
+                        "--json, --trajectory and --plan-html, export it")
     p.add_argument("--robot", default=None, help="robot name in the store (default: the newest table's robot)")
     p.add_argument("--initial", default=None, help="initial grasp CLASS,THETA (degrees)")
     p.add_argument("--goal", default=None, help="goal class and theta range CLASS,MIN:MAX (degrees)")
@@ -148,6 +155,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_motion_arguments(p, "conjunctions of the table")
     add_output(p, "--json", "write the sequence and its plan to this JSON file")
     add_output(p, "--html", "write the table with the sequence overlaid (Fig. 6) to this HTML file")
+    add_output(p, "--plan-html", "write the plan's animation with its obstacles and insertion as static HTML")
+    add_output(p, "--trajectory", suffixes=(".csv", ".yaml", ".yml", ".json"),
+               help="write the plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml (a ROS 2 "
+                    "trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
     add_gripper_argument(p)
     p.set_defaults(func=run)
 
@@ -232,7 +243,66 @@ def _legal_text(table, mask: np.ndarray) -> str:
     return "; ".join(parts) or "none"
 
 
+def _table_of(scene: Scene) -> tuple:
+    return tuple(scene.table_min), tuple(scene.table_max), float(scene.table_thickness)
+
+
+def _export(args, plan, robot, mesh, scene: Scene) -> None:
+    """The plan's --trajectory and --plan-html files."""
+    if args.trajectory and plan.segments:
+        print(f"trajectory: {write_trajectory(plan, args.trajectory)}")
+    elif args.trajectory:
+        print("trajectory: not written, the plan has no timed motions (--no-motion)")
+    if args.plan_html:
+        print(f"plan html: {plan_page(plan, robot, mesh, _table_of(scene), args.plan_html)}")
+
+
+def describe_task(plan) -> list[str]:
+    """What a plan carries beyond its steps: the part held at either end, the insertion, the obstacles."""
+    out = []
+    for held, text in ((plan.start_held, "starts with the part in the hand at the pick-up"),
+                       (plan.end_held, "ends with the part still in the hand at the destination")):
+        if held:
+            out.append(f"the plan {text}")
+    if plan.insertion is not None:
+        d = ", ".join(f"{v:+.3f}" for v in plan.insertion)
+        out.append(f"the plan ends with an insertion of {plan.insertion_depth * 1000:.0f} mm along ({d})")
+    if plan.obstacles:
+        ends = {e: sum(o.end == e for o in plan.obstacles) for e in ("pickup", "destination")}
+        out.append(f"obstacles: {ends['pickup']} at the pick-up, {ends['destination']} at the destination")
+    return out
+
+
+def run_stored(args: argparse.Namespace) -> int:
+    """`--plan ID`: a stored plan reloaded from the store alone, printed, validated and exported."""
+    plan = load_stored(args.db, args.plan)
+    if args.object is not None and args.object != plan.object:
+        raise WorkbenchError(f"plan {args.plan} in {args.db} is of {plan.object!r}, not --object {args.object!r}")
+    r = load_planner(args.db, plan.object, plan.robot, gripper=gripper_from_args(args), idtable=plan.ids["idtabletop"])
+    scene = stored_scene(args.db, args.plan)
+    print(f"plan {args.plan} from {args.db}: " + plan.summary())
+    for line in plan.lines():
+        print("  " + line)
+    for line in describe_task(plan):
+        print(line)
+    report = validate_stored(args.db, r, args.plan, plan, require_motion=bool(plan.segments))
+    print("validator: " + ("ok" if report.ok else "FAILED: " + "; ".join(report.errors[:3])))
+    if args.json:
+        write_text(args.json, json.dumps({"idplan": args.plan, "plan": plan.as_dict(), "validator":
+                                          {"ok": report.ok, "errors": report.errors}}, indent=1))
+        print(f"json: {args.json}")
+    _export(args, plan, r.robot, r.obj.mesh, scene)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
+    if args.plan is not None:
+        if any(getattr(args, k) is not None for k in ("initial", "goal", "from_", "to", "pickup", "destination", "html")):
+            raise WorkbenchError("--plan ID reloads a stored plan: give no query (--initial, --goal, --from, --to, "
+                                 "--pickup, --destination) and no --html with it")
+        return run_stored(args)
+    if args.object is None:
+        raise WorkbenchError("--object NAME is needed with a query (or --plan ID to reload a stored plan)")
     task_mode = args.pickup is not None or args.destination is not None
     grasp_mode = not task_mode and (args.initial is not None or args.goal is not None)
     place_mode = args.from_ is not None or args.to is not None
@@ -315,17 +385,18 @@ def run(args: argparse.Namespace) -> int:
         print("the initial grasp is already in the goal range: nothing to do")
     else:
         print(plan.summary())
-        for held, text in ((plan.start_held, "starts with the part in the hand at the pick-up"),
-                           (plan.end_held, "ends with the part still in the hand at the destination")):
-            if held:
-                print(f"the plan {text}")
+        for line in describe_task(plan):
+            print(line)
         if args.no_save:
             report = plan_validator(args.db, r, scene).check(plan)
         else:
             idplan, plan = save_plan(args.db, r, plan, scene, realiser.opts)
-            print(f"stored plan id {idplan} in {args.db} (planner tournassoud; tables plan, planstep)")
-            report = validate_stored(args.db, r, idplan, plan, require_motion=motions is not None, obstacles=obstacles)
+            print(f"stored plan id {idplan} in {args.db} (planner tournassoud; tables plan, planstep, plansegment, "
+                  f"planobstacle); `workbench gpplan --db {args.db} --plan {idplan}` reloads it")
+            stored = load_stored(args.db, idplan)  # what the store holds is what is checked and exported
+            report = validate_stored(args.db, r, idplan, stored, require_motion=motions is not None)
         print("validator: " + ("ok" if report.ok else "FAILED: " + "; ".join(report.errors[:3])))
+        _export(args, plan if args.no_save else stored, r.robot, r.obj.mesh, scene)
     if args.json:
         doc = {"sequence": seq.as_dict(t), "plan": None if plan is None else plan.as_dict(),
                "table_sequence": seq.extra.get("table"), "removed": seq.extra.get("removed", [])}

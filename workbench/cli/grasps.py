@@ -12,11 +12,10 @@ from workbench.cli.outputs import add_output
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.geometry.objects import load_object
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
-from workbench.params import add_param, cli_bound, from_cli, parse_number
+from workbench.params import HAND_SIZED, PART_SIZE, SCALE, add_param, from_cli, parse_number
 from workbench.planners.wan_harada.stages import ensure_grasps
 from workbench.viewer.scenes import grasp_scene
 
-SCALE = cli_bound(0, 1e3, lo_open=True, help="the scale")
 
 
 def add_object_arguments(parser: argparse.ArgumentParser) -> None:
@@ -27,8 +26,8 @@ def add_object_arguments(parser: argparse.ArgumentParser) -> None:
                       help=f"factor from the file's units to metres, e.g. 0.001 ({SCALE.describe(True)})")
     unit.add_argument("--units", choices=["m", "cm", "mm", "in"], default=None, help="the file's unit")
     parser.add_argument("--accept-size", action="store_true",
-                        help="read in metres (no --units or --scale), a part over 0.5 m across is refused as a likely "
-                             "unit mistake; this plans it in metres anyway (up to 2 m)")
+                        help=f"read in metres (no --units or --scale), a part over {HAND_SIZED.hi:g} m across is refused "
+                             f"as a likely unit mistake; this plans it in metres anyway (up to {PART_SIZE.hi:g} m)")
     parser.add_argument("--name", default=None, help="object name in the store (default: the file's stem)")
 
 
@@ -41,8 +40,11 @@ def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--contact-model", choices=["pads", "paper"], default=GraspParams().contact_model,
                         help="pads: each pad closes until it first touches (CONVENTIONS.md); paper: parallel facet pairs "
                              "and swept cylinders")
-    for name in ("friction", "finger_clearance", "fingertip_margin"):
+    for name in ("friction", "finger_clearance", "fingertip_margin", "pregrasp_margin", "approach_length"):
         add_param(parser, GraspParams, name)
+    parser.add_argument("--full-opening", action="store_true",
+                        help="approach every grasp with the jaw fully open instead of at the grasp's opening plus "
+                             "--pregrasp-margin")
     parser.add_argument("--no-fingertip", action="store_true",
                         help="centre-of-pad grasps only (no fingertip grasps of thin parts)")
     parser.add_argument("--no-support-grasps", action="store_true",
@@ -64,6 +66,8 @@ def grasp_params(args: argparse.Namespace) -> GraspParams:
                        friction=args.friction, finger_clearance=args.finger_clearance,
                        fingertip_margin=None if args.no_fingertip else args.fingertip_margin,
                        support_grasps=not args.no_support_grasps, gap_grasps=not args.no_gap_grasps,
+                       pregrasp_margin=None if args.full_opening else args.pregrasp_margin,
+                       approach_length=args.approach_length,
                        lengths="fixed" if args.fixed_lengths else "adaptive")
 
 
@@ -110,10 +114,10 @@ def grasp_counts(plan: GraspPlan) -> str:
             f"{c['facet_samples_distance']} of {c['facet_samples']} facet samples after the boundary distance")
     if "pads_width" in c:
         body = (f"hand poses {c['hand_poses']} -> {c['pads_width']} opening fits -> {c['pads_cone']} friction cone -> "
-                f"{c['pads_com']} near the centre of mass -> {c['hand_open']} open hand free -> {c['grasps']} fingers free")
+                f"{c['pads_com']} near the centre of mass -> {c['hand_open']} approach free -> {c['grasps']} fingers free")
     else:
         body = (f"contact pairs {c['contact_pairs']} -> {c['pairs_width']} jaw -> {c['pairs_com']} com -> "
-                f"{c['pairs_level1']} level 1; hand poses {c['hand_poses']} -> {c['hand_open']} open hand free -> "
+                f"{c['pairs_level1']} level 1; hand poses {c['hand_poses']} -> {c['hand_open']} approach free -> "
                 f"{c['grasps']} fingers free")
     lengths = (f"lengths x{L['scale']:.2f}: neighbour radius {L['neighbour_radius'] * 1e3:.3g} mm, boundary distance "
                f"{L['dist_min'] * 1e3:.3g}-{L['dist_max'] * 1e3:.3g} mm, centre-of-mass distance {L['com_max'] * 1e3:.3g} mm")

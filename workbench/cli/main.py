@@ -11,7 +11,9 @@ import importlib
 import inspect
 import os
 import re
+import signal
 import sys
+import threading
 import warnings
 
 from workbench.errors import WorkbenchError
@@ -94,8 +96,40 @@ def build_parser(argv: list[str] | None = None, full: bool = False) -> argparse.
     return parser
 
 
+class _CtrlC:
+    """SIGINT raises KeyboardInterrupt, as Python's default does, and is remembered: a library that swallows the
+    exception (some catch everything while they import) cannot make a Ctrl-C'd command end as if it had finished."""
+
+    def __init__(self) -> None:
+        self.seen = False
+        self.old = None
+
+    def __enter__(self) -> "_CtrlC":
+        if threading.current_thread() is threading.main_thread():
+            self.old = signal.signal(signal.SIGINT, self._handle)
+        return self
+
+    def _handle(self, signum, frame) -> None:
+        self.seen = True
+        raise KeyboardInterrupt
+
+    def __exit__(self, *exc) -> None:
+        if self.old is not None:
+            signal.signal(signal.SIGINT, self.old)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run one command; returns its exit status (2 for bad input, argparse's refusals included)."""
+    with _CtrlC() as ctrl_c:
+        status = _main(argv, ctrl_c)
+    if ctrl_c.seen and status == 0:  # the command went on to the end, but the user asked it to stop
+        name = _selected(sys.argv[1:] if argv is None else argv) or ""
+        print(f"workbench {name}: interrupted; the store keeps only completed stages".replace("  ", " "), file=sys.stderr)
+        return 130
+    return status
+
+
+def _main(argv: list[str] | None, ctrl_c: _CtrlC) -> int:
     try:
         args = build_parser(argv).parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a refused option (2, one line already printed)
@@ -104,6 +138,9 @@ def main(argv: list[str] | None = None) -> int:
         name = _selected(sys.argv[1:] if argv is None else argv) or ""
         print(f"workbench {name}: interrupted; the store keeps only completed stages".replace("  ", " "), file=sys.stderr)
         return 130
+
+    if ctrl_c.seen:  # a Ctrl-C swallowed while the command's modules loaded: stop before it starts
+        return 0
 
     def one_line(message, category, *_args, **_kwargs) -> None:  # warnings: one line each, no source excerpt
         print(f"workbench {args.command}: warning: {message}", file=sys.stderr)

@@ -17,8 +17,9 @@ from workbench.store import Store
 
 HELP = "replay a stored plan in MuJoCo physics: does the part stay in the hand and end at its goal?"
 INSTALL = "needs MuJoCo and CoACD: pip install 'regrasp-workbench[physics]'"
-OPTIONS = ("timestep", "density", "grip_force", "friction", "table_friction", "goal_tol", "goal_tol_angle",
-           "waypoint_tol", "waypoint_tol_angle", "slip_tol", "slip_tol_angle", "settle_speed", "settle_time", "hold_end")
+OPTIONS = ("timestep", "impratio", "density", "grip_force", "friction", "table_friction", "goal_tol", "goal_tol_angle",
+           "waypoint_tol", "waypoint_tol_angle", "slip_tol", "slip_tol_angle", "settle_speed", "settle_time", "hold_end", "collision_depth",
+           "hull_concavity", "max_hulls", "hull_resolution")
 
 
 def register(sub: argparse._SubParsersAction) -> None:

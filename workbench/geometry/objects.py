@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -12,12 +13,13 @@ import trimesh
 
 from workbench.errors import MeshError
 from workbench.geometry.repair import repair
+from workbench.params import HAND_SIZED, PART_SIZE, SCALE
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254}
 NAMES = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "in": "inches"}
-MAX_EXTENT = 2.0
-MIN_EXTENT = 0.005
-TYPICAL = (0.01, 0.5)  # the sizes (m) of parts a hand-sized gripper usually meets, for the unit hints
+MIN_EXTENT, MAX_EXTENT = PART_SIZE.lo, PART_SIZE.hi  # declared in workbench.params, quoted by every size message
+TYPICAL = (HAND_SIZED.lo, HAND_SIZED.hi)  # the sizes (m) of parts a hand-sized gripper usually meets, for the unit hints
+MAX_TRIANGLES = 2**31 - 1  # the store keeps vertex indices as 32-bit integers (object.faces INTEGER[3][])
 
 
 class MeshWarning(UserWarning):
@@ -56,8 +58,8 @@ def resolve_scale(scale: float | None, units: str | None) -> float:
             raise MeshError(f"unknown unit {units!r}: use one of {', '.join(UNITS)}")
         return UNITS[units]
     s = 1.0 if scale is None else float(scale)
-    if not np.isfinite(s) or s <= 0:
-        raise MeshError(f"scale must be a positive finite number, got {scale!r}")
+    if SCALE.problem(s) is not None:
+        raise MeshError(f"scale must be a positive finite number, {SCALE.describe()}, got {scale!r}")
     return s
 
 
@@ -73,6 +75,7 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
         raise MeshError(f"object file {path} is a folder; give a mesh file (STL, OBJ, PLY, OFF, GLB, DAE)")
     if path.stat().st_size == 0:
         raise MeshError(f"object file {path} is empty")
+    check_declared_size(path)
     try:
         loaded = trimesh.load(path, force=None, process=False)
     except Exception as exc:  # trimesh raises many types for unreadable files
@@ -93,9 +96,43 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
         extent = float(np.ptp(np.asarray(loaded.vertices)[np.unique(loaded.faces)], axis=0).max())
         if TYPICAL[1] < extent <= MAX_EXTENT:  # larger: refused as implausible below, whatever is accepted
             raise MeshError(f"object file {path} is {extent:.4g} m across read in metres (no --units or --scale), not a "
-                            f"hand-sized part; {_scale_hint(extent)}; or give --accept-size to plan it in metres")
+                            f"hand-sized part ({HAND_SIZED.describe()}); {_scale_hint(extent)}; or give --accept-size "
+                            f"to plan it in metres")
     return from_arrays(loaded.vertices, loaded.faces, scale=resolve_scale(scale, units),
                        name=name or path.stem, source=str(path), pieces=pieces)
+
+
+def check_triangle_count(triangles: int, label: str, vertices: int = 0, verb: str = "has") -> None:
+    """Refuse a mesh of more triangles (or vertices) than the store's 32-bit indices hold, before any array is built."""
+    for count, what in ((triangles, "triangles"), (vertices, "vertices")):
+        if count > MAX_TRIANGLES:
+            raise MeshError(f"{label} {verb} {count:,} {what}, more than the {MAX_TRIANGLES:,} a store holds (32-bit "
+                            f"indices); decimate it (e.g. to a million triangles) first")
+
+
+def check_declared_size(path: Path) -> None:
+    """The triangle count a binary STL's or a PLY's header declares, checked before the mesh is read: above the
+    store's limit, or more triangles than the file's bytes can hold (a damaged or truncated file), it is refused
+    in one line instead of failing inside the reader."""
+    size = path.stat().st_size
+    with open(path, "rb") as fh:
+        head = fh.read(4096)
+    suffix = path.suffix.lower()
+    ascii_stl = head.lstrip().lower().startswith(b"solid") and b"facet" in head.lower()
+    if suffix == ".stl" and len(head) >= 84 and not ascii_stl:  # a binary header may begin with "solid" too
+        n = int.from_bytes(head[80:84], "little")
+        check_triangle_count(n, f"object file {path}", verb="declares in its binary STL header")
+        if size < 84 + 50 * n:
+            raise MeshError(f"object file {path} is a binary STL whose header declares {n:,} triangles ({84 + 50 * n:,} "
+                            f"bytes) but holds {size:,} bytes: it is truncated or damaged; export it again")
+    elif suffix == ".ply" and head.startswith(b"ply"):
+        m = re.search(rb"^element\s+face\s+(\d+)", head, re.MULTILINE)
+        if m:
+            n = int(m.group(1))
+            check_triangle_count(n, f"object file {path}", verb="declares in its PLY header")
+            if size < 3 * n:  # at least a count byte and two more per face, whatever the format
+                raise MeshError(f"object file {path} declares {n:,} faces in its PLY header but holds {size:,} bytes: it is "
+                                f"truncated or damaged; export it again")
 
 
 def from_trimesh(mesh: trimesh.Trimesh, name: str, scale: float = 1.0) -> ObjectModel:
@@ -114,6 +151,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         raise MeshError(f"{label} has no vertices")
     if faces.ndim != 2 or faces.shape[1] != 3 or len(faces) == 0:
         raise MeshError(f"{label} has no triangle faces")
+    check_triangle_count(len(faces), label, len(vertices))
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices)).any(axis=1).sum())
         raise MeshError(f"{label} has {bad} vertices with NaN or infinite coordinates; repair the file")
@@ -123,7 +161,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     extent = float(np.ptp(vertices[np.unique(faces)] * scale, axis=0).max())
     if extent > MAX_EXTENT or (MIN_EXTENT > extent > 0):
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
-                        f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {_scale_hint(extent, scale)}")
+                        f"(allowed: {PART_SIZE.describe()}); {_scale_hint(extent, scale)}")
     mesh = trimesh.Trimesh(vertices * scale, faces, process=False, validate=False)
     mesh, repairs = repair(mesh, label, pieces=pieces)
     for note in repairs:
@@ -132,7 +170,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     if extent > MAX_EXTENT or extent < MIN_EXTENT:
         hint = _scale_hint(extent, scale)
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
-                        f"(allowed {MIN_EXTENT}-{MAX_EXTENT} m); {hint}")
+                        f"(allowed: {PART_SIZE.describe()}); {hint}")
     if extent > TYPICAL[1] and scale == 1.0:
         warnings.warn(f"{label} is {extent:.3g} m across read in metres, larger than a gripper-sized part; "
                       f"{_scale_hint(extent, scale)}", MeshWarning, stacklevel=3)
@@ -156,8 +194,14 @@ def _scale_hint(extent: float, scale: float = 1.0) -> str:
     if typical or fits:
         return "; ".join(f"if the file is in {NAMES[u]}, pass --units {u} ({raw * f * 1000:.3g} mm across)"
                          for u, f in (typical or fits))
-    if extent < MIN_EXTENT:
-        need = MIN_EXTENT / raw
-        return (f"no unit makes it at least {MIN_EXTENT * 1000:g} mm across: it would take --scale {need:.3g} or more; "
-                f"check the file's units, or the part is too small to grip")
-    return f"it would take --scale {MAX_EXTENT / raw:.3g} or less; pass the scale that converts the file's units to metres"
+    small = extent < MIN_EXTENT
+    limit = MIN_EXTENT if small else MAX_EXTENT
+    need, side = limit / raw, "or more" if small else "or less"
+    if SCALE.problem(need) is not None:  # beyond --scale's declared range: no value of it would do
+        return (f"no unit or --scale ({SCALE.describe()}) makes it {'at least' if small else 'at most'} {limit * 1000:g} mm "
+                f"across (it would take --scale {need:.3g} {side}); check the file, or the part cannot be gripped")
+    if small:
+        return (f"no unit makes it at least {limit * 1000:g} mm across: it would take --scale {need:.3g} or more "
+                f"({SCALE.describe()}); check the file's units, or the part is too small to grip")
+    return (f"it would take --scale {need:.3g} or less ({SCALE.describe()}); pass the scale that converts the file's "
+            f"units to metres")

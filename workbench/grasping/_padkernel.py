@@ -1,5 +1,7 @@
-"""Compiled first-touch kernel of the pad contact model (`pads.first_touches`): one pass per jaw axis over the
-triangles near it, every hand rotation, both pads. Numba, cached on disk after the first compile."""
+"""Compiled first-touch kernel of the pad contact model (`pads.first_touches`): a bounding-volume hierarchy over the
+triangles, searched per jaw axis, hand rotation and pad by branch and bound (a pad's first touch is the highest point
+in its footprint, so a subtree whose bounds lie below the best touch so far, or outside the footprint, is skipped).
+Numba, cached on disk after the first compile."""
 
 from __future__ import annotations
 
@@ -7,69 +9,7 @@ import numpy as np
 from numba import njit
 
 _EPS = 1e-12
-
-
-@njit(cache=True)
-def _cell_key(i, j, k, n1, n2):
-    return (i * n1 + j) * n2 + k
-
-
-@njit(cache=True)
-def _axis_triangles(o, y, lo_b, hi_b, cell, dims, start, order, big, centre, reach, radius, out, mark, cmark, stamp):
-    """Triangles whose bounding sphere, grown by `radius`, reaches the axis line (o, y): the grid cells the line's
-    chord through the box crosses, widened by the largest small-triangle reach, plus the large triangles."""
-    n = 0
-    for b in big:
-        d0, d1, d2 = centre[b, 0] - o[0], centre[b, 1] - o[1], centre[b, 2] - o[2]
-        al = d0 * y[0] + d1 * y[1] + d2 * y[2]
-        if d0 * d0 + d1 * d1 + d2 * d2 - al * al <= reach[b] ** 2:
-            out[n] = b
-            n += 1
-    # the chord of the line through the grid box
-    t0, t1 = -np.inf, np.inf
-    for a in range(3):
-        if abs(y[a]) < 1e-300:
-            if o[a] < lo_b[a] or o[a] > hi_b[a]:
-                return n
-        else:
-            u = (lo_b[a] - o[a]) / y[a]
-            v = (hi_b[a] - o[a]) / y[a]
-            if u > v:
-                u, v = v, u
-            t0 = max(t0, u)
-            t1 = min(t1, v)
-    if t0 > t1 or len(order) == 0:
-        return n
-    step = 0.5 * cell
-    m = int((t1 - t0) / step) + 2
-    # cells either side of a sampled line point: a small triangle's centre lies within its size (< cell) plus
-    # `radius` of the line, and the nearest sample is within a quarter cell along it
-    w = int(np.ceil(radius / cell + 1.25)) + 1
-    for s in range(m):
-        tt = min(t0 + s * step, t1)
-        ci = int((o[0] + tt * y[0] - lo_b[0]) / cell)
-        cj = int((o[1] + tt * y[1] - lo_b[1]) / cell)
-        ck = int((o[2] + tt * y[2] - lo_b[2]) / cell)
-        for i in range(max(ci - w, 0), min(ci + w + 1, dims[0])):
-            for j in range(max(cj - w, 0), min(cj + w + 1, dims[1])):
-                for k in range(max(ck - w, 0), min(ck + w + 1, dims[2])):
-                    c = _cell_key(i, j, k, dims[1], dims[2])
-                    if cmark[c] == stamp:
-                        continue
-                    cmark[c] = stamp
-                    for q in range(start[c], start[c + 1]):
-                        f = order[q]
-                        if mark[f] == stamp:
-                            continue
-                        mark[f] = stamp
-                        d0, d1, d2 = centre[f, 0] - o[0], centre[f, 1] - o[1], centre[f, 2] - o[2]
-                        al = d0 * y[0] + d1 * y[1] + d2 * y[2]
-                        if d0 * d0 + d1 * d1 + d2 * d2 - al * al <= reach[f] ** 2:
-                            out[n] = f
-                            n += 1
-    # the triangle order of a brute-force scan, so that ties break the same way whatever the grid
-    out[:n].sort()
-    return n
+_STACK = 256  # deeper than any tree: the implicit tree of 2^62 leaves has 63 levels, a search holds one child per level
 
 
 @njit(cache=True)
@@ -162,126 +102,255 @@ def _candidates(x, y, z, hx, hz, ax, az, px, py, pz, valid):
 
 
 @njit(cache=True)
-def first_touch_kernel(tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max,
-                       lo_b, hi_b, cell, dims, start, order, big, centre, reach):
+def _project(shape, node, o, u, slack):
+    """The range (min, max) of a node's box along the unit vector `u`, measured from `o`, widened by `slack`."""
+    mid = 0.0
+    rad = 0.0
+    for a in range(3):
+        mid += (0.5 * (shape[node, a] + shape[node, 3 + a]) - o[a]) * u[a]
+        rad += 0.5 * (shape[node, 3 + a] - shape[node, a]) * abs(u[a])
+    return mid - rad - slack, mid + rad + slack
+
+
+@njit(cache=True)
+def _reach(shape, node, o, u, slack):
+    """The range (min, max) along the unit vector `u`, from `o`, of a node's points: the box's range, narrowed by the
+    node's bounding sphere cut by its slab (centre, radius, normal n, offsets d0..d1 along n; `_node_shapes`). For a
+    patch nearly facing `u` the slab is far tighter than the box, so the search stays near the touch."""
+    lo_b, hi_b = _project(shape, node, o, u, slack)
+    c = 0.0
+    cn = 0.0
+    for a in range(3):
+        c += (shape[node, 6 + a] - o[a]) * u[a]
+        cn += shape[node, 10 + a] * u[a]
+    r, d0, d1 = shape[node, 9], shape[node, 13], shape[node, 14]
+    sn = np.sqrt(max(0.0, 1.0 - cn * cn))
+    # max over offsets a in [d0, d1] of a cos + sqrt(r^2 - a^2) sin (concave in a, largest at a = r cos), and the min
+    a = min(max(r * cn, d0), d1)
+    top = a * cn + np.sqrt(max(r * r - a * a, 0.0)) * sn
+    a = min(max(-r * cn, d0), d1)
+    bottom = a * cn - np.sqrt(max(r * r - a * a, 0.0)) * sn
+    return max(lo_b, c + bottom - slack), min(hi_b, c + top + slack)
+
+
+@njit(cache=True)
+def _key(shape, node, o, y, ux, uz, slack, si, wlo, whi, a_max, a_min, tie, cx, cz, hx, hz):
+    """How high (the left pad, si 0) or low (the right, as minus the height) a node's points can be first touched;
+    -inf for an empty node, one outside the pad's footprint or window, or one wholly between the axis's crossings
+    (touched by neither pad)."""
+    if shape[node, 0] > shape[node, 3]:
+        return -np.inf
+    ymn, ymx = _reach(shape, node, o, y, slack)
+    if ymx < wlo or ymn > whi or (ymx < a_max - tie and ymn > a_min + tie):
+        return -np.inf
+    xmn, xmx = _project(shape, node, o, ux, slack)
+    if xmn - cx > hx or xmx - cx < -hx:
+        return -np.inf
+    zmn, zmx = _project(shape, node, o, uz, slack)
+    if zmn - cz > hz or zmx - cz < -hz:
+        return -np.inf
+    return ymx if si == 0 else -ymn
+
+
+@njit(cache=True)
+def _heap_push(key, node, n, k, v):
+    """Push (k, v) on the max-heap of size n; returns its new size."""
+    i = n
+    while i > 0:
+        parent = (i - 1) // 2
+        if key[parent] >= k:
+            break
+        key[i], node[i] = key[parent], node[parent]
+        i = parent
+    key[i], node[i] = k, v
+    return n + 1
+
+
+@njit(cache=True)
+def _heap_pop(key, node, n):
+    """Remove the top of the max-heap of size n; returns its new size."""
+    n -= 1
+    k, v = key[n], node[n]
+    i = 0
+    while True:
+        c = 2 * i + 1
+        if c >= n:
+            break
+        if c + 1 < n and key[c + 1] > key[c]:
+            c += 1
+        if key[c] <= k:
+            break
+        key[i], node[i] = key[c], node[c]
+        i = c
+    key[i], node[i] = k, v
+    return n
+
+
+@njit(cache=True)
+def _line_meets_box(shape, node, o, y, slack):
+    """Does the line (o, y) pass through the node's box widened by `slack`?"""
+    t0, t1 = -np.inf, np.inf
+    for a in range(3):
+        b0, b1 = shape[node, a] - slack, shape[node, 3 + a] + slack
+        if abs(y[a]) < 1e-300:
+            if o[a] < b0 or o[a] > b1:
+                return False
+        else:
+            u = (b0 - o[a]) / y[a]
+            v = (b1 - o[a]) / y[a]
+            if u > v:
+                u, v = v, u
+            t0 = max(t0, u)
+            t1 = min(t1, v)
+    return t0 <= t1
+
+
+@njit(cache=True)
+def _local(tri, f, o, x0, y, z0, ca, cb, ly):
+    """Triangle (slot) f's vertices relative to the axis origin `o` along z0 (ca), x0 (cb) and y (ly); (min, max) of ly."""
+    mn, mx = np.inf, -np.inf
+    for v in range(3):
+        r0, r1, r2 = tri[f, v, 0] - o[0], tri[f, v, 1] - o[1], tri[f, v, 2] - o[2]
+        ca[v] = r0 * z0[0] + r1 * z0[1] + r2 * z0[2]
+        cb[v] = r0 * x0[0] + r1 * x0[1] + r2 * x0[2]
+        ly[v] = r0 * y[0] + r1 * y[1] + r2 * y[2]
+        mn = min(mn, ly[v])
+        mx = max(mx, ly[v])
+    return mn, mx
+
+
+@njit(cache=True)
+def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max):
     """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y,
-    local contact point (TCP frame of that rotation), triangle."""
+    local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
+    triangles and their unit normals by leaf slot."""
     cx, cz, hx, hz = rect[0], rect[1], rect[2], rect[3]
     radius = np.hypot(abs(cx) + hx, abs(cz) + hz)
-    K, A, T = origins.shape[0], angles.shape[0], tri.shape[0]
+    rad2 = radius * radius
+    K, A, T = origins.shape[0], angles.shape[0], slots.shape[0]
+    P = shape.shape[0] // 2  # leaves are the nodes P .. 2P-1 of the implicit tree, the root is node 1
     found = np.zeros((K * A, 2), dtype=np.bool_)
     height = np.zeros((K * A, 2))
     local = np.zeros((K * A, 2, 3))
     tri_id = np.full((K * A, 2), -1, dtype=np.int64)
-    near = np.empty(T, dtype=np.int64)
-    mark = np.full(T, -1, dtype=np.int64)
-    cmark = np.full(len(start), -1, dtype=np.int64)
-    ly = np.empty((T, 3))
-    ca = np.empty((T, 3))
-    cb = np.empty((T, 3))
-    ny = np.empty(T)
-    keep = np.empty(T, dtype=np.int64)
+    if shape[1, 0] > shape[1, 3]:  # no triangle
+        return found, height, local, tri_id
+    diag = 0.0
+    for a in range(3):
+        diag += (shape[1, 3 + a] - shape[1, a]) ** 2
+    # a box bound is exact up to rounding; the slack keeps every pruning conservative against the per-triangle tests
+    slack = 1e-9 * (1.0 + np.sqrt(diag))
+    stack = np.empty(_STACK, dtype=np.int64)
+    hkey = np.empty(P + 1)  # the open nodes of a best-first search: fewer than the leaves
+    hnode = np.empty(P + 1, dtype=np.int64)
     # the rows of one pose and pad: triangle, top, local point, d2, align
     rt = np.empty(T, dtype=np.int64)
     rs = np.empty(T)
     rp = np.empty((T, 3))
     rd = np.empty(T)
     ra = np.empty(T)
-    ymx = np.empty(T)
-    ymn = np.empty(T)
-    lx3, lz3, ly3 = np.empty(3), np.empty(3), np.empty(3)
+    ca, cb, ly = np.empty(3), np.empty(3), np.empty(3)
+    lx3, lz3 = np.empty(3), np.empty(3)
     px, py, pz = np.empty(20), np.empty(20), np.empty(20)
     valid = np.empty(20, dtype=np.bool_)
-    rad2 = radius * radius
+    ux, uz = np.empty(3), np.empty(3)
     for k in range(K):
         o = origins[k]
         x0, y, z0 = frames0[k, 0], frames0[k, 1], frames0[k, 2]
         wlo, whi = windows[k, 0], windows[k, 1]
-        n = _axis_triangles(o, y, lo_b, hi_b, cell, dims, start, order, big, centre, reach, radius, near, mark, cmark, k)
-        m = 0
+        # where the axis itself crosses the surface: points inside every rotation's footprint
         a_max, a_min = -np.inf, np.inf
-        for q in range(n):
-            f = near[q]
-            for v in range(3):
-                r0, r1, r2 = tri[f, v, 0] - o[0], tri[f, v, 1] - o[1], tri[f, v, 2] - o[2]
-                ca[m, v] = r0 * z0[0] + r1 * z0[1] + r2 * z0[2]
-                cb[m, v] = r0 * x0[0] + r1 * x0[1] + r2 * x0[2]
-            # a projection that misses the disc every rotated pad rectangle lies in is touched at no rotation
-            if not _meets_disc(cb[m], ca[m], rad2):
+        stack[0] = 1
+        top = 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            if shape[node, 0] > shape[node, 3] or not _line_meets_box(shape, node, o, y, slack):
                 continue
-            mn, mx = np.inf, -np.inf
-            for v in range(3):
-                r0, r1, r2 = tri[f, v, 0] - o[0], tri[f, v, 1] - o[1], tri[f, v, 2] - o[2]
-                ly[m, v] = r0 * y[0] + r1 * y[1] + r2 * y[2]
-                mn = min(mn, ly[m, v])
-                mx = max(mx, ly[m, v])
-            if mx < wlo or mn > whi:
+            if node < P:
+                stack[top] = 2 * node
+                stack[top + 1] = 2 * node + 1
+                top += 2
                 continue
-            ymn[m], ymx[m] = mn, mx
-            ny[m] = fn[f, 0] * y[0] + fn[f, 1] * y[1] + fn[f, 2] * y[2]
-            keep[m] = f
-            # where the axis itself crosses the triangle: surface points inside every rotation's footprint
-            e1x, e1z = cb[m, 1] - cb[m, 0], ca[m, 1] - ca[m, 0]
-            e2x, e2z = cb[m, 2] - cb[m, 0], ca[m, 2] - ca[m, 0]
-            det = e1x * e2z - e2x * e1z
-            if abs(det) > 1e-18:
-                inv = 1.0 / det
-                qx, qz = -cb[m, 0], -ca[m, 0]
-                u = (qx * e2z - e2x * qz) * inv
-                v = (e1x * qz - qx * e1z) * inv
-                if u >= -1e-12 and v >= -1e-12 and u + v <= 1 + 1e-12:
-                    h = ly[m, 0] + u * (ly[m, 1] - ly[m, 0]) + v * (ly[m, 2] - ly[m, 0])
-                    if h <= whi:
-                        a_max = max(a_max, h)
-                    if h >= wlo:
-                        a_min = min(a_min, h)
-            m += 1
+            for q in range((node - P) * leaf, (node - P + 1) * leaf):
+                if slots[q] < 0:
+                    continue
+                mn, mx = _local(tri, q, o, x0, y, z0, ca, cb, ly)
+                if mx < wlo or mn > whi or not _meets_disc(cb, ca, rad2):
+                    continue
+                e1x, e1z = cb[1] - cb[0], ca[1] - ca[0]
+                e2x, e2z = cb[2] - cb[0], ca[2] - ca[0]
+                det = e1x * e2z - e2x * e1z
+                if abs(det) > 1e-18:
+                    inv = 1.0 / det
+                    qx, qz = -cb[0], -ca[0]
+                    u = (qx * e2z - e2x * qz) * inv
+                    v = (e1x * qz - qx * e1z) * inv
+                    if u >= -1e-12 and v >= -1e-12 and u + v <= 1 + 1e-12:
+                        h = ly[0] + u * (ly[1] - ly[0]) + v * (ly[2] - ly[0])
+                        if h <= whi:
+                            a_max = max(a_max, h)
+                        if h >= wlo:
+                            a_min = min(a_min, h)
         # an axis whose own crossings are farther apart than the jaw opens cannot be grasped at any rotation
         if np.isfinite(a_max - a_min) and a_max - a_min > jaw_max + tie:
             continue
-        # a triangle wholly between the axis's highest and lowest crossings is first touched by neither pad
-        mm = 0
-        for q in range(m):
-            if not (ymx[q] >= a_max - tie or ymn[q] <= a_min + tie):
-                continue
-            ly[mm], ca[mm], cb[mm], ny[mm], keep[mm], ymx[mm], ymn[mm] = ly[q], ca[q], cb[q], ny[q], keep[q], ymx[q], ymn[q]
-            mm += 1
-        # each pad meets the triangles in the order they can first be touched (highest top for the left pad, lowest
-        # bottom for the right): once a triangle's bound is `tie` below the best touch so far, none after it counts
-        order0 = np.argsort(-ymx[:mm])
-        order1 = np.argsort(ymn[:mm])
         for j in range(A):
             c, s = np.cos(angles[j]), np.sin(angles[j])
+            for a in range(3):
+                ux[a] = c * x0[a] - s * z0[a]
+                uz[a] = c * z0[a] + s * x0[a]
             hrow = k * A + j
             for si in range(2):
                 side = 1 if si == 0 else -1
-                seq = order0 if si == 0 else order1
                 nr = 0
                 g = -np.inf
-                for qq in range(mm):
-                    q = seq[qq]
-                    if (ymx[q] if si == 0 else -ymn[q]) < g - tie:
+                # best first: the node that may reach highest (lowest for the right pad) is opened next, and the
+                # search ends once no open node reaches within `tie` of the best touch
+                kk = _key(shape, 1, o, y, ux, uz, slack, si, wlo, whi, a_max, a_min, tie, cx, cz, hx, hz)
+                hn = _heap_push(hkey, hnode, 0, kk, 1) if kk > -np.inf else 0
+                while hn > 0:
+                    if hkey[0] < g - tie:
                         break
-                    xmn, xmx, zmn, zmx = np.inf, -np.inf, np.inf, -np.inf
-                    for v in range(3):
-                        lz3[v] = c * ca[q, v] + s * cb[q, v] - cz
-                        lx3[v] = c * cb[q, v] - s * ca[q, v] - cx
-                        ly3[v] = ly[q, v]
-                        xmn, xmx = min(xmn, lx3[v]), max(xmx, lx3[v])
-                        zmn, zmx = min(zmn, lz3[v]), max(zmx, lz3[v])
-                    if xmn > hx or xmx < -hx or zmn > hz or zmx < -hz:
+                    node = hnode[0]
+                    hn = _heap_pop(hkey, hnode, hn)
+                    if node < P:
+                        for child in (2 * node, 2 * node + 1):
+                            kk = _key(shape, child, o, y, ux, uz, slack, si, wlo, whi, a_max, a_min, tie, cx, cz, hx, hz)
+                            if kk > -np.inf and kk >= g - tie:
+                                hn = _heap_push(hkey, hnode, hn, kk, child)
                         continue
-                    _candidates(lx3, ly3, lz3, hx, hz, -cx, -cz, px, py, pz, valid)
-                    top, b, d2 = _pick(px, py, pz, valid, side, wlo, whi, tie, cx, cz)
-                    if b < 0:
-                        continue
-                    rt[nr] = keep[q]
-                    rs[nr] = top
-                    rp[nr, 0], rp[nr, 1], rp[nr, 2] = px[b] + cx, py[b], pz[b] + cz
-                    rd[nr] = d2
-                    ra[nr] = abs(ny[q]) if flip else side * ny[q]
-                    nr += 1
-                    g = max(g, top)
+                    for qs in range((node - P) * leaf, (node - P + 1) * leaf):
+                        f = slots[qs]
+                        if f < 0:
+                            continue
+                        mn, mx = _local(tri, qs, o, x0, y, z0, ca, cb, ly)
+                        if not _meets_disc(cb, ca, rad2) or mx < wlo or mn > whi:
+                            continue
+                        if not (mx >= a_max - tie or mn <= a_min + tie):
+                            continue
+                        if (mx if si == 0 else -mn) < g - tie:
+                            continue
+                        xmn3, xmx3, zmn3, zmx3 = np.inf, -np.inf, np.inf, -np.inf
+                        for v in range(3):
+                            lz3[v] = c * ca[v] + s * cb[v] - cz
+                            lx3[v] = c * cb[v] - s * ca[v] - cx
+                            xmn3, xmx3 = min(xmn3, lx3[v]), max(xmx3, lx3[v])
+                            zmn3, zmx3 = min(zmn3, lz3[v]), max(zmx3, lz3[v])
+                        if xmn3 > hx or xmx3 < -hx or zmn3 > hz or zmx3 < -hz:
+                            continue
+                        _candidates(lx3, ly, lz3, hx, hz, -cx, -cz, px, py, pz, valid)
+                        tp, b, d2 = _pick(px, py, pz, valid, side, wlo, whi, tie, cx, cz)
+                        if b < 0:
+                            continue
+                        ny = fn[qs, 0] * y[0] + fn[qs, 1] * y[1] + fn[qs, 2] * y[2]
+                        rt[nr] = f
+                        rs[nr] = tp
+                        rp[nr, 0], rp[nr, 1], rp[nr, 2] = px[b] + cx, py[b], pz[b] + cz
+                        rd[nr] = d2
+                        ra[nr] = abs(ny) if flip else side * ny
+                        nr += 1
+                        g = max(g, tp)
                 if nr == 0:
                     continue
                 # among the touches within `tie` of the best: nearest the axis, then best facing, then lowest index
@@ -300,25 +369,102 @@ def first_touch_kernel(tri, fn, flip, origins, frames0, angles, rect, tie, windo
     return found, height, local, tri_id
 
 
-def triangle_grid(tri: np.ndarray, radius: float, brute: int = 4096):
-    """A uniform grid over triangle centres (cells about the pad's reach), the triangles far larger than a cell kept
-    apart: (lo, hi, cell, dims, start, order, big, centre, reach) for `first_touch_kernel`."""
+def _spread(v: np.ndarray) -> np.ndarray:
+    """The bits of 10-bit integers spread three apart (one axis of a Morton code)."""
+    v = (v | (v << 16)) & 0x030000FF
+    v = (v | (v << 8)) & 0x0300F00F
+    v = (v | (v << 4)) & 0x030C30C3
+    return (v | (v << 2)) & 0x09249249
+
+
+@njit(cache=True)
+def _node_shapes(tri, slots, leaf, shape):  # tri by leaf slot
+    """Fill `shape`: per node its box (lo, hi; empty: lo > hi), the box centre c, the radius of a sphere about c holding
+    the node's points, the unit mean normal n of its triangles (area-weighted; any unit vector where they cancel) and
+    the least and largest offsets of its points along n. Exact at the leaves; a parent's sphere and offsets hold its
+    children's (their reach along n by `_reach`), so the tree is built in one pass over the triangles."""
+    N = shape.shape[0]
+    P = N // 2
+    nsum = np.zeros((N, 3))
+    shape[:, 0:3] = np.inf
+    shape[:, 3:6] = -np.inf
+    for node in range(P, N):
+        for q in range((node - P) * leaf, (node - P + 1) * leaf):
+            if slots[q] < 0:
+                continue
+            for v in range(3):
+                for a in range(3):
+                    shape[node, a] = min(shape[node, a], tri[q, v, a])
+                    shape[node, 3 + a] = max(shape[node, 3 + a], tri[q, v, a])
+            e1 = tri[q, 1] - tri[q, 0]
+            e2 = tri[q, 2] - tri[q, 0]
+            nsum[node, 0] += e1[1] * e2[2] - e1[2] * e2[1]
+            nsum[node, 1] += e1[2] * e2[0] - e1[0] * e2[2]
+            nsum[node, 2] += e1[0] * e2[1] - e1[1] * e2[0]
+    for node in range(P - 1, 0, -1):
+        nsum[node] = nsum[2 * node] + nsum[2 * node + 1]
+        for a in range(3):
+            shape[node, a] = min(shape[2 * node, a], shape[2 * node + 1, a])
+            shape[node, 3 + a] = max(shape[2 * node, 3 + a], shape[2 * node + 1, 3 + a])
+    for node in range(N - 1, 0, -1):
+        if shape[node, 0] > shape[node, 3]:
+            continue
+        c = 0.5 * (shape[node, 0:3] + shape[node, 3:6])
+        ln = np.sqrt(nsum[node, 0] ** 2 + nsum[node, 1] ** 2 + nsum[node, 2] ** 2)
+        n = nsum[node] / ln if ln > 0 else np.array([0.0, 0.0, 1.0])
+        r2, d0, d1 = 0.0, np.inf, -np.inf
+        if node >= P:
+            for q in range((node - P) * leaf, (node - P + 1) * leaf):
+                if slots[q] < 0:
+                    continue
+                for v in range(3):
+                    w0, w1, w2 = tri[q, v, 0] - c[0], tri[q, v, 1] - c[1], tri[q, v, 2] - c[2]
+                    r2 = max(r2, w0 * w0 + w1 * w1 + w2 * w2)
+                    d = w0 * n[0] + w1 * n[1] + w2 * n[2]
+                    d0 = min(d0, d)
+                    d1 = max(d1, d)
+            r = np.sqrt(r2)
+        else:
+            r = 0.0
+            for child in (2 * node, 2 * node + 1):
+                if shape[child, 0] > shape[child, 3]:
+                    continue
+                gap = np.sqrt(((shape[child, 6:9] - c) ** 2).sum())
+                r = max(r, gap + shape[child, 9])
+                a, b = _reach(shape, child, c, n, 0.0)
+                d0 = min(d0, a)
+                d1 = max(d1, b)
+            r = min(r, np.sqrt(((shape[node, 3:6] - shape[node, 0:3]) ** 2).sum()) / 2)  # the box's own sphere
+        shape[node, 6:9] = c
+        shape[node, 9] = r
+        shape[node, 10:13] = n
+        shape[node, 13], shape[node, 14] = d0, d1
+
+
+def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int = 4) -> tuple:
+    """A bounding-volume hierarchy over triangles (T, 3, 3) for `first_touch_kernel`: the triangles in Morton order of
+    their centres, `leaf` to a leaf, and a complete binary tree over the leaves (node 1 the root, node i's children
+    2i and 2i + 1, the leaves P .. 2P - 1). Returns the node shapes (2P, 15): box lo, hi (empty: lo > hi), and the
+    sphere and slab of `_node_shapes`; the triangle of every leaf slot (P * leaf, -1 for none); `leaf`; and the
+    triangles and their `normals` (T, 3) by slot, so that a leaf's triangles lie together in memory. `leaf` >= T gives
+    one leaf: a scan of every triangle."""
+    tri = np.ascontiguousarray(tri, dtype=np.float64).reshape(-1, 3, 3)
+    n, leaf = len(tri), max(int(leaf), 1)
     centre = tri.mean(axis=1)
-    size = np.linalg.norm(tri - centre[:, None, :], axis=2).max(axis=1)
-    reach = size + radius
-    lo = centre.min(axis=0) if len(tri) else np.zeros(3)
-    hi = centre.max(axis=0) if len(tri) else np.zeros(3)
-    cell = max(2 * radius, float(np.max(hi - lo)) / 64, 1e-6)
-    # padded, so that a line passing beside the centres' box still crosses the grid where it nears them
-    lo, hi = lo - 2 * radius - cell, hi + 2 * radius + cell
-    dims = np.maximum(np.ceil((hi - lo) / cell).astype(np.int64), 1)
-    hi = lo + dims * cell
-    # reached from more cells than the search widens by, or a mesh small enough to scan: tested one by one
-    big_mask = (size > cell) | (len(tri) <= brute)
-    idx = np.clip(((centre - lo) / cell).astype(np.int64), 0, dims - 1)
-    key = (idx[:, 0] * dims[1] + idx[:, 1]) * dims[2] + idx[:, 2]
-    small = np.flatnonzero(~big_mask)
-    order = small[np.argsort(key[small], kind="stable")]
-    start = np.searchsorted(key[order], np.arange(int(np.prod(dims)) + 1))
-    return lo, hi, float(cell), dims, start.astype(np.int64), order.astype(np.int64), \
-        np.flatnonzero(big_mask).astype(np.int64), centre, reach
+    if n:
+        c0, c1 = centre.min(axis=0), centre.max(axis=0)
+        q = np.clip(((centre - c0) / np.maximum(c1 - c0, 1e-300) * 1023).astype(np.int64), 0, 1023)
+        order = np.argsort(_spread(q[:, 0]) | (_spread(q[:, 1]) << 1) | (_spread(q[:, 2]) << 2), kind="stable")
+    else:
+        order = np.zeros(0, dtype=np.int64)
+    leaves = max(-(-n // leaf), 1)
+    P = 1 << int(np.ceil(np.log2(leaves)))
+    slots = np.full(P * leaf, -1, dtype=np.int64)
+    slots[:n] = order
+    shape = np.empty((2 * P, 15))
+    tri_s = np.zeros((P * leaf, 3, 3))
+    tri_s[:n] = tri[order]
+    fn_s = np.zeros((P * leaf, 3))
+    fn_s[:n] = np.asarray(normals, dtype=np.float64)[order]
+    _node_shapes(tri_s, slots, leaf, shape)
+    return shape, slots, leaf, tri_s, fn_s

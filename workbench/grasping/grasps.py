@@ -5,8 +5,9 @@ and boundary-distance filters), then for every kept (facet, sample) the jaw axis
 facet's normal at `rotations` hand rotations about it. Contacts follow CONVENTIONS.md (Gripper): each pad closes
 along the axis until its rectangle first touches the object (`pads.first_touches`); a grasp is kept when both contact
 normals lie within the friction cone, the opening fits the gripper, the contacts' centre is near the centre of mass
-(resistance to gravity torque), the hand at full opening clears the object (level 2 of the paper) and the hand and
-both fingers at the grasp's opening do not intersect it (within `finger_clearance`).
+(resistance to gravity torque), the hand at its pre-grasp opening clears the object along the approach (level 2 of
+the paper, which checks the hand at full opening at the grasp; `pregrasp_margin=None` approaches fully open) and the
+hand and both fingers at the grasp's opening do not intersect it (within `finger_clearance`).
 
 `contact_model="paper"` keeps the paper's own pairing, measured beside the default: project the sample along the
 inverse facet normal to a parallel facet, then level 1 (the pads' swept cylinders, rotation invariant) and level 2.
@@ -40,12 +41,21 @@ from workbench.geometry.collision import (
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
-from workbench.grasping.pads import Touches, axis_frames, fingertip_shifts, first_touches, gap_windows
+from workbench.grasping.pads import (
+    Touches,
+    axis_frames,
+    fingertip_shifts,
+    first_touches,
+    gap_windows,
+    pad_offsets,
+)
 from workbench.grasping.placements import stable_placements
-from workbench.params import Params, check_memory, param
+from workbench.params import Params, bounds, check_memory, param
 from workbench.robots.gripper import Gripper
 
 DEG = 180.0 / np.pi  # radians in the library, degrees on the command line
+PREGRASP_MARGIN = 0.010
+"""How much wider than the grasp the jaw opens to approach it (m), CONVENTIONS.md (Gripper)."""
 
 
 @dataclass(frozen=True)
@@ -100,6 +110,12 @@ class GraspParams(Params):
     fingertip_margin: float | None = param(0.003, ge=0, le=0.05, optional=True, unit="m",
                                            help="fingertip grasps of thin parts: the hand moved back so the fingertips "
                                                 "end this far short of the part's far side")
+    pregrasp_margin: float | None = param(PREGRASP_MARGIN, ge=0, le=0.5, optional=True, unit="m",
+                                          help="the hand approaches with the jaw open to the grasp's opening plus this "
+                                               "margin, capped at the stroke")
+    approach_length: float = param(0.05, ge=0, le=1.0, unit="m",
+                                   help="how far back along the approach the hand at its pre-grasp opening must clear "
+                                        "the part")
 
     def check(self) -> None:
         self.require(self.dist_min <= self.dist_max, ("dist_min", "dist_max"), "the distance filter needs dist_min <= dist_max")
@@ -113,6 +129,10 @@ class GraspParams(Params):
         if self.lengths not in ("adaptive", "fixed"):
             raise ParameterError(f"lengths {self.lengths!r} must be 'adaptive' or 'fixed'")
 
+    def pregrasp(self, widths: np.ndarray, gripper: Gripper) -> np.ndarray:
+        """The pre-grasp opening of grasps of `widths` (CONVENTIONS.md, Gripper)."""
+        return pregrasp_widths(widths, gripper.jaw_max, self.pregrasp_margin)
+
     @property
     def friction_coefficient(self) -> float:
         return float(np.tan(self.parallel_angle)) if self.friction is None else float(self.friction)
@@ -124,6 +144,15 @@ class GraspParams(Params):
         # com_max is under less torque than the reference part, so the distance only ever scales up
         return {"scale": s, "neighbour_radius": self.neighbour_radius * s, "dist_min": self.dist_min * s,
                 "dist_max": self.dist_max * s, "com_max": self.com_max * max(s, 1.0)}
+
+
+def pregrasp_widths(widths: np.ndarray, jaw_max: float, margin: float | None) -> np.ndarray:
+    """The jaw opening while approaching and leaving grasps of `widths`: min(width + margin, jaw_max), or `jaw_max`
+    (full opening) when `margin` is None (CONVENTIONS.md, Gripper)."""
+    widths = np.asarray(widths, dtype=np.float64)
+    if margin is None:
+        return np.full(widths.shape, float(jaw_max))
+    return np.minimum(widths + float(margin), float(jaw_max))
 
 
 def part_size(mesh: trimesh.Trimesh) -> float:
@@ -152,6 +181,7 @@ class ContactPairs:
     width_ok: np.ndarray
     com_ok: np.ndarray
     level1_ok: np.ndarray
+    axis: np.ndarray | None = None  # the jaw axis (+y of the TCP) of each row, with the pad model
 
     def __len__(self) -> int:
         return len(self.sample)
@@ -160,7 +190,9 @@ class ContactPairs:
 @dataclass(frozen=True)
 class GraspSet:
     """Collision-free grasps: contacts, outward normals, TCP poses in the object frame (G, 4, 4), jaw widths,
-    facet ids, contact-pair ids and the rotation about the jaw axis."""
+    facet ids, contact-pair ids and the rotation about the jaw axis; where each contact lies on its pad (`offset0`,
+    `offset1` (G, 2): along the TCP's x and z from the pad's centre, in pad half sizes, `pads.pad_offsets`) and the
+    grasp's `robustness` (`contact_robustness`: 1 with both contacts at their pads' centres, 0 at an edge)."""
 
     contact0: np.ndarray
     contact1: np.ndarray
@@ -172,9 +204,20 @@ class GraspSet:
     facet1: np.ndarray
     pair: np.ndarray
     rotation: np.ndarray
+    offset0: np.ndarray
+    offset1: np.ndarray
+    robustness: np.ndarray
 
     def __len__(self) -> int:
         return len(self.jawwidth)
+
+
+def contact_robustness(offset0: np.ndarray, offset1: np.ndarray) -> np.ndarray:
+    """(G,) how far both contacts of each grasp stay from their pads' edges: 1 - the largest offset of either contact
+    from its pad's centre (in pad half sizes, either axis), clipped to [0, 1]. A contact at a pad's edge (0) is the
+    least robust: a small slip or pose error moves it off the pad."""
+    worst = np.maximum(np.abs(offset0).max(axis=1, initial=0.0), np.abs(offset1).max(axis=1, initial=0.0))
+    return np.clip(1.0 - worst, 0.0, 1.0)
 
 
 @dataclass
@@ -248,33 +291,82 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
         pairs, poses, cand_pair, cand_rot, free = _paper(obj, gripper, params, lengths, facets, samples, margin,
                                                          counts, timings)
     g = cand_pair[free]
+    off0 = pad_offsets(poses[free], pairs.point0[g], gripper).reshape(-1, 2)
+    off1 = pad_offsets(poses[free], pairs.point1[g], gripper).reshape(-1, 2)
     grasps = GraspSet(contact0=pairs.point0[g], contact1=pairs.point1[g], normal0=pairs.normal0[g],
                       normal1=pairs.normal1[g], poses=poses[free], jawwidth=pairs.width[g], facet0=pairs.facet0[g],
-                      facet1=pairs.facet1[g], pair=g, rotation=cand_rot[free])
+                      facet1=pairs.facet1[g], pair=g, rotation=cand_rot[free], offset0=off0, offset1=off1,
+                      robustness=contact_robustness(off0, off1))
     counts["grasps"] = int(len(grasps))
     return GraspPlan(params=params, facets=facets, samples=samples, pairs=pairs, candidate_poses=poses,
                      candidate_pair=cand_pair, candidate_free=free, grasps=grasps, counts=counts, timings=timings,
                      lengths=lengths, empty_reason=empty_reason(counts, params, lengths, gripper, pairs))
 
 
-def _level2(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, clearance: float,
+def _level2(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, params: GraspParams,
             counts: dict, timings: dict, pads: bool = True) -> np.ndarray:
-    """Level 2: the hand at full opening at each pose, then the fingers at the grasp's opening (CONVENTIONS.md)."""
+    """Level 2: the hand at its pre-grasp opening swept along the approach to each pose, then the fingers at the
+    grasp's opening (CONVENTIONS.md, Gripper)."""
     t0 = time.perf_counter()
-    free = ~collide_at_poses(bvh(gripper.collision_mesh()), poses, target)
+    free = ~approach_collides(gripper, poses, params.pregrasp(widths, gripper), target, params.approach_length,
+                              params.finger_clearance)
     counts["hand_open"] = int(free.sum())
     timings["level2"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     idx = np.flatnonzero(free)
-    free[idx] = ~fingers_collide(gripper, poses[idx], widths[idx], target, clearance, pads)
+    free[idx] = ~fingers_collide(gripper, poses[idx], widths[idx], target, params.finger_clearance, pads)
     timings["fingers"] = time.perf_counter() - t0
     return free
+
+
+def swept_body(gripper: Gripper, length: float) -> trimesh.Trimesh:
+    """The volume the hand body sweeps moving `length` along the approach to its pose (TCP frame): the convex hull
+    of the body and its copy `length` back along -z. Exact for a convex body (the Franka hand's hull is within
+    0.01% of its volume), conservative otherwise."""
+    v = np.asarray(gripper.body.vertices, dtype=np.float64)
+    if length <= 0:
+        return gripper.body.convex_hull
+    return trimesh.Trimesh(np.vstack([v, v - [0.0, 0.0, length]])).convex_hull
+
+
+def swept_fingers(boxes: list[tuple[np.ndarray, np.ndarray]], length: float,
+                  clearance: float) -> tuple[trimesh.Trimesh, trimesh.Trimesh]:
+    """The volumes the left (+y) and right finger boxes (extents, pose; inner faces at y = 0) sweep moving `length`
+    along the TCP's +z to their pose, each box shrunk by `clearance` on every side first: per finger, the union of
+    every box's sweep, each the convex hull of the box's corners at both ends (exact)."""
+    corners = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (-0.5, 0.5)])
+    left, right = [], []
+    for ext, pose in boxes:
+        c = (corners * np.maximum(np.asarray(ext, dtype=np.float64) - 2 * clearance, 1e-6)) @ pose[:3, :3].T + pose[:3, 3]
+        hull = trimesh.Trimesh(np.vstack([c, c - [0.0, 0.0, length]])).convex_hull
+        (left if pose[1, 3] > 0 else right).append(hull)
+    return trimesh.util.concatenate(left), trimesh.util.concatenate(right)
+
+
+def approach_collides(gripper: Gripper, poses: np.ndarray, openings: np.ndarray, target, length: float,
+                      clearance: float) -> np.ndarray:
+    """(N,) whether the hand, with the fingers at `openings`, hits the object anywhere on its way along the approach
+    axis from `length` back to each pose: the body's sweep (`swept_body`) and both fingers' (`swept_fingers`, pads
+    included, shrunk by `clearance`), CONVENTIONS.md (Gripper: the gripper clears the object at its pre-grasp
+    opening along the approach)."""
+    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    openings = np.asarray(openings, dtype=np.float64)
+    out = collide_at_poses(bvh(swept_body(gripper, length)), poses, target)
+    live = np.flatnonzero(~out)
+    for sel, shape in gripper.width_groups(openings[live]):
+        rows = live[sel]
+        for side, finger in zip((1.0, -1.0), swept_fingers(shape, length, clearance)):
+            rows = rows[~out[rows]]
+            placed = poses[rows].copy()
+            placed[:, :3, 3] += side * openings[rows][:, None] / 2 * poses[rows][:, :3, 1]
+            out[rows] = collide_at_poses(bvh(finger), placed, target)
+    return out
 
 
 def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, clearance: float,
                     pads: bool = True) -> np.ndarray:
     """Do the finger boxes of both fingers at each grasp's opening, shrunk by `clearance` on every side, intersect
-    the object? (The body does not move with the fingers: it is tested at full opening.) `pads=False` skips the pad
+    the object? (The body does not move with the fingers: `approach_collides` tests it.) `pads=False` skips the pad
     boxes, for grasps whose pads closed onto their first touches and so cannot overlap the object."""
     widths = np.asarray(widths)
     out = np.zeros(len(poses), dtype=bool)
@@ -347,11 +439,10 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                          facet0=np.where(sampled, samples.pair_facet[source], _facet_of(facets, touch.tri0, y)),
                          facet1=_facet_of(facets, touch.tri1, -y), point0=touch.point0, point1=touch.point1,
                          normal0=touch.normal0, normal1=touch.normal1, width=touch.width, width_ok=width_ok,
-                         com_ok=com_ok, level1_ok=com_ok)
+                         com_ok=com_ok, level1_ok=com_ok, axis=y)
     live = np.flatnonzero(com_ok)
     target = object_collider(mesh)
-    free = _level2(gripper, touch.poses[live], touch.width[live], target, params.finger_clearance, counts, timings,
-                   pads=False)
+    free = _level2(gripper, touch.poses[live], touch.width[live], target, params, counts, timings, pads=False)
     kept = touch.poses[live]
     return pairs, kept, live, rotation_about_axis(kept[:, :3, 1], kept[:, :3, 2]), free
 
@@ -516,7 +607,7 @@ def _paper(obj, gripper, params, lengths, facets, samples, margin, counts, timin
     level1 = np.zeros(len(pairs), dtype=bool)
     idx = np.flatnonzero(ok)
     level1[idx] = ~swept_pads_collide(gripper, pairs.point0[idx], pairs.point1[idx], target, pairs.normal0[idx],
-                                      pairs.normal1[idx])
+                                      pairs.normal1[idx], params.pregrasp(pairs.width[idx], gripper))
     pairs = ContactPairs(**{**pairs.__dict__, "level1_ok": level1})
     timings["level1"] = time.perf_counter() - t0
     counts.update(contact_pairs=int(len(pairs)), pairs_width=int(pairs.width_ok.sum()),
@@ -531,8 +622,7 @@ def _paper(obj, gripper, params, lengths, facets, samples, margin, counts, timin
     counts["hand_poses"] = int(len(poses))
     # the pads themselves are level 1's (their swept cylinders stop short of a tilted facet, where a flat pad
     # at the contact would dig in by its rim): the other finger boxes are tested at the grasp's opening
-    free = _level2(gripper, poses, pairs.width[cand_pair], target, params.finger_clearance, counts, timings,
-                   pads=False)
+    free = _level2(gripper, poses, pairs.width[cand_pair], target, params, counts, timings, pads=False)
     return pairs, poses, cand_pair, cand_rot, free
 
 
@@ -605,8 +695,10 @@ def grasp_poses(point0: np.ndarray, point1: np.ndarray, angles: np.ndarray) -> n
 
 
 def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray, target,
-                       normal0: np.ndarray | None = None, normal1: np.ndarray | None = None) -> np.ndarray:
-    """The paper's level 1: does either pad's swept cylinder (from full opening down to its contact) hit the object?
+                       normal0: np.ndarray | None = None, normal1: np.ndarray | None = None,
+                       opening: np.ndarray | None = None) -> np.ndarray:
+    """The paper's level 1: does either pad's swept cylinder (from `opening`, the pre-grasp opening, default full
+    opening, down to its contact) hit the object?
 
     Each cylinder stops 0.5 mm short of its contact plus r * tan(tilt), where tilt is the angle between that
     side's facet normal and the jaw axis: a flat pad closing on a facet tilted within the antiparallel tolerance
@@ -618,7 +710,7 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     frames = axis_frames(np.zeros_like(point0), point0 - point1, np.zeros(1))
     y, z0 = frames[:, :3, 1], frames[:, :3, 2]
     width = np.linalg.norm(point0 - point1, axis=1)
-    radius, y_near, y_far = gripper.pad_sweep(width)
+    radius, y_near, y_far = gripper.pad_sweep(width, opening)
     mid = 0.5 * (point0 + point1)
     for side, normal in ((1.0, normal0), (-1.0, normal1)):
         axis = side * y
@@ -633,19 +725,45 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     return out
 
 
+def friction_hint(mu: float, pairs: ContactPairs | None) -> str:
+    """What --friction would change an empty friction cone, quoting its declared range: the friction the contacts
+    tried need with their own jaw axes (the smallest over the pairs that fit the jaw: the cone half-angle of the
+    normal further from its axis), and the bound no jaw axis can beat (half the angle between one normal and the
+    other reversed, over the same pairs). Beyond the range, it says no friction in it would do."""
+    bound = bounds(GraspParams)["friction"][0]
+    if pairs is None or not pairs.width_ok.any():
+        return f"raise --friction ({bound.describe(True)})"
+    n0, n1 = pairs.normal0[pairs.width_ok], pairs.normal1[pairs.width_ok]
+    half = 0.5 * np.arccos(np.clip(-np.einsum("ij,ij->i", n0, n1), -1.0, 1.0)).min()
+    least = f"the most nearly opposed pair that fits needs at least {np.tan(half):.2g} ({np.degrees(half):.3g} degrees)"
+    if pairs.axis is None:
+        tried = np.tan(half)
+    else:
+        y = pairs.axis[pairs.width_ok]
+        worst = np.maximum(np.arccos(np.clip(np.einsum("ij,ij->i", n0, y), -1.0, 1.0)),
+                           np.arccos(np.clip(-np.einsum("ij,ij->i", n1, y), -1.0, 1.0)))
+        tried = float(np.tan(min(worst.min(), np.pi / 2 - 1e-9)))
+    if bound.problem(tried) is not None and bound.problem(np.tan(half)) is not None:
+        return f"no --friction in its range ({bound.describe(True)}) would do: {least}"
+    if bound.problem(tried) is not None:
+        return (f"the jaw axes tried need a friction beyond --friction's range ({bound.describe(True)}); {least}, so only "
+                f"other jaw axes could (a finer --density or --tau-deg)")
+    return f"--friction {_ceil(tried)} passes the cone for the jaw axes tried ({bound.describe(True)}); {least}"
+
+
+def _ceil(value: float) -> str:
+    """`value` rounded up to two significant digits, as text: a friction that passes, not one just below."""
+    digits = 1 - int(np.floor(np.log10(abs(value)))) if value > 0 else 2
+    return f"{np.ceil(value * 10**digits) / 10**digits:.{max(digits, 0)}f}"
+
+
 def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Gripper,
                  pairs: ContactPairs | None = None) -> str | None:
-    """Which stage removed the last candidate, and what to try; None when grasps remain. With the contact
-    `pairs`, an empty friction stage names the friction the most nearly opposed pair that fits the jaw needs: half the
-    angle between one normal and the other reversed, the best any jaw axis can do."""
+    """Which stage removed the last candidate, and what to try; None when grasps remain. An empty friction stage
+    (`friction_hint`) names the friction its contacts need, within --friction's declared range or beyond it."""
     if counts.get("grasps", 0) > 0:
         return None
     mu = params.friction_coefficient
-    need = ""
-    if pairs is not None and pairs.width_ok.any():
-        n0, n1 = pairs.normal0[pairs.width_ok], pairs.normal1[pairs.width_ok]
-        half = 0.5 * np.arccos(np.clip(-np.einsum("ij,ij->i", n0, n1), -1.0, 1.0)).min()
-        need = f" (the most nearly opposed pair that fits needs at least {np.tan(half):.2g}: {np.degrees(half):.3g} degrees)"
     stages = [
         ("facets", "the mesh has no facets"),
         ("samples_neighbour", "the surface got no samples; raise --density"),
@@ -659,13 +777,14 @@ def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Grip
         ("pairs_width", f"every facet pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
         ("pads_width", f"every contact pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
         ("pads_cone", f"no pad contact has both normals within the friction cone (friction {mu:.2g}, "
-                      f"{np.degrees(np.arctan(mu)):.3g} degrees); raise --friction{need}"),
+                      f"{np.degrees(np.arctan(mu)):.3g} degrees); {friction_hint(mu, pairs)}"),
         ("pairs_com", f"every contact pair is more than {lengths['com_max'] * 1e3:.3g} mm from the centre of mass; "
                       f"raise --com-max"),
         ("pads_com", f"every grasp centre is more than {lengths['com_max'] * 1e3:.3g} mm from the centre of mass; "
                      f"raise --com-max"),
         ("pairs_level1", "the pads' swept volumes hit the object at every contact pair; use --contact-model pads"),
-        ("hand_open", "the open hand collides with the object at every grasp pose; raise --rotations"),
+        ("hand_open", "the hand at its pre-grasp opening hits the object along the approach at every grasp pose; lower "
+                      "--pregrasp-margin or --approach-length, or raise --rotations"),
         ("grasps", f"the fingers at the grasp's opening hit the object at every remaining pose; raise "
                    f"--finger-clearance (now {params.finger_clearance * 1e3:.3g} mm)"),
     ]

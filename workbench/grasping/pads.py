@@ -21,9 +21,9 @@ jaw): `gap_windows` finds those starts along the axis line and `first_touches` t
 touches only what lies between its start and the TCP. The hand at full opening is checked against the object
 afterwards (level 2), which rejects a start inside material.
 
-The work runs in a compiled kernel (`_padkernel`): per jaw axis, a uniform grid over the triangles gives those
-within the pads' reach of the axis line, and each pad then meets them in the order they can first be touched, so
-the cost follows the triangles near the pads, not the mesh.
+The work runs in a compiled kernel (`_padkernel`) over a bounding-volume hierarchy of the triangles: each pad at
+each rotation searches it by branch and bound, skipping every subtree outside its footprint or below the best touch
+found so far, so the cost follows the triangles near the first touch, not the mesh.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from workbench.grasping._padkernel import first_touch_kernel, triangle_grid
+from workbench.grasping._padkernel import first_touch_kernel, triangle_bvh
 from workbench.robots.gripper import Gripper
 
 
@@ -198,11 +198,11 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows) -> Touch
     fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
     flip = not mesh.is_watertight
     rect = np.array(pad_rectangle(gripper))
-    grid = _grid(mesh, tri, gripper.pad_radius)
+    tree = _tree(mesh, tri, fn)
     basis = np.ascontiguousarray(np.transpose(fr0[:, :3, :3], (0, 2, 1)))  # rows: x0, y, z0
-    found, height, local, tri_id = first_touch_kernel(tri, fn, flip, np.ascontiguousarray(origins), basis,
+    found, height, local, tri_id = first_touch_kernel(*tree, flip, np.ascontiguousarray(origins), basis,
                                                       np.ascontiguousarray(angles), rect, float(tie),
-                                                      np.ascontiguousarray(windows), float(gripper.jaw_max), *grid)
+                                                      np.ascontiguousarray(windows), float(gripper.jaw_max))
     hit = found.all(axis=1)
     res = {}
     for si, side in enumerate((1, -1)):
@@ -220,10 +220,9 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows) -> Touch
                    point1=res[-1][1], normal1=res[-1][2], tri1=res[-1][3], window=window)
 
 
-def _grid(mesh: trimesh.Trimesh, tri: np.ndarray, radius: float):
-    """The triangle grid of `mesh` for pads of reach `radius`, built once per mesh and pad."""
-    key = f"workbench_pad_grid_{radius!r}"
-    grid = mesh._cache[key]  # trimesh's cache: dropped when the mesh changes
-    if grid is None:
-        grid = mesh._cache[key] = triangle_grid(tri, radius)
-    return grid
+def _tree(mesh: trimesh.Trimesh, tri: np.ndarray, normals: np.ndarray):
+    """The triangle hierarchy of `mesh` (`_padkernel.triangle_bvh`), built once per mesh."""
+    tree = mesh._cache["workbench_pad_bvh"]  # trimesh's cache: dropped when the mesh changes
+    if tree is None:
+        tree = mesh._cache["workbench_pad_bvh"] = triangle_bvh(tri, normals)
+    return tree

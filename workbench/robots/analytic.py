@@ -15,7 +15,7 @@ Then (Pieper's decoupling, solved with Paden-Kahan subproblems):
 3. q1 rotates the resulting point onto W about axis 1 (one solution);
 4. with c the wrist's last axis: a4 . R5(q5) c = a4 . Y c gives two q5 (wrist flip); q4 and q6 are single rotations.
 
-All 2 x 2 x 2 = 8 branches are computed for many poses at once with numpy (struct-of-arrays, no per-pose loop).
+All 2 x 2 x 2 = 8 branches are computed for many poses at once by a compiled kernel (`robots._closedkernel`).
 Branches without a real solution or outside the joint limits come back as NaN with `valid` False.
 """
 
@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.errors import RobotError
+from workbench.robots._closedkernel import wrist_rows
 
 TOL_AXES = 1e-9  # metres: how close lines must pass to count as intersecting
 
@@ -202,100 +203,6 @@ def analytic_ik(robot, limits: bool = True) -> AnalyticIK:
                       joint_names=tuple(robot.joint_names))
 
 
-# -- vector helpers, struct of arrays: vectors (3, N) ---------------------------------------------------------------
-
-
-def _axis(k: np.ndarray) -> tuple[int, float] | None:
-    """(index, sign) when the unit vector k is a coordinate axis, else None (the fast paths below)."""
-    m = int(np.argmax(np.abs(k)))
-    return (m, float(np.sign(k[m]))) if abs(abs(k[m]) - 1.0) < 1e-15 else None
-
-
-_NEXT = ((1, 2), (2, 0), (0, 1))  # the two other coordinates, cyclic
-
-
-def _rot(k: np.ndarray, c: np.ndarray, s: np.ndarray, v: np.ndarray, inverse: bool = False) -> np.ndarray:
-    """Rotate vectors v (3, N) about the constant unit axis k by angles with cosines c and sines s (Rodrigues);
-    `inverse` rotates by minus those angles (no negated copy of s)."""
-    ax = _axis(k)
-    if ax is not None:
-        m, sg = ax
-        i, j = _NEXT[m]
-        out = np.empty(np.broadcast_shapes(v.shape, (3,) + np.shape(c)))
-        np.multiply(v[i], c, out=out[i])
-        np.multiply(v[j], c, out=out[j])
-        if (sg > 0) != inverse:
-            out[i] -= v[j] * s
-            out[j] += v[i] * s
-        else:
-            out[i] += v[j] * s
-            out[j] -= v[i] * s
-        out[m] = v[m]
-        return out
-    if inverse:
-        s = -s
-    kv = (k[0] * v[0] + k[1] * v[1] + k[2] * v[2]) * (1 - c)
-    return np.stack((v[0] * c + (k[1] * v[2] - k[2] * v[1]) * s + k[0] * kv,
-                     v[1] * c + (k[2] * v[0] - k[0] * v[2]) * s + k[1] * kv,
-                     v[2] * c + (k[0] * v[1] - k[1] * v[0]) * s + k[2] * kv))
-
-
-def _lin(r: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Constant 3x3 matrix times vectors (3, N); zero entries skipped, unit entries not multiplied (DH-like frames)."""
-    rows = []
-    for i in range(3):
-        acc = None
-        for j in range(3):
-            c = float(r[i, j])
-            if abs(c) < 1e-15:
-                continue
-            term = v[j] if abs(c - 1) < 1e-15 else (-v[j] if abs(c + 1) < 1e-15 else c * v[j])
-            acc = term if acc is None else acc + term
-        rows.append(np.zeros_like(v[0]) if acc is None else acc)
-    return np.stack(rows)
-
-
-def _dot(k: np.ndarray, v: np.ndarray) -> np.ndarray:
-    ax = _axis(k)
-    if ax is not None:
-        return v[ax[0]] * ax[1]
-    return k[0] * v[0] + k[1] * v[1] + k[2] * v[2]
-
-
-def _acs(a, b, c) -> tuple[np.ndarray, np.ndarray]:
-    """Both solutions x of a cos x + b sin x = c as (cos x, sin x), each (2, N) (NaN where there is none)."""
-    r2 = a * a + b * b
-    x = c / np.sqrt(r2)
-    x = np.where(np.abs(x) <= 1 + 1e-10, np.clip(x, -1, 1), np.nan)
-    sd = np.sqrt(1 - x * x)
-    ca, sa = a / np.sqrt(r2), b / np.sqrt(r2)
-    # x = phi +/- delta with cos phi = ca, sin phi = sa, cos delta = x, sin delta = sd
-    cs = np.stack((ca * x - sa * sd, ca * x + sa * sd))
-    sn = np.stack((sa * x + ca * sd, sa * x - ca * sd))
-    return cs, sn
-
-
-def _sub1(k: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(cos, sin) of the angle rotating u onto v about the constant unit axis k (Paden-Kahan subproblem 1)."""
-    ax = _axis(k)
-    if ax is not None:
-        m, sg = ax
-        i, j = _NEXT[m]
-        x = u[i] * v[i] + u[j] * v[j]
-        y = (u[i] * v[j] - u[j] * v[i]) * sg
-    else:
-        ku, kv = _dot(k, u), _dot(k, v)
-        up = u - np.multiply.outer(k, ku)
-        vp = v - np.multiply.outer(k, kv)
-        y = (k[0] * (up[1] * vp[2] - up[2] * vp[1]) + k[1] * (up[2] * vp[0] - up[0] * vp[2])
-             + k[2] * (up[0] * vp[1] - up[1] * vp[0]))
-        x = up[0] * vp[0] + up[1] * vp[1] + up[2] * vp[2]
-    h = np.hypot(x, y)
-    ok = h > 0
-    h = np.where(ok, h, 1.0)
-    return np.where(ok, x / h, 1.0), y / h
-
-
 def _limit(q: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """q in (-pi, pi] moved by a multiple of 2 pi into [lo, hi] (the representative nearest to 0), NaN if none."""
     ok = (q >= lo) & (q <= hi)
@@ -308,121 +215,64 @@ def _limit(q: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return out
 
 
-BLOCK = 4096  # poses per vectorised pass: its ~50 temporaries of 8 x BLOCK doubles stay in the CPU caches
+BLOCK = 4096  # poses per compiled pass (bounds the temporaries of callers that solve millions of poses)
 
 
 def reachable(ik: AnalyticIK, poses: np.ndarray, block: int = BLOCK) -> np.ndarray:
     """(N,) bool: whether any of the 8 branches of each TCP pose (N, 4, 4) is within the joint limits (Section 5.2:
-    the grasp-placement table needs no joint values). Skips writing the joints and, when the last joint's range
-    spans a full turn, its angle altogether."""
-    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
-    out = np.empty(len(poses), dtype=bool)
-    for s in range(0, len(poses), block):
-        out[s:s + block] = _solve_block(ik, poses[s:s + block], joints=False)[1].any(axis=1)
-    return out
+    the grasp-placement table needs no joint values)."""
+    return solve(ik, poses, block)[1].any(axis=1)
 
 
 def solve(ik: AnalyticIK, poses: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
     """All 8 IK branches of TCP poses (N, 4, 4) in the world: joints (N, 8, 6) and valid (N, 8).
 
-    Branch index bits: 4 = elbow (q3 root), 2 = shoulder (q2 root), 1 = wrist flip (q5 root). Section 5.2.
-    Poses are solved `block` at a time into preallocated outputs (larger blocks spill the temporaries out of the
-    caches and run slower)."""
+    Branch index bits: 4 = elbow (q3 root), 2 = shoulder (q2 root), 1 = wrist flip (q5 root). Section 5.2."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
-    n = len(poses)
-    if n <= block:
-        return _solve_block(ik, poses)
-    q = np.empty((n, 8, 6))
-    valid = np.empty((n, 8), dtype=bool)
-    for s in range(0, n, block):
-        q[s:s + block], valid[s:s + block] = _solve_block(ik, poses[s:s + block])
+    q = np.empty((len(poses), 8, 6))
+    valid = np.empty((len(poses), 8), dtype=bool)
+    consts = getattr(ik, "_kernel", None)
+    if consts is None:
+        consts = kernel_constants([ik])
+        object.__setattr__(ik, "_kernel", consts)  # built once per solver (a frozen dataclass)
+    solve_into(consts, poses, q, valid, block=block)
     return q, valid
 
 
-def _solve_block(ik: AnalyticIK, poses: np.ndarray, joints: bool = True) -> tuple[np.ndarray | None, np.ndarray]:
-    """`solve` on one block of poses (N, 4, 4); without `joints`, only the validity (None, (N, 8))."""
-    n = len(poses)
-    # the joint-6 frame in the robot root is B P T (B = base^-1, P = pose, T = TCP -> joint 6); only its products
-    # with constant vectors are needed: B P T u = B (P_R (T_R u) + P_t + P_R T_t) ...
-    pr = poses[:, :3, :3].transpose(1, 2, 0)                 # (3, 3, N)
-    b, t, m1i = ik.base_inv, ik.tip_inv, ik.m1_inv
+def kernel_constants(iks: list[AnalyticIK]) -> tuple[np.ndarray, ...]:
+    """The compiled kernel's constants of one or more forms, stacked on a leading axis (`_closedkernel.wrist_rows`)."""
+    parts: list[list[np.ndarray]] = [[] for _ in range(21)]
+    for ik in iks:
+        b, t, m1i = ik.base_inv, ik.tip_inv, ik.m1_inv
+        (r2, p2), (r3, p3), (r4, _), _, _ = ik.m
+        a1, a2, a3 = ik.axes[0], ik.axes[1], ik.axes[2]
+        mb = m1i @ b
+        g = r3.T @ (p3 - ik.o2)
+        wpar = a3 * (a3 @ ik.w3)
+        c0 = (p3 - ik.o2) @ (p3 - ik.o2) + ik.w3 @ ik.w3 + 2 * g @ wpar
+        wa, wb, wc = ik.wrist_a, ik.wrist_b, ik.wrist_c
+        cpar = wb * (wb @ wc)
+        consts = np.array([2 * g @ (ik.w3 - wpar), 2 * g @ np.cross(a3, ik.w3), c0, a1 @ p2,
+                           wa @ (wc - cpar), wa @ np.cross(wb, wc), wa @ cpar])
+        vals = (mb, t[:3, :3] @ ik.c6 + t[:3, 3], m1i[:3, :3] @ b[:3, :3], t[:3, :3] @ ik.wrist_at @ wc,
+                t[:3, :3] @ ik.wrist_at @ ik.wrist_d, ik.o, ik.axes, r2, p2, r3, p3, r4, ik.w3, r2.T @ a1, wa, wb, wc,
+                ik.wrist_d, consts, ik.lower, ik.upper)
+        for part, val in zip(parts, vals):
+            part.append(np.asarray(val, dtype=np.float64))
+    return tuple(np.ascontiguousarray(np.stack(p)) for p in parts)
 
-    def rot6(u: np.ndarray) -> np.ndarray:
-        """R6 u in the joint-1 parent frame with M1's rotation removed: M1_R^T B_R P_R T_R u."""
-        k = t[:3, :3] @ u
-        return _lin(m1i[:3, :3] @ b[:3, :3], pr[:, 0] * k[0] + pr[:, 1] * k[1] + pr[:, 2] * k[2])
 
-    k = t[:3, :3] @ ik.c6 + t[:3, 3]
-    w = pr[:, 0] * k[0] + pr[:, 1] * k[1] + pr[:, 2] * k[2] + poses[:, :3, 3].T
-    mb = m1i @ b
-    pw = _lin(mb[:3, :3], w) + mb[:3, 3][:, None]             # wrist centre before q1
-    ax = ik.axes
-    (r2, p2), (r3, p3), (r4, _), _, _ = ik.m
-    a1, a2, a3 = ax[0], ax[1], ax[2]
-
-    def col(x: np.ndarray) -> np.ndarray:
-        """A constant vector (3,) or per-pose vectors (3, N) as (3, A, B, C, N|1) for broadcasting over the branch axes
-        A (q3 root), B (q2 root), C (q5 root): scalars per branch are (A, B, C, N), vectors get a leading 3."""
-        return x.reshape(3, 1, 1, 1, -1)
-
-    # 1. elbow: |v(q3) - o2|^2 = |pw - o|^2 -> two q3
-    rad2 = ((pw - ik.o[:, None]) ** 2).sum(0)
-    g = r3.T @ (p3 - ik.o2)
-    w3 = ik.w3
-    wpar = a3 * (a3 @ w3)
-    c0 = (p3 - ik.o2) @ (p3 - ik.o2) + w3 @ w3 + 2 * g @ wpar
-    c3, s3 = _acs(2 * g @ (w3 - wpar), 2 * g @ np.cross(a3, w3), rad2 - c0)
-    c3, s3 = c3[:, None, None, :], s3[:, None, None, :]                      # (2, 1, 1, N)
-    v = _lin(r3, _rot(a3, c3, s3, col(w3))) + col(p3)
-    # 2. shoulder: height of W along axis 1 -> two q2 per q3
-    a1p = r2.T @ a1
-    vpar = np.multiply.outer(a2, _dot(a2, v))
-    vperp = v - vpar
-    av = np.stack((a2[1] * v[2] - a2[2] * v[1], a2[2] * v[0] - a2[0] * v[2], a2[0] * v[1] - a2[1] * v[0]))
-    h = _dot(a1, pw) - a1 @ p2
-    c2, s2 = _acs(_dot(a1p, vperp), _dot(a1p, av), h - _dot(a1p, vpar))
-    c2, s2 = c2[:, :, 0].swapaxes(0, 1), s2[:, :, 0].swapaxes(0, 1)          # (2, 2, 1, N)
-    x = _lin(r2, vpar + vperp * c2 + av * s2) + col(p2)
-    # 3. base: rotate x onto W about axis 1
-    c1, s1 = _sub1(a1, x, col(pw))
-    # 4. wrist: Y = R4^T R03^T R6 (R5 R6)^T; only Y c and Y d are needed
-    wa, wb, wc, wd = ik.wrist_a, ik.wrist_b, ik.wrist_c, ik.wrist_d
-    free6 = not joints and ik.upper[5] - ik.lower[5] >= 2 * np.pi
-    ys = []
-    for vec in ((wc,) if free6 else (wc, wd)):
-        y = _rot(a1, c1, s1, col(rot6(ik.wrist_at @ vec)), inverse=True)
-        y = _rot(a2, c2, s2, _lin(r2.T, y), inverse=True)
-        ys.append(_lin(r4.T, _rot(a3, c3, s3, _lin(r3.T, y), inverse=True)))
-    yc, yd = ys[0], (ys[1] if len(ys) > 1 else None)
-    cpar = wb * (wb @ wc)
-    c5, s5 = _acs(wa @ (wc - cpar), wa @ np.cross(wb, wc), _dot(wa, yc) - wa @ cpar)
-    c5, s5 = np.moveaxis(c5[..., 0, :], 0, 2), np.moveaxis(s5[..., 0, :], 0, 2)  # (2, 2, 2, N)
-    u = _rot(wb, c5, s5, col(wc))
-    c4, s4 = _sub1(wa, u, yc)
-    angles = [(s1, c1), (s2, c2), (s3, c3), (s4, c4), (s5, c5)]
-    if not free6:
-        tt = _rot(wb, c5, s5, _rot(wa, c4, s4, yd, inverse=True), inverse=True)
-        c6, s6 = _sub1(wc, col(wd), tt)
-        angles.append((s6, c6))
-    if not joints:  # validity only: every computed joint within its limits (by whole turns), NaN fails
-        ok = np.ones((2, 2, 2, n), dtype=bool)
-        for j, (sj, cj) in enumerate(angles):
-            a = np.arctan2(sj, cj)
-            lo, hi = ik.lower[j], ik.upper[j]
-            inside = (a >= lo) & (a <= hi)
-            if lo < -np.pi or hi > np.pi:
-                inside |= ((a + 2 * np.pi >= lo) & (a + 2 * np.pi <= hi)) | ((a - 2 * np.pi >= lo) & (a - 2 * np.pi <= hi))
-            ok &= inside
-        return None, ok.transpose(3, 0, 1, 2).reshape(n, 8)
-    # each joint's angle on its own branch shape (q1, q2: 4 per pose, q3: 2, wrist: 8), written into the output's
-    # (N, q3 root, q2 root, q5 root, joint) layout through a transposed view (no stacked or broadcast copies)
-    q = np.empty((n, 2, 2, 2, 6))
-    view = q.transpose(1, 2, 3, 0, 4)                                         # (2, 2, 2, N, 6)
-    for j, (sj, cj) in enumerate(angles):
-        view[..., j] = _limit(np.arctan2(sj, cj), ik.lower[j], ik.upper[j])
-    q = q.reshape(n, 8, 6)
-    valid = ~np.isnan(q).any(axis=2)
-    return q, valid
+def solve_into(consts: tuple[np.ndarray, ...], poses: np.ndarray, q: np.ndarray, valid: np.ndarray,
+               cols: tuple[int, ...] = tuple(range(6)), fixed_col: int = -1, fixed: np.ndarray | None = None,
+               block: int = BLOCK) -> None:
+    """The 8 branches of each of S forms (`kernel_constants`; form s in branches 8 s .. 8 s + 7) of poses (N, 4, 4),
+    written into q (N, 8 S, n) at joint columns `cols` (and `fixed[s]` at `fixed_col`, a 7-joint arm's held joint)
+    and valid (N, 8 S), by the compiled kernel."""
+    fixed = np.zeros(len(consts[0])) if fixed is None else np.ascontiguousarray(fixed, dtype=np.float64)
+    cols_a = np.asarray(cols, dtype=np.int64)
+    poses = np.ascontiguousarray(poses, dtype=np.float64)
+    for s in range(0, len(poses), block):
+        wrist_rows(poses[s:s + block], *consts, cols_a, fixed_col, fixed, q[s:s + block], valid[s:s + block])
 
 
 def branch_distances(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,

@@ -6,8 +6,8 @@ Levenberg-Marquardt IK solve within the joint limits (`solve_ik`), with stall de
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
+from workbench.robots._lmkernel import lm_rows, tcp_rows
 from workbench.robots.model import Robot
 
 STALL_WINDOW = 6  # LM iterations between progress checks
@@ -152,91 +152,31 @@ def jacobian(robot: Robot, q: np.ndarray) -> np.ndarray:
     return _jacobian_soa(robot, axes, pos, tcp_t).transpose(2, 0, 1)
 
 
-def _rotvec_soa(m: np.ndarray) -> np.ndarray:
-    """Rotation vectors (3, B) of rotations (3, 3, B) (SO(3) log; near pi through scipy)."""
-    v = 0.5 * np.stack([m[2, 1] - m[1, 2], m[0, 2] - m[2, 0], m[1, 0] - m[0, 1]])
-    c = np.clip(0.5 * (m[0, 0] + m[1, 1] + m[2, 2] - 1.0), -1.0, 1.0)
-    s = np.sqrt((v * v).sum(0))
-    theta = np.arctan2(s, c)
-    out = v * np.where(s > 1e-9, theta / np.maximum(s, 1e-300), 1.0)
-    far = c < -0.95
-    if far.any():
-        out[:, far] = Rotation.from_matrix(m[:, :, far].transpose(2, 0, 1)).as_rotvec().T
-    return out
-
-
-def rotvec(m: np.ndarray) -> np.ndarray:
-    """Rotation vectors (B, 3) of rotation matrices (B, 3, 3) (the SO(3) log map)."""
-    return _rotvec_soa(np.ascontiguousarray(np.asarray(m, dtype=np.float64).transpose(1, 2, 0))).T
-
-
-def _spd_solve(a: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    """Solve a x = rhs for symmetric positive definite a (m, m, B), rhs (m, B), by Cholesky in entry-major layout."""
-    m = a.shape[0]
-    low = np.zeros_like(a)
-    for j in range(m):
-        d = a[j, j] - (low[j, :j] ** 2).sum(0)
-        low[j, j] = np.sqrt(np.maximum(d, 1e-300))
-        if j + 1 < m:
-            low[j + 1:, j] = (a[j + 1:, j] - (low[j + 1:, :j] * low[j, :j][None]).sum(1)) / low[j, j]
-    y = np.empty_like(rhs)
-    for i in range(m):
-        y[i] = (rhs[i] - (low[i, :i] * y[:i]).sum(0)) / low[i, i]
-    x = np.empty_like(rhs)
-    for i in range(m - 1, -1, -1):
-        x[i] = (y[i] - (low[i + 1:, i] * x[i + 1:]).sum(0)) / low[i, i]
-    return x
-
-
 def solve_ik(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, tol_pos: float = 1e-4,
              tol_rot: float = 1e-3) -> tuple[np.ndarray, np.ndarray]:
     """Batched Levenberg-Marquardt IK (Sugihara's damping E + 1e-3) with joint-limit clamping.
 
-    The step is J^T (J J^T + lambda I)^-1 e, solved per pose by a 6x6 Cholesky vectorised across poses.
-    Converged rows leave the active set; rows whose error stalls for STALL_WINDOW iterations are given up.
-    Returns the joint vectors (M, n) and which converged (M,)."""
-    targets = np.asarray(targets, dtype=np.float64)
-    q = np.ascontiguousarray(np.clip(np.array(q0, dtype=np.float64), robot.lower, robot.upper).T)  # (n, M)
-    n, m = q.shape
-    lo, hi = robot.lower[:, None], robot.upper[:, None]
-    t_rot = np.ascontiguousarray(targets[:, :3, :3].transpose(1, 2, 0))
-    t_pos = np.ascontiguousarray(targets[:, :3, 3].T)
-    ok = np.zeros(m, dtype=bool)
-    active = np.arange(m)
-    last = np.full(m, np.inf)
-    eye6 = np.eye(6)[:, :, None]
-    qa, tr, tp = q, t_rot, t_pos
-    for it in range(iters + 1):
-        _, pos, axes, tcp_r, tcp_t = _fk(robot, qa)
-        ep = tp - tcp_t
-        er = _rotvec_soa(_mm(tr, tcp_r.transpose(1, 0, 2)))
-        np_, nr = np.sqrt((ep * ep).sum(0)), np.sqrt((er * er).sum(0))
-        conv = (np_ < tol_pos) & (nr < tol_rot)
-        q[:, active] = qa
-        ok[active[conv]] = True
-        keep = ~conv
-        err = np_ + 0.2 * nr
-        if it > 0 and it % STALL_WINDOW == 0:
-            keep &= err <= STALL_RATIO * last[active]
-            last[active] = err
-        elif it == 0:
-            last[active] = err
-        if it == iters or not keep.any():
-            break
-        if not keep.all():
-            active, qa, tr, tp = active[keep], qa[:, keep], tr[..., keep], tp[:, keep]
-            axes, pos, tcp_t, ep, er = axes[..., keep], pos[..., keep], tcp_t[:, keep], ep[:, keep], er[:, keep]
-        e = np.concatenate([ep, er], axis=0)  # (6, B)
-        jac = _jacobian_soa(robot, axes, pos, tcp_t)  # (6, n, B)
-        energy = 0.5 * (e * e).sum(0)
-        a = eye6 * (energy + 1e-3)
-        for k in range(n):
-            a = a + jac[:, None, k] * jac[None, :, k]
-        x = _spd_solve(a, e)
-        dq = jac[0] * x[0]
-        for i in range(1, 6):
-            dq = dq + jac[i] * x[i]
-        step = np.abs(dq).max(axis=0)
-        dq *= np.minimum(1.0, 0.6 / np.maximum(step, 1e-12))
-        qa = np.clip(qa + dq, lo, hi)
-    return np.ascontiguousarray(q.T), ok
+    The step is J^T (J J^T + lambda I)^-1 e, solved per pose by a 6x6 Cholesky in a compiled kernel, one pose at a
+    time (a row's answer never depends on the rows solved with it). A pose stops when converged, or when its error
+    stalls for STALL_WINDOW iterations. Returns the joint vectors (M, n) and which converged (M,)."""
+    targets = np.ascontiguousarray(np.asarray(targets, dtype=np.float64).reshape(-1, 4, 4))
+    q0 = np.ascontiguousarray(np.asarray(q0, dtype=np.float64).reshape(len(targets), -1))
+    return lm_rows(*_kernel_chain(robot), robot.lower, robot.upper, targets, q0, int(iters), float(tol_pos),
+                   float(tol_rot), STALL_WINDOW, STALL_RATIO)
+
+
+def tcp_positions(robot: Robot, q: np.ndarray) -> np.ndarray:
+    """TCP positions (M, 3) in the world of joint vectors q (M, n), compiled (cheap for a few rows)."""
+    q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=np.float64)))
+    return tcp_rows(*_kernel_chain(robot), q)
+
+
+def _kernel_chain(robot: Robot) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The chain as the compiled kernels take it: base, placements (n, 4, 4), axes, prismatic flags, tip; cached."""
+    cached = getattr(robot, "_kernel_chain", None)
+    if cached is None:
+        f64 = lambda a: np.ascontiguousarray(np.asarray(a, dtype=np.float64))  # noqa: E731
+        cached = (f64(robot.base), f64(np.array(robot.chain_placement)), f64(robot.chain_axis),
+                  np.ascontiguousarray(np.asarray(robot.chain_prismatic, dtype=np.bool_)), f64(robot.tip_in_joint))
+        robot._kernel_chain = cached
+    return cached

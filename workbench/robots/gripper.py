@@ -149,14 +149,15 @@ class Gripper:
             parts.append(trimesh.creation.box(extents=ext, transform=pose))
         return trimesh.util.concatenate(parts)
 
-    def pad_sweep(self, width: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    def pad_sweep(self, width: np.ndarray, opening: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
         """Level-1 swept volume of the left pad for grasps of `width`: (radius, y_start, y_end) along the TCP's y.
 
-        The cylinder runs from just outside the contact (y = width/2 + 0.5 mm) to the pad's outer face at full
-        opening; the right pad's cylinder is its mirror image.
+        The cylinder runs from just outside the contact (y = width/2 + 0.5 mm) to the pad's outer face at `opening`
+        (the pre-grasp opening; default full opening); the right pad's cylinder is its mirror image.
         """
         y0 = np.asarray(width, dtype=np.float64) / 2 + 5e-4
-        y1 = np.maximum(self.jaw_max / 2 + self.pad_extents[1], y0 + 1e-4)
+        start = self.jaw_max if opening is None else np.asarray(opening, dtype=np.float64)
+        y1 = np.maximum(start / 2 + self.pad_extents[1], y0 + 1e-4)
         return self.pad_radius, y0, y1
 
 

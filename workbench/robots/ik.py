@@ -288,6 +288,9 @@ def converge(robot: Robot, targets: np.ndarray, q0: np.ndarray, iters: int, opts
     return solve_ik(robot, targets, q0, iters, opts.tol_pos, opts.tol_rot)
 
 
+CLOSED_BLOCK = 1024  # targets per closed-form pass: all their branches stay in the CPU caches
+
+
 class IKSolver:
     """One robot's IK engine for a scene and an object (Section IV): the robot, its seed library, its collider
     (arm and gripper against the table, arm against the object) and the reachability pre-filter, built once.
@@ -335,8 +338,19 @@ class IKSolver:
         return q, ok
 
     def _closed(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The collision-free closed-form branch of every target nearest to `q0` (rows of NaN: none). Branches are
-        checked nearest first, each row only until one is free: the same answer as checking them all."""
+        """The collision-free closed-form branch of every target nearest to `q0` (rows of NaN: none), CLOSED_BLOCK
+        targets at a time (a 7-joint arm's 128 branches of a whole chunk would fill hundreds of MB; each row depends
+        on its own target alone)."""
+        if len(targets) <= CLOSED_BLOCK:
+            return self._closed_block(targets, placements, q0)
+        parts = [self._closed_block(targets[s:s + CLOSED_BLOCK], placements[s:s + CLOSED_BLOCK],
+                                    None if q0 is None else q0[s:s + CLOSED_BLOCK])
+                 for s in range(0, len(targets), CLOSED_BLOCK)]
+        return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+    def _closed_block(self, targets: np.ndarray, placements: np.ndarray, q0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """`_closed` of one block. Branches are checked nearest first, each row only until one is free: the same
+        answer as checking them all."""
         m, n = len(targets), self.robot.nq
         joints, valid = self.analytic.solve(targets)
         ref = np.where(np.isfinite(q0), q0, 0.0) if q0 is not None else np.zeros((m, n))
@@ -368,7 +382,7 @@ class IKSolver:
                          q: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Poses a swept closed form misses within the limits although the arm reaches them: Levenberg-Marquardt from
         their branch nearest `ref` without the limits (clipped into them by the solver), which the free joint then
-        moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first."""
+        moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first; then `solve_from_seeds`."""
         rows = np.flatnonzero(~valid.any(axis=1))
         rows = rows[self.prefilter(targets[rows])] if len(rows) else rows
         if not len(rows):
@@ -383,6 +397,11 @@ class IKSolver:
                 break
             qn, okn = self._numeric(targets[rows[sel]], placements[rows[sel]], qu[sel, b[sel]], self.opts.iters_seed)
             q[rows[sel[okn]]], ok[rows[sel[okn]]] = qn[okn], True
+        rest = rows[~ok[rows]]
+        if len(rest):  # then the numerical solver's own seeds: the library's and the pose-hashed restarts
+            qn, okn = self.solve_from_seeds(targets[rest], placements[rest], np.full((len(rest), self.robot.nq), np.nan),
+                                            numeric=True)
+            q[rest[okn]], ok[rest[okn]] = qn[okn], True
         return q, ok
 
     def _chunk_closed(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -427,11 +446,13 @@ class IKSolver:
             joints[:, k], feas[:, k] = self.solve_from_seeds(targets[:, k], place[:, k], warm)
         return feas, joints
 
-    def solve_from_seeds(self, targets: np.ndarray, placements: np.ndarray, warm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def solve_from_seeds(self, targets: np.ndarray, placements: np.ndarray, warm: np.ndarray,
+                         numeric: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Joints (M, n) (NaN where none) and feasibility (M,) of poses that pass the reach filter, each from its own
         seeds in a fixed order (`chunk`): `warm` (rows of NaN: none) or the nearest library seed; the branches of the
         nearest decomposable model (`solvers.nearby_form`, an arm with more than 7 joints), nearest the home first;
-        the other library seeds; the restarts."""
+        the other library seeds; the restarts. With `numeric`, Levenberg-Marquardt from every seed even where the robot
+        has a closed form (the poses its swept samples miss)."""
         o = self.opts
         m, n = len(targets), self.robot.nq
         q_out = np.full((m, n), np.nan)
@@ -464,7 +485,7 @@ class IKSolver:
             if len(sel) == 0:
                 continue
             rows = live[sel]
-            q, ok = self.solve(targets[rows], placements[rows], seeds[sel], iters)
+            q, ok = (self._numeric if numeric else self.solve)(targets[rows], placements[rows], seeds[sel], iters)
             q_out[rows[ok]] = q[ok]
             good[rows[ok]] = True
             left[sel[ok]] = False

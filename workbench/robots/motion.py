@@ -7,8 +7,9 @@ when it is free, else OMPL's RRT-Connect within a time budget, then shortcutting
 Collision model (`MotionChecker`, pinocchio + coal on the URDF's collision geometry, `selfcollision.robot_parts`):
 - self-collision of the arm and the planning gripper (`SelfCollision`, allowed pairs from the SRDF or sampled);
 - the arm's moving links and the gripper against the table slab (the robot's fixed base stands on it);
-- empty hand: the arm and the gripper (fingers at full opening) against the object where it rests, the fingers
-  excepted on the line between the approach and the grasp (CONVENTIONS.md: the fingers at the grasp);
+- empty hand: the arm and the gripper (fingers at the move's opening, `set_jaw`: the pre-grasp opening while
+  approaching and retracting; full opening by default) against the object where it rests, the fingers excepted on
+  the line between the approach and the grasp (CONVENTIONS.md: the fingers at the grasp);
 - holding: the object, attached to the TCP with its grasp, never below the table top's plane (z = 0 lowered by
   `table_tol`, since a placed object touches it; beside the table too), against the arm's links and the robot's
   fixed parts. The gripper's own parts hold it rigidly and are not checked against it.
@@ -32,7 +33,7 @@ import trimesh
 from scipy.spatial.transform import Rotation, Slerp
 
 from workbench.errors import PlanningError
-from workbench.robots.chain import forward
+from workbench.robots.chain import forward, tcp_positions
 from workbench.robots.collider import Scene
 from workbench.robots.ik import converge
 from workbench.robots.model import Robot
@@ -146,6 +147,8 @@ class MotionChecker:
             for k in arm_all:
                 add(k, self.k_held, "held")
         self.gripper_parts = gripper
+        self.finger_parts = [k for k, p in enumerate(parts) if p.link == GRIPPER_FINGERS]  # in `finger_poses` order
+        self.jaw = robot.gripper.jaw_max
         self.gm, self.parts = gm, parts
         self.gd = pin.GeometryData(gm)
         self.data = robot.model.createData()
@@ -180,6 +183,16 @@ class MotionChecker:
         self.gm.geometryObjects[self.k_rest].placement = _se3(self.base_inv @ np.asarray(pose, dtype=np.float64))
         self.mode, self.fingers = "resting", bool(fingers)
         self._apply()
+
+    def set_jaw(self, width: float) -> None:
+        """Move the fingers to opening `width` (clipped to the stroke): every later check sees them there."""
+        g = self.robot.gripper
+        width = float(np.clip(width, g.jaw_min, g.jaw_max))
+        if width == self.jaw:
+            return
+        for k, (_, pose) in zip(self.finger_parts, g.finger_poses(width)):
+            self.gm.geometryObjects[k].placement = _se3(self.robot.tip_in_joint @ pose)
+        self.jaw = width
 
     def set_holding(self, grasp: np.ndarray) -> None:
         """The object in the hand, held with `grasp` (TCP pose in the object frame)."""
@@ -241,7 +254,7 @@ class MotionChecker:
 
     def tcp_gap(self, q: np.ndarray) -> float:
         """The largest TCP travel (m) between consecutive joint vectors of q (K, n), K >= 2 (batched FK)."""
-        return float(np.linalg.norm(np.diff(forward(self.robot, q)[3], axis=0), axis=1).max())
+        return float(np.linalg.norm(np.diff(tcp_positions(self.robot, q), axis=0), axis=1).max())
 
     def line_free(self, qa: np.ndarray, qb: np.ndarray) -> bool:
         """Whether the straight joint line qa -> qb is valid at every sample (checked coarse-to-fine)."""

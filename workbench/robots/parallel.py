@@ -18,7 +18,7 @@ Then, with T the last joint's frame in joint 1's parent frame (Paden-Kahan subpr
 4. joint 4's frame is then known: its distance from joint 2's origin gives two q3 (elbow), then q2 and q4 are single
    rotations about n.
 
-All 2 x 2 x 2 = 8 branches are computed for many poses at once (struct of arrays, no per-pose loop); branches
+All 2 x 2 x 2 = 8 branches are computed for many poses at once by a compiled kernel (`robots._closedkernel`); branches
 without a real solution or outside the joint limits come back as NaN with `valid` False.
 """
 
@@ -29,7 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.errors import RobotError
-from workbench.robots.analytic import BLOCK, TOL_AXES, _acs, _closest, _dot, _lin, _limit, _rot, _sub1
+from workbench.robots._closedkernel import parallel_rows
+from workbench.robots.analytic import BLOCK, TOL_AXES, _closest
 
 TOL_PARALLEL = 1e-9
 
@@ -99,86 +100,18 @@ def parallel_ik(robot, limits: bool = True) -> ParallelIK:
 
 
 def solve(ik: ParallelIK, poses: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
-    """All 8 IK branches of TCP poses (N, 4, 4) in the world: joints (N, 8, 6) and valid (N, 8).
+    """All 8 IK branches of TCP poses (N, 4, 4) in the world: joints (N, 8, 6) and valid (N, 8), by the compiled
+    kernel (`_closedkernel.parallel_rows`).
 
     Branch index bits: 4 = q1 root (shoulder), 2 = q5 root (wrist), 1 = q3 root (elbow)."""
-    poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+    poses = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4))
     n = len(poses)
     q = np.empty((n, 8, 6))
     valid = np.empty((n, 8), dtype=bool)
+    f64 = np.ascontiguousarray
+    rm, tm = f64(np.stack([r for r, _ in ik.m])), f64(np.stack([t for _, t in ik.m]))
     for s in range(0, n, block):
-        q[s:s + block], valid[s:s + block] = _solve_block(ik, poses[s:s + block])
+        parallel_rows(poses[s:s + block], f64(ik.pre), f64(ik.tip_inv), rm, tm, f64(ik.axes), f64(ik.n1), ik.k,
+                      f64(ik.c6), f64(ik.n5), f64(ik.d4), f64(ik.lower), f64(ik.upper), q[s:s + block],
+                      valid[s:s + block])
     return q, valid
-
-
-def _solve_block(ik: ParallelIK, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    n = len(poses)
-    t = ik.pre @ poses @ ik.tip_inv                       # joint-6 frame in joint 1's parent frame
-    tr = t[:, :3, :3].transpose(1, 2, 0)                   # (3, 3, N)
-    tt = t[:, :3, 3].T                                     # (3, N)
-    ax = ik.axes
-    a1, a2, a3, a4, a5, a6 = ax
-    (r2, t2), (r3, t3), (r4, t4), (r5, t5), (r6, t6) = ik.m
-
-    def apply(v: np.ndarray) -> np.ndarray:
-        """T_R v for a constant vector v (3,) -> (3, N)."""
-        return tr[:, 0] * v[0] + tr[:, 1] * v[1] + tr[:, 2] * v[2]
-
-    def apply_t(v: np.ndarray) -> np.ndarray:
-        """T_R^T v for vectors v (3, ..., N)."""
-        return np.stack([sum(tr[i, j] * v[i] for i in range(3)) for j in range(3)])
-
-    # 1. shoulder: n(q1) . W = K
-    w = apply(ik.c6) + tt
-    n1 = ik.n1
-    par = a1 * (a1 @ n1)
-    perp, cr = n1 - par, np.cross(a1, n1)
-    c1, s1 = _acs(_dot(perp, w), _dot(cr, w), ik.k - _dot(par, w))                        # (2, N)
-    c1, s1 = c1[:, None, None], s1[:, None, None]                                          # (2, 1, 1, N)
-    nw = par[:, None, None, None, None] + perp[:, None, None, None, None] * c1 + cr[:, None, None, None, None] * s1
-    # 2. wrist: n . R5(q5) c = n . z6
-    zt = apply(a6)
-    sz = (nw * zt[:, None, None, None]).sum(0)                                              # (2, 1, 1, N)
-    m, c = ik.n5, r6 @ a6
-    cpar = a5 * (a5 @ c)
-    c5, s5 = _acs(m @ (c - cpar), m @ np.cross(a5, c), sz[:, 0, 0] - m @ cpar)              # (2, 2, N): q5 root, q1 root
-    c5, s5 = c5.swapaxes(0, 1)[:, :, None], s5.swapaxes(0, 1)[:, :, None]                   # (2, 2, 1, N)
-    # 3. q6 turns n seen from the tool onto n seen from joint 5
-    n6 = apply_t(nw)                                                                        # (3, 2, 1, 1, N)
-    v6 = _lin(r6.T, _rot(a5, c5, s5, m.reshape(3, 1, 1, 1, 1), inverse=True))              # (3, 2, 2, 1, N)
-    c6, s6 = _sub1(a6, np.broadcast_to(n6, v6.shape), v6)
-    # 4. joint 4's frame: T G^-1 with G = M5 R5(q5) M6 R6(q6); only its origin T_t - T_R G_R^T G_t and its rotation
-    # applied to d4 are needed, with G_R^T G_t = R6^T(q6) R6^T (R5^T(q5) R5^T t5 + t6)
-    def g_inv(v: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
-        """R6(q6)^T R6^T (R5(q5)^T v + extra) for constant vectors v and extra: (3, 2, 2, 1, N)."""
-        x = _rot(a5, c5, s5, v.reshape(3, 1, 1, 1, 1), inverse=True)
-        if extra is not None:
-            x = x + extra.reshape(3, 1, 1, 1, 1)
-        return _rot(a6, c6, s6, _lin(r6.T, x), inverse=True)
-
-    def t_apply(u: np.ndarray) -> np.ndarray:
-        return tr[:, 0][:, None, None, None] * u[0] + tr[:, 1][:, None, None, None] * u[1] + tr[:, 2][:, None, None, None] * u[2]
-
-    p4 = tt[:, None, None, None] - t_apply(g_inv(r5.T @ t5, t6))                        # frame-4 origin
-    x1 = _rot(a1, c1, s1, p4, inverse=True)
-    x2 = _lin(r2.T, x1 - t2.reshape(3, 1, 1, 1, 1))
-    g = r3.T @ t3
-    t4par = a3 * (a3 @ t4)
-    rhs = 0.5 * ((x2 * x2).sum(0) - t3 @ t3 - t4 @ t4) - g @ t4par
-    c3, s3 = _acs(g @ (t4 - t4par), g @ np.cross(a3, t4), rhs)                             # (2, 2, 2, 1, N)
-    c3, s3 = np.moveaxis(c3[..., 0, :], 0, 2), np.moveaxis(s3[..., 0, :], 0, 2)            # (2, 2, 2, N)
-    u = _lin(r3, _rot(a3, c3, s3, t4.reshape(3, 1, 1, 1, 1))) + t3.reshape(3, 1, 1, 1, 1)
-    c2, s2 = _sub1(a2, u, np.broadcast_to(x2, u.shape))
-    # q4: R4(q4) d = R4^T R3(q3)^T R3^T R2(q2)^T R2^T R1(q1)^T T4_R d
-    d = ik.d4
-    y = _lin(r2.T, _rot(a1, c1, s1, t_apply(g_inv(r5.T @ d)), inverse=True))
-    y = _lin(r3.T, _rot(a2, c2, s2, y, inverse=True))
-    y = _lin(r4.T, _rot(a3, c3, s3, y, inverse=True))
-    c4, s4 = _sub1(a4, np.broadcast_to(d.reshape(3, 1, 1, 1, 1), y.shape), y)
-    q = np.empty((n, 2, 2, 2, 6))
-    view = q.transpose(1, 2, 3, 0, 4)                                                       # (2, 2, 2, N, 6)
-    full = (2, 2, 2, n)
-    for j, (sj, cj) in enumerate(((s1, c1), (s2, c2), (s3, c3), (s4, c4), (s5, c5), (s6, c6))):
-        view[..., j] = np.broadcast_to(_limit(np.arctan2(sj, cj), ik.lower[j], ik.upper[j]), full)
-    q = q.reshape(n, 8, 6)
-    return q, ~np.isnan(q).any(axis=2)

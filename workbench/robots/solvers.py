@@ -42,19 +42,19 @@ class ClosedForm:
     solve: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
-def _six(chain: Chain, limits: bool) -> tuple[str, bool, Callable] | None:
-    """The fastest closed form of a 6R chain as (kind, reversed, solve), or None. With `reversed`, `solve` takes
-    `reverse_poses(chain, poses)` and returns the joints in reversed order."""
+def _six(chain: Chain, limits: bool) -> tuple[str, bool, Callable, object] | None:
+    """The fastest closed form of a 6R chain as (kind, reversed, solve, constants), or None. With `reversed`, `solve`
+    takes `reverse_poses(chain, poses)` and returns the joints in reversed order."""
     if not analytic.spherical_wrist_reason(chain):
         ik = analytic.analytic_ik(chain, limits=limits)
-        return "spherical wrist", False, lambda poses: analytic.solve(ik, poses)
+        return "spherical wrist", False, lambda poses: analytic.solve(ik, poses), ik
     rev = reversed_chain(chain)
     if not analytic.spherical_wrist_reason(rev):
         ik = analytic.analytic_ik(rev, limits=limits)
-        return "spherical shoulder", True, lambda poses: analytic.solve(ik, poses)
+        return "spherical shoulder", True, lambda poses: analytic.solve(ik, poses), ik
     if not parallel.parallel_axes_reason(chain):
         ik = parallel.parallel_ik(chain, limits=limits)
-        return "three parallel axes", False, lambda poses: parallel.solve(ik, poses)
+        return "three parallel axes", False, lambda poses: parallel.solve(ik, poses), ik
     return None
 
 
@@ -126,12 +126,19 @@ def _swept(chain: Chain, free: int, angles: np.ndarray, limits: bool) -> ClosedF
         return None
     kind, rev = forms[0][:2]
     others = [k for k in range(chain.nq) if k != free]
+    wrists = None
+    if isinstance(forms[0][3], analytic.AnalyticIK) and not (rev and free == 0):
+        wrists = analytic.kernel_constants([f[3] for f in forms])
 
     def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
         q = np.empty((len(poses), 8 * len(angles), chain.nq))
         valid = np.empty((len(poses), 8 * len(angles)), dtype=bool)
         x = reverse_poses(subs[0], poses) if rev else poses
+        if wrists is not None:  # every sample in one compiled pass, written in place
+            analytic.solve_into(wrists, x, q, valid, cols=tuple(others[::-1] if rev else others), fixed_col=free,
+                                fixed=angles)
+            return q, valid
         for k, (a, sub, f) in enumerate(zip(angles, subs, forms)):
             if rev and free == 0 and k:  # the held first joint moves the reversed chain's target
                 x = reverse_poses(sub, poses)
@@ -164,7 +171,7 @@ def closed_form(robot, limits: bool = True, samples: int = SWEEP) -> ClosedForm 
     six = _six(chain, limits)
     if six is None:
         return _eaik(chain, limits)
-    kind, rev, f = six
+    kind, rev, f, _ = six
 
     def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)

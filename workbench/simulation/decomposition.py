@@ -81,8 +81,9 @@ def _decompose(mesh: trimesh.Trimesh, name: str, opts: Decomposition) -> list[tu
         with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context(method)) as pool:
             raw = pool.submit(_run_coacd, v, f, opts).result()
     except BrokenProcessPool:
-        raise SimulationError(f"convex decomposition of mesh {name!r} failed (CoACD aborted on it: a flat, open or "
-                              f"self-intersecting mesh?); repair or replace the mesh") from None
+        raise SimulationError(f"convex decomposition of mesh {name!r} failed (CoACD aborted on it at remeshing resolution "
+                              f"{opts.preprocess_resolution}: too coarse a --hull-resolution, or a flat, open or "
+                              f"self-intersecting mesh?); raise --hull-resolution, or repair or replace the mesh") from None
     except Exception as exc:  # CoACD reports bad input as RuntimeError with a C++ message
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise SimulationError(f"convex decomposition of mesh {name!r} failed ({first}); repair or replace the mesh") from None

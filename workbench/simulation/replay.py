@@ -6,6 +6,8 @@ plan's jaw actions say, move it, under gravity, at a fixed timestep. After the t
 `hold_end` seconds and the part's final pose is compared with the goal.
 
 The verdict, in time order (the first failure names the plan step and how it failed):
+- collision: an arm link or the gripper goes into the table, an arm link into the part, or two links of the robot
+  into each other (a self-collision pair), deeper than `collision_depth`;
 - shove: while the fingers close, the part moves more than the slip tolerance (a curved surface pushed aside);
 - slip / drop: during a transfer (from the close to the last straight line down) the part moves in the hand, as relative motion of
   part and TCP, beyond the slip tolerance; a drop when no pad touches it any more or it moved by more than
@@ -32,7 +34,7 @@ from workbench.params import Params, param
 from workbench.simulation.decomposition import Decomposition
 from workbench.simulation.scene import build_scene, mass_properties, mujoco_module, part_scene
 
-MODEL_VERSION = 2  # bump when the scene or the verdict changes what a stored simulation means
+MODEL_VERSION = 3  # bump when the scene or the verdict changes what a stored simulation means
 DEGREE = math.pi / 180
 SQUEEZE = 0.02  # m: closing aims this far past the closed stop, so the finger force sits at its limit
 DEFAULT_GRIP_FORCE = 70.0  # N: the Franka hand's continuous grasp force
@@ -44,6 +46,7 @@ class SimParams(Params):
     """Every parameter of a simulation; their digest keys the stored result (with the plan)."""
 
     timestep: float = param(0.002, gt=0, le=0.01, unit="s", help="physics timestep")
+    impratio: float = param(10.0, ge=1, le=100, help="ratio of frictional to normal contact impedance (MuJoCo's impratio)")
     density: float = param(1000.0, gt=0, le=30000, unit="kg/m^3", help="density of the part")
     grip_force: float | None = param(None, ge=0, le=2000, optional=True, unit="N",
                                      help="force of each finger when closed (default: the gripper's, 70 N for the Franka hand)")
@@ -65,28 +68,42 @@ class SimParams(Params):
     settle_spin: float = param(0.2, gt=0, le=100, unit="rad/s", help="angular speed below which a released part has settled")
     settle_time: float = param(1.0, gt=0, le=30, unit="s", help="time a released part has to settle")
     hold_end: float = param(1.0, ge=0, le=30, unit="s", help="time simulated after the trajectory, the arm at rest")
+    collision_depth: float = param(0.0005, gt=0, le=0.1, unit="m",
+                                   help="penetration of the robot into the table, the part or itself counted as a collision")
+    hull_concavity: float = param(0.1, ge=0.01, le=1,
+                                  help="concavity each convex part of the part's collision shape may keep, relative to its size "
+                                       "(CoACD's threshold)")
+    max_hulls: int = param(16, ge=1, le=256, integer=True, help="most convex parts of the part's collision shape")
+    hull_resolution: int = param(30, ge=2, le=200, integer=True,
+                                 help="voxel resolution of CoACD's remeshing of the part before it cuts it")
 
-    def digest(self, grip_force: float, friction: float, table_friction: float, decomposition: Decomposition) -> str:
+    @property
+    def decomposition(self) -> Decomposition:
+        """The convex decomposition's settings these parameters ask for."""
+        return Decomposition(threshold=self.hull_concavity, max_hulls=self.max_hulls, preprocess_resolution=self.hull_resolution)
+
+    def digest(self, grip_force: float, friction: float, table_friction: float) -> str:
         """The digest of every simulation parameter, the defaults resolved (grip force, frictions), the convex
-        decomposition's settings and the model version."""
+        decomposition's remaining settings and the model version."""
         d = {**self.as_dict(), "grip_force": grip_force, "friction": friction, "table_friction": table_friction,
-             "decomposition": decomposition.__dict__, "model": MODEL_VERSION}
+             "decomposition": self.decomposition.__dict__, "model": MODEL_VERSION}
         return hashlib.sha256(json.dumps(d, sort_keys=True).encode()).hexdigest()[:24]
 
 
-FAILURES = ("shove", "slip", "drop", "roll", "pose", "goal")
+FAILURES = ("collision", "shove", "slip", "drop", "roll", "pose", "goal")
 
 
 @dataclass
 class Failure:
-    """The first thing that went wrong: its kind (FAILURES), the plan step (0-based) and its kind, the time (s) and
-    a one-line description."""
+    """The first thing that went wrong: its kind (FAILURES), the plan step (0-based) and its kind, the time (s), a
+    one-line description and, for a collision, the robot's links in its first contact."""
 
     kind: str
     step: int
     step_kind: str
     t: float
     message: str
+    links: tuple[str, ...] = ()
 
 
 @dataclass
@@ -170,10 +187,11 @@ def _finger_targets(segments) -> list[float]:
 
 
 def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.ndarray, np.ndarray]],
-             params: SimParams = SimParams(), decomposition: Decomposition = Decomposition()) -> SimResult:
+             params: SimParams = SimParams(), self_pairs: list[tuple[str, str]] | None = None) -> SimResult:
     """Replay `plan` (a timed Plan: steps and segments) with `robot` (its Robot, whose gripper is the planning
     gripper), the part's `mesh` and convex `hulls`, on `scene`'s table, with the plan's grasp `friction` unless
-    `params.friction` overrides it; see the module docstring for the verdict."""
+    `params.friction` overrides it; `self_pairs`: the robot's link pairs that may collide (the stored robot's
+    `AllowedPairs.checked`); see the module docstring for the verdict."""
     mujoco = mujoco_module()
     if not plan.segments:
         raise SimulationError("the plan has no timed motions to simulate; plan it with its motions")
@@ -181,7 +199,7 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
     grip_force, mu, mu_table = resolve(params, gripper, friction)
     t_build = time.perf_counter()
     ss = build_scene(robot, gripper, scene, mesh, hulls, params.density, grip_force, mu, mu_table, params.timestep,
-                     spec_value(gripper, "mass"))
+                     spec_value(gripper, "mass"), self_pairs, params.impratio)
     m = ss.model
     data = mujoco.MjData(m)
     build_seconds = time.perf_counter() - t_build
@@ -223,6 +241,9 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
     ctrl[:, ss.arm_act], ctrl[:, ss.vel_act] = q_des, qd_des
     ctrl[:, ss.finger_act] = finger[:, None]
     pb, hb = ss.part_body, ss.hand_body
+    bad = _forbidden(m, ss, part_geoms)
+    hit: list[tuple[int, int, int, float]] = []  # (step, geom, geom, depth) of every collision deeper than the tolerance
+    depth = float(params.collision_depth)
     t0, c0 = time.perf_counter(), time.process_time()
     for k in range(n):
         data.ctrl[:] = ctrl[k]
@@ -231,21 +252,64 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
         hand_pos[k], hand_quat[k] = data.xpos[hb], data.xquat[hb]
         if k in events:
             touching[events[k]] = _touches(data, pads, part_geoms)
+        if data.ncon:
+            c = data.contact
+            g, dist = c.geom[:data.ncon], c.dist[:data.ncon]
+            deep = bad[g[:, 0], g[:, 1]] & (dist < -depth)
+            if deep.any():
+                i = int(np.argmin(np.where(deep, dist, np.inf)))
+                hit.append((k, int(g[i, 0]), int(g[i, 1]), -float(dist[i])))
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
     if not np.isfinite(part_pos).all():
         raise SimulationError(f"the physics diverged (timestep {dt:g} s); give a smaller --timestep")
     part = _poses(part_pos, part_quat)
     hand = _poses(hand_pos, hand_quat)
     rows, failures, final = _verdict(plan, robot, segs, times, seg_end, part, hand, touching, ss.part_com, params, start)
+    failures += _collisions(hit, m, ss, plan, segs, seg_of, times, params)
     failures.sort(key=lambda f: f.t)
     every = max(1, int(round(1.0 / (PLAYBACK_HZ * dt))))
     keep = np.r_[np.arange(0, n, every), n - 1] if (n - 1) % every else np.arange(0, n, every)
     resolved = {**params.as_dict(), "grip_force": grip_force, "friction": mu, "table_friction": mu_table,
-                "decomposition": decomposition.__dict__, "model": MODEL_VERSION}
+                "decomposition": params.decomposition.__dict__, "model": MODEL_VERSION}
     return SimResult(confirmed=not failures, failure=failures[0] if failures else None, steps=rows, final_error=final[0],
                      final_angle=final[1], playback_t=np.r_[0.0, times[keep]], playback_pose=np.concatenate([start[None], part[keep]]),
                      simulated=float(n * dt), seconds=seconds, cpu_seconds=cpu, build_seconds=build_seconds,
-                     digest=params.digest(grip_force, mu, mu_table, decomposition), params=resolved, failures=failures)
+                     digest=params.digest(grip_force, mu, mu_table), params=resolved, failures=failures)
+
+
+def _forbidden(m, ss, part_geoms: set[int]) -> np.ndarray:
+    """(ngeom, ngeom) True for the geom pairs whose contact is a collision: any robot geom with the table, an arm
+    link's with the part, and the self-collision pairs (the gripper's own contact with the part is the grasp)."""
+    bad = np.zeros((m.ngeom, m.ngeom), dtype=bool)
+    robot = np.array(sorted(ss.robot_geoms), dtype=np.int64)
+    arm = np.array(sorted(set(ss.robot_geoms) - ss.gripper_geoms), dtype=np.int64)
+    bad[robot, ss.table_geom] = True
+    for g in part_geoms:
+        bad[arm, g] = True
+    for a, b in ss.self_pairs:
+        bad[a, b] = True
+    return bad | bad.T
+
+
+def _collisions(hit, m, ss, plan, segs, seg_of, times, p: SimParams) -> list[Failure]:
+    """One failure per plan step with a collision: its first contact (time and the two geoms' links) and the
+    deepest penetration in that step."""
+    first: dict[int, tuple[int, int, int]] = {}
+    deepest: dict[int, float] = {}
+    for k, a, b, d in hit:
+        i = int(segs[seg_of[k]].step)
+        first.setdefault(i, (k, a, b))
+        deepest[i] = max(deepest.get(i, 0.0), d)
+    name = {**ss.robot_geoms, ss.table_geom: "the table"}
+    out = []
+    for i, (k, a, b) in first.items():
+        s = segs[seg_of[k]]
+        pair = tuple(name.get(g, "the part") for g in (a, b))
+        out.append(Failure("collision", i, plan.steps[i].kind, float(times[k]),
+                           f"step {i + 1} ({plan.steps[i].kind}, {s.caption} {s.kind}) at {times[k]:.2f} s: {pair[0]} and "
+                           f"{pair[1]} collide, up to {deepest[i] * 1000:.1f} mm deep (tolerance {p.collision_depth * 1000:g} mm)",
+                           tuple(x for x in pair if x not in ("the table", "the part"))))
+    return out
 
 
 def _touches(data, pads: set[int], part: set[int]) -> bool:
@@ -366,7 +430,7 @@ def rest_on_table(mesh, hulls: list[tuple[np.ndarray, np.ndarray]], pose: np.nda
     """A part released at rest at `pose` on the table (no robot; a placement as a plan's release leaves it), judged
     as after a release (`settled`, over `settle_time` plus `hold_end`): (None or why it rolls, its final pose)."""
     mujoco = mujoco_module()
-    m, body = part_scene(mesh, hulls, scene, params.density, friction, params.timestep)
+    m, body = part_scene(mesh, hulls, scene, params.density, friction, params.timestep, params.impratio)
     data = mujoco.MjData(m)
     data.qpos[:3] = pose[:3, 3]
     quat = np.zeros(4)

@@ -2,9 +2,12 @@
 
 - The arm is the robot's serial chain as the stored URDF gives it (the library's reduced pinocchio model: joint
   placements, axes, limits, link masses and inertias), one position actuator per joint plus a velocity term that
-  follows the trajectory's velocities; the links are gravity-compensated, as an arm's own controller does. The
-  arm's links carry no collision geometry: the plan's trajectory is already checked against the table, the part
-  and itself at every knot (workbench.validation), and the physics here is the part's.
+  follows the trajectory's velocities; the links are gravity-compensated, as an arm's own controller does. Each
+  link collides through the URDF's collision shapes (primitives as they are, meshes as their convex hulls, as
+  MuJoCo convexifies every mesh), without the robot's own hand: against the table and the part, and against the
+  other links and the gripper in the pairs the self-collision check tests (`robots.selfcollision`; never
+  adjacent links, never pairs that cannot move relative to each other, never a link whose hull is much larger than
+  its mesh: that hull would touch where the mesh keeps clear, and the kinematic check tests its exact mesh).
 - The gripper is the planning gripper's own geometry in its TCP frame (hand body mesh, finger boxes), its fingers
   on two slide joints coupled to move together (as a parallel-jaw gripper's mechanism does), each driven by a
   force-limited position actuator: closing squeezes with the grip force whatever the opening.
@@ -17,12 +20,13 @@ Friction: the pads with the part use the plan's grasp friction, the table with t
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
 
 from workbench.errors import SimulationError
+from workbench.geometry.collision import pinocchio_geometry
 
 ARM_KP = 4000.0  # N m / rad: position gain of every arm joint (tracking error I a / kp, under 0.1 mm at the TCP here)
 ARM_KV = 100.0  # N m s / rad: velocity gain toward the trajectory velocity (higher gains chatter the hand at 2 ms)
@@ -36,12 +40,18 @@ TORSION = 0.004  # m: torsional friction of the soft pads (MuJoCo condim 4)
 SOLREF = (0.005, 1.0)  # contact time constant (s, >= 2 timesteps) and damping ratio
 NOSLIP = 0  # no-slip solver iterations: off (with it the soft pad contacts of a held part drift more, and it costs a third of the step)
 SOLIMP = (0.95, 0.99, 0.001, 0.5, 2.0)
+# contype / conaffinity: the table and the part raise contacts with everything, the robot's geoms only with them;
+# robot-robot contacts are the explicit self-collision pairs
+ENV_TYPE, ENV_AFFINITY, ROBOT_TYPE, ROBOT_AFFINITY = 1, 1, 0, 1
+CONVEX_RATIO = 1.1  # a link mesh whose hull exceeds its volume this much takes no part in self-collision here
 
 
 @dataclass
 class SimScene:
     """A compiled MuJoCo model and the indices the replay needs: arm joint and finger qpos addresses, the part's
-    free joint, the arm's position and velocity actuators, the finger actuators, the hand (TCP) body and the part."""
+    free joint, the arm's position and velocity actuators, the finger actuators, the hand (TCP) body and the part;
+    the robot's geoms (id -> the link they belong to, `gripper_hand` and `gripper_fingers` for the gripper's),
+    which of them are the gripper's, the self-collision geom pairs and the table's geom."""
 
     model: object
     arm_qpos: np.ndarray
@@ -53,6 +63,10 @@ class SimScene:
     hand_body: int
     part_body: int
     part_com: np.ndarray
+    robot_geoms: dict[int, str] = field(default_factory=dict)
+    gripper_geoms: frozenset[int] = frozenset()
+    self_pairs: frozenset[tuple[int, int]] = frozenset()
+    table_geom: int = -1
 
 
 def mujoco_module():
@@ -87,12 +101,14 @@ def _full_inertia(i: np.ndarray) -> list[float]:
 
 def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[np.ndarray, np.ndarray]],
                 density: float, grip_force: float, pad_friction: float, table_friction: float,
-                timestep: float, hand_mass: float | None = None) -> SimScene:
+                timestep: float, hand_mass: float | None = None, self_pairs: list[tuple[str, str]] | None = None,
+                impratio: float = 1.0) -> SimScene:
     """Compile the scene of the module docstring for `robot` (a workbench Robot), `gripper` (its planning
     Gripper), `scene` (the table), the part's `mesh` and convex `hulls` (part frame); `hand_mass` from the
-    gripper's spec, else 0.7 kg (it only loads the gravity-compensated arm)."""
+    gripper's spec, else 0.7 kg (it only loads the gravity-compensated arm); `self_pairs`: the link pairs that
+    may collide with each other (`AllowedPairs.checked`; None: every pair of links two or more joints apart)."""
     mujoco = mujoco_module()
-    spec = _spec(timestep)
+    spec = _spec(timestep, impratio)
 
     _add_table(spec, scene, table_friction)
 
@@ -100,6 +116,7 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
     parent = spec.worldbody.add_body(name="robot_base", pos=base[:3, 3], quat=_quat(base[:3, :3]))
     model = robot.model
     arm_joints = []
+    bodies = {0: parent}
     for j in range(1, model.njoints):
         placement = robot.chain_placement[j - 1]
         inertia = model.inertias[j]
@@ -115,6 +132,7 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
         body.add_joint(name=name, type=kind, axis=robot.chain_axis[j - 1], range=[robot.lower[j - 1], robot.upper[j - 1]],
                        armature=ARM_ARMATURE, limited=mujoco.mjtLimited.mjLIMITED_TRUE)
         arm_joints.append(name)
+        bodies[j] = body
         parent = body
 
     tip = robot.tip_in_joint
@@ -128,7 +146,8 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
     spec.add_mesh(name="hand_body", uservert=np.asarray(body_mesh.vertices, dtype=np.float32).ravel(),
                   userface=np.asarray(body_mesh.faces, dtype=np.int32).ravel())
     hand.add_geom(name="hand_body", type=mujoco.mjtGeom.mjGEOM_MESH, meshname="hand_body", condim=3,
-                  solref=SOLREF, solimp=SOLIMP)
+                  solref=SOLREF, solimp=SOLIMP, contype=ROBOT_TYPE, conaffinity=ROBOT_AFFINITY)
+    links = {"hand_body": "gripper_hand"}
     mirror = np.diag([1.0, -1.0, 1.0, 1.0])
     fingers = []
     for side, sign in (("left", 1.0), ("right", -1.0)):
@@ -145,11 +164,18 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
             finger.add_geom(name=f"{side}_{'pad' if pad else f'box{k}'}", type=mujoco.mjtGeom.mjGEOM_BOX,
                             size=np.asarray(ext, dtype=np.float64) / 2, pos=p[:3, 3], quat=_quat(p[:3, :3]),
                             friction=[pad_friction, TORSION, 0.0], priority=1, condim=4 if pad else 3,
-                            solref=SOLREF, solimp=SOLIMP)
+                            solref=SOLREF, solimp=SOLIMP, contype=ROBOT_TYPE, conaffinity=ROBOT_AFFINITY)
+            links[f"{side}_{'pad' if pad else f'box{k}'}"] = "gripper_fingers"
         fingers.append(f"finger_{side}")
     spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="finger_left", name2="finger_right",
                       data=[0.0, 1.0, 0.0, 0.0, 0.0] + [0.0] * 7)
     spec.add_exclude(bodyname1="finger_left", bodyname2="finger_right")
+
+    arm, bent = _add_link_geoms(spec, robot, bodies)
+    links.update(arm)
+    pairs = _self_pairs(robot, links, self_pairs, bent)
+    for a, b in pairs:
+        spec.add_pair(geomname1=a, geomname2=b, condim=3, solref=SOLREF, solimp=SOLIMP)
 
     _, com = _add_part(spec, mesh, hulls, density, min(pad_friction, table_friction))
 
@@ -175,14 +201,73 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
                     arm_act=np.array([m.actuator(f"pos_{n}").id for n in arm_joints]),
                     vel_act=np.array([m.actuator(f"vel_{n}").id for n in arm_joints]),
                     finger_act=np.array([m.actuator(f"grip_{n}").id for n in fingers]),
-                    hand_body=m.body("hand").id, part_body=m.body("part").id, part_com=com)
+                    hand_body=m.body("hand").id, part_body=m.body("part").id, part_com=com,
+                    robot_geoms={m.geom(g).id: lk for g, lk in links.items()},
+                    gripper_geoms=frozenset(m.geom(g).id for g, lk in links.items() if lk.startswith("gripper_")),
+                    self_pairs=frozenset(tuple(sorted((m.geom(a).id, m.geom(b).id))) for a, b in pairs),
+                    table_geom=m.geom("table").id)
 
 
-def _spec(timestep: float):
-    """An empty MjSpec with the scene's options: gravity, timestep, implicit integration, elliptic friction cones."""
+def _add_link_geoms(spec, robot, bodies: dict[int, object]) -> tuple[dict[str, str], set[str]]:
+    """The URDF's collision shapes of the arm (without the robot's own hand) and of its fixed base on their bodies
+    (`bodies`: reduced-model joint -> MjsBody, 0 the base); returns geom name -> link name, and the links with a
+    mesh far from convex (its hull more than `CONVEX_RATIO` times its volume)."""
+    mujoco = mujoco_module()
+    out, bent = {}, set()
+    for k in robot.fixed_geometry() + robot.arm_geometry():
+        go = robot.geom.geometryObjects[k]
+        body = bodies.get(int(go.parentJoint))
+        if body is None:
+            continue
+        pl = np.asarray(go.placement.homogeneous, dtype=np.float64)
+        name = f"arm{k}"
+        kw = dict(name=name, pos=pl[:3, 3], quat=_quat(pl[:3, :3]), contype=ROBOT_TYPE, conaffinity=ROBOT_AFFINITY,
+                  condim=3, solref=SOLREF, solimp=SOLIMP)
+        geom, kind = go.geometry, type(go.geometry).__name__
+        if kind == "Box" or hasattr(geom, "halfSide"):
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_BOX, size=np.asarray(geom.halfSide, dtype=np.float64), **kw)
+        elif kind in ("Cylinder", "Capsule"):
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_CYLINDER if kind == "Cylinder" else mujoco.mjtGeom.mjGEOM_CAPSULE,
+                          size=[float(geom.radius), float(geom.halfLength), 0.0], **kw)
+        elif kind == "Sphere":
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_SPHERE, size=[float(geom.radius), 0.0, 0.0], **kw)
+        else:
+            _, tm = pinocchio_geometry(go)
+            hull = tm.convex_hull  # MuJoCo collides a mesh as its convex hull; handing it the hull compiles faster
+            if not tm.is_volume or hull.volume > CONVEX_RATIO * tm.volume:
+                bent.add(robot.model.frames[go.parentFrame].name)
+            spec.add_mesh(name=name, uservert=np.asarray(hull.vertices, dtype=np.float32).ravel(),
+                          userface=np.asarray(hull.faces, dtype=np.int32).ravel())
+            body.add_geom(type=mujoco.mjtGeom.mjGEOM_MESH, meshname=name, **kw)
+        out[name] = robot.model.frames[go.parentFrame].name
+    return out, bent
+
+
+def _self_pairs(robot, links: dict[str, str], checked: list[tuple[str, str]] | None,
+                bent: set[str]) -> list[tuple[str, str]]:
+    """Geom pairs (names) of the link pairs that may collide: `checked` link pairs, else every pair of links whose
+    joints are neither the same nor adjacent (the gripper's two pseudo-links ride the last joint); never with a
+    `bent` link, whose hull touches its neighbours where its mesh keeps clear (a UR5's forearm and the hand: 2 mm
+    apart, hulls touching), and whose exact mesh the kinematic self-collision check tests at every knot."""
+    if checked is None:
+        joint = {robot.model.frames[go.parentFrame].name: int(go.parentJoint) for go in robot.geom.geometryObjects}
+        joint["gripper_hand"] = joint["gripper_fingers"] = robot.nq
+        parents = np.asarray(robot.model.parents)
+        names = sorted(joint)
+        checked = [(a, b) for i, a in enumerate(names) for b in names[i + 1:]
+                   if joint[a] != joint[b] and parents[max(joint[a], joint[b])] != min(joint[a], joint[b])]
+    want = {tuple(sorted(p)) for p in checked if not bent & set(p)}
+    geoms = sorted(links)
+    return [(a, b) for i, a in enumerate(geoms) for b in geoms[i + 1:] if tuple(sorted((links[a], links[b]))) in want]
+
+
+def _spec(timestep: float, impratio: float = 1.0):
+    """An empty MjSpec with the scene's options: gravity, timestep, implicit integration, elliptic friction cones
+    (`impratio`: frictional to normal impedance)."""
     mujoco = mujoco_module()
     spec = mujoco.MjSpec()
     spec.option.timestep = float(timestep)
+    spec.option.impratio = float(impratio)
     spec.option.gravity = [0.0, 0.0, -9.81]
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
@@ -199,7 +284,7 @@ def _add_table(spec, scene, friction: float) -> None:
     lo, hi, th = np.asarray(scene.table_min), np.asarray(scene.table_max), float(scene.table_thickness)
     spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[*(0.5 * (hi - lo)), th / 2],
                             pos=[*(0.5 * (lo + hi)), -th / 2], friction=[friction, 0.0, 0.0], priority=1,
-                            condim=3, solref=SOLREF, solimp=SOLIMP)
+                            condim=3, solref=SOLREF, solimp=SOLIMP, contype=ENV_TYPE, conaffinity=ENV_AFFINITY)
 
 
 def _add_part(spec, mesh: trimesh.Trimesh, hulls, density: float, friction: float) -> tuple[float, np.ndarray]:
@@ -216,13 +301,15 @@ def _add_part(spec, mesh: trimesh.Trimesh, hulls, density: float, friction: floa
         spec.add_mesh(name=f"hull{k}", uservert=np.asarray(v, dtype=np.float32).ravel(),
                       userface=np.asarray(f, dtype=np.int32).ravel())
         part.add_geom(name=f"hull{k}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"hull{k}", condim=4,
-                      friction=[friction, TORSION, 0.0], solref=SOLREF, solimp=SOLIMP)
+                      friction=[friction, TORSION, 0.0], solref=SOLREF, solimp=SOLIMP, contype=ENV_TYPE,
+                      conaffinity=ENV_AFFINITY)
     return mass, com
 
 
-def part_scene(mesh: trimesh.Trimesh, hulls, scene, density: float, friction: float, timestep: float) -> tuple[object, int]:
+def part_scene(mesh: trimesh.Trimesh, hulls, scene, density: float, friction: float, timestep: float,
+               impratio: float = 1.0) -> tuple[object, int]:
     """The table and the part alone (no robot): the compiled model and the part's body id."""
-    spec = _spec(timestep)
+    spec = _spec(timestep, impratio)
     _add_table(spec, scene, friction)
     _add_part(spec, mesh, hulls, density, friction)
     m = spec.compile()

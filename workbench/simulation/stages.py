@@ -13,11 +13,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.planners.wan_harada.stages import get_object, load_plan, stored_robot
-from workbench.simulation.decomposition import Decomposition, convex_parts
+from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
+from workbench.simulation.decomposition import convex_parts
 from workbench.simulation.replay import SimParams, SimResult, resolve, simulate
 from workbench.store import Store
 from workbench.store import simulation as sql
-from workbench.store.robots import scene_row
+from workbench.store.robots import robot_row, scene_row
 
 
 @dataclass
@@ -35,7 +36,7 @@ class StoredSimulation:
     result: SimResult | None
 
 
-def simulate_stored(store: Store, idplan: int, params: SimParams = SimParams(), decomposition: Decomposition = Decomposition(),
+def simulate_stored(store: Store, idplan: int, params: SimParams = SimParams(),
                     plan=None, robot=None, save: bool = True, gripper=None) -> StoredSimulation:
     """Simulate stored plan `idplan` (or reuse its stored simulation with the same parameters) and store the result.
     `plan` and `robot` may be given when already loaded (a plan just made by `workbench plan`); else the robot is
@@ -45,14 +46,15 @@ def simulate_stored(store: Store, idplan: int, params: SimParams = SimParams(), 
     robot = robot if robot is not None else stored_robot(store, inputs["idrobot"], gripper)
     _, obj = get_object(store, inputs["object"])
     scene = scene_row(store, inputs["idscene"]).scene
-    hulls = convex_parts(obj.mesh, obj.digest, obj.name, decomposition)
-    digest = params.digest(*resolve(params, robot.gripper, inputs["friction"]), decomposition)
+    digest = params.digest(*resolve(params, robot.gripper, inputs["friction"]))
     found = sql.find_simulation(store, idplan, digest) if save else None
     if found is not None:
         row, _ = sql.load_simulation(store, found)
         return StoredSimulation(found, True, bool(row["confirmed"]), row["failure"], row["failure_step"], row["message"] or "",
                                 float(row["final_error"]), float(row["final_angle"]), None)
-    res = simulate(plan, robot, obj.mesh, scene, inputs["friction"], hulls, params, decomposition)
+    hulls = convex_parts(obj.mesh, obj.digest, obj.name, params.decomposition)
+    res = simulate(plan, robot, obj.mesh, scene, inputs["friction"], hulls, params,
+                   self_pairs(store, inputs["idrobot"], robot))
     f = res.failure
     sid = -1
     if save:
@@ -66,21 +68,27 @@ def simulate_stored(store: Store, idplan: int, params: SimParams = SimParams(), 
                             f.message if f else res.summary(), res.final_error, res.final_angle, res)
 
 
-def simulate_in_memory(store: Store, plan, robot, params: SimParams = SimParams(),
-                       decomposition: Decomposition = Decomposition()) -> SimResult:
+def simulate_in_memory(store: Store, plan, robot, params: SimParams = SimParams()) -> SimResult:
     """Simulate a plan that is not stored (its object, scene and grasp friction from the store); nothing written."""
     _, obj = get_object(store, plan.object)
-    hulls = convex_parts(obj.mesh, obj.digest, obj.name, decomposition)
+    hulls = convex_parts(obj.mesh, obj.digest, obj.name, params.decomposition)
     friction = sql.grasp_friction(store, plan.steps[0].idfreeairgrip)
-    return simulate(plan, robot, obj.mesh, scene_row(store, plan.ids["idscene"]).scene, friction, hulls, params, decomposition)
+    return simulate(plan, robot, obj.mesh, scene_row(store, plan.ids["idscene"]).scene, friction, hulls, params,
+                    self_pairs(store, plan.ids["idrobot"], robot))
 
 
-def physics_check(store: Store, robot, params: SimParams = SimParams(),
-                  decomposition: Decomposition = Decomposition()) -> Callable[[object], tuple[int, str] | None]:
+def self_pairs(store: Store, idrobot: int, robot) -> list[tuple[str, str]]:
+    """The link pairs the self-collision check tests for a stored robot (its row's allowed pairs; computed for
+    rows stored without them)."""
+    text = robot_row(store, int(idrobot))["allowed_pairs"]
+    return (AllowedPairs.from_json(text) if text else allowed_pairs(robot)).checked
+
+
+def physics_check(store: Store, robot, params: SimParams = SimParams()) -> Callable[[object], tuple[int, str] | None]:
     """For the planner's search (`plan --require-physics`): a function of a plan that simulates it and returns None
     when it is confirmed, else (the failing step, why); the failing step's roadmap node or grip is then removed."""
     def check(plan) -> tuple[int, str] | None:
-        res = simulate_in_memory(store, plan, robot, params, decomposition)
+        res = simulate_in_memory(store, plan, robot, params)
         return None if res.confirmed else (res.failure.step, f"physics: {res.failure.kind}: {res.failure.message}")
 
     return check

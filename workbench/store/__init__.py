@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import signal
 import time
 from contextlib import contextmanager
@@ -43,6 +44,8 @@ from workbench.store.schema import ALL_TABLES, MIGRATIONS
 
 CONNECT_CONFIG = {"autoinstall_known_extensions": False}
 FAULT_ENV = "WORKBENCH_FAULT"  # tests only: "TABLE:N:SIGNAL" sends SIGNAL to this process after the N-th insert into TABLE
+REACQUIRE_SECONDS = 60.0  # a run that released the store to compute waits at least this long to write its results
+_INSERT = re.compile(r"\s*INSERT\s+(?:OR\s+\w+\s+)?INTO\s+(\w+)", re.IGNORECASE)
 
 
 class Store:
@@ -53,7 +56,8 @@ class Store:
         """An in-memory store with the full schema (and `extra_tables`' DDL): a catalogue worker writes a unit's rows
         in it with the stage writers, then exports them as Parquet files."""
         self = cls.__new__(cls)
-        self.path, self._depth, self.read_only, self._fault = Path(":memory:"), 0, False, None
+        self.path, self._depth, self.read_only, self._fault, self._released = Path(":memory:"), 0, False, None, 0
+        self._wait, self._con, self._closed = 0.0, None, False
         self.dataset = None
         self.con = duckdb.connect(":memory:", config=CONNECT_CONFIG)
         self.con.execute("SET threads = 1")
@@ -70,8 +74,12 @@ class Store:
         self.dataset: Path | None = None  # a Parquet catalogue folder: its partitioned tables are read as views
         if self.path.is_dir() and (self.path / DATASET_FILE).is_file():
             self.dataset, self.path = self.path, self.path / DATASET_FILE
-        self._deadline = time.monotonic() + (_wait_seconds() if wait is None else max(0.0, float(wait)))
+        self._wait = _wait_seconds() if wait is None else max(0.0, float(wait))
+        self._deadline = time.monotonic() + self._wait
         self._depth = 0  # open transaction() levels
+        self._released = 0  # open released() levels: each outermost transaction gives the file back when it ends
+        self._con: duckdb.DuckDBPyConnection | None = None
+        self._closed = False
         self.read_only = read_only
         check_path(self.path, read_only or not create)
         if self.path.exists():
@@ -91,6 +99,42 @@ class Store:
                 raise
         if self.dataset is not None:
             dataset_views(self)
+
+    @property
+    def con(self) -> duckdb.DuckDBPyConnection:
+        """The DuckDB connection; opened again here after `released` gave the file back (waiting for its lock)."""
+        if self._con is None:
+            if self._closed:
+                raise StoreError(f"store {self.path} was closed; open it again")
+            self._deadline = time.monotonic() + max(self._wait, REACQUIRE_SECONDS)
+            self._con = self._connect(self.read_only)
+            if self.dataset is not None:
+                dataset_views(self)  # the views live on the connection
+        return self._con
+
+    @con.setter
+    def con(self, value: duckdb.DuckDBPyConnection | None) -> None:
+        self._con = value
+
+    @contextmanager
+    def released(self) -> Iterator["Store"]:
+        """Computation that other processes may write beside: the file's lock is given back now and after each
+        outermost transaction inside the block, and taken again (waiting up to --wait, at least REACQUIRE_SECONDS)
+        at the next read or write. Inside a transaction, or on an in-memory store, nothing is released."""
+        if self._depth or str(self.path) == ":memory:":
+            yield self
+            return
+        self._released += 1
+        self._give_back()
+        try:
+            yield self
+        finally:
+            self._released -= 1
+
+    def _give_back(self) -> None:
+        if self._con is not None:
+            self._con.close()
+            self._con = None
 
     def _open_checked(self, read_only: bool) -> duckdb.DuckDBPyConnection:
         """A connection to an existing file whose identity and version were checked first, on a read-only connection
@@ -145,7 +189,8 @@ class Store:
             self.con.execute("CHECKPOINT")  # the schema in the file itself, not only in the WAL
 
     def close(self) -> None:
-        self.con.close()
+        self._give_back()
+        self._closed = True
 
     def __enter__(self) -> "Store":
         return self
@@ -189,6 +234,9 @@ class Store:
                 if not isinstance(exc, duckdb.Error):
                     raise
                 raise self._write_error(exc) from None
+        finally:
+            if self._released and not self._depth:
+                self._give_back()
 
     def _rollback(self) -> None:
         try:
@@ -207,9 +255,14 @@ class Store:
         if self.dataset is not None and sql.lstrip().startswith("CREATE TABLE"):
             sql = without_references(sql)  # a Parquet catalogue's rows named by a foreign key are in its partitions
         try:
-            return self.con.execute(sql, list(params)).fetchall()
+            rows = self.con.execute(sql, list(params)).fetchall()
         except (duckdb.Error, RuntimeError) as exc:
             raise read_error(self.path, exc) from None
+        if self._fault:
+            m = _INSERT.match(sql)
+            if m:
+                self._after_insert(m.group(1).lower())
+        return rows
 
     def arrow(self, sql: str, params: list[Any] | tuple[Any, ...] | dict[str, Any] = ()) -> pa.Table:
         """Run a SELECT and return its rows as an Arrow table (named `$parameters` from a dict; errors as `run`)."""
@@ -253,11 +306,11 @@ class Store:
                 self.con.unregister("_wb_rows")
             except duckdb.Error:
                 pass  # the insert failed or was interrupted: its own error is the one to report
-        self._after_insert(table)
         return arrow.num_rows
 
     def _after_insert(self, table: str) -> None:
-        """Fault injection for the test suite (WORKBENCH_FAULT): a signal inside a stage's transaction."""
+        """Fault injection for the test suite (WORKBENCH_FAULT): a signal after the N-th INSERT into a table, inside
+        its stage's transaction (every INSERT through `run`, whichever module writes it)."""
         if self._fault and self._fault[0] == table:
             self._fault[1] -= 1
             if self._fault[1] == 0:

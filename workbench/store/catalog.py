@@ -366,7 +366,6 @@ def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, in
                     _put(store, t, f"x.* EXCLUDE (filename) REPLACE ({', '.join(swap)})",
                          f"FROM read_parquet(?, filename = true) x JOIN _wb_offsets o ON o.file = x.filename {angle}", args,
                          {"part": "o.part"})
-                    store._after_insert(t)
             finally:
                 _unregister(store, "_wb_offsets")
     except duckdb.IOException as exc:

@@ -216,12 +216,27 @@ def inspect(con: duckdb.DuckDBPyConnection, path: Path, ddl: tuple[str, ...]) ->
     # a schema-1 store: our core tables with our columns (extra tables, e.g. a catalogue's, are allowed)
     core = [t for t in ("object", "paramset") if t in have]
     clash = sorted(t for t, cols in have.items() if t in ours and not cols <= ours[t])
-    if clash or len(core) < 2:
+    lacking = {t: sorted(CORE_COLUMNS[t] - have[t]) for t in core if not CORE_COLUMNS[t] <= have[t]}
+    keyless = [t for t in core if t not in lacking and f"id{t}" not in _primary_keys(con, t)]
+    if clash or lacking or keyless or len(core) < 2:
         foreign = sorted(t for t in have if t not in ours)
         what = (f"table {clash[0]} with columns {', '.join(sorted(have[clash[0]])[:4])}" if clash else
+                f"its own table {next(iter(lacking))}, without our columns {', '.join(next(iter(lacking.values()))[:4])}"
+                if lacking else f"its own table {keyless[0]}, whose id{keyless[0]} is not a primary key" if keyless else
                 f"tables {', '.join(foreign[:3])}" if foreign else "none of our core tables")
         raise StoreError(f"store {path} is not a workbench store (it holds {what}); give a new file for --db")
     return Identity("older", 1)
+
+
+# the columns every workbench store has had in its two core tables since the first schema
+CORE_COLUMNS = {"object": {"idobject", "name", "digest", "scale", "com", "vertices", "faces"},
+                "paramset": {"idparamset", "stage", "digest", "params", "idobject"}}
+
+
+def _primary_keys(con: duckdb.DuckDBPyConnection, table: str) -> set[str]:
+    rows = con.execute("SELECT constraint_column_names FROM duckdb_constraints() WHERE table_name = ? "
+                       "AND constraint_type = 'PRIMARY KEY'", [table]).fetchall()
+    return {c for (cols,) in rows for c in cols}
 
 
 def table_names(ddl: tuple[str, ...]) -> list[str]:

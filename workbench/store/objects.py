@@ -87,6 +87,17 @@ def gripper_row(store: Store, idgripper: int) -> dict:
             "body_faces": None if body_faces is None else int(body_faces)}
 
 
+def stored_grippers(store: Store) -> list[dict]:
+    """Every gripper with grasps or a robot in the store, in the order stored: name, digest, and the names of the
+    objects it has grasps of and of the robots stored with it."""
+    rows = store.run("SELECT g.name, g.digest, (SELECT list(DISTINCT o.name ORDER BY o.name) FROM object o WHERE o.idobject "
+                     "IN (SELECT f.idobject FROM freeairgrip f WHERE f.idgripper = g.idgripper)), (SELECT list(r.name "
+                     "ORDER BY r.name) FROM robot r WHERE r.idgripper = g.idgripper) FROM gripper g ORDER BY g.idgripper")
+    out = [{"name": str(n), "digest": str(d), "objects": list(objs or []), "robots": list(robots or [])}
+           for n, d, objs, robots in rows]
+    return [g for g in out if g["objects"] or g["robots"]]
+
+
 def object_name(store: Store, idobject: int) -> str:
     """The name of the stored object with this id."""
     row = store.one("SELECT name FROM object WHERE idobject = ?", [int(idobject)])

@@ -119,15 +119,23 @@ def _joint_lists(joints: np.ndarray, feasible: np.ndarray) -> pa.Array:
 
 def insert_ik(store: Store, idrobot: int, idscene: int, idikret: int, grip_ids: np.ndarray, feasible: np.ndarray,
               joints: np.ndarray) -> int:
-    """Write one chunk of `ik` rows in its own transaction; returns the number of rows."""
+    """Write one chunk of `ik` rows in its own transaction, leaving out grips whose row another process running the
+    same IK run stored meanwhile; returns the number of rows written."""
     grip_ids = np.asarray(grip_ids, dtype=np.int64)
     k = len(FEASIBILITY)
     feasible = np.asarray(feasible, dtype=bool).reshape(len(grip_ids), k)
     joints = np.asarray(joints, dtype=np.float64).reshape(len(grip_ids), k, -1)
-    n = len(grip_ids)
-    if n == 0:
+    if len(grip_ids) == 0:
         return 0
     with store.transaction():
+        stored = store.query_arrays("SELECT idtabletopgrips FROM ik WHERE idrobot = ? AND idscene = ? AND idikret = ? AND "
+                                    "idtabletopgrips BETWEEN ? AND ?", [idrobot, idscene, idikret, int(grip_ids.min()),
+                                                                          int(grip_ids.max())])["idtabletopgrips"]
+        new = ~np.isin(grip_ids, np.asarray(stored, dtype=np.int64))
+        grip_ids, feasible, joints = grip_ids[new], feasible[new], joints[new]
+        n = len(grip_ids)
+        if n == 0:
+            return 0
         store.insert("ik", {
             "idik": store.new_ids("ik", n), "idrobot": np.full(n, idrobot, dtype=np.int64),
             "idtabletopgrips": grip_ids, "idikret": np.full(n, idikret, dtype=np.int64),

@@ -13,7 +13,10 @@ Paper tables
   Extra: allowed_pairs (JSON: the link pairs exempt from self-collision checks, with their reason: rigid,
   adjacent, srdf, never, always; the planning gripper is the links gripper_hand and gripper_fingers).
 - freeairgrip: grasps in the object frame; rotmat is the TCP pose in the object frame.
-  Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y).
+  Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y),
+  padoffset0/padoffset1 (`DOUBLE[2]`: where each contact lies on its pad, along the TCP's x and z from the pad's
+  centre in pad half sizes, 1 at an edge) and robustness (1 minus the larger offset, 0 at an edge; NULL in stores
+  written before them).
 - freetabletopplacement: rotmat is the object in the table frame, centre of mass above the origin, lowest
   point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, `DOUBLE[3][]`),
   probability (quasi-static chance that a part dropped at random rests on it; NULL in stores written before it).
@@ -45,6 +48,14 @@ Extra tables
   transaction is complete when its paramset row exists. Consumers refuse an incomplete IK run unless asked.
 - plan rows are unique per query and motions: a re-run of the same query with the same motion settings finds the
   stored answer (store.wan_harada.find_plan); another --acc, or motions timed otherwise, is a new plan.
+- a task's plan (the grasp-placement table's Fig. 1 task) keeps its task: plan.start_held and plan.end_held (the
+  motions begin with the part already in the hand / end with it still held), plan.insertion (unit world
+  direction, NULL without one) and plan.insertion_depth (m), plan.obstacles (digest of the obstacles, NULL without
+  any: the same query among other obstacles is another plan), planstep.lift (the TCP's world move from the grasp
+  to the worlda pose: the insertion run backwards; NULL: straight up by worlda).
+- planobstacle(idplanobstacle, idplan, seq, task_end, name, vertices, faces, pose): each obstacle fixed in the world
+  that a plan's motions were checked against: task_end 'pickup' or 'destination', the mesh in metres in its own
+  frame, pose its world pose (DOUBLE[16]); a validator reads them back with the plan.
 """
 
 from __future__ import annotations
@@ -105,7 +116,10 @@ CORE_TABLES: tuple[str, ...] = (
         idfacet0 BIGINT,
         idfacet1 BIGINT,
         idcontactpair BIGINT,
-        rotation DOUBLE
+        rotation DOUBLE,
+        padoffset0 DOUBLE[2],
+        padoffset1 DOUBLE[2],
+        robustness DOUBLE
     )""",
     """CREATE TABLE IF NOT EXISTS freetabletopplacement (
         idfreetabletopplacement BIGINT PRIMARY KEY,
@@ -204,6 +218,14 @@ ALL_TABLES: tuple[str, ...] = CORE_TABLES
 # set) or 'tournassoud' (the grasp-placement table, Tournassoud et al. 1987; idtabletop the `tournassoud.table`
 # parameter set, its placements and grasps are `freetabletopplacement` / `freeairgrip` rows written for the plan, see
 # store.tournassoud). Both go through the same plan validator.
+# A task's plan (the grasp-placement table's Fig. 1 task): plan.start_held / plan.end_held (the motions begin with
+# the part already in the hand at the first step's grasp / end with it still held at the last's), plan.insertion
+# (the final insertion's world direction, unit; NULL without one) and plan.insertion_depth (m), plan.obstacles (a
+# digest of its obstacles, NULL without any: a query among other obstacles is another plan); planstep.lift (the TCP's
+# world move from the grasp to the worlda pose, DOUBLE[3]: the insertion run backwards; NULL: straight up by the
+# retraction set's worlda); planobstacle: one row per obstacle fixed in the world (seq, task_end 'pickup' or
+# 'destination', name, the mesh's vertices (m, its own frame) and faces, pose its world pose), which the motions
+# were checked against and the validator checks again.
 PLAN_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS plan (
         idplan BIGINT PRIMARY KEY,
@@ -258,6 +280,17 @@ PLAN_TABLES: tuple[str, ...] = (
         t DOUBLE[] NOT NULL,
         q DOUBLE[] NOT NULL,
         qd DOUBLE[] NOT NULL,
+        UNIQUE (idplan, seq)
+    )""",
+    """CREATE TABLE IF NOT EXISTS planobstacle (
+        idplanobstacle BIGINT PRIMARY KEY,
+        idplan BIGINT NOT NULL REFERENCES plan(idplan),
+        seq INTEGER NOT NULL,
+        task_end VARCHAR NOT NULL,
+        name VARCHAR NOT NULL,
+        vertices DOUBLE[3][] NOT NULL,
+        faces INTEGER[3][] NOT NULL,
+        pose DOUBLE[16] NOT NULL,
         UNIQUE (idplan, seq)
     )""",
 )
@@ -453,6 +486,9 @@ ALL_TABLES = ALL_TABLES + SIMULATION_TABLES
 
 # Columns added after a store format was first released; run after the CREATE statements so older files gain them.
 MIGRATIONS: tuple[str, ...] = (
+    "ALTER TABLE freeairgrip ADD COLUMN IF NOT EXISTS padoffset0 DOUBLE[2]",
+    "ALTER TABLE freeairgrip ADD COLUMN IF NOT EXISTS padoffset1 DOUBLE[2]",
+    "ALTER TABLE freeairgrip ADD COLUMN IF NOT EXISTS robustness DOUBLE",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS locked VARCHAR DEFAULT '{}'",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS drop_geometry VARCHAR[] DEFAULT []",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS package_dirs VARCHAR[] DEFAULT []",
@@ -480,4 +516,11 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS acc DOUBLE[]",
     # the planner that answered: 'wan_harada' (the roadmap planner, every plan stored before) or 'tournassoud'
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS planner VARCHAR DEFAULT 'wan_harada'",
+    # a task's plan: the part in the hand at the start or the end, the insertion, the obstacles; the held part's lift
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS start_held BOOLEAN DEFAULT false",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS end_held BOOLEAN DEFAULT false",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS insertion DOUBLE[3]",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS insertion_depth DOUBLE",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS obstacles VARCHAR",
+    "ALTER TABLE planstep ADD COLUMN IF NOT EXISTS lift DOUBLE[3]",
 )

@@ -83,15 +83,18 @@ QUERY_COLUMNS = ("idobject", "idrobot", "idscene", "idikret", "idtabletop", "sta
 
 def find_plan(store: Store, plan: dict[str, Any], segments: dict[str, Any] | None = None) -> int | None:
     """The id of a stored plan answering the same query (object, robot, scene, retractions, tabletop set, start and
-    goal placements and poses to 1e-9, rank), or None. With its `segments`, only a plan with the same motions counts:
-    the same acceleration limits, duration and number of knots (another --acc, or a trajectory timed otherwise by
-    another version, is a new plan)."""
+    goal placements and poses to 1e-9, rank, and a task's held ends, insertion and obstacles), or None. With its
+    `segments`, only a plan with the same motions counts: the same acceleration limits, duration and number of knots
+    (another --acc, or a trajectory timed otherwise by another version, is a new plan)."""
     where = " AND ".join(f"{c} = ?" for c in QUERY_COLUMNS)
     args = [*(plan[c] for c in QUERY_COLUMNS), list(plan["start_xyyaw"]), list(plan["goal_xyyaw"])]
-    same = ""
+    same = (" AND coalesce(start_held, false) = ? AND coalesce(end_held, false) = ? AND obstacles IS NOT DISTINCT FROM ?"
+            " AND insertion IS NOT DISTINCT FROM ?::DOUBLE[3] AND insertion_depth IS NOT DISTINCT FROM ?")
+    args += [bool(plan.get("start_held", False)), bool(plan.get("end_held", False)), plan.get("obstacles"),
+             plan.get("insertion"), plan.get("insertion_depth")]
     if segments is not None:
         knots = pc.sum(pc.list_value_length(segments["t"])).as_py() or 0
-        same = (" AND acc IS NOT DISTINCT FROM ?::DOUBLE[] AND duration IS NOT DISTINCT FROM ?"
+        same += (" AND acc IS NOT DISTINCT FROM ?::DOUBLE[] AND duration IS NOT DISTINCT FROM ?"
                 " AND (SELECT coalesce(sum(len(s.t)), 0) FROM plansegment s WHERE s.idplan = plan.idplan) = ?")
         args += [plan.get("acc"), plan.get("duration"), int(knots)]
     row = store.one(f"SELECT min(idplan) FROM plan WHERE {where} AND list_distance(start_xyyaw, ?::DOUBLE[3]) < 1e-9 "
@@ -99,10 +102,12 @@ def find_plan(store: Store, plan: dict[str, Any], segments: dict[str, Any] | Non
     return None if row is None or row[0] is None else int(row[0])
 
 
-def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray], segments: dict[str, np.ndarray] | None = None) -> int:
-    """Store one plan (columns of `plan`), its steps (columns of `planstep`, arrays) and its timed motions (columns
-    of `plansegment`) in one transaction; returns idplan. A plan answering a query already stored, with the same
-    motions, is not stored again: the stored plan's id is returned."""
+def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray], segments: dict[str, np.ndarray] | None = None,
+              obstacles: dict[str, Any] | None = None) -> int:
+    """Store one plan (columns of `plan`), its steps (columns of `planstep`, arrays), its timed motions (columns
+    of `plansegment`) and its task's obstacles (columns of `planobstacle`) in one transaction; returns idplan. A
+    plan answering a query already stored, with the same motions, is not stored again: the stored plan's id is
+    returned."""
     with store.transaction():
         found = find_plan(store, plan, segments)
         if found is not None:
@@ -117,6 +122,10 @@ def save_plan(store: Store, plan: dict[str, Any], steps: dict[str, np.ndarray], 
         if m:
             store.insert("plansegment", {"idplansegment": store.new_ids("plansegment", m),
                                          "idplan": np.full(m, pid, dtype=np.int64), **segments})
+        k = len(obstacles["seq"]) if obstacles else 0
+        if k:
+            store.insert("planobstacle", {"idplanobstacle": store.new_ids("planobstacle", k),
+                                          "idplan": np.full(k, pid, dtype=np.int64), **obstacles})
     return pid
 
 
@@ -128,6 +137,15 @@ def load_plan_rows(store: Store, idplan: int) -> tuple[dict[str, Any], dict[str,
     plan = {k: v[0] for k, v in table.to_pydict().items()}
     steps = store.arrow("SELECT * FROM planstep WHERE idplan = ? ORDER BY seq", [idplan])
     return plan, steps
+
+
+def load_plan_obstacles(store: Store, idplan: int) -> list[dict[str, Any]]:
+    """A stored plan's obstacles in order: dicts of name, end ('pickup' or 'destination'), vertices (V, 3), faces
+    (F, 3) and pose (4, 4)."""
+    rows = store.run("SELECT name, task_end, vertices, faces, pose FROM planobstacle WHERE idplan = ? ORDER BY seq", [idplan])
+    return [{"name": n, "end": e, "vertices": np.asarray(v, dtype=np.float64).reshape(-1, 3),
+             "faces": np.asarray(f, dtype=np.int64).reshape(-1, 3), "pose": np.asarray(p, dtype=np.float64).reshape(4, 4)}
+            for n, e, v, f, p in rows]
 
 
 def load_plan_segments(store: Store, idplan: int):

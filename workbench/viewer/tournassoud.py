@@ -5,6 +5,8 @@ planner's plan animation)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import meshcat
 import numpy as np
 import trimesh
@@ -20,14 +22,18 @@ from workbench.viewer.scenes import (
     ORANGE,
     RED,
     legend,
+    new_scene,
     show_gripper,
     show_mesh,
     show_segments,
     show_spheres,
+    static_html,
 )
-from workbench.viewer.wan_harada import show_plan
+from workbench.viewer.wan_harada import PlanView, caption_track, frame_plan, plan_frames, plan_overlay, show_plan
 
 FEATURE_COLOR = 0xDD3333
+PART_AT_H = 0xE0A030
+"""The part's colour at (P_j, phi) on the table (`show_conjunction`)."""
 
 
 def feature_meshes(mesh: trimesh.Trimesh, cls: GraspClass, params: ClassParams = ClassParams()) -> list[trimesh.Trimesh]:
@@ -76,7 +82,7 @@ def show_conjunction(vis: meshcat.Visualizer, mesh: trimesh.Trimesh, table: Gras
     f = int(np.round(np.mod(phi, 2 * np.pi) / (2 * np.pi / len(table.phi)))) % len(table.phi)
     vis[path].delete()
     show_spheres(vis, f"{path}/H", table.frame[:3, 3][None], 0.004, color=BLUE)
-    show_mesh(vis, f"{path}/object", mesh, color=0xE0A030, pose=obj)
+    show_mesh(vis, f"{path}/object", mesh, color=PART_AT_H, pose=obj)
     legal = bool(table.q[index, placement, t, f])
     show_gripper(vis, f"{path}/hand", gripper, obj @ cls.pose(theta), width=min(cls.opening + 1e-3, gripper.jaw_max),
                  color=GREEN if legal else ORANGE)
@@ -84,8 +90,37 @@ def show_conjunction(vis: meshcat.Visualizer, mesh: trimesh.Trimesh, table: Gras
 
 
 def show_sequence(vis: meshcat.Visualizer, plan, robot, mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30):
-    """A realised sequence animated with the robot (the plan animation of `workbench.viz.plan`)."""
-    return show_plan(vis, plan, robot, mesh, table, fps=fps)
+    """A realised sequence animated with the robot (the roadmap planner's plan animation), with the plan's task
+    obstacles (grey, half transparent) and its insertion (an orange segment ending where the part goes)."""
+    anim = show_plan(vis, plan, robot, mesh, table, fps=fps)
+    show_plan_task(vis, plan, mesh)
+    return anim
+
+
+def show_plan_task(vis: meshcat.Visualizer, plan, mesh: trimesh.Trimesh, path: str = "plan_task") -> None:
+    """The obstacles a plan's motions were checked against and its final insertion, as the plan carries them (a
+    plan reloaded from the store included)."""
+    vis[path].delete()
+    for k, o in enumerate(plan.obstacles):
+        show_mesh(vis, f"{path}/obstacle_{k}", o.mesh(), color=GREY, opacity=0.5, pose=o.pose)
+    if plan.insertion is not None and plan.insertion_depth > 0:
+        end = mesh.copy().apply_transform(plan.goal_pose).bounds.mean(axis=0)
+        show_segments(vis, f"{path}/insertion", (end - plan.insertion_depth * np.asarray(plan.insertion))[None], end[None],
+                      color=ORANGE)
+
+
+def plan_page(plan, robot, mesh: trimesh.Trimesh, table: tuple, out) -> Path:
+    """A plan's animation with its obstacles and insertion as a static HTML page, framed on the work, with the
+    plan views' key, caption and footer overlays."""
+    vis = new_scene()
+    frames = plan_frames(plan, robot)
+    PlanView(vis, robot, mesh, table, kind="collision").play(plan, frames=frames)
+    show_plan_task(vis, plan, mesh)
+    frame_plan(vis, plan, robot)
+    path = static_html(vis, out)
+    page = path.read_text()
+    path.write_text(page.replace("</body>", plan_overlay(caption_track(plan, frames)) + "</body>", 1))
+    return path
 
 
 def show_task(vis: meshcat.Visualizer, mesh: trimesh.Trimesh, pickup_pose: np.ndarray, destination_pose: np.ndarray,

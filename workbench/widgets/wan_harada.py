@@ -8,6 +8,7 @@ from __future__ import annotations
 import html
 from dataclasses import replace
 from pathlib import Path
+from typing import Callable, Sequence
 
 import ipywidgets as W
 import meshcat
@@ -24,7 +25,7 @@ from workbench.grasping.placements import (
     stable_placements,
 )
 from workbench.planners.wan_harada.query import PoseQuery
-from workbench.planners.wan_harada.stages import load_planner
+from workbench.planners.wan_harada.stages import load_planner, robot_name_for
 from workbench.planners.wan_harada.tabletop import TabletopParams, plan_tabletop
 from workbench.robots.gripper import Gripper
 from workbench.robots.ik import KINDS
@@ -53,6 +54,7 @@ from workbench.viewer.wan_harada import (
 )
 from workbench.viewer.live import HandOutlines, Switches, pick_evenly
 from workbench.widgets.grasping import counts_table
+from workbench.widgets.grippers import GripperMenu
 from workbench.widgets.panel import BesideView, Busy, StageCache, digest
 
 
@@ -65,7 +67,8 @@ class RegraspExplorer(BesideView):
 
     captions = True  # the step's caption and footer over the view
 
-    def __init__(self, db, objects: dict, robots=("panda", "ur5", "talos"), tparams=None, vis=None, build=None):
+    def __init__(self, db, objects: dict, robots=("panda", "ur5", "talos"), tparams=None, vis=None, build=None,
+                 grippers: Sequence[Gripper] = ()):
         self.db, self.objects, self.tparams, self.build = Path(db), dict(objects), tparams, build
         self.vis = vis if vis is not None else new_scene()
         self.planner, self.plans, self.result, self.scene = None, [], None, None
@@ -74,6 +77,8 @@ class RegraspExplorer(BesideView):
         wide = {"style": {"description_width": "initial"}, "layout": W.Layout(width="420px")}
         self.object = W.Dropdown(options=names, value="tube" if "tube" in names else names[0], description="object", **wide)
         self.robot = W.Dropdown(options=list(robots), description="robot", **wide)
+        # the store's grippers, or another to build for (`build(db, obj, robot, gripper)`); loading plans with it
+        self.grippers = GripperMenu(self.db, grippers)
         self.load_button = W.Button(description="build / load graph", button_style="info")
         self.ends = {}
         for label in ("start", "goal"):
@@ -99,7 +104,8 @@ class RegraspExplorer(BesideView):
         self.plan_button.on_click(lambda _: self.run())
         self.which.observe(lambda _: self.animate(), names="value")
         self.nodes.observe(lambda _: self.vis["roadmap"].set_property("visible", bool(self.nodes.value)), names="value")
-        self.controls = W.VBox([self.object, self.robot, W.HBox([self.load_button]), *self.ends["start"], *self.ends["goal"],
+        self.controls = W.VBox([self.object, self.robot, self.grippers.widget, self.grippers.note, W.HBox([self.load_button]),
+                                *self.ends["start"], *self.ends["goal"],
                                 self.alternatives, self.full, W.HBox([self.plan_button, self.busy.widget]), self.which,
                                 self.nodes, self.info])
         self._widget = None
@@ -114,14 +120,17 @@ class RegraspExplorer(BesideView):
         return [(describe_placement(number[i], rot[i][:3, :3].T @ [0.0, 0.0, -1.0]).split(", face")[0], i) for i in ids]
 
     def load(self):  # -> regrasp.Planner
-        """Build (or reuse) the store's stages for the chosen object and robot, load the regrasp graph and draw its
-        scene once (table, robot, part and ghosts)."""
+        """Build (or reuse) the store's stages for the chosen object, robot and gripper, load the regrasp graph and
+        draw its scene once (table, robot, part and ghosts)."""
 
         obj = load_object(self.objects[self.object.value])
-        with self.busy.running(f"building / loading {obj.name} for {self.robot.value}"):
+        gripper = self.grippers.gripper
+        with self.busy.running(f"building / loading {obj.name} for {self.robot.value} with {gripper.name}"):
             if self.build is not None:
-                self.build(self.db, obj, self.robot.value)
-            self.planner = load_planner(self.db, obj.name, self.robot.value)
+                self.build(self.db, obj, self.robot.value, gripper)
+                self.grippers.refresh()
+            robot = robot_name_for(self.db, self.robot.value, gripper)
+            self.planner = load_planner(self.db, obj.name, robot, gripper=gripper)
             options = self.placement_options()
             for label in ("start", "goal"):
                 self.ends[label][0].options = options
@@ -327,14 +336,15 @@ class PlacementExplorer(BesideView):
     what was sent."""
 
     def __init__(self, obj: ObjectModel, gripper: Gripper, grasp_poses: np.ndarray, grasp_widths: np.ndarray, vis=None,
-                 max_hands: int = 30, params: PlacementParams = PlacementParams(), tabletop: TabletopParams = TabletopParams()):
-        self.obj, self.gripper, self.max_hands = obj, gripper, max_hands
-        self.grasp_poses, self.grasp_widths = grasp_poses, grasp_widths
+                 max_hands: int = 30, params: PlacementParams = PlacementParams(), tabletop: TabletopParams = TabletopParams(),
+                 grasps_for: Callable[[Gripper], tuple[np.ndarray, np.ndarray]] | None = None, db=None,
+                 grippers: Sequence[Gripper] = ()):
+        self.obj, self.max_hands, self.grasps_for = obj, max_hands, grasps_for
         self.vis = vis if vis is not None else viz.new_scene()
         self.base, self.base_grid = params, tabletop  # parameters without a widget stay as given
-        self.switches, self.outlines = Switches(self.vis), HandOutlines(gripper)
+        self.switches = Switches(self.vis)
         self.stage_cache, self.tabletop_cache = StageCache(), StageCache()
-        self.source = digest(obj.digest or obj.name, gripper.digest, np.asarray(grasp_poses).round(9).tobytes().hex()[:4096])
+        self._use(gripper, grasp_poses, grasp_widths)
         t = tabletop
         label = {"style": {"description_width": "initial"}, "layout": W.Layout(width="420px"), "continuous_update": False}
         self.stability = W.FloatSlider(value=params.min_stability, min=0, max=1.5, step=0.01,
@@ -354,9 +364,26 @@ class PlacementExplorer(BesideView):
             w.observe(lambda _: self.run_tabletop(), names="value")
         for w in (self.which, self.hands, self.roadmap):
             w.observe(lambda _: self.show(), names="value")
-        self.controls = W.VBox([self.stability, self.which, self.hands, self.roadmap, W.HTML("<b>table grid</b>"),
+        # with `grasps_for(gripper)` (the free-air grasps of another gripper, e.g. from the store): a gripper menu
+        self.grippers = None if grasps_for is None else GripperMenu(db, grippers, value=gripper, on_change=self.set_gripper)
+        menu = [] if self.grippers is None else [self.grippers.widget, self.grippers.note]
+        self.controls = W.VBox([*menu, self.stability, self.which, self.hands, self.roadmap, W.HTML("<b>table grid</b>"),
                                 self.nx, self.ny, self.angles, self.busy.widget, self.info])
         self.placements, self.params, self.tt, self._widget = None, self.base, None, None
+
+    def _use(self, gripper: Gripper, poses: np.ndarray, widths: np.ndarray) -> None:
+        self.gripper, self.grasp_poses, self.grasp_widths = gripper, poses, widths
+        self.outlines = HandOutlines(gripper)
+        self.source = digest(self.obj.digest or self.obj.name, gripper.digest, np.asarray(poses).round(9).tobytes().hex()[:4096])
+
+    def set_gripper(self, gripper: Gripper):
+        """Placements and grips with another gripper's free-air grasps (from `grasps_for`)."""
+        with self.busy.running(f"free-air grasps with {gripper.name}"):
+            poses, widths = self.grasps_for(gripper)
+        self._use(gripper, poses, widths)
+        if self.grippers is not None:
+            self.grippers.refresh(gripper.digest)
+        return self.run()
 
 
     def grid(self) -> TabletopParams:

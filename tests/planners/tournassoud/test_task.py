@@ -58,6 +58,26 @@ def _hits(hand_mesh, poses: np.ndarray, obstacles) -> bool:
     return False
 
 
+_HANDS: dict = {}
+
+
+def _hand_at(hand, width: float):
+    """The hand's collision mesh with the fingers `width` apart (one mesh per width, for the coal cache)."""
+    key = round(float(width), 12)
+    if key not in _HANDS:
+        _HANDS[key] = hand.collision_mesh(min(float(width), hand.jaw_max))
+    return _HANDS[key]
+
+
+def _end_hits(hand, cls, tcp: np.ndarray, end) -> bool:
+    """coal: the hand at the class's pre-grasp opening (its opening plus 10 mm, CONVENTIONS.md, capped at the stroke)
+    at the grasp and along the approach, or at the grasp's opening along the insertion, touches an obstacle."""
+    if _hits(_hand_at(hand, cls.opening + 0.010), _path(tcp, end.approach), end.obstacles):
+        return True
+    return end.insertion is not None and _hits(_hand_at(hand, cls.opening), _path(tcp, 0.0, end.insertion, end.depth),
+                                               end.obstacles)
+
+
 def _path(tcp: np.ndarray, approach: float, insertion=None, depth: float = 0.0) -> np.ndarray:
     """The test's own sweep: the grasp backed off along its -z every 5 mm, and back along the insertion every 2 mm."""
     out = []
@@ -86,15 +106,30 @@ def test_pickup_obstacles_refuse_the_grasps_that_hit_them(setup, lpart, hand, pu
     assert legal.any() and refused.any() and not (legal & ~free).any()
     assert counts["obstacles"] == int(refused.sum())
     obj = pocket.object_pose(table)
-    mesh = hand.collision_mesh(hand.jaw_max)
     for (c, t), expect in [((c, t), True) for c, t in np.argwhere(refused)] + [((c, t), False) for c, t in np.argwhere(legal)]:
         tcp = obj @ classes[c].pose(table.theta[t])
-        assert _hits(mesh, _path(tcp, pocket.approach), pocket.obstacles) == expect, (c, t)
+        assert _end_hits(hand, classes[c], tcp, pocket) == expect, (c, t)
     dest = TaskEnd(0, 0.45, 0.32, 0.0)
     seq = task_query(table, legal, end_mask(table, classes, dest, puma560, hand)[0], pocket, dest)
     c, t = seq.grasps[0]
-    assert legal[c, t] and not _hits(mesh, _path(obj @ classes[c].pose(table.theta[t]), pocket.approach), pocket.obstacles)
+    assert legal[c, t] and not _end_hits(hand, classes[c], obj @ classes[c].pose(table.theta[t]), pocket)
     assert np.allclose(seq.extra["start_pose"], obj) and seq.placements[0][0] == STANDING
+
+
+def test_a_tight_pocket_is_entered_at_the_pregrasp_opening(setup, lpart, hand, puma560):
+    """Walls 10 mm from the standing part: the hand fully open (80 mm) fits no grasp between them, the hand at each
+    class's pre-grasp opening (its opening plus 10 mm) fits some; each grasp is legal exactly when coal finds the hand
+    at that opening clear of the walls along the approach."""
+    classes, table = setup
+    pocket = TaskEnd(STANDING, 0.45, -0.12, np.radians(30))
+    pocket.obstacles = walls_around(lpart.mesh, pocket.object_pose(table), gap=0.01, sides="y")
+    legal, _ = end_mask(table, classes, pocket, puma560, hand)
+    wide, _ = end_mask(table, classes, pocket, puma560, hand, pregrasp_margin=None)
+    free, _ = end_mask(table, classes, TaskEnd(STANDING, 0.45, -0.12, np.radians(30)), puma560, hand)
+    assert not wide.any() and legal.any() and not (legal & ~free).any()
+    obj = pocket.object_pose(table)
+    for c, t in np.argwhere(free):
+        assert _end_hits(hand, classes[c], obj @ classes[c].pose(table.theta[t]), pocket) == (not legal[c, t]), (c, t)
 
 
 def test_insertion_keeps_the_last_hand_clear_of_the_fixture(setup, lpart, hand, puma560):
@@ -111,10 +146,9 @@ def test_insertion_keeps_the_last_hand_clear_of_the_fixture(setup, lpart, hand, 
     free, _ = end_mask(table, classes, bare, puma560, hand)
     legal, _ = end_mask(table, classes, dest, puma560, hand)
     assert legal.any() and (free & ~legal).any() and not (legal & ~free).any()
-    mesh = hand.collision_mesh(hand.jaw_max)
     for (c, t) in np.argwhere(free):
         tcp = obj @ classes[c].pose(table.theta[t])
-        assert _hits(mesh, _path(tcp, dest.approach, dest.insertion, dest.depth), dest.obstacles) == (not legal[c, t]), (c, t)
+        assert _end_hits(hand, classes[c], tcp, dest) == (not legal[c, t]), (c, t)
     pick = TaskEnd(STANDING, 0.45, -0.12, np.radians(30))
     seq = task_query(table, end_mask(table, classes, pick, puma560, hand)[0], legal, pick, dest)
     c, t = seq.grasps[-1]
@@ -163,11 +197,11 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
     assert np.allclose(np.reshape(plan["steps"][0]["object_pose"], (4, 4)), pick.object_pose(run.table), atol=1e-9)
     assert np.allclose(np.reshape(plan["steps"][-1]["object_pose"], (4, 4)), dest.object_pose(run.table), atol=1e-9)
     robot = get_robot("puma560")
-    body = hand.collision_mesh(hand.jaw_max)
     held = trimesh.Trimesh(lpart.mesh.vertices, lpart.mesh.faces, process=False)
     knots = 0
     for seg in plan["motion"]["segments"]:
         step = plan["steps"][seg["step"]]
+        body = _hand_at(hand, seg["jaw"])  # the fingers at the segment's opening
         for q in seg["q"]:
             tcp = robot.tcp_pose(np.asarray(q))
             assert not _hits(body, tcp[None], obstacles), (seg["kind"], seg["caption"])
@@ -245,8 +279,8 @@ def _clear_everywhere(segs, steps, fk, nq, hand, lpart, walls) -> None:
 
     grasps = [np.linalg.inv(np.reshape(x["grasp"], (4, 4))) for x in steps]
     held = trimesh.Trimesh(lpart.mesh.vertices, lpart.mesh.faces, process=False)
-    body = hand.collision_mesh(hand.jaw_max)
     for s in segs:
+        body = _hand_at(hand, s["jaw"])  # the fingers at the segment's opening
         for x in np.reshape(s["q"], (-1, nq)):
             p = fk(x)
             assert not _hits(body, p[None], walls), (s["kind"], s["caption"])
@@ -291,29 +325,50 @@ def test_slanted_insertion_is_the_plans_last_straight_line(slot, lpart, hand, ca
     _clear_everywhere(segs, steps, fk, robot.nq, hand, lpart, walls["destination"])
 
 
-def test_plan_starts_and_ends_in_the_hand(slot, lpart, hand, capsys):
+@pytest.fixture(scope="module")
+def held(slot, capsys_module):
+    """`gpplan` of the task with obstacles at both ends, the part held at the start and at the end, and a slanted
+    insertion: (idplan, its JSON plan, the output)."""
+    import json
+
+    from workbench.cli.main import main
+
+    db, run, walls, flags, tmp = slot
+    js = tmp / "held.json"
+    out = capsys_module(lambda: main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30",
+                                      "--destination", "0,0.35,0.25,0", "--insert", "1,0,-1,0.03", *flags["pickup"],
+                                      *flags["destination"], "--start-held", "--end-held", "--json", str(js)]))
+    idplan = int(out.split("stored plan id ")[1].split()[0])
+    return idplan, json.loads(js.read_text())["plan"], out
+
+
+@pytest.fixture(scope="module")
+def capsys_module():
+    """Run a callable that must return 0 and give its standard output (module-scoped fixtures cannot use capsys)."""
+    import contextlib
+    import io
+
+    def run(fn) -> str:
+        buf = io.StringIO()
+        with contextlib.redirect_stdout(buf):
+            assert fn() == 0
+        return buf.getvalue()
+    return run
+
+
+def test_plan_starts_and_ends_in_the_hand(slot, held, lpart, hand):
     """`--start-held --end-held` (Fig. 1 (a) and (d)): the stored trajectory begins with the part held at the first
     grasp at the pick-up, lifting it out of the pocket, and ends with it still held at the last grasp at the
     destination after the insertion (pinocchio FK of the stored knots); hand and part clear both ends' walls (coal);
     the validators rebuilt from the store accept it because the plan says so, and refuse the same trajectory when
     the plan claims to release the part at the end or to start with an empty hand."""
-    import json
-
-    from workbench.cli.main import main
     from workbench.planners.tournassoud.stages import validate_stored
     from workbench.planners.wan_harada.plans import Plan
     from workbench.robots.model import get_robot
 
     db, run, walls, flags, tmp = slot
-    capsys.readouterr()
-    js = tmp / "held.json"
-    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0",
-                 "--insert", "1,0,-1,0.03", *flags["pickup"], *flags["destination"], "--start-held", "--end-held",
-                 "--json", str(js)]) == 0
-    out = capsys.readouterr().out
+    idplan, doc, out = held
     assert "validator: ok" in out and "starts with the part in the hand" in out and "still in the hand" in out, out
-    idplan = int(out.split("stored plan id ")[1].split()[0])
-    doc = json.loads(js.read_text())["plan"]
     assert doc["start_held"] and doc["end_held"]
     steps = doc["steps"]
     segs = _stored_segments(db, idplan)
@@ -330,6 +385,7 @@ def test_plan_starts_and_ends_in_the_hand(slot, lpart, hand, capsys):
     _clear_everywhere(segs, steps, fk, robot.nq, hand, lpart, walls["pickup"] + walls["destination"])
     obstacles = [(o.mesh, o.pose) for o in walls["pickup"] + walls["destination"]]
     plan = Plan.from_dict(doc)
+    plan.obstacles = []  # the obstacles given, not the plan's
     assert validate_stored(db, run, idplan, plan, require_motion=True, obstacles=obstacles).ok
     plan.end_held = False
     report = validate_stored(db, run, idplan, plan, require_motion=True, obstacles=obstacles)
@@ -337,3 +393,60 @@ def test_plan_starts_and_ends_in_the_hand(slot, lpart, hand, capsys):
     plan.end_held, plan.start_held = True, False
     report = validate_stored(db, run, idplan, plan, require_motion=True, obstacles=obstacles)
     assert not report.ok and any("held" in e for e in report.errors), report.errors
+
+
+def test_reloaded_plan_keeps_its_task(slot, held, tmp_path, capsys):
+    """The held plan with obstacles and an insertion, reloaded from the store in a fresh process (`gpplan --plan`):
+    the same steps with their lifts, the same timed motions, both held ends, the insertion and every obstacle (the
+    walls' own meshes and poses, compared with the files given); the validators rebuilt from the store accept it
+    again, checking the trajectory against the stored obstacles; its exports name them."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    db, run, walls, flags, tmp = slot
+    idplan, doc, _ = held
+    js, traj, page = tmp_path / "reloaded.json", tmp_path / "plan.yaml", tmp_path / "plan.html"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(__import__("pathlib").Path(__file__).parents[3])] +
+                                                       os.environ.get("PYTHONPATH", "").split(os.pathsep))}
+    res = subprocess.run([sys.executable, "-m", "workbench", "gpplan", "--db", db, "--plan", str(idplan), "--json", str(js),
+                          "--trajectory", str(traj), "--plan-html", str(page)], capture_output=True, text=True, env=env,
+                         timeout=600)
+    assert res.returncode == 0, res.stderr
+    out = res.stdout
+    assert "validator: ok" in out and "starts with the part in the hand" in out and "still in the hand" in out, out
+    assert "insertion of 30 mm" in out and "obstacles: 2 at the pick-up, 2 at the destination" in out, out
+    back = json.loads(js.read_text())
+    assert back["validator"]["ok"], back["validator"]
+    plan = back["plan"]
+    assert plan["start_held"] and plan["end_held"]
+    assert np.allclose(plan["insertion"], np.array([1.0, 0.0, -1.0]) / np.sqrt(2)) and plan["insertion_depth"] == 0.03
+    assert len(plan["steps"]) == len(doc["steps"])
+    for a, b in zip(plan["steps"], doc["steps"]):
+        assert a["kind"] == b["kind"]
+        for k in ("object_pose", "tcp", "q_grasp", "q_approach", "q_retract", "q_worlda", "q_worldaworldz"):
+            assert np.allclose(a[k], b[k], atol=1e-12), k
+        assert (a.get("lift") is None) == (b.get("lift") is None)
+        if b.get("lift") is not None:
+            assert np.allclose(a["lift"], b["lift"], atol=1e-12)
+    assert np.allclose(plan["steps"][-1]["lift"], -0.03 * np.array([1.0, 0.0, -1.0]) / np.sqrt(2), atol=1e-12)
+    sa, sb = plan["motion"]["segments"], doc["motion"]["segments"]
+    assert [(x["kind"], x["holding"], x["step"]) for x in sa] == [(x["kind"], x["holding"], x["step"]) for x in sb]
+    for x, y in zip(sa, sb):
+        assert np.allclose(x["t"], y["t"]) and np.allclose(x["q"], y["q"]) and np.allclose(x["qd"], y["qd"])
+    given = [(e, o) for e in ("pickup", "destination") for o in walls[e]]
+    assert [o["end"] for o in plan["obstacles"]] == [e for e, _ in given]
+    for o, (_, w) in zip(plan["obstacles"], given):
+        assert np.allclose(np.reshape(o["pose"], (4, 4)), w.pose, atol=1e-6)
+        assert np.allclose(np.sort(np.reshape(o["vertices"], (-1, 3)), axis=0), np.sort(w.mesh.vertices, axis=0), atol=1e-6)
+    assert "joint_names" in traj.read_text() and "planobstacle" not in traj.read_text()
+    assert page.stat().st_size > 10_000 and "wb-caption" in page.read_text()
+    # a plan that is not there, or a query beside --plan: one line, status 2
+    from workbench.cli.main import main
+
+    assert main(["gpplan", "--db", db, "--plan", "9999"]) == 2
+    assert main(["gpplan", "--db", db, "--plan", str(idplan), "--initial", "0,10"]) == 2
+    assert main(["gpplan", "--db", db, "--initial", "0,10", "--goal", "3,0:90"]) == 2  # no --object
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "has no plan 9999" in err and "--plan ID reloads" in err and "--object NAME" in err

@@ -281,3 +281,73 @@ def test_ros2_trajectory_export_matches_the_csv_and_its_own_kinematics(planner, 
     err = np.abs(np.diff(qd, axis=0) - (qdd[1:] + qdd[:-1]) / 2 * dt)
     assert err.max() < 0.05
     assert np.abs(qd).max() > 0.1
+
+
+def test_empty_hand_moves_at_the_pregrasp_opening(planner, validator, demo_result):
+    """CONVENTIONS.md (Gripper): the plan opens the fingers to each grasp's width plus the grasps' margin, capped at
+    the stroke, before the approach and keeps them there until the hand has retracted; the validator checks the
+    fingers where the segments put them."""
+    plan, segs = demo_result.plan, demo_result.motion.segments
+    jaw_max = planner.robot.gripper.jaw_max
+    assert planner.pregrasp_margin == pytest.approx(0.010)  # the store's grasp parameters
+    seen = set()
+    for k, s in enumerate(segs):
+        step = plan.steps[s.step]
+        pre = min(step.jawwidth + 0.010, jaw_max)
+        if s.kind in ("approach", "retract"):
+            assert s.jaw == pytest.approx(pre, abs=1e-12), (k, s.kind)
+            assert step.jawwidth < s.jaw or s.jaw == jaw_max
+            seen.add(s.kind)
+        elif s.kind == "gripper":
+            assert s.jaw == pytest.approx(step.jawwidth if s.holding else pre, abs=1e-12)
+        elif s.kind in ("lift", "lower", "transfer"):
+            assert s.jaw == pytest.approx(step.jawwidth, abs=1e-12)
+    assert seen == {"approach", "retract"}
+    # the validator moves the fingers: closed through the part at the first grasp they hit it, at the pre-grasp
+    # opening they clear it
+    first = plan.steps[0]
+    tcp = validator._place(np.asarray(first.q_grasp), 1e-4)
+    closed = validator.problems(tcp, False, np.asarray(first.object_pose), None, True)
+    assert any("gripper_fingers hits the object" in p for p in closed), closed
+    tcp = validator._place(np.asarray(first.q_grasp), min(first.jawwidth + 0.010, jaw_max))
+    assert not any("fingers" in p for p in validator.problems(tcp, False, np.asarray(first.object_pose), None, True))
+    # and so does the planner's motion checker
+    from workbench.planners.wan_harada.motions import motion_checker
+
+    checker = motion_checker(planner)
+    checker.set_resting(np.asarray(first.object_pose), fingers=True)
+    checker.set_jaw(1e-4)
+    assert not checker.valid(np.asarray(first.q_grasp))
+    checker.set_jaw(min(first.jawwidth + 0.010, jaw_max))
+    assert checker.valid(np.asarray(first.q_grasp)), checker.why(np.asarray(first.q_grasp))
+    checker.set_jaw(jaw_max)
+    # a plan whose hand approaches narrower than its grasp is refused
+    narrow = [TimedSegment(s.kind, s.caption, s.step, s.holding, s.t0, s.traj, s.method,
+                           plan.steps[s.step].jawwidth / 2 if s.kind == "approach" else s.jaw) for s in segs]
+    errors, _ = validator.check(plan, narrow)
+    assert any("narrower than the grasp" in e for e in errors), errors
+
+
+def test_search_prefers_central_contacts_among_equal_routes(planner):
+    """Each grip carries its grasp's stored contact robustness, and among the confirmed start/goal pairs of the best
+    cost the search returns first the pair whose less robust grasp is the most robust (brute force over the pairs)."""
+    from workbench.planners.wan_harada.search import pair_costs
+    from workbench.store import Store
+    from workbench.store.grasps import load_grasps
+
+    start, goal = choose_task(planner, 0)
+    result = planner.search(start, goal, alternatives=3)
+    s, g = result.start, result.goal
+    with Store(planner.roadmap.key[0]) as store:
+        stored = load_grasps(store, planner.ids["idobject"], None)
+    by_id = dict(zip(stored["idfreeairgrip"].tolist(), stored["robustness"].tolist()))
+    assert np.allclose(s.robust, [by_id[i] for i in s.grasp]) and np.isfinite(s.robust).all()
+    cost = pair_costs(planner.roadmap, s, g)
+    ok = (s.state == 1)[:, None] & (g.state == 1)[None, :]
+    best = cost[ok].min()
+    si, gi = np.nonzero(ok & (cost == best))
+    rob = np.round(np.minimum(s.robust[si], g.robust[gi]), 6)
+    first = result.routes[0]
+    assert cost[first.start_grip, first.goal_grip] == best
+    assert np.round(min(s.robust[first.start_grip], g.robust[first.goal_grip]), 6) == rob.max()
+    assert len(set(rob.tolist())) > 1  # the preference decides something here

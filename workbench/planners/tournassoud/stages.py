@@ -36,8 +36,8 @@ from workbench.planners.tournassoud.table import (
     table_frame,
 )
 from workbench.planners.wan_harada.motions import DEFAULT_ACC
-from workbench.planners.wan_harada.plans import Plan, plan_rows
-from workbench.planners.wan_harada.stages import get_object, scene_params
+from workbench.planners.wan_harada.plans import Plan, obstacle_rows, plan_rows
+from workbench.planners.wan_harada.stages import get_object, load_plan, scene_params
 from workbench.robots.collider import Scene
 from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import IKOptions
@@ -141,15 +141,17 @@ def _table_from_rows(rows: dict) -> GraspPlacementTable:
                                placements=rows["placements"], frame=table_frame(rows["table_point"]), timings=rows["timings"])
 
 
-def load_planner(db: str, object_name: str, robot_name: str | None = None, gripper: Gripper | None = None) -> TableRun:
-    """The newest stored table of `object_name` (and robot), its classes, object and robot rebuilt from the store
-    with the planning `gripper` it was built with (default: the Franka hand)."""
+def load_planner(db: str, object_name: str, robot_name: str | None = None, gripper: Gripper | None = None,
+                 idtable: int | None = None) -> TableRun:
+    """The newest stored table of `object_name` (and robot), or the table of paramset `idtable`, its classes,
+    object and robot rebuilt from the store with the planning `gripper` it was built with (default: the Franka
+    hand)."""
     with Store(db, read_only=True) as store:
         idobject, obj = get_object(store, object_name)
         idrobot = None
         if robot_name is not None:
             idrobot = robot_row(store, robot_name)["idrobot"]
-        pid = sql.latest_table(store, idobject, idrobot)
+        pid = sql.latest_table(store, idobject, idrobot) if idtable is None else int(idtable)
         rows = sql.load_table(store, pid)
         classes = [GraspClass(**d) for d in sql.load_classes(store, rows["idclasses"])]
         r = robot_row(store, rows["idrobot"])
@@ -232,8 +234,25 @@ def save_plan(db: str, run: TableRun, plan: Plan, scene: Scene, ik: IKOptions) -
             stored.ids = {"idobject": ids["idobject"], "idrobot": ids["idrobot"],
                           "idscene": put_scene(store, scene_params(run.robot, scene, ik)),
                           "idikret": put_ikret(store, plan.handx, plan.worldz, plan.worlda), "idtabletop": run.idtable}
-            pid = plan_sql.save_plan(store, *plan_rows(stored))
+            pid = plan_sql.save_plan(store, *plan_rows(stored), obstacle_rows(stored))
     return pid, stored
+
+
+def load_stored(db: str, idplan: int) -> Plan:
+    """A stored plan of this planner rebuilt from the store alone (`wan_harada.stages.load_plan`: its steps and
+    lifts, timed motions, held ends, insertion and obstacles)."""
+    with Store(db, read_only=True) as store:
+        plan = load_plan(store, idplan)
+    if plan.planner != "tournassoud":
+        raise WorkbenchError(f"plan {idplan} in {db} was made by the {plan.planner} planner, not by `workbench gpplan`; "
+                             f"use `workbench plan` or `workbench simulate` for it")
+    return plan
+
+
+def stored_scene(db: str, idplan: int) -> Scene:
+    """The scene (table top, workspace) a stored plan was planned and checked in."""
+    with Store(db, read_only=True) as store:
+        return scene_row(store, sql.plan_scene(store, idplan)).scene
 
 
 def stored_validator(db: str, run: TableRun, idplan: int) -> PlanValidator:
@@ -256,11 +275,12 @@ def _validators(db: str, run: TableRun, idplan: int, acc=None,
 
 
 def validate_stored(db: str, run: TableRun, idplan: int, plan: Plan, require_motion: bool = False,
-                    obstacles: tuple = ()) -> ValidationReport:
-    """A stored plan (with the store's ids, as `save_plan` returns it) checked like the roadmap planner's plans
-    (`wan_harada.planner.Planner.validate`): its waypoints, and its timed trajectory when it has one (required with
-    `require_motion`), by the independent validators rebuilt from the store's rows, the trajectory also against the
-    task's `obstacles` ((mesh, world pose) pairs)."""
+                    obstacles: tuple | None = None) -> ValidationReport:
+    """A stored plan (with the store's ids, as `save_plan` returns it or `load_stored` reloads it) checked like the
+    roadmap planner's plans (`wan_harada.planner.Planner.validate`): its waypoints, and its timed trajectory when it
+    has one (required with `require_motion`), by the independent validators rebuilt from the store's rows, the
+    trajectory also against the task's `obstacles` ((mesh, world pose) pairs; default the plan's own)."""
+    obstacles = plan.obstacle_pairs() if obstacles is None else obstacles
     acc = None
     if plan.segments:
         acc = np.broadcast_to(np.asarray(plan.acc or DEFAULT_ACC, dtype=np.float64), (len(plan.joint_names),))

@@ -25,6 +25,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from workbench.errors import PlanningError
+from workbench.grasping.grasps import pregrasp_widths
 from workbench.planners.wan_harada.plans import make_plan
 from workbench.planners.wan_harada.roadmap import build_roadmap
 from workbench.planners.wan_harada.search import search
@@ -107,13 +108,21 @@ def _mode(checker: MotionChecker, mode: tuple[bool, np.ndarray], fingers: bool =
     checker.set_holding(mode[1]) if mode[0] else checker.set_resting(mode[1], fingers)
 
 
-def step_lines(checker: MotionChecker, step, worlda: float, worldz: float) -> StepLines | None:
+def pregrasp_opening(step, jaw_max: float, margin: float | None) -> float:
+    """The jaw opening of the empty hand approaching and leaving `step`'s grasp: its width plus `margin`, capped at
+    `jaw_max` (None: full opening), CONVENTIONS.md (Gripper)."""
+    return float(pregrasp_widths(np.array([float(step.jawwidth)]), jaw_max, margin)[0])
+
+
+def step_lines(checker: MotionChecker, step, worlda: float, worldz: float,
+               pregrasp_margin: float | None = None) -> StepLines | None:
     """The step's waypoints on one IK branch: the stored configurations may come from different branches (the IK rows
     solve each pose on its own), so the lines are continued by IK from one stored configuration (the grasp, else the
     approach, else the retract): the empty hand's retract -> approach -> grasp, checked with the object resting
     (the fingers may touch it next to the grasp), then the held part's lift grasp -> worlda -> worldaworldz
     (straight up by `worlda`, or back along the step's insertion `lift`; then up by `worldz`), checked with the object
-    in the hand. None when no anchor works."""
+    in the hand. The empty hand's fingers are at the step's pre-grasp opening (`pregrasp_opening`), the holding
+    hand's at the grasp's. None when no anchor works."""
     robot = checker.robot
     qs = [np.asarray(step.q_retract, dtype=np.float64), np.asarray(step.q_approach, dtype=np.float64),
           np.asarray(step.q_grasp, dtype=np.float64)]
@@ -122,14 +131,16 @@ def step_lines(checker: MotionChecker, step, worlda: float, worldz: float) -> St
     poses[:, :3, :3], poses[:, :3, 3] = r, t
     resting = (False, np.asarray(step.object_pose, dtype=np.float64))
     held = (True, np.asarray(step.grasp, dtype=np.float64))
+    jaw_pre = pregrasp_opening(step, robot.gripper.jaw_max, pregrasp_margin)
     for anchor in (2, 1, 0):
+        checker.set_jaw(jaw_pre)
         chain: dict[int, np.ndarray] = {anchor: qs[anchor]}
         paths: dict[tuple[int, int], np.ndarray] = {}
         ok = True
         for a, b in [(i, i - 1) for i in range(anchor, 0, -1)] + [(i, i + 1) for i in range(anchor, 2)]:
             _mode(checker, resting, fingers=2 not in (a, b))  # the fingers may touch the part next to the grasp
-            p = tcp_line_to(robot, checker, chain[a], poses[b])
-            if p is None or not checker.path_free(p):
+            p = tcp_line_to(robot, checker, chain[a], poses[b])  # checked collision-free at the resolution
+            if p is None:
                 ok = False
                 break
             chain[b] = p[-1]
@@ -137,6 +148,7 @@ def step_lines(checker: MotionChecker, step, worlda: float, worldz: float) -> St
         if not ok:
             continue
         _mode(checker, held)
+        checker.set_jaw(float(step.jawwidth))
         _, _, rg, tg = forward(robot, chain[2][None])
         lift = np.eye(4)
         lift[:3, :3], lift[:3, 3] = rg[0], tg[0]
@@ -146,7 +158,7 @@ def step_lines(checker: MotionChecker, step, worlda: float, worldz: float) -> St
             target = lift.copy()
             target[:3, 3] += d
             p = tcp_line_to(robot, checker, q, target)
-            if p is None or not checker.path_free(p):
+            if p is None:
                 break
             up.append(p)
             q = p[-1]
@@ -178,20 +190,23 @@ def _taking(step) -> bool:
 
 
 def moves_of_steps(steps, lines: list[StepLines], jaw_open: float, start_held: bool = False,
-                   end_held: bool = False) -> list[Move]:
+                   end_held: bool = False, pregrasp_margin: float | None = None) -> list[Move]:
     """The waypoint scheme of `PlanStep.waypoints()`: taking the part (pick, regrasp), the empty hand goes retract ->
     approach -> grasp, closes, and lifts the part straight up grasp -> worlda -> worldaworldz; putting it down
     (transfer, place), the held part goes worldaworldz -> worlda -> grasp, the hand opens and backs off grasp ->
     approach -> retract. A transfer (held) joins a taking step's worldaworldz to the next step's; a transit (empty,
     the part where it was released) joins a putting step's retract to the next step's. With `start_held` the first
     step begins with the part already in the hand at its grasp (no approach, no closing); with `end_held` the last
-    ends there with it still in the hand (no opening, no retract)."""
+    ends there with it still in the hand (no opening, no retract). The empty hand's jaw is at the step's pre-grasp
+    opening (`pregrasp_opening` with `pregrasp_margin`, capped at `jaw_open`; None: `jaw_open`): it opens to it
+    before the approach and after the release; a transit between two steps has the wider of their two openings."""
     out: list[Move] = []
     for i, (s, ln) in enumerate(zip(steps, lines)):
         taking = _taking(s)
         caption = {"pick": "pick", "regrasp": "regrasp", "transfer": "release", "place": "place"}[s.kind]
         pose, grasp = np.asarray(s.object_pose, dtype=np.float64), np.asarray(s.grasp, dtype=np.float64)
         jaw_shut = float(s.jawwidth)
+        jaw_pre = pregrasp_opening(s, jaw_open, pregrasp_margin)
 
         def mv(kind, path, holding, jaw, how="path", at_grasp=False):
             out.append(Move(kind, caption, i, path[0].copy(), path[-1].copy(), holding, None if holding else pose,
@@ -199,8 +214,8 @@ def moves_of_steps(steps, lines: list[StepLines], jaw_open: float, start_held: b
 
         if taking:
             if not (start_held and i == 0):
-                mv("approach", ln.down[0], False, jaw_open)
-                mv("approach", ln.down[1], False, jaw_open, at_grasp=True)
+                mv("approach", ln.down[0], False, jaw_pre)
+                mv("approach", ln.down[1], False, jaw_pre, at_grasp=True)
                 mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), True, jaw_shut, "dwell", at_grasp=True)
             mv("lift", ln.up[0], True, jaw_shut)
             mv("lift", ln.up[1], True, jaw_shut)
@@ -212,12 +227,12 @@ def moves_of_steps(steps, lines: list[StepLines], jaw_open: float, start_held: b
             mv("lower", ln.up[0][::-1].copy(), True, jaw_shut)
             if end_held and i == len(steps) - 1:
                 continue
-            mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), False, jaw_open, "dwell", at_grasp=True)
-            mv("retract", ln.down[1][::-1].copy(), False, jaw_open, at_grasp=True)
-            mv("retract", ln.down[0][::-1].copy(), False, jaw_open)
+            mv("gripper", np.stack([ln.q_grasp, ln.q_grasp]), False, jaw_pre, "dwell", at_grasp=True)
+            mv("retract", ln.down[1][::-1].copy(), False, jaw_pre, at_grasp=True)
+            mv("retract", ln.down[0][::-1].copy(), False, jaw_pre)
             if i + 1 < len(steps):
                 out.append(Move("transit", "regrasp", i, ln.q_retract.copy(), lines[i + 1].q_retract.copy(), False, pose,
-                                None, jaw_open, "joint"))
+                                None, max(jaw_pre, pregrasp_opening(steps[i + 1], jaw_open, pregrasp_margin)), "joint"))
     return out
 
 
@@ -243,7 +258,8 @@ class MotionResult:
         return (self.segments[-1].t0 + self.segments[-1].duration) if self.segments else 0.0
 
 
-def _set(checker: MotionChecker, m: Move) -> None:
+def _set(checker: MotionChecker, m: Move, jaw: float) -> None:
+    checker.set_jaw(jaw)
     if m.holding:
         checker.set_holding(m.grasp)
     elif m.object_pose is not None:
@@ -270,8 +286,11 @@ def solve_moves(checker: MotionChecker, moves: list[Move], vlim: np.ndarray, ali
     t0, rrt = 0.0, 0
     methods: dict[str, int] = {}
     timed: dict[tuple, Trajectory] = {}
+    jaw = robot.gripper.jaw_max
     for k, m in enumerate(moves):
-        _set(checker, m)
+        # the fingers at the move's opening; while the jaw acts, at the wider of its two openings
+        _set(checker, m, max(m.jaw, jaw) if m.how == "dwell" else m.jaw)
+        jaw = m.jaw
         if m.how == "dwell":
             if not checker.valid(m.q_from):
                 return MotionResult(segments, k, f"{m.caption}: the {m.kind} configuration collides ({', '.join(checker.why(m.q_from))})",
@@ -323,14 +342,23 @@ def _timed(checker: MotionChecker, path: np.ndarray, vlim: np.ndarray, alim: np.
 
 def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarray | float, seed: int | None = None,
                 worlda: float = WORLDA, worldz: float = 0.10, start_held: bool = False,
-                end_held: bool = False) -> tuple[MotionResult, list[StepLines | None]]:
+                end_held: bool = False, pregrasp_margin: float | None = None) -> tuple[MotionResult, list[StepLines | None]]:
     """The timed motion of a whole plan: consistent straight TCP lines at every step, then the moves in
     order (`moves_of_steps`, with the part in the hand at the start or the end when told). On failure `result.blame` is ("step", i) when step i's lines fail (its grip is unusable) or ("edge", i, i+1)
-    when the transfer or transit from step i to step i+1 fails; the lines found so far are returned too."""
+    when the transfer or transit from step i to step i+1 fails; the lines found so far are returned too. The empty
+    hand moves at each step's pre-grasp opening (`pregrasp_margin`, None: fully open); the checker's fingers are
+    left fully open afterwards."""
+    try:
+        return _plan_motion(checker, steps, vlim, alim, seed, worlda, worldz, start_held, end_held, pregrasp_margin)
+    finally:
+        checker.set_jaw(checker.robot.gripper.jaw_max)
+
+
+def _plan_motion(checker, steps, vlim, alim, seed, worlda, worldz, start_held, end_held, pregrasp_margin):
     t0 = time.perf_counter()
     lines: list[StepLines | None] = []
     for i, s in enumerate(steps):
-        ln = step_lines(checker, s, worlda, worldz)
+        ln = step_lines(checker, s, worlda, worldz, pregrasp_margin)
         lines.append(ln)
         if ln is None:
             res = MotionResult([], None, f"step {i + 1} ({s.kind}): no collision-free straight TCP lines between its retract, "
@@ -343,7 +371,7 @@ def plan_motion(checker: MotionChecker, steps, vlim: np.ndarray, alim: np.ndarra
             lines[i] = unwrap_lines(checker.robot, lines[i], lines[i].q_worldaworldz, prev.q_worldaworldz)
         else:
             lines[i] = unwrap_lines(checker.robot, lines[i], lines[i].q_retract, prev.q_retract)
-    moves = moves_of_steps(steps, lines, checker.robot.gripper.jaw_max, start_held, end_held)
+    moves = moves_of_steps(steps, lines, checker.robot.gripper.jaw_max, start_held, end_held, pregrasp_margin)
     res = solve_moves(checker, moves, vlim, alim, seed)
     res.seconds = time.perf_counter() - t0
     if not res.ok:
@@ -436,7 +464,8 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
                                ids=planner.ids)
         plan = make_plan(view, result, route, 0)
         t0 = time.perf_counter()
-        motion, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz)
+        motion, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz,
+                                    pregrasp_margin=planner.pregrasp_margin)
         seconds += time.perf_counter() - t0
         verdict = None
         if motion.ok:
@@ -453,7 +482,8 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
                         continue
                     alt = make_plan(view, more, r, len(out.alternatives) + 1)
                     t1 = time.perf_counter()
-                    m, ls = plan_motion(checker, alt.steps, vlim, opts.acc, opts.motion.seed, alt.worlda, alt.worldz)
+                    m, ls = plan_motion(checker, alt.steps, vlim, opts.acc, opts.motion.seed, alt.worlda, alt.worldz,
+                                        pregrasp_margin=planner.pregrasp_margin)
                     if m.ok:
                         _attach(alt, m, ls, removed, time.perf_counter() - t1, opts.acc, robot.nq)
                         out.alternatives.append(alt)

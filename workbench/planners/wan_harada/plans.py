@@ -25,6 +25,7 @@ table.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,6 +33,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import trimesh
 
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.search import Route, SearchResult
@@ -120,6 +122,31 @@ class PlanStep:
 
 
 @dataclass
+class PlanObstacle:
+    """A fixed obstacle of a plan's task (Tournassoud et al. 1987, Section 5.1): a mesh (metres, its own frame) at a
+    world pose, at the task's `end` ("pickup" or "destination"); stored in `planobstacle`."""
+
+    name: str
+    end: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    pose: np.ndarray
+
+    def mesh(self) -> trimesh.Trimesh:
+        """The mesh in its own frame (not processed)."""
+        return trimesh.Trimesh(np.asarray(self.vertices, dtype=np.float64), np.asarray(self.faces, dtype=np.int64), process=False)
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"name": self.name, "end": self.end, "vertices": _list(self.vertices),
+                "faces": np.asarray(self.faces, dtype=np.int64).tolist(), "pose": _list(self.pose)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "PlanObstacle":
+        return cls(str(d["name"]), str(d["end"]), np.asarray(d["vertices"], dtype=np.float64).reshape(-1, 3),
+                   np.asarray(d["faces"], dtype=np.int64).reshape(-1, 3), np.asarray(d["pose"], dtype=np.float64).reshape(4, 4))
+
+
+@dataclass
 class Plan:
     """A regrasp plan for one object and robot from a start to a goal pose (Section V); `rank` 0 is the best of a
     search, higher ranks its alternatives. `timings` holds the search's connect and search times and the motion
@@ -145,6 +172,13 @@ class Plan:
     planner: str = "wan_harada"
     start_held: bool = False  # the motions begin with the part already in the hand at the first step's grasp
     end_held: bool = False  # they end with it still in the hand at the last step's grasp (Tournassoud Fig. 1 (a), (d))
+    obstacles: list[PlanObstacle] = field(default_factory=list)  # the task's, fixed in the world
+    insertion: np.ndarray | None = None  # the final insertion's direction (world, unit); its move is the last step's lift
+    insertion_depth: float = 0.0
+
+    def obstacle_pairs(self) -> tuple:
+        """The obstacles as (mesh, world pose) pairs, as the motion checker and the validators take them."""
+        return tuple((o.mesh(), np.asarray(o.pose, dtype=np.float64)) for o in self.obstacles)
 
     @property
     def duration(self) -> float:
@@ -172,7 +206,8 @@ class Plan:
                 "ids": {k: int(v) for k, v in self.ids.items()}, "steps": [s.as_dict() for s in self.steps],
                 "motion": {"duration": self.duration, "removed": self.removed, "acc": [float(a) for a in self.acc],
                            "segments": [s.as_dict() for s in self.segments]},
-                "start_held": self.start_held, "end_held": self.end_held}
+                "start_held": self.start_held, "end_held": self.end_held, "obstacles": [o.as_dict() for o in self.obstacles],
+                "insertion": _list(self.insertion), "insertion_depth": float(self.insertion_depth)}
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "Plan":
@@ -186,7 +221,10 @@ class Plan:
                    segments=[TimedSegment.from_dict(s) for s in (d.get("motion") or {}).get("segments", [])],
                    removed=int((d.get("motion") or {}).get("removed", 0)), acc=list((d.get("motion") or {}).get("acc", [])),
                    planner=str(d.get("planner", "wan_harada")), start_held=bool(d.get("start_held", False)),
-                   end_held=bool(d.get("end_held", False)))
+                   end_held=bool(d.get("end_held", False)),
+                   obstacles=[PlanObstacle.from_dict(o) for o in d.get("obstacles") or []],
+                   insertion=None if d.get("insertion") is None else np.asarray(d["insertion"], dtype=np.float64).reshape(3),
+                   insertion_depth=float(d.get("insertion_depth") or 0.0))
 
     def to_json(self, path: str | Path | None = None) -> str:
         """The plan as JSON (written to `path` when given)."""
@@ -266,6 +304,30 @@ def make_plan(planner, result: SearchResult, route: Route, rank: int = 0) -> Pla
                 steps=steps, handx=planner.handx, worldz=planner.worldz, worlda=planner.worlda, rank=rank, timings=dict(result.timings), ids=dict(planner.ids))
 
 
+def obstacles_digest(obstacles: list[PlanObstacle]) -> str | None:
+    """A digest of a plan's obstacles (ends, names, meshes, poses), None without any: plans answering the same
+    query among other obstacles are other plans."""
+    if not obstacles:
+        return None
+    h = hashlib.sha256()
+    for o in obstacles:
+        h.update(f"{o.end}\0{o.name}\0".encode())
+        for a, t in ((o.vertices, np.float64), (o.faces, np.int64), (o.pose, np.float64)):
+            h.update(np.ascontiguousarray(a, dtype=t).tobytes())
+    return h.hexdigest()
+
+
+def obstacle_rows(plan: Plan) -> dict[str, Any]:
+    """The `planobstacle` columns of a plan's obstacles (empty lists without any)."""
+    o = plan.obstacles
+    return {"seq": np.arange(len(o), dtype=np.int32), "task_end": np.array([x.end for x in o], dtype=object),
+            "name": np.array([x.name for x in o], dtype=object),
+            "vertices": pa.array([np.asarray(x.vertices, dtype=np.float64).tolist() for x in o],
+                                 type=pa.list_(pa.list_(pa.float64(), 3))),
+            "faces": pa.array([np.asarray(x.faces, dtype=np.int64).tolist() for x in o], type=pa.list_(pa.list_(pa.int32(), 3))),
+            "pose": np.array([np.asarray(x.pose, dtype=np.float64).ravel() for x in o]).reshape(len(o), 16)}
+
+
 def plan_rows(plan: Plan) -> tuple[dict, dict, dict]:
     """The `plan` row, the `planstep` columns and the `plansegment` columns of a plan (written by `stages.save_plan`)."""
 
@@ -276,7 +338,10 @@ def plan_rows(plan: Plan) -> tuple[dict, dict, dict]:
            "goal_xyyaw": [plan.goal.x, plan.goal.y, plan.goal.yaw], "rank": plan.rank, "regrasps": plan.regrasps,
            "transfers": plan.transfers, "t_connect": plan.timings.get("connect"), "t_search": plan.timings.get("search"),
            "duration": plan.duration if plan.segments else None, "removed": plan.removed,
-           "t_motion": plan.timings.get("motion"), "acc": [float(a) for a in plan.acc] or None, "planner": plan.planner}
+           "t_motion": plan.timings.get("motion"), "acc": [float(a) for a in plan.acc] or None, "planner": plan.planner,
+           "start_held": bool(plan.start_held), "end_held": bool(plan.end_held), "insertion": _list(plan.insertion),
+           "insertion_depth": float(plan.insertion_depth) if plan.insertion is not None else None,
+           "obstacles": obstacles_digest(plan.obstacles)}
     s = plan.steps
 
     steps = {"seq": np.arange(len(s), dtype=np.int32), "kind": np.array([x.kind for x in s], dtype=object),
@@ -291,7 +356,9 @@ def plan_rows(plan: Plan) -> tuple[dict, dict, dict]:
              "jnt_retract": pa.array([x.q_retract.tolist() for x in s], type=pa.list_(pa.float64())),
              "jnt_worlda": pa.array([None if x.q_worlda is None else x.q_worlda.tolist() for x in s], type=pa.list_(pa.float64())),
              "jnt_worldaworldz": pa.array([None if x.q_worldaworldz is None else x.q_worldaworldz.tolist() for x in s],
-                                         type=pa.list_(pa.float64()))}
+                                         type=pa.list_(pa.float64())),
+             "lift": pa.array([None if x.lift is None else np.asarray(x.lift, dtype=np.float64).ravel().tolist() for x in s],
+                              type=pa.list_(pa.float64()))}
     g = plan.segments
     flat = lambda a: pa.array([np.asarray(a(x), dtype=np.float64).ravel().tolist() for x in g], type=pa.list_(pa.float64()))  # noqa: E731
     segments = {"seq": np.arange(len(g), dtype=np.int32), "kind": np.array([x.kind for x in g], dtype=object),

@@ -27,7 +27,7 @@ from workbench.grasping.placements import (
     stable_placements,
 )
 from workbench.planners.wan_harada.planner import Planner
-from workbench.planners.wan_harada.plans import Plan, PlanStep, plan_rows
+from workbench.planners.wan_harada.plans import Plan, PlanObstacle, PlanStep, plan_rows
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.planners.wan_harada.roadmap import build_roadmap, grid_index
 from workbench.planners.wan_harada.tabletop import (
@@ -44,7 +44,7 @@ from workbench.store import Store
 from workbench.store import robots as robot_sql
 from workbench.store import wan_harada as sql
 from workbench.store.grasps import find_grasps, latest_paramset_for, load_grasps, save_grasps
-from workbench.store.objects import gripper_row, object_name, object_row, put_object
+from workbench.store.objects import gripper_row, object_name, object_row, put_object, stored_grippers
 from workbench.store.placements import (
     find_placements,
     find_tabletop,
@@ -58,7 +58,7 @@ from workbench.store.placements import (
     tabletop_counts,
     tabletop_grasp_count,
 )
-from workbench.store.robots import ik_runs, ikret_row, robot_row, scene_row
+from workbench.store.robots import ik_runs, ikret_row, robot_row, robot_with_gripper, scene_row
 
 if TYPE_CHECKING:  # pragma: no cover
 
@@ -91,7 +91,8 @@ def ensure_grasps(db: str | Path | Store, obj: ObjectModel, gripper: Gripper, pa
         pid = find_grasps(store, oid, gripper, params)
         plan = None
         if pid is None:
-            plan = plan_grasps(obj, gripper, params)
+            with store.released():  # other processes may write the store while this one plans
+                plan = plan_grasps(obj, gripper, params)
             pid, _ = save_grasps(store, oid, gripper, params, plan.grasps)
         else:
             store.mark_used(pid)
@@ -134,8 +135,9 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
             reused = False
             t0 = time.perf_counter()
             grasps = load_grasps(store, idobject, grasp_pid)
-            placements = stable_placements(obj, pparams)
-            ftg = free_tabletop_grips(placements, grasps["rotmat"], gripper, pparams)
+            with store.released():
+                placements = stable_placements(obj, pparams)
+                ftg = free_tabletop_grips(placements, grasps["rotmat"], gripper, pparams)
             timings["placements"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             pl_pid = save_placements(store, idobject, grasp_pid, pparams, placements, grasps, ftg)
@@ -149,7 +151,8 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
             t0 = time.perf_counter()
             grasps = load_grasps(store, idobject, grasp_pid) if grasps is None else grasps
             g_index = np.searchsorted(grasps["idfreeairgrip"], ftg["idfreeairgrip"])
-            tt = plan_tabletop(stored["rotmat"], fp_index, g_index, ftg["rotmat"], grasps["rotmat"], tparams)
+            with store.released():
+                tt = plan_tabletop(stored["rotmat"], fp_index, g_index, ftg["rotmat"], grasps["rotmat"], tparams)
             timings["tabletop"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             tt_pid = save_tabletop(store, idobject, pl_pid, tparams, tt, ftg, stored["idfreetabletopplacement"])
@@ -250,6 +253,10 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
         planner = Planner(roadmap, free, ftg, obj, robot, scene, ret["handx"], ret["worldz"], ids, opts, grid=grid_index(rows),
                           worlda=ret["worlda"])
         planner.partial = not complete
+        # the grasps' parameters (via the placements that consumed them): grasps stored before the pre-grasp
+        # opening existed were checked fully open, and are approached so
+        gparams = store.params_of(int(store.params_of(pl).get("grasps", -1)))
+        planner.pregrasp_margin = gparams.get("pregrasp_margin")
         roadmap.key = key
         _, orow = object_row(store, object_name)
         gid = rrow["idgripper"]
@@ -421,10 +428,11 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
 
     computed = 0
     arrays = {k: v for k, v in grips.items() if isinstance(v, np.ndarray) and v.shape[:1] == ids.shape}
-    for ix, feas, joints in iter_ik(robot, arrays, scene, handx, worldz, obj.mesh, opts, workers, skip=skip, progress=progress,
-                                    worlda=worlda):
-        todo = ~np.isin(ids[ix], done)
-        computed += robot_sql.insert_ik(store, rid, sid, kid, ids[ix][todo], feas[todo], joints[todo])
+    with store.released():  # each chunk's write takes the store briefly: another process's stages run beside
+        for ix, feas, joints in iter_ik(robot, arrays, scene, handx, worldz, obj.mesh, opts, workers, skip=skip,
+                                        progress=progress, worlda=worlda):
+            todo = ~np.isin(ids[ix], done)
+            computed += robot_sql.insert_ik(store, rid, sid, kid, ids[ix][todo], feas[todo], joints[todo])
     robot_sql.mark_ik_complete(store, pid, rid, sid, kid)
     counts = robot_sql.run_counts(store, rid, sid, kid, pid)
     reason = diagnose_unreachable(robot, arrays, scene, obj.mesh, opts) if len(ids) and counts[0] == 0 else None
@@ -549,8 +557,9 @@ def grasp_reason(store: Store, object_name: str, gripper: Gripper, params: Grasp
 
 
 def load_plan(store: Store, idplan: int) -> Plan:
-    """A stored plan (either planner's) rebuilt from its `plan`, `planstep` and `plansegment` rows, with its timed
-    motions (knot times from the plan's start), the grasps as TCP in the object frame."""
+    """A stored plan (either planner's) rebuilt from its `plan`, `planstep`, `plansegment` and `planobstacle` rows,
+    with its timed motions (knot times from the plan's start), the grasps as TCP in the object frame, and a task's
+    held ends, lifts, insertion and obstacles."""
     row, steps = sql.load_plan_rows(store, idplan)
     seg = sql.load_plan_segments(store, idplan).to_pydict()
     nq = len(robot_row(store, int(row["idrobot"]))["joint_names"])
@@ -567,7 +576,8 @@ def load_plan(store: Store, idplan: int) -> Plan:
                             position=np.asarray(s["position"][i], dtype=np.float64), yaw=float(s["yaw"][i]), object_pose=obj_pose,
                             tcp=tcp, grasp=np.linalg.inv(obj_pose) @ tcp, jawwidth=float(s["jawwidth"][i]),
                             q_approach=q["jnt_approach"], q_grasp=q["jnt_grasp"], q_retract=q["jnt_retract"],
-                            idtabletopgrips=s["idtabletopgrips"][i], q_worlda=q["jnt_worlda"], q_worldaworldz=q["jnt_worldaworldz"]))
+                            idtabletopgrips=s["idtabletopgrips"][i], q_worlda=q["jnt_worlda"], q_worldaworldz=q["jnt_worldaworldz"],
+                            lift=None if s.get("lift", [None] * (i + 1))[i] is None else np.asarray(s["lift"][i], dtype=np.float64)))
     segments = []
     for k in range(len(seg["seq"])):
         t = np.asarray(seg["t"][k], dtype=np.float64)
@@ -582,9 +592,30 @@ def load_plan(store: Store, idplan: int) -> Plan:
                 start=query(row["start_placement"], row["start_xyyaw"]), goal=query(row["goal_placement"], row["goal_xyyaw"]),
                 start_pose=out[0].object_pose.copy(), goal_pose=out[-1].object_pose.copy(), steps=out, handx=ret["handx"],
                 worldz=ret["worldz"], worlda=ret["worlda"], rank=int(row["rank"] or 0), ids=ids, segments=segments,
-                removed=int(row.get("removed") or 0), acc=list(row.get("acc") or []), planner=row.get("planner") or "wan_harada")
+                removed=int(row.get("removed") or 0), acc=list(row.get("acc") or []), planner=row.get("planner") or "wan_harada",
+                start_held=bool(row.get("start_held") or False), end_held=bool(row.get("end_held") or False),
+                obstacles=[PlanObstacle(**o) for o in sql.load_plan_obstacles(store, idplan)],
+                insertion=None if row.get("insertion") is None else np.asarray(row["insertion"], dtype=np.float64),
+                insertion_depth=float(row.get("insertion_depth") or 0.0))
 
 
 def stored_robot(store: Store, idrobot: int, gripper: Gripper | None = None) -> Robot:
     """The library robot of a stored robot row, with its planning gripper (default: the Franka hand)."""
     return _robot_from_row(robot_row(store, int(idrobot)), gripper)
+
+
+def grippers_in_store(db: str | Path) -> list[dict]:
+    """The grippers with grasps or robots in store `db` (name, digest, objects, robots), none when it does not exist yet."""
+    if not Path(db).is_file():
+        return []
+    with Store(db, read_only=True) as store:
+        return stored_grippers(store)
+
+
+def robot_name_for(db: str | Path, robot: str, gripper: Gripper) -> str:
+    """The stored name of robot `robot` built with `gripper` (NAME, or NAME-DIGEST when another gripper took the name
+    first); `robot` itself when the store has none (loading then says what is missing)."""
+    if not Path(db).is_file():
+        return robot
+    with Store(db, read_only=True) as store:
+        return robot_with_gripper(store, robot, gripper.digest) or robot
