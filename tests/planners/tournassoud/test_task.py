@@ -395,7 +395,7 @@ def test_plan_starts_and_ends_in_the_hand(slot, held, lpart, hand):
     assert not report.ok and any("held" in e for e in report.errors), report.errors
 
 
-def test_reloaded_plan_keeps_its_task(slot, held, tmp_path):
+def test_reloaded_plan_keeps_its_task(slot, held, tmp_path, capsys):
     """The held plan with obstacles and an insertion, reloaded from the store in a fresh process (`gpplan --plan`):
     the same steps with their lifts, the same timed motions, both held ends, the insertion and every obstacle (the
     walls' own meshes and poses, compared with the files given); the validators rebuilt from the store accept it
@@ -442,3 +442,11 @@ def test_reloaded_plan_keeps_its_task(slot, held, tmp_path):
         assert np.allclose(np.sort(np.reshape(o["vertices"], (-1, 3)), axis=0), np.sort(w.mesh.vertices, axis=0), atol=1e-6)
     assert "joint_names" in traj.read_text() and "planobstacle" not in traj.read_text()
     assert page.stat().st_size > 10_000 and "wb-caption" in page.read_text()
+    # a plan that is not there, or a query beside --plan: one line, status 2
+    from workbench.cli.main import main
+
+    assert main(["gpplan", "--db", db, "--plan", "9999"]) == 2
+    assert main(["gpplan", "--db", db, "--plan", str(idplan), "--initial", "0,10"]) == 2
+    assert main(["gpplan", "--db", db, "--initial", "0,10", "--goal", "3,0:90"]) == 2  # no --object
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "has no plan 9999" in err and "--plan ID reloads" in err and "--object NAME" in err
