@@ -46,7 +46,8 @@ KINDS = ("part", "ik", "graph")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--objects", choices=["all", "bundled", "paper"], default="all")
     parser.add_argument("--robots", default="panda,ur5")
-    parser.add_argument("--workers", default="1,2", help="worker counts to compare (comma-separated)")
+    parser.add_argument("--workers", dest="worker_counts", default="1,2",
+                        help="worker counts to compare (comma-separated; none: only the simulation)")
     parser.add_argument("--simulate-workers", default=None, metavar="N,...",
                         help="replay recorded units into the driver as N workers would produce them, e.g. 16,64,256,1024")
     parser.add_argument("--units-per-worker", type=float, default=4.0, help="units per simulated worker (parts copied)")
@@ -93,9 +94,9 @@ def run(args: argparse.Namespace) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             rec, rows = simulate(parts, args.robots, params, simulated, args.units_per_worker, Path(tmp))
             print_simulation(rec, rows, args)
-        if args.workers in ("", "none"):
+        if args.worker_counts in ("", "none"):
             return 0
-    counts = _counts(args.workers, "--workers")
+    counts = _counts(args.worker_counts, "--workers")
     paths = ["files"]
     # the first worker count on the first path is the base; every path then runs with the other worker counts
     configs = [(counts[0], paths[0])] + [(w, path) for path in paths for w in counts[1:]]
