@@ -210,6 +210,11 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
             knots += 1
     assert knots > 100
     assert doc["task"]["destination"]["insertion"] == [0.0, 0.0, -1.0] and len(doc["task"]["pickup"]["obstacles"]) == 2
+    # not stored: the same validators check the plan and its trajectory against the obstacles given
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination",
+                 "0,0.35,0.25,0", "--insert", "0,0,-1,0.02", *args, "--no-save"]) == 0
+    out = capsys.readouterr().out
+    assert "validator: ok" in out and "stored plan id" not in out, out
     # bad task input: one line each, exit 2, nothing planned
     base = ["gpplan", "--db", db, "--object", "L", "--no-motion", "--no-save"]
     ends = ["--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0"]
