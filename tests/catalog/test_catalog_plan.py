@@ -14,6 +14,7 @@ import pytest
 
 from workbench.cli.main import main
 from workbench.planners.tournassoud.shapes import l_part
+from workbench.errors import StoreError
 from workbench.store import Store
 from workbench.store.catalog import PARTITIONED
 
@@ -96,3 +97,29 @@ def test_plan_and_gpplan_answer_on_a_catalogue_store(catalogues, tmp_path, capsy
         planners = [r[0] for r in s.run("SELECT planner FROM plan ORDER BY idplan")]
         objects = s.one("SELECT count(*) FROM object")[0]
     assert planners[-1] == "tournassoud" and len(planners) == 2 and objects == 1  # the catalogue's part, reused
+
+
+def test_files_of_a_merge_that_never_committed_are_swept_and_the_rows_stay(catalogues, tmp_path):
+    """A driver killed inside a merge of a Parquet catalogue leaves files of a batch `catalog_batch` does not hold
+    (one half written): the next build's opening deletes them, and the catalogue reads the rows it held before."""
+    import shutil
+
+    from workbench.catalog.stages import open_store
+
+    folder = tmp_path / "copy"
+    shutil.copytree(catalogues["parquet"], folder)
+    with Store(folder, read_only=True) as s:
+        before = {t: _table(s, t) for t in PARTITIONED}
+        batch = s.one("SELECT max(batch) FROM catalog_batch")[0]
+    ik = next((folder / "ik").glob("*/*/*.parquet"))
+    stray = [ik.with_name(f"b{batch + 1}_1_0.parquet"), folder / "object" / "part=M" / f"b{batch + 1}_2_0.parquet"]
+    shutil.copy(ik, stray[0])  # a whole file of the uncommitted batch: its rows would be duplicates
+    stray[1].parent.mkdir()
+    stray[1].write_bytes(ik.read_bytes()[:100])  # a half-written one
+    with pytest.raises(StoreError):
+        with Store(folder, read_only=True) as s:
+            s.run("SELECT count(*) FROM object")  # the half-written file cannot be read
+    open_store(folder).close()
+    assert not any(p.exists() for p in stray) and ik.exists()
+    with Store(folder, read_only=True) as s:
+        assert {t: _table(s, t) for t in PARTITIONED} == before

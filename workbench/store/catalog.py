@@ -130,10 +130,11 @@ def merge_batch(store: Store) -> Iterator[None]:
             return
         store._batch = int(store.one("SELECT coalesce(max(batch), 0) + 1 FROM catalog_batch")[0])
         store.run("INSERT INTO catalog_batch (batch) VALUES (?)", [store._batch])
+        store._copies = 0
         try:
             yield
         finally:
-            del store._batch
+            del store._batch, store._copies
 
 
 def _put(store: Store, table: str, columns: str, source: str, args: list, keys: dict[str, str]) -> int:
@@ -149,8 +150,9 @@ def _put(store: Store, table: str, columns: str, source: str, args: list, keys: 
     keyed = ", ".join(f"{keys[k]} AS {k}" for k in names)  # a failed statement rolls the temporary table back too
     n = _count(store.run(f"INSERT INTO {stage} BY NAME SELECT {columns}, {keyed} {source}", args))
     if n:
-        store.run(f"COPY {stage} TO '{store.dataset}/{table}' (FORMAT parquet, COMPRESSION zstd, "
-                  f"PARTITION_BY ({', '.join(names)}), FILENAME_PATTERN 'b{store._batch}_{{i}}', OVERWRITE_OR_IGNORE true)")
+        store._copies += 1  # a file name of its own for every write of the batch
+        store.run(f"COPY {stage} TO '{store.dataset}/{table}' (FORMAT parquet, COMPRESSION zstd, PARTITION_BY "
+                  f"({', '.join(names)}), FILENAME_PATTERN 'b{store._batch}_{store._copies}_{{i}}', OVERWRITE_OR_IGNORE true)")
     store.run(f"DROP TABLE {stage}")
     if n:
         dataset_views(store, (table,))

@@ -159,7 +159,7 @@ def read_error(path: Path, exc: BaseException) -> BaseException:
             return StoreError(f"store {path} has no {table} table: {hint}")
         return exc
     if isinstance(exc, (duckdb.IOException, duckdb.FatalException, duckdb.InternalException, duckdb.SerializationException)) \
-            or "corrupt" in str(exc).lower() or "checksum" in str(exc).lower():
+            or any(w in str(exc).lower() for w in ("corrupt", "checksum", "no magic bytes")):  # a damaged Parquet file too
         return open_error(path, exc)
     return exc
 
