@@ -210,6 +210,11 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
             knots += 1
     assert knots > 100
     assert doc["task"]["destination"]["insertion"] == [0.0, 0.0, -1.0] and len(doc["task"]["pickup"]["obstacles"]) == 2
+    # not stored: the same validators check the plan and its trajectory against the obstacles given
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination",
+                 "0,0.35,0.25,0", "--insert", "0,0,-1,0.02", *args, "--no-save"]) == 0
+    out = capsys.readouterr().out
+    assert "validator: ok" in out and "stored plan id" not in out, out
     # bad task input: one line each, exit 2, nothing planned
     base = ["gpplan", "--db", db, "--object", "L", "--no-motion", "--no-save"]
     ends = ["--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0"]
@@ -442,6 +447,22 @@ def test_reloaded_plan_keeps_its_task(slot, held, tmp_path, capsys):
         assert np.allclose(np.sort(np.reshape(o["vertices"], (-1, 3)), axis=0), np.sort(w.mesh.vertices, axis=0), atol=1e-6)
     assert "joint_names" in traj.read_text() and "planobstacle" not in traj.read_text()
     assert page.stat().st_size > 10_000 and "wb-caption" in page.read_text()
+    # the store answers the same query with this plan only among the same obstacles and held ends
+    from workbench.planners.wan_harada.plans import Plan, plan_rows
+    from workbench.store import Store
+    from workbench.store.wan_harada import find_plan
+
+    same = Plan.from_dict(doc)
+    moved = Plan.from_dict(doc)
+    moved.obstacles[0].pose[0, 3] += 0.01
+    released = Plan.from_dict(doc)
+    released.end_held = False
+    found = []
+    with Store(db, read_only=True) as store:
+        for p in (same, moved, released):
+            row, _, segments = plan_rows(p)
+            found.append(find_plan(store, row, segments))
+    assert found == [idplan, None, None], found
     # a plan that is not there, or a query beside --plan: one line, status 2
     from workbench.cli.main import main
 

@@ -303,6 +303,12 @@ def test_empty_hand_moves_at_the_pregrasp_opening(planner, validator, demo_resul
         elif s.kind in ("lift", "lower", "transfer"):
             assert s.jaw == pytest.approx(step.jawwidth, abs=1e-12)
     assert seen == {"approach", "retract"}
+    # the animation closes the jaw from the approach's opening and opens it to the retract's
+    frames = timed_frames(plan, segs, FK(planner), fps=30.0)
+    for k in (i for i, s in enumerate(segs) if s.kind == "gripper"):
+        pre = min(plan.steps[segs[k].step].jawwidth + 0.010, jaw_max)
+        jaws = [f["jaw"] for f in frames if f["segment"] == k]
+        assert jaws and max(jaws) <= pre + 1e-9 and min(jaws) >= plan.steps[segs[k].step].jawwidth - 1e-9, (k, jaws)
     # the validator moves the fingers: closed through the part at the first grasp they hit it, at the pre-grasp
     # opening they clear it
     first = plan.steps[0]
