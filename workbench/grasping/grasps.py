@@ -366,7 +366,7 @@ def approach_collides(gripper: Gripper, poses: np.ndarray, openings: np.ndarray,
 def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, clearance: float,
                     pads: bool = True) -> np.ndarray:
     """Do the finger boxes of both fingers at each grasp's opening, shrunk by `clearance` on every side, intersect
-    the object? (The body does not move with the fingers: it is tested at full opening.) `pads=False` skips the pad
+    the object? (The body does not move with the fingers: `approach_collides` tests it.) `pads=False` skips the pad
     boxes, for grasps whose pads closed onto their first touches and so cannot overlap the object."""
     widths = np.asarray(widths)
     out = np.zeros(len(poses), dtype=bool)

@@ -48,6 +48,14 @@ Extra tables
   transaction is complete when its paramset row exists. Consumers refuse an incomplete IK run unless asked.
 - plan rows are unique per query and motions: a re-run of the same query with the same motion settings finds the
   stored answer (store.wan_harada.find_plan); another --acc, or motions timed otherwise, is a new plan.
+- a task's plan (the grasp-placement table's Fig. 1 task) keeps its task: plan.start_held and plan.end_held (the
+  motions begin with the part already in the hand / end with it still held), plan.insertion (unit world
+  direction, NULL without one) and plan.insertion_depth (m), plan.obstacles (digest of the obstacles, NULL without
+  any: the same query among other obstacles is another plan), planstep.lift (the TCP's world move from the grasp
+  to the worlda pose: the insertion run backwards; NULL: straight up by worlda).
+- planobstacle(idplanobstacle, idplan, seq, task_end, name, vertices, faces, pose): each obstacle fixed in the world
+  that a plan's motions were checked against: task_end 'pickup' or 'destination', the mesh in metres in its own
+  frame, pose its world pose (DOUBLE[16]); a validator reads them back with the plan.
 """
 
 from __future__ import annotations

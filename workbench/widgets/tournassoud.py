@@ -24,7 +24,7 @@ from workbench.robots.gripper import Gripper
 from workbench.robots.model import Robot, get_robot
 from workbench.viewer import scenes as viewer
 from workbench.viewer.scenes import BLUE, GREEN, GREY, ORANGE, RED
-from workbench.viewer.tournassoud import PART_AT_H, show_class, show_conjunction
+from workbench.viewer.tournassoud import BESIDE, PART_AT_H, TableView
 from workbench.widgets.grippers import GripperMenu
 from workbench.widgets.panel import BesideView, Busy
 
@@ -37,6 +37,7 @@ class TableExplorer(BesideView):
         self.db, self.obj, self.robot, self.params, self.robot_for = db, obj, robot, params, robot_for
         self.vis = vis if vis is not None else viewer.new_scene()
         self.run: TableRun | None = None
+        self.view: TableView | None = None
         self.cls = W.Dropdown(description="class G_i")
         self.theta = W.FloatSlider(value=90.0, min=0.0, max=359.0, step=1.0, description="theta (deg)", continuous_update=False)
         self.place = W.Dropdown(description="placement P_j")
@@ -77,6 +78,10 @@ class TableExplorer(BesideView):
         with self.busy.running("building the grasp-placement table"):
             self.run = table_stage_at(self.db, self.obj, self.robot, params=p)
         r = self.run
+        self.view = TableView(self.vis, r.obj.mesh, r.table, r.classes, r.gripper)
+        size = float(r.obj.mesh.scale)  # camera on the part beside the table and the part at the table point
+        x, y = self.params.table_point
+        viewer.frame_points(self.vis, np.array([BESIDE[:3, 3], [x, y, 0.0]]) + [[-size, -size, -size], [size, size, size]])
         self.cls.options = [(f"G{i} {c.kind} ({c.opening * 1000:.0f} mm)", i) for i, c in enumerate(r.classes)]
         self.place.options = [(f"P{j}", j) for j in range(len(r.table.placements))]
         for box in (self.cls, self.place):  # the view opens on the first class and placement, not empty
@@ -99,11 +104,7 @@ class TableExplorer(BesideView):
         i, j = int(self.cls.value), int(self.place.value)
         th, ph = float(np.radians(self.theta.value)), float(np.radians(self.phi.value))
         c = r.classes[i]
-        show_class(self.vis, r.obj.mesh, c, r.gripper, th, pose=np.array([[1, 0, 0, 0.0], [0, 1, 0, -0.3], [0, 0, 1, 0.2], [0, 0, 0, 1]]))
-        legal = show_conjunction(self.vis, r.obj.mesh, r.table, r.classes, i, r.gripper, j, th, ph)
-        size = float(r.obj.mesh.scale)  # camera on the part beside the table and the part at the table point
-        x, y = self.params.table_point
-        viewer.frame_points(self.vis, np.array([[0, -0.3, 0.2], [x, y, 0.0]]) + [[-size, -size, -size], [size, size, size]])
+        legal = self.view.pose(i, th, j, ph)  # moves and recolours what the scene holds; a new class sends its geometry
         self.info.value = (f"G{i}: {c.kind}, opening {c.opening * 1000:.1f} mm, e = {c.eccentricity * 1000:.1f} mm, legal theta "
                            f"{np.degrees(c.legal_range):.0f} deg; (theta, phi) in Q_{i}{j}: <b>{'yes' if legal else 'no'}</b>")
         return legal

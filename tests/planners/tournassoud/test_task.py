@@ -210,6 +210,11 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
             knots += 1
     assert knots > 100
     assert doc["task"]["destination"]["insertion"] == [0.0, 0.0, -1.0] and len(doc["task"]["pickup"]["obstacles"]) == 2
+    # not stored: the same validators check the plan and its trajectory against the obstacles given
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination",
+                 "0,0.35,0.25,0", "--insert", "0,0,-1,0.02", *args, "--no-save"]) == 0
+    out = capsys.readouterr().out
+    assert "validator: ok" in out and "stored plan id" not in out, out
     # bad task input: one line each, exit 2, nothing planned
     base = ["gpplan", "--db", db, "--object", "L", "--no-motion", "--no-save"]
     ends = ["--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0"]
@@ -395,7 +400,7 @@ def test_plan_starts_and_ends_in_the_hand(slot, held, lpart, hand):
     assert not report.ok and any("held" in e for e in report.errors), report.errors
 
 
-def test_reloaded_plan_keeps_its_task(slot, held, tmp_path):
+def test_reloaded_plan_keeps_its_task(slot, held, tmp_path, capsys):
     """The held plan with obstacles and an insertion, reloaded from the store in a fresh process (`gpplan --plan`):
     the same steps with their lifts, the same timed motions, both held ends, the insertion and every obstacle (the
     walls' own meshes and poses, compared with the files given); the validators rebuilt from the store accept it
@@ -442,3 +447,27 @@ def test_reloaded_plan_keeps_its_task(slot, held, tmp_path):
         assert np.allclose(np.sort(np.reshape(o["vertices"], (-1, 3)), axis=0), np.sort(w.mesh.vertices, axis=0), atol=1e-6)
     assert "joint_names" in traj.read_text() and "planobstacle" not in traj.read_text()
     assert page.stat().st_size > 10_000 and "wb-caption" in page.read_text()
+    # the store answers the same query with this plan only among the same obstacles and held ends
+    from workbench.planners.wan_harada.plans import Plan, plan_rows
+    from workbench.store import Store
+    from workbench.store.wan_harada import find_plan
+
+    same = Plan.from_dict(doc)
+    moved = Plan.from_dict(doc)
+    moved.obstacles[0].pose[0, 3] += 0.01
+    released = Plan.from_dict(doc)
+    released.end_held = False
+    found = []
+    with Store(db, read_only=True) as store:
+        for p in (same, moved, released):
+            row, _, segments = plan_rows(p)
+            found.append(find_plan(store, row, segments))
+    assert found == [idplan, None, None], found
+    # a plan that is not there, or a query beside --plan: one line, status 2
+    from workbench.cli.main import main
+
+    assert main(["gpplan", "--db", db, "--plan", "9999"]) == 2
+    assert main(["gpplan", "--db", db, "--plan", str(idplan), "--initial", "0,10"]) == 2
+    assert main(["gpplan", "--db", db, "--initial", "0,10", "--goal", "3,0:90"]) == 2  # no --object
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "has no plan 9999" in err and "--plan ID reloads" in err and "--object NAME" in err
