@@ -873,7 +873,7 @@ def test_ctrl_c_during_gptable(work, tmp_path):
     assert_interrupted(res, "gptable")
 
 
-@pytest.mark.parametrize("delay", [0.3, 0.6])
+@pytest.mark.parametrize("delay", [0.1, 0.3, 0.6])
 def test_ctrl_c_while_modules_load(work, tmp_path, delay):
     """A Ctrl-C in the first second, while the command imports scipy and the planners (a library that catches
     everything there would swallow it): the command still stops, with one line and exit 130."""
@@ -1021,6 +1021,22 @@ def test_gpplan_writes_its_json_into_a_folder_it_creates(work, gp_built, tmp_pat
     assert json.loads((out / "q.json").read_text())["sequence"] is not None
     assert (out / "t.html").read_text().lstrip().lower().startswith("<")
     assert state(db) == before
+
+
+def test_gptable_face_area_hint_names_a_threshold_that_keeps_classes(work, tmp_path):
+    """--min-face-area above every face of the box: 0 classes, and the warning names the two largest faces and a
+    --min-face-area within its declared range that keeps them, which then gives classes (not a curved surface)."""
+    from workbench.params import bounds
+    from workbench.planners.tournassoud.classes import ClassParams
+
+    db = tmp_path / "g.duckdb"
+    res = cli("gptable", work / "box.stl", "--db", db, *GPTABLE, "--min-face-area", "1", cwd=work)
+    assert res.returncode == 0 and "0 grasp classes" in res.stdout, res.stderr[-2000:]
+    assert "curved" not in res.stderr and bounds(ClassParams)["min_face_area"][0].describe(True) in res.stderr
+    keep = re.search(r"its two largest are 2000 and 2000 mm\^2: --min-face-area ([0-9.e-]+) keeps them", res.stderr)
+    assert keep, res.stderr
+    res = cli("gptable", work / "box.stl", "--db", db, *GPTABLE, "--min-face-area", keep.group(1), cwd=work)
+    assert res.returncode == 0 and re.search(r"box: [1-9]\d* grasp classes", res.stdout), res.stdout + res.stderr[-2000:]
 
 
 GP_FAULTS = ["object", "tgraspclass", "robot", "tplacementclass", "tgpcell"]  # each stage, and between them

@@ -122,3 +122,36 @@ def test_pregrasp_sweep_refusals_match_an_independent_check(hand):
     confirmed = [_coal_hits(hand, obj.mesh, cand[i], params.pregrasp(widths[[i]], hand)[0], 5e-4)
                  for i in rng.choice(refused, min(15, len(refused)), replace=False)]
     assert all(confirmed), confirmed
+
+
+def test_contact_offsets_and_robustness_are_stored(hand, tmp_path):
+    """Each contact's place on its pad, checked against the finger box read directly (its inner face's rectangle in
+    the TCP frame), and the robustness score round trip through the store; rows from before it load as NaN."""
+    import duckdb
+
+    from workbench.grasping.grasps import contact_robustness
+    from workbench.planners.wan_harada.stages import ensure_grasps
+    from workbench.store import Store
+    from workbench.store.grasps import load_grasps
+
+    obj = from_trimesh(trimesh.creation.box((0.05, 0.04, 0.03)), name="box")
+    g = plan_grasps(obj, hand, GraspParams()).grasps
+    ext, pose = hand.finger_boxes[hand.pad]
+    centre, half = pose[:3, 3][[0, 2]], ext[[0, 2]] / 2
+    for contact, offset in ((g.contact0, g.offset0), (g.contact1, g.offset1)):
+        local = np.einsum("gji,gj->gi", g.poses[:, :3, :3], contact - g.poses[:, :3, 3])
+        assert np.allclose(offset, (local[:, [0, 2]] - centre) / half, atol=1e-9)
+    assert (np.abs(g.offset0) <= 1 + 1e-9).all() and (np.abs(g.offset1) <= 1 + 1e-9).all()
+    worst = np.maximum(np.abs(g.offset0).max(axis=1), np.abs(g.offset1).max(axis=1))
+    assert np.allclose(g.robustness, np.clip(1 - worst, 0, 1))
+    assert np.allclose(contact_robustness(np.zeros((1, 2)), np.array([[0.0, 1.5]])), 0.0)
+    db = tmp_path / "g.duckdb"
+    res = ensure_grasps(db, obj, hand, GraspParams())
+    with Store(db) as store:
+        stored = load_grasps(store, res.idobject, res.idparamset)
+    assert np.allclose(np.sort(stored["robustness"]), np.sort(g.robustness))
+    con = duckdb.connect(str(db))  # rows written before the column existed (the migration adds it empty)
+    con.execute("UPDATE freeairgrip SET robustness = NULL")
+    con.close()
+    with Store(db) as store:
+        assert np.isnan(load_grasps(store, res.idobject, res.idparamset)["robustness"]).all()

@@ -110,7 +110,8 @@ def bench_placements(rows: list, repeats: int, db: Path) -> None:
 def bench_regrasp(rows: list, repeats: int, db: Path) -> None:
     grid = TabletopParams(x_min=0.4, x_max=0.6, nx=3, y_min=-0.15, y_max=0.15, ny=3, angles=8, max_grasps=40)
     ex = RegraspExplorer(db, bundled_objects(), tparams=grid,
-                         build=lambda db, obj, robot: build_all(db, obj, robot, tparams=grid, progress=False))
+                         build=lambda db, obj, robot, gripper: build_all(db, obj, get_robot(robot, gripper=gripper),
+                                                                         tparams=grid, progress=False))
     planner = ex.load()  # notebook 04's grid; the build is not timed
     start, goal = choose_task(planner, seed=0, grid=grid)
     ex.set_query(start, goal)

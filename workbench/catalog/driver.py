@@ -237,6 +237,10 @@ class _Build:
             self.schedule_stored(self.done[digest])
             return
         priority = PART_PRIORITY + min(path.stat().st_size if path.is_file() else 0, PART_PRIORITY - 1)
+        if path.stem in self.stored_names and self.store.dataset is not None:
+            self.fail(unit, CatalogError(f"the Parquet catalogue holds part {path.stem} built from another file or "
+                                         f"parameters; build these into a new folder (or a DuckDB catalogue)"), counted=True)
+            return
         if path.stem in self.stored_names:  # the store holds this part: the driver writes it with the stage writers
             self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop,
                          self.hand, priority=priority)
@@ -634,7 +638,7 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
                   robots: str | Sequence[str] | dict[str, CatalogRobot], db: str | Path, client,
                   params: CatalogParams = CatalogParams(), progress: bool = True,
                   on_unit: Callable[[str, dict], None] | None = None, shards: str | Path | None = None,
-                  gripper: Gripper | None = None) -> CatalogResult:
+                  gripper: Gripper | None = None, form: str = "duckdb") -> CatalogResult:
     """Build (or finish) the catalogue of `parts` x `robots` in the store `db` on the Dask `client`; returns the
     summary. Stored units are skipped.
 
@@ -645,13 +649,14 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
     `MERGE_SECONDS`), then deletes the files. `shards` is the folder of these files (default: beside the store,
     `DB.units`; with a cluster of several machines, on a file system every worker sees). Files of a killed build are
     merged by the re-run without computing them again. `gripper`: the catalogue's gripper (default the Franka hand;
-    the robots, when given parsed, carry the same)."""
+    the robots, when given parsed, carry the same). `form`: the catalogue's form when `db` is new, a DuckDB file
+    ("duckdb") or a folder of Hive-partitioned Parquet files ("parquet"; `workbench.store.catalog`)."""
     paths = collect_parts(parts)
     hand = gripper or franka_hand()
     robot_models = catalog_robots(robots, hand)
     folder = Path(shards) if shards is not None else Path(f"{db}.units")
     t0 = time.perf_counter()
-    with stages.open_store(db) as store:
+    with stages.open_store(db, form=form) as store:
         build = _Build(store, client, robot_models, params, progress, on_unit, folder, hand)
         build.result.start = time.time()
         try:

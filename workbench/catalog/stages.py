@@ -65,11 +65,22 @@ IK_GRIPS = "ik_grips.parquet"  # a part's tabletop grips in IK order (`neighbour
 RECORD = "record.json"
 
 
-def open_store(db: str | Path, read_only: bool = False) -> Store:
-    """The catalogue's store (created with its `catalog_unit` table when new)."""
+FORMS = ("duckdb", "parquet")
+
+
+def open_store(db: str | Path, read_only: bool = False, form: str = "duckdb") -> Store:
+    """The catalogue's store (created with its `catalog_unit` table when new): a DuckDB file, or with `form`
+    "parquet" a folder of Hive-partitioned Parquet files (see `workbench.store.catalog`); an existing folder is
+    opened as the Parquet catalogue it is, whatever `form`."""
+    if form not in FORMS:
+        raise StoreError(f"a catalogue's form is {' or '.join(FORMS)}, got {form!r}")
+    if not read_only and (form == "parquet" or Path(db).is_dir()):
+        sql.create_dataset(Path(db))
     store = Store(db, read_only=read_only)
     if not read_only:
         sql.ensure_catalog_tables(store)
+        if store.dataset is not None:
+            sql.sweep_dataset(store)
         sql.single_thread(store)  # the driver shares the machine with the workers
     elif not sql.has_catalog(store):
         store.close()
@@ -79,8 +90,9 @@ def open_store(db: str | Path, read_only: bool = False) -> Store:
 
 @contextmanager
 def batch(store: Store) -> Iterator[None]:
-    """Several finished units in one transaction (each unit whole; they share the commit)."""
-    with store.transaction():
+    """Several finished units in one transaction (each unit whole; they share the commit), which names the files it
+    writes in a Parquet catalogue."""
+    with sql.merge_batch(store):
         yield
 
 
@@ -166,7 +178,7 @@ def merge_runs(store: Store, runs: list[dict], units: list[list[tuple[dict, Path
         for run, u in zip(runs, units):
             if len(run["stored"]):
                 n += sql.merge_ik_shards(store, run["idrobot"], run["idscene"], run["idikret"], run["nq"],
-                                         [str(p) for _, p in u], run.get("offset", 0))
+                                         [str(p) for _, p in u], run.get("offset", 0), run["part"], run["robot"])
         sql.put_units(store, [unit for u in units for unit, _ in u])
     return n
 
@@ -288,7 +300,8 @@ def merge_units(store: Store, parts: list[tuple[dict, Path]], idgripper: int) ->
     store's (the offset of their tabletop grips, which their IK units' shards name, is kept in `counts`). Returns
     the rows inserted."""
     with store.transaction():
-        offsets = sql.merge_part_files(store, [str(f) for _, f in parts], [u["rows"] for u, _ in parts], idgripper)
+        offsets = sql.merge_part_files(store, [str(f) for _, f in parts], [u["rows"] for u, _ in parts], idgripper,
+                                       [u["part"] for u, _ in parts])
         for (unit, _), o in zip(parts, offsets):
             unit["idobject"] += o["object"]
             for k in ("idgrasps", "idplacements", "idtabletop"):

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from workbench.benchmarks import print_table
 from workbench.catalog.cluster import cluster_client, dashboard_link
-from workbench.catalog.stages import open_store
+from workbench.catalog.stages import FORMS, open_store
 from workbench.catalog.driver import (
     SUMMARY_HEADERS,
     CatalogParams,
@@ -53,7 +53,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--base", default=None, help="the URDF robots' base in the world: X,Y,Z,YAW (m, rad)")
     b.add_argument("--hand-links", default=None, metavar="PREFIX,...",
                    help="the URDF robots' own hand links, replaced by the planning gripper (default: the links past --tip)")
-    b.add_argument("--db", required=True, help="DuckDB store file (created when missing; a re-run resumes)")
+    b.add_argument("--db", required=True,
+                   help="the catalogue: a DuckDB store file, or with --form parquet a folder (created when missing; a "
+                        "re-run resumes)")
+    b.add_argument("--form", choices=FORMS, default="duckdb",
+                   help="a new catalogue's form: one DuckDB file, or a folder of Hive-partitioned Parquet files (TABLE/"
+                        "part=NAME/..., ik/part=NAME/robot=NAME/...) with its shared tables in catalog.duckdb, which "
+                        "`plan`, `catalog report` and DuckDB read as they are (default duckdb)")
     where = b.add_mutually_exclusive_group()
     where.add_argument("--workers", type=parse_number(WORKERS, "--workers"), default=None, metavar="N",
                        help=f"worker processes of a local cluster ({WORKERS.describe(True)}, and within the memory budget; "
@@ -83,7 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_gripper_argument(b)
     b.set_defaults(func=run_build)
     r = inner.add_parser("report", help="print the summary table of a stored catalogue")
-    r.add_argument("--db", required=True, help="DuckDB store file")
+    r.add_argument("--db", required=True, help="the catalogue: a DuckDB store file or a Parquet catalogue's folder")
     add_output(r, "--html", suffixes=(".html",), metavar="OUT.html",
                help="also write the parts x robots table as a page with a thumbnail of each part")
     r.set_defaults(func=run_report)
@@ -109,12 +115,12 @@ def run_build(args: argparse.Namespace) -> int:
     collect_parts(args.parts)  # bad input fails before a cluster starts: parts, robots, a locked or damaged store
     robots = catalog_robot_list(args)
     hand = next(iter(robots.values())).robot.spec.hand
-    open_store(args.db).close()
+    open_store(args.db, form=args.form).close()
     with cluster_client(workers=args.workers, scheduler=args.scheduler) as client:
         n = len(client.scheduler_info().get("workers", {}))
         print(f"dask: {n} worker(s) at {client.scheduler.address}; dashboard {dashboard_link(client)}", file=sys.stderr)
         res = build_catalog(args.parts, robots, args.db, client, params, progress=not args.no_progress,
-                            shards=args.shards, gripper=hand)
+                            shards=args.shards, gripper=hand, form=args.form)
     print_summary(res.rows, res.failures)
     write_share = f", writing {res.write_seconds / res.wall:.0%} of it" if res.wall > 0 else ""
     print(f"{sum(res.computed.values())} units computed ({res.computed['part']} part, {res.computed['ik']} IK, "

@@ -35,7 +35,6 @@ from workbench.planners.tournassoud.plans import (
 from workbench.planners.tournassoud.stages import (
     load_planner,
     load_stored,
-    plan_validator,
     save_plan,
     stored_scene,
     validate_stored,
@@ -388,7 +387,7 @@ def run(args: argparse.Namespace) -> int:
         for line in describe_task(plan):
             print(line)
         if args.no_save:
-            report = plan_validator(args.db, r, scene).check(plan)
+            report = validate_stored(args.db, r, None, plan, require_motion=motions is not None, scene=scene)
         else:
             idplan, plan = save_plan(args.db, r, plan, scene, realiser.opts)
             print(f"stored plan id {idplan} in {args.db} (planner tournassoud; tables plan, planstep, plansegment, "

@@ -87,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
 
     start, goal = parse_pose(args.start, "--start", degrees=True), parse_pose(args.goal, "--goal", degrees=True)
     opts = exec_options(args)
-    if not Path(args.db).is_file():
+    if not Path(args.db).exists():
         raise PlanningError(f"store {args.db} does not exist; run `workbench build MESH --robot {args.robot} --db {args.db}` first")
     simulate = args.simulate or args.require_physics
     save = False

@@ -18,6 +18,7 @@ import numpy as np
 import trimesh
 
 from workbench.errors import WorkbenchError
+from workbench.geometry._segkernel import facet_boundaries, grow_facets
 
 
 @dataclass(frozen=True)
@@ -66,49 +67,9 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     n_tri = len(normals)
     nbr = _neighbour_table(np.asarray(mesh.face_adjacency), n_tri)
     order = np.lexsort((np.arange(n_tri), -np.round(areas, 12)))
-    cos_tau, cos_merge = np.cos(tau), np.cos(merge)
-    assigned = np.zeros(n_tri, dtype=bool)
-    # for over-segmentation: best alignment of each triangle with the seed normal of a facet holding it
-    covered_cos = np.full(n_tri, -2.0)
-    facet_tris: list[np.ndarray] = []
-    seeds: list[int] = []
-    visited = np.zeros(n_tri + 1, dtype=bool)
-    visited[n_tri] = True
-    stamp = np.zeros(n_tri + 1, dtype=np.int64)
-    normals = np.vstack([normals, np.zeros(3)])
-    assigned = np.append(assigned, True)
-    for seed in order:
-        if method == "conventional":
-            if assigned[seed]:
-                continue
-        elif covered_cos[seed] >= cos_merge:
-            continue
-        ns = normals[seed]
-        region = [np.array([seed])]
-        visited[seed] = True
-        frontier = np.array([seed])
-        while len(frontier):
-            cand = nbr[frontier].ravel()
-            cand = cand[~visited[cand]]  # the padding index n_tri is always "visited"
-            if method == "conventional":
-                cand = cand[~assigned[cand]]
-            cand = cand[normals[cand] @ ns >= cos_tau]
-            # drop repeats without sorting: keep the last occurrence of each triangle
-            order = np.arange(len(cand))
-            stamp[cand] = order
-            cand = cand[stamp[cand] == order]
-            visited[cand] = True
-            region.append(cand)
-            frontier = cand
-        tris = np.unique(np.concatenate(region))
-        visited[tris] = False
-        if method == "conventional":
-            assigned[tris] = True
-        else:
-            np.maximum.at(covered_cos, tris, normals[tris] @ ns)
-        facet_tris.append(tris)
-        seeds.append(int(seed))
-    return _build(mesh, method, tau, facet_tris, np.array(seeds, dtype=np.int64))
+    tri_ptr, tri_index, seeds = grow_facets(np.ascontiguousarray(normals, dtype=np.float64), nbr, order,
+                                            method == "conventional", float(np.cos(tau)), float(np.cos(merge)))
+    return _build(mesh, method, tau, tri_ptr, tri_index, seeds)
 
 
 def _neighbour_table(adj: np.ndarray, n: int) -> np.ndarray:
@@ -124,31 +85,18 @@ def _neighbour_table(adj: np.ndarray, n: int) -> np.ndarray:
     return table
 
 
-def _build(mesh: trimesh.Trimesh, method: str, tau: float, facet_tris: list[np.ndarray], seeds: np.ndarray) -> Facets:
-    counts = np.array([len(t) for t in facet_tris], dtype=np.int64)
-    tri_ptr = np.concatenate([[0], np.cumsum(counts)])
-    tri_index = np.concatenate(facet_tris) if facet_tris else np.zeros(0, dtype=np.int64)
-    fid = np.repeat(np.arange(len(facet_tris)), counts)
+def _build(mesh: trimesh.Trimesh, method: str, tau: float, tri_ptr: np.ndarray, tri_index: np.ndarray,
+           seeds: np.ndarray) -> Facets:
+    m = len(seeds)
+    fid = np.repeat(np.arange(m), np.diff(tri_ptr))
     a = mesh.area_faces[tri_index]
-    wn = np.zeros((len(facet_tris), 3))
-    np.add.at(wn, fid, mesh.face_normals[tri_index] * a[:, None])
-    normals = wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300)
-    areas = np.bincount(fid, weights=a, minlength=len(facet_tris))
-    wc = np.zeros((len(facet_tris), 3))
-    np.add.at(wc, fid, mesh.triangles_center[tri_index] * a[:, None])
-    centers = wc / areas[:, None].clip(1e-300)
-    # boundary edges: edges used once inside the facet (sorted vertex pairs, keyed per facet)
-    e = mesh.faces[tri_index][:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)
-    e.sort(axis=1)
-    efid = np.repeat(fid, 3)
-    nv = len(mesh.vertices)
-    key = (efid * nv + e[:, 0]) * nv + e[:, 1]
-    uniq, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)
-    once = cnt[inv] == 1
-    bf, be = efid[once], e[once]
-    order = np.argsort(bf, kind="stable")
-    bf, be = bf[order], be[order]
-    edge_ptr = np.searchsorted(bf, np.arange(len(facet_tris) + 1))
+    wn = np.column_stack([np.bincount(fid, weights=mesh.face_normals[tri_index, i] * a, minlength=m) for i in range(3)])
+    normals = wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300) if m else np.zeros((0, 3))
+    areas = np.bincount(fid, weights=a, minlength=m)
+    wc = np.column_stack([np.bincount(fid, weights=mesh.triangles_center[tri_index, i] * a, minlength=m)
+                          for i in range(3)])
+    centers = wc / areas[:, None].clip(1e-300) if m else np.zeros((0, 3))
+    edge_ptr, be = facet_boundaries(np.asarray(mesh.faces, dtype=np.int64), tri_ptr, tri_index, len(mesh.vertices))
     edges = mesh.vertices[be]
     return Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index, normals=normals, centers=centers,
                   areas=areas, seeds=seeds, edge_ptr=edge_ptr, edges=edges)

@@ -41,7 +41,14 @@ from workbench.geometry.collision import (
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
-from workbench.grasping.pads import Touches, axis_frames, fingertip_shifts, first_touches, gap_windows
+from workbench.grasping.pads import (
+    Touches,
+    axis_frames,
+    fingertip_shifts,
+    first_touches,
+    gap_windows,
+    pad_offsets,
+)
 from workbench.grasping.placements import stable_placements
 from workbench.params import Params, bounds, check_memory, param
 from workbench.robots.gripper import Gripper
@@ -183,7 +190,9 @@ class ContactPairs:
 @dataclass(frozen=True)
 class GraspSet:
     """Collision-free grasps: contacts, outward normals, TCP poses in the object frame (G, 4, 4), jaw widths,
-    facet ids, contact-pair ids and the rotation about the jaw axis."""
+    facet ids, contact-pair ids and the rotation about the jaw axis; where each contact lies on its pad (`offset0`,
+    `offset1` (G, 2): along the TCP's x and z from the pad's centre, in pad half sizes, `pads.pad_offsets`) and the
+    grasp's `robustness` (`contact_robustness`: 1 with both contacts at their pads' centres, 0 at an edge)."""
 
     contact0: np.ndarray
     contact1: np.ndarray
@@ -195,9 +204,20 @@ class GraspSet:
     facet1: np.ndarray
     pair: np.ndarray
     rotation: np.ndarray
+    offset0: np.ndarray
+    offset1: np.ndarray
+    robustness: np.ndarray
 
     def __len__(self) -> int:
         return len(self.jawwidth)
+
+
+def contact_robustness(offset0: np.ndarray, offset1: np.ndarray) -> np.ndarray:
+    """(G,) how far both contacts of each grasp stay from their pads' edges: 1 - the largest offset of either contact
+    from its pad's centre (in pad half sizes, either axis), clipped to [0, 1]. A contact at a pad's edge (0) is the
+    least robust: a small slip or pose error moves it off the pad."""
+    worst = np.maximum(np.abs(offset0).max(axis=1, initial=0.0), np.abs(offset1).max(axis=1, initial=0.0))
+    return np.clip(1.0 - worst, 0.0, 1.0)
 
 
 @dataclass
@@ -271,9 +291,12 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
         pairs, poses, cand_pair, cand_rot, free = _paper(obj, gripper, params, lengths, facets, samples, margin,
                                                          counts, timings)
     g = cand_pair[free]
+    off0 = pad_offsets(poses[free], pairs.point0[g], gripper).reshape(-1, 2)
+    off1 = pad_offsets(poses[free], pairs.point1[g], gripper).reshape(-1, 2)
     grasps = GraspSet(contact0=pairs.point0[g], contact1=pairs.point1[g], normal0=pairs.normal0[g],
                       normal1=pairs.normal1[g], poses=poses[free], jawwidth=pairs.width[g], facet0=pairs.facet0[g],
-                      facet1=pairs.facet1[g], pair=g, rotation=cand_rot[free])
+                      facet1=pairs.facet1[g], pair=g, rotation=cand_rot[free], offset0=off0, offset1=off1,
+                      robustness=contact_robustness(off0, off1))
     counts["grasps"] = int(len(grasps))
     return GraspPlan(params=params, facets=facets, samples=samples, pairs=pairs, candidate_poses=poses,
                      candidate_pair=cand_pair, candidate_free=free, grasps=grasps, counts=counts, timings=timings,
@@ -343,7 +366,7 @@ def approach_collides(gripper: Gripper, poses: np.ndarray, openings: np.ndarray,
 def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, clearance: float,
                     pads: bool = True) -> np.ndarray:
     """Do the finger boxes of both fingers at each grasp's opening, shrunk by `clearance` on every side, intersect
-    the object? (The body does not move with the fingers: it is tested at full opening.) `pads=False` skips the pad
+    the object? (The body does not move with the fingers: `approach_collides` tests it.) `pads=False` skips the pad
     boxes, for grasps whose pads closed onto their first touches and so cannot overlap the object."""
     widths = np.asarray(widths)
     out = np.zeros(len(poses), dtype=bool)

@@ -101,10 +101,11 @@ def _void(out_q, out_valid, i, col0, count, cols, fixed_col, fixed_val):
 
 @njit(cache=True, nogil=True)
 def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa, wb, wc, wd, consts, lower, upper,
-               cols, fixed_col, fixed, out_q, out_valid):
+               cols, fixed_col, fixed, out_q, out_valid, any_only=False):
     """Spherical-wrist IK (`analytic._solve_block`, Section 5.2) of poses (N, 4, 4) for S forms (constants stacked
     on a leading axis S): the 8 branches of form s go to out_q[:, 8 s + b, cols] (branch b = 4 elbow + 2 shoulder +
-    wrist flip), with out_q[:, 8 s + b, fixed_col] = fixed[s] when fixed_col >= 0; out_valid (N, 8 S)."""
+    wrist flip), with out_q[:, 8 s + b, fixed_col] = fixed[s] when fixed_col >= 0; out_valid (N, 8 S). With
+    `any_only`, out_q is not touched and each pose stops at its first valid branch (out_valid must start False)."""
     n, nf = poses.shape[0], mb.shape[0]
     k = np.empty(3)
     w = np.empty(3)
@@ -124,7 +125,10 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
     qb = np.empty(6)
     for i in range(n):
         pr = poses[i, :3, :3]
+        found = False
         for f in range(nf):
+            if found:  # any_only: this pose has a valid branch
+                break
             # the wrist centre in the joint-1 parent frame, and R6 (c, d) through the pose's rotation
             _mul(pr, kw[f], tmp)
             for a in range(3):
@@ -145,7 +149,8 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                 c3, s3 = r4_[2 * i3], r4_[2 * i3 + 1]
                 qb[2] = _limit(np.arctan2(s3, c3), lower[f, 2], upper[f, 2])
                 if np.isnan(qb[2]):  # no elbow (or out of its limits): its 4 branches are void
-                    _void(out_q, out_valid, i, 8 * f + 4 * i3, 4, cols, fixed_col, fixed[f])
+                    if not any_only:
+                        _void(out_q, out_valid, i, 8 * f + 4 * i3, 4, cols, fixed_col, fixed[f])
                     continue
                 _rot(a3, c3, s3, w3[f], False, tmp)
                 _mul(r3[f], tmp, v)
@@ -164,7 +169,8 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                     c2, s2 = r4b[2 * i2], r4b[2 * i2 + 1]
                     qb[1] = _limit(np.arctan2(s2, c2), lower[f, 1], upper[f, 1])
                     if np.isnan(qb[1]):
-                        _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f])
+                        if not any_only:
+                            _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f])
                         continue
                     t2[0] = a2[0] * av2 + vp0 * c2 + x0 * s2
                     t2[1] = a2[1] * av2 + vp1 * c2 + x1 * s2
@@ -176,10 +182,13 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                     c1, s1, q1 = _sub1(a1, x, pw)
                     qb[0] = _limit(q1, lower[f, 0], upper[f, 0])
                     if np.isnan(qb[0]):
-                        _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f])
+                        if not any_only:
+                            _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f])
                         continue
                     # 4. wrist: Y c and Y d with Y = R4^T R03^T R6 (R5 R6)^T
-                    for yv0, yv in ((yc0, yc), (yd0, yd)):
+                    free6 = any_only and upper[f, 5] - lower[f, 5] >= TWO_PI  # validity alone: any q6 is in range
+                    for which in range(1 if free6 else 2):
+                        yv0, yv = (yc0, yc) if which == 0 else (yd0, yd)
                         _rot(a1, c1, s1, yv0, True, tmp)
                         _mul_t(r2[f], tmp, u)
                         _rot(a2, c2, s2, u, True, tmp)
@@ -192,19 +201,24 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                         c5, s5 = r4c[2 * i5], r4c[2 * i5 + 1]
                         _rot(wb[f], c5, s5, wc[f], False, u)
                         c4, s4, q4 = _sub1(wa[f], u, yc)
-                        _rot(wa[f], c4, s4, yd, True, tmp)
-                        _rot(wb[f], c5, s5, tmp, True, u)
+                        if not free6:
+                            _rot(wa[f], c4, s4, yd, True, tmp)
+                            _rot(wb[f], c5, s5, tmp, True, u)
                         qb[3] = _limit(q4, lower[f, 3], upper[f, 3])
                         qb[4] = _limit(np.arctan2(s5, c5), lower[f, 4], upper[f, 4])
-                        qb[5] = _limit(_sub1(wc[f], wd[f], u)[2], lower[f, 5], upper[f, 5])
+                        qb[5] = 0.0 if free6 else _limit(_sub1(wc[f], wd[f], u)[2], lower[f, 5], upper[f, 5])
                         col = 8 * f + 4 * i3 + 2 * i2 + i5
                         ok = True
                         for j in range(6):
-                            out_q[i, col, cols[j]] = qb[j]
                             ok = ok and not np.isnan(qb[j])
+                        out_valid[i, col] = ok
+                        if any_only:
+                            found = found or ok
+                            continue
+                        for j in range(6):
+                            out_q[i, col, cols[j]] = qb[j]
                         if fixed_col >= 0:
                             out_q[i, col, fixed_col] = fixed[f]
-                        out_valid[i, col] = ok
 
 
 @njit(cache=True, nogil=True)

@@ -220,8 +220,24 @@ BLOCK = 4096  # poses per compiled pass (bounds the temporaries of callers that 
 
 def reachable(ik: AnalyticIK, poses: np.ndarray, block: int = BLOCK) -> np.ndarray:
     """(N,) bool: whether any of the 8 branches of each TCP pose (N, 4, 4) is within the joint limits (Section 5.2:
-    the grasp-placement table needs no joint values)."""
-    return solve(ik, poses, block)[1].any(axis=1)
+    the grasp-placement table needs no joint values). Each pose stops at its first valid branch."""
+    poses = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4))
+    valid = np.zeros((len(poses), 8), dtype=bool)
+    consts = _constants(ik)
+    none = np.empty((1, 1, 1))
+    cols = np.arange(6, dtype=np.int64)
+    for s in range(0, len(poses), block):
+        wrist_rows(poses[s:s + block], *consts, cols, -1, np.zeros(1), none, valid[s:s + block], True)
+    return valid.any(axis=1)
+
+
+def _constants(ik: AnalyticIK) -> tuple[np.ndarray, ...]:
+    """`kernel_constants` of one solver, built once (kept on the frozen dataclass)."""
+    consts = getattr(ik, "_kernel", None)
+    if consts is None:
+        consts = kernel_constants([ik])
+        object.__setattr__(ik, "_kernel", consts)
+    return consts
 
 
 def solve(ik: AnalyticIK, poses: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
@@ -231,11 +247,7 @@ def solve(ik: AnalyticIK, poses: np.ndarray, block: int = BLOCK) -> tuple[np.nda
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
     q = np.empty((len(poses), 8, 6))
     valid = np.empty((len(poses), 8), dtype=bool)
-    consts = getattr(ik, "_kernel", None)
-    if consts is None:
-        consts = kernel_constants([ik])
-        object.__setattr__(ik, "_kernel", consts)  # built once per solver (a frozen dataclass)
-    solve_into(consts, poses, q, valid, block=block)
+    solve_into(_constants(ik), poses, q, valid, block=block)
     return q, valid
 
 

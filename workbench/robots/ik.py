@@ -382,7 +382,7 @@ class IKSolver:
                          q: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Poses a swept closed form misses within the limits although the arm reaches them: Levenberg-Marquardt from
         their branch nearest `ref` without the limits (clipped into them by the solver), which the free joint then
-        moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first."""
+        moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first; then `solve_from_seeds`."""
         rows = np.flatnonzero(~valid.any(axis=1))
         rows = rows[self.prefilter(targets[rows])] if len(rows) else rows
         if not len(rows):
@@ -397,6 +397,11 @@ class IKSolver:
                 break
             qn, okn = self._numeric(targets[rows[sel]], placements[rows[sel]], qu[sel, b[sel]], self.opts.iters_seed)
             q[rows[sel[okn]]], ok[rows[sel[okn]]] = qn[okn], True
+        rest = rows[~ok[rows]]
+        if len(rest):  # then the numerical solver's own seeds: the library's and the pose-hashed restarts
+            qn, okn = self.solve_from_seeds(targets[rest], placements[rest], np.full((len(rest), self.robot.nq), np.nan),
+                                            numeric=True)
+            q[rest[okn]], ok[rest[okn]] = qn[okn], True
         return q, ok
 
     def _chunk_closed(self, targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -441,11 +446,13 @@ class IKSolver:
             joints[:, k], feas[:, k] = self.solve_from_seeds(targets[:, k], place[:, k], warm)
         return feas, joints
 
-    def solve_from_seeds(self, targets: np.ndarray, placements: np.ndarray, warm: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def solve_from_seeds(self, targets: np.ndarray, placements: np.ndarray, warm: np.ndarray,
+                         numeric: bool = False) -> tuple[np.ndarray, np.ndarray]:
         """Joints (M, n) (NaN where none) and feasibility (M,) of poses that pass the reach filter, each from its own
         seeds in a fixed order (`chunk`): `warm` (rows of NaN: none) or the nearest library seed; the branches of the
         nearest decomposable model (`solvers.nearby_form`, an arm with more than 7 joints), nearest the home first;
-        the other library seeds; the restarts."""
+        the other library seeds; the restarts. With `numeric`, Levenberg-Marquardt from every seed even where the robot
+        has a closed form (the poses its swept samples miss)."""
         o = self.opts
         m, n = len(targets), self.robot.nq
         q_out = np.full((m, n), np.nan)
@@ -478,7 +485,7 @@ class IKSolver:
             if len(sel) == 0:
                 continue
             rows = live[sel]
-            q, ok = self.solve(targets[rows], placements[rows], seeds[sel], iters)
+            q, ok = (self._numeric if numeric else self.solve)(targets[rows], placements[rows], seeds[sel], iters)
             q_out[rows[ok]] = q[ok]
             good[rows[ok]] = True
             left[sel[ok]] = False

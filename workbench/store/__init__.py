@@ -24,6 +24,7 @@ import numpy as np
 import pyarrow as pa
 
 from workbench.errors import StoreError
+from workbench.store.dataset import DATASET_FILE, DATASET_TABLES, dataset_views, without_references
 from workbench.params import WAIT_ENV
 from workbench.store.identity import (
     APPLICATION,
@@ -57,6 +58,7 @@ class Store:
         self = cls.__new__(cls)
         self.path, self._depth, self.read_only, self._fault, self._released = Path(":memory:"), 0, False, None, 0
         self._wait, self._con, self._closed = 0.0, None, False
+        self.dataset = None
         self.con = duckdb.connect(":memory:", config=CONNECT_CONFIG)
         self.con.execute("SET threads = 1")
         with self.transaction():
@@ -69,6 +71,9 @@ class Store:
         checked before anything is written (workbench.store.identity). A file another process holds is waited for
         up to `wait` seconds (default: WORKBENCH_WAIT, else 0), then refused as busy."""
         self.path = Path(path)
+        self.dataset: Path | None = None  # a Parquet catalogue folder: its partitioned tables are read as views
+        if self.path.is_dir() and (self.path / DATASET_FILE).is_file():
+            self.dataset, self.path = self.path, self.path / DATASET_FILE
         self._wait = _wait_seconds() if wait is None else max(0.0, float(wait))
         self._deadline = time.monotonic() + self._wait
         self._depth = 0  # open transaction() levels
@@ -92,6 +97,8 @@ class Store:
                 if isinstance(exc, duckdb.Error):
                     raise open_error(self.path, exc) from None
                 raise
+        if self.dataset is not None:
+            dataset_views(self)
 
     @property
     def con(self) -> duckdb.DuckDBPyConnection:
@@ -101,6 +108,8 @@ class Store:
                 raise StoreError(f"store {self.path} was closed; open it again")
             self._deadline = time.monotonic() + max(self._wait, REACQUIRE_SECONDS)
             self._con = self._connect(self.read_only)
+            if self.dataset is not None:
+                dataset_views(self)  # the views live on the connection
         return self._con
 
     @con.setter
@@ -243,6 +252,8 @@ class Store:
     def run(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> list[tuple]:
         """Execute one statement with bound parameters and return all its rows (DuckDB needs results finished).
         A damaged block or a missing stage's table is a one-line StoreError (`identity.read_error`)."""
+        if self.dataset is not None and sql.lstrip().startswith("CREATE TABLE"):
+            sql = without_references(sql)  # a Parquet catalogue's rows named by a foreign key are in its partitions
         try:
             rows = self.con.execute(sql, list(params)).fetchall()
         except (duckdb.Error, RuntimeError) as exc:
@@ -286,9 +297,10 @@ class Store:
             return 0  # zero rows: nothing to write (and nothing to reshape)
         arrow = pa.table({name: to_arrow(v) for name, v in columns.items()})
         names = ", ".join(_check_name(c) for c in arrow.column_names)
+        target = table if self.dataset is None else f"{DATASET_TABLES}.{table}"  # the view of a Parquet catalogue reads it too
         self.con.register("_wb_rows", arrow)
         try:
-            self.run(f"INSERT INTO {table} ({names}) SELECT {names} FROM _wb_rows")
+            self.run(f"INSERT INTO {target} ({names}) SELECT {names} FROM _wb_rows")
         finally:
             try:
                 self.con.unregister("_wb_rows")

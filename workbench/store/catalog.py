@@ -9,11 +9,21 @@
   seconds: worker compute time; write_seconds: the driver's write transaction; counts: JSON of the unit's sizes.
 
 Units are written by one process (the driver); workers never open the store.
+
+A catalogue takes one of two forms. A DuckDB file holds every table. A Parquet catalogue is a folder: the rows of
+each part (`object`, `freeairgrip`, `freetabletopplacement`, `freetabletopgrip`, `tabletopplacements`,
+`tabletopgrips`) are Hive partitions `TABLE/part=NAME/*.parquet`, the IK rows `ik/part=NAME/robot=NAME/*.parquet`,
+and the small shared tables (paramset, angle, robot, gripper, scene, ikret, catalog_unit, plans) sit beside them in
+`catalog.duckdb`. Opening the folder as a store (`Store(FOLDER)`) reads the partitions through DuckDB views with the
+paper's table and column names and types, nothing imported. Each merge writes its files named after its batch,
+recorded in `catalog_batch` in the merge's transaction; files of a batch that never committed (a driver killed
+during a merge) are deleted when the next build opens the folder.
 """
 
 from __future__ import annotations
 
 import json
+import os
 import time
 from contextlib import contextmanager
 from typing import Any, Iterator
@@ -24,7 +34,19 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from workbench.errors import StoreError
-from workbench.store import Store, _digest
+from pathlib import Path
+
+from workbench.store import CONNECT_CONFIG, Store, _digest
+from workbench.store.dataset import (
+    DATASET_FILE,
+    DATASET_TABLES,
+    PARTITIONED,
+    dataset_files,
+    dataset_views,
+    without_references,
+)
+from workbench.store.identity import APPLICATION, META_TABLES, SCHEMA_VERSION
+from workbench.store.schema import ALL_TABLES, MIGRATIONS
 from workbench.store.robots import ALL_FEASIBLE, FEASIBILITY, JOINTS
 
 CATALOG_TABLES: tuple[str, ...] = (
@@ -51,10 +73,88 @@ CATALOG_TABLES: tuple[str, ...] = (
         worker VARCHAR,
         created TIMESTAMP DEFAULT current_timestamp
     )""",
+    """CREATE TABLE IF NOT EXISTS catalog_batch (
+        batch BIGINT PRIMARY KEY,
+        created TIMESTAMP DEFAULT current_timestamp
+    )""",
 )
+
 
 UNIT_COLUMNS = ("digest", "kind", "part", "source", "robot", "chunk", "idobject", "idgrasps", "idplacements", "idtabletop",
                 "idrobot", "idscene", "idikret", "status", "error", "nrows", "counts", "seconds", "write_seconds", "worker")
+
+
+def create_dataset(folder: Path) -> None:
+    """A new Parquet catalogue at `folder` (created with its `catalog.duckdb`); an existing one is left as it is."""
+    if folder.exists() and not folder.is_dir():
+        raise StoreError(f"catalogue path {folder} is a file; a Parquet catalogue is a folder (or give --form duckdb)")
+    if (folder / DATASET_FILE).is_file():
+        return
+    if folder.is_dir() and any(folder.iterdir()):
+        raise StoreError(f"folder {folder} is not empty and holds no catalogue; give a new or empty folder")
+    folder.mkdir(parents=True, exist_ok=True)
+    # the shared tables without foreign keys: the rows they name are in the partitions, not in this file
+    tmp = folder / f"{DATASET_FILE}.{os.getpid()}.tmp"
+    tmp.unlink(missing_ok=True)
+    con = duckdb.connect(str(tmp), config=CONNECT_CONFIG)
+    try:
+        for ddl in ALL_TABLES + META_TABLES + MIGRATIONS + CATALOG_TABLES:
+            con.execute(without_references(ddl))
+        con.execute("INSERT INTO workbench_meta VALUES ('application', ?), ('schema_version', ?)",
+                    [APPLICATION, str(SCHEMA_VERSION)])
+        con.execute("CHECKPOINT")
+    finally:
+        con.close()
+    os.replace(tmp, folder / DATASET_FILE)
+
+
+def sweep_dataset(store: Store) -> int:
+    """Delete a Parquet catalogue's files of batches that never committed (a driver killed during a merge); returns
+    how many."""
+    batches = {r[0] for r in store.run("SELECT batch FROM catalog_batch")}
+    gone = 0
+    for table in PARTITIONED:
+        for f in store.dataset.glob(f"{table}/{'/'.join('*' for _ in PARTITIONED[table])}/b*_*.parquet"):
+            if int(f.name[1:].split("_", 1)[0]) not in batches:
+                f.unlink(missing_ok=True)
+                gone += 1
+    return gone
+
+
+@contextmanager
+def merge_batch(store: Store) -> Iterator[None]:
+    """One merge's transaction; in a Parquet catalogue the batch that names its files, recorded when it commits."""
+    with store.transaction():
+        if store.dataset is None:
+            yield
+            return
+        store._batch = int(store.one("SELECT coalesce(max(batch), 0) + 1 FROM catalog_batch")[0])
+        store.run("INSERT INTO catalog_batch (batch) VALUES (?)", [store._batch])
+        try:
+            yield
+        finally:
+            del store._batch
+
+
+def _put(store: Store, table: str, columns: str, source: str, args: list, keys: dict[str, str]) -> int:
+    """The rows `SELECT columns source` into `table` (by column name), inside the caller's transaction; in a Parquet
+    catalogue as the batch's files of the table's partitions (`keys`: the SQL of each Hive key in the select's
+    scope). Returns the rows written."""
+    if store.dataset is None:
+        return _count(store.run(f"INSERT INTO {table} BY NAME SELECT {columns} {source}", args))
+    names = PARTITIONED[table]
+    stage = f"_wb_stage_{table}"
+    store.run(f"CREATE OR REPLACE TEMP TABLE {stage} AS SELECT *, {', '.join(f'NULL::VARCHAR AS {k}' for k in names)} "
+              f"FROM {DATASET_TABLES}.{table} LIMIT 0")
+    keyed = ", ".join(f"{keys[k]} AS {k}" for k in names)  # a failed statement rolls the temporary table back too
+    n = _count(store.run(f"INSERT INTO {stage} BY NAME SELECT {columns}, {keyed} {source}", args))
+    if n:
+        store.run(f"COPY {stage} TO '{store.dataset}/{table}' (FORMAT parquet, COMPRESSION zstd, "
+                  f"PARTITION_BY ({', '.join(names)}), FILENAME_PATTERN 'b{store._batch}_{{i}}', OVERWRITE_OR_IGNORE true)")
+    store.run(f"DROP TABLE {stage}")
+    if n:
+        dataset_views(store, (table,))
+    return n
 
 
 def ensure_catalog_tables(store: Store) -> None:
@@ -134,25 +234,30 @@ def merge_ik_runs(store: Store, runs: list[dict[str, Any]]) -> int:
             continue
         files = [(str(p), k, r) for k, r in group for p in r["paths"]]
         table = pa.table({"file": [f for f, _, _ in files], "ord": [k for _, k, _ in files],
-                          **{c: [int(r[c]) for _, _, r in files] for c in ("idrobot", "idscene", "idikret", "offset")}})
-        feas = ", ".join(f"f[{k + 1}]" for k in range(len(FEASIBILITY)))
-        jnts = ", ".join(f"CASE WHEN f[{k + 1}] THEN j[{k * nq + 1}:{(k + 1) * nq}] END" for k in range(len(JOINTS)))
+                          **{c: [int(r[c]) for _, _, r in files] for c in ("idrobot", "idscene", "idikret", "offset")},
+                          **{c: [str(r[c]) for _, _, r in files] for c in ("part", "robot")}})
         first = store.next_id("ik", "idik")
         with store.transaction():
             store.con.register("_wb_runs", table)
             try:
-                n += _count(store.run(
-                    f"INSERT INTO ik (idik, idrobot, idtabletopgrips, idikret, idscene, {', '.join(FEASIBILITY)}, "
-                    f"{', '.join(JOINTS)}) SELECT ? - 1 + row_number() OVER (ORDER BY r.ord, s.idtabletopgrips + r.offset), "
-                    f"r.idrobot, s.idtabletopgrips + r.offset, r.idikret, r.idscene, {feas}, {jnts} FROM "
-                    "(SELECT filename, idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j "
-                    "FROM read_parquet(?, filename = true)) s JOIN _wb_runs r ON r.file = s.filename",
-                    [first, [f for f, _, _ in files]]))
+                n += _put(store, "ik",
+                          "? - 1 + row_number() OVER (ORDER BY r.ord, s.idtabletopgrips + r.offset) AS idik, r.idrobot, "
+                          f"s.idtabletopgrips + r.offset AS idtabletopgrips, r.idikret, r.idscene, {_ik_columns(nq)}",
+                          "FROM (SELECT filename, idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j "
+                          "FROM read_parquet(?, filename = true)) s JOIN _wb_runs r ON r.file = s.filename",
+                          [first, [f for f, _, _ in files]], {"part": "r.part", "robot": "r.robot"})
             except duckdb.IOException as exc:
                 raise StoreError(f"a shard of an IK run cannot be read ({str(exc).splitlines()[0]})") from None
             finally:
-                store.con.unregister("_wb_runs")
+                _unregister(store, "_wb_runs")
     return n
+
+
+def _ik_columns(nq: int) -> str:
+    """The `ik` table's feasibility and joint columns from a shard's feasible (`f`, 5) and joints (`j`, 5 x nq)."""
+    feas = ", ".join(f"f[{k + 1}] AS {c}" for k, c in enumerate(FEASIBILITY))
+    jnts = ", ".join(f"CASE WHEN f[{k + 1}] THEN j[{k * nq + 1}:{(k + 1) * nq}] END AS {c}" for k, c in enumerate(JOINTS))
+    return f"{feas}, {jnts}"
 
 
 @contextmanager
@@ -168,28 +273,28 @@ def unit_transaction(store: Store, unit: dict[str, Any]) -> Iterator[dict[str, A
 
 
 def merge_ik_shards(store: Store, idrobot: int, idscene: int, idikret: int, nq: int, paths: list[str],
-                    offset: int = 0) -> int:
+                    offset: int = 0, part: str = "", robot: str = "") -> int:
     """The `ik` rows of one IK run's shard files (Parquet, one per unit: idtabletopgrips, feasible (5) and joints
     (5 x nq, NaN where infeasible), as `workbench.catalog.units.ik_unit` writes them) in one transaction; grips that
-    already have a row for the run (stored by `workbench ik`) are left as they are. Returns the rows inserted. The shards of a part unit merged from its folder name its tabletop grips by their ids in the
-    unit's range: `offset` moves them to the store's ids. A shard that cannot be read is a StoreError naming it."""
+    already have a row for the run (stored by `workbench ik`) are left as they are. Returns the rows inserted. The
+    shards of a part unit merged from its folder name its tabletop grips by their ids in the unit's range: `offset`
+    moves them to the store's ids. `part` and `robot` name the run's partition in a Parquet catalogue. A shard that
+    cannot be read is a StoreError naming it."""
     if not paths:
         return 0
-    feas = ", ".join(f"f[{k + 1}]" for k in range(len(FEASIBILITY)))
-    jnts = ", ".join(f"CASE WHEN f[{k + 1}] THEN j[{k * nq + 1}:{(k + 1) * nq}] END" for k in range(len(JOINTS)))
     with store.transaction():
         first = store.next_id("ik", "idik")
         try:
-            store.run(
-                f"INSERT INTO ik (idik, idrobot, idtabletopgrips, idikret, idscene, {', '.join(FEASIBILITY)}, {', '.join(JOINTS)}) "
-                f"SELECT ? - 1 + row_number() OVER (ORDER BY idtabletopgrips), ?, idtabletopgrips, ?, ?, {feas}, {jnts} "
-                "FROM (SELECT idtabletopgrips + ? AS idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j "
-                "FROM read_parquet(?)) s "
-                "WHERE idtabletopgrips NOT IN (SELECT idtabletopgrips FROM ik WHERE idrobot = ? AND idscene = ? AND idikret = ?)",
-                [first, idrobot, idikret, idscene, int(offset), list(paths), idrobot, idscene, idikret])
+            return _put(store, "ik",
+                        "? - 1 + row_number() OVER (ORDER BY idtabletopgrips) AS idik, ?::BIGINT AS idrobot, idtabletopgrips, "
+                        f"?::BIGINT AS idikret, ?::BIGINT AS idscene, {_ik_columns(nq)}",
+                        "FROM (SELECT idtabletopgrips + ? AS idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j "
+                        "FROM read_parquet(?)) s WHERE idtabletopgrips NOT IN "
+                        "(SELECT idtabletopgrips FROM ik WHERE idrobot = ? AND idscene = ? AND idikret = ?)",
+                        [first, idrobot, idikret, idscene, int(offset), list(paths), idrobot, idscene, idikret],
+                        {"part": _literal(part), "robot": _literal(robot)})
         except duckdb.IOException as exc:
             raise StoreError(f"a shard of this IK run cannot be read ({str(exc).splitlines()[0]})") from None
-        return store.next_id("ik", "idik") - first
 
 
 UNIT_TABLES = ("object", "paramset", "freeairgrip", "freetabletopplacement", "freetabletopgrip", "angle",
@@ -215,12 +320,14 @@ RENUMBERED: dict[str, tuple[str, ...]] = {
 PARAMSET_REFS = ("grasps", "placements")  # keys of a stage's parameters naming the parameter set it consumed
 
 
-def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, int]], idgripper: int) -> list[dict[str, int]]:
+def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, int]], idgripper: int,
+                     names: list[str]) -> list[dict[str, int]]:
     """The rows of part units left as Parquet folders (`<folder>/<table>.parquet` for `UNIT_TABLES`, each table's
     ids counting from 1, `counts` rows per table) in the caller's transaction. Ids are renumbered into the store's
     sequences (each unit's ids move by one offset per table, returned per unit), the parameter sets' digests are
     computed again with their new ids, the free-air grasps take the store's gripper row `idgripper`, and angles
-    already stored are reused by value. An unreadable file is a StoreError naming the problem."""
+    already stored are reused by value. `names`: the parts' names (their partitions in a Parquet catalogue). An
+    unreadable file is a StoreError naming the problem."""
     if not folders:
         return []
     files = {t: [f"{d}/{t}.parquet" for d in folders] for t in UNIT_TABLES}
@@ -230,8 +337,10 @@ def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, in
         offsets.append({t: nxt[t] - 1 for t in RENUMBERED})
         for t in RENUMBERED:
             nxt[t] += int(c.get(t, 0))
-    rows = [(f"{d}/{t}.parquet", *(o[r] for r in RENUMBERED)) for d, o in zip(folders, offsets) for t in UNIT_TABLES]
-    table = pa.table({"file": [r[0] for r in rows], **{f"d_{t}": [r[k + 1] for r in rows] for k, t in enumerate(RENUMBERED)}})
+    rows = [(f"{d}/{t}.parquet", name, *(o[r] for r in RENUMBERED))
+            for d, name, o in zip(folders, names, offsets) for t in UNIT_TABLES]
+    table = pa.table({"file": [r[0] for r in rows], "part": [r[1] for r in rows],
+                      **{f"d_{t}": [r[k + 2] for r in rows] for k, t in enumerate(RENUMBERED)}})
     try:
         with store.transaction():
             store.con.register("_wb_offsets", table)
@@ -254,10 +363,11 @@ def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, in
                                  "JOIN (SELECT value, min(idangle) AS idangle FROM angle GROUP BY value) a "
                                  "ON abs(a.value - u.value) < 1e-9 ")
                         args.append(files["angle"])
-                    store.run(f"INSERT INTO {t} BY NAME SELECT x.* EXCLUDE (filename) REPLACE ({', '.join(swap)}) "
-                              f"FROM read_parquet(?, filename = true) x JOIN _wb_offsets o ON o.file = x.filename {angle}", args)
+                    _put(store, t, f"x.* EXCLUDE (filename) REPLACE ({', '.join(swap)})",
+                         f"FROM read_parquet(?, filename = true) x JOIN _wb_offsets o ON o.file = x.filename {angle}", args,
+                         {"part": "o.part"})
             finally:
-                store.con.unregister("_wb_offsets")
+                _unregister(store, "_wb_offsets")
     except duckdb.IOException as exc:
         raise StoreError(f"a part unit's file cannot be read ({str(exc).splitlines()[0]})") from None
     return offsets
@@ -292,7 +402,7 @@ def _insert_renumbered(store: Store, table: str, folders: list[str], offsets: li
     try:
         store.run(f"INSERT INTO {table} BY NAME SELECT * FROM _wb_rows")
     finally:
-        store.con.unregister("_wb_rows")
+        _unregister(store, "_wb_rows")
 
 
 def _insert_angles(store: Store, files: list[str]) -> None:
@@ -301,6 +411,19 @@ def _insert_angles(store: Store, files: list[str]) -> None:
     store.run("INSERT INTO angle (idangle, value) SELECT ? - 1 + row_number() OVER (ORDER BY value), value FROM "
               "(SELECT DISTINCT value FROM read_parquet(?) u WHERE NOT EXISTS "
               "(SELECT 1 FROM angle a WHERE abs(a.value - u.value) < 1e-9))", [first, files])
+
+
+def _unregister(store: Store, name: str) -> None:
+    """Drop a registered Arrow table; after a failed statement the connection refuses it, and that error is the one
+    to report."""
+    try:
+        store.con.unregister(name)
+    except duckdb.Error:
+        pass
+
+
+def _literal(text: str) -> str:
+    return "'" + str(text).replace("'", "''") + "'"
 
 
 def _count(rows: list[tuple]) -> int:

@@ -41,6 +41,7 @@ def save_grasps(store: Store, idobject: int, gripper: Gripper, params: GraspPara
             "rotmat": grasps.poses, "jawwidth": grasps.jawwidth,
             "idfacet0": grasps.facet0.astype(np.int64), "idfacet1": grasps.facet1.astype(np.int64),
             "idcontactpair": grasps.pair.astype(np.int64), "rotation": grasps.rotation,
+            "padoffset0": grasps.offset0, "padoffset1": grasps.offset1, "robustness": grasps.robustness,
         })
     return pid, False
 
@@ -51,10 +52,12 @@ def latest_grasp_paramset(store: Store, idobject: int) -> int:
 
 
 def load_grasps(store: Store, idobject: int, idparamset: int | None = None) -> dict[str, np.ndarray]:
-    """Free-air grasps as arrays: idfreeairgrip, contactpoint0/1, contactnormal0/1 (N, 3), rotmat (N, 4, 4), jawwidth."""
+    """Free-air grasps as arrays: idfreeairgrip, contactpoint0/1, contactnormal0/1 (N, 3), rotmat (N, 4, 4), jawwidth,
+    robustness (NaN in stores written before it)."""
     pid = latest_grasp_paramset(store, idobject) if idparamset is None else idparamset
     out = store.query_arrays(
-        "SELECT idfreeairgrip, contactpoint0, contactpoint1, contactnormal0, contactnormal1, rotmat, jawwidth, idgripper "
+        "SELECT idfreeairgrip, contactpoint0, contactpoint1, contactnormal0, contactnormal1, rotmat, jawwidth, idgripper, "
+        "coalesce(robustness, 'NaN'::DOUBLE) AS robustness "
         "FROM freeairgrip WHERE idobject = ? AND idparamset = ? ORDER BY idfreeairgrip", [idobject, pid])
     out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
     out["idparamset"] = pid

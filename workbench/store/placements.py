@@ -70,11 +70,14 @@ def load_placements(store: Store, idplacements: int) -> dict[str, np.ndarray]:
 
 
 def load_free_tabletop_grips(store: Store, idplacements: int) -> dict[str, np.ndarray]:
-    """Free tabletop grips of a placement parameter set, with their placement and free-air grasp ids."""
+    """Free tabletop grips of a placement parameter set, with their placement and free-air grasp ids and the free-air
+    grasp's contact robustness (NaN where not stored)."""
     out = store.query_arrays(
         "SELECT g.idfreetabletopgrip, g.idfreetabletopplacement, g.idfreeairgrip, g.rotmat, g.jawwidth, "
-        "g.contactpoint0, g.contactpoint1, g.contactnormal0, g.contactnormal1 "
+        "g.contactpoint0, g.contactpoint1, g.contactnormal0, g.contactnormal1, "
+        "coalesce(a.robustness, 'NaN'::DOUBLE) AS robustness "
         "FROM freetabletopgrip g JOIN freetabletopplacement p USING (idfreetabletopplacement) "
+        "LEFT JOIN freeairgrip a ON a.idfreeairgrip = g.idfreeairgrip "
         "WHERE p.idparamset = ? ORDER BY g.idfreetabletopgrip", [idplacements])
     out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
     return out

@@ -13,7 +13,10 @@ Paper tables
   Extra: allowed_pairs (JSON: the link pairs exempt from self-collision checks, with their reason: rigid,
   adjacent, srdf, never, always; the planning gripper is the links gripper_hand and gripper_fingers).
 - freeairgrip: grasps in the object frame; rotmat is the TCP pose in the object frame.
-  Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y).
+  Extra: idparamset, idgripper, idfacet0/idfacet1 (facet ids of the run), idcontactpair, rotation (rad about y),
+  padoffset0/padoffset1 (`DOUBLE[2]`: where each contact lies on its pad, along the TCP's x and z from the pad's
+  centre in pad half sizes, 1 at an edge) and robustness (1 minus the larger offset, 0 at an edge; NULL in stores
+  written before them).
 - freetabletopplacement: rotmat is the object in the table frame, centre of mass above the origin, lowest
   point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, `DOUBLE[3][]`),
   probability (quasi-static chance that a part dropped at random rests on it; NULL in stores written before it).
@@ -45,6 +48,14 @@ Extra tables
   transaction is complete when its paramset row exists. Consumers refuse an incomplete IK run unless asked.
 - plan rows are unique per query and motions: a re-run of the same query with the same motion settings finds the
   stored answer (store.wan_harada.find_plan); another --acc, or motions timed otherwise, is a new plan.
+- a task's plan (the grasp-placement table's Fig. 1 task) keeps its task: plan.start_held and plan.end_held (the
+  motions begin with the part already in the hand / end with it still held), plan.insertion (unit world
+  direction, NULL without one) and plan.insertion_depth (m), plan.obstacles (digest of the obstacles, NULL without
+  any: the same query among other obstacles is another plan), planstep.lift (the TCP's world move from the grasp
+  to the worlda pose: the insertion run backwards; NULL: straight up by worlda).
+- planobstacle(idplanobstacle, idplan, seq, task_end, name, vertices, faces, pose): each obstacle fixed in the world
+  that a plan's motions were checked against: task_end 'pickup' or 'destination', the mesh in metres in its own
+  frame, pose its world pose (DOUBLE[16]); a validator reads them back with the plan.
 """
 
 from __future__ import annotations
@@ -105,7 +116,10 @@ CORE_TABLES: tuple[str, ...] = (
         idfacet0 BIGINT,
         idfacet1 BIGINT,
         idcontactpair BIGINT,
-        rotation DOUBLE
+        rotation DOUBLE,
+        padoffset0 DOUBLE[2],
+        padoffset1 DOUBLE[2],
+        robustness DOUBLE
     )""",
     """CREATE TABLE IF NOT EXISTS freetabletopplacement (
         idfreetabletopplacement BIGINT PRIMARY KEY,
@@ -472,6 +486,9 @@ ALL_TABLES = ALL_TABLES + SIMULATION_TABLES
 
 # Columns added after a store format was first released; run after the CREATE statements so older files gain them.
 MIGRATIONS: tuple[str, ...] = (
+    "ALTER TABLE freeairgrip ADD COLUMN IF NOT EXISTS padoffset0 DOUBLE[2]",
+    "ALTER TABLE freeairgrip ADD COLUMN IF NOT EXISTS padoffset1 DOUBLE[2]",
+    "ALTER TABLE freeairgrip ADD COLUMN IF NOT EXISTS robustness DOUBLE",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS locked VARCHAR DEFAULT '{}'",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS drop_geometry VARCHAR[] DEFAULT []",
     "ALTER TABLE robot ADD COLUMN IF NOT EXISTS package_dirs VARCHAR[] DEFAULT []",

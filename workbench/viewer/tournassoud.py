@@ -29,9 +29,12 @@ from workbench.viewer.scenes import (
     show_spheres,
     static_html,
 )
+from workbench.viewer.live import Switches
 from workbench.viewer.wan_harada import PlanView, caption_track, frame_plan, plan_frames, plan_overlay, show_plan
 
 FEATURE_COLOR = 0xDD3333
+PART_AT_H = 0xE0A030
+"""The part's colour at (P_j, phi) on the table (`TableView`)."""
 
 
 def feature_meshes(mesh: trimesh.Trimesh, cls: GraspClass, params: ClassParams = ClassParams()) -> list[trimesh.Trimesh]:
@@ -45,46 +48,75 @@ def feature_meshes(mesh: trimesh.Trimesh, cls: GraspClass, params: ClassParams =
     return out
 
 
-def show_class(vis: meshcat.Visualizer, mesh: trimesh.Trimesh, cls: GraspClass, gripper: Gripper, theta: float,
-               pose: np.ndarray | None = None, path: str = "class", params: ClassParams = ClassParams()) -> None:
-    """The object (at `pose`, default its own frame), the class's features highlighted, the grasp point, the grasp
-    plane normal and the hand at angle `theta` (Sections 2.1-2.3)."""
-    pose = np.eye(4) if pose is None else np.asarray(pose, dtype=np.float64)
-    vis[path].delete()
-    show_mesh(vis, f"{path}/object", mesh, color=GREY, opacity=0.5, pose=pose)
-    for i, m in enumerate(feature_meshes(mesh, cls, params)):
-        m = m.copy()
-        m.apply_transform(pose)
-        m.vertices += m.face_normals.mean(axis=0) * 2e-4  # just above the surface
-        show_mesh(vis, f"{path}/features/face{i}", m, color=FEATURE_COLOR)
-    R, t = pose[:3, :3], pose[:3, 3]
-    if "edge" in cls.features:
-        a, b = (np.asarray(p) @ R.T + t for p in cls.features["edge"])
-        show_segments(vis, f"{path}/features/edge", a[None], b[None], color=FEATURE_COLOR)
-    if "vertex" in cls.features:
-        show_spheres(vis, f"{path}/features/vertex", (np.asarray(cls.features["vertex"]) @ R.T + t)[None], 0.003, color=FEATURE_COLOR)
-    c = cls.point @ R.T + t
-    show_spheres(vis, f"{path}/point", c[None], 0.002, color=BLUE)
-    show_segments(vis, f"{path}/normal", c[None], (c + 0.04 * (R @ cls.normal))[None], color=BLUE)
-    show_gripper(vis, f"{path}/hand", gripper, pose @ cls.pose(theta), width=min(cls.opening + 1e-3, gripper.jaw_max),
-                 color=GREEN if cls.legal(np.array([theta]))[0] else RED)
+BESIDE = np.array([[1, 0, 0, 0.0], [0, 1, 0, -0.3], [0, 0, 1, 0.2], [0, 0, 0, 1]])
+"""Where the class's part stands in the explorer's scene: beside the table point H, clear of the part there."""
 
 
-def show_conjunction(vis: meshcat.Visualizer, mesh: trimesh.Trimesh, table: GraspPlacementTable, classes: list[GraspClass],
-                     index: int, gripper: Gripper, placement: int, theta: float, phi: float, path: str = "conjunction") -> bool:
-    """The object at (P_j, phi) on the table and the hand at (G_index, theta) (Section 4.1); returns whether the
-    sampled table holds the pair at the nearest samples (green hand) or not (orange)."""
-    cls = classes[index]
-    obj = table.object_pose(placement, phi)
-    t = int(np.round(np.mod(theta, 2 * np.pi) / (2 * np.pi / len(table.theta)))) % len(table.theta)
-    f = int(np.round(np.mod(phi, 2 * np.pi) / (2 * np.pi / len(table.phi)))) % len(table.phi)
-    vis[path].delete()
-    show_spheres(vis, f"{path}/H", table.frame[:3, 3][None], 0.004, color=BLUE)
-    show_mesh(vis, f"{path}/object", mesh, color=0xE0A030, pose=obj)
-    legal = bool(table.q[index, placement, t, f])
-    show_gripper(vis, f"{path}/hand", gripper, obj @ cls.pose(theta), width=min(cls.opening + 1e-3, gripper.jaw_max),
-                 color=GREEN if legal else ORANGE)
-    return legal
+def _rgba(color: int, opacity: float) -> list[float]:
+    return [((color >> s) & 255) / 255 for s in (16, 8, 0)] + [opacity]
+
+
+class TableView:
+    """Notebook 06's scene (Sections 2-4): on the left the class's part (at `BESIDE`) with its features highlighted,
+    the grasp point, the grasp-plane normal and the hand at angle theta (green legal on the part, red not); on the
+    right the part at (P_j, phi) at the table point H with the hand at (G_i, theta) (green when the sampled table
+    holds the pair, orange when not). Geometry is sent when the class changes (`set_class`); a change of theta,
+    placement or phi only moves and recolours what is there (`pose`)."""
+
+    def __init__(self, vis: meshcat.Visualizer, mesh: trimesh.Trimesh, table: GraspPlacementTable,
+                 classes: list[GraspClass], gripper: Gripper, params: ClassParams = ClassParams()):
+        self.vis, self.mesh, self.table, self.classes, self.gripper, self.params = vis, mesh, table, classes, gripper, params
+        self.switches = Switches(vis)
+        self.index: int | None = None
+        for path in ("class", "conjunction"):
+            vis[path].delete()
+
+    def set_class(self, index: int) -> None:
+        """Send the class's part, features, grasp point, normal and both hands (at its opening), unless shown."""
+        if index == self.index:
+            return
+        vis, cls, pose = self.vis, self.classes[index], BESIDE
+        for path in ("class", "conjunction"):
+            vis[path].delete()
+            self.switches.forget(path)
+        show_mesh(vis, "class/object", self.mesh, color=GREY, opacity=0.5, pose=pose)
+        for i, m in enumerate(feature_meshes(self.mesh, cls, self.params)):
+            m = m.copy()
+            m.apply_transform(pose)
+            m.vertices += m.face_normals.mean(axis=0) * 2e-4  # just above the surface
+            show_mesh(vis, f"class/features/face{i}", m, color=FEATURE_COLOR)
+        R, t = pose[:3, :3], pose[:3, 3]
+        if "edge" in cls.features:
+            a, b = (np.asarray(p) @ R.T + t for p in cls.features["edge"])
+            show_segments(vis, "class/features/edge", a[None], b[None], color=FEATURE_COLOR)
+        if "vertex" in cls.features:
+            show_spheres(vis, "class/features/vertex", (np.asarray(cls.features["vertex"]) @ R.T + t)[None], 0.003,
+                         color=FEATURE_COLOR)
+        c = cls.point @ R.T + t
+        show_spheres(vis, "class/point", c[None], 0.002, color=BLUE)
+        show_segments(vis, "class/normal", c[None], (c + 0.04 * (R @ cls.normal))[None], color=BLUE)
+        width = min(cls.opening + 1e-3, self.gripper.jaw_max)
+        show_gripper(vis, "class/hand", self.gripper, np.eye(4), width=width)
+        show_spheres(vis, "conjunction/H", self.table.frame[:3, 3][None], 0.004, color=BLUE)
+        show_mesh(vis, "conjunction/object", self.mesh, color=PART_AT_H)
+        show_gripper(vis, "conjunction/hand", self.gripper, np.eye(4), width=width)
+        self.index = index
+
+    def pose(self, index: int, theta: float, placement: int, phi: float) -> bool:
+        """The hand at (G_index, theta) on the class's part, and the part at (P_placement, phi) at H with the hand;
+        returns whether the sampled table holds the pair at the nearest samples (Section 4.1)."""
+        self.set_class(index)
+        cls, table, sw = self.classes[index], self.table, self.switches
+        sw.move("class/hand", BESIDE @ cls.pose(theta))
+        sw.set("class/hand", "color", _rgba(GREEN if cls.legal(np.array([theta]))[0] else RED, 0.6))
+        obj = table.object_pose(placement, phi)
+        t = int(np.round(np.mod(theta, 2 * np.pi) / (2 * np.pi / len(table.theta)))) % len(table.theta)
+        f = int(np.round(np.mod(phi, 2 * np.pi) / (2 * np.pi / len(table.phi)))) % len(table.phi)
+        legal = bool(table.q[index, placement, t, f])
+        sw.move("conjunction/object", obj)
+        sw.move("conjunction/hand", obj @ cls.pose(theta))
+        sw.set("conjunction/hand", "color", _rgba(GREEN if legal else ORANGE, 0.6))
+        return legal
 
 
 def show_sequence(vis: meshcat.Visualizer, plan, robot, mesh: trimesh.Trimesh, table: tuple | None = None, fps: int = 30):

@@ -99,8 +99,7 @@ def timed_frames(plan, segments: list[TimedSegment], tcp_pose, fps: float = 30.0
     jaw_before = jaw_open
     for t in times:
         while k + 1 < len(segments) and t > segments[k].t0 + segments[k].duration + 1e-9:
-            if segments[k].kind == "gripper":
-                jaw_before = segments[k].jaw
+            jaw_before = segments[k].jaw  # the jaw acts from the opening of the move before it (the pre-grasp one)
             k += 1
         seg = segments[k]
         local = min(max(t - seg.t0, 0.0), seg.duration)

@@ -273,7 +273,7 @@ def test_executable_plan_with_motions(box_setup, low_puma):
     hand = low_puma.gripper
     allowed = list(allowed_pairs(low_puma).allowed)
     tv = TrajectoryValidator(validator, hand.body, trimesh.Trimesh(*_fingers(hand)), allowed, np.array(plan.acc),
-                             urdf=low_puma.spec.urdf)
+                             urdf=low_puma.spec.urdf, jaw_max=hand.jaw_max)
     errors, knots = tv.check(plan, plan.segments)
     assert not errors and knots > 0
 
@@ -298,7 +298,8 @@ def test_grasp_query_motions_pass_the_trajectory_validator(box_setup, low_puma):
             continue
         if tv is None:
             tv = TrajectoryValidator(validator, hand.body, trimesh.Trimesh(*_fingers(hand)),
-                                     list(allowed_pairs(low_puma).allowed), np.array(plan.acc), urdf=low_puma.spec.urdf)
+                                     list(allowed_pairs(low_puma).allowed), np.array(plan.acc), urdf=low_puma.spec.urdf,
+                                     jaw_max=hand.jaw_max)
         assert plan.segments and plan.regrasps == seq.regrasps >= 1
         assert validator.check(plan).ok
         errors, knots = tv.check(plan, plan.segments)

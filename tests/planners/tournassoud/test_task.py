@@ -58,6 +58,26 @@ def _hits(hand_mesh, poses: np.ndarray, obstacles) -> bool:
     return False
 
 
+_HANDS: dict = {}
+
+
+def _hand_at(hand, width: float):
+    """The hand's collision mesh with the fingers `width` apart (one mesh per width, for the coal cache)."""
+    key = round(float(width), 12)
+    if key not in _HANDS:
+        _HANDS[key] = hand.collision_mesh(min(float(width), hand.jaw_max))
+    return _HANDS[key]
+
+
+def _end_hits(hand, cls, tcp: np.ndarray, end) -> bool:
+    """coal: the hand at the class's pre-grasp opening (its opening plus 10 mm, CONVENTIONS.md, capped at the stroke)
+    at the grasp and along the approach, or at the grasp's opening along the insertion, touches an obstacle."""
+    if _hits(_hand_at(hand, cls.opening + 0.010), _path(tcp, end.approach), end.obstacles):
+        return True
+    return end.insertion is not None and _hits(_hand_at(hand, cls.opening), _path(tcp, 0.0, end.insertion, end.depth),
+                                               end.obstacles)
+
+
 def _path(tcp: np.ndarray, approach: float, insertion=None, depth: float = 0.0) -> np.ndarray:
     """The test's own sweep: the grasp backed off along its -z every 5 mm, and back along the insertion every 2 mm."""
     out = []
@@ -86,15 +106,30 @@ def test_pickup_obstacles_refuse_the_grasps_that_hit_them(setup, lpart, hand, pu
     assert legal.any() and refused.any() and not (legal & ~free).any()
     assert counts["obstacles"] == int(refused.sum())
     obj = pocket.object_pose(table)
-    mesh = hand.collision_mesh(hand.jaw_max)
     for (c, t), expect in [((c, t), True) for c, t in np.argwhere(refused)] + [((c, t), False) for c, t in np.argwhere(legal)]:
         tcp = obj @ classes[c].pose(table.theta[t])
-        assert _hits(mesh, _path(tcp, pocket.approach), pocket.obstacles) == expect, (c, t)
+        assert _end_hits(hand, classes[c], tcp, pocket) == expect, (c, t)
     dest = TaskEnd(0, 0.45, 0.32, 0.0)
     seq = task_query(table, legal, end_mask(table, classes, dest, puma560, hand)[0], pocket, dest)
     c, t = seq.grasps[0]
-    assert legal[c, t] and not _hits(mesh, _path(obj @ classes[c].pose(table.theta[t]), pocket.approach), pocket.obstacles)
+    assert legal[c, t] and not _end_hits(hand, classes[c], obj @ classes[c].pose(table.theta[t]), pocket)
     assert np.allclose(seq.extra["start_pose"], obj) and seq.placements[0][0] == STANDING
+
+
+def test_a_tight_pocket_is_entered_at_the_pregrasp_opening(setup, lpart, hand, puma560):
+    """Walls 10 mm from the standing part: the hand fully open (80 mm) fits no grasp between them, the hand at each
+    class's pre-grasp opening (its opening plus 10 mm) fits some; each grasp is legal exactly when coal finds the hand
+    at that opening clear of the walls along the approach."""
+    classes, table = setup
+    pocket = TaskEnd(STANDING, 0.45, -0.12, np.radians(30))
+    pocket.obstacles = walls_around(lpart.mesh, pocket.object_pose(table), gap=0.01, sides="y")
+    legal, _ = end_mask(table, classes, pocket, puma560, hand)
+    wide, _ = end_mask(table, classes, pocket, puma560, hand, pregrasp_margin=None)
+    free, _ = end_mask(table, classes, TaskEnd(STANDING, 0.45, -0.12, np.radians(30)), puma560, hand)
+    assert not wide.any() and legal.any() and not (legal & ~free).any()
+    obj = pocket.object_pose(table)
+    for c, t in np.argwhere(free):
+        assert _end_hits(hand, classes[c], obj @ classes[c].pose(table.theta[t]), pocket) == (not legal[c, t]), (c, t)
 
 
 def test_insertion_keeps_the_last_hand_clear_of_the_fixture(setup, lpart, hand, puma560):
@@ -111,10 +146,9 @@ def test_insertion_keeps_the_last_hand_clear_of_the_fixture(setup, lpart, hand, 
     free, _ = end_mask(table, classes, bare, puma560, hand)
     legal, _ = end_mask(table, classes, dest, puma560, hand)
     assert legal.any() and (free & ~legal).any() and not (legal & ~free).any()
-    mesh = hand.collision_mesh(hand.jaw_max)
     for (c, t) in np.argwhere(free):
         tcp = obj @ classes[c].pose(table.theta[t])
-        assert _hits(mesh, _path(tcp, dest.approach, dest.insertion, dest.depth), dest.obstacles) == (not legal[c, t]), (c, t)
+        assert _end_hits(hand, classes[c], tcp, dest) == (not legal[c, t]), (c, t)
     pick = TaskEnd(STANDING, 0.45, -0.12, np.radians(30))
     seq = task_query(table, end_mask(table, classes, pick, puma560, hand)[0], legal, pick, dest)
     c, t = seq.grasps[-1]
@@ -163,11 +197,11 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
     assert np.allclose(np.reshape(plan["steps"][0]["object_pose"], (4, 4)), pick.object_pose(run.table), atol=1e-9)
     assert np.allclose(np.reshape(plan["steps"][-1]["object_pose"], (4, 4)), dest.object_pose(run.table), atol=1e-9)
     robot = get_robot("puma560")
-    body = hand.collision_mesh(hand.jaw_max)
     held = trimesh.Trimesh(lpart.mesh.vertices, lpart.mesh.faces, process=False)
     knots = 0
     for seg in plan["motion"]["segments"]:
         step = plan["steps"][seg["step"]]
+        body = _hand_at(hand, seg["jaw"])  # the fingers at the segment's opening
         for q in seg["q"]:
             tcp = robot.tcp_pose(np.asarray(q))
             assert not _hits(body, tcp[None], obstacles), (seg["kind"], seg["caption"])
@@ -176,6 +210,11 @@ def test_cli_task_plan_clears_the_obstacles(tmp_path, lpart, hand, capsys):
             knots += 1
     assert knots > 100
     assert doc["task"]["destination"]["insertion"] == [0.0, 0.0, -1.0] and len(doc["task"]["pickup"]["obstacles"]) == 2
+    # not stored: the same validators check the plan and its trajectory against the obstacles given
+    assert main(["gpplan", "--db", db, "--object", "L", "--pickup", f"{STANDING},0.55,-0.05,30", "--destination",
+                 "0,0.35,0.25,0", "--insert", "0,0,-1,0.02", *args, "--no-save"]) == 0
+    out = capsys.readouterr().out
+    assert "validator: ok" in out and "stored plan id" not in out, out
     # bad task input: one line each, exit 2, nothing planned
     base = ["gpplan", "--db", db, "--object", "L", "--no-motion", "--no-save"]
     ends = ["--pickup", f"{STANDING},0.55,-0.05,30", "--destination", "0,0.35,0.25,0"]
@@ -245,8 +284,8 @@ def _clear_everywhere(segs, steps, fk, nq, hand, lpart, walls) -> None:
 
     grasps = [np.linalg.inv(np.reshape(x["grasp"], (4, 4))) for x in steps]
     held = trimesh.Trimesh(lpart.mesh.vertices, lpart.mesh.faces, process=False)
-    body = hand.collision_mesh(hand.jaw_max)
     for s in segs:
+        body = _hand_at(hand, s["jaw"])  # the fingers at the segment's opening
         for x in np.reshape(s["q"], (-1, nq)):
             p = fk(x)
             assert not _hits(body, p[None], walls), (s["kind"], s["caption"])
@@ -361,7 +400,7 @@ def test_plan_starts_and_ends_in_the_hand(slot, held, lpart, hand):
     assert not report.ok and any("held" in e for e in report.errors), report.errors
 
 
-def test_reloaded_plan_keeps_its_task(slot, held, tmp_path):
+def test_reloaded_plan_keeps_its_task(slot, held, tmp_path, capsys):
     """The held plan with obstacles and an insertion, reloaded from the store in a fresh process (`gpplan --plan`):
     the same steps with their lifts, the same timed motions, both held ends, the insertion and every obstacle (the
     walls' own meshes and poses, compared with the files given); the validators rebuilt from the store accept it
@@ -408,3 +447,27 @@ def test_reloaded_plan_keeps_its_task(slot, held, tmp_path):
         assert np.allclose(np.sort(np.reshape(o["vertices"], (-1, 3)), axis=0), np.sort(w.mesh.vertices, axis=0), atol=1e-6)
     assert "joint_names" in traj.read_text() and "planobstacle" not in traj.read_text()
     assert page.stat().st_size > 10_000 and "wb-caption" in page.read_text()
+    # the store answers the same query with this plan only among the same obstacles and held ends
+    from workbench.planners.wan_harada.plans import Plan, plan_rows
+    from workbench.store import Store
+    from workbench.store.wan_harada import find_plan
+
+    same = Plan.from_dict(doc)
+    moved = Plan.from_dict(doc)
+    moved.obstacles[0].pose[0, 3] += 0.01
+    released = Plan.from_dict(doc)
+    released.end_held = False
+    found = []
+    with Store(db, read_only=True) as store:
+        for p in (same, moved, released):
+            row, _, segments = plan_rows(p)
+            found.append(find_plan(store, row, segments))
+    assert found == [idplan, None, None], found
+    # a plan that is not there, or a query beside --plan: one line, status 2
+    from workbench.cli.main import main
+
+    assert main(["gpplan", "--db", db, "--plan", "9999"]) == 2
+    assert main(["gpplan", "--db", db, "--plan", str(idplan), "--initial", "0,10"]) == 2
+    assert main(["gpplan", "--db", db, "--initial", "0,10", "--goal", "3,0:90"]) == 2  # no --object
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "has no plan 9999" in err and "--plan ID reloads" in err and "--object NAME" in err

@@ -303,6 +303,12 @@ def test_empty_hand_moves_at_the_pregrasp_opening(planner, validator, demo_resul
         elif s.kind in ("lift", "lower", "transfer"):
             assert s.jaw == pytest.approx(step.jawwidth, abs=1e-12)
     assert seen == {"approach", "retract"}
+    # the animation closes the jaw from the approach's opening and opens it to the retract's
+    frames = timed_frames(plan, segs, FK(planner), fps=30.0)
+    for k in (i for i, s in enumerate(segs) if s.kind == "gripper"):
+        pre = min(plan.steps[segs[k].step].jawwidth + 0.010, jaw_max)
+        jaws = [f["jaw"] for f in frames if f["segment"] == k]
+        assert jaws and max(jaws) <= pre + 1e-9 and min(jaws) >= plan.steps[segs[k].step].jawwidth - 1e-9, (k, jaws)
     # the validator moves the fingers: closed through the part at the first grasp they hit it, at the pre-grasp
     # opening they clear it
     first = plan.steps[0]
@@ -326,3 +332,28 @@ def test_empty_hand_moves_at_the_pregrasp_opening(planner, validator, demo_resul
                            plan.steps[s.step].jawwidth / 2 if s.kind == "approach" else s.jaw) for s in segs]
     errors, _ = validator.check(plan, narrow)
     assert any("narrower than the grasp" in e for e in errors), errors
+
+
+def test_search_prefers_central_contacts_among_equal_routes(planner):
+    """Each grip carries its grasp's stored contact robustness, and among the confirmed start/goal pairs of the best
+    cost the search returns first the pair whose less robust grasp is the most robust (brute force over the pairs)."""
+    from workbench.planners.wan_harada.search import pair_costs
+    from workbench.store import Store
+    from workbench.store.grasps import load_grasps
+
+    start, goal = choose_task(planner, 0)
+    result = planner.search(start, goal, alternatives=3)
+    s, g = result.start, result.goal
+    with Store(planner.roadmap.key[0]) as store:
+        stored = load_grasps(store, planner.ids["idobject"], None)
+    by_id = dict(zip(stored["idfreeairgrip"].tolist(), stored["robustness"].tolist()))
+    assert np.allclose(s.robust, [by_id[i] for i in s.grasp]) and np.isfinite(s.robust).all()
+    cost = pair_costs(planner.roadmap, s, g)
+    ok = (s.state == 1)[:, None] & (g.state == 1)[None, :]
+    best = cost[ok].min()
+    si, gi = np.nonzero(ok & (cost == best))
+    rob = np.round(np.minimum(s.robust[si], g.robust[gi]), 6)
+    first = result.routes[0]
+    assert cost[first.start_grip, first.goal_grip] == best
+    assert np.round(min(s.robust[first.start_grip], g.robust[first.goal_grip]), 6) == rob.max()
+    assert len(set(rob.tolist())) > 1  # the preference decides something here

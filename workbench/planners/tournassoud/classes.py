@@ -41,7 +41,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from tqdm import tqdm
 
-from workbench.params import DEG, Params, param
+from workbench.params import DEG, Params, bounds, param
 from workbench.geometry.collision import bvh, collide_at_poses, object_collider
 from workbench.geometry.objects import ObjectModel
 from workbench.planners.tournassoud.features import (
@@ -410,6 +410,14 @@ def no_class_reason(obj: ObjectModel, gripper: Gripper, params: ClassParams = Cl
     faces = faces_of(obj.mesh, params.min_face_area)
     area = f"{params.min_face_area * 1e6:.3g} mm^2"
     if len(faces) < 2:
+        planar = sorted((float(obj.mesh.area_faces[f].sum()) for f in obj.mesh.facets), reverse=True)
+        if len(planar) >= 2 and planar[1] < params.min_face_area:  # planar faces there are, only smaller
+            bound = bounds(ClassParams)["min_face_area"][0]
+            digits = 1 - int(np.floor(np.log10(planar[1])))
+            keep = np.floor(planar[1] * 0.999 * 10**digits) / 10**digits  # two digits, safely below the face's area
+            return (f"{obj.name} has {len(faces)} planar face(s) of at least {area}, and a grasp class needs a planar face "
+                    f"opposite a parallel feature; its two largest are {planar[0] * 1e6:.4g} and {planar[1] * 1e6:.4g} "
+                    f"mm^2: --min-face-area {keep:g} keeps them ({bound.describe(True)})")
         return (f"{obj.name} has {len(faces)} planar face(s) of at least {area} (a curved or scanned surface), and a "
                 f"grasp class needs a planar face opposite a parallel feature; plan its regrasps with `workbench build` "
                 f"and `workbench plan` (Wan & Harada), or lower --min-face-area")

@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from workbench.errors import PlanningError
-from workbench.grasping.grasps import PREGRASP_MARGIN
+from workbench.grasping.grasps import PREGRASP_MARGIN, pregrasp_widths
 from workbench.planners.tournassoud.chaining import (
     NoSequence,
     Sequence,
@@ -76,11 +76,15 @@ class Realiser:
     closed form for spherical-wrist arms (every branch tried as a seed), its Levenberg-Marquardt tiers from library
     seeds otherwise; its collider rejects arm or hand against the table and arm against the object. With `obstacles`
     ((mesh, world pose) pairs: a task's pick-up and destination, `task.Obstacle`), the five configurations of a
-    conjunction and every motion are also checked against them (the motion checker's)."""
+    conjunction and every motion are also checked against them (the motion checker's). The motion checker's
+    fingers are at the grasp's opening while the part is held and at its pre-grasp opening (the opening plus
+    `pregrasp_margin`, capped at the stroke; None: full opening) while the empty hand is at the part (CONVENTIONS.md,
+    Gripper)."""
 
     def __init__(self, robot: Robot, scene: Scene, obj_mesh, handx: float = 0.05, worldz: float = 0.05, seed: int = 0,
-                 worlda: float = WORLDA, obstacles: tuple = ()):
+                 worlda: float = WORLDA, obstacles: tuple = (), pregrasp_margin: float | None = PREGRASP_MARGIN):
         self.robot, self.handx, self.worldz, self.worlda = robot, handx, worldz, worlda
+        self.pregrasp_margin = pregrasp_margin
         self.obstacles = tuple(obstacles)
         self.closed = not spherical_wrist_reason(robot)
         self.opts = IKOptions(solver="auto" if self.closed else "numerical", library=8192, seed=seed, self_collide=True)
@@ -100,12 +104,18 @@ class Realiser:
                                                         opts.motion, self.obstacles))
         return self._checker[1]
 
-    def grasp_free(self, object_poses: np.ndarray, tcps: np.ndarray) -> np.ndarray:
+    def pregrasp(self, opening: float) -> float:
+        """The empty hand's jaw opening at a grasp of `opening` (m)."""
+        return float(pregrasp_widths(np.array([opening]), self.robot.gripper.jaw_max, self.pregrasp_margin)[0])
+
+    def grasp_free(self, object_poses: np.ndarray, tcps: np.ndarray, opening: float) -> np.ndarray:
         """(K,) bool, closed-form arms only: whether some IK branch of each grasp pose is within the joint limits and
         free of self-collisions, of the table and of the resting object away from the fingers (the motion checker's
         test, `robots.motion.MotionChecker.valid`). A necessary condition of `configurations`, cheap enough to sweep
-        a whole (class, placement) block of the table: the table itself (Section 5.2) checks joint limits only."""
+        a whole (class, placement) block of the table: the table itself (Section 5.2) checks joint limits only. The
+        fingers are at the pre-grasp opening of a grasp of `opening`."""
         checker = self.motion_checker(ExecOptions())
+        checker.set_jaw(self.pregrasp(opening))
         q, valid = solve(self.ik, tcps)
         out = np.zeros(len(tcps), dtype=bool)
         for k in range(len(tcps)):
@@ -128,10 +138,11 @@ class Realiser:
         return cand
 
     def configurations(self, object_pose: np.ndarray, tcp: np.ndarray, q_prev: np.ndarray | None,
-                       lift: np.ndarray | None = None) -> np.ndarray | None:
+                       lift: np.ndarray | None = None, opening: float | None = None) -> np.ndarray | None:
         """(5, n) joint vectors at the roadmap planner's five poses (grasp, handx, handxworldz, worlda, worldaworldz;
         the object held at the two lifts; with `lift`, worlda is the grasp moved by it in the world, the start of an
-        insertion), or None when no seed gives all five collision-free."""
+        insertion), or None when no seed gives all five collision-free (the fingers at the grasp's `opening` and its
+        pre-grasp opening, default full opening)."""
         poses = retract(tcp[None], self.handx, self.worldz, self.worlda)[0]  # (5, 4, 4)
         if lift is not None:
             poses[3, :3, 3] = tcp[:3, 3] + lift
@@ -148,20 +159,23 @@ class Realiser:
                 if not okk[0]:
                     break
                 out.append(q[0])
-            if len(out) == 5 and self._clear(np.stack(out), object_pose, tcp):
+            if len(out) == 5 and self._clear(np.stack(out), object_pose, tcp, opening):
                 return np.stack(out)
         return None
 
-    def _clear(self, q: np.ndarray, object_pose: np.ndarray, tcp: np.ndarray) -> bool:
-        """Whether the five configurations clear the obstacles (the part resting at the first three, held at the
-        lifts); True without obstacles."""
+    def _clear(self, q: np.ndarray, object_pose: np.ndarray, tcp: np.ndarray, opening: float | None = None) -> bool:
+        """Whether the five configurations clear the obstacles (the part resting at the first three, the fingers at
+        the pre-grasp opening; held at the lifts, at the grasp's); True without obstacles."""
         if not self.obstacles:
             return True
         checker = self.motion_checker_default()
+        jaw = self.robot.gripper.jaw_max if opening is None else opening
         checker.set_resting(object_pose, False)
+        checker.set_jaw(self.pregrasp(jaw) if opening is not None else jaw)
         if not all(checker.valid(x) for x in q[:3]):
             return False
         checker.set_holding(np.linalg.solve(object_pose, tcp))
+        checker.set_jaw(jaw)
         return all(checker.valid(x) for x in q[3:])
 
 
@@ -249,7 +263,7 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
                 obj = seq.extra[f"{end}_pose"]
                 tcp = obj @ classes[g[0]].pose(work.theta[g[1]])
                 lift = seq.extra.get(f"{end}_lift")
-            q = realiser.configurations(obj, tcp, q_prev, lift)
+            q = realiser.configurations(obj, tcp, q_prev, lift, classes[g[0]].opening)
             if q is None:
                 bad = (k, g, p)
                 break
@@ -278,13 +292,13 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
             rows_done.add((c, j))
             ts, fs = np.nonzero(work.q[c, j])
             objs = work.frame[None] @ rz(work.phi[fs]) @ work.placements[j]
-            ok = realiser.grasp_free(objs, objs @ classes[c].pose(work.theta[ts]))
+            ok = realiser.grasp_free(objs, objs @ classes[c].pose(work.theta[ts]), classes[c].opening)
             work.q[c, j, ts[~ok], fs[~ok]] = False
         elif realiser.ik is None and (c, j, t) not in rows_done:
             rows_done.add((c, j, t))
             for f2 in np.flatnonzero(work.q[c, j, t]):
                 o2, tcp2, _ = conjunction_poses(work, classes, (c, t), (j, int(f2)))
-                if realiser.configurations(o2, tcp2, None) is None:
+                if realiser.configurations(o2, tcp2, None, opening=classes[c].opening) is None:
                     work.q[c, j, t, f2] = False
         work._matrix = None
         if log is not None:
@@ -332,6 +346,7 @@ def _flood(work: GraspPlacementTable, classes: list[GraspClass], realiser: Reali
     block[t, f] = False
     checker = realiser.motion_checker_default()
     g = classes[c]
+    checker.set_jaw(realiser.pregrasp(g.opening))
 
     def needs_switch(ti: int, fi: int) -> bool:
         obj = work.object_pose(j, work.phi[fi])
@@ -458,7 +473,7 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
     vlim = np.asarray(robot.model.velocityLimit, dtype=np.float64)
     t0 = time.perf_counter()
     res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz,
-                             plan.start_held, plan.end_held, pregrasp_margin=PREGRASP_MARGIN)
+                             plan.start_held, plan.end_held, pregrasp_margin=realiser.pregrasp_margin)
     if res.ok:
         for st, ln in zip(plan.steps, lines):
             st.q_retract, st.q_approach, st.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp

@@ -181,13 +181,7 @@ def _robot(row: dict, gripper: Gripper | None = None) -> Robot:
 def plan_validator(db: str, run: TableRun, scene: Scene) -> PlanValidator:
     """The independent plan validator rebuilt from the store's rows of this table (robot, object, gripper) and the
     scene's table; the placement classes are the stable placements it checks start and goal poses against."""
-    with Store(db, read_only=True) as store:
-        _, obj = object_row(store, run.obj.name)
-        r = robot_row(store, sql.table_robot(store, run.idtable))
-        g = gripper_row(store, sql.gripper_id(store, run.gripper.digest))
-    rows = {"robot": r, "object": obj, "gripper": g,
-            "scene": StoredScene(idscene=0, scene=scene, ik=IKOptions(), robot={})}
-    return validator_from_rows(rows, free_poses=dict(enumerate(run.table.placements)))
+    return _validators(db, run, None, scene=scene)[0]
 
 
 def _grasp_columns(run: TableRun, plan: Plan) -> dict[str, np.ndarray]:
@@ -261,30 +255,37 @@ def stored_validator(db: str, run: TableRun, idplan: int) -> PlanValidator:
     return _validators(db, run, idplan)[0]
 
 
-def _validators(db: str, run: TableRun, idplan: int, acc=None,
-                obstacles: tuple = ()) -> tuple[PlanValidator, TrajectoryValidator | None]:
+def _validators(db: str, run: TableRun, idplan: int | None, acc=None, obstacles: tuple = (),
+                scene: Scene | None = None) -> tuple[PlanValidator, TrajectoryValidator | None]:
+    """The validators of a stored plan (its scene, the table's `freetabletopplacement` rows), or with `idplan` None
+    of a plan not stored (`scene`, the table's placement classes by index)."""
     with Store(db, read_only=True) as store:
         _, obj = object_row(store, run.obj.name)
         r = robot_row(store, sql.table_robot(store, run.idtable))
         g = gripper_row(store, sql.gripper_id(store, run.gripper.digest))
-        free = sql.stored_placements(store, run.idtable)
-        scene = scene_row(store, sql.plan_scene(store, idplan))
-    rows = {"robot": r, "object": obj, "gripper": g, "scene": scene}
+        if idplan is None:
+            free = dict(enumerate(run.table.placements))
+            stored = StoredScene(idscene=0, scene=scene, ik=IKOptions(), robot={})
+        else:
+            free = sql.stored_placements(store, run.idtable)
+            stored = scene_row(store, sql.plan_scene(store, idplan))
+    rows = {"robot": r, "object": obj, "gripper": g, "scene": stored}
     pv = validator_from_rows(rows, free_poses=free)
     return pv, (None if acc is None else trajectory_validator_from_rows(rows, pv, acc, obstacles))
 
 
-def validate_stored(db: str, run: TableRun, idplan: int, plan: Plan, require_motion: bool = False,
-                    obstacles: tuple | None = None) -> ValidationReport:
+def validate_stored(db: str, run: TableRun, idplan: int | None, plan: Plan, require_motion: bool = False,
+                    obstacles: tuple | None = None, scene: Scene | None = None) -> ValidationReport:
     """A stored plan (with the store's ids, as `save_plan` returns it or `load_stored` reloads it) checked like the
     roadmap planner's plans (`wan_harada.planner.Planner.validate`): its waypoints, and its timed trajectory when it
     has one (required with `require_motion`), by the independent validators rebuilt from the store's rows, the
-    trajectory also against the task's `obstacles` ((mesh, world pose) pairs; default the plan's own)."""
+    trajectory also against the task's `obstacles` ((mesh, world pose) pairs; default the plan's own). With
+    `idplan` None, a plan not stored (its table-local ids) in `scene`."""
     obstacles = plan.obstacle_pairs() if obstacles is None else obstacles
     acc = None
     if plan.segments:
         acc = np.broadcast_to(np.asarray(plan.acc or DEFAULT_ACC, dtype=np.float64), (len(plan.joint_names),))
-    pv, tv = _validators(db, run, idplan, acc, obstacles)
+    pv, tv = _validators(db, run, idplan, acc, obstacles, scene)
     report = pv.check(plan)
     if tv is not None:
         errors, knots = tv.check(plan, plan.segments)

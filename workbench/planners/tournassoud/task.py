@@ -17,8 +17,10 @@ joint limits (Section 5.2, closed form; the numerical IK otherwise), and the han
 - along the insertion (the destination), at every 2 mm of the sweep from `depth` back along the insertion
   direction to the final pose;
 
-the hand body and both fingers at full opening throughout, as the motion checker models the hand (`robots.motion`),
-so that a grasp legal here is one its motions can use.
+the hand body and both fingers at the pre-grasp opening (the class's opening plus `pregrasp_margin`, capped at the
+stroke; None: full opening) at the grasp and along the approach or retract, and at the grasp's opening along the
+insertion (the part in the hand), as the motion checker places the fingers (`robots.motion`), so that a grasp legal
+here is one its motions can use.
 
 The chaining then starts from the (C, T) set of legal grasps at the pick-up and ends in the set legal at the
 destination (`task_query`): the theta ranges of the first and last grasps come from the obstacles, not from the user.
@@ -40,6 +42,7 @@ import trimesh
 
 from workbench.errors import WorkbenchError
 from workbench.geometry.collision import bvh, collide_at_poses, object_collider
+from workbench.grasping.grasps import PREGRASP_MARGIN, pregrasp_widths
 from workbench.planners.tournassoud.chaining import NoSequence, Sequence, _pick2, _through, chain, nearest_sample
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable, reachable, rz
@@ -129,8 +132,8 @@ def _sweeps(grasps: np.ndarray, end: TaskEnd) -> tuple[np.ndarray, np.ndarray]:
     return app, ins
 
 
-def end_mask(table: GraspPlacementTable, classes: list[GraspClass], end: TaskEnd, robot: Robot,
-             gripper: Gripper) -> tuple[np.ndarray, dict[str, int]]:
+def end_mask(table: GraspPlacementTable, classes: list[GraspClass], end: TaskEnd, robot: Robot, gripper: Gripper,
+             pregrasp_margin: float | None = PREGRASP_MARGIN) -> tuple[np.ndarray, dict[str, int]]:
     """(C, T) bool: the grasps legal at this end (see the module docstring), and how many legal-on-the-part samples
     each test refused ("table", "ik", "obstacles")."""
     c_n, t_n = table.hand_object.shape
@@ -146,10 +149,15 @@ def end_mask(table: GraspPlacementTable, classes: list[GraspClass], end: TaskEnd
     if end.obstacles and len(ci):
         targets = [object_collider(o.mesh, o.pose) for o in end.obstacles]
         app, ins = _sweeps(tcp, end)
-        hand = bvh(gripper.collision_mesh(gripper.jaw_max))
+        hands: dict[int, tuple] = {}  # per class: the hand at the pre-grasp opening and at the grasp's
         for k in range(len(ci)):
-            poses = np.concatenate([app[k], ins[k]])
-            free[k] = not any(collide_at_poses(hand, poses, target).any() for target in targets)
+            c = int(ci[k])
+            if c not in hands:
+                w = classes[c].opening
+                pre = float(pregrasp_widths(np.array([w]), gripper.jaw_max, pregrasp_margin)[0])
+                hands[c] = (bvh(gripper.collision_mesh(pre)), bvh(gripper.collision_mesh(min(w, gripper.jaw_max))))
+            free[k] = not any(collide_at_poses(hands[c][0], app[k], target).any() or
+                              collide_at_poses(hands[c][1], ins[k], target).any() for target in targets)
     counts["obstacles"] = int((~free).sum())
     out = np.zeros((c_n, t_n), dtype=bool)
     out[ci[free], ti[free]] = True

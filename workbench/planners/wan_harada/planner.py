@@ -133,7 +133,8 @@ class Planner:
         n = len(rows)
         return Side(label=label, query=query, pose=pose, grasp=grasp, tcp=tcp, jawwidth=np.asarray(self.ftg["jawwidth"])[rows],
                     rindex=self.roadmap.grasp_index(grasp), state=np.zeros(n, dtype=np.int8),
-                    joints=np.full((n, len(KINDS), self.robot.nq), np.nan), prior=self.prior(query, grasp))
+                    joints=np.full((n, len(KINDS), self.robot.nq), np.nan), prior=self.prior(query, grasp),
+                    robust=np.asarray(self.ftg["robustness"])[rows] if "robustness" in self.ftg else None)
 
     def prior(self, query: PoseQuery, grasp: np.ndarray, k: int = 4) -> np.ndarray:
         """For each grasp at a query pose, the share of the `k` nearest grid placements of the same stable placement

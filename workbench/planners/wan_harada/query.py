@@ -228,7 +228,9 @@ class Side:
     """The grips of a start or goal pose: free-air grasp ids, TCP poses in the world, jaw widths, roadmap grasp index
     (-1 when the grasp has no roadmap node), IK state (0 unknown, 1 feasible, -1 infeasible, -2 not solved from the
     nearest stored solution, the fall-back seeds still untried), joints (NaN where unsolved), and `prior`:
-    the share of the nearest grid placements where the same grasp is IK-feasible (evaluation order only)."""
+    the share of the nearest grid placements where the same grasp is IK-feasible (evaluation order only), and
+    `robust`: each grasp's contact robustness (1 at the pads' centres, 0 at an edge; NaN unknown), which orders
+    routes of equal cost."""
 
     label: str
     query: PoseQuery
@@ -240,6 +242,7 @@ class Side:
     state: np.ndarray
     joints: np.ndarray
     prior: np.ndarray | None = None
+    robust: np.ndarray | None = None
 
     @property
     def n_feasible(self) -> int:

@@ -87,7 +87,7 @@ def search(roadmap: Roadmap, start: Side, goal: Side, evaluate: Callable[[list[t
     unknown grip left; it ends when a confirmed pair costs no more than any unsettled one, so the best cost is the
     same as evaluating every grip first (`lazy=False`). Phase B gathers alternatives (at most one regrasp above the
     best) from tier 1 only, until `1 + alternatives` pairs are confirmed. Routes come best first: cost, then the
-    pair's order."""
+    robustness of the pair's contacts (`_robustness`, central contacts first), then the pair's order."""
     timings = {"connect": 0.0, "search": 0.0}
     want = 1 + max(0, int(alternatives))
     t0 = time.perf_counter()
@@ -142,10 +142,21 @@ def search(roadmap: Roadmap, start: Side, goal: Side, evaluate: Callable[[list[t
     if len(si):  # alternatives: at most one regrasp more than the best
         near = cost[si, gi] <= cost[si, gi].min() + 1
         si, gi = si[near], gi[near]
-    order = np.lexsort((gi, si, cost[si, gi]))[:want]
+    order = np.lexsort((gi, si, -_robustness(start, goal, si, gi), cost[si, gi]))[:want]
     routes = [route(roadmap, start, goal, int(si[k]), int(gi[k])) for k in order]
     timings["search"] += time.perf_counter() - t
     return SearchResult(routes=routes, start=start, goal=goal, timings=timings, rounds=rounds)
+
+
+def _robustness(start: Side, goal: Side, si: np.ndarray, gi: np.ndarray) -> np.ndarray:
+    """The less robust contact grasp of each (start grip, goal grip) pair (0 where unknown), rounded so that the
+    order does not hang on the last bits: among routes of equal cost the search prefers central contacts."""
+    def of(side: Side, idx: np.ndarray) -> np.ndarray:
+        if side.robust is None:
+            return np.zeros(len(idx))
+        return np.nan_to_num(np.asarray(side.robust, dtype=np.float64)[idx], nan=0.0)
+
+    return np.round(np.minimum(of(start, si), of(goal, gi)), 6)
 
 
 def route(roadmap: Roadmap, start: Side, goal: Side, s: int, g: int) -> Route:

@@ -1,0 +1,54 @@
+"""Grasps of a full-resolution mesh (over 400,000 triangles) hold against that mesh, checked with coal."""
+
+from __future__ import annotations
+
+import coal
+import numpy as np
+import trimesh
+
+from workbench.geometry.objects import from_trimesh, load_object
+from workbench.grasping.grasps import GraspParams, plan_grasps
+from workbench.resources import bundled_objects
+
+
+def _full_resolution_tube() -> trimesh.Trimesh:
+    """The bundled tube subdivided to 433,152 triangles: the same surface at a scan's resolution."""
+    m = load_object(bundled_objects()["tube"]).mesh
+    for _ in range(4):
+        m = m.subdivide()
+    return m
+
+
+def _coal_mesh(mesh: trimesh.Trimesh) -> coal.CollisionObject:
+    model = coal.BVHModelOBBRSS()
+    model.beginModel(len(mesh.faces), len(mesh.vertices))
+    model.addVertices(np.asarray(mesh.vertices, dtype=np.float64))
+    model.addTriangles(np.asarray(mesh.faces, dtype=np.int64))
+    model.endModel()
+    return coal.CollisionObject(model, coal.Transform3s())
+
+
+def test_full_resolution_grasps_touch_and_clear_the_full_mesh(hand):
+    mesh = _full_resolution_tube()
+    assert len(mesh.faces) > 400_000
+    params = GraspParams(rotations=4)
+    plan = plan_grasps(from_trimesh(mesh, "scan"), hand, params)
+    g = plan.grasps
+    assert len(g) >= 50
+    target = _coal_mesh(mesh)
+    dreq, creq = coal.DistanceRequest(), coal.CollisionRequest()
+    probe = coal.CollisionObject(coal.Sphere(1e-7), coal.Transform3s())
+    for k in np.linspace(0, len(g) - 1, 60).astype(int):
+        # both contacts lie on the full mesh (within 0.1 mm)
+        for c in (g.contact0[k], g.contact1[k]):
+            probe.setTranslation(np.asarray(c, dtype=np.float64))
+            assert coal.distance(probe, target, dreq, coal.DistanceResult()) <= 1e-4
+        # the contacts are the pads' first touches: on the jaw axis's two sides, the opening their distance along it
+        y = g.poses[k, :3, 1]
+        assert abs((g.contact0[k] - g.contact1[k]) @ y - g.jawwidth[k]) < 2e-6  # each pad picks within its 1e-6 m tie
+        # no finger box at the grasp's opening, shrunk by the finger clearance, enters the full mesh
+        for ext, pose in hand.finger_poses(float(g.jawwidth[k])):
+            box = coal.CollisionObject(coal.Box(*np.maximum(np.asarray(ext) - 2 * params.finger_clearance, 1e-6)))
+            world = g.poses[k] @ pose
+            box.setTransform(coal.Transform3s(world[:3, :3], world[:3, 3]))
+            assert not coal.collide(box, target, creq, coal.CollisionResult())
