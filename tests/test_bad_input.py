@@ -873,7 +873,7 @@ def test_ctrl_c_during_gptable(work, tmp_path):
     assert_interrupted(res, "gptable")
 
 
-@pytest.mark.parametrize("delay", [0.3, 0.6])
+@pytest.mark.parametrize("delay", [0.1, 0.3, 0.6])
 def test_ctrl_c_while_modules_load(work, tmp_path, delay):
     """A Ctrl-C in the first second, while the command imports scipy and the planners (a library that catches
     everything there would swallow it): the command still stops, with one line and exit 130."""

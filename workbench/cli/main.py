@@ -16,6 +16,13 @@ import sys
 import threading
 import warnings
 
+try:  # the slow part of loading the command line (under load a second or more): a Ctrl-C in it has started nothing
+    import numpy  # noqa: F401
+except KeyboardInterrupt:
+    _name = next((a for a in sys.argv[1:] if not a.startswith("-")), "")
+    sys.stderr.write(f"workbench {_name}: interrupted; the store keeps only completed stages\n".replace("  ", " "))
+    raise SystemExit(130) from None
+
 from workbench.errors import WorkbenchError
 from workbench.params import BUDGET_ENV, WAIT_ENV, check_workers, cli_bound, parse_number, parse_size
 

@@ -16,13 +16,22 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from workbench.geometry._hullkernel import group_faces
 
-def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float) -> tuple[list[np.ndarray], np.ndarray]:
-    """Groups of hull faces (lists of face ids, largest seed first) and their area-weighted outward unit normals."""
+
+def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float,
+                    walk_above: int = 20_000) -> tuple[list[np.ndarray], np.ndarray]:
+    """Groups of hull faces (lists of face ids, largest seed first) and their area-weighted outward unit normals.
+    A hull of more than `walk_above` faces (a smooth full-resolution scan's) is grouped by walking its edges from
+    each seed (`_hullkernel.group_faces`), the same groups at a cost that follows their sizes."""
     normals = np.asarray(hull.face_normals)
     areas = np.asarray(hull.area_faces)
     tri = np.asarray(hull.triangles)
     order = np.lexsort((np.arange(len(areas)), -areas))
+    if len(areas) > walk_above:
+        groups = _walked_groups(hull, normals, order, distance, angle)
+        wn = np.array([(normals[g] * areas[g, None]).sum(axis=0) for g in groups]).reshape(-1, 3)
+        return groups, wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300)
     free = np.ones(len(areas), dtype=bool)
     cos_a = np.cos(angle)
     groups = []
@@ -52,6 +61,23 @@ def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float) -> tup
     wn = np.array([(normals[g] * areas[g, None]).sum(axis=0) for g in groups]).reshape(-1, 3)
     wn /= np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300)
     return groups, wn
+
+
+def _walked_groups(hull: trimesh.Trimesh, normals: np.ndarray, order: np.ndarray, distance: float,
+                   angle: float) -> list[np.ndarray]:
+    faces = np.asarray(hull.faces, dtype=np.int64)
+    nv = len(hull.vertices)
+    e = np.asarray(hull.edges_unique, dtype=np.int64)
+    src, dst = np.concatenate([e[:, 0], e[:, 1]]), np.concatenate([e[:, 1], e[:, 0]])
+    k = np.argsort(src, kind="stable")
+    v_ptr, v_adj = np.searchsorted(src[k], np.arange(nv + 1)), dst[k]
+    fv = faces.ravel()
+    k = np.argsort(fv, kind="stable")
+    f_ptr, f_idx = np.searchsorted(fv[k], np.arange(nv + 1)), k // 3
+    label = group_faces(np.asarray(hull.vertices, dtype=np.float64), faces, np.ascontiguousarray(normals), order,
+                        v_ptr, v_adj, f_ptr, f_idx, float(distance), float(np.cos(angle)))
+    k = np.argsort(label, kind="stable")
+    return np.split(k, np.cumsum(np.bincount(label, minlength=int(label.max()) + 1))[:-1])
 
 
 def support_stability(points: np.ndarray, com: np.ndarray, normal: np.ndarray) -> float:

@@ -119,10 +119,18 @@ def fingertip_shifts(vertices: np.ndarray, poses: np.ndarray, gripper: Gripper, 
     """
     _, cz, _, hz = pad_rectangle(gripper)
     tip = cz + hz
-    extent = np.einsum("hj,vj->hv", poses[:, :3, 2], vertices).max(axis=1) - np.einsum("hj,hj->h", poses[:, :3, 2],
-                                                                                       poses[:, :3, 3])
+    extent = _farthest(poses[:, :3, 2], vertices) - np.einsum("hj,hj->h", poses[:, :3, 2], poses[:, :3, 3])
     d = tip - extent + margin
     return np.where((d > 0) & (d <= tip - min_contact), d, np.nan)
+
+
+def _farthest(directions: np.ndarray, vertices: np.ndarray, dense: int = 10_000_000) -> np.ndarray:
+    """The largest extent (H,) of `vertices` (V, 3) along each direction (H, 3). Above `dense` direction-vertex
+    pairs (a full-resolution scan's hull) as matrix products in blocks of about `dense` pairs."""
+    if len(directions) * len(vertices) <= dense:
+        return np.einsum("hj,vj->hv", directions, vertices).max(axis=1)
+    step = max(1, dense // max(len(vertices), 1))
+    return np.concatenate([(directions[i:i + step] @ vertices.T).max(axis=1) for i in range(0, len(directions), step)])
 
 
 def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, angles: np.ndarray,

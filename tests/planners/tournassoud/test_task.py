@@ -447,6 +447,22 @@ def test_reloaded_plan_keeps_its_task(slot, held, tmp_path, capsys):
         assert np.allclose(np.sort(np.reshape(o["vertices"], (-1, 3)), axis=0), np.sort(w.mesh.vertices, axis=0), atol=1e-6)
     assert "joint_names" in traj.read_text() and "planobstacle" not in traj.read_text()
     assert page.stat().st_size > 10_000 and "wb-caption" in page.read_text()
+    # the store answers the same query with this plan only among the same obstacles and held ends
+    from workbench.planners.wan_harada.plans import Plan, plan_rows
+    from workbench.store import Store
+    from workbench.store.wan_harada import find_plan
+
+    same = Plan.from_dict(doc)
+    moved = Plan.from_dict(doc)
+    moved.obstacles[0].pose[0, 3] += 0.01
+    released = Plan.from_dict(doc)
+    released.end_held = False
+    found = []
+    with Store(db, read_only=True) as store:
+        for p in (same, moved, released):
+            row, _, segments = plan_rows(p)
+            found.append(find_plan(store, row, segments))
+    assert found == [idplan, None, None], found
     # a plan that is not there, or a query beside --plan: one line, status 2
     from workbench.cli.main import main
 
