@@ -33,7 +33,7 @@ demo: $(RUNTIME)
 	$(BIN)/workbench demo --out build/demo
 
 test: $(TESTDEPS)
-	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --nbmake tests notebooks
+	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --durations=25 --nbmake tests notebooks
 
 # The documentation site, into build/site; --strict turns a broken link or a public function without a docstring
 # into a failure.
