@@ -104,11 +104,14 @@ def build_parser(argv: list[str] | None = None, full: bool = False) -> argparse.
 
 
 class _CtrlC:
-    """SIGINT raises KeyboardInterrupt, as Python's default does, and is remembered: a library that swallows the
-    exception (some catch everything while they import) cannot make a Ctrl-C'd command end as if it had finished."""
+    """While the command's modules load, SIGINT is only noted, so no KeyboardInterrupt lands inside an extension's
+    import or in a library that catches everything there (trimesh does); `loaded()` then stops a noted Ctrl-C. After
+    that SIGINT raises KeyboardInterrupt, as Python's default does, and is still noted: a library that swallows it
+    cannot make a Ctrl-C'd command end as if it had finished."""
 
     def __init__(self) -> None:
         self.seen = False
+        self.loading = True
         self.old = None
 
     def __enter__(self) -> "_CtrlC":
@@ -118,7 +121,14 @@ class _CtrlC:
 
     def _handle(self, signum, frame) -> None:
         self.seen = True
-        raise KeyboardInterrupt
+        if not self.loading:
+            raise KeyboardInterrupt
+
+    def loaded(self) -> None:
+        """The modules are loaded: a Ctrl-C noted meanwhile raises KeyboardInterrupt now, and later ones at once."""
+        self.loading = False
+        if self.seen:
+            raise KeyboardInterrupt
 
     def __exit__(self, *exc) -> None:
         if self.old is not None:
@@ -138,16 +148,15 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str] | None, ctrl_c: _CtrlC) -> int:
     try:
-        args = build_parser(argv).parse_args(argv)
+        parser = build_parser(argv)
+        ctrl_c.loaded()
+        args = parser.parse_args(argv)
     except SystemExit as exc:  # argparse: --help (0) or a refused option (2, one line already printed)
         return exc.code if isinstance(exc.code, int) else 0
     except KeyboardInterrupt:  # Ctrl-C while the command's modules load: nothing started yet
         name = _selected(sys.argv[1:] if argv is None else argv) or ""
         print(f"workbench {name}: interrupted; the store keeps only completed stages".replace("  ", " "), file=sys.stderr)
         return 130
-
-    if ctrl_c.seen:  # a Ctrl-C swallowed while the command's modules loaded: stop before it starts
-        return 0
 
     def one_line(message, category, *_args, **_kwargs) -> None:  # warnings: one line each, no source excerpt
         print(f"workbench {args.command}: warning: {message}", file=sys.stderr)
