@@ -117,6 +117,17 @@ def test_rerun_reuses_and_interrupted_run_resumes(stored, tmp_path, panda, monke
         again = run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=run.idtabletop)
         reference = sql.load_ik(store, run.idrobot, run.idscene, run.idikret)
     assert again.reused and again.computed == 0 and again.feasible == run.feasible
+    # a new revision of a solver these rows do not use changes nothing; of the one they use, they are computed again
+    from workbench.robots import solvers
+
+    for kind, reused in (("three parallel axes", True), ("numerical", False)):
+        monkeypatch.setitem(solvers.REVISIONS, kind, solvers.REVISIONS[kind] + 1)
+        with Store(db) as store:
+            bumped = run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False,
+                            idtabletop=run.idtabletop)
+        assert bumped.reused == reused and bumped.computed == (0 if reused else run.grips)
+        assert (bumped.idscene == run.idscene) == reused and bumped.feasible == run.feasible
+    monkeypatch.undo()
 
     # interrupt after the first chunk is written, then resume: the same rows as the uninterrupted run
     db2 = tmp_path / "resume.duckdb"

@@ -46,6 +46,7 @@ from tqdm.auto import tqdm
 
 from workbench.errors import ParameterError, RobotError
 from workbench.params import Params, param
+from workbench.robots._closedkernel import branch_order
 from workbench.robots.analytic import branch_distances
 from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
@@ -314,6 +315,7 @@ class IKSolver:
         self.unlimited = closed_form(robot, limits=False) if self.analytic is not None and robot.nq > 6 else None
         self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)
+        self._wrap = bool((robot.upper - robot.lower > 2 * np.pi).any())  # a joint spanning more than a turn
 
     def for_object(self, obj_mesh: trimesh.Trimesh | None) -> IKSolver:
         """This solver for another object: its own collider, the same robot, seed library (the library keeps the seeds
@@ -359,8 +361,10 @@ class IKSolver:
         m, n = len(targets), self.robot.nq
         joints, valid = self.analytic.solve(targets)
         ref = np.where(np.isfinite(q0), q0, 0.0) if q0 is not None else np.zeros((m, n))
-        joints, dist = branch_distances(joints, valid, ref, self.robot.lower, self.robot.upper)
-        rank = np.argsort(dist, axis=1, kind="stable")
+        dist = np.empty(valid.shape)
+        rank = np.empty(valid.shape, dtype=np.int64)
+        branch_order(joints, valid, np.ascontiguousarray(ref, dtype=np.float64), self.robot.lower, self.robot.upper,
+                     self._wrap, dist, rank)
         q = np.full((m, n), np.nan)
         ok = np.zeros(m, dtype=bool)
         left = np.flatnonzero(np.isfinite(dist).any(axis=1))

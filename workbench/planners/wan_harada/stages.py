@@ -39,6 +39,7 @@ from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import WORLDA, IKOptions, diagnose_unreachable, iter_ik, solver_kind
 from workbench.robots.model import ROBOTS, Robot, RobotSpec, builtin_robot, get_robot
 from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
+from workbench.robots.solvers import revision as solver_revision
 from workbench.robots.timing import TimedSegment, Trajectory
 from workbench.store import Store
 from workbench.store import robots as robot_sql
@@ -398,7 +399,8 @@ class IKRun:
 
 def scene_params(robot: Robot, scene: Scene, opts: IKOptions) -> dict:
     """Everything besides the robot row and the grips that changes the `ik` rows (stored in `scene.params`)."""
-    return {**scene.as_dict(), "ik": opts.as_dict(), "ik_solver": solver_kind(robot, opts), "home": robot.home().tolist(),
+    return {**scene.as_dict(), "ik": opts.as_dict(), "ik_solver": solver_kind(robot, opts),
+            "ik_revision": solver_revision(robot, numerical=opts.solver == "numerical"), "home": robot.home().tolist(),
             "robot": {"locked": {k: v for k, v in robot.spec.locked}, "drop_geometry": list(robot.spec.drop_geometry),
                       "gripper": robot.gripper.digest}}
 
