@@ -10,6 +10,7 @@ from scipy.spatial import cKDTree
 
 from workbench.benchmarks import median_time, print_table
 from workbench.benchmarks.graspcheck import CHECKS, check_grasps, failures
+from workbench.benchmarks.pregrasp import run as mug_table
 from workbench.benchmarks.organic import ORGANIC, blob, min_width
 from workbench.benchmarks.paper import TABLE_I, bench_objects
 from workbench.geometry.objects import from_trimesh
@@ -40,8 +41,6 @@ def run(args: argparse.Namespace) -> int:
     if args.set == "scale":
         return _scale(args)
     if args.set == "mug":
-        from workbench.benchmarks.pregrasp import run as mug_table
-
         return mug_table(args)
     return _organic(args) if args.set == "organic" else _paper(args)
 
