@@ -341,6 +341,17 @@ def test_bad_input_is_one_line_and_status_2(parts, tmp_path, args, message):
     assert code == 2 and message in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1, err.getvalue()
 
 
+def test_missing_part_file_is_refused_before_a_cluster_starts(tmp_path, monkeypatch):
+    import workbench.cli.catalog as cli
+
+    monkeypatch.setattr(cli, "cluster_client", None)  # calling it would raise: the check must come first
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        code = main(["catalog", "build", str(tmp_path / "nosuch.stl"), "--robots", "panda", "--db", str(tmp_path / "x.duckdb")])
+    assert code == 2 and "no such part file or folder" in err.getvalue() and len(err.getvalue().strip().splitlines()) == 1
+    assert not (tmp_path / "x.duckdb").exists()
+
+
 def test_report_of_a_store_without_catalogue(tmp_path):
     Store(tmp_path / "plain.duckdb").close()
     assert main(["catalog", "report", "--db", str(tmp_path / "plain.duckdb")]) == 2

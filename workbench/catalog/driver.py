@@ -110,8 +110,10 @@ class CatalogResult:
 
 def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> list[tuple[Path, float | None]]:
     """(mesh file, scale or None) for mesh files given directly or found (not recursively) in the given folders,
-    sorted within each folder; an entry may be a (path, scale) pair to override the build's scale for it."""
+    sorted within each folder; an entry may be a (path, scale) pair to override the build's scale for it. A path that
+    does not exist is refused (before any cluster starts)."""
     out: list[tuple[Path, float | None]] = []
+    missing: list[Path] = []
     for item in paths:
         p, scale = (Path(item[0]), float(item[1])) if isinstance(item, tuple) else (Path(item), None)
         if p.is_dir():
@@ -119,8 +121,13 @@ def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> lis
             if not found:
                 raise CatalogError(f"folder {p} holds no mesh files ({', '.join(MESH_SUFFIXES)})")
             out.extend((q, scale) for q in found)
+        elif p.is_file():
+            out.append((p, scale))  # a broken file is reported as that part's failure
         else:
-            out.append((p, scale))  # a missing or broken file is reported as that part's failure
+            missing.append(p)
+    if missing:
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise CatalogError(f"no such part file or folder: {', '.join(map(str, missing[:3]))}{more}")
     if not out:
         raise CatalogError("no parts given: pass mesh files or folders of them")
     stems = [p.stem for p, _ in out]
