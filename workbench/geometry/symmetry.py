@@ -13,7 +13,6 @@ given no symmetry: its principal axes are not determined by its inertia.
 
 from __future__ import annotations
 
-import hashlib
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +22,6 @@ DEFAULT_TOL = 5e-4  # m: how far the turned mesh may lie from the mesh (a tessel
 EQUAL_MOMENTS = 1e-3  # relative difference under which two principal moments count as equal
 REVOLUTION_ANGLES = np.radians([7.0, 31.0, 97.0, 151.0])
 ORDERS = range(12, 1, -1)
-_CACHE: dict[tuple[str, float], Symmetry] = {}
 
 
 @dataclass(frozen=True)
@@ -65,15 +63,7 @@ def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
 
 def part_symmetry(mesh: trimesh.Trimesh, tol: float = DEFAULT_TOL) -> Symmetry:
     """The rotational symmetry of a watertight `mesh` (part frame, metres), within `tol` (see the module
-    docstring); cached by the mesh's vertices and faces."""
-    key = (hashlib.sha256(np.ascontiguousarray(mesh.vertices).tobytes()
-                          + np.ascontiguousarray(mesh.faces).tobytes()).hexdigest(), float(tol))
-    if key not in _CACHE:
-        _CACHE[key] = _find(mesh, tol)
-    return _CACHE[key]
-
-
-def _find(mesh: trimesh.Trimesh, tol: float) -> Symmetry:
+    docstring; under a second for the bundled parts)."""
     centre = np.asarray(mesh.center_mass, dtype=np.float64)
     moments, axes = np.linalg.eigh(np.asarray(mesh.moment_inertia, dtype=np.float64))
     scale = max(float(np.abs(moments).max()), 1e-30)

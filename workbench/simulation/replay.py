@@ -197,11 +197,13 @@ def _finger_targets(segments) -> list[float]:
 
 
 def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.ndarray, np.ndarray]],
-             params: SimParams = SimParams(), self_pairs: list[tuple[str, str]] | None = None) -> SimResult:
+             params: SimParams = SimParams(), self_pairs: list[tuple[str, str]] | None = None,
+             symmetry: Symmetry | None = None) -> SimResult:
     """Replay `plan` (a timed Plan: steps and segments) with `robot` (its Robot, whose gripper is the planning
     gripper), the part's `mesh` and convex `hulls`, on `scene`'s table, with the plan's grasp `friction` unless
     `params.friction` overrides it; `self_pairs`: the robot's link pairs that may collide (the stored robot's
-    `AllowedPairs.checked`); see the module docstring for the verdict."""
+    `AllowedPairs.checked`); `symmetry`: the mesh's (`part_symmetry`, found here when not given); see the module
+    docstring for the verdict."""
     mujoco = mujoco_module()
     if not plan.segments:
         raise SimulationError("the plan has no timed motions to simulate; plan it with its motions")
@@ -283,7 +285,7 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
         raise SimulationError(f"the physics diverged (timestep {dt:g} s); give a smaller --timestep")
     part = _poses(part_pos, part_quat)
     hand = _poses(hand_pos, hand_quat)
-    sym = part_symmetry(mesh)
+    sym = symmetry if symmetry is not None else part_symmetry(mesh)
     rows, failures, final = _verdict(plan, robot, segs, times, seg_end, part, hand, touching, ss.part_com, params, start,
                                      sym)
     failures += _collisions(hit, m, ss, plan, segs, seg_of, times, params)
