@@ -230,6 +230,13 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows) -> Touch
                    point1=res[-1][1], normal1=res[-1][2], tri1=res[-1][3], window=window)
 
 
+def triangle_tree(mesh: trimesh.Trimesh) -> tuple:
+    """The triangle hierarchy of `mesh` (`_padkernel.triangle_bvh`), built once per mesh: the pads' first touches and
+    the hand's collision checks (`grasps.hand_hits`) share it."""
+    return _tree(mesh, np.ascontiguousarray(mesh.triangles, dtype=np.float64),
+                 np.ascontiguousarray(mesh.face_normals, dtype=np.float64))
+
+
 def _tree(mesh: trimesh.Trimesh, tri: np.ndarray, normals: np.ndarray):
     """The triangle hierarchy of `mesh` (`_padkernel.triangle_bvh`), built once per mesh."""
     tree = mesh._cache["workbench_pad_bvh"]  # trimesh's cache: dropped when the mesh changes
