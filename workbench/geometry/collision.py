@@ -42,9 +42,18 @@ def collide_at_poses(geometry: fcl.CollisionGeometry, poses: np.ndarray, target:
     return out
 
 
+def mesh_bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
+    """The fcl BVH of `mesh`, built once per mesh and kept in its trimesh cache (dropped when the mesh changes): a
+    full-resolution part's hierarchy takes seconds to build, and every stage that collides with it shares one."""
+    model = mesh._cache["workbench_fcl_bvh"]
+    if model is None:
+        model = mesh._cache["workbench_fcl_bvh"] = bvh(mesh)
+    return model
+
+
 def object_collider(mesh: trimesh.Trimesh, pose: np.ndarray | None = None) -> fcl.CollisionObject:
-    """The object as an fcl collision object at `pose` (identity by default)."""
-    obj = fcl.CollisionObject(bvh(mesh))
+    """The object as an fcl collision object at `pose` (identity by default), on its cached BVH (`mesh_bvh`)."""
+    obj = fcl.CollisionObject(mesh_bvh(mesh))
     if pose is not None:
         obj.setTransform(fcl.Transform(pose[:3, :3], pose[:3, 3]))
     return obj
@@ -104,18 +113,4 @@ def cylinders_collide(radius: float, lengths: np.ndarray, rotations: np.ndarray,
     for k in np.flatnonzero(~skip if skip is not None else np.ones(len(lengths), dtype=bool)):
         cyl = fcl.CollisionObject(fcl.Cylinder(radius, float(lengths[k])), fcl.Transform(rotations[k], centres[k]))
         out[k] = collide(cyl, target)
-    return out
-
-
-def boxes_collide(extents: np.ndarray, poses: np.ndarray, target: fcl.CollisionObject) -> np.ndarray:
-    """For each row of box poses (G, B, 4, 4), whether any of the B boxes (extents (B, 3)) intersects `target`."""
-    poses = np.asarray(poses, dtype=np.float64)
-    out = np.zeros(len(poses), dtype=bool)
-    boxes = [collision_object(box(e)) for e in extents]
-    for g in range(len(poses)):
-        for b, obj in enumerate(boxes):
-            set_pose(obj, poses[g, b, :3, :3], poses[g, b, :3, 3])
-            if collide(obj, target):
-                out[g] = True
-                break
     return out
