@@ -101,7 +101,8 @@ def test_plan_and_gpplan_answer_on_a_catalogue_store(catalogues, tmp_path, capsy
 
 def test_files_of_a_merge_that_never_committed_are_swept_and_the_rows_stay(catalogues, tmp_path):
     """A driver killed inside a merge of a Parquet catalogue leaves files of a batch `catalog_batch` does not hold
-    (one half written): the next build's opening deletes them, and the catalogue reads the rows it held before."""
+    (one half written): readers do not see the whole ones, the next build's opening deletes them, and the catalogue
+    reads the rows it held before."""
     import shutil
 
     from workbench.catalog.stages import open_store
@@ -114,6 +115,8 @@ def test_files_of_a_merge_that_never_committed_are_swept_and_the_rows_stay(catal
     ik = next((folder / "ik").glob("*/*/*.parquet"))
     stray = [ik.with_name(f"b{batch + 1}_1_0.parquet"), folder / "object" / "part=M" / f"b{batch + 1}_2_0.parquet"]
     shutil.copy(ik, stray[0])  # a whole file of the uncommitted batch: its rows would be duplicates
+    with Store(folder, read_only=True) as s:  # ... which a reader does not see
+        assert {t: _table(s, t) for t in PARTITIONED} == before
     stray[1].parent.mkdir()
     stray[1].write_bytes(ik.read_bytes()[:100])  # a half-written one
     with pytest.raises(StoreError):
