@@ -79,3 +79,34 @@ def test_pad_offsets_place_contacts_on_the_pads(hand):
     assert on_axis.sum() > 10
     assert np.allclose(off[: len(g)][on_axis], [-cx / hx, -cz / hz])
     assert 0.0 <= edge_share(g.poses, g.contact0, g.contact1, hand) < 0.5
+
+
+def test_a_pad_starting_inside_the_part_touches_nothing(hand):
+    """A pad whose window start lies inside the part (a 10 mm slab's top and bottom faces cross its starting plane
+    inside its footprint) starts in the material: no first touch, not a touch on the material past its start."""
+    slab = trimesh.creation.box((0.04, 0.04, 0.01))
+    origin, axis = np.zeros((1, 3)), np.array([[0.0, 1.0, 0.0]])
+    ref = np.array([[0.0, 0.0, 1.0]])
+    outside = first_touches(slab, origin, axis, np.zeros(1), hand, ref=ref, windows=np.array([[-0.03, 0.03]]))
+    assert outside.hit.all() and np.isclose(outside.width[0], 0.04)
+    inside = first_touches(slab, origin, axis, np.zeros(1), hand, ref=ref, windows=np.array([[-0.01, 0.03]]))
+    assert not inside.hit.any()
+
+
+def test_parallel60_grasps_of_the_planebody_keep_both_fingers_out_of_it():
+    """The parallel60 fingers are their pads: a gap grasp whose right pad started inside the planebody's wall held
+    a finger 1.5 mm inside it at the grasp's opening. Every grasp passes coal's check of the hand at the grasp's and
+    the pre-grasp opening (benchmarks.graspcheck, none of the planner's code)."""
+    from workbench.benchmarks.graspcheck import check_grasps
+    from workbench.cli.gripper import load_gripper
+    from workbench.geometry.objects import load_object
+    from workbench.grasping.grasps import GraspParams, plan_grasps
+    from workbench.resources import bundled_objects
+
+    obj = load_object(bundled_objects()["planebody"])
+    params = GraspParams()
+    g = plan_grasps(obj, load_gripper("parallel60"), params).grasps
+    assert len(g) >= 50
+    v = check_grasps(obj.mesh, g.poses, g.jawwidth, g.contact0, g.contact1, g.normal0, g.normal1,
+                     params.friction_coefficient, hand="parallel60", pregrasp_margin=params.pregrasp_margin)
+    assert v.ok.all(), np.flatnonzero(~v.ok)

@@ -133,6 +133,9 @@ def test_drop_test_of_every_stored_placement(built):
         rows = store.query_arrays("SELECT rotmat FROM freetabletopplacement WHERE idparamset = ?", [r.idplacements])
     poses = rows["rotmat"].reshape(-1, 4, 4)
     assert len(poses) == len(r.placements["stability"]) > 0
+    fresh = stable_placements(obj)  # the rocking flag and probability round-trip through the store
+    assert np.array_equal(r.placements["rocking"] == 1, fresh.rocking) and np.isin(r.placements["rocking"], (0, 1)).all()
+    assert np.allclose(r.placements["probability"], fresh.probability)
     for pose in poses:
         angle, shift = physics.drop_test(obj.mesh, pose)
         assert angle < 2.0 and shift < 0.002, (angle, shift)
@@ -324,8 +327,21 @@ def test_faceted_round_sides_get_a_low_probability_and_rock():
     assert facets.sum() >= 4 and flats.sum() == 2
     assert (p.stability[facets] >= 0.1).all()  # the support-polygon score keeps the facets the part rolls off
     assert (p.probability[facets] < 0.05).all() and (p.probability[facets] < p.probability[flats].min() / 4).all()
+    assert p.rocking[facets].all() and not p.rocking[flats].any()
     kept = stable_placements(obj, PlacementParams(min_probability=0.05))
-    assert len(kept) == int((~facets).sum())
+    assert len(kept) == int((~facets).sum()) and not kept.rocking.any()
+    # the stated tilt: tipped by atan(min_stability) about any edge of its support polygon, every kept placement's
+    # centre of mass stays over the support (checked on the placed vertices, without the stability formula)
+    tilt = np.arctan(PlacementParams().min_stability)
+    for pose, support in zip(p.poses, p.supports):
+        com = pose[:3, :3] @ obj.com + pose[:3, 3]
+        ring = support[:, :2]
+        for a, b in zip(ring, np.roll(ring, -1, axis=0)):
+            edge = (b - a) / np.linalg.norm(b - a)
+            inward = np.array([-edge[1], edge[0]])  # counter-clockwise ring: the interior is on the left
+            r, h = float((com[:2] - a) @ inward), float(com[2])
+            # rotated by the tilt about the edge, toward the outside: the horizontal offset from the pivot
+            assert r * np.cos(tilt) - h * np.sin(tilt) > 0, (r, h)
     # a 12-sided bar's sides (30 degrees apart, tipping at 15) rock; a hexagonal bar's (60 degrees) do not
     for sections, rocks in ((12, True), (6, False)):
         bar = from_trimesh(trimesh.creation.cylinder(radius=0.015, height=0.06, sections=sections), "bar")

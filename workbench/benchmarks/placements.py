@@ -110,9 +110,11 @@ def _organic(args: argparse.Namespace) -> int:
             warnings.simplefilter("ignore")
             obj = from_trimesh(make(), name)
         t, pl = median_time(lambda: stable_placements(obj), args.repeats)
-        rows.append([name, len(pl), " ".join(f"{p:.2f}/{s:.2f}" for p, s in zip(pl.probability, pl.stability)),
-                     f"{float(np.sum(pl.probability)):.2f}", t])
-    print_table(["part", "#-fp", "probability/stability (most likely first)", "sum p kept", "t-fp s"], rows,
+        rows.append([name, len(pl), " ".join(f"{p:.2f}/{s:.2f}" + ("r" if r else "")
+                                              for p, s, r in zip(pl.probability, pl.stability, pl.rocking)),
+                     int(np.sum(pl.rocking)), f"{float(np.sum(pl.probability)):.2f}", t])
+    print_table(["part", "#-fp", "probability/stability, r: rocks (most likely first)", "#-rocking", "sum p kept", "t-fp s"],
+                rows,
                 title=f"Placements with their quasi-static rest probability (a part dropped at random; it rolls on from "
                       f"a rocking support, a faceted round side, when a steadier support is within reach) beside the "
                       f"support-polygon stability (median of {args.repeats} runs)")

@@ -141,7 +141,7 @@ def part_tables(res: PartResult) -> dict[str, pa.Table]:
                     "com_method": [o.com_method], "reason": pa.array([res.reason], type=pa.string())})
     pl = res.placements
     place = arrays_table({"poses": pl.poses, "stability": pl.stability, "normals": pl.normals,
-                          "probability": pl.probability})
+                          "probability": pl.probability, "rocking": pl.rocking})
     place = place.append_column("supports", _ragged(pl.supports))
     tt = res.tabletop
     return {
@@ -171,7 +171,7 @@ def part_from_tables(tables: dict[str, pa.Table]) -> PartResult:
     supports = [np.asarray(s, dtype=np.float64).reshape(-1, 3) for s in tables["placements"].column("supports").to_pylist()]
     placements = Placements(poses=p["poses"], stability=p["stability"], supports=supports, normals=p["normals"],
                             rejected_poses=np.zeros((0, 4, 4)), rejected_stability=np.zeros(0),
-                            probability=p["probability"])
+                            probability=p["probability"], rocking=p["rocking"])
     f = table_arrays(tables["ftg"])
     tp, tg = table_arrays(tables["tabletop_placements"]), table_arrays(tables["tabletop_grips"])
     tt = Tabletop(placement=tp["placement"], angle=tp["angle"], position=tp["position"], poses=tp["poses"], moves=tp["moves"],

@@ -69,5 +69,5 @@ def print_build(res: BuildResult, db, seconds: float, note: str = "") -> None:
               if c["placements_nogrip"] else "")
     print(f"store {Path(db).resolve()} ready in {seconds:.1f} s; stable placements for --start/--goal "
           f"(PLACEMENT,X,Y,YAW): {', '.join(str(number[i]) for i in c['placement_ids'])}{nogrip}")
-    for line in placement_lines(c["placement_rotmats"]):
+    for line in placement_lines(c["placement_rotmats"], c.get("placement_rocking")):
         print(f"  {line}")

@@ -108,9 +108,11 @@ def roadmap_grasps_line(label: str, roadmap: int, usable: int) -> str:
 def print_placements(name: str, result, seconds: float) -> None:
     stab = result.placements["stability"]
     prob = result.placements.get("probability", np.full(len(stab), np.nan))
+    rock = result.placements.get("rocking", np.full(len(stab), np.nan))
     if len(stab):
-        print(f"{name}: {len(stab)} stable placements, most likely first (probability / stability: "
-              f"{', '.join(f'{p:.2f}/{s:.2f}' for p, s in zip(prob, stab))})")
+        print(f"{name}: {len(stab)} stable placements, most likely first (probability / stability, \"rocks\" where a "
+              f"small tilt rolls the part onto the next face: "
+              f"{', '.join(f'{p:.2f}/{s:.2f}' + (' rocks' if r == 1 else '') for p, s, r in zip(prob, stab, rock))})")
         print(f"free tabletop grips per placement: {', '.join(str(int(n)) for n in result.n_free_grips)}")
     else:
         print(f"{name}: 0 stable placements")

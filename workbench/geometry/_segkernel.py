@@ -67,37 +67,115 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
     return np.array(ptr, dtype=np.int64), out[:size].copy(), np.array(seeds, dtype=np.int64)
 
 
+def edge_groups(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh's edges: every triangle edge (3 t + j: from corner j to j + 1) sorted by its vertex pair, and where
+    each pair's run starts in that order (one run per distinct edge, then the total). One sort of 3n keys."""
+    faces = np.asarray(faces, dtype=np.int64)
+    u, v = faces, np.roll(faces, -1, axis=1)
+    keys = (np.minimum(u, v) * np.int64(n_vertices) + np.maximum(u, v)).ravel()
+    order = np.argsort(keys, kind="stable")
+    ks = keys[order]
+    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True]) if len(ks) else np.zeros(1, dtype=np.int64)
+    return order, starts
+
+
 @njit(cache=True)
-def facet_boundaries(faces, tri_ptr, tri_index, n_vertices):
-    """Boundary edges of every facet: the edges (sorted vertex pairs) its triangles use once, in ascending order of
-    the pair per facet. Returns (edge_ptr, edges (E, 2) vertex ids)."""
+def neighbour_table(order, starts, n):
+    """(n, 3) the triangle across each edge of every triangle, n where none: edges shared by exactly two triangles
+    (as trimesh's face adjacency; an edge of three or more triangles joins none)."""
+    table = np.full((n, 3), n, dtype=np.int64)
+    for g in range(starts.shape[0] - 1):
+        if starts[g + 1] - starts[g] != 2:
+            continue
+        a, b = order[starts[g]], order[starts[g] + 1]
+        if a // 3 != b // 3:
+            table[a // 3, a % 3] = b // 3
+            table[b // 3, b % 3] = a // 3
+    return table
+
+
+@njit(cache=True)
+def facet_boundaries(faces, tri_ptr, tri_index, n_vertices, order, starts):
+    """Boundary edges of every facet: the edges its triangles use once, in ascending order of their sorted vertex
+    pair per facet; linear in the memberships (`edge_groups` gives every edge's triangles). Returns (edge_ptr, edges
+    (E, 2) vertex ids)."""
     m = tri_ptr.shape[0] - 1
-    total = 3 * tri_index.shape[0]
-    keys = np.empty(total, dtype=np.int64)
+    n = faces.shape[0]
+    group = np.empty(3 * n, dtype=np.int64)
+    for g in range(starts.shape[0] - 1):
+        for q in range(starts[g], starts[g + 1]):
+            group[order[q]] = g
+    stamp = np.full(n, -1, dtype=np.int64)
     edge_ptr = np.zeros(m + 1, dtype=np.int64)
-    out = np.empty((total, 2), dtype=np.int64)
+    keys = np.empty(3 * n, dtype=np.int64)
+    out = np.empty((64, 2), dtype=np.int64)
     e = 0
     for f in range(m):
         a, b = tri_ptr[f], tri_ptr[f + 1]
+        for q in range(a, b):
+            stamp[tri_index[q]] = f
         w = 0
         for q in range(a, b):
             t = tri_index[q]
             for j in range(3):
-                u, v = faces[t, j], faces[t, (j + 1) % 3]
-                if u > v:
-                    u, v = v, u
-                keys[w] = u * n_vertices + v
-                w += 1
+                g = group[3 * t + j]
+                uses = 0
+                for r in range(starts[g], starts[g + 1]):
+                    if stamp[order[r] // 3] == f:
+                        uses += 1
+                if uses == 1:
+                    u, v = faces[t, j], faces[t, (j + 1) % 3]
+                    keys[w] = min(u, v) * n_vertices + max(u, v)
+                    w += 1
         ks = np.sort(keys[:w])
-        i = 0
-        while i < w:
-            j = i + 1
-            while j < w and ks[j] == ks[i]:
-                j += 1
-            if j - i == 1:
-                out[e, 0] = ks[i] // n_vertices
-                out[e, 1] = ks[i] % n_vertices
-                e += 1
-            i = j
+        if e + w > out.shape[0]:
+            grown = np.empty((max(2 * out.shape[0], e + w), 2), dtype=np.int64)
+            grown[:e] = out[:e]
+            out = grown
+        for i in range(w):
+            out[e + i, 0] = ks[i] // n_vertices
+            out[e + i, 1] = ks[i] % n_vertices
+        e += w
         edge_ptr[f + 1] = e
     return edge_ptr, out[:e].copy()
+
+
+@njit(cache=True)
+def facet_sums(tri_ptr, tri_index, normals, centres, areas):
+    """Per facet the sums over its triangles of normal * area, centre * area and area (in membership order)."""
+    m = tri_ptr.shape[0] - 1
+    wn = np.zeros((m, 3))
+    wc = np.zeros((m, 3))
+    ar = np.zeros(m)
+    for f in range(m):
+        for q in range(tri_ptr[f], tri_ptr[f + 1]):
+            t = tri_index[q]
+            a = areas[t]
+            for i in range(3):
+                wn[f, i] += normals[t, i] * a
+                wc[f, i] += centres[t, i] * a
+            ar[f] += a
+    return wn, wc, ar
+
+
+@njit(cache=True)
+def by_triangle(tri_ptr, tri_index):
+    """Every (facet, triangle) membership sorted by triangle, then facet: a counting sort, linear in the memberships.
+    Returns (facet ids, triangle ids)."""
+    n = 0
+    for q in range(tri_index.shape[0]):
+        n = max(n, tri_index[q] + 1)
+    start = np.zeros(n + 1, dtype=np.int64)
+    for q in range(tri_index.shape[0]):
+        start[tri_index[q] + 1] += 1
+    for t in range(n):
+        start[t + 1] += start[t]
+    fid = np.empty(tri_index.shape[0], dtype=np.int64)
+    tid = np.empty(tri_index.shape[0], dtype=np.int64)
+    for f in range(tri_ptr.shape[0] - 1):
+        for q in range(tri_ptr[f], tri_ptr[f + 1]):
+            t = tri_index[q]
+            fid[start[t]] = f
+            tid[start[t]] = t
+            start[t] += 1
+    return fid, tid

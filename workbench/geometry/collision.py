@@ -42,9 +42,18 @@ def collide_at_poses(geometry: fcl.CollisionGeometry, poses: np.ndarray, target:
     return out
 
 
+def mesh_bvh(mesh: trimesh.Trimesh) -> fcl.BVHModel:
+    """The fcl BVH of `mesh`, built once per mesh and kept in its trimesh cache (dropped when the mesh changes): a
+    full-resolution part's hierarchy takes seconds to build, and every stage that collides with it shares one."""
+    model = mesh._cache["workbench_fcl_bvh"]
+    if model is None:
+        model = mesh._cache["workbench_fcl_bvh"] = bvh(mesh)
+    return model
+
+
 def object_collider(mesh: trimesh.Trimesh, pose: np.ndarray | None = None) -> fcl.CollisionObject:
-    """The object as an fcl collision object at `pose` (identity by default)."""
-    obj = fcl.CollisionObject(bvh(mesh))
+    """The object as an fcl collision object at `pose` (identity by default), on its cached BVH (`mesh_bvh`)."""
+    obj = fcl.CollisionObject(mesh_bvh(mesh))
     if pose is not None:
         obj.setTransform(fcl.Transform(pose[:3, :3], pose[:3, 3]))
     return obj

@@ -13,12 +13,20 @@ literally every triangle; the default, tau/2, keeps facets overlapping while bou
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import trimesh
 
 from workbench.errors import WorkbenchError
-from workbench.geometry._segkernel import facet_boundaries, grow_facets
+from workbench.geometry._segkernel import (
+    by_triangle,
+    edge_groups,
+    facet_boundaries,
+    facet_sums,
+    grow_facets,
+    neighbour_table,
+)
 
 
 @dataclass(frozen=True)
@@ -48,10 +56,14 @@ class Facets:
         return self.tri_index[self.tri_ptr[f]:self.tri_ptr[f + 1]]
 
     def membership(self) -> tuple[np.ndarray, np.ndarray]:
-        """(facet id, triangle id) for every membership, sorted by triangle."""
-        fid = np.repeat(np.arange(len(self)), np.diff(self.tri_ptr))
-        order = np.argsort(self.tri_index, kind="stable")
-        return fid[order], self.tri_index[order]
+        """(facet id, triangle id) for every membership, sorted by triangle (then facet); computed once (read-only)."""
+        return self._membership
+
+    @cached_property
+    def _membership(self) -> tuple[np.ndarray, np.ndarray]:
+        fid, tid = by_triangle(self.tri_ptr, self.tri_index)
+        fid.flags.writeable = tid.flags.writeable = False
+        return fid, tid
 
 
 def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = "over",
@@ -65,41 +77,20 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     normals = np.asarray(mesh.face_normals)
     areas = np.asarray(mesh.area_faces)
     n_tri = len(normals)
-    nbr = _neighbour_table(np.asarray(mesh.face_adjacency), n_tri)
-    order = np.lexsort((np.arange(n_tri), -np.round(areas, 12)))
-    tri_ptr, tri_index, seeds = grow_facets(np.ascontiguousarray(normals, dtype=np.float64), nbr, order,
+    faces = np.asarray(mesh.faces, dtype=np.int64)
+    order, starts = edge_groups(faces, len(mesh.vertices))
+    nbr = neighbour_table(order, starts, n_tri)
+    seed_order = np.lexsort((np.arange(n_tri), -np.round(areas, 12)))
+    tri_ptr, tri_index, seeds = grow_facets(np.ascontiguousarray(normals, dtype=np.float64), nbr, seed_order,
                                             method == "conventional", float(np.cos(tau)), float(np.cos(merge)))
-    return _build(mesh, method, tau, tri_ptr, tri_index, seeds)
-
-
-def _neighbour_table(adj: np.ndarray, n: int) -> np.ndarray:
-    """(n, k) neighbours across shared edges, padded with the index n (k = 3 on a manifold mesh)."""
-    src = np.concatenate([adj[:, 0], adj[:, 1]])
-    dst = np.concatenate([adj[:, 1], adj[:, 0]])
-    order = np.argsort(src, kind="stable")
-    src, dst = src[order], dst[order]
-    counts = np.bincount(src, minlength=n)
-    table = np.full((n, max(int(counts.max(initial=0)), 1)), n, dtype=np.int64)
-    slot = np.arange(len(src)) - np.repeat(np.cumsum(counts) - counts, counts)
-    table[src, slot] = dst
-    return table
-
-
-def _build(mesh: trimesh.Trimesh, method: str, tau: float, tri_ptr: np.ndarray, tri_index: np.ndarray,
-           seeds: np.ndarray) -> Facets:
-    m = len(seeds)
-    fid = np.repeat(np.arange(m), np.diff(tri_ptr))
-    a = mesh.area_faces[tri_index]
-    wn = np.column_stack([np.bincount(fid, weights=mesh.face_normals[tri_index, i] * a, minlength=m) for i in range(3)])
-    normals = wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300) if m else np.zeros((0, 3))
-    areas = np.bincount(fid, weights=a, minlength=m)
-    wc = np.column_stack([np.bincount(fid, weights=mesh.triangles_center[tri_index, i] * a, minlength=m)
-                          for i in range(3)])
-    centers = wc / areas[:, None].clip(1e-300) if m else np.zeros((0, 3))
-    edge_ptr, be = facet_boundaries(np.asarray(mesh.faces, dtype=np.int64), tri_ptr, tri_index, len(mesh.vertices))
-    edges = mesh.vertices[be]
-    return Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index, normals=normals, centers=centers,
-                  areas=areas, seeds=seeds, edge_ptr=edge_ptr, edges=edges)
+    wn, wc, area = facet_sums(tri_ptr, tri_index, np.ascontiguousarray(normals, dtype=np.float64),
+                              np.ascontiguousarray(mesh.triangles_center, dtype=np.float64),
+                              np.ascontiguousarray(areas, dtype=np.float64))
+    edge_ptr, be = facet_boundaries(faces, tri_ptr, tri_index, len(mesh.vertices), order, starts)
+    return Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index,
+                  normals=wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300),
+                  centers=wc / area[:, None].clip(1e-300), areas=area, seeds=seeds, edge_ptr=edge_ptr,
+                  edges=mesh.vertices[be])
 
 
 def distance_to_boundary(facets: Facets, facet_ids: np.ndarray, points: np.ndarray, budget: int = 2_000_000) -> np.ndarray:

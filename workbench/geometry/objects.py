@@ -12,7 +12,7 @@ import numpy as np
 import trimesh
 
 from workbench.errors import MeshError
-from workbench.geometry.repair import repair
+from workbench.geometry.repair import repair, volume_centre
 from workbench.params import HAND_SIZED, PART_SIZE, SCALE
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254}
@@ -93,7 +93,8 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError(f"object file {path} is not a triangle mesh (got {type(loaded).__name__})")
     if scale is None and units is None and not accept_size and len(loaded.faces):
-        extent = float(np.ptp(np.asarray(loaded.vertices)[np.unique(loaded.faces)], axis=0).max())
+        v = np.asarray(loaded.vertices)
+        extent = float(np.ptp(v[np.bincount(np.asarray(loaded.faces).ravel(), minlength=len(v)) > 0], axis=0).max())
         if TYPICAL[1] < extent <= MAX_EXTENT:  # larger: refused as implausible below, whatever is accepted
             raise MeshError(f"object file {path} is {extent:.4g} m across read in metres (no --units or --scale), not a "
                             f"hand-sized part ({HAND_SIZED.describe()}); {_scale_hint(extent)}; or give --accept-size "
@@ -158,7 +159,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshError(f"{label} has faces that index missing vertices; repair the file")
     # size first, on the referenced vertices: merging vertices of a sub-micron part would make every face degenerate
-    extent = float(np.ptp(vertices[np.unique(faces)] * scale, axis=0).max())
+    extent = float(np.ptp(vertices[np.bincount(faces.ravel(), minlength=len(vertices)) > 0] * scale, axis=0).max())
     if extent > MAX_EXTENT or (MIN_EXTENT > extent > 0):
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
                         f"(allowed: {PART_SIZE.describe()}); {_scale_hint(extent, scale)}")
@@ -174,8 +175,9 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     if extent > TYPICAL[1] and scale == 1.0:
         warnings.warn(f"{label} is {extent:.3g} m across read in metres, larger than a gripper-sized part; "
                       f"{_scale_hint(extent, scale)}", MeshWarning, stacklevel=3)
-    if mesh.is_watertight and mesh.is_winding_consistent and mesh.volume > 0:
-        com, method = np.asarray(mesh.center_mass, dtype=np.float64), "volume"
+    volume, centre = volume_centre(mesh) if mesh.is_watertight and mesh.is_winding_consistent else (0.0, None)
+    if volume > 0:
+        com, method = centre, "volume"
     else:
         warnings.warn(f"{label} is not watertight: centre of mass weighted by area", MeshWarning, stacklevel=3)
         com = (mesh.triangles_center * mesh.area_faces[:, None]).sum(0) / mesh.area

@@ -21,6 +21,7 @@ import numpy as np
 import trimesh
 
 from workbench.errors import MeshError
+from workbench.geometry._segkernel import edge_groups, neighbour_table
 from workbench.geometry.collision import mesh_distance
 
 
@@ -38,7 +39,7 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
     nv = len(mesh.vertices)
     # an STL stores every face's own corners: merging them is loading, not repairing; an indexed mesh (OBJ, PLY)
     # that repeats vertices has seams, and merging those is a repair worth reporting
-    indexed = len(np.unique(mesh.faces)) < 3 * len(mesh.faces)
+    indexed = bool(np.bincount(np.asarray(mesh.faces).ravel(), minlength=nv).max(initial=0) > 1)
     mesh = mesh.copy()
     mesh.merge_vertices()
     if indexed and len(mesh.vertices) < nv:
@@ -65,19 +66,67 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
     mesh, body_note = _one_body(mesh, label, debris)
     if body_note:
         notes.append(body_note)
-    if not mesh.is_watertight:
+    watertight, winding = edge_flags(mesh.faces, len(mesh.vertices))
+    if not watertight:
         before = len(mesh.faces)
         filled = _fill_loops(mesh, hole_edges, hole_size)
         if filled:
             notes.append(f"filled {filled} small holes (at most {hole_size * 1e3:.3g} mm across) with "
                          f"{len(mesh.faces) - before} faces")
-    if not mesh.is_winding_consistent:
+            watertight, winding = edge_flags(mesh.faces, len(mesh.vertices))
+    if not winding:
         trimesh.repair.fix_normals(mesh)  # consistent winding, and outward when closed
         notes.append("faces were not consistently oriented; re-oriented them")
-    if mesh.is_watertight and mesh.volume < 0:
+        watertight, winding = edge_flags(mesh.faces, len(mesh.vertices))
+    if watertight and volume_centre(mesh)[0] < 0:
         mesh.invert()
         notes.append("turned the normals outward (the mesh was inside out)")
-    return canonical(mesh), notes
+    out = canonical(mesh)
+    # a relabelling: the same edges, used the same ways (trimesh would find them again at a second's cost at 1M faces)
+    out._cache["is_watertight"], out._cache["is_winding_consistent"] = watertight, winding
+    return out, notes
+
+
+def face_pairs(mesh: trimesh.Trimesh) -> np.ndarray:
+    """(P, 2) the faces joined across an edge that exactly two faces share (trimesh's face adjacency, as a set), from
+    one sort of the edges."""
+    n = len(mesh.faces)
+    table = neighbour_table(*edge_groups(mesh.faces, len(mesh.vertices)), n)
+    t = np.repeat(np.arange(n), 3)
+    other = table.ravel()
+    keep = other < n
+    return np.column_stack([t[keep], other[keep]])
+
+
+def edge_flags(faces: np.ndarray, n_vertices: int) -> tuple[bool, bool]:
+    """(watertight, winding consistent) as trimesh defines them: every edge is shared by exactly two faces; each
+    edge shared by two faces is used by them in opposite directions. One sort of the edges."""
+    faces = np.asarray(faces, dtype=np.int64)
+    if len(faces) == 0:
+        return False, True
+    order, starts = edge_groups(faces, n_vertices)
+    size = np.diff(starts)
+    pair = starts[:-1][size == 2]
+    a, b = order[pair], order[pair + 1]
+    # directed edge q = 3 t + j runs from corner j to corner j + 1 of face t
+    head_a = faces[a // 3, (a % 3 + 1) % 3]
+    tail_b = faces[b // 3, b % 3]
+    return bool(len(pair) * 2 == 3 * len(faces)), bool((head_a == tail_b).all())
+
+
+def volume_centre(mesh: trimesh.Trimesh) -> tuple[float, np.ndarray]:
+    """The signed volume of a closed mesh and its centre of mass (uniform density): trimesh's integration
+    (`trimesh.triangles.mass_properties`, the same operations, so the same bits) without the inertia's terms, which
+    cost two thirds of it."""
+    tri = np.asarray(mesh.triangles, dtype=np.float64)
+    crosses = np.asarray(mesh.triangles_cross)
+    f1 = tri[:, 0, :] + tri[:, 1, :] + tri[:, 2, :]
+    f2 = tri[:, 0, :] ** 2 + tri[:, 1, :] ** 2 + tri[:, 0, :] * tri[:, 1, :] + tri[:, 2, :] * f1
+    integral = np.zeros((4, len(f1)))
+    integral[0] = crosses[:, 0] * f1[:, 0]
+    integral[1:4] = (crosses * f2).T
+    integrated = integral.sum(axis=1) / np.array([6, 24, 24, 24], dtype=np.float64)
+    return float(integrated[0]), integrated[1:4] / integrated[0]
 
 
 def canonical(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
@@ -107,7 +156,7 @@ def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarr
         part = mesh if p is None else _submesh(mesh, pieces == p)
         if p is not None:
             part.merge_vertices()
-        labels = trimesh.graph.connected_component_labels(part.face_adjacency, node_count=len(part.faces))
+        labels = trimesh.graph.connected_component_labels(face_pairs(part), node_count=len(part.faces))
         bodies += [part] if labels.max(initial=0) == 0 else [_submesh(part, labels == i) for i in range(labels.max() + 1)]
     n = len(bodies)
     if n <= 1:
@@ -159,8 +208,12 @@ def _inner_walls(faces: np.ndarray) -> np.ndarray:
     # the winding's parity: an even rotation of the sorted triple, or an odd one
     even = ((faces == np.roll(key, 0, axis=1)).all(axis=1) | (faces == np.roll(key, 1, axis=1)).all(axis=1)
             | (faces == np.roll(key, 2, axis=1)).all(axis=1))
-    _, inv = np.unique(key, axis=0, return_inverse=True)
-    inv = inv.ravel()
+    # which faces share a vertex triple: the triples sorted (lexicographically), then numbered
+    order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))
+    ks = key[order]
+    new = np.r_[True, (ks[1:] != ks[:-1]).any(axis=1)] if len(ks) else np.zeros(0, dtype=bool)
+    inv = np.empty(len(key), dtype=np.int64)
+    inv[order] = np.cumsum(new) - 1
     n = int(inv.max()) + 1 if len(inv) else 0
     pos = np.bincount(inv, weights=even, minlength=n)
     neg = np.bincount(inv, weights=~even, minlength=n)

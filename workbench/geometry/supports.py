@@ -173,9 +173,11 @@ def rest_probabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.n
     downward ray from its centre of mass meets, with probability that face's solid angle seen from the centre of
     mass over 4 pi; on a face of an unstable support it rolls over the edge beyond which the centre of mass
     projects, onto the neighbouring face, until it reaches a stable support (the drop statistics of Goldberg et al.'s
-    part feeding and of Dex-Net's stable poses). A stable support is a rocking one when both the tilt that tips it
-    over its weakest edge (the edge nearest the centre of mass's projection) and the angle to the hull face beyond
-    that edge are below `rock_angle`: a small tilt rolls it onto the next facet, as on a faceted round side. The
+    part feeding and of Dex-Net's stable poses). A stable support is a rocking one when the tilt that tips it over its
+    weakest edge (the edge nearest the centre of mass's projection) is below half `rock_angle` and the angle to the
+    hull face beyond that edge below `rock_angle`: a small tilt rolls it onto the next facet, as on a faceted round
+    side (a regular polygon's sides tip at half the angle between them). A broad support next to a rounded edge,
+    which tips only at a large tilt, does not rock. The
     part rolls on from it, so that it gets no probability, unless rolling on never ends on a support that does not
     rock (a rounded part, all of whose supports rock): then the plain quasi-static flow decides.
     `stable` (G,) marks the supports holding the centre of mass's projection.
@@ -230,7 +232,7 @@ def rest_probabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.n
             f, e = out_edges[int(np.argmin(dist))]
             beyond = across[f, e]
             tip = np.arctan2(min(dist), height)
-            if beyond >= 0 and tip < rock_angle and np.arccos(np.clip(fn[beyond] @ n, -1.0, 1.0)) < rock_angle:
+            if beyond >= 0 and tip < 0.5 * rock_angle and np.arccos(np.clip(fn[beyond] @ n, -1.0, 1.0)) < rock_angle:
                 rocking[g] = True
                 for m in members:  # the part rolls on across that edge
                     nxt[m] = beyond

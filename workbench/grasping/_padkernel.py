@@ -102,6 +102,38 @@ def _candidates(x, y, z, hx, hz, ax, az, px, py, pz, valid):
 
 
 @njit(cache=True)
+def _cuts_start(x, y, z, start, hx, hz):
+    """Does the triangle (pad coordinates x, z from the pad's centre; heights y) cross the plane y = `start`, the
+    pad's starting height, inside the rectangle [-hx, hx] x [-hz, hz]? Then the pad starts inside the part."""
+    n = 0
+    sx, sz = np.empty(2), np.empty(2)
+    for e in range(3):
+        i, j = e, (e + 1) % 3
+        if (y[i] - start) * (y[j] - start) < 0 and n < 2:
+            t = (start - y[i]) / (y[j] - y[i])
+            sx[n], sz[n] = x[i] + t * (x[j] - x[i]), z[i] + t * (z[j] - z[i])
+            n += 1
+    if n < 2:
+        return False
+    # the section's segment against the rectangle (Liang-Barsky clipping)
+    t0, t1 = 0.0, 1.0
+    dx, dz = sx[1] - sx[0], sz[1] - sz[0]
+    for p, q in ((-dx, sx[0] + hx), (dx, hx - sx[0]), (-dz, sz[0] + hz), (dz, hz - sz[0])):
+        if abs(p) <= _EPS:
+            if q < 0:
+                return False
+        else:
+            r = q / p
+            if p < 0:
+                t0 = max(t0, r)
+            else:
+                t1 = min(t1, r)
+            if t0 > t1:
+                return False
+    return True
+
+
+@njit(cache=True)
 def _project(shape, node, o, u, slack):
     """The range (min, max) of a node's box along the unit vector `u`, measured from `o`, widened by `slack`."""
     mid = 0.0
@@ -305,6 +337,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                 side = 1 if si == 0 else -1
                 nr = 0
                 g = -np.inf
+                blocked = False
                 # best first: the node that may reach highest (lowest for the right pad) is opened next, and the
                 # search ends once no open node reaches within `tie` of the best touch
                 kk = _key(shape, 1, o, y, ux, uz, slack, si, wlo, whi, a_max, a_min, tie, cx, cz, hx, hz)
@@ -339,6 +372,12 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                             zmn3, zmx3 = min(zmn3, lz3[v]), max(zmx3, lz3[v])
                         if xmn3 > hx or xmx3 < -hx or zmn3 > hz or zmx3 < -hz:
                             continue
+                        # a pad starting inside a hole or cavity (a finite window) must start clear of the part: a
+                        # triangle crossing its starting plane inside its footprint puts the pad into the part there
+                        start = whi if si == 0 else wlo
+                        if np.isfinite(start) and _cuts_start(lx3, ly, lz3, start, hx, hz):
+                            blocked = True
+                            break
                         _candidates(lx3, ly, lz3, hx, hz, -cx, -cz, px, py, pz, valid)
                         tp, b, d2 = _pick(px, py, pz, valid, side, wlo, whi, tie, cx, cz)
                         if b < 0:
@@ -351,7 +390,9 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                         ra[nr] = abs(ny) if flip else side * ny
                         nr += 1
                         g = max(g, tp)
-                if nr == 0:
+                    if blocked:
+                        break
+                if nr == 0 or blocked:
                     continue
                 # among the touches within `tie` of the best: nearest the axis, then best facing, then lowest index
                 best = -1

@@ -43,7 +43,10 @@ def resting_normal(rotmat: np.ndarray) -> np.ndarray:
     return np.asarray(rotmat, dtype=np.float64)[:3, :3].T @ np.array([0.0, 0.0, -1.0])
 
 
-def placement_lines(rotmats: dict[int, np.ndarray]) -> list[str]:
-    """One description per placement (store id -> rotation), numbered within the part: "placement 1: upright, ..."."""
+def placement_lines(rotmats: dict[int, np.ndarray], rocking: dict[int, bool] | None = None) -> list[str]:
+    """One description per placement (store id -> rotation), numbered within the part: "placement 1: upright, ...",
+    ending ", rocks" where `rocking` flags it (a small tilt rolls the part onto the next hull face)."""
     numbers = per_part_numbers(np.array(list(rotmats), dtype=np.int64))
-    return [describe_placement(numbers[i], resting_normal(rotmats[i])) for i in sorted(rotmats)]
+    rocking = rocking or {}
+    return [describe_placement(numbers[i], resting_normal(rotmats[i])) + (", rocks" if rocking.get(i) else "")
+            for i in sorted(rotmats)]

@@ -18,8 +18,10 @@ The pads start at full opening, half the jaw range either side of the TCP. Where
 along the axis, they start outside it and only the first touches matter. Where it is not, one pad may start inside
 a hole or a cavity and close outwards onto a wall (a washer's rim, a mug's wall, the tube of a ring wider than the
 jaw): `gap_windows` finds those starts along the axis line and `first_touches` takes a window per axis, so each pad
-touches only what lies between its start and the TCP. The hand at full opening is checked against the object
-afterwards (level 2), which rejects a start inside material.
+touches only what lies between its start and the TCP. `gap_windows` checks only the axis line; a pad whose starting
+plane cuts the part anywhere inside its footprint starts inside the material and touches nothing (else it would
+"touch" the material past its start, and a finger that is its pad would sit inside the part at the grasp). The hand
+at its pre-grasp opening is checked against the object afterwards (level 2).
 
 The work runs in a compiled kernel (`_padkernel`) over a bounding-volume hierarchy of the triangles: each pad at
 each rotation searches it by branch and bound, skipping every subtree outside its footprint or below the best touch

@@ -7,7 +7,8 @@ is the distance from that projection to the polygon's boundary divided by the he
 (Section VI, "Experiences"), i.e. the tangent of the tilt it can take before tipping. Each placement also gets the
 quasi-static probability that a part dropped at random comes to rest on it (geometry/supports.py,
 `rest_probabilities`): it says where parts arriving from a feeder lie, and a face the part rolls off (a faceted round
-side, whose neighbouring facet is within `rock_angle`) gets little or none. Placements are ordered by probability.
+side, whose neighbouring facet is within `rock_angle`) gets little or none and is flagged `rocking`. Placements are
+ordered by probability.
 Free-air grasps are
 transformed into each placement (not re-planned) and kept when the hand and both fingers at full opening stay
 above the table.
@@ -34,8 +35,8 @@ class PlacementParams(Params):
     coplanar_angle: hull faces within 0.5 mm of a support's plane and 1 degree of its normal merge into one candidate
     support. support_tolerance: once settled, the hull vertices within 0.1 mm of the table form the support polygon
     (the plan validator's flatness tolerance). min_probability: smallest quasi-static rest probability kept.
-    rock_angle: a support that tips within this angle onto a hull neighbour within this angle rocks (35 degrees: a
-    round side of 11 facets or more)."""
+    rock_angle: a support that tips within half this angle onto a hull neighbour within this angle rocks (35 degrees:
+    a round side of 11 facets or more)."""
 
     min_stability: float = param(0.1, ge=0, help="smallest stability (support margin over centre-of-mass height)")
     clearance: float = param(0.002, ge=0, le=0.5, unit="m", help="hand clearance above the table")
@@ -48,16 +49,18 @@ class PlacementParams(Params):
                                      help="hull vertices within this height of the table support the part")
     min_probability: float = param(0.0, ge=0, le=1, help="smallest quasi-static probability of coming to rest on a placement")
     rock_angle: float = param(float(np.radians(35.0)), ge=0, lt=np.pi / 2, unit="rad",
-                              help="a support that tips, and whose neighbouring hull face beyond its weakest edge lies, "
-                                   "within this angle rocks (the part rolls on)", cli_scale=180.0 / np.pi, cli_unit="deg")
+                              help="a support that tips within half this angle, onto a neighbouring hull face within this "
+                                   "angle, rocks (the part rolls on)", cli_scale=180.0 / np.pi, cli_unit="deg")
 
 
 @dataclass(frozen=True)
 class Placements:
     """Stable placements: object poses in the table frame (P, 4, 4) with the centre of mass above the origin and
     the lowest point on z = 0; stability values; support polygons (in the table frame, z = 0); the outward normal
-    of the supporting hull face in the object frame; `probability` the quasi-static chance of resting there. `rejected_stability` keeps every unstable candidate's value (0 for
-    those that cannot reach 0.9 of the threshold, scored without a polygon) and `rejected_poses` the first 64 poses."""
+    of the supporting hull face in the object frame; `probability` the quasi-static chance of resting there;
+    `rocking` whether the support rocks (a small tilt rolls the part onto the next hull face, as on a faceted round
+    side: `supports.rest_probabilities`). `rejected_stability` keeps every unstable candidate's value (0 for those that
+    cannot reach 0.9 of the threshold, scored without a polygon) and `rejected_poses` the first 64 poses."""
 
     poses: np.ndarray
     stability: np.ndarray
@@ -66,6 +69,7 @@ class Placements:
     rejected_poses: np.ndarray
     rejected_stability: np.ndarray
     probability: np.ndarray
+    rocking: np.ndarray
 
     def __len__(self) -> int:
         return len(self.stability)
@@ -124,14 +128,15 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     # every support holding the centre of mass's projection, for the drop statistics
     holds = stabilities(hull, obj.com, groups, normals) > 0
     holds[list(poses)] = stability[list(poses)] > 0
-    prob, _ = rest_probabilities(hull, obj.com, groups, normals, holds, params.rock_angle)
+    prob, rocking = rest_probabilities(hull, obj.com, groups, normals, holds, params.rock_angle)
     ok = (stability >= threshold) & np.isin(np.arange(len(groups)), list(poses)) & (prob >= params.min_probability)
     idx = np.flatnonzero(ok)[np.lexsort((-stability[ok], -np.round(prob[ok], 12)))]
     rejected = np.flatnonzero(~ok)
     rejected_poses = np.array([rest_pose(normals[i], obj.com, verts) for i in rejected[:64]]).reshape(-1, 4, 4)
     return Placements(poses=np.array([poses[i] for i in idx]).reshape(-1, 4, 4), stability=stability[idx],
                       supports=[supports[i] for i in idx], normals=normals[idx].reshape(-1, 3),
-                      rejected_poses=rejected_poses, rejected_stability=stability[rejected], probability=prob[idx])
+                      rejected_poses=rejected_poses, rejected_stability=stability[rejected], probability=prob[idx],
+                      rocking=rocking[idx])
 
 
 def stability_hint(obj: ObjectModel, params: PlacementParams = PlacementParams()) -> str:

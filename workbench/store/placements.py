@@ -42,7 +42,7 @@ def save_placements(store: Store, idobject: int, grasp_pid: int, params: Placeme
         store.insert("freetabletopplacement", {
             "idfreetabletopplacement": fp_ids, "idobject": np.full(n, idobject, dtype=np.int64),
             "idparamset": np.full(n, pid, dtype=np.int64), "rotmat": placements.poses, "stability": placements.stability,
-            "probability": placements.probability,
+            "probability": placements.probability, "rocking": placements.rocking,
             "support": np.array([s.tolist() for s in placements.supports] + [None], dtype=object)[:n],
         })
         p_idx, g_idx, poses = ftg
@@ -61,9 +61,11 @@ def save_placements(store: Store, idobject: int, grasp_pid: int, params: Placeme
 
 def load_placements(store: Store, idplacements: int) -> dict[str, np.ndarray]:
     """Free placements of a parameter set: idfreetabletopplacement, rotmat (P, 4, 4), stability, support (objects),
-    probability (NaN where a store written before it has none)."""
+    probability and rocking (1.0 when a small tilt rolls the part on, 0.0 when not; both NaN where a store written
+    before them has none)."""
     out = store.query_arrays("SELECT idfreetabletopplacement, rotmat, stability, support, "
-                             "coalesce(probability, 'NaN'::DOUBLE) AS probability FROM freetabletopplacement "
+                             "coalesce(probability, 'NaN'::DOUBLE) AS probability, "
+                             "coalesce(rocking::DOUBLE, 'NaN'::DOUBLE) AS rocking FROM freetabletopplacement "
                              "WHERE idparamset = ? ORDER BY idfreetabletopplacement", [idplacements])
     out["rotmat"] = out["rotmat"].reshape(-1, 4, 4)
     return out

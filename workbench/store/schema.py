@@ -19,7 +19,8 @@ Paper tables
   written before them).
 - freetabletopplacement: rotmat is the object in the table frame, centre of mass above the origin, lowest
   point on z = 0. Extra: idparamset, stability (paper Section VI measure), support (support polygon, `DOUBLE[3][]`),
-  probability (quasi-static chance that a part dropped at random rests on it; NULL in stores written before it).
+  probability (quasi-static chance that a part dropped at random rests on it) and rocking (true when a small tilt
+  rolls the part on onto the next hull face, as on a faceted round side); both NULL in stores written before them.
 - freetabletopgrip: free-air grasps kept at a free placement; rotmat is the TCP in the table frame.
 - angle(idangle, value): rotations about world z in radians.
 - tabletopplacements: rotmat is the object in the world; tabletopposition the (x, y, z) of the placement.
@@ -128,7 +129,8 @@ CORE_TABLES: tuple[str, ...] = (
         rotmat DOUBLE[16] NOT NULL,
         stability DOUBLE NOT NULL,
         support DOUBLE[3][],
-        probability DOUBLE
+        probability DOUBLE,
+        rocking BOOLEAN
     )""",
     """CREATE TABLE IF NOT EXISTS freetabletopgrip (
         idfreetabletopgrip BIGINT PRIMARY KEY,
@@ -513,6 +515,7 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS removed INTEGER",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS t_motion DOUBLE",
     "ALTER TABLE freetabletopplacement ADD COLUMN IF NOT EXISTS probability DOUBLE",
+    "ALTER TABLE freetabletopplacement ADD COLUMN IF NOT EXISTS rocking BOOLEAN",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS acc DOUBLE[]",
     # the planner that answered: 'wan_harada' (the roadmap planner, every plan stored before) or 'tournassoud'
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS planner VARCHAR DEFAULT 'wan_harada'",

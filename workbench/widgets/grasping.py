@@ -8,21 +8,22 @@ from dataclasses import replace
 
 import ipywidgets as W
 import numpy as np
-import trimesh
 
 from workbench.geometry.objects import ObjectModel
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.robots.gripper import BUNDLED, Gripper, load_gripper
 from workbench.viewer import scenes as viz
 from workbench.viewer.live import (
+    FirstHands,
     HandOutlines,
+    OneAtATime,
     SolidHand,
     Switches,
     finger_corners,
-    mesh_object,
     pick_evenly,
     points_object,
-    send_group,
+    spread_order,
+    triangles_object,
 )
 from workbench.widgets.panel import BesideView, Busy, StageCache, digest
 
@@ -152,26 +153,28 @@ class GraspExplorer(BesideView):
         dead = (p.width_ok & p.com_ok) & ~live
         viz.show_segments(vis, "grasps/layers/contact pairs/free", p.point0[live], p.point1[live], viz.GREEN)
         viz.show_segments(vis, "grasps/layers/contact pairs/level1", p.point0[dead], p.point1[dead], viz.RED)
+        # a few hands as outlines, the first `hands` of an evenly spread order shown, free ones and collided ones
         collided = np.flatnonzero(~plan.candidate_free)
         pick = collided[pick_evenly(len(collided), self.max_hands)]
-        self.outlines.send(vis, "grasps/layers/collided hands", plan.candidate_poses[pick],
-                           p.width[plan.candidate_pair[pick]], viz.RED)
+        pick = pick[spread_order(len(pick))]
+        self.collided_view = FirstHands(vis, "grasps/layers/collided hands", self.outlines.placed(
+            plan.candidate_poses[pick], p.width[plan.candidate_pair[pick]]), viz.RED)
         g = plan.grasps
         self.hand_pick = pick_evenly(len(g), self.max_hands)
-        self.outlines.send(vis, "grasps/hands", g.poses[self.hand_pick], g.jawwidth[self.hand_pick], HAND_COLOR)
-        self.solid = SolidHand(vis, "grasps/selected", self.gripper, viz.GREEN)
-        lift = 0.004 * float(mesh.scale) * np.asarray(plan.facets.normals)
-        size = 0.02 * float(mesh.scale)
-        self.facet_paths = []
-        for f in range(len(plan.facets)):  # each facet lifted in magenta with its samples, shown by the slider
-            sub = trimesh.Trimesh(mesh.vertices + lift[f], mesh.faces[plan.facets.triangles_of(f)], process=False)
-            mine = s.pair_facet == f
-            kept, removed = s.pair_sample[mine & s.pair_ok], s.pair_sample[mine & ~s.pair_ok]
-            pts = np.vstack([s.points[kept], s.points[removed]]) + 2 * lift[f]
-            colors = np.r_[np.full(len(kept), viz.GREEN), np.full(len(removed), viz.WHITE)]
-            children = [mesh_object(sub, viz.HIGHLIGHT)] + ([points_object(pts, colors, size)] if len(pts) else [])
-            self.facet_paths.append(send_group(vis, f"grasps/facet/{f}", children))
-            self.switches.visible[self.facet_paths[-1]] = False
+        self.hand_pick = self.hand_pick[spread_order(len(self.hand_pick))]
+        self.hands_view = FirstHands(vis, "grasps/hands", self.outlines.placed(g.poses[self.hand_pick],
+                                                                               g.jawwidth[self.hand_pick]), HAND_COLOR)
+        if self.solid is None or self.solid.gripper is not self.gripper:  # sent once per gripper, moved by transforms
+            vis["selected hand"].delete()
+            self.solid = SolidHand(vis, "selected hand", self.gripper, viz.GREEN)
+        # each facet lifted in magenta with its samples (kept green, removed white), one at a time by the slider
+        lift = 0.004 * float(mesh.scale) * np.asarray(plan.facets.normals).reshape(-1, 3)
+        kept = s.pair_ok.astype(bool)
+        self.facet_view = OneAtATime(vis, "grasps/facet", len(plan.facets), [
+            (mesh.vertices[mesh.faces[tid]] + lift[fid][:, None], np.repeat(fid, 3),
+             lambda v: triangles_object(v, viz.HIGHLIGHT)),
+            (s.points[s.pair_sample] + 2 * lift[s.pair_facet], s.pair_facet,
+             lambda v: points_object(v, np.where(kept, viz.GREEN, viz.WHITE), 0.02 * float(mesh.scale)))])
         self.facet.max = max(len(plan.facets) - 1, 0)
         self.selected.max = max(len(g) - 1, 0)
         self.show()
@@ -190,14 +193,10 @@ class GraspExplorer(BesideView):
         sw.show("grasps/part/plain", not on["facets"])
         for name in list(self.layers)[1:]:
             sw.show(f"grasps/layers/{name}", on[name])
-        shown = set(pick_evenly(len(self.hand_pick), self.hands.value).tolist())
-        for i in range(len(self.hand_pick)):
-            sw.show(f"grasps/hands/{i}", i in shown)
-        for i in range(min(self.max_hands, int((~plan.candidate_free).sum()))):
-            sw.show(f"grasps/layers/collided hands/{i}", i in shown)
+        shown = self.hands_view.show(self.hands.value)
+        self.collided_view.show(self.hands.value)
         f = self.facet.value
-        for i, path in enumerate(self.facet_paths):
-            sw.show(path, i == f)
+        self.facet_view.choose(f)
         g = plan.grasps
         i = self.selected.value
         self.solid.place(g.poses[i] if len(g) else None, g.jawwidth[i] if len(g) else None)
@@ -205,7 +204,7 @@ class GraspExplorer(BesideView):
             [(viz.HIGHLIGHT, f"facet {f} (slider)"), (viz.GREEN, "its samples kept / contact pairs kept"),
              (viz.WHITE, "its samples removed by the distance filter"), (viz.RED, "pairs removed by the swept-pad check"),
              (viz.BLUE, "samples after the neighbour filter"),
-             (HAND_COLOR, f"hands: {len(shown)} outlines of {len(g):,} grasps"), (viz.GREEN, "the selected grasp")],
+             (HAND_COLOR, f"hands: {shown} outlines of {len(g):,} grasps"), (viz.GREEN, "the selected grasp")],
             "colour key:") + "<small>other facets: one colour each on the part</small>"
         self.about.value = (f"<small>selected grasp {i}: jaw {g.jawwidth[i] * 1e3:.1f} mm, facets {int(g.facet0[i])} and "
                             f"{int(g.facet1[i])}</small>" if len(g) else "<small>no grasp</small>")

@@ -357,6 +357,8 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
         out.counts["placements_nogrip"] = sorted(set(planner.placement_ids()) - set(out.counts["placement_ids"]))
         out.counts["placement_rotmats"] = {int(i): np.asarray(m) for i, m in
                                            zip(planner.free["idfreetabletopplacement"], planner.free["rotmat"])}
+        out.counts["placement_rocking"] = {int(i): bool(r == 1) for i, r in
+                                           zip(planner.free["idfreetabletopplacement"], planner.free["rocking"])}
         out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **planner.ids}
         return out
     finally:
