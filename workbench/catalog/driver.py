@@ -221,7 +221,7 @@ class _Build:
         # parts a DuckDB store holds already: written by the stage writers (a Parquet catalogue's merge reuses them)
         self.stored_names = stages.object_names(store) if store.dataset is None else set()
         self.queue_parts: list[tuple[dict, Path]] = []  # part units on disk, waiting for the next merge
-        self.queue_runs: list[dict] = []  # (part, robot) runs whose IK units are all on disk
+        self.queue_runs: list[dict] = []  # (part, gripper, robot) runs whose IK units are all on disk
         self.readers: dict[str, int] = {}  # part digest -> its runs still reading its folder
         self.last_merge = time.monotonic()
 
