@@ -39,81 +39,20 @@ VOLATILE = {"created", "finished", "used", "seconds", "seconds_clustering", "sec
             "seconds_hand_object", "seconds_hand_table", "seconds_ik"}
 
 
-# The commands run in processes forked from one server that imported the command line once (a real process per
-# case: its own exit status, stdout, stderr, signals and file-size limit), which keeps the suite fast.
-SERVER = r"""
-import json, os, resource, signal, sys, traceback
-from workbench.cli.main import build_parser, main
-build_parser(full=True)  # every command's module imported once here, not again in each forked child
-for line in sys.stdin:
-    req = json.loads(line)
-    pid = os.fork()
-    if pid == 0:
-        code = 1
-        try:
-            os.chdir(req["cwd"])
-            os.environ.update(req["env"])
-            if req["fsize"]:
-                signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-                resource.setrlimit(resource.RLIMIT_FSIZE, (req["fsize"], req["fsize"]))
-            sys.stdin = open(os.devnull)
-            for fd, name in ((1, "out"), (2, "err")):
-                os.dup2(os.open(req[name], os.O_WRONLY | os.O_CREAT | os.O_TRUNC), fd)
-            try:
-                code = main(req["argv"])
-            except SystemExit as exc:
-                code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
-            except BaseException:
-                traceback.print_exc()
-                code = 1
-        finally:
-            sys.stdout.flush()
-            sys.stderr.flush()
-            os._exit(code)
-    _, status = os.waitpid(pid, 0)
-    print(json.dumps(os.waitstatus_to_exitcode(status)), flush=True)
-"""
+def cli(*args, cwd: Path, env: dict | None = None, fsize: int | None = None) -> subprocess.CompletedProcess:
+    """Run `workbench ARGS` as a user would: its own process (forked from the session's command server), exit
+    status, stdout and stderr."""
+    return _SERVER[0].run([str(a) for a in args], cwd, {k: str(v) for k, v in (env or {}).items()}, fsize)
 
 
-class ForkServer:
-    """A process that imported the command line; `run` forks one child per command and returns its results."""
-
-    def __init__(self, tmp: Path):
-        self.tmp = tmp
-        self.count = 0
-        env = {**os.environ, "PYTHONPATH": str(ROOT)}
-        self.proc = subprocess.Popen([sys.executable, "-c", SERVER], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     text=True, env=env)
-
-    def run(self, argv: list[str], cwd: Path, env: dict, fsize: int | None) -> subprocess.CompletedProcess:
-        self.count += 1
-        out, err = self.tmp / f"{self.count}.out", self.tmp / f"{self.count}.err"
-        req = {"argv": argv, "cwd": str(cwd), "env": env, "fsize": fsize, "out": str(out), "err": str(err)}
-        self.proc.stdin.write(json.dumps(req) + "\n")
-        self.proc.stdin.flush()
-        code = json.loads(self.proc.stdout.readline())
-        return subprocess.CompletedProcess(["workbench", *argv], code, out.read_text(), err.read_text())
-
-    def close(self) -> None:
-        self.proc.stdin.close()
-        self.proc.wait(timeout=60)
-
-
-_SERVER: list[ForkServer] = []
+_SERVER: list = []
 
 
 @pytest.fixture(scope="session", autouse=True)
-def fork_server(tmp_path_factory):
-    server = ForkServer(tmp_path_factory.mktemp("forks"))
-    _SERVER.append(server)
-    yield server
+def fork_server(cli_server):
+    _SERVER.append(cli_server)
+    yield cli_server
     _SERVER.clear()
-    server.close()
-
-
-def cli(*args, cwd: Path, env: dict | None = None, fsize: int | None = None) -> subprocess.CompletedProcess:
-    """Run `workbench ARGS` as a user would: its own process, exit status, stdout and stderr."""
-    return _SERVER[0].run([str(a) for a in args], cwd, {k: str(v) for k, v in (env or {}).items()}, fsize)
 
 
 def spawn(*args, cwd: Path) -> subprocess.Popen:
@@ -501,13 +440,11 @@ def test_four_plans_at_once(work, db):
     """Four plans of one query at once: planning only reads (readers share the store), each stores briefly; with
     --wait every one succeeds and the plans are stored once; without, each succeeds or says the store is busy."""
     for wait in (["--wait", "120"], []):
-        procs = [spawn(*_reader("plan", db), *wait, cwd=work) for _ in range(4)]
-        results = [(p, *p.communicate(timeout=600)) for p in procs]
-        for p, out, err in results:
-            if wait or p.returncode == 0:
-                assert p.returncode == 0, err[-2000:]
+        for res in _SERVER[0].run_many([[*_reader("plan", db), *wait]] * 4, work):
+            if wait or res.returncode == 0:
+                assert res.returncode == 0, res.stderr[-2000:]
             else:
-                assert_refused(subprocess.CompletedProcess([], p.returncode, out, err), "busy", "--wait")
+                assert_refused(res, "busy", "--wait")
         con = duckdb.connect(str(db), read_only=True)
         stored = con.execute("SELECT count(*), count(DISTINCT rank) FROM plan").fetchone()
         con.close()

@@ -6,7 +6,6 @@ from __future__ import annotations
 import json
 import re
 import subprocess
-import sys
 
 import duckdb
 import numpy as np
@@ -18,9 +17,19 @@ from workbench.geometry.objects import from_trimesh
 from workbench.grasping.grasps import GraspParams, plan_grasps
 
 
+_SERVER: list = []
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _server(cli_server):
+    _SERVER.append(cli_server)
+    yield
+    _SERVER.clear()
+
+
 def _cli(*args: str, cwd) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "workbench.cli", *args], cwd=cwd, capture_output=True, text=True,
-                          timeout=900)
+    """`workbench ARGS` in its own process (forked from the session's command server)."""
+    return _SERVER[0].run(list(args), cwd)
 
 
 @pytest.fixture(scope="module")
@@ -52,9 +61,10 @@ def test_every_command_on_an_ungraspable_part_exits_0_and_names_the_stage(big_cu
         warning = [line for line in out.stderr.splitlines() if line.startswith("warning:")]
         assert len(warning) == 1 and ("stage grasps" in warning[0] or "stage pads_width" in warning[0]), (args[0], out.stderr)
     # the five-finger planner is not limited by the jaw: it runs and exits 0 as well
-    out = run("fingers", "bigcube.stl", "--db", "f.duckdb", "--faces", "0", "--clusters", "8", "--samples", "20",
+    out = run("fingers", "bigcube.stl", "--db", "f.duckdb", "--faces", "120", "--clusters", "8", "--samples", "20",
               "--picks", "2", "--queries", "2")
     assert out.returncode == 0, out.stderr
+    assert re.search(r"^ +2/2 ", out.stdout.split("Table III")[1], re.M), out.stdout  # both queries connected
 
 
 def test_each_grasp_filter_is_named_when_it_removes_the_last_candidate(hand):

@@ -52,3 +52,33 @@ def test_full_resolution_grasps_touch_and_clear_the_full_mesh(hand):
             world = g.poses[k] @ pose
             box.setTransform(coal.Transform3s(world[:3, :3], world[:3, 3]))
             assert not coal.collide(box, target, creq, coal.CollisionResult())
+
+
+def test_hand_volumes_meet_the_part_exactly_where_coal_says(hand):
+    """The compiled hand check (`hand_hits`: convex volumes against the pad model's triangle hierarchy) agrees with
+    coal's boolean collision, pose by pose, for the hand's own swept body and a finger box placed at random about
+    the bundled wheel, half of them touching it."""
+    from workbench.grasping.grasps import box_corners, hand_hits, swept_body
+
+    mesh = load_object(bundled_objects()["wheel"]).mesh
+    target = _coal_mesh(mesh)
+    rng = np.random.default_rng(3)
+    q = rng.normal(size=(120, 4))
+    poses = np.tile(np.eye(4), (120, 1, 1))
+    for k in range(120):
+        poses[k, :3, :3] = trimesh.transformations.quaternion_matrix(q[k] / np.linalg.norm(q[k]))[:3, :3]
+    poses[:, :3, 3] = mesh.centroid + rng.uniform(-1, 1, (120, 3)) * mesh.extents
+    body = swept_body(hand, 0.02)
+    ext = np.array([0.022, 0.015, 0.02])
+    points = coal.StdVec_Vec3s()
+    for v in np.asarray(body.vertices, dtype=np.float64):
+        points.append(v)
+    pieces = [(np.asarray(body.vertices), coal.Convex.convexHull(points, False, None)), (box_corners(ext), coal.Box(*ext))]
+    hits = 0
+    for points, shape in pieces:
+        got = hand_hits(mesh, [points], poses[:, None])
+        for k in range(120):
+            probe = coal.CollisionObject(shape, coal.Transform3s(poses[k, :3, :3], poses[k, :3, 3]))
+            assert got[k] == bool(coal.collide(probe, target, coal.CollisionRequest(), coal.CollisionResult())), k
+        hits += int(got.sum())
+    assert 40 <= hits <= 200

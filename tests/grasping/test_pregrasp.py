@@ -111,9 +111,8 @@ def test_pregrasp_sweep_refusals_match_an_independent_check(hand):
     rng = np.random.default_rng(0)
     kept = np.flatnonzero(plan.candidate_free)
     # level 2's refusals: candidates the approach check removed (the fingers' check at the grasp comes after it)
-    from workbench.geometry.collision import object_collider
     from workbench.grasping.grasps import approach_collides
-    hit = approach_collides(hand, cand, params.pregrasp(widths, hand), object_collider(obj.mesh), APPROACH,
+    hit = approach_collides(hand, cand, params.pregrasp(widths, hand), obj.mesh, APPROACH,
                             params.finger_clearance)
     refused = np.flatnonzero(hit)
     assert len(kept) > 0 and len(refused) > 0

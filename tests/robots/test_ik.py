@@ -15,6 +15,7 @@ import pytest
 from workbench.benchmarks.ik import synthetic_grips, synthetic_store
 from workbench.cli import main as cli
 from workbench.errors import RobotError, StoreError
+from workbench.planners.wan_harada import stages
 from workbench.planners.wan_harada.stages import HANDX, WORLDZ, run_ik
 from workbench.resources import erd_robots
 from workbench.robots.chain import forward
@@ -116,6 +117,17 @@ def test_rerun_reuses_and_interrupted_run_resumes(stored, tmp_path, panda, monke
         again = run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=run.idtabletop)
         reference = sql.load_ik(store, run.idrobot, run.idscene, run.idikret)
     assert again.reused and again.computed == 0 and again.feasible == run.feasible
+    # a new revision of a solver these rows do not use changes nothing; of the one they use, they are computed again
+    from workbench.robots import solvers
+
+    for kind, reused in (("three parallel axes", True), ("numerical", False)):
+        monkeypatch.setitem(solvers.REVISIONS, kind, solvers.REVISIONS[kind] + 1)
+        with Store(db) as store:
+            bumped = run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False,
+                            idtabletop=run.idtabletop)
+        assert bumped.reused == reused and bumped.computed == (0 if reused else run.grips)
+        assert (bumped.idscene == run.idscene) == reused and bumped.feasible == run.feasible
+    monkeypatch.undo()
 
     # interrupt after the first chunk is written, then resume: the same rows as the uninterrupted run
     db2 = tmp_path / "resume.duckdb"
@@ -131,6 +143,7 @@ def test_rerun_reuses_and_interrupted_run_resumes(stored, tmp_path, panda, monke
     with Store(db2) as store:
         _, pid = synthetic_store(store, "box", **SMALL)
         monkeypatch.setattr(sql, "insert_ik", flaky)
+        monkeypatch.setattr(stages, "IK_WRITE_SECONDS", 0.0)  # every chunk written as it comes
         with pytest.raises(KeyboardInterrupt):
             run_ik(store, "box", panda, None, HANDX, WORLDZ, OPTS, workers=1, progress=False, idtabletop=pid)
         monkeypatch.setattr(sql, "insert_ik", real)
@@ -175,6 +188,31 @@ def test_grip_that_puts_the_arm_through_the_table_is_infeasible(panda):
     assert z7 < 0
     res = ik_feasibility(panda, grips, default_scene("panda"), 0.0, 0.0, None, IKOptions(library=4096), workers=1, progress=False)
     assert not res.feasible[0, 0]
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_compiled_broad_phase_answers_as_fcl_alone(name):
+    """The collider's compiled broad phase (hull vertices settle most pairs) gives, configuration by configuration,
+    fcl's answer on every candidate pair: random in-limit configurations against the table, and the box held near
+    the TCP for half of them against the arm."""
+    from workbench.robots.collider import Collider
+
+    robot = get_robot(name)
+    _, mesh, _ = synthetic_grips(**SMALL)
+    collider = Collider(robot, default_scene(name), mesh)
+    rng = np.random.default_rng(7)
+    q = rng.uniform(robot.lower, robot.upper, (3000, robot.nq))
+    rot, pos, _, tcp = forward(robot, q)
+    places = np.tile(np.eye(4), (len(q), 1, 1))
+    r = np.linalg.qr(rng.normal(size=(len(q), 3, 3)))[0]
+    r[:, :, 2] *= np.sign(np.linalg.det(r))[:, None]  # proper rotations
+    places[:, :3, :3] = r
+    places[:, :3, 3] = tcp + rng.normal(0, 0.08, (len(q), 3))
+    for pl in (places, None):
+        fast = collider.collides_q(q, pl)
+        ref = collider.collides(rot, pos, pl)
+        assert 0.05 * len(q) < ref.sum() < 0.95 * len(q)
+        assert (fast == ref).all()
 
 
 def test_batched_forward_kinematics_matches_pinocchio():

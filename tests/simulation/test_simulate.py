@@ -295,3 +295,88 @@ def test_links_far_from_convex_take_no_part_in_self_collision():
         m = ss.model
         arm = [g for g in ss.robot_geoms if g not in ss.gripper_geoms]
         assert all(m.geom_contype[ss.table_geom] & m.geom_conaffinity[g] for g in arm)
+
+
+def _xor_volume(mesh: trimesh.Trimesh, turn: np.ndarray, centre: np.ndarray) -> float:
+    """Volume (m^3) of the mesh and the mesh turned by `turn` about `centre` that is not shared, by manifold3d's
+    booleans (not our symmetry code)."""
+    moved = mesh.copy()
+    t = np.eye(4)
+    t[:3, :3], t[:3, 3] = turn, centre - turn @ centre
+    moved.apply_transform(t)
+    both = trimesh.boolean.intersection([mesh, moved], engine="manifold")
+    return float(mesh.volume + moved.volume - 2 * both.volume)
+
+
+def test_the_goal_check_counts_poses_the_same_up_to_the_parts_symmetry(demo):
+    """The T-shaped tube maps onto itself by a half turn about its branch (and by nothing else): manifold3d's
+    booleans agree. The demo plan with its goal turned by that half turn is still confirmed; a 10 degree turn about
+    the run's axis (the branch then tilts) or a half turn about the run is not a symmetry and still counts. A
+    cylinder is a body of revolution: any turn about its axis, or end for end, is no error; a tilt is."""
+    import copy
+
+    from workbench.geometry.symmetry import part_symmetry, rotation
+
+    db, _, plan = demo
+    tube = load_object(bundled_objects()["tube"]).mesh
+    sym = part_symmetry(tube)
+    c = sym.centre
+    half_z, tilt_y, half_y = rotation([0, 0, 1], np.pi), rotation([0, 1, 0], np.radians(10)), rotation([0, 1, 0], np.pi)
+    assert sym.axis is None and len(sym.turns) == 2 and np.allclose(sym.turns[1], half_z, atol=1e-6)
+    assert _xor_volume(tube, half_z, c) < 1e-3 * tube.volume
+    assert min(_xor_volume(tube, r, c) for r in (tilt_y, half_y)) > 0.05 * tube.volume
+
+    def turned(pose, r):
+        t = np.eye(4)
+        t[:3, :3], t[:3, 3] = r, c - r @ c
+        return pose @ t
+
+    goal = np.asarray(plan.goal_pose, dtype=np.float64)
+    for r, expect in ((half_z, 0.0), (tilt_y, 10.0), (half_y, 180.0)):
+        e_t, e_r = pose_error(turned(goal, r), goal, c, sym)
+        assert e_t < 1e-9 and abs(np.degrees(e_r) - expect) < 1e-4, (expect, np.degrees(e_r))
+    with Store(db) as store:
+        robot = load_planner(store, "tube", "panda").robot
+        other = copy.deepcopy(plan)
+        other.goal_pose = turned(goal, half_z)
+        out = simulate_in_memory(store, other, robot, SimParams())
+    assert out.confirmed and out.final_angle <= np.radians(5), out.failures
+
+    cyl = trimesh.creation.cylinder(radius=0.02, height=0.07, sections=48)
+    s = part_symmetry(cyl)
+    assert s.axis is not None and abs(abs(s.axis[2]) - 1) < 1e-9 and len(s.turns) == 2  # about z, and end for end
+    for r, expect in ((rotation([0, 0, 1], 0.3), 0.0), (rotation([1, 0, 0], np.pi), 0.0),
+                      (rotation([1, 0, 0], 0.2) @ rotation([0, 0, 1], 1.0), np.degrees(0.2))):
+        assert abs(np.degrees(s.angle(r, np.eye(3))) - expect) < 1e-4, (expect, np.degrees(s.angle(r, np.eye(3))))
+    assert _xor_volume(cyl, rotation([0, 0, 1], 0.3), s.centre) < 1e-2 * cyl.volume  # its 48 facets aside
+    assert _xor_volume(cyl, rotation([1, 0, 0], 0.2), s.centre) > 0.05 * cyl.volume
+
+
+def test_a_part_placed_beside_the_table_drops_to_the_floor_at_once(demo):
+    """The demo plan on a table that ends beside the start: the part set down at the goal, past the table's edge,
+    falls onto the floor; the replay reports a drop at the place step as it lands, a free fall of 0.75 m after the
+    fingers open (sqrt(2 h / g), at least), and stops there."""
+    from workbench.robots.collider import Scene
+    from workbench.simulation.replay import simulate
+    from workbench.simulation.scene import FLOOR_Z
+    from workbench.simulation.stages import self_pairs
+    from workbench.store import simulation as sql
+
+    db, idplan, plan = demo
+    obj = load_object(bundled_objects()["tube"])
+    sx, sy = plan.start_pose[:2, 3]
+    small = Scene(table_min=(sx - 0.08, sy - 0.08), table_max=(sx + 0.08, sy + 0.08))
+    assert (np.abs(plan.goal_pose[:2, 3] - (sx, sy)) > 0.08).any()  # the goal is off that table
+    with Store(db) as store:
+        inputs = sql.plan_inputs(store, idplan)
+        robot = load_planner(store, "tube", "panda").robot
+        res = simulate(plan, robot, obj.mesh, small, inputs["friction"], convex_parts(obj.mesh, obj.digest, obj.name),
+                       SimParams(), self_pairs(store, inputs["idrobot"], robot))
+    f = res.failure
+    assert f.kind == "drop" and plan.steps[f.step].kind == "place" and "floor" in f.message, res.failures
+    release = [s for s in plan.segments if s.kind == "gripper" and not s.holding and s.t0 < f.t][-1]
+    fall = np.sqrt(2 * -FLOOR_Z / 9.81)
+    assert fall <= f.t - release.t0 <= release.duration + fall + 0.1, (f.t, release.t0)
+    assert res.simulated == pytest.approx(f.t, abs=0.003) and res.playback_t[-1] == pytest.approx(f.t, abs=0.003)
+    low = (res.playback_pose[-1][:3, :3] @ obj.mesh.vertices.T).T[:, 2] + res.playback_pose[-1][2, 3]
+    assert abs(low.min() - FLOOR_Z) < 0.005  # it lies on the floor

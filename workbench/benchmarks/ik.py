@@ -23,6 +23,7 @@ import argparse
 import statistics
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +49,7 @@ from workbench.robots.model import get_robot
 from workbench.robots.solvers import closed_form
 from workbench.store import Store
 from workbench.store.objects import put_gripper, put_object
-from workbench.store.placements import TABLETOP_STAGE, angle_ids
+from workbench.store.placements import TABLETOP_STAGE, angle_ids, load_tabletop_grips
 
 PAPER_ROWS = [  # obj, #-tpg, t-tpgikn (Nextage), t-tpgikh (HRP5P)
     ("TU", 18648, 1746.67, 1692.74), ("PB", 168, 4025.69, 4069.84), ("PW", 27048, 2200.94, 2346.49),
@@ -240,6 +241,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "a tenth)")
     parser.add_argument("--repeats", type=int, default=3, help="runs per timing (median)")
     parser.add_argument("--workers", type=int, default=None, help="processes (default: all cores)")
+    parser.add_argument("--compare", type=int, default=2000,
+                        help="paper protocol: a seeded sample of this many of each object's grips solved again by the "
+                             "numerical solver, for the comparison columns (default 2,000; 0: none)")
     parser.add_argument("--handx", type=float, default=0.05)
     parser.add_argument("--worldz", type=float, default=0.10)
     parser.add_argument("--worlda", type=float, default=WORLDA)
@@ -321,14 +325,38 @@ def run_paper(args: argparse.Namespace) -> int:
                                progress=False, idtabletop=p.idtabletop, worlda=args.worlda)
                     t = time.perf_counter() - t0
                 ref = paper_rows.get(row)
+                with Store(db) as store:
+                    grips = load_tabletop_grips(store, g.idobject, p.idtabletop)
                 rows.append((label, robot.name, solver_kind(robot, opts).split(" (")[0], robot.nq, r.grips, t, r.feasible,
-                             r.feasible_all, f"{r.grips / t:,.0f}", *(ref[1:] if ref else ("-", "-", "-"))))
+                             r.feasible_all, f"{r.grips / t:,.0f}", *compare_numerical(robot, grips, obj.mesh, opts, args),
+                             *(ref[1:] if ref else ("-", "-", "-"))))
     print_table(["object", "robot", "ik", "dof", "#-tpg", "t-tpgik (s)", "#feasible grasp", "#feasible all five", "grips/s",
-                 "paper #-tpg", "paper t-tpgikn (s)", "paper t-tpgikh (s)"], rows,
+                 "sample", "sample: feasible (this ik / numerical)", "numerical only", "paper #-tpg", "paper t-tpgikn (s)",
+                 "paper t-tpgikh (s)"], rows,
                 title=f"IK feasibility, protocol paper: every tabletop grip of each object (all grasps, 168 placements per free "
                       f"placement) at the grasp, handx {args.handx} m, + worldz {args.worldz} m, worlda {args.worlda} m and "
-                      f"+ worldz; one cold run in a fresh store. Paper: Nextage / HRP5P, Xeon 2.8 GHz")
+                      f"+ worldz; one cold run in a fresh store. Sample: {args.compare:,} seeded grips solved again by this "
+                      f"IK and by the numerical solver (Levenberg-Marquardt from seeds), grips feasible at all five poses, "
+                      f"and the grips feasible at some pose for the numerical solver but not for this IK. Paper: "
+                      f"Nextage / HRP5P, Xeon 2.8 GHz")
     return 0
+
+
+def compare_numerical(robot, grips: dict[str, np.ndarray], mesh: trimesh.Trimesh, opts: IKOptions,
+                      args: argparse.Namespace) -> tuple:
+    """(sample size, "feasible at all five: this IK / numerical", grips feasible at some pose for the numerical solver
+    only) on a seeded sample of `args.compare` grips; dashes when the IK is the numerical one or no sample is asked."""
+    if args.compare <= 0 or solver_kind(robot, opts).startswith("numerical"):
+        return "-", "-", "-"
+    n = len(grips["rotmat"])
+    keep = np.sort(np.random.default_rng(0).choice(n, min(n, args.compare), replace=False))
+    sample = {k: v[keep] for k, v in grips.items() if isinstance(v, np.ndarray) and v.shape[:1] == (n,)}
+    scene = default_scene(robot.name)
+    runs = [ik_feasibility(robot, sample, scene, args.handx, args.worldz, mesh, o, workers=args.workers, progress=False,
+                           worlda=args.worlda).feasible for o in (opts, replace(opts, solver="numerical"))]
+    ours, numerical = runs
+    return (len(keep), f"{int(ours.all(1).sum()):,} / {int(numerical.all(1).sum()):,}",
+            int((numerical & ~ours).any(1).sum()))
 
 
 def run(args: argparse.Namespace) -> int:

@@ -34,6 +34,7 @@ from workbench.geometry.objects import from_arrays, load_object
 from workbench.planners.wan_harada.motions import ExecOptions, plan_executable
 from workbench.planners.wan_harada.stages import DEMO_GRID, build_all, choose_task, load_planner
 from workbench.resources import bundled_objects
+from workbench.geometry.symmetry import part_symmetry
 from workbench.simulation.decomposition import cache_dir, convex_parts
 from workbench.simulation.replay import FAILURES, SimParams
 from workbench.simulation.stages import simulate_in_memory
@@ -110,6 +111,7 @@ def run(args: argparse.Namespace) -> int:
             continue
         t_decomp = time.perf_counter() - t0
         decomp = f"{t_decomp:.2f} ({'cached' if cached else 'computed'}, {len(hulls)} hulls)"
+        symmetry = part_symmetry(obj.mesh)
         for label in robots:
             bar.update(1)
             try:
@@ -133,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
                 for plan in plans:
                     t1 = time.perf_counter()
                     try:
-                        out = simulate_in_memory(store, plan, planner.robot, params)
+                        out = simulate_in_memory(store, plan, planner.robot, params, symmetry)
                     except SimulationError:
                         kinds["diverged"] = kinds.get("diverged", 0) + 1
                         totals["diverged"] = totals.get("diverged", 0) + 1
@@ -190,11 +192,12 @@ def study(args: argparse.Namespace) -> int:
             except PlanningError as exc:
                 rows.append([obj.name, "-", "-", "-", f"no plan ({_first_line(exc)})", "-", "-", "-"])
                 continue
+            symmetry = part_symmetry(obj.mesh)
             for dt, imp, mu in itertools.product(*STUDY.values()):
                 p = SimParams(timestep=dt, impratio=imp, friction=mu, grip_force=args.grip_force)
                 t0 = time.perf_counter()
                 try:
-                    out = simulate_in_memory(store, plan, planner.robot, p)
+                    out = simulate_in_memory(store, plan, planner.robot, p, symmetry)
                 except SimulationError:
                     tally.setdefault((dt, imp, mu), []).append(0)
                     rows.append([obj.name, f"{dt * 1000:g}", f"{imp:g}", f"{mu:g}", "diverged", "-", "-",

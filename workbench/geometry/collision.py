@@ -114,17 +114,3 @@ def cylinders_collide(radius: float, lengths: np.ndarray, rotations: np.ndarray,
         cyl = fcl.CollisionObject(fcl.Cylinder(radius, float(lengths[k])), fcl.Transform(rotations[k], centres[k]))
         out[k] = collide(cyl, target)
     return out
-
-
-def boxes_collide(extents: np.ndarray, poses: np.ndarray, target: fcl.CollisionObject) -> np.ndarray:
-    """For each row of box poses (G, B, 4, 4), whether any of the B boxes (extents (B, 3)) intersects `target`."""
-    poses = np.asarray(poses, dtype=np.float64)
-    out = np.zeros(len(poses), dtype=bool)
-    boxes = [collision_object(box(e)) for e in extents]
-    for g in range(len(poses)):
-        for b, obj in enumerate(boxes):
-            set_pose(obj, poses[g, b, :3, :3], poses[g, b, :3, 3])
-            if collide(obj, target):
-                out[g] = True
-                break
-    return out

@@ -31,16 +31,11 @@ import trimesh
 from scipy.spatial import QhullError
 
 from workbench.errors import MeshError, ParameterError
-from workbench.geometry.collision import (
-    boxes_collide,
-    bvh,
-    collide_at_poses,
-    cylinders_collide,
-    object_collider,
-)
+from workbench.geometry.collision import cylinders_collide, object_collider
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
+from workbench.grasping._handkernel import convex_piece, hull_hits, pack
 from workbench.grasping.pads import (
     Touches,
     axis_frames,
@@ -48,6 +43,7 @@ from workbench.grasping.pads import (
     first_touches,
     gap_windows,
     pad_offsets,
+    triangle_tree,
 )
 from workbench.grasping.placements import stable_placements
 from workbench.params import Params, bounds, check_memory, param
@@ -303,18 +299,18 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
                      lengths=lengths, empty_reason=empty_reason(counts, params, lengths, gripper, pairs))
 
 
-def _level2(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, params: GraspParams,
+def _level2(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, mesh: trimesh.Trimesh, params: GraspParams,
             counts: dict, timings: dict, pads: bool = True) -> np.ndarray:
     """Level 2: the hand at its pre-grasp opening swept along the approach to each pose, then the fingers at the
     grasp's opening (CONVENTIONS.md, Gripper)."""
     t0 = time.perf_counter()
-    free = ~approach_collides(gripper, poses, params.pregrasp(widths, gripper), target, params.approach_length,
+    free = ~approach_collides(gripper, poses, params.pregrasp(widths, gripper), mesh, params.approach_length,
                               params.finger_clearance)
     counts["hand_open"] = int(free.sum())
     timings["level2"] = time.perf_counter() - t0
     t0 = time.perf_counter()
     idx = np.flatnonzero(free)
-    free[idx] = ~fingers_collide(gripper, poses[idx], widths[idx], target, params.finger_clearance, pads)
+    free[idx] = ~fingers_collide(gripper, poses[idx], widths[idx], mesh, params.finger_clearance, pads)
     timings["fingers"] = time.perf_counter() - t0
     return free
 
@@ -330,56 +326,70 @@ def swept_body(gripper: Gripper, length: float) -> trimesh.Trimesh:
 
 
 def swept_fingers(boxes: list[tuple[np.ndarray, np.ndarray]], length: float,
-                  clearance: float) -> tuple[trimesh.Trimesh, trimesh.Trimesh]:
+                  clearance: float) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """The volumes the left (+y) and right finger boxes (extents, pose; inner faces at y = 0) sweep moving `length`
-    along the TCP's +z to their pose, each box shrunk by `clearance` on every side first: per finger, the union of
-    every box's sweep, each the convex hull of the box's corners at both ends (exact)."""
-    corners = np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (-0.5, 0.5)])
+    along the TCP's +z to their pose, each box shrunk by `clearance` on every side first: per finger, the corners
+    (16, 3) of every box at both ends, whose convex hull is that box's sweep (exact); the finger's is their union."""
     left, right = [], []
     for ext, pose in boxes:
-        c = (corners * np.maximum(np.asarray(ext, dtype=np.float64) - 2 * clearance, 1e-6)) @ pose[:3, :3].T + pose[:3, 3]
-        hull = trimesh.Trimesh(np.vstack([c, c - [0.0, 0.0, length]])).convex_hull
-        (left if pose[1, 3] > 0 else right).append(hull)
-    return trimesh.util.concatenate(left), trimesh.util.concatenate(right)
+        c = box_corners(np.maximum(np.asarray(ext, dtype=np.float64) - 2 * clearance, 1e-6)) @ pose[:3, :3].T + pose[:3, 3]
+        (left if pose[1, 3] > 0 else right).append(np.vstack([c, c - [0.0, 0.0, length]]))
+    return left, right
 
 
-def approach_collides(gripper: Gripper, poses: np.ndarray, openings: np.ndarray, target, length: float,
-                      clearance: float) -> np.ndarray:
-    """(N,) whether the hand, with the fingers at `openings`, hits the object anywhere on its way along the approach
-    axis from `length` back to each pose: the body's sweep (`swept_body`) and both fingers' (`swept_fingers`, pads
-    included, shrunk by `clearance`), CONVENTIONS.md (Gripper: the gripper clears the object at its pre-grasp
+def box_corners(extents: np.ndarray) -> np.ndarray:
+    """The 8 corners (8, 3) of a box of full `extents` centred on its frame."""
+    return np.array([[sx, sy, sz] for sx in (-0.5, 0.5) for sy in (-0.5, 0.5) for sz in (-0.5, 0.5)]) * extents
+
+
+def hand_hits(mesh: trimesh.Trimesh, pieces: list[np.ndarray], poses: np.ndarray) -> np.ndarray:
+    """(N,) whether any of the convex volumes (`pieces`: the points (V, 3) whose hull each is, in its own frame)
+    placed at `poses` (N, P, 4, 4) meets the part: against the triangle hierarchy of the pad model
+    (`_handkernel.hull_hits`), solid volumes."""
+    poses = np.ascontiguousarray(np.asarray(poses, dtype=np.float64).reshape(-1, len(pieces), 4, 4))
+    if len(poses) == 0:
+        return np.zeros(0, dtype=bool)
+    shape, slots, leaf, tri, _ = triangle_tree(mesh)
+    return hull_hits(shape, slots, leaf, tri, *pack([convex_piece(p) for p in pieces]), poses, 0.0)
+
+
+def approach_collides(gripper: Gripper, poses: np.ndarray, openings: np.ndarray, mesh: trimesh.Trimesh,
+                      length: float, clearance: float) -> np.ndarray:
+    """(N,) whether the hand, with the fingers at `openings`, hits the part `mesh` anywhere on its way along the
+    approach axis from `length` back to each pose: the body's sweep (`swept_body`) and both fingers' (`swept_fingers`,
+    pads included, shrunk by `clearance`), CONVENTIONS.md (Gripper: the gripper clears the object at its pre-grasp
     opening along the approach)."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
     openings = np.asarray(openings, dtype=np.float64)
-    out = collide_at_poses(bvh(swept_body(gripper, length)), poses, target)
-    live = np.flatnonzero(~out)
-    for sel, shape in gripper.width_groups(openings[live]):
-        rows = live[sel]
-        for side, finger in zip((1.0, -1.0), swept_fingers(shape, length, clearance)):
-            rows = rows[~out[rows]]
-            placed = poses[rows].copy()
-            placed[:, :3, 3] += side * openings[rows][:, None] / 2 * poses[rows][:, :3, 1]
-            out[rows] = collide_at_poses(bvh(finger), placed, target)
+    out = np.zeros(len(poses), dtype=bool)
+    body = np.asarray(swept_body(gripper, length).vertices)
+    for sel, shape in gripper.width_groups(openings):
+        left, right = swept_fingers(shape, length, clearance)
+        side = np.array([0.0] + [1.0] * len(left) + [-1.0] * len(right))
+        placed = np.repeat(poses[sel][:, None], len(side), axis=1)
+        placed[:, :, :3, 3] += (side[None, :, None] * (openings[sel] / 2)[:, None, None]
+                                * poses[sel][:, None, :3, 1])
+        out[sel] = hand_hits(mesh, [body, *left, *right], placed)
     return out
 
 
-def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, target, clearance: float,
+def fingers_collide(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, mesh: trimesh.Trimesh, clearance: float,
                     pads: bool = True) -> np.ndarray:
     """Do the finger boxes of both fingers at each grasp's opening, shrunk by `clearance` on every side, intersect
-    the object? (The body does not move with the fingers: `approach_collides` tests it.) `pads=False` skips the pad
-    boxes, for grasps whose pads closed onto their first touches and so cannot overlap the object."""
+    the part `mesh`? (The body does not move with the fingers: `approach_collides` tests it.) `pads=False` skips the
+    pad boxes, for grasps whose pads closed onto their first touches and so cannot overlap the object."""
     widths = np.asarray(widths)
     out = np.zeros(len(poses), dtype=bool)
     for sel, shape in gripper.width_groups(widths):  # one group unless a linkage's fingers change along the stroke
         boxes = [b for k, b in enumerate(shape) if pads or k // 2 != gripper.pad]
         if not boxes or not len(sel):  # fingers that are their pads only
             continue
-        extents = np.array([np.maximum(ext - 2 * clearance, 1e-6) for ext, _ in boxes])
+        corners = [box_corners(np.maximum(ext - 2 * clearance, 1e-6)) for ext, _ in boxes]
         local = np.array([pose for _, pose in boxes])
         side = np.sign(local[:, 1, 3])
         placed = np.repeat(local[None], len(sel), axis=0)
         placed[:, :, 1, 3] += side[None, :] * widths[sel][:, None] / 2
-        out[sel] = boxes_collide(extents, np.einsum("gij,gbjk->gbik", poses[sel], placed), target)
+        out[sel] = hand_hits(mesh, corners, np.einsum("gij,gbjk->gbik", poses[sel], placed))
     return out
 
 
@@ -415,7 +425,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
         parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref))
         source.append(np.repeat(src, len(ang)))
         if params.gap_grasps and (src >= 0).all():  # gaps open from a surface sample along its normal
-            w, win = gap_windows(mesh, o, a, gripper.jaw_max)
+            w, win = gap_windows(mesh, o, a, gripper.jaw_max, params.pregrasp_margin)
             parts.append(first_touches(mesh, o[w], a[w], ang, gripper, ref=None if ref is None else ref[w],
                                        windows=win))
             source.append(np.repeat(src[w], len(ang)))
@@ -441,8 +451,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                          normal0=touch.normal0, normal1=touch.normal1, width=touch.width, width_ok=width_ok,
                          com_ok=com_ok, level1_ok=com_ok, axis=y)
     live = np.flatnonzero(com_ok)
-    target = object_collider(mesh)
-    free = _level2(gripper, touch.poses[live], touch.width[live], target, params, counts, timings, pads=False)
+    free = _level2(gripper, touch.poses[live], touch.width[live], mesh, params, counts, timings, pads=False)
     kept = touch.poses[live]
     return pairs, kept, live, rotation_about_axis(kept[:, :3, 1], kept[:, :3, 2]), free
 
@@ -622,7 +631,7 @@ def _paper(obj, gripper, params, lengths, facets, samples, margin, counts, timin
     counts["hand_poses"] = int(len(poses))
     # the pads themselves are level 1's (their swept cylinders stop short of a tilted facet, where a flat pad
     # at the contact would dig in by its rim): the other finger boxes are tested at the grasp's opening
-    free = _level2(gripper, poses, pairs.width[cand_pair], target, params, counts, timings, pads=False)
+    free = _level2(gripper, poses, pairs.width[cand_pair], mesh, params, counts, timings, pads=False)
     return pairs, poses, cand_pair, cand_rot, free
 
 

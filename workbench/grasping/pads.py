@@ -155,14 +155,16 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
         return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows)
 
 
-def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray,
-                jaw_max: float) -> tuple[np.ndarray, np.ndarray]:
+def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, jaw_max: float,
+                margin: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Pad starts inside a hole or cavity for jaw axes through surface points `origins` (K, 3) along their outward
     normals `axes` (K, 3): (axis index (W,), window (W, 2)) for `first_touches`.
 
     Along the axis line, the left pad touches the origin's surface and the right pad a surface below it facing down
-    (any surface on an open mesh) at most `jaw_max` away; with the TCP midway, the pads start `jaw_max` / 2 either
-    side of it, and each start must leave the line clear up to its touch. The windows where both starts lie outside
+    (any surface on an open mesh) at most `jaw_max` away; with the TCP midway, the pads start at the pre-grasp
+    opening, `margin` wider than the span between the two crossings and at most `jaw_max` (CONVENTIONS.md, Gripper:
+    the hand approaches at the pre-grasp opening), or `jaw_max` / 2 either side of the TCP when `margin` is None
+    (full opening). Each start must leave the line clear up to its touch. The windows where both starts lie outside
     the part along the line are the ordinary grasp from outside and are not returned.
     """
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
@@ -195,7 +197,8 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray,
     eps = max(1e-7, 1e-9 * reach)
     span = h[top][group] - h
     mid = 0.5 * (h[top][group] + h)
-    lo, hi = mid - jaw_max / 2, mid + jaw_max / 2
+    half = jaw_max / 2 if margin is None else np.minimum(span + margin, jaw_max) / 2
+    lo, hi = mid - half, mid + half
     ok = (hit_origin[group] & (np.arange(n) > top[group]) & down & (span > eps) & (span <= jaw_max)
           & (hi < ceiling - eps) & (lo > floor + eps)  # both starts in free space along the line
           & ~(np.isinf(ceiling) & np.isinf(floor)))  # not both outside the part: the ordinary grasp
@@ -228,6 +231,13 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows) -> Touch
     window = np.repeat(windows, len(angles), axis=0) - mid[:, None]
     return Touches(poses=poses, width=width, hit=hit, point0=res[1][1], normal0=res[1][2], tri0=res[1][3],
                    point1=res[-1][1], normal1=res[-1][2], tri1=res[-1][3], window=window)
+
+
+def triangle_tree(mesh: trimesh.Trimesh) -> tuple:
+    """The triangle hierarchy of `mesh` (`_padkernel.triangle_bvh`), built once per mesh: the pads' first touches and
+    the hand's collision checks (`grasps.hand_hits`) share it."""
+    return _tree(mesh, np.ascontiguousarray(mesh.triangles, dtype=np.float64),
+                 np.ascontiguousarray(mesh.face_normals, dtype=np.float64))
 
 
 def _tree(mesh: trimesh.Trimesh, tri: np.ndarray, normals: np.ndarray):

@@ -332,3 +332,36 @@ def parallel_rows(poses, pre, tip_inv, rm, tm, ax, n1, kk, c6v, n5, d4, lower, u
                         out_q[i, col, j] = qb[j]
                         ok = ok and not np.isnan(qb[j])
                     out_valid[i, col] = ok
+
+
+@njit(cache=True, nogil=True)
+def branch_order(joints, valid, ref, lower, upper, wrap, dist, rank):
+    """`analytic.branch_distances` and a stable argsort of its distances in one pass: with `wrap`, joints (M, B, n)
+    moved in place by whole turns toward ref (M, n) where that stays within the limits; dist (M, B) their L1
+    distances to ref (inf where not valid), rank (M, B) the branches nearest first (ties in branch order)."""
+    m, nb, n = joints.shape
+    for i in range(m):
+        for b in range(nb):
+            if not valid[i, b]:
+                dist[i, b] = np.inf
+                continue
+            d = 0.0
+            for j in range(n):
+                x = joints[i, b, j]
+                if wrap:
+                    alt = x + TWO_PI * np.rint((ref[i, j] - x) / TWO_PI)
+                    if alt >= lower[j] and alt <= upper[j]:
+                        x = alt
+                        joints[i, b, j] = x
+                d += abs(x - ref[i, j])
+            dist[i, b] = d
+        for b in range(nb):  # insertion sort: stable, and few branches per pose are valid
+            rank[i, b] = b
+        for b in range(1, nb):
+            k = rank[i, b]
+            v = dist[i, k]
+            c = b - 1
+            while c >= 0 and dist[i, rank[i, c]] > v:
+                rank[i, c + 1] = rank[i, c]
+                c -= 1
+            rank[i, c + 1] = k

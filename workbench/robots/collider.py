@@ -1,6 +1,7 @@
 """Collision checks of a robot at joint configurations (Section IV's IK feasibility): the arm and the planning
 gripper against the table slab of a `Scene`, the arm against the object at its placement, with python-fcl on the
-URDF's collision geometry (the robot's own hand replaced by the planning gripper).
+URDF's collision geometry (the robot's own hand replaced by the planning gripper). A compiled broad phase
+(`robots._collidekernel`) settles most configurations from the parts' boxes and hull vertices; fcl tests the rest.
 """
 
 from __future__ import annotations
@@ -19,7 +20,8 @@ from workbench.geometry.collision import (
     set_pose,
 )
 from workbench.params import Params, param
-from workbench.robots.chain import forward
+from workbench.robots._collidekernel import HIT, OPEN, classify_rows
+from workbench.robots.chain import _kernel_chain, forward
 from workbench.robots.model import Robot
 
 
@@ -58,6 +60,17 @@ def default_scene(robot_name: str) -> Scene:
     return DEFAULT_SCENES.get(robot_name, Scene())
 
 
+MARGIN = 1e-5  # m: hull vertices this far inside the table are a contact, this far clear of a box none; fcl between
+
+
+def _hull_vertices(mesh: trimesh.Trimesh) -> np.ndarray:
+    """The vertices of the mesh's convex hull (all its vertices where qhull fails on a flat or tiny mesh)."""
+    try:
+        return np.asarray(mesh.convex_hull.vertices, dtype=np.float64)
+    except Exception:  # noqa: BLE001 - qhull's errors on degenerate input have no common type
+        return np.asarray(mesh.vertices, dtype=np.float64)
+
+
 def _obb(mesh: trimesh.Trimesh, pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Bounding box of `mesh` (axis-aligned in the mesh's frame) placed at `pose`: rotation (3, 3), centre (3,),
     half extents (3,) (plus 0.1 mm)."""
@@ -69,13 +82,14 @@ def _obb(mesh: trimesh.Trimesh, pose: np.ndarray) -> tuple[np.ndarray, np.ndarra
 class Collider:
     """Arm (without its own hand) and planning gripper against the table slab and the object.
 
-    Broad phase: world axis-aligned boxes of each part's oriented bounding box (numpy, batched over
-    configurations); narrow phase: python-fcl on the URDF's collision geometry for the overlapping
-    (configuration, part) pairs only."""
+    Broad phase: world axis-aligned boxes of each part's oriented bounding box, then for the pairs whose boxes meet,
+    the part's convex-hull vertices (compiled, one configuration at a time; `_collidekernel.classify_rows`); narrow
+    phase: python-fcl on the URDF's collision geometry for the pairs the vertices leave open. `collides` is the
+    same test with the numpy box broad phase and fcl alone."""
 
     def __init__(self, robot: Robot, scene: Scene, obj_mesh: trimesh.Trimesh | None):
         self.robot = robot
-        joints, obbs, objs, vs_obj, names = [], [], [], [], []
+        joints, obbs, objs, vs_obj, names, verts, exact = [], [], [], [], [], [], []
         for k in robot.arm_geometry():
             go = robot.geom.geometryObjects[k]
             g, mesh = pinocchio_geometry(go)
@@ -85,12 +99,21 @@ class Collider:
             objs.append((pl, collision_object(g)))
             vs_obj.append(True)
             names.append(go.name)
+            # a cylinder's, sphere's or capsule's mesh is inscribed in the shape: its vertices bound nothing
+            exact.append(type(g).__name__ in ("BVHModel", "Box"))
+            verts.append(_hull_vertices(mesh) @ pl[:3, :3].T + pl[:3, 3])
         grip = robot.gripper.collision_mesh()
         joints.append(robot.nq - 1)
         obbs.append(_obb(grip, robot.tip_in_joint))
         objs.append((robot.tip_in_joint, collision_object(bvh(grip))))
         vs_obj.append(False)
         names.append("gripper")
+        exact.append(True)
+        tip = robot.tip_in_joint
+        verts.append(_hull_vertices(grip) @ tip[:3, :3].T + tip[:3, 3])
+        self.verts = np.ascontiguousarray(np.concatenate(verts))
+        self.vstart = np.cumsum([0] + [len(v) for v in verts]).astype(np.int64)
+        self.exact = np.array(exact)
         self.names = names
         self.joint = np.array(joints)
         self.parts = objs
@@ -105,6 +128,7 @@ class Collider:
         at[:3, 3] = 0.5 * (tmin + tmax)
         self.table = collision_object(box(tmax - tmin), at)
         self.obj = None
+        self.obj_obb = (np.eye(3), np.zeros(3), np.zeros(3))
         if obj_mesh is not None:
             self.obj = collision_object(bvh(obj_mesh))
             self.obj_obb = _obb(obj_mesh, np.eye(4))
@@ -150,7 +174,13 @@ class Collider:
             cw = placements[:, :3, :3] @ oc + placements[:, :3, 3]
             hw = np.einsum("bij,j->bi", np.abs(rw), oh)
             cand_obj = (lo <= (cw + hw)[:, None]).all(-1) & (hi >= (cw - hw)[:, None]).all(-1) & self.vs_object[None]
-        hit = np.zeros(b, dtype=bool)
+        return self._narrow(rot, pos, placements, cand_table, cand_obj)
+
+    def _narrow(self, rot: np.ndarray, pos: np.ndarray, placements: np.ndarray | None, cand_table: np.ndarray,
+                cand_obj: np.ndarray) -> np.ndarray:
+        """(B,) whether fcl finds a contact among the candidate (configuration, part) pairs with the table
+        (cand_table (B, P)) and with the object (cand_obj (B, P))."""
+        hit = np.zeros(len(rot), dtype=bool)
         for bi, pi in zip(*np.nonzero(cand_table | cand_obj)):
             if hit[bi]:
                 continue
@@ -184,7 +214,23 @@ class Collider:
         return out
 
     def collides_q(self, q: np.ndarray, placements: np.ndarray | None, table_only: bool = False) -> np.ndarray:
-        """`collides` for joint vectors (B, n)."""
-        rot, pos, _, _ = forward(self.robot, np.atleast_2d(q))
-        pl = None if placements is None else np.asarray(placements).reshape(-1, 4, 4)
-        return self.collides(rot, pos, pl, table_only)
+        """`collides` for joint vectors (B, n): the compiled broad phase, then fcl on the pairs it leaves open."""
+        q = np.ascontiguousarray(np.atleast_2d(np.asarray(q, dtype=np.float64)))
+        pl = None if placements is None else np.ascontiguousarray(np.asarray(placements, dtype=np.float64).reshape(-1, 4, 4))
+        with_obj = self.obj is not None and pl is not None and not table_only
+        places = pl if with_obj else np.empty((0, 4, 4))
+        status = np.empty(len(q), dtype=np.int8)
+        open_table = np.empty((len(q), len(self.parts)), dtype=bool)
+        open_obj = np.empty_like(open_table)
+        base, chain_pl, axis, prism, _ = _kernel_chain(self.robot)
+        tmin, tmax = self.table_box
+        orr, oc, oh = self.obj_obb
+        classify_rows(q, base, chain_pl, axis, prism, self.joint, self.obb_r, self.obb_c, self.obb_h, self.vstart,
+                      self.verts, self.exact, self.vs_object, tmin, tmax, places, orr, oc, oh, MARGIN, status,
+                      open_table, open_obj)
+        hit = status == HIT
+        rows = np.flatnonzero(status == OPEN)
+        if len(rows):
+            rot, pos, _, _ = forward(self.robot, q[rows])
+            hit[rows] = self._narrow(rot, pos, pl[rows] if with_obj else None, open_table[rows], open_obj[rows])
+        return hit

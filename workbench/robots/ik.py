@@ -46,6 +46,7 @@ from tqdm.auto import tqdm
 
 from workbench.errors import ParameterError, RobotError
 from workbench.params import Params, param
+from workbench.robots._closedkernel import branch_order
 from workbench.robots.analytic import branch_distances
 from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
@@ -211,8 +212,13 @@ def neighbour_order(grips: dict[str, np.ndarray]) -> np.ndarray:
     n = len(grips["rotmat"])
     if n == 0:
         return np.zeros(0, dtype=np.int64)
-    prot = np.round(np.asarray(grips["placement_rotmat"])[:, :3, :3].reshape(n, 9), 6)
-    _, orient = np.unique(prot, axis=0, return_inverse=True)
+    rot = np.asarray(grips["placement_rotmat"])
+    if "idtabletopplacements" in grips:  # one rotation per tabletop placement: sort the few distinct ones
+        _, first, inverse = np.unique(np.asarray(grips["idtabletopplacements"]), return_index=True, return_inverse=True)
+        _, orient = np.unique(np.round(rot[first, :3, :3].reshape(len(first), 9), 6), axis=0, return_inverse=True)
+        orient = orient.ravel()[inverse.ravel()]
+    else:
+        _, orient = np.unique(np.round(rot[:, :3, :3].reshape(n, 9), 6), axis=0, return_inverse=True)
     pos = np.asarray(grips["tabletopposition"], dtype=np.float64)
     ix = np.unique(np.round(pos[:, 0], 4), return_inverse=True)[1].ravel()
     iy = np.unique(np.round(pos[:, 1], 4), return_inverse=True)[1].ravel()
@@ -309,6 +315,7 @@ class IKSolver:
         self.unlimited = closed_form(robot, limits=False) if self.analytic is not None and robot.nq > 6 else None
         self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)
+        self._wrap = bool((robot.upper - robot.lower > 2 * np.pi).any())  # a joint spanning more than a turn
 
     def for_object(self, obj_mesh: trimesh.Trimesh | None) -> IKSolver:
         """This solver for another object: its own collider, the same robot, seed library (the library keeps the seeds
@@ -354,8 +361,10 @@ class IKSolver:
         m, n = len(targets), self.robot.nq
         joints, valid = self.analytic.solve(targets)
         ref = np.where(np.isfinite(q0), q0, 0.0) if q0 is not None else np.zeros((m, n))
-        joints, dist = branch_distances(joints, valid, ref, self.robot.lower, self.robot.upper)
-        rank = np.argsort(dist, axis=1, kind="stable")
+        dist = np.empty(valid.shape)
+        rank = np.empty(valid.shape, dtype=np.int64)
+        branch_order(joints, valid, np.ascontiguousarray(ref, dtype=np.float64), self.robot.lower, self.robot.upper,
+                     self._wrap, dist, rank)
         q = np.full((m, n), np.nan)
         ok = np.zeros(m, dtype=bool)
         left = np.flatnonzero(np.isfinite(dist).any(axis=1))
@@ -556,8 +565,9 @@ def _init_worker(spec: RobotSpec, scene: Scene, opts: IKOptions, obj_mesh: trime
     _WORKER_SOLVER = IKSolver(robot_from_spec(spec), scene, opts, obj_mesh)
 
 
-def _work_chunk(targets: np.ndarray, placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    return _WORKER_SOLVER.chunk(targets, placements)
+def _work_chunk(poses: np.ndarray, placements: np.ndarray, handx: float, worldz: float,
+                worlda: float) -> tuple[np.ndarray, np.ndarray]:
+    return _WORKER_SOLVER.chunk(retract(poses, handx, worldz, worlda), placements)
 
 
 class IKPool:
@@ -578,8 +588,10 @@ class IKPool:
         self.executor = ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx, initializer=_init_worker,
                                             initargs=(robot.spec, scene, opts, obj_mesh))
 
-    def submit(self, targets: np.ndarray, placements: np.ndarray):
-        return self.executor.submit(_work_chunk, targets, placements)
+    def submit(self, poses: np.ndarray, placements: np.ndarray, handx: float, worldz: float, worlda: float):
+        """Solve the grips of TCP poses (C, 4, 4) at the five KINDS (`retract`, in the worker: a fifth of the data
+        to send) of the object at `placements` (C, 4, 4); a future of `IKSolver.chunk`'s result."""
+        return self.executor.submit(_work_chunk, poses, placements, handx, worldz, worlda)
 
     def close(self) -> None:
         self.executor.shutdown(wait=True, cancel_futures=True)
@@ -681,7 +693,6 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
     todo = [(s, e) for s, e in bounds if skip is None or not skip(order[s:e])]
     if not todo:
         return
-    targets = retract(poses, handx, worldz, worlda)
     workers = pool.workers if pool is not None else (workers or os.cpu_count() or 1)
     workers = max(1, min(workers, len(todo)))
     if pool is not None and pool.key != (robot.spec.digest, scene, opts, _mesh_key(obj_mesh)):
@@ -693,12 +704,14 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
     try:
         if workers == 1 and pool is None:
             solver = solver or IKSolver(robot, scene, opts, obj_mesh)
-            results = (solver.chunk(targets[order[s:e]], placements[order[s:e]]) for s, e in todo)
+            results = (solver.chunk(retract(poses[order[s:e]], handx, worldz, worlda), placements[order[s:e]])
+                       for s, e in todo)
         else:
             with children_without_sigint():  # a worker half-started by an interrupted submit prints a traceback
                 if pool is None:
                     pool = own_pool = IKPool(robot, scene, opts, obj_mesh, workers)
-                futures = [pool.submit(targets[order[s:e]], placements[order[s:e]]) for s, e in todo]
+                futures = [pool.submit(poses[order[s:e]], placements[order[s:e]], handx, worldz, worlda)
+                           for s, e in todo]
             results = (_result(f) for f in futures)
         for (s, e), (feas, joints) in zip(todo, results):
             bar.update(e - s)

@@ -206,6 +206,30 @@ def nearby_form(robot, samples: int = 4) -> ClosedForm | None:
     return ClosedForm(f"{inner.kind}, {names} held at home", inner.branches, robot.nq, solve)
 
 
+# Revision of each solver's rows: bump one when a change to that solver (or to the collision checks every solver's
+# rows go through) can change a stored `ik` row. The IK stage's digest holds the revisions of the solvers a robot
+# uses, so a store built by an older solver computes its rows again instead of reusing them.
+REVISIONS = {"collision checks": 1, "spherical wrist": 1, "spherical shoulder": 1, "three parallel axes": 1,
+             "subproblem decomposition": 1, "swept joint": 1, "numerical": 1}
+
+
+def revision(robot, numerical: bool = False) -> dict[str, int]:
+    """The revisions (`REVISIONS`) of the solvers whose answers make the robot's `ik` rows: its closed form's kind
+    (with the swept joint and the Levenberg-Marquardt fall-back of a 7-joint arm), or the numerical solver."""
+    form = None if numerical else closed_form(robot)
+    keys = ["collision checks"]
+    if form is None:
+        keys.append("numerical")
+        nearby = None if numerical else nearby_form(robot)
+        if nearby is not None:  # its seeds come from a swept closed form
+            keys += [k for k in REVISIONS if nearby.kind.startswith(k)] + ["swept joint"]
+    else:
+        keys += [k for k in REVISIONS if form.kind.startswith(k)]
+        if robot.nq == 7:
+            keys += ["swept joint", "numerical"]
+    return {k: REVISIONS[k] for k in keys}
+
+
 def describe(robot, numerical: bool = False) -> str:
     """The IK the robot gets, in words: 'closed form (KIND, B branches)' or 'numerical (...)'."""
     form = None if numerical else closed_form(robot)

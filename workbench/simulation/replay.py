@@ -11,11 +11,16 @@ The verdict, in time order (the first failure names the plan step and how it fai
 - shove: while the fingers close, the part moves more than the slip tolerance (a curved surface pushed aside);
 - slip / drop: during a transfer (from the close to the last straight line down) the part moves in the hand, as relative motion of
   part and TCP, beyond the slip tolerance; a drop when no pad touches it any more or it moved by more than
-  `drop_distance`;
+  `drop_distance`; at any time, a part that leaves the table and lands on the floor is a drop, and the replay
+  stops there;
 - roll: after a release the part does not settle (speeds below `settle_speed`, `settle_spin` within
   `settle_time`), or settles turned beyond the waypoint tolerance from its placement;
 - pose: at a waypoint (the end of a motion) the part is beyond the waypoint tolerance from the plan's pose;
 - goal: at the end the part is beyond the goal tolerance (defaults 5 mm and 5 degrees).
+
+The part's poses are compared with the plan's up to the part's rotational symmetry (`geometry.symmetry`, found
+from its mesh within 0.5 mm): a part at rest turned about its own axis of revolution, or by a turn that maps it onto
+itself, is where the plan put it. Slip and shove measure motion, and count every turn.
 """
 
 from __future__ import annotations
@@ -30,11 +35,12 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from workbench.errors import SimulationError
+from workbench.geometry.symmetry import Symmetry, part_symmetry
 from workbench.params import Params, param
 from workbench.simulation.decomposition import Decomposition
 from workbench.simulation.scene import build_scene, mass_properties, mujoco_module, part_scene
 
-MODEL_VERSION = 3  # bump when the scene or the verdict changes what a stored simulation means
+MODEL_VERSION = 4  # bump when the scene or the verdict changes what a stored simulation means
 DEGREE = math.pi / 180
 SQUEEZE = 0.02  # m: closing aims this far past the closed stop, so the finger force sits at its limit
 DEFAULT_GRIP_FORCE = 70.0  # N: the Franka hand's continuous grasp force
@@ -173,11 +179,15 @@ def _angle(ra: np.ndarray, rb: np.ndarray) -> np.ndarray:
     return np.arccos(np.clip(c, -1.0, 1.0))
 
 
-def pose_error(a: np.ndarray, b: np.ndarray, com: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Translation (m) of the part's centre of mass and rotation angle (rad) between part poses a and b (..., 4, 4)."""
+def pose_error(a: np.ndarray, b: np.ndarray, com: np.ndarray,
+               symmetry: Symmetry | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Translation (m) of the part's centre of mass and rotation angle (rad) between part poses a and b (..., 4, 4);
+    with the part's `symmetry`, the smallest angle between a and b turned by any of its symmetries (the centre of
+    mass stays where it is under them)."""
     ca = np.einsum("...ij,j->...i", a[..., :3, :3], com) + a[..., :3, 3]
     cb = np.einsum("...ij,j->...i", b[..., :3, :3], com) + b[..., :3, 3]
-    return np.linalg.norm(ca - cb, axis=-1), _angle(a[..., :3, :3], b[..., :3, :3])
+    turn = _angle(a[..., :3, :3], b[..., :3, :3]) if symmetry is None else symmetry.angle(a[..., :3, :3], b[..., :3, :3])
+    return np.linalg.norm(ca - cb, axis=-1), turn
 
 
 def _finger_targets(segments) -> list[float]:
@@ -187,11 +197,13 @@ def _finger_targets(segments) -> list[float]:
 
 
 def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.ndarray, np.ndarray]],
-             params: SimParams = SimParams(), self_pairs: list[tuple[str, str]] | None = None) -> SimResult:
+             params: SimParams = SimParams(), self_pairs: list[tuple[str, str]] | None = None,
+             symmetry: Symmetry | None = None) -> SimResult:
     """Replay `plan` (a timed Plan: steps and segments) with `robot` (its Robot, whose gripper is the planning
     gripper), the part's `mesh` and convex `hulls`, on `scene`'s table, with the plan's grasp `friction` unless
     `params.friction` overrides it; `self_pairs`: the robot's link pairs that may collide (the stored robot's
-    `AllowedPairs.checked`); see the module docstring for the verdict."""
+    `AllowedPairs.checked`); `symmetry`: the mesh's (`part_symmetry`, found here when not given); see the module
+    docstring for the verdict."""
     mujoco = mujoco_module()
     if not plan.segments:
         raise SimulationError("the plan has no timed motions to simulate; plan it with its motions")
@@ -242,6 +254,9 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
     ctrl[:, ss.finger_act] = finger[:, None]
     pb, hb = ss.part_body, ss.hand_body
     bad = _forbidden(m, ss, part_geoms)
+    on_floor = np.zeros((m.ngeom, m.ngeom), dtype=bool)
+    on_floor[ss.floor_geom, sorted(part_geoms)] = on_floor[sorted(part_geoms), ss.floor_geom] = True
+    fell = None  # the step at which the part reached the floor
     hit: list[tuple[int, int, int, float]] = []  # (step, geom, geom, depth) of every collision deeper than the tolerance
     depth = float(params.collision_depth)
     t0, c0 = time.perf_counter(), time.process_time()
@@ -259,13 +274,28 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
             if deep.any():
                 i = int(np.argmin(np.where(deep, dist, np.inf)))
                 hit.append((k, int(g[i, 0]), int(g[i, 1]), -float(dist[i])))
+            if on_floor[g[:, 0], g[:, 1]].any():
+                fell = k
+                break
     seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+    if fell is not None:  # nothing moves after the drop: the rest of the replay keeps the scene as it was then
+        for a in (part_pos, part_quat, hand_pos, hand_quat):
+            a[fell + 1:] = a[fell]
     if not np.isfinite(part_pos).all():
         raise SimulationError(f"the physics diverged (timestep {dt:g} s); give a smaller --timestep")
     part = _poses(part_pos, part_quat)
     hand = _poses(hand_pos, hand_quat)
-    rows, failures, final = _verdict(plan, robot, segs, times, seg_end, part, hand, touching, ss.part_com, params, start)
+    sym = symmetry if symmetry is not None else part_symmetry(mesh)
+    rows, failures, final = _verdict(plan, robot, segs, times, seg_end, part, hand, touching, ss.part_com, params, start,
+                                     sym)
     failures += _collisions(hit, m, ss, plan, segs, seg_of, times, params)
+    if fell is not None:
+        i = int(segs[seg_of[fell]].step)
+        failures = [f for f in failures if f.t <= times[fell]]
+        failures.append(Failure("drop", i, plan.steps[i].kind, float(times[fell]),
+                                f"step {i + 1} ({plan.steps[i].kind}, {segs[seg_of[fell]].caption} {segs[seg_of[fell]].kind}) "
+                                f"at {times[fell]:.2f} s: the part fell off the table onto the floor"))
+        n = fell + 1
     failures.sort(key=lambda f: f.t)
     every = max(1, int(round(1.0 / (PLAYBACK_HZ * dt))))
     keep = np.r_[np.arange(0, n, every), n - 1] if (n - 1) % every else np.arange(0, n, every)
@@ -320,8 +350,9 @@ def _touches(data, pads: set[int], part: set[int]) -> bool:
     return False
 
 
-def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: SimParams, start):
-    """Per-waypoint rows and every failure (see the module docstring); also the final (translation, angle) error."""
+def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: SimParams, start, sym: Symmetry | None = None):
+    """Per-waypoint rows and every failure (see the module docstring), part poses compared up to the part's
+    symmetry `sym`; also the final (translation, angle) error."""
     dt = times[1] - times[0] if len(times) > 1 else p.timestep
     idx_end = np.clip(np.round(seg_end / dt).astype(np.int64) - 1, 0, len(times) - 1)
     idx_start = np.r_[0, idx_end[:-1]]
@@ -331,7 +362,7 @@ def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: Si
         planned[k] = (robot.tcp_pose(s.traj.q[-1]) @ np.linalg.inv(steps[s.step].grasp) if s.holding
                       else steps[s.step].object_pose)  # grasp: the TCP in the part frame
     sim = part[idx_end]
-    err_t, err_r = pose_error(sim, planned, com)
+    err_t, err_r = pose_error(sim, planned, com, sym)
     slip_t, slip_r = np.full(len(segs), np.nan), np.full(len(segs), np.nan)
     settle = np.full(len(segs), np.nan)
     failures: list[Failure] = []
@@ -382,7 +413,7 @@ def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: Si
             continue
         if s.kind == "gripper":  # the open: the released part must come to rest at its placement
             a = idx_end[k]
-            settle[k], at, what = settled(part, com, dt, a, steps[s.step].object_pose, p)
+            settle[k], at, what = settled(part, com, dt, a, steps[s.step].object_pose, p, sym)
             if what:
                 fail("roll", k, times[at], what)
         k += 1
@@ -393,7 +424,7 @@ def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: Si
                                                f"the plan (waypoint tolerance {p.waypoint_tol * 1000:g} mm, "
                                                f"{math.degrees(p.waypoint_tol_angle):g} deg)")
             flagged.add(segs[k].step)
-    f_t, f_r = pose_error(part[-1], np.asarray(plan.goal_pose, dtype=np.float64), com)
+    f_t, f_r = pose_error(part[-1], np.asarray(plan.goal_pose, dtype=np.float64), com, sym)
     if f_t > p.goal_tol or f_r > p.goal_tol_angle:
         fail("goal", len(segs) - 1, times[-1], f"the part ends {f_t * 1000:.1f} mm and {math.degrees(f_r):.1f} deg from its "
                                                f"goal (tolerance {p.goal_tol * 1000:g} mm, {math.degrees(p.goal_tol_angle):g} deg)")
@@ -407,7 +438,7 @@ def _verdict(plan, robot, segs, times, seg_end, part, hand, touching, com, p: Si
 
 
 def settled(part: np.ndarray, com: np.ndarray, dt: float, a: int, placement: np.ndarray,
-            p: SimParams) -> tuple[float, int, str | None]:
+            p: SimParams, sym: Symmetry | None = None) -> tuple[float, int, str | None]:
     """Whether a part released at sample `a` of its poses `part` is at rest at `placement` `settle_time` later:
     (seconds until its speeds last fell below `settle_speed` and `settle_spin`, NaN if it still moves; the sample
     judged; None, or why it counts as a roll: it still moves, or it rests beyond the waypoint tolerance)."""
@@ -418,7 +449,7 @@ def settled(part: np.ndarray, com: np.ndarray, dt: float, a: int, placement: np.
         return math.nan, w, (f"the released part did not settle within {p.settle_time:g} s (still {lin[-1] * 1000:.0f} mm/s, "
                              f"{math.degrees(ang[-1]):.0f} deg/s)")
     calm = float((moving[-1] + 1) * dt) if len(moving) else 0.0
-    e_t, e_r = pose_error(part[w], placement, com)
+    e_t, e_r = pose_error(part[w], placement, com, sym)
     if e_r > p.waypoint_tol_angle or e_t > p.waypoint_tol:
         return calm, w, (f"the released part rolled: it rests {e_t * 1000:.1f} mm and {math.degrees(e_r):.1f} deg from its "
                          f"placement")
@@ -445,7 +476,7 @@ def rest_on_table(mesh, hulls: list[tuple[np.ndarray, np.ndarray]], pose: np.nda
         pos[k + 1], q[k + 1] = data.xpos[body], data.xquat[body]
     part = _poses(pos, q)
     _, com, _ = mass_properties(mesh, params.density)
-    _, _, what = settled(part, com, params.timestep, 0, pose, params)
+    _, _, what = settled(part, com, params.timestep, 0, pose, params, part_symmetry(mesh))
     return what, part[-1]
 
 

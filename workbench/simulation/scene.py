@@ -11,7 +11,8 @@
 - The gripper is the planning gripper's own geometry in its TCP frame (hand body mesh, finger boxes), its fingers
   on two slide joints coupled to move together (as a parallel-jaw gripper's mechanism does), each driven by a
   force-limited position actuator: closing squeezes with the grip force whatever the opening.
-- The table is a box whose top is z = 0 over the scene's table rectangle.
+- The table is a box whose top is z = 0 over the scene's table rectangle, standing on a floor (a plane at
+  z = FLOOR_Z, a table's height below its top): a part that leaves the table lands there (the replay calls it a drop).
 - The part is a free body with the mass, centre of mass and inertia of its mesh at a density, colliding through
   its convex decomposition (simulation.decomposition).
 Friction: the pads with the part use the plan's grasp friction, the table with the part the table friction
@@ -30,6 +31,7 @@ from workbench.geometry.collision import pinocchio_geometry
 
 ARM_KP = 4000.0  # N m / rad: position gain of every arm joint (tracking error I a / kp, under 0.1 mm at the TCP here)
 ARM_KV = 100.0  # N m s / rad: velocity gain toward the trajectory velocity (higher gains chatter the hand at 2 ms)
+FLOOR_Z = -0.75  # m: the floor, a table's height below the table top
 ARM_ARMATURE = 0.1  # kg m^2: reflected rotor inertia, keeps stiff joints stable at a 2 ms step
 FINGER_KP = 20000.0  # N / m: finger position gain; closing aims past the closed stop so the force limit holds
 FINGER_DAMPING = 150.0  # N s / m
@@ -51,7 +53,7 @@ class SimScene:
     """A compiled MuJoCo model and the indices the replay needs: arm joint and finger qpos addresses, the part's
     free joint, the arm's position and velocity actuators, the finger actuators, the hand (TCP) body and the part;
     the robot's geoms (id -> the link they belong to, `gripper_hand` and `gripper_fingers` for the gripper's),
-    which of them are the gripper's, the self-collision geom pairs and the table's geom."""
+    which of them are the gripper's, the self-collision geom pairs, the table's geom and the floor's."""
 
     model: object
     arm_qpos: np.ndarray
@@ -67,6 +69,7 @@ class SimScene:
     gripper_geoms: frozenset[int] = frozenset()
     self_pairs: frozenset[tuple[int, int]] = frozenset()
     table_geom: int = -1
+    floor_geom: int = -1
 
 
 def mujoco_module():
@@ -205,7 +208,7 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
                     robot_geoms={m.geom(g).id: lk for g, lk in links.items()},
                     gripper_geoms=frozenset(m.geom(g).id for g, lk in links.items() if lk.startswith("gripper_")),
                     self_pairs=frozenset(tuple(sorted((m.geom(a).id, m.geom(b).id))) for a, b in pairs),
-                    table_geom=m.geom("table").id)
+                    table_geom=m.geom("table").id, floor_geom=m.geom("floor").id)
 
 
 def _add_link_geoms(spec, robot, bodies: dict[int, object]) -> tuple[dict[str, str], set[str]]:
@@ -280,11 +283,15 @@ def _spec(timestep: float, impratio: float = 1.0):
 
 
 def _add_table(spec, scene, friction: float) -> None:
+    """The table slab and the floor under it."""
     mujoco = mujoco_module()
     lo, hi, th = np.asarray(scene.table_min), np.asarray(scene.table_max), float(scene.table_thickness)
     spec.worldbody.add_geom(name="table", type=mujoco.mjtGeom.mjGEOM_BOX, size=[*(0.5 * (hi - lo)), th / 2],
                             pos=[*(0.5 * (lo + hi)), -th / 2], friction=[friction, 0.0, 0.0], priority=1,
                             condim=3, solref=SOLREF, solimp=SOLIMP, contype=ENV_TYPE, conaffinity=ENV_AFFINITY)
+    spec.worldbody.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[0.0, 0.0, 1.0], pos=[0.0, 0.0, FLOOR_Z],
+                            friction=[friction, 0.0, 0.0], priority=1, condim=3, solref=SOLREF, solimp=SOLIMP,
+                            contype=ENV_TYPE, conaffinity=ENV_AFFINITY)
 
 
 def _add_part(spec, mesh: trimesh.Trimesh, hulls, density: float, friction: float) -> tuple[float, np.ndarray]:

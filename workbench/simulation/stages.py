@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from workbench.geometry.symmetry import Symmetry, part_symmetry
 from workbench.planners.wan_harada.stages import get_object, load_plan, stored_robot
 from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
 from workbench.simulation.decomposition import convex_parts
@@ -68,13 +69,15 @@ def simulate_stored(store: Store, idplan: int, params: SimParams = SimParams(),
                             f.message if f else res.summary(), res.final_error, res.final_angle, res)
 
 
-def simulate_in_memory(store: Store, plan, robot, params: SimParams = SimParams()) -> SimResult:
-    """Simulate a plan that is not stored (its object, scene and grasp friction from the store); nothing written."""
+def simulate_in_memory(store: Store, plan, robot, params: SimParams = SimParams(),
+                       symmetry: Symmetry | None = None) -> SimResult:
+    """Simulate a plan that is not stored (its object, scene and grasp friction from the store); nothing written.
+    `symmetry`: the part's (`part_symmetry` of its mesh), when several plans of one part are simulated."""
     _, obj = get_object(store, plan.object)
     hulls = convex_parts(obj.mesh, obj.digest, obj.name, params.decomposition)
     friction = sql.grasp_friction(store, plan.steps[0].idfreeairgrip)
     return simulate(plan, robot, obj.mesh, scene_row(store, plan.ids["idscene"]).scene, friction, hulls, params,
-                    self_pairs(store, plan.ids["idrobot"], robot))
+                    self_pairs(store, plan.ids["idrobot"], robot), symmetry)
 
 
 def self_pairs(store: Store, idrobot: int, robot) -> list[tuple[str, str]]:
@@ -87,8 +90,12 @@ def self_pairs(store: Store, idrobot: int, robot) -> list[tuple[str, str]]:
 def physics_check(store: Store, robot, params: SimParams = SimParams()) -> Callable[[object], tuple[int, str] | None]:
     """For the planner's search (`plan --require-physics`): a function of a plan that simulates it and returns None
     when it is confirmed, else (the failing step, why); the failing step's roadmap node or grip is then removed."""
+    symmetry: list[Symmetry] = []  # the part's, found on the first plan
+
     def check(plan) -> tuple[int, str] | None:
-        res = simulate_in_memory(store, plan, robot, params)
+        if not symmetry:
+            symmetry.append(part_symmetry(get_object(store, plan.object)[1].mesh))
+        res = simulate_in_memory(store, plan, robot, params, symmetry[0])
         return None if res.confirmed else (res.failure.step, f"physics: {res.failure.kind}: {res.failure.message}")
 
     return check

@@ -73,12 +73,15 @@ def test_table_far_away_no_limits_is_theta_range_times_all_phi(box, hand, make_p
     classes = grasp_classes(box, hand)
     pl = stable_placements(box).poses
     robot = make_puma(base_z=-0.4)  # shoulder 0.27 m above the table: every orientation reachable near H
-    t = build_table(classes, pl, robot, hand, TableParams(table_point=(0.45, 0.0), clearance=-1.0, limits=False), progress=False)
+    steps = {"theta_step": np.radians(10.0), "phi_step": np.radians(10.0)}
+    t = build_table(classes, pl, robot, hand, TableParams(table_point=(0.45, 0.0), clearance=-1.0, limits=False, **steps),
+                    progress=False)
     expect = np.broadcast_to(t.hand_object[:, None, :, None], t.q.shape)
     assert t.hand_object.any(axis=1).all()
     assert np.array_equal(t.q, expect)
     # with the table at its place, the hand-table stage prunes (jaw vertical on a resting face is impossible)
-    near = build_table(classes, pl, robot, hand, TableParams(table_point=(0.45, 0.0), limits=False), progress=False)
+    near = build_table(classes, pl, robot, hand, TableParams(table_point=(0.45, 0.0), limits=False, **steps),
+                       progress=False)
     assert near.q.sum() < t.q.sum() and not (near.q & ~t.q).any()
 
 

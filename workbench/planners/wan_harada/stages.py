@@ -39,6 +39,7 @@ from workbench.robots.gripper import Gripper, franka_hand
 from workbench.robots.ik import WORLDA, IKOptions, diagnose_unreachable, iter_ik, solver_kind
 from workbench.robots.model import ROBOTS, Robot, RobotSpec, builtin_robot, get_robot
 from workbench.robots.selfcollision import AllowedPairs, allowed_pairs
+from workbench.robots.solvers import revision as solver_revision
 from workbench.robots.timing import TimedSegment, Trajectory
 from workbench.store import Store
 from workbench.store import robots as robot_sql
@@ -398,9 +399,13 @@ class IKRun:
 
 def scene_params(robot: Robot, scene: Scene, opts: IKOptions) -> dict:
     """Everything besides the robot row and the grips that changes the `ik` rows (stored in `scene.params`)."""
-    return {**scene.as_dict(), "ik": opts.as_dict(), "ik_solver": solver_kind(robot, opts), "home": robot.home().tolist(),
+    return {**scene.as_dict(), "ik": opts.as_dict(), "ik_solver": solver_kind(robot, opts),
+            "ik_revision": solver_revision(robot, numerical=opts.solver == "numerical"), "home": robot.home().tolist(),
             "robot": {"locked": {k: v for k, v in robot.spec.locked}, "drop_geometry": list(robot.spec.drop_geometry),
                       "gripper": robot.gripper.digest}}
+
+
+IK_WRITE_SECONDS = 5.0  # solved chunks are written together at most this often (each write reopens the store)
 
 
 def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx: float = HANDX, worldz: float = WORLDZ,
@@ -430,11 +435,25 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
 
     computed = 0
     arrays = {k: v for k, v in grips.items() if isinstance(v, np.ndarray) and v.shape[:1] == ids.shape}
-    with store.released():  # each chunk's write takes the store briefly: another process's stages run beside
+    pending: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def write() -> int:
+        if not pending:
+            return 0
+        parts = [np.concatenate(p) for p in zip(*pending)]
+        pending.clear()
+        return robot_sql.insert_ik(store, rid, sid, kid, *parts)
+
+    last = time.monotonic()
+    with store.released():  # each write takes the store briefly: another process's stages run beside
         for ix, feas, joints in iter_ik(robot, arrays, scene, handx, worldz, obj.mesh, opts, workers, skip=skip,
                                         progress=progress, worlda=worlda):
             todo = ~np.isin(ids[ix], done)
-            computed += robot_sql.insert_ik(store, rid, sid, kid, ids[ix][todo], feas[todo], joints[todo])
+            pending.append((ids[ix][todo], feas[todo], joints[todo]))
+            if time.monotonic() - last > IK_WRITE_SECONDS:  # an interrupted run keeps what was written
+                computed += write()
+                last = time.monotonic()
+        computed += write()
     robot_sql.mark_ik_complete(store, pid, rid, sid, kid)
     counts = robot_sql.run_counts(store, rid, sid, kid, pid)
     reason = diagnose_unreachable(robot, arrays, scene, obj.mesh, opts) if len(ids) and counts[0] == 0 else None

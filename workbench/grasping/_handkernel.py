@@ -1,0 +1,164 @@
+"""Compiled collision of the hand's convex volumes with the part's triangles (level 2 of `grasps`): each convex piece
+(the swept body, a finger box's sweep, a finger box) placed at each hand pose is tested against the triangle
+hierarchy the pad model already built (`_padkernel.triangle_bvh`), by the separating axis theorem. So a
+full-resolution part needs no second hierarchy, and the cost follows the triangles near the hand. Numba, cached on
+disk after the first compile."""
+
+from __future__ import annotations
+
+import numpy as np
+import trimesh
+from numba import njit
+
+_STACK = 256  # deeper than any tree (`_padkernel._STACK`)
+
+
+def convex_piece(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A convex volume for `hull_hits`: its hull's vertices (V, 3), face planes (unit normals (F, 3) and offsets (F,),
+    inside where n . x <= offset) and edge directions (E, 3, unit, up to sign), coplanar faces and parallel edges
+    given once."""
+    hull = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64)).convex_hull
+    v = np.asarray(hull.vertices, dtype=np.float64)
+    n = np.asarray(hull.face_normals, dtype=np.float64)
+    d = np.einsum("ij,ij->i", n, v[hull.faces[:, 0]])
+    _, first = np.unique(np.round(np.column_stack([n, d]), 12), axis=0, return_index=True)
+    first.sort()
+    e = v[hull.edges_unique[:, 1]] - v[hull.edges_unique[:, 0]]
+    e /= np.linalg.norm(e, axis=1, keepdims=True)
+    sign = np.sign(e[np.arange(len(e)), np.argmax(np.abs(e), axis=1)])
+    _, keep = np.unique(np.round(e * sign[:, None], 12), axis=0, return_index=True)
+    keep.sort()
+    return v, n[first], d[first], e[keep]
+
+
+def pack(pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> tuple:
+    """Convex pieces (`convex_piece`) as one set of arrays for `hull_hits`: vertices, normals, offsets, edges and the
+    start of each piece's rows in them."""
+    arrays = [np.concatenate([p[k] for p in pieces]) for k in range(4)]
+    ptrs = [np.concatenate([[0], np.cumsum([len(p[k]) for p in pieces])]).astype(np.int64) for k in (0, 1, 3)]
+    return (*[np.ascontiguousarray(a, dtype=np.float64) for a in arrays], *ptrs)
+
+
+@njit(cache=True)
+def _separated(tri, q, wv, v0, v1, wn, wd, f0, f1, we, e0, e1, eps):
+    """Is triangle (slot) q separated from the placed convex piece: by one of its face planes, by the triangle's
+    plane, or by an axis across a triangle edge and a piece edge (the separating axis theorem)."""
+    for f in range(f0, f1):
+        lo = np.inf
+        for a in range(3):
+            lo = min(lo, tri[q, a, 0] * wn[f, 0] + tri[q, a, 1] * wn[f, 1] + tri[q, a, 2] * wn[f, 2])
+        if lo > wd[f] + eps:
+            return True
+    ux, uy, uz = tri[q, 1, 0] - tri[q, 0, 0], tri[q, 1, 1] - tri[q, 0, 1], tri[q, 1, 2] - tri[q, 0, 2]
+    vx, vy, vz = tri[q, 2, 0] - tri[q, 0, 0], tri[q, 2, 1] - tri[q, 0, 1], tri[q, 2, 2] - tri[q, 0, 2]
+    mx, my, mz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
+    ln = np.sqrt(mx * mx + my * my + mz * mz)
+    if ln > 0:
+        mx, my, mz = mx / ln, my / ln, mz / ln
+        c = tri[q, 0, 0] * mx + tri[q, 0, 1] * my + tri[q, 0, 2] * mz
+        lo, hi = np.inf, -np.inf
+        for i in range(v0, v1):
+            p = wv[i, 0] * mx + wv[i, 1] * my + wv[i, 2] * mz
+            lo, hi = min(lo, p), max(hi, p)
+        if lo > c + eps or hi < c - eps:
+            return True
+    for j in range(3):
+        k = (j + 1) % 3
+        tx, ty, tz = tri[q, k, 0] - tri[q, j, 0], tri[q, k, 1] - tri[q, j, 1], tri[q, k, 2] - tri[q, j, 2]
+        tl = np.sqrt(tx * tx + ty * ty + tz * tz)
+        if tl == 0:
+            continue
+        for g in range(e0, e1):
+            ax = ty * we[g, 2] - tz * we[g, 1]
+            ay = tz * we[g, 0] - tx * we[g, 2]
+            az = tx * we[g, 1] - ty * we[g, 0]
+            al = np.sqrt(ax * ax + ay * ay + az * az)
+            if al <= 1e-9 * tl:  # parallel edges: the face axes cover them
+                continue
+            ax, ay, az = ax / al, ay / al, az / al
+            tlo, thi = np.inf, -np.inf
+            for a in range(3):
+                p = tri[q, a, 0] * ax + tri[q, a, 1] * ay + tri[q, a, 2] * az
+                tlo, thi = min(tlo, p), max(thi, p)
+            lo, hi = np.inf, -np.inf
+            for i in range(v0, v1):
+                p = wv[i, 0] * ax + wv[i, 1] * ay + wv[i, 2] * az
+                lo, hi = min(lo, p), max(hi, p)
+            if lo > thi + eps or hi < tlo - eps:
+                return True
+    return False
+
+
+@njit(cache=True)
+def hull_hits(shape, slots, leaf, tri, verts, normals, offsets, edges, vptr, fptr, eptr, poses, eps):
+    """(N,) whether any convex piece p, placed at poses[n, p] (N, P, 4, 4, in the part's frame), meets a triangle of
+    the hierarchy (`_padkernel.triangle_bvh`: node shapes, slots, leaf size, triangles by slot), within `eps`. A piece
+    is solid: a triangle inside it meets it."""
+    N, P = poses.shape[0], poses.shape[1]
+    M = shape.shape[0] // 2
+    out = np.zeros(N, dtype=np.bool_)
+    if shape[1, 0] > shape[1, 3]:
+        return out
+    wv = np.empty((verts.shape[0], 3))
+    wn = np.empty((normals.shape[0], 3))
+    wd = np.empty(normals.shape[0])
+    we = np.empty((edges.shape[0], 3))
+    stack = np.empty(_STACK, dtype=np.int64)
+    lo, hi = np.empty(3), np.empty(3)
+    for n in range(N):
+        for p in range(P):
+            R = poses[n, p, :3, :3]
+            t = poses[n, p, :3, 3]
+            v0, v1 = vptr[p], vptr[p + 1]
+            f0, f1 = fptr[p], fptr[p + 1]
+            e0, e1 = eptr[p], eptr[p + 1]
+            lo[:] = np.inf
+            hi[:] = -np.inf
+            for i in range(v0, v1):
+                for a in range(3):
+                    wv[i, a] = R[a, 0] * verts[i, 0] + R[a, 1] * verts[i, 1] + R[a, 2] * verts[i, 2] + t[a]
+                    lo[a] = min(lo[a], wv[i, a])
+                    hi[a] = max(hi[a], wv[i, a])
+            for f in range(f0, f1):
+                for a in range(3):
+                    wn[f, a] = R[a, 0] * normals[f, 0] + R[a, 1] * normals[f, 1] + R[a, 2] * normals[f, 2]
+                wd[f] = offsets[f] + wn[f, 0] * t[0] + wn[f, 1] * t[1] + wn[f, 2] * t[2]
+            for g in range(e0, e1):
+                for a in range(3):
+                    we[g, a] = R[a, 0] * edges[g, 0] + R[a, 1] * edges[g, 1] + R[a, 2] * edges[g, 2]
+            hit = False
+            stack[0] = 1
+            top = 1
+            while top > 0 and not hit:
+                top -= 1
+                node = stack[top]
+                if shape[node, 0] > shape[node, 3]:
+                    continue
+                apart = False
+                for a in range(3):
+                    if shape[node, a] > hi[a] + eps or shape[node, 3 + a] < lo[a] - eps:
+                        apart = True
+                if not apart:  # the node's box wholly outside one face plane
+                    for f in range(f0, f1):
+                        c, r = 0.0, 0.0
+                        for a in range(3):
+                            c += 0.5 * (shape[node, a] + shape[node, 3 + a]) * wn[f, a]
+                            r += 0.5 * (shape[node, 3 + a] - shape[node, a]) * abs(wn[f, a])
+                        if c - r > wd[f] + eps:
+                            apart = True
+                            break
+                if apart:
+                    continue
+                if node < M:
+                    stack[top] = 2 * node
+                    stack[top + 1] = 2 * node + 1
+                    top += 2
+                    continue
+                for q in range((node - M) * leaf, (node - M + 1) * leaf):
+                    if slots[q] >= 0 and not _separated(tri, q, wv, v0, v1, wn, wd, f0, f1, we, e0, e1, eps):
+                        hit = True
+                        break
+            if hit:
+                out[n] = True
+                break
+    return out
