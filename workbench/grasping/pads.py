@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from workbench.grasping._padkernel import first_touch_kernel, triangle_bvh
+from workbench.grasping._padkernel import first_touch_kernel, line_crossings, triangle_bvh
 from workbench.robots.gripper import Gripper
 
 
@@ -171,18 +171,23 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
     reach = 1.1 * float(np.linalg.norm(mesh.extents)) + 1e-3
     start = origins + reach * axes  # beyond the part: every crossing of the line is at a height below `reach`
-    locs, ray, tri = mesh.ray.intersects_location(start, -axes, multiple_hits=True)
+    shape, slots, leaf, tri_s, _ = triangle_tree(mesh)
+    ray, tri, along = line_crossings(shape, slots, leaf, tri_s, np.ascontiguousarray(start),
+                                     np.ascontiguousarray(-axes))
     if len(ray) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-    # heights along the axis from the origin, in float64 on the hit triangle's plane (the caster may be float32)
+    # heights along the axis from the origin, on the crossed triangle's plane
     tn = mesh.face_normals[tri]
     a = axes[ray]
     t = np.einsum("ij,ij->i", mesh.triangles[tri, 0] - start[ray], tn) / np.einsum("ij,ij->i", -a, tn)
-    h = np.where(np.isfinite(t), reach - t, np.einsum("ij,ij->i", locs - origins[ray], a))
+    h = reach - np.where(np.isfinite(t), t, along)
     down = np.einsum("ij,ij->i", tn, a) < 0 if mesh.is_watertight else np.ones(len(h), dtype=bool)
-    # every crossing, grouped by axis and in descending height along it
-    order = np.lexsort((-h, ray))
+    # every crossing, grouped by axis and in descending height along it; a line through an edge or a corner crosses
+    # every triangle there: one crossing per height and side
+    order = np.lexsort((tri, -h, ray))
     ray, h, down = ray[order], h[order], down[order]
+    again = np.r_[False, (ray[1:] == ray[:-1]) & (h[:-1] - h[1:] <= 1e-9 * reach) & (down[1:] == down[:-1])]
+    ray, h, down = ray[~again], h[~again], down[~again]
     n = len(h)
     first = np.flatnonzero(np.r_[True, ray[1:] != ray[:-1]])
     group = np.repeat(np.arange(len(first)), np.diff(np.r_[first, n]))
