@@ -6,6 +6,8 @@ disk after the first compile."""
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 import trimesh
 from numba import njit
@@ -16,8 +18,14 @@ _STACK = 256  # deeper than any tree (`_padkernel._STACK`)
 def convex_piece(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A convex volume for `hull_hits`: its hull's vertices (V, 3), face planes (unit normals (F, 3) and offsets (F,),
     inside where n . x <= offset) and edge directions (E, 3, unit, up to sign), coplanar faces and parallel edges
-    given once."""
-    hull = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64)).convex_hull
+    given once. The same points give the same piece, computed once (a hand's volumes recur on every part)."""
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    return _piece(v.tobytes(), v.shape)
+
+
+@lru_cache(maxsize=256)
+def _piece(data: bytes, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    hull = trimesh.Trimesh(np.frombuffer(data, dtype=np.float64).reshape(shape)).convex_hull
     v = np.asarray(hull.vertices, dtype=np.float64)
     n = np.asarray(hull.face_normals, dtype=np.float64)
     d = np.einsum("ij,ij->i", n, v[hull.faces[:, 0]])
@@ -28,7 +36,10 @@ def convex_piece(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     sign = np.sign(e[np.arange(len(e)), np.argmax(np.abs(e), axis=1)])
     _, keep = np.unique(np.round(e * sign[:, None], 12), axis=0, return_index=True)
     keep.sort()
-    return v, n[first], d[first], e[keep]
+    out = (v, n[first], d[first], e[keep])
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def pack(pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> tuple:
