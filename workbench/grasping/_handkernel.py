@@ -54,12 +54,18 @@ def pack(pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) ->
 def _separated(tri, q, wv, v0, v1, wn, wd, f0, f1, we, e0, e1, eps):
     """Is triangle (slot) q separated from the placed convex piece: by one of its face planes, by the triangle's
     plane, or by an axis across a triangle edge and a piece edge (the separating axis theorem)."""
+    in0, in1, in2 = True, True, True  # which of the triangle's corners lie in the piece
     for f in range(f0, f1):
-        lo = np.inf
-        for a in range(3):
-            lo = min(lo, tri[q, a, 0] * wn[f, 0] + tri[q, a, 1] * wn[f, 1] + tri[q, a, 2] * wn[f, 2])
-        if lo > wd[f] + eps:
+        p0 = tri[q, 0, 0] * wn[f, 0] + tri[q, 0, 1] * wn[f, 1] + tri[q, 0, 2] * wn[f, 2]
+        p1 = tri[q, 1, 0] * wn[f, 0] + tri[q, 1, 1] * wn[f, 1] + tri[q, 1, 2] * wn[f, 2]
+        p2 = tri[q, 2, 0] * wn[f, 0] + tri[q, 2, 1] * wn[f, 1] + tri[q, 2, 2] * wn[f, 2]
+        if min(p0, p1, p2) > wd[f] + eps:
             return True
+        in0 = in0 and p0 <= wd[f] + eps
+        in1 = in1 and p1 <= wd[f] + eps
+        in2 = in2 and p2 <= wd[f] + eps
+    if in0 or in1 or in2:  # a corner inside: they meet, no other axis can separate them
+        return False
     ux, uy, uz = tri[q, 1, 0] - tri[q, 0, 0], tri[q, 1, 1] - tri[q, 0, 1], tri[q, 1, 2] - tri[q, 0, 2]
     vx, vy, vz = tri[q, 2, 0] - tri[q, 0, 0], tri[q, 2, 1] - tri[q, 0, 1], tri[q, 2, 2] - tri[q, 0, 2]
     mx, my, mz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
