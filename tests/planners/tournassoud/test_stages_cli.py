@@ -246,3 +246,39 @@ def test_notebook_query_names_its_removals_and_the_tables_answer(tmp_path, lpart
     # the last grasp is in the goal class and range, both ends kept
     c, t = doc["sequence"]["grasps"][-1]
     assert c == 2 and 60 - 1e-6 <= np.degrees(run.table.theta[t]) <= 120 + 1e-6
+
+
+def test_gpplan_with_a_urdf_robots_own_hand(tmp_path, box, capsys):
+    """The Panda from its URDF with the hand in that URDF (`--gripper own`): `gptable` stores the robot with that
+    hand (the digest of the hand read from the file here), `gpplan --gripper own` rebuilds it from the stored row and
+    plans, validates and stores an executable plan whose jaw widths are within that hand's range; another gripper on
+    the same robot is refused in one line."""
+    from workbench.resources import erd_robots
+    from workbench.robots.gripper import load_gripper
+
+    urdf = erd_robots() / "panda_description" / "urdf" / "panda.urdf"
+    fingers = "panda_finger_joint1,panda_finger_joint2"
+    own = ["--gripper", "own", "--gripper-hand", "panda_hand", "--gripper-tcp", "panda_hand_tcp", "--gripper-fingers", fingers]
+    mesh = tmp_path / "box.stl"
+    box.mesh.export(mesh)
+    db = str(tmp_path / "own.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--robot", str(urdf), "--tip", "panda_hand_tcp", *own,
+                 "--theta-step", "30", "--phi-step", "30", "--table-point", "0.45,0.1"]) == 0
+    hand = load_gripper("own", robot_urdf=urdf, tip="panda_hand_tcp", hand_link="panda_hand", tcp_frame="panda_hand_tcp",
+                        finger_joints=tuple(fingers.split(",")))
+    con = duckdb.connect(db, read_only=True)
+    assert con.execute("SELECT r.name, g.digest FROM robot r JOIN gripper g USING (idgripper)").fetchall() == [("panda", hand.digest)]
+    con.close()
+    js = tmp_path / "own.json"
+    capsys.readouterr()
+    assert main(["gpplan", "--db", db, "--object", "box", "--robot", "panda", *own, "--from", "0,0", "--to", "1,90",
+                 "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    assert "validator: ok" in out and "stored plan id" in out, out
+    plan = json.loads(js.read_text())["plan"]
+    jaws = [s["jaw"] for s in plan["motion"]["segments"]] + [s["jawwidth"] for s in plan["steps"]]
+    assert plan["regrasps"] >= 1 and all(hand.jaw_min - 1e-6 <= w <= hand.jaw_max + 1e-6 for w in jaws)
+    assert main(["gpplan", "--db", db, "--object", "box", "--robot", "panda", "--gripper", "robotiq-2f85",
+                 "--from", "0,0", "--to", "1,90", "--no-save"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "panda-hand" in err[0], err
