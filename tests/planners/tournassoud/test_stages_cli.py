@@ -7,6 +7,7 @@ import json
 import duckdb
 import numpy as np
 import trimesh
+import yaml
 
 from workbench.cli.main import main
 from workbench.planners.tournassoud.stages import load_planner, table_stage_at
@@ -269,15 +270,35 @@ def test_gpplan_with_a_urdf_robots_own_hand(tmp_path, box, capsys):
     con = duckdb.connect(db, read_only=True)
     assert con.execute("SELECT r.name, g.digest FROM robot r JOIN gripper g USING (idgripper)").fetchall() == [("panda", hand.digest)]
     con.close()
-    js = tmp_path / "own.json"
+    js, traj = tmp_path / "own.json", tmp_path / "own.yaml"
     capsys.readouterr()
     assert main(["gpplan", "--db", db, "--object", "box", "--robot", "panda", *own, "--from", "0,0", "--to", "1,90",
-                 "--json", str(js)]) == 0
+                 "--json", str(js), "--trajectory", str(traj)]) == 0
     out = capsys.readouterr().out
-    assert "validator: ok" in out and "stored plan id" in out, out
+    assert "validator: ok" in out and "stored plan id" in out and "own.gripper.yaml" in out, out
     plan = json.loads(js.read_text())["plan"]
     jaws = [s["jaw"] for s in plan["motion"]["segments"]] + [s["jawwidth"] for s in plan["steps"]]
     assert plan["regrasps"] >= 1 and all(hand.jaw_min - 1e-6 <= w <= hand.jaw_max + 1e-6 for w in jaws)
+    # the ROS 2 export: the gripper's JointTrajectory beside the arm's, at the same times, with the stored jaw widths
+    arm, grip = (yaml.safe_load(f.read_text()) for f in (traj, tmp_path / "own.gripper.yaml"))
+    times = [[p["time_from_start"]["sec"] + 1e-9 * p["time_from_start"]["nanosec"] for p in m["points"]] for m in (arm, grip)]
+    assert grip["joint_names"] == ["jaw_width"] and np.allclose(times[0], times[1], atol=1e-9)
+    t, width = np.array(times[1]), np.array([p["positions"][0] for p in grip["points"]])
+    con = duckdb.connect(db, read_only=True)
+    idplan = con.execute("SELECT max(idplan) FROM plan").fetchone()[0]
+    segs = con.execute("SELECT s.kind, s.holding, s.t0, s.duration, s.jaw, p.jawwidth FROM plansegment s JOIN planstep p "
+                       "ON p.idplan = s.idplan AND p.seq = s.step WHERE s.idplan = ? ORDER BY s.seq", [idplan]).fetchall()
+    con.close()
+    closes = 0
+    for k, (kind, holding, t0, duration, jaw, jawwidth) in enumerate(segs):
+        inside = (t > t0 + 1e-6) & (t <= t0 + duration + 1e-6)
+        assert inside.any(), k
+        if kind == "gripper":  # the jaw moves from the previous segment's width to this one's while the arm rests
+            assert np.isclose(width[inside][-1], jaw) and np.isclose(width[t <= t0 + 1e-6][-1], segs[k - 1][4])
+            closes += holding and np.isclose(jaw, jawwidth)  # closed on the stored grasp's width
+        else:
+            assert np.allclose(width[inside], jaw), (k, kind)
+    assert closes == plan["regrasps"] + 1
     assert main(["gpplan", "--db", db, "--object", "box", "--robot", "panda", "--gripper", "robotiq-2f85",
                  "--from", "0,0", "--to", "1,90", "--no-save"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
