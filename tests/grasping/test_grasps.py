@@ -77,39 +77,52 @@ def test_over_segmentation_plans_more_grasps_on_curved_objects(cylinder, hand, t
 
 def _independent_collision_free(obj, hand, grasps, samples_per_box: int = 60) -> None:
     """Checks with exact ray-parity containment (trimesh's rtree caster, not python-fcl and not Embree, whose
-    single-precision parity is unreliable near surfaces): no hand-body or open-finger point inside the object, no
-    object vertex inside the open hand's boxes, and each pad's swept box free of the object but at its contact."""
+    single-precision parity is unreliable near surfaces), with the fingers at each grasp's pre-grasp opening (its
+    width plus the default 10 mm margin, capped at the stroke; CONVENTIONS.md, Gripper): no hand-body or
+    pre-grasp-finger point inside the object, no object vertex inside the pre-grasp fingers' boxes, and each pad's
+    swept box from its pre-grasp position free of the object but at its contact (the fingers within the planner's
+    0.5 mm clearance)."""
     from trimesh.ray.ray_triangle import RayMeshIntersector
 
     inside = RayMeshIntersector(obj.mesh).contains_points
     rng = np.random.default_rng(0)
-    hand_mesh = hand.collision_mesh()
-    hand_pts = np.vstack([hand_mesh.vertices, trimesh.sample.sample_surface(hand_mesh, 400, seed=1)[0]])
+    body = hand.body
+    body_pts = np.vstack([body.vertices, trimesh.sample.sample_surface(body, 250, seed=1)[0]])
+    # the finger boxes with the pads together, shrunk by the planner's finger clearance (0.5 mm: a pre-grasp finger
+    # may graze a wall by less); each moves out by half the opening
+    tol = GraspParams().finger_clearance + 1e-9
+    closed = [(ext - 2 * tol, pose) for ext, pose in hand.finger_poses(0.0)]
+    finger_pts = [(np.sign(pose[1, 3]), np.vstack([trimesh.creation.box(ext, pose).vertices,
+                                                    trimesh.sample.volume_rectangular(ext, 15, pose, seed=2)]))
+                  for ext, pose in closed]
+    pregrasp = np.minimum(grasps.jawwidth + 0.010, hand.jaw_max)
     ext = hand.pad_extents
     for k in range(len(grasps)):
         pose = grasps.poses[k]
-        pts = hand_pts @ pose[:3, :3].T + pose[:3, 3]
-        assert not inside(pts).any(), f"grasp {k}: hand inside object"
-        # pad sweeps: boxes from the fully open pad down to its contact, in the TCP frame; the sweep stops 0.5 mm
+        pts = np.vstack([body_pts] + [q + [0.0, side * pregrasp[k] / 2, 0.0] for side, q in finger_pts])
+        assert not inside(pts @ pose[:3, :3].T + pose[:3, 3]).any(), f"grasp {k}: hand inside object"
+        # pad sweeps: boxes from the pre-grasp pad down to its contact, in the TCP frame; the sweep stops 0.5 mm
         # short, plus the rise of a facet tilted against the jaw axis across the pad's face (CONVENTIONS: the pad
         # meets the object only at its contact)
         w = grasps.jawwidth[k]
         reach = np.hypot(ext[0] / 2, ext[2] / 2 + abs(hand.pad_center[2]))
         for side, normal in ((1, grasps.normal0[k]), (-1, grasps.normal1[k])):
             cos = float(normal @ (side * pose[:3, 1]))
-            lo, hi = w / 2 + 5e-4 + reach * np.tan(np.arccos(min(cos, 1.0))), hand.jaw_max / 2 + ext[1]
+            lo, hi = w / 2 + 5e-4 + reach * np.tan(np.arccos(min(cos, 1.0))), pregrasp[k] / 2 + ext[1] - tol
+            if lo >= hi:
+                continue  # the pad's tilt allowance covers its whole travel
             u = rng.random((samples_per_box, 3))
-            local = np.column_stack([(u[:, 0] - 0.5) * ext[0], side * (lo + u[:, 1] * (hi - lo)),
-                                     hand.pad_center[2] + (u[:, 2] - 0.5) * ext[2]])
+            local = np.column_stack([(u[:, 0] - 0.5) * (ext[0] - 2 * tol), side * (lo + u[:, 1] * (hi - lo)),
+                                     hand.pad_center[2] + (u[:, 2] - 0.5) * (ext[2] - 2 * tol)])
             assert not inside(local @ pose[:3, :3].T + pose[:3, 3]).any(), f"grasp {k}: pad sweep hits object"
-    # object vertices never inside any open-finger box
+    # object vertices never inside any pre-grasp finger box
     inv = np.linalg.inv(grasps.poses)
     v = obj.mesh.vertices
-    for box_ext, box_pose in hand.finger_poses(hand.jaw_max):
-        tcp_pts = np.einsum("gij,vj->gvi", inv[:, :3, :3], v) + inv[:, None, :3, 3]
-        local = np.einsum("ji,gvj->gvi", box_pose[:3, :3], tcp_pts - box_pose[:3, 3])
-        inside = (np.abs(local) < box_ext / 2 - 1e-9).all(axis=2)
-        assert not inside.any()
+    tcp_pts = np.einsum("gij,vj->gvi", inv[:, :3, :3], v) + inv[:, None, :3, 3]
+    for box_ext, box_pose in closed:
+        centre = box_pose[:3, 3][None, :] + np.sign(box_pose[1, 3]) * pregrasp[:, None] / 2 * np.array([0.0, 1.0, 0.0])
+        local = np.einsum("ji,gvj->gvi", box_pose[:3, :3], tcp_pts - centre[:, None, :])
+        assert not (np.abs(local) < box_ext / 2 - 1e-9).all(axis=2).any()
 
 
 def test_box_grasps_are_collision_free_by_independent_check(box, hand, box_plan):

@@ -10,6 +10,7 @@ from scipy.spatial import cKDTree
 
 from workbench.benchmarks import median_time, print_table
 from workbench.benchmarks.graspcheck import CHECKS, check_grasps, failures
+from workbench.benchmarks.pregrasp import run as mug_table
 from workbench.benchmarks.organic import ORGANIC, blob, min_width
 from workbench.benchmarks.paper import TABLE_I, bench_objects
 from workbench.geometry.objects import from_trimesh
@@ -20,10 +21,11 @@ from workbench.robots.gripper import BUNDLED, franka_hand, load_gripper
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=3, help="runs per object (the median is printed)")
-    parser.add_argument("--set", dest="set", choices=["paper", "organic", "scale"], default="paper",
+    parser.add_argument("--set", dest="set", choices=["paper", "organic", "scale", "mug"], default="paper",
                         help="paper: the bundled and paper objects beside Table I; organic: procedural scans, blobs, "
                              "tori, cups and a studded brick; scale: one scanned-like part subdivided from 1k to 1M "
-                             "triangles (the same surface), time and grasps per level and stage")
+                             "triangles (the same surface), time and grasps per level and stage; mug: a mug with a "
+                             "handle, its candidates by filter at the pre-grasp and at full opening")
     parser.add_argument("--max-triangles", type=int, default=1_200_000,
                         help="with --set scale: the largest level (default 1.2M)")
     parser.add_argument("--objects", choices=["all", "bundled", "paper"], default="all", help="with --set paper")
@@ -38,6 +40,8 @@ def run(args: argparse.Namespace) -> int:
         return _grippers(args)
     if args.set == "scale":
         return _scale(args)
+    if args.set == "mug":
+        return mug_table(args)
     return _organic(args) if args.set == "organic" else _paper(args)
 
 

@@ -95,10 +95,10 @@ def neighbour_table(order, starts, n):
 
 
 @njit(cache=True)
-def facet_boundaries(faces, tri_ptr, tri_index, n_vertices, order, starts):
+def facet_boundaries(faces, tri_ptr, tri_index, n_vertices, order, starts, nbr):
     """Boundary edges of every facet: the edges its triangles use once, in ascending order of their sorted vertex
-    pair per facet; linear in the memberships (`edge_groups` gives every edge's triangles). Returns (edge_ptr, edges
-    (E, 2) vertex ids)."""
+    pair per facet; linear in the memberships (`neighbour_table` gives the triangle across an edge two triangles
+    share, `edge_groups` every other edge's triangles). Returns (edge_ptr, edges (E, 2) vertex ids)."""
     m = tri_ptr.shape[0] - 1
     n = faces.shape[0]
     group = np.empty(3 * n, dtype=np.int64)
@@ -118,11 +118,15 @@ def facet_boundaries(faces, tri_ptr, tri_index, n_vertices, order, starts):
         for q in range(a, b):
             t = tri_index[q]
             for j in range(3):
-                g = group[3 * t + j]
-                uses = 0
-                for r in range(starts[g], starts[g + 1]):
-                    if stamp[order[r] // 3] == f:
-                        uses += 1
+                c = nbr[t, j]
+                if c < n:  # an edge of exactly two triangles: used once unless the other is in the facet too
+                    uses = 1 if stamp[c] != f else 2
+                else:
+                    g = group[3 * t + j]
+                    uses = 0
+                    for r in range(starts[g], starts[g + 1]):
+                        if stamp[order[r] // 3] == f:
+                            uses += 1
                 if uses == 1:
                     u, v = faces[t, j], faces[t, (j + 1) % 3]
                     keys[w] = min(u, v) * n_vertices + max(u, v)

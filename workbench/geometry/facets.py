@@ -86,7 +86,7 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     wn, wc, area = facet_sums(tri_ptr, tri_index, np.ascontiguousarray(normals, dtype=np.float64),
                               np.ascontiguousarray(mesh.triangles_center, dtype=np.float64),
                               np.ascontiguousarray(areas, dtype=np.float64))
-    edge_ptr, be = facet_boundaries(faces, tri_ptr, tri_index, len(mesh.vertices), order, starts)
+    edge_ptr, be = facet_boundaries(faces, tri_ptr, tri_index, len(mesh.vertices), order, starts, nbr)
     return Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index,
                   normals=wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300),
                   centers=wc / area[:, None].clip(1e-300), areas=area, seeds=seeds, edge_ptr=edge_ptr,

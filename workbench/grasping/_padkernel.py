@@ -509,3 +509,69 @@ def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int = 4) -> tuple:
     fn_s[:n] = np.asarray(normals, dtype=np.float64)[order]
     _node_shapes(tri_s, slots, leaf, shape)
     return shape, slots, leaf, tri_s, fn_s
+
+
+@njit(cache=True)
+def line_crossings(shape, slots, leaf, tri, starts, dirs):
+    """Every crossing of the rays (starts (K, 3), unit dirs (K, 3)) with the triangles of the hierarchy
+    (`triangle_bvh`), edges and corners included (a ray through a shared edge crosses both triangles there): (ray,
+    triangle, distance along the ray), ray-major."""
+    K = starts.shape[0]
+    P = shape.shape[0] // 2
+    cap = max(16, 4 * K)
+    ray = np.empty(cap, dtype=np.int64)
+    tid = np.empty(cap, dtype=np.int64)
+    dist = np.empty(cap)
+    m = 0
+    if shape[1, 0] > shape[1, 3]:
+        return ray[:0], tid[:0], dist[:0]
+    diag = 0.0
+    for a in range(3):
+        diag += (shape[1, 3 + a] - shape[1, a]) ** 2
+    slack = 1e-9 * (1.0 + np.sqrt(diag))
+    stack = np.empty(_STACK, dtype=np.int64)
+    for k in range(K):
+        o, d = starts[k], dirs[k]
+        stack[0] = 1
+        top = 1
+        while top > 0:
+            top -= 1
+            node = stack[top]
+            if shape[node, 0] > shape[node, 3] or not _line_meets_box(shape, node, o, d, slack):
+                continue
+            if node < P:
+                stack[top] = 2 * node
+                stack[top + 1] = 2 * node + 1
+                top += 2
+                continue
+            for q in range((node - P) * leaf, (node - P + 1) * leaf):
+                if slots[q] < 0:
+                    continue
+                e1 = tri[q, 1] - tri[q, 0]
+                e2 = tri[q, 2] - tri[q, 0]
+                px = d[1] * e2[2] - d[2] * e2[1]
+                py = d[2] * e2[0] - d[0] * e2[2]
+                pz = d[0] * e2[1] - d[1] * e2[0]
+                det = e1[0] * px + e1[1] * py + e1[2] * pz
+                if det == 0.0:
+                    continue
+                inv = 1.0 / det
+                sx, sy, sz = o[0] - tri[q, 0, 0], o[1] - tri[q, 0, 1], o[2] - tri[q, 0, 2]
+                u = (sx * px + sy * py + sz * pz) * inv
+                if u < 0.0 or u > 1.0:
+                    continue
+                qx = sy * e1[2] - sz * e1[1]
+                qy = sz * e1[0] - sx * e1[2]
+                qz = sx * e1[1] - sy * e1[0]
+                v = (d[0] * qx + d[1] * qy + d[2] * qz) * inv
+                if v < 0.0 or u + v > 1.0:
+                    continue
+                if m == cap:
+                    cap *= 2
+                    ray2, tid2, dist2 = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), np.empty(cap)
+                    ray2[:m], tid2[:m], dist2[:m] = ray[:m], tid[:m], dist[:m]
+                    ray, tid, dist = ray2, tid2, dist2
+                ray[m], tid[m] = k, slots[q]
+                dist[m] = (e2[0] * qx + e2[1] * qy + e2[2] * qz) * inv
+                m += 1
+    return ray[:m].copy(), tid[:m].copy(), dist[:m].copy()

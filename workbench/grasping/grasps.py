@@ -425,7 +425,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
         parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref))
         source.append(np.repeat(src, len(ang)))
         if params.gap_grasps and (src >= 0).all():  # gaps open from a surface sample along its normal
-            w, win = gap_windows(mesh, o, a, gripper.jaw_max)
+            w, win = gap_windows(mesh, o, a, gripper.jaw_max, params.pregrasp_margin)
             parts.append(first_touches(mesh, o[w], a[w], ang, gripper, ref=None if ref is None else ref[w],
                                        windows=win))
             source.append(np.repeat(src[w], len(ang)))

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import trimesh
 
-from workbench.grasping._padkernel import first_touch_kernel, triangle_bvh
+from workbench.grasping._padkernel import first_touch_kernel, line_crossings, triangle_bvh
 from workbench.robots.gripper import Gripper
 
 
@@ -155,32 +155,39 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
         return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows)
 
 
-def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray,
-                jaw_max: float) -> tuple[np.ndarray, np.ndarray]:
+def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, jaw_max: float,
+                margin: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Pad starts inside a hole or cavity for jaw axes through surface points `origins` (K, 3) along their outward
     normals `axes` (K, 3): (axis index (W,), window (W, 2)) for `first_touches`.
 
     Along the axis line, the left pad touches the origin's surface and the right pad a surface below it facing down
-    (any surface on an open mesh) at most `jaw_max` away; with the TCP midway, the pads start `jaw_max` / 2 either
-    side of it, and each start must leave the line clear up to its touch. The windows where both starts lie outside
+    (any surface on an open mesh) at most `jaw_max` away; with the TCP midway, the pads start at the pre-grasp
+    opening, `margin` wider than the span between the two crossings and at most `jaw_max` (CONVENTIONS.md, Gripper:
+    the hand approaches at the pre-grasp opening), or `jaw_max` / 2 either side of the TCP when `margin` is None
+    (full opening). Each start must leave the line clear up to its touch. The windows where both starts lie outside
     the part along the line are the ordinary grasp from outside and are not returned.
     """
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
     reach = 1.1 * float(np.linalg.norm(mesh.extents)) + 1e-3
     start = origins + reach * axes  # beyond the part: every crossing of the line is at a height below `reach`
-    locs, ray, tri = mesh.ray.intersects_location(start, -axes, multiple_hits=True)
+    shape, slots, leaf, tri_s, _ = triangle_tree(mesh)
+    ray, tri, along = line_crossings(shape, slots, leaf, tri_s, np.ascontiguousarray(start),
+                                     np.ascontiguousarray(-axes))
     if len(ray) == 0:
         return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
-    # heights along the axis from the origin, in float64 on the hit triangle's plane (the caster may be float32)
+    # heights along the axis from the origin, on the crossed triangle's plane
     tn = mesh.face_normals[tri]
     a = axes[ray]
     t = np.einsum("ij,ij->i", mesh.triangles[tri, 0] - start[ray], tn) / np.einsum("ij,ij->i", -a, tn)
-    h = np.where(np.isfinite(t), reach - t, np.einsum("ij,ij->i", locs - origins[ray], a))
+    h = reach - np.where(np.isfinite(t), t, along)
     down = np.einsum("ij,ij->i", tn, a) < 0 if mesh.is_watertight else np.ones(len(h), dtype=bool)
-    # every crossing, grouped by axis and in descending height along it
-    order = np.lexsort((-h, ray))
+    # every crossing, grouped by axis and in descending height along it; a line through an edge or a corner crosses
+    # every triangle there: one crossing per height and side
+    order = np.lexsort((tri, -h, ray))
     ray, h, down = ray[order], h[order], down[order]
+    again = np.r_[False, (ray[1:] == ray[:-1]) & (h[:-1] - h[1:] <= 1e-9 * reach) & (down[1:] == down[:-1])]
+    ray, h, down = ray[~again], h[~again], down[~again]
     n = len(h)
     first = np.flatnonzero(np.r_[True, ray[1:] != ray[:-1]])
     group = np.repeat(np.arange(len(first)), np.diff(np.r_[first, n]))
@@ -195,7 +202,8 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray,
     eps = max(1e-7, 1e-9 * reach)
     span = h[top][group] - h
     mid = 0.5 * (h[top][group] + h)
-    lo, hi = mid - jaw_max / 2, mid + jaw_max / 2
+    half = jaw_max / 2 if margin is None else np.minimum(span + margin, jaw_max) / 2
+    lo, hi = mid - half, mid + half
     ok = (hit_origin[group] & (np.arange(n) > top[group]) & down & (span > eps) & (span <= jaw_max)
           & (hi < ceiling - eps) & (lo > floor + eps)  # both starts in free space along the line
           & ~(np.isinf(ceiling) & np.isinf(floor)))  # not both outside the part: the ordinary grasp

@@ -16,6 +16,7 @@ validation and animation; `to_csv` and `to_json` export a whole timed plan for r
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import logging
@@ -171,7 +172,6 @@ def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, density: f
     limit between grid points. Knots at most `max_step` apart in every joint and, with `spacing`, within it too."""
     import toppra as ta
     import toppra.algorithm as algo
-    import toppra.constraint as constraint
 
     logging.getLogger("toppra").setLevel(logging.ERROR)
     path = np.asarray(path, dtype=np.float64)
@@ -187,12 +187,10 @@ def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, density: f
     s = chord / chord[-1]
     geo = ta.SplineInterpolator(s, pts, bc_type="natural")
     v, a = LIMIT_MARGIN * vlim, LIMIT_MARGIN * alim
-    cons = [constraint.JointVelocityConstraint(np.stack([-v, v], axis=1)),
-            constraint.JointAccelerationConstraint(np.stack([-a, a], axis=1),
-                                                   discretization_scheme=constraint.DiscretizationType.Interpolation)]
+    cons = _constraints(v.tobytes(), a.tobytes())
     out = None
     for grid in (gridpoints, 5 * gridpoints):
-        inst = algo.TOPPRA(cons, geo, parametrizer="ParametrizeConstAccel", gridpt_min_nb_points=grid)
+        inst = algo.TOPPRA(cons, geo, parametrizer="ParametrizeConstAccel", gridpoints=propose_gridpoints(geo, grid))
         traj = inst.compute_trajectory(0.0, 0.0)
         if traj is None:
             raise PlanningError("TOPP-RA found no time parametrisation of a path; check the velocity and acceleration limits")
@@ -207,6 +205,43 @@ def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, density: f
         if not within_limits(out, -np.inf, np.inf, vlim, alim) and np.abs(np.diff(q, axis=0)).max() <= max_step + 1e-12:
             break
     return out
+
+
+@functools.lru_cache(maxsize=32)
+def _constraints(v: bytes, a: bytes) -> list:
+    """TOPP-RA's joint velocity and acceleration constraints for limits +-v, +-a (float64 bytes); they hold only
+    the limits, so one pair serves every path."""
+    import toppra.constraint as constraint
+
+    v, a = np.frombuffer(v), np.frombuffer(a)
+    return [constraint.JointVelocityConstraint(np.stack([-v, v], axis=1)),
+            constraint.JointAccelerationConstraint(np.stack([-a, a], axis=1),
+                                                   discretization_scheme=constraint.DiscretizationType.Interpolation)]
+
+
+def propose_gridpoints(path, min_nb_points: int, max_err_threshold: float = 1e-3, max_seg_length: float = 0.05,
+                       max_iteration: int = 100) -> np.ndarray:
+    """The grid TOPP-RA proposes for `path` (`toppra.interpolator.propose_gridpoints` with TOPPRA's defaults), the
+    same points computed a pass at a time: each pass halves every segment longer than `max_seg_length` or whose
+    estimated interpolation error 0.5 |p''(mid)| d^2 exceeds the threshold, then segments are halved until there
+    are `min_nb_points` points."""
+    grid = np.array([path.path_interval[0], path.path_interval[1]], dtype=np.float64)
+    for iteration in range(max_iteration):
+        a, b = grid[:-1], grid[1:]
+        mid, dist = 0.5 * (a + b), b - a
+        split = dist > max_seg_length
+        check = np.flatnonzero(~split)
+        if len(check):
+            err = np.abs(0.5 * np.asarray(path(mid[check], 2)).reshape(len(check), -1) * dist[check, None] ** 2)
+            split[check] = err.max(axis=1) > max_err_threshold
+        if not split.any():
+            break
+        grid = np.sort(np.r_[grid, mid[split]])
+    if iteration == max_iteration - 1:
+        raise PlanningError("TOPP-RA found no grid fine enough for a path")
+    while len(grid) < min_nb_points:
+        grid = np.sort(np.r_[grid, 0.5 * (grid[:-1] + grid[1:])])
+    return grid
 
 
 def reversed_trajectory(traj: Trajectory) -> Trajectory:
