@@ -12,6 +12,11 @@ targets). Nothing waits on a fixed wall-clock limit: Run All is followed while c
 only against a hang. Finally a `plan.html` written by `workbench demo` must animate (two screenshots a moment apart
 differ) with its caption and footer naming the same step. Screenshots go to `build/screenshots/` for a person.
 
+A view's animation is paused once it plays (`hold_animations`): headless Chromium draws WebGL in software, and a
+looping plan animation would keep a core busy redrawing, slowing the kernel, every screenshot and every click several
+times over; it also means a view that changes after a move changed because of the move, not the animation's clock.
+Whether an animation plays is `plan.html`'s check.
+
 Needs Chromium (`apt-get install chromium`; playwright's own browser download is not used) and the test extras
 (playwright). Without them the module skips with one line saying what is missing.
 """
@@ -255,6 +260,23 @@ class Frames:
         return len(self.types)
 
 
+HOLD = """() => { const a = window.viewer && window.viewer.animator;
+  if (a && a.playing) { a.pause(); return true; } return false; }"""
+
+
+def hold_animations(page) -> int:
+    """Pause the animation of every meshcat view in the page that plays one; how many were playing."""
+    from playwright.sync_api import Error
+
+    held = 0
+    for frame in page.frames:
+        try:
+            held += bool(frame.evaluate(HOLD))
+        except Error:  # a frame still loading or gone
+            pass
+    return held
+
+
 BOTH = "() => ['wb-caption', 'wb-footer'].map(i => (document.getElementById(i) || {}).textContent || '')"
 """The caption and the footer read at one moment (the page updates both in the same animation frame)."""
 
@@ -330,6 +352,7 @@ def run_all(page, console: Console, name: str) -> None:
     progress, last = None, time.monotonic()
     while time.monotonic() - last < HANG:  # waits as long as cells keep finishing: a loaded machine is only slower
         page.wait_for_timeout(1000)
+        hold_animations(page)
         errors = shown_errors(page)
         assert not errors, f"{name}: a cell shows an error:\n" + "\n---\n".join(errors)
         ps = prompts(page)
@@ -403,9 +426,10 @@ MOVES = {
     "03": lambda page: move_slider(page, "feasible grip"),
     "04": lambda page: (move_slider(page, "start x (m)", 4), click(page, "search")),  # the view animates: numbers
     "05": lambda page: move_slider(page, "switch"),
+    "06": lambda page: move_slider(page, "theta (deg)", 5),
     "07": lambda page: (move_slider(page, "start x (m)", 4), click(page, "search")),  # the explorer of the picked part
 }
-VIEW_ONLY = {"01", "02", "03", "05"}  # their move only shows, hides or moves what the view holds: no geometry is sent
+VIEW_ONLY = {"01", "02", "03", "05", "06"}  # their move only shows, hides or moves what the view holds: no geometry is sent
 # The part's colour in the notebook's first view (None: the part is drawn in many colours, so everything drawn
 # counts) and the least share of the frame it covers: the camera frames the work, not the room.
 PART = {"01": (None, 0.08), "02": (0xE0C040, 0.001), "03": (None, 0.04), "04": (0xE0A030, 0.0003),
@@ -443,6 +467,7 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
         page.goto(f"{lab.url}lab/workspaces/{stem}/tree/notebooks/{name}?reset&token={lab.token}")
         run_all(page, console, name)
         page.wait_for_timeout(1000)
+        hold_animations(page)
         assert not shown_errors(page), f"{name}: a cell shows an error: {shown_errors(page)}"
 
         outputs = " ".join(page.eval_on_selector_all(".jp-OutputArea-output", "els => els.map(e => e.innerText)"))
@@ -487,7 +512,7 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
         if move is None and not default_move(page):
             print(f"{name}: no slider or dropdown to move")
         else:
-            changed, animated = False, stem[:2] in ("04", "07")  # an animated view changes anyway: read the numbers
+            changed, animated = False, stem[:2] in ("04", "07")  # a search starts a new animation: read the numbers
             while not changed and time.monotonic() - t0 < HANG / 6:
                 page.wait_for_timeout(100)
                 if not animated:
@@ -496,6 +521,7 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
                 changed = changed or numbers(page) != text_before
             measured["move to update (s)"] = round(time.monotonic() - t0, 3)
             wait_idle(page, HANG)
+            hold_animations(page)  # a search plays its new plan
             for i in range(frames.count()):
                 frames.nth(i).screenshot(path=SHOTS / f"{stem}_view{i}_moved.png")
             assert changed, f"{name}: moving a widget changed neither a view nor a number"
@@ -507,6 +533,7 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
         assert not shown_errors(page), f"{name}: a cell shows an error after the move: {shown_errors(page)}"
         assert not console.errors, f"{name}: browser console errors:\n" + "\n".join(console.errors[:10])
     finally:
+        hold_animations(page)
         page.screenshot(path=SHOTS / f"{stem}_page.png")
         context.close()
         lab.shutdown_kernels()

@@ -141,3 +141,19 @@ def test_export_round_trip(panda):
     assert len(rows) == 1 + len(a.t) + 2 and rows[0].startswith("t,segment,kind,caption")
     frames = resample(segs, 30.0)
     assert np.isclose(frames["t"][1], 1 / 30) and frames["segment"][-1] == 1
+
+
+def test_the_toppra_grid_is_toppras_own():
+    """The grid the spline timing hands TOPP-RA is point for point the one toppra would propose itself."""
+    import toppra as ta
+    from toppra.interpolator import propose_gridpoints as toppras
+
+    from workbench.robots.timing import propose_gridpoints
+
+    rng = np.random.default_rng(3)
+    for _ in range(12):
+        pts = np.cumsum(rng.normal(0, rng.uniform(0.01, 0.5), (int(rng.integers(3, 30)), 7)), axis=0)
+        s = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(pts, axis=0), axis=1))]
+        geo = ta.SplineInterpolator(s / s[-1], pts, bc_type="natural")
+        for n in (60, 300):
+            assert np.array_equal(propose_gridpoints(geo, n), np.asarray(toppras(geo, max_err_threshold=1e-3, min_nb_points=n)))

@@ -20,6 +20,7 @@ a real store before any grasp planning.
 from __future__ import annotations
 
 import argparse
+import resource
 import statistics
 import tempfile
 import time
@@ -44,7 +45,7 @@ from workbench.planners.wan_harada.tabletop import TabletopParams
 from workbench.robots.chain import forward
 from workbench.robots.collider import Scene, default_scene
 from workbench.robots.gripper import franka_hand
-from workbench.robots.ik import CLOSED_BLOCK, SOLVERS, WORLDA, IKOptions, IKSolver, ik_feasibility, solver_kind
+from workbench.robots.ik import CLOSED_BLOCK, SOLVERS, WORKER_CPU_SECONDS, WORLDA, IKOptions, IKSolver, ik_feasibility, solver_kind
 from workbench.robots.model import get_robot
 from workbench.robots.solvers import closed_form
 from workbench.store import Store
@@ -318,28 +319,37 @@ def run_paper(args: argparse.Namespace) -> int:
             p = ensure_placements(db, g.idobject, obj, g.idparamset, hand, PlacementParams(), TabletopParams())
             for name in args.robots.split(","):
                 with Store(db) as store:
+                    cpu0 = _cpu_seconds()
                     t0 = time.perf_counter()
                     robot = get_robot(name.strip())
                     opts = IKOptions(solver=args.ik)
                     r = run_ik(store, obj.name, robot, None, args.handx, args.worldz, opts, args.workers,
                                progress=False, idtabletop=p.idtabletop, worlda=args.worlda)
                     t = time.perf_counter() - t0
+                    cpu = _cpu_seconds() - cpu0
                 ref = paper_rows.get(row)
                 with Store(db) as store:
                     grips = load_tabletop_grips(store, g.idobject, p.idtabletop)
-                rows.append((label, robot.name, solver_kind(robot, opts).split(" (")[0], robot.nq, r.grips, t, r.feasible,
+                rows.append((label, robot.name, solver_kind(robot, opts).split(" (")[0], robot.nq, r.grips, t, cpu, r.feasible,
                              r.feasible_all, f"{r.grips / t:,.0f}", *compare_numerical(robot, grips, obj.mesh, opts, args),
                              *(ref[1:] if ref else ("-", "-", "-"))))
-    print_table(["object", "robot", "ik", "dof", "#-tpg", "t-tpgik (s)", "#feasible grasp", "#feasible all five", "grips/s",
-                 "sample", "sample: feasible (this ik / numerical)", "numerical only", "paper #-tpg", "paper t-tpgikn (s)",
+    print_table(["object", "robot", "ik", "dof", "#-tpg", "t-tpgik (s)", "CPU (s)", "#feasible grasp", "#feasible all five",
+                 "grips/s", "sample", "sample: feasible (this ik / numerical)", "numerical only", "paper #-tpg", "paper t-tpgikn (s)",
                  "paper t-tpgikh (s)"], rows,
                 title=f"IK feasibility, protocol paper: every tabletop grip of each object (all grasps, 168 placements per free "
                       f"placement) at the grasp, handx {args.handx} m, + worldz {args.worldz} m, worlda {args.worlda} m and "
-                      f"+ worldz; one cold run in a fresh store. Sample: {args.compare:,} seeded grips solved again by this "
+                      f"+ worldz; one cold run in a fresh store; CPU: the seconds of processor time it took, its worker "
+                      f"processes' included (what a loaded machine does not stretch). Sample: {args.compare:,} seeded grips solved again by this "
                       f"IK and by the numerical solver (Levenberg-Marquardt from seeds), grips feasible at all five poses, "
                       f"and the grips feasible at some pose for the numerical solver but not for this IK. Paper: "
                       f"Nextage / HRP5P, Xeon 2.8 GHz")
     return 0
+
+
+def _cpu_seconds() -> float:
+    """Processor time of this process, of its ended child processes and of the IK workers it closed, in seconds."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime + WORKER_CPU_SECONDS[0]
 
 
 def compare_numerical(robot, grips: dict[str, np.ndarray], mesh: trimesh.Trimesh, opts: IKOptions,

@@ -4,7 +4,8 @@ Each notebook's main explorer is built as the notebook builds it, with a real me
 acknowledged by the server before a change returns), then each change is made `--repeats` times, alternating
 between two values, and the median is printed with the geometry messages (set_object) it sent. Targets: a
 view-only change at most 100 ms and no geometry sent; a threshold change on the tube at most 500 ms; a plan search
-in notebook 04 at most 1 s once the planner is loaded.
+in notebook 04 at most 1 s once the planner is loaded (the independent validation runs when asked, timed on its own
+row).
 """
 
 from __future__ import annotations
@@ -121,18 +122,28 @@ def bench_regrasp(rows: list, repeats: int, db: Path) -> None:
         n = geometry_sent(ex.vis)
         t0 = time.perf_counter()
         ex.run()
-        return time.perf_counter() - t0, geometry_sent(ex.vis) - n
+        return ex.shown_at - t0, time.perf_counter() - t0, geometry_sent(ex.vis) - n
 
     runs = [search() for _ in range(max(1, repeats // 2))]
-    times = [r[0] for r in runs]
-    rows.append(["04", "search (graph, motions, validation, view)", "recompute", f"{statistics.median(times) * 1e3:.1f}",
-                 f"{max(times) * 1e3:.1f}", max(r[1] for r in runs), "1 s"])
+    shown, total = [r[0] for r in runs], [r[1] for r in runs]
+    rows.append(["04", "search: the best plan shown (graph, timed motions, view)", "recompute",
+                 f"{statistics.median(shown) * 1e3:.1f}", f"{max(shown) * 1e3:.1f}", max(r[2] for r in runs), "1 s"])
+    rows.append(["04", f"  then its {ex.alternatives.value} alternatives planned (whole search)", "recompute",
+                 f"{statistics.median(total) * 1e3:.1f}", f"{max(total) * 1e3:.1f}", "-", "-"])
     t = ex.plans[0].timings
     rows.append(["04", "  of which graph search (connect + search)", "-", f"{(t.get('connect', 0) + t.get('search', 0)) * 1e3:.1f}",
                  "-", "-", "-"])
     rows.append(["04", "  of which motions (last run)", "-", f"{t.get('motion', 0) * 1e3:.1f}", "-", "-", "-"])
+    checks = []
+    for _ in range(max(1, repeats // 2)):
+        ex.reports = {}
+        t0 = time.perf_counter()
+        ex.check()
+        checks.append(time.perf_counter() - t0)
+    rows.append(["04", "validate the shown plan (button)", "recompute", f"{statistics.median(checks) * 1e3:.1f}",
+                 f"{max(checks) * 1e3:.1f}", 0, "-"])
     if len(ex.which.options) > 1:
-        _row(rows, "04", "animate another alternative (validated once)", "view only", "100 ms",
+        _row(rows, "04", "animate another alternative", "view only", "100 ms",
              measure(ex.which, (1, 0), repeats, ex.vis))
     _row(rows, "04", "show the graph's nodes", "view only", "100 ms", measure(ex.nodes, (True, False), repeats, ex.vis))
 

@@ -255,15 +255,19 @@ def parallel_rows(poses, pre, tip_inv, rm, tm, ax, n1, kk, c6v, n5, d4, lower, u
     s5r = np.empty(4)
     s3r = np.empty(4)
     qb = np.empty(6)
+    pt = np.empty((4, 4))
     for i in range(n):
-        for a in range(4):  # joint-6 frame in joint 1's parent frame: pre P tip^-1
+        for k in range(4):  # joint-6 frame in joint 1's parent frame: pre (P tip^-1)
+            for b in range(4):
+                acc2 = 0.0
+                for l in range(4):
+                    acc2 += poses[i, k, l] * tip_inv[l, b]
+                pt[k, b] = acc2
+        for a in range(4):
             for b in range(4):
                 acc = 0.0
                 for k in range(4):
-                    acc2 = 0.0
-                    for l in range(4):
-                        acc2 += poses[i, k, l] * tip_inv[l, b]
-                    acc += pre[a, k] * acc2
+                    acc += pre[a, k] * pt[k, b]
                 tt[a, b] = acc
         tr = tt[:3, :3]
         _mul(tr, c6v, w)

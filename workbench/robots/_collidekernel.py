@@ -79,6 +79,8 @@ def classify_rows(q, base, pl, axis, prism, joint, obb_r, obb_c, obb_h, vstart, 
     vhi = np.empty(3)
     omin = np.empty(3)
     omax = np.empty(3)
+    am = np.empty((3, 3))
+    ac = np.empty(3)
     has_obj = places.shape[0] > 0
     for b in range(nb):
         _frames(q[b], base, pl, axis, prism, rot, pos)
@@ -126,17 +128,22 @@ def classify_rows(q, base, pl, axis, prism, joint, obb_r, obb_c, obb_h, vstart, 
                 if hit:
                     break
                 ct = zlo - margin <= tmax[2] and zhi + margin >= tmin[2]
-            if exact[p] and co:
+            if exact[p] and co:  # the hull in the object's frame against the object's own box (oc +- oh)
+                pr = places[b]
                 for a in range(3):
+                    c = 0.0
+                    for k in range(3):
+                        am[a, k] = pr[0, a] * rj[0, k] + pr[1, a] * rj[1, k] + pr[2, a] * rj[2, k]
+                        c += pr[k, a] * (pos[j, k] - pr[k, 3])
+                    ac[a] = c
                     vlo[a], vhi[a] = np.inf, -np.inf
                 for v in range(vstart[p], vstart[p + 1]):
                     for a in range(3):
-                        x = pos[j, a] + rj[a, 0] * verts[v, 0] + rj[a, 1] * verts[v, 1] + rj[a, 2] * verts[v, 2]
+                        x = ac[a] + am[a, 0] * verts[v, 0] + am[a, 1] * verts[v, 1] + am[a, 2] * verts[v, 2]
                         vlo[a], vhi[a] = min(vlo[a], x), max(vhi[a], x)
+                co = True
                 for a in range(3):
-                    vlo[a] -= margin
-                    vhi[a] += margin
-                co = _overlap(vlo, vhi, omin, omax)
+                    co = co and vlo[a] - margin <= oc[a] + oh[a] and vhi[a] + margin >= oc[a] - oh[a]
             open_table[b, p] = ct
             open_obj[b, p] = co
             undecided = undecided or ct or co

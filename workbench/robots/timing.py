@@ -16,6 +16,7 @@ validation and animation; `to_csv` and `to_json` export a whole timed plan for r
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import logging
@@ -171,7 +172,6 @@ def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, density: f
     limit between grid points. Knots at most `max_step` apart in every joint and, with `spacing`, within it too."""
     import toppra as ta
     import toppra.algorithm as algo
-    import toppra.constraint as constraint
 
     logging.getLogger("toppra").setLevel(logging.ERROR)
     path = np.asarray(path, dtype=np.float64)
@@ -187,12 +187,10 @@ def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, density: f
     s = chord / chord[-1]
     geo = ta.SplineInterpolator(s, pts, bc_type="natural")
     v, a = LIMIT_MARGIN * vlim, LIMIT_MARGIN * alim
-    cons = [constraint.JointVelocityConstraint(np.stack([-v, v], axis=1)),
-            constraint.JointAccelerationConstraint(np.stack([-a, a], axis=1),
-                                                   discretization_scheme=constraint.DiscretizationType.Interpolation)]
+    cons = _constraints(v.tobytes(), a.tobytes())
     out = None
     for grid in (gridpoints, 5 * gridpoints):
-        inst = algo.TOPPRA(cons, geo, parametrizer="ParametrizeConstAccel", gridpt_min_nb_points=grid)
+        inst = algo.TOPPRA(cons, geo, parametrizer="ParametrizeConstAccel", gridpoints=propose_gridpoints(geo, grid))
         traj = inst.compute_trajectory(0.0, 0.0)
         if traj is None:
             raise PlanningError("TOPP-RA found no time parametrisation of a path; check the velocity and acceleration limits")
@@ -207,6 +205,43 @@ def time_spline(path: np.ndarray, vlim: np.ndarray, alim: np.ndarray, density: f
         if not within_limits(out, -np.inf, np.inf, vlim, alim) and np.abs(np.diff(q, axis=0)).max() <= max_step + 1e-12:
             break
     return out
+
+
+@functools.lru_cache(maxsize=32)
+def _constraints(v: bytes, a: bytes) -> list:
+    """TOPP-RA's joint velocity and acceleration constraints for limits +-v, +-a (float64 bytes); they hold only
+    the limits, so one pair serves every path."""
+    import toppra.constraint as constraint
+
+    v, a = np.frombuffer(v), np.frombuffer(a)
+    return [constraint.JointVelocityConstraint(np.stack([-v, v], axis=1)),
+            constraint.JointAccelerationConstraint(np.stack([-a, a], axis=1),
+                                                   discretization_scheme=constraint.DiscretizationType.Interpolation)]
+
+
+def propose_gridpoints(path, min_nb_points: int, max_err_threshold: float = 1e-3, max_seg_length: float = 0.05,
+                       max_iteration: int = 100) -> np.ndarray:
+    """The grid TOPP-RA proposes for `path` (`toppra.interpolator.propose_gridpoints` with TOPPRA's defaults), the
+    same points computed a pass at a time: each pass halves every segment longer than `max_seg_length` or whose
+    estimated interpolation error 0.5 |p''(mid)| d^2 exceeds the threshold, then segments are halved until there
+    are `min_nb_points` points."""
+    grid = np.array([path.path_interval[0], path.path_interval[1]], dtype=np.float64)
+    for iteration in range(max_iteration):
+        a, b = grid[:-1], grid[1:]
+        mid, dist = 0.5 * (a + b), b - a
+        split = dist > max_seg_length
+        check = np.flatnonzero(~split)
+        if len(check):
+            err = np.abs(0.5 * np.asarray(path(mid[check], 2)).reshape(len(check), -1) * dist[check, None] ** 2)
+            split[check] = err.max(axis=1) > max_err_threshold
+        if not split.any():
+            break
+        grid = np.sort(np.r_[grid, mid[split]])
+    if iteration == max_iteration - 1:
+        raise PlanningError("TOPP-RA found no grid fine enough for a path")
+    while len(grid) < min_nb_points:
+        grid = np.sort(np.r_[grid, 0.5 * (grid[:-1] + grid[1:])])
+    return grid
 
 
 def reversed_trajectory(traj: Trajectory) -> Trajectory:
@@ -318,6 +353,31 @@ def to_csv(segments: list[TimedSegment], joint_names: list[str]) -> str:
     return buf.getvalue()
 
 
+def _ros2_knots(segments: list[TimedSegment]):
+    """(segment index, knot index, plan time) of every knot written to a ROS 2 trajectory: consecutive segments
+    share their boundary knot, which is written once (with the earlier segment), so times strictly increase."""
+    last = -math.inf
+    for k, s in enumerate(segments):
+        for i, t in enumerate(s.traj.t + s.t0):
+            if t <= last + 1e-9:
+                continue
+            last = float(t)
+            yield k, i, last
+
+
+def _ros2_time(t: float) -> dict:
+    sec = int(math.floor(t))
+    return {"sec": sec, "nanosec": min(int(round((t - sec) * 1e9)), 999_999_999)}
+
+
+def _ros2_message(joint_names: list[str], points: list[dict]) -> str:
+    import yaml
+
+    msg = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}, "joint_names": list(joint_names),
+           "points": points}
+    return yaml.safe_dump(msg, sort_keys=False, default_flow_style=None, width=120)
+
+
 def to_ros2_yaml(segments: list[TimedSegment], joint_names: list[str]) -> str:
     """The whole plan as one ROS 2 `trajectory_msgs/JointTrajectory` in YAML: `joint_names` in the URDF's names, and
     per knot `positions`, `velocities`, `accelerations` and `time_from_start` (sec, nanosec) from the plan's start.
@@ -325,22 +385,33 @@ def to_ros2_yaml(segments: list[TimedSegment], joint_names: list[str]) -> str:
     Consecutive segments share their boundary knot; it is written once, so `time_from_start` strictly increases, as
     a controller requires. A knot where the arm is at rest gets zero acceleration: the segments meet at rest, and a
     controller interpolating with accelerations must not carry the stopping segment's deceleration into the next.
-    The gripper is not a joint of the message (the jaw's dwells appear as the arm at rest).
+    The gripper is not a joint of this message: `to_ros2_gripper_yaml` gives its jaw width at the same times.
     """
-    import yaml
+    acc = [np.where(np.all(np.abs(s.traj.qd) < 1e-12, axis=1)[:, None], 0.0, s.traj.accelerations()) for s in segments]
+    points = [{"positions": [float(x) for x in segments[k].traj.q[i]], "velocities": [float(x) for x in segments[k].traj.qd[i]],
+               "accelerations": [float(x) for x in acc[k][i]], "effort": [], "time_from_start": _ros2_time(t)}
+              for k, i, t in _ros2_knots(segments)]
+    return _ros2_message(joint_names, points)
 
-    points, last = [], -math.inf
-    for s in segments:
-        acc = np.where(np.all(np.abs(s.traj.qd) < 1e-12, axis=1)[:, None], 0.0, s.traj.accelerations())
-        for t, q, qd, qdd in zip(s.traj.t + s.t0, s.traj.q, s.traj.qd, acc):
-            if t <= last + 1e-9:
-                continue
-            last = float(t)
-            sec = int(math.floor(t))
-            nanosec = min(int(round((t - sec) * 1e9)), 999_999_999)
-            points.append({"positions": [float(x) for x in q], "velocities": [float(x) for x in qd],
-                           "accelerations": [float(x) for x in qdd], "effort": [],
-                           "time_from_start": {"sec": sec, "nanosec": nanosec}})
-    msg = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}, "joint_names": list(joint_names),
-           "points": points}
-    return yaml.safe_dump(msg, sort_keys=False, default_flow_style=None, width=120)
+
+GRIPPER_JOINT = "jaw_width"
+
+
+def jaw_widths(segments: list[TimedSegment], k: int, t: np.ndarray) -> np.ndarray:
+    """The jaw width (m) at times `t` (s, from segment k's start): the segment's jaw, except in a `gripper` segment,
+    where the jaw moves at a constant rate from the previous segment's width to its own while the arm rests."""
+    s = segments[k]
+    if s.kind != "gripper" or k == 0 or s.duration <= 0:
+        return np.full(len(t), s.jaw)
+    before = segments[k - 1].jaw
+    return before + (s.jaw - before) * np.clip(np.asarray(t, dtype=np.float64) / s.duration, 0.0, 1.0)
+
+
+def to_ros2_gripper_yaml(segments: list[TimedSegment], joint: str = GRIPPER_JOINT) -> str:
+    """The gripper's part of the plan as a second ROS 2 `trajectory_msgs/JointTrajectory` in YAML: one joint,
+    `joint` (default `jaw_width`: the opening between the pads, m), its `positions` at every `time_from_start` of
+    `to_ros2_yaml`'s message, so the two play together (positions only: a controller interpolates them linearly)."""
+    points = [{"positions": [float(jaw_widths(segments, k, segments[k].traj.t[i:i + 1])[0])], "velocities": [],
+               "accelerations": [], "effort": [], "time_from_start": _ros2_time(t)}
+              for k, i, t in _ros2_knots(segments)]
+    return _ros2_message([joint], points)

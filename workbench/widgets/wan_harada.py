@@ -6,6 +6,7 @@ stage functions) and draw with `workbench.viewer`; no planning logic lives here.
 from __future__ import annotations
 
 import html
+import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -93,6 +94,7 @@ class RegraspExplorer(BesideView):
         self.full = W.Checkbox(value=False, description="evaluate every start/goal grip (not lazy)", indent=False)
         self.nodes = W.Checkbox(value=False, description="show the graph's nodes", indent=False)
         self.plan_button = W.Button(description="search", button_style="primary")
+        self.check_button = W.Button(description="validate", tooltip="check the shown plan with the independent validator")
         self.which = W.Dropdown(options=[], description="animate", **wide)
         self.busy = Busy()
         self.key = W.HTML(legend([(OBJECT_COLOR, "the part (animated)"), (START_COLOR, "start pose"),
@@ -102,11 +104,13 @@ class RegraspExplorer(BesideView):
         self.info = W.HTML()
         self.load_button.on_click(lambda _: self.load())
         self.plan_button.on_click(lambda _: self.run())
-        self.which.observe(lambda _: self.animate(), names="value")
+        self.check_button.on_click(lambda _: self.check())
+        self._listing, self.shown_at = False, None
+        self.which.observe(lambda _: None if self._listing else self.animate(), names="value")
         self.nodes.observe(lambda _: self.vis["roadmap"].set_property("visible", bool(self.nodes.value)), names="value")
         self.controls = W.VBox([self.object, self.robot, self.grippers.widget, self.grippers.note, W.HBox([self.load_button]),
                                 *self.ends["start"], *self.ends["goal"],
-                                self.alternatives, self.full, W.HBox([self.plan_button, self.busy.widget]), self.which,
+                                self.alternatives, self.full, W.HBox([self.plan_button, self.check_button, self.busy.widget]), self.which,
                                 self.nodes, self.info])
         self._widget = None
 
@@ -160,41 +164,74 @@ class RegraspExplorer(BesideView):
         return PoseQuery(int(p.value), float(x.value), float(y.value), float(np.radians(yaw.value)))
 
     def run(self) -> list:
-        """Search (Section V) from the widgets' start to their goal; animate the best plan. Each plan is checked by
-        the independent validator when it is first shown (`animate`), not all of them before the first is seen."""
+        """Search (Section V) from the widgets' start to their goal; animate the best plan at once. The independent
+        validator checks the shown plan when asked (`check`, the *validate* button), as the command line's `plan`
+        checks every plan it writes."""
 
         if self.planner is None:
             self.load()
+        self.shown_at = None
         try:
             with self.busy.running("searching"):
                 self.plans = self.planner.plan(self.query("start"), self.query("goal"), alternatives=self.alternatives.value,
-                                               lazy=not self.full.value, validate=False)
-            self.result, self.reports = self.planner.last, {}
+                                               lazy=not self.full.value, validate=False, on_best=self._show_best)
+            self.result = self.planner.last
         except PlanningError as exc:
             self.plans, self.result = [], None
             self.info.value = self.graph_html() + f"<p style='color:#b00'><b>no plan:</b> {exc}</p>"
             return []
-        self.attach = show_roadmap(self.vis, self.planner, self.result)  # the graph's nodes, sent once per search
-        self.vis["roadmap"].set_property("visible", bool(self.nodes.value))  # node clouds hide the part: off by default
-        self.which.options = [(f"{'best' if p.rank == 0 else f'alternative {p.rank}'}: {p.regrasps} regrasp(s)", p.rank)
-                              for p in self.plans]
-        self.which.value = 0
-        self.animate()
+        if self.shown_at is None:  # (a planner that does not report its best plan early)
+            self._show_best(self.plans[0], self.result)
+        self._list_plans()
         return self.plans
 
+    def _show_best(self, plan, result) -> None:
+        """The best plan, shown as soon as its motions are timed (its alternatives are planned after it)."""
+        self.plans, self.result, self.reports = [plan], result, {}
+        self.attach = show_roadmap(self.vis, self.planner, result)  # the graph's nodes, sent once per search
+        self.vis["roadmap"].set_property("visible", bool(self.nodes.value))  # node clouds hide the part: off by default
+        self._list_plans()
+        self.animate()
+        self.shown_at = time.perf_counter()
+        if self.alternatives.value:
+            self.busy.widget.value = "<span style='color:#b60'>&#9203; alternative plans ...</span>"
+
+    def _list_plans(self) -> None:
+        """The plans found so far in the *animate* menu, the best chosen (without replaying it)."""
+        self._listing = True
+        try:
+            self.which.options = [(f"{'best' if p.rank == 0 else f'alternative {p.rank}'}: {p.regrasps} regrasp(s)", p.rank)
+                                  for p in self.plans]
+            self.which.value = 0
+        finally:
+            self._listing = False
+
     def animate(self) -> None:
+        """Play the chosen plan (the best or an alternative) and describe it, with its verdict once validated."""
         if not self.plans:
             return
         plan = self.plans[self.which.value or 0]
         self.scene.play(plan, numbers=per_part_numbers(self.planner.free["idfreetabletopplacement"]))
-        self.info.value = self.graph_html(self.attach) + self.plan_html(plan)
+        self.info.value = self.graph_html(self.attach) + self.verdict_html(plan) + self.plan_html(plan)
+
+    def check(self):  # -> ValidationReport | None
+        """Validate the shown plan with the independent validator (once per plan) and show the verdict."""
+        if not self.plans:
+            return None
+        plan = self.plans[self.which.value or 0]
         if plan.rank not in self.reports:
             with self.busy.running("validating the plan"):
                 self.reports[plan.rank] = self.planner.validate(plan, require_motion=bool(plan.segments))
-        rep = self.reports[plan.rank]
-        verdict = (f"<p style='color:#185'><b>validation: ok</b> ({rep.checks:,} checks)</p>" if rep.ok else
-                   f"<p style='color:#b00'><b>validation failed:</b> {html.escape('; '.join(rep.errors[:3]))}</p>")
-        self.info.value = self.graph_html(self.attach) + verdict + self.plan_html(plan)
+        self.info.value = self.graph_html(self.attach) + self.verdict_html(plan) + self.plan_html(plan)
+        return self.reports[plan.rank]
+
+    def verdict_html(self, plan) -> str:
+        """The validator's verdict on `plan`, or how to get it."""
+        rep = self.reports.get(plan.rank)
+        if rep is None:
+            return "<p style='color:#666'>validation: not run yet (<i>validate</i> checks the shown plan)</p>"
+        return (f"<p style='color:#185'><b>validation: ok</b> ({rep.checks:,} checks)</p>" if rep.ok else
+                f"<p style='color:#b00'><b>validation failed:</b> {html.escape('; '.join(rep.errors[:3]))}</p>")
 
     def graph_html(self, attach: dict | None = None) -> str:
 
