@@ -252,10 +252,12 @@ def _local(tri, f, o, x0, y, z0, ca, cb, ly):
 
 
 @njit(cache=True)
-def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max):
+def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max,
+                       block):
     """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y,
     local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
-    triangles and their unit normals by leaf slot."""
+    triangles and their unit normals by leaf slot. `block` (m, negative: off): a pad whose finite start's plane,
+    moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing."""
     cx, cz, hx, hz = rect[0], rect[1], rect[2], rect[3]
     radius = np.hypot(abs(cx) + hx, abs(cz) + hz)
     rad2 = radius * radius
@@ -375,7 +377,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                         # a pad starting inside a hole or cavity (a finite window) must start clear of the part: a
                         # triangle crossing its starting plane inside its footprint puts the pad into the part there
                         start = whi if si == 0 else wlo
-                        if np.isfinite(start) and _cuts_start(lx3, ly, lz3, start, hx, hz):
+                        if block >= 0 and np.isfinite(start) and _cuts_start(lx3, ly, lz3, start + side * block, hx, hz):
                             blocked = True
                             break
                         _candidates(lx3, ly, lz3, hx, hz, -cx, -cz, px, py, pz, valid)
