@@ -20,8 +20,10 @@ a hole or a cavity and close outwards onto a wall (a washer's rim, a mug's wall,
 jaw): `gap_windows` finds those starts along the axis line and `first_touches` takes a window per axis, so each pad
 touches only what lies between its start and the TCP. `gap_windows` checks only the axis line; a pad whose starting
 plane cuts the part anywhere inside its footprint starts inside the material and touches nothing (else it would
-"touch" the material past its start, and a finger that is its pad would sit inside the part at the grasp). The hand
-at its pre-grasp opening is checked against the object afterwards (level 2).
+"touch" the material past its start, and a finger that is its pad would sit inside the part at the grasp).
+`pregrasp_touches` then searches each such grasp again from its own pre-grasp opening about its TCP, so its touches
+are what the pads meet as the hand closes from the opening it approached at. The hand at its pre-grasp opening is
+checked against the object afterwards (level 2).
 
 The work runs in a compiled kernel (`_padkernel`) over a bounding-volume hierarchy of the triangles: each pad at
 each rotation searches it by branch and bound, skipping every subtree outside its footprint or below the best touch
