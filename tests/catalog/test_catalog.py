@@ -344,6 +344,8 @@ def test_sharded_build_equals_serial_and_resumes(parts, robots, serial, serial_d
     (["--robots", "arm=arm.urdf"], "give its tip frame with --tip"),
     (["--robots", "panda,panda"], "listed twice"),
     (["--robots", "robots.yaml"], "robots file robots.yaml does not exist"),
+    (["--robots", "panda", "--grippers", "franka,robotiq-2f85,franka"], "gripper franka_hand is listed twice"),
+    (["--robots", "panda", "--grippers", "franka,nosuch.yaml"], "nosuch.yaml"),
 ])
 def test_bad_input_is_one_line_and_status_2(parts, tmp_path, args, message):
     err = io.StringIO()
