@@ -442,17 +442,6 @@ def _morton(tri):
 
 
 @njit(cache=True)
-def _by_slot(tri, normals, order, slots):
-    """The triangles and their normals in slot order (`order`), zero past the last triangle."""
-    tri_s = np.zeros((slots, 3, 3))
-    fn_s = np.zeros((slots, 3))
-    for s in range(order.shape[0]):
-        tri_s[s] = tri[order[s]]
-        fn_s[s] = normals[order[s]]
-    return tri_s, fn_s
-
-
-@njit(cache=True)
 def _node_shapes(tri, slots, leaf, shape):  # tri by leaf slot
     """Fill `shape`: per node its box (lo, hi; empty: lo > hi), the box centre c, the radius of a sphere about c holding
     the node's points, the unit mean normal n of its triangles (area-weighted; any unit vector where they cancel) and
@@ -531,7 +520,10 @@ def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int = 4) -> tuple:
     slots = np.full(P * leaf, -1, dtype=np.int64)
     slots[:n] = order
     shape = np.empty((2 * P, 15))
-    tri_s, fn_s = _by_slot(tri, np.ascontiguousarray(normals, dtype=np.float64), order, P * leaf)
+    tri_s = np.zeros((P * leaf, 3, 3))
+    tri_s[:n] = tri[order]
+    fn_s = np.zeros((P * leaf, 3))
+    fn_s[:n] = np.asarray(normals, dtype=np.float64)[order]
     _node_shapes(tri_s, slots, leaf, shape)
     return shape, slots, leaf, tri_s, fn_s
 
