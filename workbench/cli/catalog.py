@@ -16,6 +16,7 @@ from workbench.catalog.driver import (
     SUMMARY_HEADERS,
     CatalogParams,
     build_catalog,
+    catalog_columns,
     collect_parts,
     report,
     summary_table,
@@ -120,6 +121,7 @@ def run_build(args: argparse.Namespace) -> int:
     params = catalog_params(args)
     collect_parts(args.parts)  # bad input fails before a cluster starts: parts, robots, a locked or damaged store
     robots = catalog_robot_list(args)
+    catalog_columns(robots)  # a gripper listed twice, too
     open_store(args.db, form=args.form).close()
     with cluster_client(workers=args.workers, scheduler=args.scheduler) as client:
         n = len(client.scheduler_info().get("workers", {}))
