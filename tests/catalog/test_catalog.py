@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import json
 import os
 import shutil
 import signal
@@ -12,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import duckdb
@@ -91,6 +93,7 @@ def _content(db: Path) -> dict[str, list]:
                                            "table_name = ? ORDER BY ordinal_position", [t])
                     if not c.startswith("id") and not c.startswith("jnt_") and "TIMESTAMP" not in kind
                     and c not in ("used", "created")]
+            cols = list(dict.fromkeys(cols))  # a Parquet catalogue's view and the table beneath it list them twice
             out[t] = sorted(map(repr, s.run(f"SELECT {', '.join(cols)} FROM {t}")))
     return out
 
@@ -240,10 +243,19 @@ def test_unit_that_kills_its_worker_is_reported_and_rerun_finishes(parts, robots
     _same(_rows(db), serial)
 
 
-def test_driver_killed_during_a_merge_then_rerun_finishes(parts, serial, tmp_path):
+def _rerun(cmd: list[str], client, capsys) -> str:
+    """The killed build's command again, in this process on the module's cluster (its stdout)."""
+    args = cmd[cmd.index("catalog"):]
+    at = args.index("--workers")
+    capsys.readouterr()
+    assert main([*args[:at], "--scheduler", client.scheduler.address, *args[at + 2:]]) == 0
+    return capsys.readouterr().out
+
+
+def test_driver_killed_during_a_merge_then_rerun_finishes(parts, serial, client, tmp_path, capsys):
     """The driver killed (SIGKILL) inside its first merge transaction, with 2 workers: the store holds no part, the
-    units' files wait on disk; the re-run merges them without computing a part again and the rows equal a serial
-    build's; `catalog report` prints them."""
+    units' files wait on disk; the re-run (the same command, on the module's cluster) merges them without computing a
+    part again and the rows equal a serial build's; `catalog report` prints them."""
     db = tmp_path / "d.duckdb"
     cmd = [sys.executable, "-m", "workbench.cli", "catalog", "build", *map(str, parts[:-1]), *ROBOT_ARGS,
            "--db", str(db), "--workers", "2", "--x", "0.4,0.6,2", "--y", "0,0,1", "--angles", "2", "--max-grasps", "10",
@@ -260,24 +272,23 @@ def test_driver_killed_during_a_merge_then_rerun_finishes(parts, serial, tmp_pat
         assert s.one("SELECT count(*) FROM object")[0] == 0  # the merge's transaction was rolled back whole
     waiting = [f for f in (tmp_path / "d.duckdb.units").glob("part-*") if f.is_dir()]
     assert waiting
-    out = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=600)
-    assert out.returncode == 0, out.stderr[-2000:]
-    computed = int(out.stdout.split("units computed (")[1].split(" part")[0])
+    out = _rerun(cmd, client, capsys)
+    computed = int(out.split("units computed (")[1].split(" part")[0])
     assert computed == len(parts[:-1]) - len(waiting)  # the parts on disk are merged, not computed again
     _same(_rows(db), serial)
     page = tmp_path / "catalogue.html"
-    rep = subprocess.run([sys.executable, "-m", "workbench.cli", "catalog", "report", "--db", str(db), "--html", str(page)],
-                         capture_output=True, text=True, env=env, timeout=120)
-    assert rep.returncode == 0, rep.stderr
+    assert main(["catalog", "report", "--db", str(db), "--html", str(page)]) == 0
+    report = capsys.readouterr().out
     text = page.read_text()  # a thumbnail per part, a column pair per robot
     assert text.count('<img src="data:image/png;base64,') == len(parts[:-1])
     assert all(f"{r} reachable" in text and f"{r} connected" in text for r in ROBOTS)
-    lines = [line.split() for line in rep.stdout.splitlines()]
-    shown = {(w[0], w[1]): w for w in lines if len(w) == 8 and w[1] in ROBOTS}
+    lines = [line.split() for line in report.splitlines()]
+    shown = {(w[0], w[1]): w for w in lines if len(w) == 9 and w[1] in ROBOTS}
     assert set(shown) == {(p.stem, r) for p in parts[:-1] for r in ROBOTS}
     for (part, robot), w in shown.items():  # tabletop grips and the feasible share, as stored
         feas = serial[part, robot]
-        assert int(w[4].replace(",", "")) == len(feas) and w[5] == f"{feas.all(axis=1).mean():.1%}"
+        assert w[2] == "franka_hand" and int(w[5].replace(",", "")) == len(feas)
+        assert w[6] == f"{feas.all(axis=1).mean():.1%}"
 
 
 def _joints(db: Path) -> dict:
@@ -333,6 +344,8 @@ def test_sharded_build_equals_serial_and_resumes(parts, robots, serial, serial_d
     (["--robots", "arm=arm.urdf"], "give its tip frame with --tip"),
     (["--robots", "panda,panda"], "listed twice"),
     (["--robots", "robots.yaml"], "robots file robots.yaml does not exist"),
+    (["--robots", "panda", "--grippers", "franka,robotiq-2f85,franka"], "gripper franka_hand is listed twice"),
+    (["--robots", "panda", "--grippers", "franka,nosuch.yaml"], "nosuch.yaml"),
 ])
 def test_bad_input_is_one_line_and_status_2(parts, tmp_path, args, message):
     err = io.StringIO()
@@ -402,3 +415,75 @@ def test_unit_rows_replace_a_recorded_failure_and_are_never_duplicated(tmp_path)
             with sql.unit_transaction(store, {**unit, "digest": "d2", "fresh": True}):
                 pass
         assert store.one("SELECT count(*) FROM catalog_unit WHERE digest = 'd2'")[0] == 1
+
+
+def test_two_grippers_parquet_catalogue_survives_a_driver_killed_in_its_merge_and_plans(client, tmp_path, capsys):
+    """Two parts x two grippers (the Franka hand, the bundled Robotiq-like spec, listed in the robots file) x one robot
+    in the Parquet form on one worker, the driver killed (SIGKILL) after its first merge wrote some partition files: readers do not
+    see them, the re-run deletes them and merges the units on disk without computing them again. Every table then
+    equals the stage runners' build of each (gripper, part) in order, object rows are not duplicated, `catalog
+    report` has a (robot, gripper) column pair per gripper, and `plan --gripper` answers with the Robotiq's grasps."""
+    from workbench.grasping.grasps import GraspParams
+    from workbench.robots.gripper import load_gripper
+
+    b = bundled_objects()
+    parts = [b["tube"], b["wheel"]]
+    hands = [franka_hand(), load_gripper("robotiq-2f85")]
+    robots = tmp_path / "robots.yaml"
+    robots.write_text("robots: [panda]\ngrippers: [franka, robotiq-2f85]\n")
+    db = tmp_path / "grippers"
+    cmd = [sys.executable, "-m", "workbench.cli", "catalog", "build", *map(str, parts), "--robots", str(robots),
+           "--db", str(db), "--form", "parquet", "--workers", "1", "--x", "0.4,0.6,2", "--y", "0,0,1", "--angles", "2",
+           "--max-grasps", "10", "--rotations", "4", "--ik-library", "2048", "--ik-seeds", "2", "--ik-chunk", "32",
+           "--no-progress"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                            env={**env, "WORKBENCH_FAULT": "_wb_stage_tabletopgrips:1:SIGKILL"})  # before its COPY
+    try:
+        assert proc.wait(timeout=600) == -signal.SIGKILL
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)  # the cluster it started
+    assert list(db.glob("*/part=*/b*.parquet"))  # written by the killed merge, never committed
+    with Store(db, read_only=True) as s:
+        assert s.one("SELECT count(*) FROM object")[0] == s.one("SELECT count(*) FROM freeairgrip")[0] == 0
+    waiting = [f for f in Path(f"{db}.units").glob("part-*") if f.is_dir()]
+    assert waiting
+
+    p = replace(PARAMS, grasps=GraspParams(rotations=4))
+    serial = tmp_path / "serial.duckdb"  # meanwhile, the build of each gripper and part in order
+    with Store(serial) as store:
+        for hand in hands:
+            robot = get_robot("panda", gripper=hand)
+            for path in parts:
+                obj = load_object(path)
+                g = ensure_grasps(store, obj, hand, p.grasps)
+                pl = ensure_placements(store, g.idobject, obj, g.idparamset, hand, p.placements, p.tabletop)
+                run_ik(store, obj.name, robot, None, p.handx, p.worldz, p.ik, workers=1, progress=False,
+                       idtabletop=pl.idtabletop)
+
+    out = _rerun(cmd, client, capsys)
+    computed = int(out.split("units computed (")[1].split(" part")[0])
+    assert computed == len(parts) * len(hands) - len(waiting)  # the part units on disk are merged, not computed again
+    with Store(db, read_only=True) as s:  # every file left is a committed merge's (the killed batch's were deleted)
+        batches = {r[0] for r in s.run("SELECT batch FROM catalog_batch")}
+    assert {int(f.name[1:].split("_")[0]) for f in db.glob("*/part=*/**/b*.parquet")} <= batches
+    mine, theirs = _content(db), _content(serial)
+    for t in PAPER_TABLES:
+        assert mine[t] == theirs[t] and mine[t], t
+    assert len(mine["object"]) == 2 and len(mine["gripper"]) == 2 and len(mine["robot"]) == 2
+    with Store(db, read_only=True) as s:
+        assert s.one("SELECT count(*), count(DISTINCT (idrobot, idtabletopgrips, idscene, idikret)) FROM ik") == \
+            (len(theirs["ik"]), len(theirs["ik"]))
+    assert main(["catalog", "report", "--db", str(db)]) == 0
+    text = capsys.readouterr().out
+    assert all(f"panda + {h.name} reachable" in text and f"{h.name} grasps" in text for h in hands), text
+    code = main(["plan", "--db", str(db), "--object", "wheel", "--robot", "panda", "--gripper", "robotiq-2f85", "--start",
+                 "1,0.45,0.1,0", "--goal", "3,0.55,-0.1,90", "--alternatives", "0", "--json", str(tmp_path / "plan.json")])
+    text = capsys.readouterr().out
+    assert code == 0 and "validation: every listed plan passes" in text, text
+    plan = json.loads((tmp_path / "plan.json").read_text())["plan"]
+    with Store(db, read_only=True) as s:  # the plan's grasps are the Robotiq-like gripper's
+        grip = {r[0] for r in s.run("SELECT g.name FROM freeairgrip f JOIN gripper g USING (idgripper) WHERE "
+                                    "list_contains(?, f.idfreeairgrip)", [[st["idfreeairgrip"] for st in plan["steps"]]])}
+    assert grip == {"robotiq-2f85"}

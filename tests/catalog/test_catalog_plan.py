@@ -101,7 +101,8 @@ def test_plan_and_gpplan_answer_on_a_catalogue_store(catalogues, tmp_path, capsy
 
 def test_files_of_a_merge_that_never_committed_are_swept_and_the_rows_stay(catalogues, tmp_path):
     """A driver killed inside a merge of a Parquet catalogue leaves files of a batch `catalog_batch` does not hold
-    (one half written): the next build's opening deletes them, and the catalogue reads the rows it held before."""
+    (one half written): readers do not see the whole ones, the next build's opening deletes them, and the catalogue
+    reads the rows it held before."""
     import shutil
 
     from workbench.catalog.stages import open_store
@@ -114,6 +115,8 @@ def test_files_of_a_merge_that_never_committed_are_swept_and_the_rows_stay(catal
     ik = next((folder / "ik").glob("*/*/*.parquet"))
     stray = [ik.with_name(f"b{batch + 1}_1_0.parquet"), folder / "object" / "part=M" / f"b{batch + 1}_2_0.parquet"]
     shutil.copy(ik, stray[0])  # a whole file of the uncommitted batch: its rows would be duplicates
+    with Store(folder, read_only=True) as s:  # ... which a reader does not see
+        assert {t: _table(s, t) for t in PARTITIONED} == before
     stray[1].parent.mkdir()
     stray[1].write_bytes(ik.read_bytes()[:100])  # a half-written one
     with pytest.raises(StoreError):
@@ -123,3 +126,30 @@ def test_files_of_a_merge_that_never_committed_are_swept_and_the_rows_stay(catal
     assert not any(p.exists() for p in stray) and ik.exists()
     with Store(folder, read_only=True) as s:
         assert {t: _table(s, t) for t in PARTITIONED} == before
+
+
+def test_notebook_07_reads_a_parquet_catalogue(catalogues, monkeypatch):
+    """Notebook 07's cells after its build (the summary from SQL, its check against the build's summary, the plot of
+    shares and stage times, the explorer loading the best part's graph) on a Parquet catalogue, which nbmake's run
+    of the notebook (a DuckDB file) does not cover."""
+    from types import SimpleNamespace
+
+    import matplotlib
+
+    from workbench.catalog.driver import report
+
+    matplotlib.use("Agg")
+    monkeypatch.chdir(Path(__file__).resolve().parents[2] / "notebooks")
+    nb = json.loads(Path("07_catalogue.ipynb").read_text())
+    cells = {c["id"]: "".join(c["source"]) for c in nb["cells"] if c["cell_type"] == "code"}
+    first = list(cells)[0]
+    assert 'form = "duckdb"' in cells[first] and "form=form" in cells[first]  # the user's choice of form
+    db = catalogues["parquet"]
+    ns = {"db": Path(db), "parts": {"L": catalogues["mesh"]}, "result": SimpleNamespace(rows=report(db)[0])}
+    for cid in list(cells)[1:]:
+        exec(compile(cells[cid], f"07_catalogue.ipynb cell {cid}", "exec"), ns)
+    assert [r[:2] for r in ns["rows"]] == [("L", "panda")] and ns["pick_part"] == "L"
+    assert ns["planner"].roadmap.n_components == ns["best"][ns["names"].index("components")]
+    import matplotlib.pyplot as plt
+
+    plt.close("all")

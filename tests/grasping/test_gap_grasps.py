@@ -55,13 +55,16 @@ def test_gap_windows_on_a_frame_bar_follow_the_line_crossings(frame, hand):
 def test_a_hole_too_small_for_the_open_jaw_is_entered_at_the_pre_grasp_opening(hand):
     """A 60 mm frame with a 30 mm hole: across its 15 mm bar, a pad starting at full opening (40 mm from the TCP)
     would start in the far bar, so there is no window; at the pre-grasp opening (the bar plus 10 mm) the inner pad
-    starts 5 mm inside the hole. The pads then close on the bar's two faces, and the grasps planned with it pass the
+    starts 5 mm inside the hole. Where the open jaw fits (the frame above), its windows stay as they are. The pads then close on the bar's two faces, and the grasps planned with it pass the
     independent check (trimesh, coal) at the grasp's and the pre-grasp opening."""
     small = _frame(outer=0.06, inner=0.03, thickness=0.008)
     origin, axis = np.array([[0.03, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]])
     assert len(gap_windows(small, origin, axis, hand.jaw_max)[0]) == 0
     idx, win = gap_windows(small, origin, axis, hand.jaw_max, margin=0.01)
     assert idx.tolist() == [0] and np.allclose(win, [[-0.0075 - 0.0125, -0.0075 + 0.0125]], atol=1e-6)
+    big = np.array([[0.05, 0.0, 0.0]])
+    assert np.array_equal(gap_windows(_frame(), big, axis, hand.jaw_max, margin=0.01)[1],
+                          gap_windows(_frame(), big, axis, hand.jaw_max)[1])
     t = first_touches(small, origin, axis, np.zeros(1), hand, windows=win)
     assert t.hit[0] and t.width[0] == pytest.approx(0.015, abs=1e-6)
     obj = from_trimesh(small, "small frame")

@@ -330,6 +330,9 @@ def test_faceted_round_sides_get_a_low_probability_and_rock():
     assert p.rocking[facets].all() and not p.rocking[flats].any()
     kept = stable_placements(obj, PlacementParams(min_probability=0.05))
     assert len(kept) == int((~facets).sum()) and not kept.rocking.any()
+    steady = stable_placements(obj, PlacementParams(reject_rocking=True))
+    assert len(steady) == int((~p.rocking).sum()) and not steady.rocking.any()
+    assert np.allclose(np.sort(steady.stability), np.sort(p.stability[~p.rocking]))
     # the stated tilt: tipped by atan(min_stability) about any edge of its support polygon, every kept placement's
     # centre of mass stays over the support (checked on the placed vertices, without the stability formula)
     tilt = np.arctan(PlacementParams().min_stability)

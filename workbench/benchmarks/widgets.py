@@ -122,12 +122,14 @@ def bench_regrasp(rows: list, repeats: int, db: Path) -> None:
         n = geometry_sent(ex.vis)
         t0 = time.perf_counter()
         ex.run()
-        return time.perf_counter() - t0, geometry_sent(ex.vis) - n
+        return ex.shown_at - t0, time.perf_counter() - t0, geometry_sent(ex.vis) - n
 
     runs = [search() for _ in range(max(1, repeats // 2))]
-    times = [r[0] for r in runs]
-    rows.append(["04", "search (graph, timed motions, view)", "recompute", f"{statistics.median(times) * 1e3:.1f}",
-                 f"{max(times) * 1e3:.1f}", max(r[1] for r in runs), "1 s"])
+    shown, total = [r[0] for r in runs], [r[1] for r in runs]
+    rows.append(["04", "search: the best plan shown (graph, timed motions, view)", "recompute",
+                 f"{statistics.median(shown) * 1e3:.1f}", f"{max(shown) * 1e3:.1f}", max(r[2] for r in runs), "1 s"])
+    rows.append(["04", f"  then its {ex.alternatives.value} alternatives planned (whole search)", "recompute",
+                 f"{statistics.median(total) * 1e3:.1f}", f"{max(total) * 1e3:.1f}", "-", "-"])
     t = ex.plans[0].timings
     rows.append(["04", "  of which graph search (connect + search)", "-", f"{(t.get('connect', 0) + t.get('search', 0)) * 1e3:.1f}",
                  "-", "-", "-"])

@@ -137,13 +137,33 @@ def collect_parts(paths: Sequence[str | Path | tuple[str | Path, float]]) -> lis
     return out
 
 
-def catalog_robots(robots: str | Sequence[str] | dict[str, CatalogRobot], hand: Gripper) -> dict[str, CatalogRobot]:
-    """The catalogue's columns with gripper `hand`: given as parsed (`workbench.catalog.robots.parse_robots`), or
-    parsed from names."""
-    out = robots if isinstance(robots, dict) else parse_robots(robots, gripper=hand)
-    other = [n for n, c in out.items() if c.robot.spec.hand.digest != hand.digest]
-    if other:
-        raise CatalogError(f"robots {', '.join(other)} carry another gripper than the catalogue's {hand.name!r}")
+Columns = list[tuple[Gripper, dict[str, CatalogRobot]]]  # per gripper, the catalogue's robots carrying it
+
+
+def catalog_columns(robots: str | Sequence[str] | dict[str, CatalogRobot] | Sequence[dict[str, CatalogRobot]],
+                    grippers: Sequence[Gripper] | None = None) -> Columns:
+    """The catalogue's (robot, gripper) columns, per gripper: `robots` given as parsed
+    (`workbench.catalog.robots.parse_robots`, one dict per gripper, each robot carrying its gripper), or as names
+    parsed once per gripper of `grippers` (default the Franka hand)."""
+    if isinstance(robots, dict):
+        groups = [robots]
+    elif not isinstance(robots, str) and robots and all(isinstance(r, dict) for r in robots):
+        groups = list(robots)
+    else:
+        groups = [parse_robots(robots, gripper=g) for g in (grippers or [franka_hand()])]
+    out: Columns = []
+    for group in groups:
+        hands = {c.robot.spec.hand.digest: c.robot.spec.hand for c in group.values()}
+        if len(hands) != 1:
+            raise CatalogError(f"robots {', '.join(group)} carry different grippers; give one robot list per gripper")
+        out.append((next(iter(hands.values())), group))
+    if grippers is not None and [h.digest for h, _ in out] != [g.digest for g in grippers]:
+        raise CatalogError(f"the robots carry grippers {', '.join(h.name for h, _ in out)}, not the catalogue's "
+                           f"{', '.join(g.name for g in grippers)}")
+    digests = [h.digest for h, _ in out]
+    dup = sorted({h.name for h, _ in out if digests.count(h.digest) > 1})
+    if dup:
+        raise CatalogError(f"gripper {', '.join(dup)} is listed twice; list each gripper once")
     return out
 
 
@@ -169,33 +189,39 @@ def one_line(exc: BaseException) -> str:
 class _Build:
     """The state of one build: the store, the client, what is stored, what runs, what waits to be merged."""
 
-    def __init__(self, store, client, robots: dict[str, CatalogRobot], params: CatalogParams, progress: bool,
-                 on_unit: Callable[[str, dict], None] | None, folder: Path, hand: Gripper):
+    def __init__(self, store, client, columns: Columns, params: CatalogParams, progress: bool,
+                 on_unit: Callable[[str, dict], None] | None, folder: Path):
         from distributed import as_completed
 
-        self.store, self.client, self.robots, self.params = store, client, robots, params
+        self.store, self.client, self.params = store, client, params
+        # per gripper row: the gripper and its robots (a part unit per part and gripper, an IK run per robot of it)
+        self.hands = {stages.gripper_id(store, hand): hand for hand, _ in columns}
+        self.columns = dict(zip(self.hands, (robots for _, robots in columns)))
         self.on_unit = on_unit
         self.done = stages.done_units(store)
         self.rows = stages.unit_digests(store)  # digests with a catalog_unit row (done or failed), kept by this writer
         self.pending: dict = {}  # future -> unit dict
-        self.left: dict[tuple[str, str], int] = {}  # (part, robot) -> IK chunks not finished yet
-        self.broken: set[tuple[str, str]] = set()  # runs with a failed IK chunk: their graph waits for a re-run
-        self.runs: dict[tuple[str, str], dict] = {}
-        self.ik_runs: dict[str, dict] = {}  # robot name -> its run's ids in this store
+        self.left: dict[tuple, int] = {}  # (part, idgripper, robot) -> IK chunks not finished yet
+        self.broken: set[tuple] = set()  # runs with a failed IK chunk: their graph waits for a re-run
+        self.runs: dict[tuple, dict] = {}
+        # (idgripper, robot name) -> its run's ids in this store; created in the columns' order, so a robot stored
+        # with several grippers is named as `workbench build` of each gripper in that order names it
+        self.ik_runs = {(gid, name): stages.ik_run(store, c.robot, c.scene, params.ik, params.handx, params.worldz,
+                                                    params.worlda)
+                        for gid, robots in self.columns.items() for name, c in robots.items()}
         # results fetched in the background (a replay of recorded units brings its own)
         self.ac = client.as_completed() if hasattr(client, "as_completed") else as_completed(with_results=True,
                                                                                               raise_errors=False)
         self.result = CatalogResult(rows=[], failures=[], shards=str(folder))
         self.bar = Progress(progress)
-        self.hand = hand
         self.folder = folder
         self._stack: list[float] = []  # seconds of nested `charge` blocks, innermost last
         self.on_disk = open_shards(folder, self.done)  # digest -> shard file of an IK unit computed, not merged yet
-        self.to_merge: dict[tuple[str, str], list[tuple[dict, Path]]] = {}  # (part, robot) -> its IK units on disk
-        self.stored_names = stages.object_names(store)  # parts the store holds already: written by the stage writers
-        self.idgripper = stages.gripper_id(store, self.hand)
+        self.to_merge: dict[tuple, list[tuple[dict, Path]]] = {}  # (part, idgripper, robot) -> its IK units on disk
+        # parts a DuckDB store holds already: written by the stage writers (a Parquet catalogue's merge reuses them)
+        self.stored_names = stages.object_names(store) if store.dataset is None else set()
         self.queue_parts: list[tuple[dict, Path]] = []  # part units on disk, waiting for the next merge
-        self.queue_runs: list[dict] = []  # (part, robot) runs whose IK units are all on disk
+        self.queue_runs: list[dict] = []  # (part, gripper, robot) runs whose IK units are all on disk
         self.readers: dict[str, int] = {}  # part digest -> its runs still reading its folder
         self.last_merge = time.monotonic()
 
@@ -232,25 +258,21 @@ class _Build:
         self.ac.add(fut)
         self.bar.add(unit["kind"])
 
-    def submit_part(self, path: Path, scale: float | None) -> None:
-        p = self.params
+    def submit_part(self, path: Path, scale: float | None, idgripper: int) -> None:
+        p, hand = self.params, self.hands[idgripper]
         units = p.units if scale is None else None
         scale = p.scale if scale is None else scale
-        digest = _digest("part", _file_digest(path), path.stem, self.hand.digest,
+        digest = _digest("part", _file_digest(path), path.stem, hand.digest,
                          {**p.part_dict(), "scale": scale, "units": units})
-        unit = {"digest": digest, "kind": "part", "part": path.stem, "source": str(path)}
+        unit = {"digest": digest, "kind": "part", "part": path.stem, "source": str(path), "idgripper": idgripper}
         if digest in self.done:
             self._skip("part")
-            self.schedule_stored(self.done[digest])
+            self.schedule_stored({**self.done[digest], "idgripper": idgripper})
             return
         priority = PART_PRIORITY + min(path.stat().st_size if path.is_file() else 0, PART_PRIORITY - 1)
-        if path.stem in self.stored_names and self.store.dataset is not None:
-            self.fail(unit, CatalogError(f"the Parquet catalogue holds part {path.stem} built from another file or "
-                                         f"parameters; build these into a new folder (or a DuckDB catalogue)"), counted=True)
-            return
         if path.stem in self.stored_names:  # the store holds this part: the driver writes it with the stage writers
             self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop,
-                         self.hand, priority=priority)
+                         hand, priority=priority)
             return
         folder = self.folder / f"part-{digest}"
         record = stages.read_record(folder) if folder.is_dir() else None
@@ -260,7 +282,7 @@ class _Build:
             return
         unit["folder"] = folder
         self._submit(unit, stages.part_unit_files, str(path), path.stem, scale, units, p.grasps, p.placements,
-                     p.tabletop, str(folder), p.ik_chunk, self.hand, priority=priority)
+                     p.tabletop, str(folder), p.ik_chunk, hand, priority=priority)
 
     def part_ready(self, unit: dict, record: dict, folder: Path) -> None:
         """A part unit's folder is whole: queue it for the next merge and schedule its IK units from its record."""
@@ -287,14 +309,13 @@ class _Build:
             self.schedule_runs(part, folder, n, stored=True)
 
     def _run_bases(self, part: dict) -> list[str]:
-        return [self._run(part, name)["base"] for name in self.robots]
+        return [self._run(part, name)["base"] for name in self.columns[part["idgripper"]]]
 
     def _run(self, part: dict, name: str) -> dict:
-        p, column = self.params, self.robots[name]
-        if name not in self.ik_runs:  # robot, scene and ikret rows: once per build
-            self.ik_runs[name] = stages.ik_run(self.store, column.robot, column.scene, p.ik, p.handx, p.worldz, p.worlda)
-        ids = self.ik_runs[name]
-        return {"part": part["part"], "robot": name, "idobject": part["idobject"], "idtabletop": part["idtabletop"],
+        p, column = self.params, self.columns[part["idgripper"]][name]
+        ids = self.ik_runs[part["idgripper"], name]
+        return {"part": part["part"], "robot": name, "idgripper": part["idgripper"], "idobject": part["idobject"],
+                "idtabletop": part["idtabletop"],
                 "idgrasps": part["idgrasps"], "idplacements": part["idplacements"], "source": part.get("source"),
                 "idrobot": ids["idrobot"], "idscene": ids["idscene"], "idikret": ids["idikret"], "nq": column.robot.nq,
                 "part_digest": part["digest"],
@@ -305,11 +326,11 @@ class _Build:
         """The IK chunk units of a part for every robot, reading the part's grips from `folder` (`stored`: some grips
         may have `ik` rows already, kept by the merge)."""
         p = self.params
-        for name, column in self.robots.items():
+        for name, column in self.columns[part["idgripper"]].items():
             run = self._run(part, name)
-            run["stored"] = (stages.stored_ik(self.store, self.ik_runs[name], part["idtabletop"]) if stored
-                             else np.zeros(0, dtype=np.int64))
-            key = (part["part"], name)
+            run["stored"] = (stages.stored_ik(self.store, self.ik_runs[part["idgripper"], name], part["idtabletop"])
+                             if stored else np.zeros(0, dtype=np.int64))
+            key = _key(run)
             self.runs[key], self.to_merge[key], left = run, [], 0
             self.readers[part["digest"]] = self.readers.get(part["digest"], 0) + 1
             run["folder"] = folder
@@ -370,7 +391,7 @@ class _Build:
     def finish_run(self, run: dict) -> None:
         """Every IK chunk of a (part, robot) is finished: queue its shards and graph for the next merge (a run with a
         failed chunk gets no graph; its shards stay on disk for a re-run)."""
-        key = (run["part"], run["robot"])
+        key = _key(run)
         if key in self.broken:
             self._run_over(run)
             return
@@ -388,7 +409,7 @@ class _Build:
         self._account(unit, meta)
         fut.release()
         self.bar.done("graph")
-        run = self.runs[(unit["part"], unit["robot"])]
+        run = self.runs[_key(unit)]
         run["graph_unit"] = unit
         self.queue_runs.append(run)
 
@@ -403,7 +424,7 @@ class _Build:
     def merge(self, force: bool = False) -> None:
         """Merge what waits (part folders, then the shards and graphs of complete runs) in one transaction, when
         `MERGE_UNITS` units wait, `MERGE_SECONDS` passed since the last merge, or `force`."""
-        waiting = len(self.queue_parts) + sum(len(self.to_merge[(r["part"], r["robot"])]) for r in self.queue_runs)
+        waiting = len(self.queue_parts) + sum(len(self.to_merge[_key(r)]) for r in self.queue_runs)
         if not (self.queue_parts or self.queue_runs):
             return
         if not force and waiting < MERGE_UNITS and time.monotonic() - self.last_merge < MERGE_SECONDS:
@@ -434,17 +455,17 @@ class _Build:
             if parts:
                 for unit, _ in parts:
                     unit["fresh"] = unit["digest"] not in self.rows
-                n += stages.merge_units(self.store, parts, self.idgripper)
+                n += stages.merge_units(self.store, parts)
             merged = {u["digest"]: u for u, _ in parts}
             for run in runs:
                 part = merged.get(run["part_digest"]) or self.done[run["part_digest"]]
                 ids = {k: part[k] for k in ("idobject", "idgrasps", "idplacements", "idtabletop")}  # the store's
                 run.update(ids, offset=part["counts"].get("offset", 0))
-                for unit, _ in self.to_merge[(run["part"], run["robot"])]:
+                for unit, _ in self.to_merge[_key(run)]:
                     unit.update(ids, fresh=unit["digest"] not in self.rows)
             if runs:
                 with self.charge("ik", "merge"):
-                    n += stages.merge_runs(self.store, runs, [self.to_merge[(r["part"], r["robot"])] for r in runs])
+                    n += stages.merge_runs(self.store, runs, [self.to_merge[_key(r)] for r in runs])
                 graphs = [self.graph(run) if "graph_unit" not in run else self._graph_computed(run) for run in runs]
                 with self.charge("graph", "rows"):
                     stages.put_units(self.store, [u for u, _ in graphs if u is not None])
@@ -458,7 +479,7 @@ class _Build:
             if self.on_unit is not None:
                 self.on_unit("part", unit)
         for run in runs:
-            for unit, path in self.to_merge.pop((run["part"], run["robot"])):
+            for unit, path in self.to_merge.pop(_key(run)):
                 self.done[unit["digest"]] = unit
                 self.rows.add(unit["digest"])
                 path.unlink(missing_ok=True)
@@ -479,7 +500,7 @@ class _Build:
             stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, one_line(exc))
             self.rows.add(unit["digest"])
         for run in runs:
-            key = (run["part"], run["robot"])
+            key = _key(run)
             for unit, path in self.to_merge.pop(key, []):
                 path.unlink(missing_ok=True)
                 stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, one_line(exc))
@@ -507,7 +528,7 @@ class _Build:
                         res = part_from_tables(tables)
                     with self.charge("part", "rows"):
                         p = self.params
-                        stages.write_part(self.store, unit, res, self.hand, p.grasps, p.placements, p.tabletop)
+                        stages.write_part(self.store, unit, res, self.hands[unit["idgripper"]], p.grasps, p.placements, p.tabletop)
         except Exception as exc:  # noqa: BLE001 - one part's rows that cannot be stored must not stop the others
             if len(items) > 1:
                 for item in items:
@@ -538,7 +559,7 @@ class _Build:
             row = table.to_pylist()[0]
             unit.update(counts={k: int(row[k]) for k in ("grips", "feasible", "feasible_all")})
             self._account(unit, meta)
-            key = (unit["part"], unit["robot"])
+            key = _key(unit)
             self.to_merge[key].append((unit, Path(meta[b"shard"].decode())))
             fut.release()
             self.bar.done("ik")
@@ -571,18 +592,19 @@ class _Build:
         if not (counted or scheduling):
             self.bar.done(unit["kind"])
         if unit["kind"] == "ik" and not scheduling:
-            key = (unit["part"], unit["robot"])  # the run's other chunks go on; its graph waits for a re-run
+            key = _key(unit)  # the run's other chunks go on; its graph waits for a re-run
             self.broken.add(key)
             self._chunk_done(key)
         if unit["kind"] == "graph":  # its run's shards stay on disk; the re-run merges them and computes the graph
-            key = (unit["part"], unit["robot"])
+            key = _key(unit)
             self.broken.add(key)
             self._run_over(self.runs[key])
 
     # -- the loop ------------------------------------------------------------------------------------------------
     def run(self, parts: Sequence[tuple[Path, float | None]]) -> None:
         for path, scale in parts:
-            self.submit_part(path, scale)
+            for idgripper in self.hands:
+                self.submit_part(path, scale, idgripper)
         for batch in self.ac.batches():
             direct = []
             for fut, result in batch:
@@ -637,15 +659,21 @@ def open_shards(folder: Path, done: dict) -> dict[str, Path]:
 
 
 def _unit_ids(run: dict) -> dict:
-    return {k: run[k] for k in ("part", "robot", "source", "idobject", "idgrasps", "idplacements", "idtabletop", "idrobot",
-                                "idscene", "idikret")}
+    return {k: run[k] for k in ("part", "robot", "idgripper", "source", "idobject", "idgrasps", "idplacements", "idtabletop",
+                                "idrobot", "idscene", "idikret")}
+
+
+def _key(unit: dict) -> tuple[str, int, str]:
+    """A (part, gripper, robot) run's key: the part's name, the gripper's row and the robot's column name."""
+    return unit["part"], unit["idgripper"], unit["robot"]
 
 
 def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
-                  robots: str | Sequence[str] | dict[str, CatalogRobot], db: str | Path, client,
-                  params: CatalogParams = CatalogParams(), progress: bool = True,
+                  robots: str | Sequence[str] | dict[str, CatalogRobot] | Sequence[dict[str, CatalogRobot]],
+                  db: str | Path, client, params: CatalogParams = CatalogParams(), progress: bool = True,
                   on_unit: Callable[[str, dict], None] | None = None, shards: str | Path | None = None,
-                  gripper: Gripper | None = None, form: str = "duckdb") -> CatalogResult:
+                  gripper: Gripper | None = None, form: str = "duckdb",
+                  grippers: Sequence[Gripper] | None = None) -> CatalogResult:
     """Build (or finish) the catalogue of `parts` x `robots` in the store `db` on the Dask `client`; returns the
     summary. Stored units are skipped.
 
@@ -655,16 +683,16 @@ def build_catalog(parts: Sequence[str | Path | tuple[str | Path, float]],
     merges what waits into the store in large batches, one transaction each (`MERGE_UNITS` units or
     `MERGE_SECONDS`), then deletes the files. `shards` is the folder of these files (default: beside the store,
     `DB.units`; with a cluster of several machines, on a file system every worker sees). Files of a killed build are
-    merged by the re-run without computing them again. `gripper`: the catalogue's gripper (default the Franka hand;
-    the robots, when given parsed, carry the same). `form`: the catalogue's form when `db` is new, a DuckDB file
+    merged by the re-run without computing them again. `grippers` (or one `gripper`): the catalogue's grippers,
+    each a part unit per part and a column per robot (default the Franka hand, or the grippers the robots carry
+    when given parsed; see `catalog_columns`). `form`: the catalogue's form when `db` is new, a DuckDB file
     ("duckdb") or a folder of Hive-partitioned Parquet files ("parquet"; `workbench.store.catalog`)."""
     paths = collect_parts(parts)
-    hand = gripper or franka_hand()
-    robot_models = catalog_robots(robots, hand)
+    columns = catalog_columns(robots, grippers if grippers is not None else None if gripper is None else [gripper])
     folder = Path(shards) if shards is not None else Path(f"{db}.units")
     t0 = time.perf_counter()
     with stages.open_store(db, form=form) as store:
-        build = _Build(store, client, robot_models, params, progress, on_unit, folder, hand)
+        build = _Build(store, client, columns, params, progress, on_unit, folder)
         build.result.start = time.time()
         try:
             build.run(paths)
@@ -689,16 +717,16 @@ def report(db: str | Path, meshes: bool = False) -> tuple[list[dict], list[dict]
         return rows, failures, stages.part_meshes(store, sorted({r["part"] for r in rows})) if meshes else {}
 
 
-SUMMARY_HEADERS = ("part", "robot", "grasps", "placements", "tabletop grips", "IK-feasible", "components", "time s")
+SUMMARY_HEADERS = ("part", "robot", "gripper", "grasps", "placements", "tabletop grips", "IK-feasible", "components", "time s")
 
 
 def summary_table(rows: list[dict]) -> list[tuple]:
-    """Rows for printing: part, robot, grasps, placements, tabletop grips, share of grips feasible at all five IK
+    """Rows for printing: part, robot, gripper, grasps, placements, tabletop grips, share of grips feasible at all five IK
     poses, graph components, seconds of worker time (part stages + the robot's IK and graph)."""
     out = []
     for r in rows:
         share = f"{r['ik_feasible'] / r['tabletop_grips']:.1%}" if r["tabletop_grips"] and r["robot"] else "-"
         comps = r["graph"].get("components", "-") if r["robot"] else "-"
         t = (r["part_seconds"] or 0.0) + (r["ik_seconds"] or 0.0) + (r["graph_seconds"] or 0.0)
-        out.append((r["part"], r["robot"] or "-", r["grasps"], r["placements"], r["tabletop_grips"], share, comps, round(t, 2)))
+        out.append((r["part"], r["robot"] or "-", r.get("gripper") or "-", r["grasps"], r["placements"], r["tabletop_grips"], share, comps, round(t, 2)))
     return out

@@ -12,23 +12,27 @@ import io
 import numpy as np
 
 def wide_table(rows: list[dict]) -> tuple[list[str], list[tuple]]:
-    """Headers and one row per part: part, grasps, placements, then per robot reachable grips (of the tabletop
-    grips) and the graph's connected share."""
-    robots = sorted({r["robot"] for r in rows if r["robot"]})
+    """Headers and one row per part: part, grasps (per gripper when the catalogue has several), placements, then per
+    (robot, gripper) column its reachable grips (of the tabletop grips) and the graph's connected share."""
+    grippers = sorted({r.get("gripper") or "-" for r in rows})
+    several = len(grippers) > 1
+    columns = sorted({(r["robot"], r.get("gripper") or "-") for r in rows if r["robot"]})
     parts: dict[str, dict] = {}
     for r in rows:
-        p = parts.setdefault(r["part"], {"grasps": r["grasps"], "placements": r["placements"], "robots": {}})
+        p = parts.setdefault(r["part"], {"grasps": {}, "placements": r["placements"], "columns": {}})
+        p["grasps"][r.get("gripper") or "-"] = r["grasps"]
         if r["robot"]:
-            p["robots"][r["robot"]] = r
-    headers = ["part", "grasps", "placements"]
-    for robot in robots:
-        headers += [f"{robot} reachable", f"{robot} connected"]
+            p["columns"][r["robot"], r.get("gripper") or "-"] = r
+    headers = ["part", *([f"{g} grasps" for g in grippers] if several else ["grasps"]), "placements"]
+    for robot, gripper in columns:
+        label = f"{robot} + {gripper}" if several else robot
+        headers += [f"{label} reachable", f"{label} connected"]
     out = []
     for name in sorted(parts):
         p = parts[name]
-        row: list = [name, p["grasps"], p["placements"]]
-        for robot in robots:
-            r = p["robots"].get(robot)
+        row: list = [name, *(p["grasps"].get(g, "-") for g in grippers), p["placements"]]
+        for column in columns:
+            r = p["columns"].get(column)
             if r is None:
                 row += ["-", "-"]
                 continue
@@ -79,7 +83,8 @@ def html_page(rows: list[dict], failures: list[dict], meshes: dict[str, tuple[np
         tds = "".join(f"<td>{html.escape(str(c))}</td>" for c in row[1:])
         cells.append(f"<tr><td class=part>{img}<span>{html.escape(name)}</span></td>{tds}</tr>")
     fails = "".join(f"<li><b>{html.escape(f['part'])}</b> {html.escape(f['kind'])}"
-                    f"{' x ' + html.escape(f['robot']) if f['robot'] else ''}: {html.escape(f['error'] or '')}</li>"
+                    f"{' x ' + html.escape(f['robot']) if f['robot'] else ''}"
+                    f"{' with ' + html.escape(f['gripper']) if f.get('gripper') else ''}: {html.escape(f['error'] or '')}</li>"
                     for f in failures)
     head = "".join(f"<th>{html.escape(h)}</th>" for h in headers)
     return f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(title)}</title><style>

@@ -12,6 +12,13 @@
         base: [0, 0, 0, 0]             # x, y, z (m), yaw (rad)
         hand_links: []                 # link-name prefixes of the robot's own hand
         table: [0.2, -0.6, 1.0, 0.6]   # table top corners XMIN, YMIN, XMAX, YMAX (m)
+    grippers:                          # optional: the catalogue's grippers, each a column with every robot
+      - franka                         # a bundled gripper
+      - my_gripper.yaml                # a spec file, relative to the YAML file
+      - file: my_gripper.urdf          # a gripper URDF and its parts
+        hand: hand_link
+        fingers: [left_joint, right_joint]
+        tcp: tcp_frame                 # optional
 """
 
 from __future__ import annotations
@@ -25,7 +32,7 @@ from scipy.spatial.transform import Rotation
 
 from workbench.errors import RobotError, WorkbenchError
 from workbench.robots.collider import Collider, Scene, default_scene
-from workbench.robots.gripper import Gripper
+from workbench.robots.gripper import BUNDLED, Gripper, load_gripper
 from workbench.robots.model import Robot, get_robot, pose_xyz_yaw, robot_from_spec
 
 ROBOT_FILE_SUFFIXES = (".yaml", ".yml")
@@ -105,16 +112,48 @@ def make_robot(name: str, urdf: str | None = None, tip: str | None = None, mount
     return CatalogRobot(robot.name, robot, scene)
 
 
-def robots_file(path: Path, gripper: Gripper | None = None) -> list[CatalogRobot]:
-    """The robots listed in a YAML file (see the module's docstring)."""
+def _robots_doc(path: Path) -> Any:
     import yaml
 
     try:
-        doc = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except (OSError, UnicodeDecodeError) as exc:
         raise RobotListError(f"robots file {path} cannot be read ({type(exc).__name__})") from None
     except yaml.YAMLError as exc:
         raise RobotListError(f"robots file {path} is not YAML ({str(exc).splitlines()[0]})") from None
+
+
+def file_grippers(text: str | Sequence[str]) -> list[Gripper] | None:
+    """The grippers listed under `grippers:` in the robots file of a `--robots` value (None when it names no file or
+    its file lists none; see the module's docstring)."""
+    items = [n.strip() for n in (text.split(",") if isinstance(text, str) else text) if n.strip()]
+    files = [Path(i) for i in items if Path(i).suffix.lower() in ROBOT_FILE_SUFFIXES and "=" not in i and Path(i).is_file()]
+    out: list[Gripper] = []
+    for path in files:
+        doc = _robots_doc(path)
+        entries = doc.get("grippers") if isinstance(doc, dict) else None
+        if entries is None:
+            continue
+        if not isinstance(entries, list) or not entries:
+            raise RobotListError(f"robots file {path}: `grippers:` must be a non-empty list of names, files or mappings")
+        for i, e in enumerate(entries):
+            if isinstance(e, str):
+                name = e if e in BUNDLED or Path(e).is_absolute() else str(path.parent / e)
+                out.append(load_gripper(name))
+                continue
+            extra = sorted(set(e) - {"file", "hand", "fingers", "tcp"}) if isinstance(e, dict) else None
+            if extra is None or "file" not in e or extra:
+                raise RobotListError(f"robots file {path}: gripper {i + 1} must be a name, a file or a mapping with `file` "
+                                     f"(and `hand`, `fingers`, `tcp`)")
+            file = Path(str(e["file"]))
+            out.append(load_gripper(str(file if file.is_absolute() else path.parent / file), hand_link=e.get("hand"),
+                                    finger_joints=tuple(e.get("fingers") or ()), tcp_frame=e.get("tcp")))
+    return out or None
+
+
+def robots_file(path: Path, gripper: Gripper | None = None) -> list[CatalogRobot]:
+    """The robots listed in a YAML file (see the module's docstring)."""
+    doc = _robots_doc(path)
     entries = doc.get("robots") if isinstance(doc, dict) else None
     if not isinstance(entries, list) or not entries:
         raise RobotListError(f"robots file {path} needs a non-empty list `robots:` of names or mappings")

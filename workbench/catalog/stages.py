@@ -295,13 +295,13 @@ def stored_part_folder(store: Store, part: dict, folder: Path, ik_chunk: int) ->
     return len(grips["idtabletopgrips"])
 
 
-def merge_units(store: Store, parts: list[tuple[dict, Path]], idgripper: int) -> int:
+def merge_units(store: Store, parts: list[tuple[dict, Path]]) -> int:
     """Part units' folders and their catalog_unit rows, in the caller's transaction; the units' ids become the
-    store's (the offset of their tabletop grips, which their IK units' shards name, is kept in `counts`). Returns
-    the rows inserted."""
+    store's (the offset of their tabletop grips, which their IK units' shards name, is kept in `counts`), their
+    grasps name their unit's `idgripper`. Returns the rows inserted."""
     with store.transaction():
-        offsets = sql.merge_part_files(store, [str(f) for _, f in parts], [u["rows"] for u, _ in parts], idgripper,
-                                       [u["part"] for u, _ in parts])
+        offsets = sql.merge_part_files(store, [str(f) for _, f in parts], [u["rows"] for u, _ in parts],
+                                       [u["idgripper"] for u, _ in parts], [u["part"] for u, _ in parts])
         for (unit, _), o in zip(parts, offsets):
             unit["idobject"] += o["object"]
             for k in ("idgrasps", "idplacements", "idtabletop"):

@@ -16,15 +16,16 @@ from workbench.catalog.driver import (
     SUMMARY_HEADERS,
     CatalogParams,
     build_catalog,
+    catalog_columns,
     collect_parts,
     report,
     summary_table,
 )
 from workbench.catalog.report import html_page, wide_table
-from workbench.catalog.robots import CatalogRobot, parse_robots
+from workbench.catalog.robots import CatalogRobot, RobotListError, file_grippers, parse_robots
 from workbench.cli.grasps import SCALE, add_grasp_arguments, grasp_params
 from workbench.cli.ik import RETRACT, WORKERS, parse_base, parse_mount
-from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.gripper import add_gripper_argument, add_grippers_argument, grippers_from_args
 from workbench.cli.outputs import add_output, write_text
 from workbench.cli.placements import add_placement_arguments, placement_params
 from workbench.params import add_param, cli_bound, parse_number
@@ -47,7 +48,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     b.add_argument("--robots", required=True, metavar="ROBOT,...|FILE.yaml",
                    help=f"the catalogue's robots, one column each: built-in names ({', '.join(ROBOTS)}) and NAME=URDF "
                         "entries (these take --tip, --mount, --base, --hand-links), comma-separated; or a YAML file "
-                        "listing robots with their URDF, tip, mount, base, hand links and table")
+                        "listing robots with their URDF, tip, mount, base, hand links and table (and the catalogue's "
+                        "grippers)")
     b.add_argument("--tip", default=None, help="the URDF robots' tip frame")
     b.add_argument("--mount", default=None, help="the URDF robots' tip frame to gripper TCP: x,y,z,roll,pitch,yaw (m, rad)")
     b.add_argument("--base", default=None, help="the URDF robots' base in the world: X,Y,Z,YAW (m, rad)")
@@ -87,6 +89,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_placement_arguments(b)
     add_grasp_arguments(b)
     add_gripper_argument(b)
+    add_grippers_argument(b)
     b.set_defaults(func=run_build)
     r = inner.add_parser("report", help="print the summary table of a stored catalogue")
     r.add_argument("--db", required=True, help="the catalogue: a DuckDB store file or a Parquet catalogue's folder")
@@ -102,25 +105,29 @@ def catalog_params(args: argparse.Namespace) -> CatalogParams:
                          worldz=args.worldz, worlda=args.worlda, ik_chunk=args.ik_chunk, scale=args.scale, units=args.units)
 
 
-def catalog_robot_list(args: argparse.Namespace) -> dict[str, CatalogRobot]:
-    """The catalogue's columns from --robots and the URDF entries' --tip, --mount, --base, --hand-links."""
-    return parse_robots(args.robots, tip=args.tip, mount=parse_mount(args.mount) if args.mount else None,
-                        base=parse_base(args.base) if args.base else None,
-                        hand_links=tuple(h.strip() for h in (args.hand_links or "").split(",") if h.strip()),
-                        gripper=gripper_from_args(args))
+def catalog_robot_list(args: argparse.Namespace) -> list[dict[str, CatalogRobot]]:
+    """The catalogue's columns, one robot list per gripper (--gripper or --grippers, or the robots file's grippers;
+    default the Franka hand), from --robots and the URDF entries' --tip, --mount, --base, --hand-links."""
+    given, listed = grippers_from_args(args), file_grippers(args.robots)
+    if given and listed:
+        raise RobotListError(f"the robots file {args.robots} lists grippers; give them there or with --grippers, not both")
+    mount, base = parse_mount(args.mount) if args.mount else None, parse_base(args.base) if args.base else None
+    hand_links = tuple(h.strip() for h in (args.hand_links or "").split(",") if h.strip())
+    return [parse_robots(args.robots, tip=args.tip, mount=mount, base=base, hand_links=hand_links, gripper=g)
+            for g in (given or listed or [None])]
 
 
 def run_build(args: argparse.Namespace) -> int:
     params = catalog_params(args)
     collect_parts(args.parts)  # bad input fails before a cluster starts: parts, robots, a locked or damaged store
     robots = catalog_robot_list(args)
-    hand = next(iter(robots.values())).robot.spec.hand
+    catalog_columns(robots)  # a gripper listed twice, too
     open_store(args.db, form=args.form).close()
     with cluster_client(workers=args.workers, scheduler=args.scheduler) as client:
         n = len(client.scheduler_info().get("workers", {}))
         print(f"dask: {n} worker(s) at {client.scheduler.address}; dashboard {dashboard_link(client)}", file=sys.stderr)
         res = build_catalog(args.parts, robots, args.db, client, params, progress=not args.no_progress,
-                            shards=args.shards, gripper=hand, form=args.form)
+                            shards=args.shards, form=args.form)
     print_summary(res.rows, res.failures)
     write_share = f", writing {res.write_seconds / res.wall:.0%} of it" if res.wall > 0 else ""
     print(f"{sum(res.computed.values())} units computed ({res.computed['part']} part, {res.computed['ik']} IK, "
@@ -154,16 +161,21 @@ def print_summary(rows: list[dict], failures: list[dict]) -> None:
     else:
         print("warning: the catalogue holds no finished part yet", file=sys.stderr)
     empty = set()
+    several = len({r.get("gripper") for r in rows}) > 1
     for r in rows:
-        if (not r["grasps"] or not r["tabletop_grips"]) and r["part"] not in empty:
-            empty.add(r["part"])
+        key = (r["part"], r.get("gripper"))
+        name = f"{r['part']} with {r['gripper']}" if several else r["part"]
+        if (not r["grasps"] or not r["tabletop_grips"]) and key not in empty:
+            empty.add(key)
             what = ("free-air grasps" if not r["grasps"] else "stable placements" if not r["placements"]
                     else "tabletop grips (no stable placement keeps a grasp clear of the table)")
             why = f"stage {r['reason']}" if r.get("reason") else "check its size and units"
-            print(f"warning: {r['part']} has no {what}; {why}", file=sys.stderr)
-        elif r["part"] not in empty and r["robot"] and r["ik_rows"] and not r["ik_feasible"]:
-            print(f"warning: no tabletop grip of {r['part']} is IK-feasible for {r['robot']} at all five poses",
+            print(f"warning: {name} has no {what}; {why}", file=sys.stderr)
+        elif key not in empty and r["robot"] and r["ik_rows"] and not r["ik_feasible"]:
+            print(f"warning: no tabletop grip of {name} is IK-feasible for {r['robot']} at all five poses",
                   file=sys.stderr)
     for f in failures:
         what = f["part"] if not f["robot"] else f"{f['part']} x {f['robot']} ({f['kind']})"
+        if f.get("gripper") and several:
+            what += f" with {f['gripper']}"
         print(f"failed: {what} ({f['source']}): {f['error']}")

@@ -72,7 +72,7 @@ def run(args: argparse.Namespace) -> int:
 
         save_plan(store, best)
     write_json(plans, out / "plan.json")
-    print(f"trajectory for a controller: {write_trajectory(best, out / 'trajectory.csv').resolve()}")
+    print(f"trajectory for a controller: {write_trajectory(best, out / 'trajectory.csv')}")
     html = plan_scene(best, planner, out / "plan.html")
     print(f"plan: {(out / 'plan.json').resolve()}")
     print(f"open in a browser: {Path(html).resolve()}")

@@ -157,7 +157,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_output(p, "--plan-html", "write the plan's animation with its obstacles and insertion as static HTML")
     add_output(p, "--trajectory", suffixes=(".csv", ".yaml", ".yml", ".json"),
                help="write the plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml (a ROS 2 "
-                    "trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
+                    "trajectory_msgs/JointTrajectory with the URDF's joint names, and OUT.gripper.yaml with the jaw "
+                    "width at the same times) or OUT.json")
     add_gripper_argument(p)
     p.set_defaults(func=run)
 

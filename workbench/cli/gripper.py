@@ -3,7 +3,7 @@
 `add_gripper_argument(parser)` adds `--gripper` and the options naming a URDF gripper's parts;
 `gripper_from_args(args)` loads the gripper they name (one line and exit 2 on a bad file or field);
 `stored_robot_gripper(store, name, args)` does so for a command planning on a stored robot, where `own` is the hand
-in the stored robot's URDF."""
+in the stored robot's URDF; `add_grippers_argument` and `grippers_from_args` give a catalogue its several grippers."""
 
 from __future__ import annotations
 
@@ -32,6 +32,26 @@ def add_gripper_argument(parser: argparse.ArgumentParser) -> None:
                    help="a URDF gripper's two finger joints (prismatic, revolute or mimic linkages)")
     g.add_argument("--gripper-tcp", metavar="FRAME", default=None,
                    help="a URDF gripper's TCP frame (default: midway between the pads, +z away from the hand link)")
+
+
+def add_grippers_argument(parser: argparse.ArgumentParser) -> None:
+    """--grippers NAME|FILE,...: several grippers (a catalogue's), beside `add_gripper_argument`'s options."""
+    parser.add_argument("--grippers", metavar="NAME|FILE,...", default=None,
+                        help=f"several grippers, comma-separated, instead of --gripper: bundled names ({', '.join(BUNDLED)}), "
+                             f"spec files or gripper URDFs (these take the --gripper-* options); each is a column of the "
+                             f"catalogue with every robot")
+
+
+def grippers_from_args(args: argparse.Namespace) -> list[Gripper] | None:
+    """The grippers of --grippers (or of a --gripper other than the default), None when neither is given."""
+    if args.grippers is None:
+        return None if args.gripper == "franka" else [gripper_from_args(args)]
+    if args.gripper != "franka":
+        raise GripperError("give --gripper or --grippers, not both")
+    names = [n.strip() for n in args.grippers.split(",") if n.strip()]
+    if not names:
+        raise GripperError("--grippers needs at least one gripper, e.g. franka,robotiq-2f85")
+    return [gripper_from_args(argparse.Namespace(**{**vars(args), "gripper": n})) for n in names]
 
 
 def gripper_from_args(args: argparse.Namespace) -> Gripper:

@@ -28,6 +28,9 @@ def add_placement_arguments(parser: argparse.ArgumentParser) -> None:
     add_param(parser, PlacementParams, "min_stability")
     add_param(parser, PlacementParams, "min_probability")
     add_param(parser, PlacementParams, "clearance")
+    parser.add_argument("--reject-rocking", action="store_true",
+                        help="a placement that rocks (a tilt of half the rock angle, 17.5 degrees, tips it onto a "
+                             "neighbouring face within 35 degrees, as on a faceted round side) is not stable")
     for axis, lo, hi, n in (("x", t.x_min, t.x_max, t.nx), ("y", t.y_min, t.y_max, t.ny)):
         parser.add_argument(f"--{axis}", type=_grid(axis), default=(lo, hi, n), metavar="MIN,MAX,N",
                             help=f"grid along {axis}: MIN and MAX in [-10, 10] m, N positions in [1, 1000] "
@@ -68,7 +71,7 @@ def _grid(axis: str):
 
 def placement_params(args: argparse.Namespace) -> tuple[PlacementParams, TabletopParams]:
     return (PlacementParams(min_stability=args.min_stability, min_probability=args.min_probability,
-                            clearance=args.clearance),
+                            clearance=args.clearance, reject_rocking=args.reject_rocking),
             TabletopParams(x_min=args.x[0], x_max=args.x[1], nx=args.x[2], y_min=args.y[0], y_max=args.y[1], ny=args.y[2],
                            angles=args.angles, max_grasps=args.max_grasps or None))
 

@@ -29,7 +29,7 @@ from workbench.planners.wan_harada.stages import (
     stored_plan,
 )
 from workbench.robots.motion import MotionOptions
-from workbench.robots.timing import to_csv, to_json, to_ros2_yaml
+from workbench.robots.timing import to_csv, to_json, to_ros2_gripper_yaml, to_ros2_yaml
 from workbench.simulation.stages import physics_check, simulate_in_memory, simulate_stored, stored_playback
 from workbench.store import Store, open_reader
 from workbench.store.robots import robot_grippers
@@ -71,7 +71,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_motion_arguments(parser, "roadmap nodes or grips")
     add_output(parser, "--trajectory", suffixes=(".csv", ".yaml", ".yml", ".json"),
                help="write the best plan's timed trajectory for a controller: OUT.csv (one row per knot), OUT.yaml "
-                    "(a ROS 2 trajectory_msgs/JointTrajectory with the URDF's joint names) or OUT.json")
+                    "(a ROS 2 trajectory_msgs/JointTrajectory with the URDF's joint names, and OUT.gripper.yaml with the jaw "
+                    "width at the same times) or OUT.json")
     add_gripper_argument(parser)
     physics = parser.add_argument_group("physics", f"replay the best plan in MuJoCo, as `workbench simulate` does ({INSTALL})")
     physics.add_argument("--simulate", action="store_true",
@@ -170,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
         write_json(plans, args.json)
         print(f"json: {Path(args.json).resolve()}")
     if args.trajectory:
-        print(f"trajectory: {write_trajectory(best, args.trajectory).resolve()}")
+        print(f"trajectory: {write_trajectory(best, args.trajectory)}")
     if args.html:
 
         print(f"html: {Path(plan_scene(best, planner, args.html, kind=args.meshes, simulated=playback)).resolve()}")
@@ -202,12 +203,17 @@ def exec_options(args: argparse.Namespace) -> ExecOptions:
     return ExecOptions(acc=args.acc, max_removed=args.max_removed, motion=MotionOptions(budget=args.budget, seed=args.seed))
 
 
-def write_trajectory(plan, out: str | Path) -> Path:
+def write_trajectory(plan, out: str | Path) -> str:
     """The plan's timed trajectory for replay, by the file's suffix: CSV (one row per knot), YAML (a ROS 2
-    `trajectory_msgs/JointTrajectory`) or JSON (per segment)."""
+    `trajectory_msgs/JointTrajectory` of the arm, and beside it OUT.gripper.yaml, the jaw width at the same
+    times) or JSON (per segment); the files written, for the command's output."""
     out = Path(out)
-    writer = {".csv": to_csv, ".yaml": to_ros2_yaml, ".yml": to_ros2_yaml}.get(out.suffix.lower(), to_json)
-    return write_text(out, writer(plan.segments, plan.joint_names))
+    if out.suffix.lower() in (".yaml", ".yml"):
+        arm = write_text(out, to_ros2_yaml(plan.segments, plan.joint_names)).resolve()
+        hand = write_text(out.with_name(f"{out.stem}.gripper{out.suffix}"), to_ros2_gripper_yaml(plan.segments)).resolve()
+        return f"{arm} (gripper: {hand})"
+    writer = to_csv if out.suffix.lower() == ".csv" else to_json
+    return str(write_text(out, writer(plan.segments, plan.joint_names)).resolve())
 
 
 def store_placement(query: PoseQuery, numbers: dict[int, int], name: str, flag: str) -> PoseQuery:

@@ -6,6 +6,8 @@ disk after the first compile."""
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 import trimesh
 from numba import njit
@@ -16,8 +18,14 @@ _STACK = 256  # deeper than any tree (`_padkernel._STACK`)
 def convex_piece(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A convex volume for `hull_hits`: its hull's vertices (V, 3), face planes (unit normals (F, 3) and offsets (F,),
     inside where n . x <= offset) and edge directions (E, 3, unit, up to sign), coplanar faces and parallel edges
-    given once."""
-    hull = trimesh.Trimesh(np.asarray(vertices, dtype=np.float64)).convex_hull
+    given once. The same points give the same piece, computed once (a hand's volumes recur on every part)."""
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    return _piece(v.tobytes(), v.shape)
+
+
+@lru_cache(maxsize=256)
+def _piece(data: bytes, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    hull = trimesh.Trimesh(np.frombuffer(data, dtype=np.float64).reshape(shape)).convex_hull
     v = np.asarray(hull.vertices, dtype=np.float64)
     n = np.asarray(hull.face_normals, dtype=np.float64)
     d = np.einsum("ij,ij->i", n, v[hull.faces[:, 0]])
@@ -28,7 +36,10 @@ def convex_piece(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     sign = np.sign(e[np.arange(len(e)), np.argmax(np.abs(e), axis=1)])
     _, keep = np.unique(np.round(e * sign[:, None], 12), axis=0, return_index=True)
     keep.sort()
-    return v, n[first], d[first], e[keep]
+    out = (v, n[first], d[first], e[keep])
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def pack(pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) -> tuple:
@@ -43,12 +54,18 @@ def pack(pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) ->
 def _separated(tri, q, wv, v0, v1, wn, wd, f0, f1, we, e0, e1, eps):
     """Is triangle (slot) q separated from the placed convex piece: by one of its face planes, by the triangle's
     plane, or by an axis across a triangle edge and a piece edge (the separating axis theorem)."""
+    in0, in1, in2 = True, True, True  # which of the triangle's corners lie in the piece
     for f in range(f0, f1):
-        lo = np.inf
-        for a in range(3):
-            lo = min(lo, tri[q, a, 0] * wn[f, 0] + tri[q, a, 1] * wn[f, 1] + tri[q, a, 2] * wn[f, 2])
-        if lo > wd[f] + eps:
+        p0 = tri[q, 0, 0] * wn[f, 0] + tri[q, 0, 1] * wn[f, 1] + tri[q, 0, 2] * wn[f, 2]
+        p1 = tri[q, 1, 0] * wn[f, 0] + tri[q, 1, 1] * wn[f, 1] + tri[q, 1, 2] * wn[f, 2]
+        p2 = tri[q, 2, 0] * wn[f, 0] + tri[q, 2, 1] * wn[f, 1] + tri[q, 2, 2] * wn[f, 2]
+        if min(p0, p1, p2) > wd[f] + eps:
             return True
+        in0 = in0 and p0 <= wd[f] + eps
+        in1 = in1 and p1 <= wd[f] + eps
+        in2 = in2 and p2 <= wd[f] + eps
+    if in0 or in1 or in2:  # a corner inside: they meet, no other axis can separate them
+        return False
     ux, uy, uz = tri[q, 1, 0] - tri[q, 0, 0], tri[q, 1, 1] - tri[q, 0, 1], tri[q, 1, 2] - tri[q, 0, 2]
     vx, vy, vz = tri[q, 2, 0] - tri[q, 0, 0], tri[q, 2, 1] - tri[q, 0, 1], tri[q, 2, 2] - tri[q, 0, 2]
     mx, my, mz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx

@@ -161,11 +161,11 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     normals `axes` (K, 3): (axis index (W,), window (W, 2)) for `first_touches`.
 
     Along the axis line, the left pad touches the origin's surface and the right pad a surface below it facing down
-    (any surface on an open mesh) at most `jaw_max` away; with the TCP midway, the pads start at the pre-grasp
-    opening, `margin` wider than the span between the two crossings and at most `jaw_max` (CONVENTIONS.md, Gripper:
-    the hand approaches at the pre-grasp opening), or `jaw_max` / 2 either side of the TCP when `margin` is None
-    (full opening). Each start must leave the line clear up to its touch. The windows where both starts lie outside
-    the part along the line are the ordinary grasp from outside and are not returned.
+    (any surface on an open mesh) at most `jaw_max` away; with the TCP midway, the pads start `jaw_max` / 2 either
+    side of it (full opening), or, where the line leaves no room for that and `margin` is given, at the pre-grasp
+    opening: `margin` wider than the span between the two crossings, at most `jaw_max` (CONVENTIONS.md, Gripper:
+    the hand approaches at the pre-grasp opening). Each start must leave the line clear up to its touch. The windows
+    where both starts lie outside the part along the line are the ordinary grasp from outside and are not returned.
     """
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
@@ -202,11 +202,17 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     eps = max(1e-7, 1e-9 * reach)
     span = h[top][group] - h
     mid = 0.5 * (h[top][group] + h)
-    half = jaw_max / 2 if margin is None else np.minimum(span + margin, jaw_max) / 2
-    lo, hi = mid - half, mid + half
-    ok = (hit_origin[group] & (np.arange(n) > top[group]) & down & (span > eps) & (span <= jaw_max)
-          & (hi < ceiling - eps) & (lo > floor + eps)  # both starts in free space along the line
-          & ~(np.isinf(ceiling) & np.isinf(floor)))  # not both outside the part: the ordinary grasp
+    lo, hi = mid - jaw_max / 2, mid + jaw_max / 2
+    base = (hit_origin[group] & (np.arange(n) > top[group]) & down & (span > eps) & (span <= jaw_max)
+            & ~(np.isinf(ceiling) & np.isinf(floor)))  # not both outside the part: the ordinary grasp
+    ok = base & (hi < ceiling - eps) & (lo > floor + eps)  # both starts in free space along the line
+    if margin is not None:
+        # where the line leaves no room for the open jaw, the pre-grasp opening; the opening from the crossings
+        # on the line, not from the touches off it, so where the open jaw fits it stays (its touches may lie higher)
+        half = np.minimum(span + margin, jaw_max) / 2
+        pre = base & ~ok & (mid + half < ceiling - eps) & (mid - half > floor + eps)
+        lo, hi = np.where(pre, mid - half, lo), np.where(pre, mid + half, hi)
+        ok |= pre
     j = np.flatnonzero(ok)
     return ray[j].astype(np.int64), np.column_stack([lo[j], hi[j]])
 

@@ -36,7 +36,9 @@ class PlacementParams(Params):
     support. support_tolerance: once settled, the hull vertices within 0.1 mm of the table form the support polygon
     (the plan validator's flatness tolerance). min_probability: smallest quasi-static rest probability kept.
     rock_angle: a support that tips within half this angle onto a hull neighbour within this angle rocks (35 degrees:
-    a round side of 11 facets or more)."""
+    a round side of 11 facets or more). reject_rocking: a rocking support is not stable (the part tips when a tilt
+    of half `rock_angle` disturbs it and rolls on); by default it is kept, flagged, with the probability the drop
+    statistics give it."""
 
     min_stability: float = param(0.1, ge=0, help="smallest stability (support margin over centre-of-mass height)")
     clearance: float = param(0.002, ge=0, le=0.5, unit="m", help="hand clearance above the table")
@@ -51,6 +53,7 @@ class PlacementParams(Params):
     rock_angle: float = param(float(np.radians(35.0)), ge=0, lt=np.pi / 2, unit="rad",
                               help="a support that tips within half this angle, onto a neighbouring hull face within this "
                                    "angle, rocks (the part rolls on)", cli_scale=180.0 / np.pi, cli_unit="deg")
+    reject_rocking: bool = False
 
 
 @dataclass(frozen=True)
@@ -130,6 +133,8 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     holds[list(poses)] = stability[list(poses)] > 0
     prob, rocking = rest_probabilities(hull, obj.com, groups, normals, holds, params.rock_angle)
     ok = (stability >= threshold) & np.isin(np.arange(len(groups)), list(poses)) & (prob >= params.min_probability)
+    if params.reject_rocking:
+        ok &= ~rocking
     idx = np.flatnonzero(ok)[np.lexsort((-stability[ok], -np.round(prob[ok], 12)))]
     rejected = np.flatnonzero(~ok)
     rejected_poses = np.array([rest_pose(normals[i], obj.com, verts) for i in rejected[:64]]).reshape(-1, 4, 4)

@@ -353,6 +353,31 @@ def to_csv(segments: list[TimedSegment], joint_names: list[str]) -> str:
     return buf.getvalue()
 
 
+def _ros2_knots(segments: list[TimedSegment]):
+    """(segment index, knot index, plan time) of every knot written to a ROS 2 trajectory: consecutive segments
+    share their boundary knot, which is written once (with the earlier segment), so times strictly increase."""
+    last = -math.inf
+    for k, s in enumerate(segments):
+        for i, t in enumerate(s.traj.t + s.t0):
+            if t <= last + 1e-9:
+                continue
+            last = float(t)
+            yield k, i, last
+
+
+def _ros2_time(t: float) -> dict:
+    sec = int(math.floor(t))
+    return {"sec": sec, "nanosec": min(int(round((t - sec) * 1e9)), 999_999_999)}
+
+
+def _ros2_message(joint_names: list[str], points: list[dict]) -> str:
+    import yaml
+
+    msg = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}, "joint_names": list(joint_names),
+           "points": points}
+    return yaml.safe_dump(msg, sort_keys=False, default_flow_style=None, width=120)
+
+
 def to_ros2_yaml(segments: list[TimedSegment], joint_names: list[str]) -> str:
     """The whole plan as one ROS 2 `trajectory_msgs/JointTrajectory` in YAML: `joint_names` in the URDF's names, and
     per knot `positions`, `velocities`, `accelerations` and `time_from_start` (sec, nanosec) from the plan's start.
@@ -360,22 +385,33 @@ def to_ros2_yaml(segments: list[TimedSegment], joint_names: list[str]) -> str:
     Consecutive segments share their boundary knot; it is written once, so `time_from_start` strictly increases, as
     a controller requires. A knot where the arm is at rest gets zero acceleration: the segments meet at rest, and a
     controller interpolating with accelerations must not carry the stopping segment's deceleration into the next.
-    The gripper is not a joint of the message (the jaw's dwells appear as the arm at rest).
+    The gripper is not a joint of this message: `to_ros2_gripper_yaml` gives its jaw width at the same times.
     """
-    import yaml
+    acc = [np.where(np.all(np.abs(s.traj.qd) < 1e-12, axis=1)[:, None], 0.0, s.traj.accelerations()) for s in segments]
+    points = [{"positions": [float(x) for x in segments[k].traj.q[i]], "velocities": [float(x) for x in segments[k].traj.qd[i]],
+               "accelerations": [float(x) for x in acc[k][i]], "effort": [], "time_from_start": _ros2_time(t)}
+              for k, i, t in _ros2_knots(segments)]
+    return _ros2_message(joint_names, points)
 
-    points, last = [], -math.inf
-    for s in segments:
-        acc = np.where(np.all(np.abs(s.traj.qd) < 1e-12, axis=1)[:, None], 0.0, s.traj.accelerations())
-        for t, q, qd, qdd in zip(s.traj.t + s.t0, s.traj.q, s.traj.qd, acc):
-            if t <= last + 1e-9:
-                continue
-            last = float(t)
-            sec = int(math.floor(t))
-            nanosec = min(int(round((t - sec) * 1e9)), 999_999_999)
-            points.append({"positions": [float(x) for x in q], "velocities": [float(x) for x in qd],
-                           "accelerations": [float(x) for x in qdd], "effort": [],
-                           "time_from_start": {"sec": sec, "nanosec": nanosec}})
-    msg = {"header": {"stamp": {"sec": 0, "nanosec": 0}, "frame_id": ""}, "joint_names": list(joint_names),
-           "points": points}
-    return yaml.safe_dump(msg, sort_keys=False, default_flow_style=None, width=120)
+
+GRIPPER_JOINT = "jaw_width"
+
+
+def jaw_widths(segments: list[TimedSegment], k: int, t: np.ndarray) -> np.ndarray:
+    """The jaw width (m) at times `t` (s, from segment k's start): the segment's jaw, except in a `gripper` segment,
+    where the jaw moves at a constant rate from the previous segment's width to its own while the arm rests."""
+    s = segments[k]
+    if s.kind != "gripper" or k == 0 or s.duration <= 0:
+        return np.full(len(t), s.jaw)
+    before = segments[k - 1].jaw
+    return before + (s.jaw - before) * np.clip(np.asarray(t, dtype=np.float64) / s.duration, 0.0, 1.0)
+
+
+def to_ros2_gripper_yaml(segments: list[TimedSegment], joint: str = GRIPPER_JOINT) -> str:
+    """The gripper's part of the plan as a second ROS 2 `trajectory_msgs/JointTrajectory` in YAML: one joint,
+    `joint` (default `jaw_width`: the opening between the pads, m), its `positions` at every `time_from_start` of
+    `to_ros2_yaml`'s message, so the two play together (positions only: a controller interpolates them linearly)."""
+    points = [{"positions": [float(jaw_widths(segments, k, segments[k].traj.t[i:i + 1])[0])], "velocities": [],
+               "accelerations": [], "effort": [], "time_from_start": _ros2_time(t)}
+              for k, i, t in _ros2_knots(segments)]
+    return _ros2_message([joint], points)

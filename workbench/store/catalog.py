@@ -7,6 +7,8 @@
   the unit's rows, so a unit is either stored with all its rows or not at all, and a re-run skips the stored ones.
   status is `done` or `failed` (error holds the one-line reason; failed units are tried again on a re-run).
   seconds: worker compute time; write_seconds: the driver's write transaction; counts: JSON of the unit's sizes.
+  idgripper: the unit's gripper row (a catalogue of several grippers has a part unit per part and gripper, and an
+  IK run per part, gripper and robot).
 
 Units are written by one process (the driver); workers never open the store.
 
@@ -71,7 +73,8 @@ CATALOG_TABLES: tuple[str, ...] = (
         seconds DOUBLE,
         write_seconds DOUBLE,
         worker VARCHAR,
-        created TIMESTAMP DEFAULT current_timestamp
+        created TIMESTAMP DEFAULT current_timestamp,
+        idgripper BIGINT
     )""",
     """CREATE TABLE IF NOT EXISTS catalog_batch (
         batch BIGINT PRIMARY KEY,
@@ -81,7 +84,8 @@ CATALOG_TABLES: tuple[str, ...] = (
 
 
 UNIT_COLUMNS = ("digest", "kind", "part", "source", "robot", "chunk", "idobject", "idgrasps", "idplacements", "idtabletop",
-                "idrobot", "idscene", "idikret", "status", "error", "nrows", "counts", "seconds", "write_seconds", "worker")
+                "idrobot", "idscene", "idikret", "status", "error", "nrows", "counts", "seconds", "write_seconds", "worker",
+                "idgripper")
 
 
 def create_dataset(folder: Path) -> None:
@@ -160,10 +164,12 @@ def _put(store: Store, table: str, columns: str, source: str, args: list, keys: 
 
 
 def ensure_catalog_tables(store: Store) -> None:
-    """Create the catalogue's table when missing (idempotent)."""
+    """Create the catalogue's tables when missing, and the columns a catalogue written by an earlier version lacks
+    (idempotent)."""
     with store.transaction():
         for ddl in CATALOG_TABLES:
             store.run(ddl)
+        store.run("ALTER TABLE catalog_unit ADD COLUMN IF NOT EXISTS idgripper BIGINT")
 
 
 def single_thread(store: Store) -> None:
@@ -322,27 +328,42 @@ RENUMBERED: dict[str, tuple[str, ...]] = {
 PARAMSET_REFS = ("grasps", "placements")  # keys of a stage's parameters naming the parameter set it consumed
 
 
-def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, int]], idgripper: int,
+def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, int]], idgripper: list[int],
                      names: list[str]) -> list[dict[str, int]]:
     """The rows of part units left as Parquet folders (`<folder>/<table>.parquet` for `UNIT_TABLES`, each table's
     ids counting from 1, `counts` rows per table) in the caller's transaction. Ids are renumbered into the store's
     sequences (each unit's ids move by one offset per table, returned per unit), the parameter sets' digests are
-    computed again with their new ids, the free-air grasps take the store's gripper row `idgripper`, and angles
-    already stored are reused by value. `names`: the parts' names (their partitions in a Parquet catalogue). An
-    unreadable file is a StoreError naming the problem."""
+    computed again with their new ids, the free-air grasps take their unit's gripper row (`idgripper`, one per
+    folder), and angles already stored are reused by value. A part stored already (by another gripper's unit) keeps
+    its object row, which the unit's rows then name; one of the same name with other geometry is a StoreError.
+    `names`: the parts' names (their partitions in a Parquet catalogue). An unreadable file is a StoreError naming
+    the problem."""
     if not folders:
         return []
     files = {t: [f"{d}/{t}.parquet" for d in folders] for t in UNIT_TABLES}
     nxt = {t: store.next_id(t, f"id{t}") for t in RENUMBERED}
-    offsets = []
-    for c in counts:
-        offsets.append({t: nxt[t] - 1 for t in RENUMBERED})
+    stored = {n: (int(i), dg) for n, i, dg in store.run("SELECT name, idobject, digest FROM object WHERE list_contains(?, name)",
+                                                       [sorted(set(names))])}
+    offsets, new_object = [], []
+    for c, name, digest in zip(counts, names, _object_digests(folders)):
+        o = {t: nxt[t] - 1 for t in RENUMBERED}
+        new_object.append(name not in stored)
+        if name in stored:  # the unit's one object (id 1) is the stored row
+            if stored[name][1] != digest:
+                raise StoreError(f"the catalogue holds part {name!r} built from another file or scale; build this one "
+                                 f"into a new catalogue or rename its file")
+            o["object"] = stored[name][0] - 1
+        else:
+            stored[name] = (nxt["object"], digest)
+        offsets.append(o)
         for t in RENUMBERED:
-            nxt[t] += int(c.get(t, 0))
-    rows = [(f"{d}/{t}.parquet", name, *(o[r] for r in RENUMBERED))
-            for d, name, o in zip(folders, names, offsets) for t in UNIT_TABLES]
+            if t != "object" or new_object[-1]:
+                nxt[t] += int(c.get(t, 0))
+    rows = [(f"{d}/{t}.parquet", name, gid, new, *(o[r] for r in RENUMBERED))
+            for d, name, gid, new, o in zip(folders, names, idgripper, new_object, offsets) for t in UNIT_TABLES]
     table = pa.table({"file": [r[0] for r in rows], "part": [r[1] for r in rows],
-                      **{f"d_{t}": [r[k + 2] for r in rows] for k, t in enumerate(RENUMBERED)}})
+                      "idgripper": pa.array([r[2] for r in rows], type=pa.int64()), "new_object": [r[3] for r in rows],
+                      **{f"d_{t}": [r[k + 4] for r in rows] for k, t in enumerate(RENUMBERED)}})
     try:
         with store.transaction():
             store.con.register("_wb_offsets", table)
@@ -354,10 +375,9 @@ def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, in
                     if t == "tabletopplacements":
                         _insert_angles(store, files["angle"])
                     swap = [f"x.{c} + o.d_{c[2:]} AS {c}" for c in RENUMBERED[t]]
-                    angle, args = "", [files[t]]
+                    angle, args = "WHERE o.new_object" if t == "object" else "", [files[t]]
                     if t == "freeairgrip":
-                        swap.append("?::BIGINT AS idgripper")
-                        args.insert(0, idgripper)
+                        swap.append("o.idgripper AS idgripper")
                     if t == "tabletopplacements":  # the unit's angle ids -> the store's, by value
                         swap.append("a.idangle AS idangle")
                         angle = ("JOIN read_parquet(?, filename = true) u ON u.idangle = x.idangle AND "
@@ -373,6 +393,17 @@ def merge_part_files(store: Store, folders: list[str], counts: list[dict[str, in
     except duckdb.IOException as exc:
         raise StoreError(f"a part unit's file cannot be read ({str(exc).splitlines()[0]})") from None
     return offsets
+
+
+def _object_digests(folders: list[str]) -> list[str]:
+    """The digest of each part unit folder's object."""
+    out = []
+    for d in folders:
+        try:
+            out.append(pq.read_table(f"{d}/object.parquet", columns=["digest"]).column("digest")[0].as_py())
+        except (OSError, pa.ArrowException, IndexError, KeyError) as exc:
+            raise StoreError(f"a part unit's file cannot be read ({str(exc).splitlines()[0] if str(exc) else type(exc).__name__})") from None
+    return out
 
 
 def _insert_renumbered(store: Store, table: str, folders: list[str], offsets: list[dict[str, int]]) -> None:
@@ -448,24 +479,36 @@ def record_failure(store: Store, unit: dict[str, Any], error: str) -> None:
         _put_unit(store, {**unit, "status": "failed", "error": error})
 
 
+def _units(store: Store) -> str:
+    """catalog_unit, with a NULL idgripper in a catalogue written before units named their gripper (opened read-only)."""
+    has = store.one("SELECT count(*) FROM duckdb_columns() WHERE table_name = 'catalog_unit' AND column_name = 'idgripper' "
+                    "AND database_name = current_database()")[0]
+    return "catalog_unit" if has else "(SELECT *, NULL::BIGINT AS idgripper FROM catalog_unit)"
+
+
 def failures(store: Store) -> list[dict[str, Any]]:
-    """Failed units (no `done` row of the same part, kind, robot and IK chunk since): part, kind, robot, source, error."""
+    """Failed units (no `done` row of the same part, gripper, kind, robot and IK chunk since): part, kind, robot,
+    gripper (its name), source, error."""
+    units = _units(store)
     rows = store.run(
-        "SELECT f.part, f.kind, f.robot, f.source, f.error FROM catalog_unit f WHERE f.status = 'failed' AND NOT EXISTS "
-        "(SELECT 1 FROM catalog_unit d WHERE d.status = 'done' AND d.part = f.part AND d.kind = f.kind "
-        "AND d.robot IS NOT DISTINCT FROM f.robot AND d.chunk IS NOT DISTINCT FROM f.chunk AND d.created >= f.created) "
-        "ORDER BY f.part, f.kind, f.robot, f.chunk")
-    return [dict(zip(("part", "kind", "robot", "source", "error"), r)) for r in rows]
+        f"SELECT f.part, f.kind, f.robot, (SELECT name FROM gripper g WHERE g.idgripper = f.idgripper), f.source, f.error "
+        f"FROM {units} f WHERE f.status = 'failed' AND NOT EXISTS "
+        f"(SELECT 1 FROM {units} d WHERE d.status = 'done' AND d.part = f.part AND d.kind = f.kind "
+        "AND d.robot IS NOT DISTINCT FROM f.robot AND d.chunk IS NOT DISTINCT FROM f.chunk "
+        "AND d.idgripper IS NOT DISTINCT FROM f.idgripper AND d.created >= f.created) "
+        "ORDER BY f.part, f.idgripper, f.kind, f.robot, f.chunk")
+    return [dict(zip(("part", "kind", "robot", "gripper", "source", "error"), r)) for r in rows]
 
 
 def summary(store: Store) -> list[dict[str, Any]]:
-    """One row per stored (part, robot) of the catalogue (the newest build of each), from the stage tables themselves: free-air grasps, stable
+    """One row per stored (part, gripper, robot) of the catalogue (the newest build of each), from the stage tables themselves: free-air grasps, stable
     placements, tabletop grips, IK rows and how many are feasible at all five poses (grasp, retractions, lifts), graph components and nodes
     (from the graph unit), and seconds of worker time for the part's stages and the robot's IK and graph."""
     sql = f"""
-    WITH part AS (  -- the newest part unit of each part name (a store may hold builds with other parameters)
-        SELECT part, idobject, idgrasps, idplacements, idtabletop, seconds, counts FROM catalog_unit
-        WHERE kind = 'part' AND status = 'done' QUALIFY row_number() OVER (PARTITION BY part ORDER BY created DESC) = 1),
+    WITH part AS (  -- the newest part unit of each part and gripper (a store may hold builds with other parameters)
+        SELECT part, idgripper, idobject, idgrasps, idplacements, idtabletop, seconds, counts FROM {_units(store)}
+        WHERE kind = 'part' AND status = 'done'
+        QUALIFY row_number() OVER (PARTITION BY part, idgripper ORDER BY created DESC) = 1),
     robot AS (  -- per part, tabletop set and robot: the newest IK run (robot, scene, retractions)
         SELECT part, robot, idtabletop, idrobot, idscene, idikret,
                sum(seconds) FILTER (WHERE kind = 'ik') AS ik_seconds,
@@ -474,7 +517,7 @@ def summary(store: Store) -> list[dict[str, Any]]:
         FROM catalog_unit WHERE kind IN ('ik', 'graph') AND status = 'done'
         GROUP BY part, robot, idtabletop, idrobot, idscene, idikret
         QUALIFY row_number() OVER (PARTITION BY part, robot, idtabletop ORDER BY max(created) DESC) = 1)
-    SELECT p.part, r.robot,
+    SELECT p.part, r.robot, (SELECT name FROM gripper g WHERE g.idgripper = p.idgripper) AS gripper,
         (SELECT count(*) FROM freeairgrip f WHERE f.idparamset = p.idgrasps) AS grasps,
         (SELECT count(*) FROM freetabletopplacement f WHERE f.idparamset = p.idplacements) AS placements,
         (SELECT count(*) FROM tabletopgrips g JOIN tabletopplacements t USING (idtabletopplacements)
@@ -487,8 +530,8 @@ def summary(store: Store) -> list[dict[str, Any]]:
             AND k.idscene = r.idscene AND k.idikret = r.idikret
             AND {ALL_FEASIBLE}) AS ik_feasible,
         r.graph, p.seconds AS part_seconds, r.ik_seconds, r.graph_seconds, p.counts AS part_counts
-    FROM part p LEFT JOIN robot r ON r.part = p.part AND r.idtabletop = p.idtabletop ORDER BY p.part, r.robot"""
-    keys = ("part", "robot", "grasps", "placements", "tabletop_grips", "ik_rows", "ik_feasible", "graph",
+    FROM part p LEFT JOIN robot r ON r.part = p.part AND r.idtabletop = p.idtabletop ORDER BY p.part, p.idgripper, r.robot"""
+    keys = ("part", "robot", "gripper", "grasps", "placements", "tabletop_grips", "ik_rows", "ik_feasible", "graph",
             "part_seconds", "ik_seconds", "graph_seconds", "part_counts")
     out = []
     for r in store.run(sql):

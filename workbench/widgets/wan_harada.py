@@ -6,6 +6,7 @@ stage functions) and draw with `workbench.viewer`; no planning logic lives here.
 from __future__ import annotations
 
 import html
+import time
 from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
@@ -104,7 +105,8 @@ class RegraspExplorer(BesideView):
         self.load_button.on_click(lambda _: self.load())
         self.plan_button.on_click(lambda _: self.run())
         self.check_button.on_click(lambda _: self.check())
-        self.which.observe(lambda _: self.animate(), names="value")
+        self._listing, self.shown_at = False, None
+        self.which.observe(lambda _: None if self._listing else self.animate(), names="value")
         self.nodes.observe(lambda _: self.vis["roadmap"].set_property("visible", bool(self.nodes.value)), names="value")
         self.controls = W.VBox([self.object, self.robot, self.grippers.widget, self.grippers.note, W.HBox([self.load_button]),
                                 *self.ends["start"], *self.ends["goal"],
@@ -168,22 +170,41 @@ class RegraspExplorer(BesideView):
 
         if self.planner is None:
             self.load()
+        self.shown_at = None
         try:
             with self.busy.running("searching"):
                 self.plans = self.planner.plan(self.query("start"), self.query("goal"), alternatives=self.alternatives.value,
-                                               lazy=not self.full.value, validate=False)
-            self.result, self.reports = self.planner.last, {}
+                                               lazy=not self.full.value, validate=False, on_best=self._show_best)
+            self.result = self.planner.last
         except PlanningError as exc:
             self.plans, self.result = [], None
             self.info.value = self.graph_html() + f"<p style='color:#b00'><b>no plan:</b> {exc}</p>"
             return []
-        self.attach = show_roadmap(self.vis, self.planner, self.result)  # the graph's nodes, sent once per search
-        self.vis["roadmap"].set_property("visible", bool(self.nodes.value))  # node clouds hide the part: off by default
-        self.which.options = [(f"{'best' if p.rank == 0 else f'alternative {p.rank}'}: {p.regrasps} regrasp(s)", p.rank)
-                              for p in self.plans]
-        self.which.value = 0
-        self.animate()
+        if self.shown_at is None:  # (a planner that does not report its best plan early)
+            self._show_best(self.plans[0], self.result)
+        self._list_plans()
         return self.plans
+
+    def _show_best(self, plan, result) -> None:
+        """The best plan, shown as soon as its motions are timed (its alternatives are planned after it)."""
+        self.plans, self.result, self.reports = [plan], result, {}
+        self.attach = show_roadmap(self.vis, self.planner, result)  # the graph's nodes, sent once per search
+        self.vis["roadmap"].set_property("visible", bool(self.nodes.value))  # node clouds hide the part: off by default
+        self._list_plans()
+        self.animate()
+        self.shown_at = time.perf_counter()
+        if self.alternatives.value:
+            self.busy.widget.value = "<span style='color:#b60'>&#9203; alternative plans ...</span>"
+
+    def _list_plans(self) -> None:
+        """The plans found so far in the *animate* menu, the best chosen (without replaying it)."""
+        self._listing = True
+        try:
+            self.which.options = [(f"{'best' if p.rank == 0 else f'alternative {p.rank}'}: {p.regrasps} regrasp(s)", p.rank)
+                                  for p in self.plans]
+            self.which.value = 0
+        finally:
+            self._listing = False
 
     def animate(self) -> None:
         """Play the chosen plan (the best or an alternative) and describe it, with its verdict once validated."""

@@ -7,6 +7,7 @@ import json
 import duckdb
 import numpy as np
 import trimesh
+import yaml
 
 from workbench.cli.main import main
 from workbench.planners.tournassoud.stages import load_planner, table_stage_at
@@ -246,3 +247,59 @@ def test_notebook_query_names_its_removals_and_the_tables_answer(tmp_path, lpart
     # the last grasp is in the goal class and range, both ends kept
     c, t = doc["sequence"]["grasps"][-1]
     assert c == 2 and 60 - 1e-6 <= np.degrees(run.table.theta[t]) <= 120 + 1e-6
+
+
+def test_gpplan_with_a_urdf_robots_own_hand(tmp_path, box, capsys):
+    """The Panda from its URDF with the hand in that URDF (`--gripper own`): `gptable` stores the robot with that
+    hand (the digest of the hand read from the file here), `gpplan --gripper own` rebuilds it from the stored row and
+    plans, validates and stores an executable plan whose jaw widths are within that hand's range; another gripper on
+    the same robot is refused in one line."""
+    from workbench.resources import erd_robots
+    from workbench.robots.gripper import load_gripper
+
+    urdf = erd_robots() / "panda_description" / "urdf" / "panda.urdf"
+    fingers = "panda_finger_joint1,panda_finger_joint2"
+    own = ["--gripper", "own", "--gripper-hand", "panda_hand", "--gripper-tcp", "panda_hand_tcp", "--gripper-fingers", fingers]
+    mesh = tmp_path / "box.stl"
+    box.mesh.export(mesh)
+    db = str(tmp_path / "own.duckdb")
+    assert main(["gptable", str(mesh), "--db", db, "--robot", str(urdf), "--tip", "panda_hand_tcp", *own,
+                 "--theta-step", "30", "--phi-step", "30", "--table-point", "0.45,0.1"]) == 0
+    hand = load_gripper("own", robot_urdf=urdf, tip="panda_hand_tcp", hand_link="panda_hand", tcp_frame="panda_hand_tcp",
+                        finger_joints=tuple(fingers.split(",")))
+    con = duckdb.connect(db, read_only=True)
+    assert con.execute("SELECT r.name, g.digest FROM robot r JOIN gripper g USING (idgripper)").fetchall() == [("panda", hand.digest)]
+    con.close()
+    js, traj = tmp_path / "own.json", tmp_path / "own.yaml"
+    capsys.readouterr()
+    assert main(["gpplan", "--db", db, "--object", "box", "--robot", "panda", *own, "--from", "0,0", "--to", "1,90",
+                 "--json", str(js), "--trajectory", str(traj)]) == 0
+    out = capsys.readouterr().out
+    assert "validator: ok" in out and "stored plan id" in out and "own.gripper.yaml" in out, out
+    plan = json.loads(js.read_text())["plan"]
+    jaws = [s["jaw"] for s in plan["motion"]["segments"]] + [s["jawwidth"] for s in plan["steps"]]
+    assert plan["regrasps"] >= 1 and all(hand.jaw_min - 1e-6 <= w <= hand.jaw_max + 1e-6 for w in jaws)
+    # the ROS 2 export: the gripper's JointTrajectory beside the arm's, at the same times, with the stored jaw widths
+    arm, grip = (yaml.safe_load(f.read_text()) for f in (traj, tmp_path / "own.gripper.yaml"))
+    times = [[p["time_from_start"]["sec"] + 1e-9 * p["time_from_start"]["nanosec"] for p in m["points"]] for m in (arm, grip)]
+    assert grip["joint_names"] == ["jaw_width"] and np.allclose(times[0], times[1], atol=1e-9)
+    t, width = np.array(times[1]), np.array([p["positions"][0] for p in grip["points"]])
+    con = duckdb.connect(db, read_only=True)
+    idplan = con.execute("SELECT max(idplan) FROM plan").fetchone()[0]
+    segs = con.execute("SELECT s.kind, s.holding, s.t0, s.duration, s.jaw, p.jawwidth FROM plansegment s JOIN planstep p "
+                       "ON p.idplan = s.idplan AND p.seq = s.step WHERE s.idplan = ? ORDER BY s.seq", [idplan]).fetchall()
+    con.close()
+    closes = 0
+    for k, (kind, holding, t0, duration, jaw, jawwidth) in enumerate(segs):
+        inside = (t > t0 + 1e-6) & (t <= t0 + duration + 1e-6)
+        assert inside.any(), k
+        if kind == "gripper":  # the jaw moves from the previous segment's width to this one's while the arm rests
+            assert np.isclose(width[inside][-1], jaw) and np.isclose(width[t <= t0 + 1e-6][-1], segs[k - 1][4])
+            closes += holding and np.isclose(jaw, jawwidth)  # closed on the stored grasp's width
+        else:
+            assert np.allclose(width[inside], jaw), (k, kind)
+    assert closes == plan["regrasps"] + 1
+    assert main(["gpplan", "--db", db, "--object", "box", "--robot", "panda", "--gripper", "robotiq-2f85",
+                 "--from", "0,0", "--to", "1,90", "--no-save"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "panda-hand" in err[0], err

@@ -24,7 +24,7 @@ from workbench.planners.wan_harada.stages import (
     load_planner,
 )
 from workbench.resources import bundled_objects
-from workbench.robots.timing import TimedSegment, Trajectory, time_line, within_limits
+from workbench.robots.timing import TimedSegment, Trajectory, plan_knots, time_line, within_limits
 from workbench.viewer.wan_harada import plan_scene, timed_frames
 
 FIXTURE = Path(__file__).parent / "data" / "demo_plan_straight.json"
@@ -184,8 +184,13 @@ def test_plan_with_motions_round_trips_json_and_store(planner, demo_result, tmp_
 
 def test_planner_plan_returns_executable_validated_plans(planner):
     start, goal = choose_task(planner, 0)
-    plans = planner.plan(start, goal, alternatives=1)
+    seen = []  # what a viewer is shown before the alternatives are planned: the best plan, as returned
+    plans = planner.plan(start, goal, alternatives=1, on_best=lambda plan, result: seen.append((plan, len(result.routes))))
     assert plans and all(p.segments for p in plans)
+    assert len(seen) == 1 and seen[0][0] is plans[0] and seen[0][1] >= 1
+    alone = planner.plan(start, goal, alternatives=0, validate=False)[0]  # planning alternatives changes nothing
+    assert [s.q_grasp.tolist() for s in alone.steps] == [s.q_grasp.tolist() for s in plans[0].steps]
+    assert np.array_equal(plan_knots(alone.segments)["q"], plan_knots(plans[0].segments)["q"])
     for p in plans:
         assert planner.validate(p, require_motion=True).ok
     bare = planner.plan(start, goal, alternatives=0, motion=False)[0]

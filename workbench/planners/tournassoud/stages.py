@@ -155,6 +155,7 @@ def load_planner(db: str, object_name: str, robot_name: str | None = None, gripp
         rows = sql.load_table(store, pid)
         classes = [GraspClass(**d) for d in sql.load_classes(store, rows["idclasses"])]
         r = robot_row(store, rows["idrobot"])
+        r["gripper_name"] = gripper_row(store, r["idgripper"])["name"] if r["idgripper"] is not None else None
     robot = _robot(r, gripper)
     return TableRun(obj, robot, robot.gripper, classes, _table_from_rows(rows), rows["idclasses"], pid, (True, True))
 
@@ -173,8 +174,9 @@ def _robot(row: dict, gripper: Gripper | None = None) -> Robot:
                      locked=tuple((k, float(v)) for k, v in row["locked"].items()), gripper=gripper)
     robot = robot_from_spec(spec)
     if robot.spec.digest != row["digest"]:
-        raise WorkbenchError(f"robot {name!r} in the store was built with another gripper than {robot.gripper.name!r}; "
-                             f"give gpplan the --gripper it was built with")
+        built = f" ({row['gripper_name']})" if row.get("gripper_name") else ""
+        raise WorkbenchError(f"robot {name!r} in the store was built with another gripper{built} than "
+                             f"{robot.gripper.name!r}; give gpplan the --gripper it was built with")
     return robot
 
 

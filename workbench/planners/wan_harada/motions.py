@@ -433,12 +433,15 @@ class ExecResult:
 
 
 def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), allowed: AllowedPairs | None = None,
-                    alternatives: int = 0, physics: Callable | None = None) -> ExecResult:
+                    alternatives: int = 0, physics: Callable | None = None,
+                    on_best: Callable[[ExecResult], None] | None = None) -> ExecResult:
     """The fewest-regrasp plan whose motions are all found (see the module docstring), and up to `alternatives` next
     best executable plans. Raises the search's PlanningError when start or goal is unreachable or unconnected;
     PlanningError(reason "exhausted") when every alternative failed or `max_removed` removals did not help.
     `physics(plan)` returns None or (failing step, why): a timed plan it fails is treated like a failed motion of
-    that step (its node or grip removed, the graph searched again); alternatives are not checked by it."""
+    that step (its node or grip removed, the graph searched again); alternatives are not checked by it.
+    `on_best(result)` is called with the best executable plan before the alternatives are planned (a viewer shows it
+    at once); the alternatives never change the best plan."""
     allowed = allowed if allowed is not None else getattr(planner, "allowed", None)
     checker = motion_checker(planner, allowed, opts.motion)
     robot = planner.robot
@@ -475,6 +478,8 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
                 motion.reason, motion.blame = verdict[1], ("step", int(verdict[0]))
         if motion.ok and verdict is None:
             out = ExecResult(plan, motion, removed, seconds, failures, searched, result=result)
+            if on_best is not None:
+                on_best(out)
             if alternatives > 0:
                 more = search(rm, s_side, g_side, planner.evaluate, alternatives, True)
                 for r in more.routes:

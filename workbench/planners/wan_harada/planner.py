@@ -260,16 +260,19 @@ class Planner:
         return report
 
     def plan(self, start: Query, goal: Query, alternatives: int = 2, lazy: bool = True, validate: bool = True,
-             motion: bool = True, exec_opts: ExecOptions | None = None, physics=None) -> list[Plan]:
+             motion: bool = True, exec_opts: ExecOptions | None = None, physics=None, on_best=None) -> list[Plan]:
         """The best plan and up to `alternatives` next best (Section V), each checked by `workbench.validation` when
         `validate` (a plan that fails is dropped; PlanningError when none passes). With `motion` (the default) the
         plans are executable: their motions are planned and timed, failing nodes or grips removed and the graph
         searched again (`motions.plan_executable`); `last_motion` keeps the outcome. `physics` (a function of a plan
         returning None or (failing step, why), e.g. `simulation.stages.physics_check`) treats a plan that fails it
-        like a failed motion."""
+        like a failed motion. `on_best(plan, result)` sees the best plan, timed and unvalidated, before the
+        alternatives are planned (with `motion`)."""
 
         if motion:
-            res = plan_executable(self, start, goal, exec_opts or ExecOptions(), alternatives=alternatives, physics=physics)
+            best = None if on_best is None else (lambda r: on_best(r.plan, r.result))
+            res = plan_executable(self, start, goal, exec_opts or ExecOptions(), alternatives=alternatives, physics=physics,
+                                  on_best=best)
             self.last_motion = res
             result = res.result
             plans = [res.plan, *res.alternatives]
