@@ -83,13 +83,32 @@ def test_each_grasp_filter_is_named_when_it_removes_the_last_candidate(hand):
 
 def test_a_card_lying_flat_is_named_too_thin_to_grip(tmp_path):
     """A 0.8 mm card has grasps in free air but none that reaches it on the table: `build` exits 0, stores its
-    placements and says the part is too thin, with its height."""
+    placements and says the part is too thin, with its height. Built with an 80 mm retraction (`--handx 0.08`), its
+    grasps are swept 80 mm back along the approach (the grasp stage's stored parameters say so)."""
     trimesh.creation.box((0.05, 0.04, 0.0008)).export(tmp_path / "card.stl")
     out = _cli("build", "card.stl", "--db", "c.duckdb", "--robot", "panda", "--workers", "1", "--x=0.4,0.6,2",
-               "--y=-0.1,0.1,2", "--angles", "2", cwd=tmp_path)
+               "--y=-0.1,0.1,2", "--angles", "2", "--handx", "0.08", cwd=tmp_path)
     assert out.returncode == 0 and "Traceback" not in out.stderr, out.stderr
     assert "2 stable placements" in out.stdout
     assert "stage free tabletop grips" in out.stderr and "card stands at most 0.8 mm above the table" in out.stderr
+    con = duckdb.connect(str(tmp_path / "c.duckdb"), read_only=True)
+    stored = [json.loads(r[0]) for r in con.execute("SELECT params FROM paramset WHERE stage = 'grasps'").fetchall()]
+    handx = [r[0] for r in con.execute("SELECT handx FROM ikret").fetchall()]
+    con.close()
+    assert [p["approach_length"] for p in stored] == [0.08] and handx == [0.08], (stored, handx)
+
+
+def test_a_longer_approach_sweep_meets_what_lies_further_back(hand):
+    """The hand's sweep along the approach (`approach_collides`) covers `length` behind its body: a plate 65 mm behind
+    the hand body's back face (found here from the body's vertices) is met by an 80 mm sweep, not by a 50 mm one."""
+    from workbench.grasping.grasps import approach_collides
+
+    back = float(hand.body.vertices[:, 2].min())  # the body's far end along -z, behind the TCP
+    plate = trimesh.creation.box((0.05, 0.05, 0.004))
+    plate.apply_translation((0.0, 0.0, back - 0.065))
+    hits = [bool(approach_collides(hand, np.eye(4)[None], np.array([hand.jaw_max]), plate, length, 0.0)[0])
+            for length in (0.05, 0.08)]
+    assert hits == [False, True]
 
 
 def test_a_cone_names_the_friction_its_most_opposed_pads_need(hand):

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -41,6 +42,8 @@ def run(args: argparse.Namespace) -> int:
     opts = IKOptions(solver=args.ik, self_collide=True)
     pparams, tparams = placement_params(args)
     gparams = grasp_params(args)
+    if args.handx > gparams.approach_length:  # the hand retracts that far: its grasps must clear the part that far back
+        gparams = replace(gparams, approach_length=args.handx)
     obj = load_object(args.mesh, scale=args.scale, units=args.units, name=args.name, accept_size=args.accept_size)
     t0 = time.perf_counter()
     res = build_all(args.db, obj, robot, gparams, pparams, tparams, args.handx, args.worldz, args.workers,

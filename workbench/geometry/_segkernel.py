@@ -9,6 +9,30 @@ from numba import njit
 
 
 @njit(cache=True)
+def _sorted(values, m, bits, tmp):
+    """values[:m] (distinct, in [0, 2^bits)) sorted: a radix sort in 11-bit digits above 256 values, linear in m."""
+    if m <= 256:
+        return np.sort(values[:m])
+    src = values[:m].copy()
+    dst = tmp[:m]
+    count = np.empty(2049, dtype=np.int64)
+    shift = 0
+    while shift < bits:
+        count[:] = 0
+        for i in range(m):
+            count[((src[i] >> shift) & 2047) + 1] += 1
+        for d in range(2048):
+            count[d + 1] += count[d]
+        for i in range(m):
+            d = (src[i] >> shift) & 2047
+            dst[count[d]] = src[i]
+            count[d] += 1
+        src, dst = dst, src
+        shift += 11
+    return src.copy()
+
+
+@njit(cache=True)
 def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
     """Grow a facet from every seed in `order` (Wan & Harada, Section III, Fig. 2): across shared edges to every
     triangle whose normal is within tau of the seed's. Conventional: each triangle in one facet; over-segmentation: a
@@ -25,6 +49,10 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
     ptr = [0]
     seeds = []
     size = 0
+    tmp = np.empty(n, dtype=np.int64)
+    bits = 1
+    while (1 << bits) < n:
+        bits += 1
     for seed in order:
         if conventional:
             if assigned[seed]:
@@ -46,7 +74,7 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
                     visited[c] = True
                     queue[tail] = c
                     tail += 1
-        region = np.sort(queue[:tail])
+        region = _sorted(queue, tail, bits, tmp)
         if size + tail > out.shape[0]:
             grown = np.empty(max(2 * out.shape[0], size + tail), dtype=np.int64)
             grown[:size] = out[:size]

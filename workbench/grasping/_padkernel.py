@@ -412,12 +412,35 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
     return found, height, local, tri_id
 
 
-def _spread(v: np.ndarray) -> np.ndarray:
-    """The bits of 10-bit integers spread three apart (one axis of a Morton code)."""
+@njit(cache=True)
+def _spread(v):
+    """The bits of a 10-bit integer spread three apart (one axis of a Morton code)."""
     v = (v | (v << 16)) & 0x030000FF
     v = (v | (v << 8)) & 0x0300F00F
     v = (v | (v << 4)) & 0x030C30C3
     return (v | (v << 2)) & 0x09249249
+
+
+@njit(cache=True)
+def _morton(tri):
+    """The Morton code (T,) of every triangle's centre, on a 1024^3 grid over the centres' bounds."""
+    n = tri.shape[0]
+    centre = np.empty((n, 3))
+    for i in range(n):
+        for a in range(3):
+            centre[i, a] = (tri[i, 0, a] + tri[i, 1, a] + tri[i, 2, a]) / 3.0
+    lo, width = np.empty(3), np.empty(3)
+    for a in range(3):
+        lo[a] = centre[:, a].min()
+        width[a] = max(centre[:, a].max() - lo[a], 1e-300)
+    code = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        c = 0
+        for a in range(3):
+            q = min(max(np.int64((centre[i, a] - lo[a]) / width[a] * 1023), 0), 1023)
+            c |= _spread(q) << a
+        code[i] = c
+    return code
 
 
 @njit(cache=True)
@@ -493,13 +516,7 @@ def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int = 4) -> tuple:
     one leaf: a scan of every triangle."""
     tri = np.ascontiguousarray(tri, dtype=np.float64).reshape(-1, 3, 3)
     n, leaf = len(tri), max(int(leaf), 1)
-    centre = tri.mean(axis=1)
-    if n:
-        c0, c1 = centre.min(axis=0), centre.max(axis=0)
-        q = np.clip(((centre - c0) / np.maximum(c1 - c0, 1e-300) * 1023).astype(np.int64), 0, 1023)
-        order = np.argsort(_spread(q[:, 0]) | (_spread(q[:, 1]) << 1) | (_spread(q[:, 2]) << 2), kind="stable")
-    else:
-        order = np.zeros(0, dtype=np.int64)
+    order = np.argsort(_morton(tri), kind="stable") if n else np.zeros(0, dtype=np.int64)
     leaves = max(-(-n // leaf), 1)
     P = 1 << int(np.ceil(np.log2(leaves)))
     slots = np.full(P * leaf, -1, dtype=np.int64)

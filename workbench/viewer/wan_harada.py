@@ -94,27 +94,32 @@ def timed_frames(plan, segments: list[TimedSegment], tcp_pose, fps: float = 30.0
     total = segments[-1].t0 + segments[-1].duration
     times = np.arange(0.0, total + 0.5 / fps, 1.0 / fps)
     times[-1] = min(times[-1], total)
-    out = []
-    k = 0
-    jaw_before = jaw_open
-    for t in times:
-        while k + 1 < len(segments) and t > segments[k].t0 + segments[k].duration + 1e-9:
-            jaw_before = segments[k].jaw  # the jaw acts from the opening of the move before it (the pre-grasp one)
-            k += 1
+    ends = np.array([sg.t0 + sg.duration for sg in segments])
+    # each frame's segment: the first one not yet over at its time (segments of no frame are passed over)
+    which = np.minimum(np.searchsorted(ends + 1e-9, times, side="left"), len(segments) - 1)
+    local = np.empty(len(times))
+    q = np.empty((len(times), len(segments[0].traj.q[0])))
+    for k in np.unique(which):
+        at = which == k
         seg = segments[k]
-        local = min(max(t - seg.t0, 0.0), seg.duration)
-        q = seg.traj.sample(np.array([local]))[0][0]
-        if seg.kind == "gripper":
-            f = local / seg.duration if seg.duration > 0 else 1.0
+        local[at] = np.clip(times[at] - seg.t0, 0.0, seg.duration)
+        q[at] = seg.traj.sample(local[at])[0]
+    out = []
+    for i, t in enumerate(times):
+        k = int(which[i])
+        seg = segments[k]
+        if seg.kind == "gripper":  # the jaw acts from the opening of the move before it (the pre-grasp one)
+            jaw_before = segments[k - 1].jaw if k > 0 else jaw_open
+            f = local[i] / seg.duration if seg.duration > 0 else 1.0
             jaw = (1 - f) * jaw_before + f * seg.jaw
         else:
             jaw = seg.jaw
         step = plan.steps[seg.step]
         if seg.holding:
-            obj = tcp_pose(q) @ inverse_pose(np.asarray(step.grasp, dtype=np.float64))
+            obj = tcp_pose(q[i]) @ inverse_pose(np.asarray(step.grasp, dtype=np.float64))
         else:
             obj = np.asarray(step.object_pose, dtype=np.float64)
-        out.append({"t": float(t), "q": q, "jaw": float(jaw), "held": bool(seg.holding), "object": obj, "caption": seg.caption,
+        out.append({"t": float(t), "q": q[i], "jaw": float(jaw), "held": bool(seg.holding), "object": obj, "caption": seg.caption,
                     "segment": k, "step": min(int(seg.step) + (seg.kind in MOVES_TO_NEXT), len(plan.steps) - 1)})
     return out
 
