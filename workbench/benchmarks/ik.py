@@ -319,14 +319,14 @@ def run_paper(args: argparse.Namespace) -> int:
             p = ensure_placements(db, g.idobject, obj, g.idparamset, hand, PlacementParams(), TabletopParams())
             for name in args.robots.split(","):
                 with Store(db) as store:
-                    cpu0 = _cpu_seconds()
+                    cpu0 = _run_cpu_seconds()
                     t0 = time.perf_counter()
                     robot = get_robot(name.strip())
                     opts = IKOptions(solver=args.ik)
                     r = run_ik(store, obj.name, robot, None, args.handx, args.worldz, opts, args.workers,
                                progress=False, idtabletop=p.idtabletop, worlda=args.worlda)
                     t = time.perf_counter() - t0
-                    cpu = _cpu_seconds() - cpu0
+                    cpu = _run_cpu_seconds() - cpu0
                 ref = paper_rows.get(row)
                 with Store(db) as store:
                     grips = load_tabletop_grips(store, g.idobject, p.idtabletop)
@@ -346,7 +346,7 @@ def run_paper(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cpu_seconds() -> float:
+def _run_cpu_seconds() -> float:
     """Processor time of this process, of its ended child processes and of the IK workers it closed, in seconds."""
     own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
     return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime + WORKER_CPU_SECONDS[0]

@@ -31,10 +31,10 @@ from workbench.benchmarks.organic import organic_set
 from workbench.benchmarks.regrasp import bench_robot, random_pairs
 from workbench.errors import PlanningError, SimulationError, WorkbenchError
 from workbench.geometry.objects import from_arrays, load_object
+from workbench.geometry.symmetry import part_symmetry
 from workbench.planners.wan_harada.motions import ExecOptions, plan_executable
 from workbench.planners.wan_harada.stages import DEMO_GRID, build_all, choose_task, load_planner
 from workbench.resources import bundled_objects
-from workbench.geometry.symmetry import part_symmetry
 from workbench.simulation.decomposition import cache_dir, convex_parts
 from workbench.simulation.replay import FAILURES, SimParams
 from workbench.simulation.stages import simulate_in_memory
