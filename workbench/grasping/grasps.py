@@ -462,11 +462,19 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
 
 
 def _support_normals(obj: ObjectModel) -> np.ndarray:
-    """Outward normals (S, 3) of the supports the part rests on stably (the placement stage's defaults)."""
-    try:
-        return stable_placements(obj).normals
-    except MeshError:  # a flat sheet rests on no face
-        return np.zeros((0, 3))
+    """Outward normals (S, 3) of the supports the part rests on stably (the placement stage's defaults).
+
+    Kept in the mesh's cache (dropped when the mesh changes), so replanning the same part with other grasp
+    parameters does not recompute its placements."""
+    key = "workbench_support_normals_" + np.asarray(obj.com, dtype=float).tobytes().hex()
+    downs = obj.mesh._cache[key]
+    if downs is None:
+        try:
+            downs = stable_placements(obj).normals
+        except MeshError:  # a flat sheet rests on no face
+            downs = np.zeros((0, 3))
+        obj.mesh._cache[key] = downs
+    return downs.copy()
 
 
 def _merge(parts: list[Touches]) -> Touches:

@@ -169,8 +169,9 @@ def pregrasp_touches(mesh: trimesh.Trimesh, touch: Touches, gripper: Gripper, ma
     touch moves there. Searched twice; a pose whose second search moves by more than `tol` is not a hit."""
     once = _from_pregrasp(mesh, touch, gripper, margin, clearance, tol)
     twice = _from_pregrasp(mesh, once, gripper, margin, clearance, tol)
-    same = (twice.hit & (np.abs(twice.width - once.width) <= tol)
-            & (np.linalg.norm(twice.poses[:, :3, 3] - once.poses[:, :3, 3], axis=1) <= tol))
+    with np.errstate(invalid="ignore"):  # misses carry NaN widths and poses
+        same = (twice.hit & (np.abs(twice.width - once.width) <= tol)
+                & (np.linalg.norm(twice.poses[:, :3, 3] - once.poses[:, :3, 3], axis=1) <= tol))
     return Touches(**{**{f: getattr(once, f) for f in Touches.__dataclass_fields__}, "hit": once.hit & same})
 
 
