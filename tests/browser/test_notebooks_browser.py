@@ -522,6 +522,10 @@ def check_notebook(browser, lab: Lab, path: Path) -> None:
             measured["move to update (s)"] = round(time.monotonic() - t0, 3)
             wait_idle(page, HANG)
             hold_animations(page)  # a search plays its new plan
+            if stem.startswith("04"):  # the overlay follows the new plan: its footer is one of the plan's steps listed
+                texts = frames.first.element_handle().content_frame().evaluate(BOTH)
+                assert step_named(texts[0]) and step_named(texts[0]) == step_named(texts[1]), texts
+                assert texts[1] == "start" or texts[1] in " ".join(numbers(page)), (texts, numbers(page))
             for i in range(frames.count()):
                 frames.nth(i).screenshot(path=SHOTS / f"{stem}_view{i}_moved.png")
             assert changed, f"{name}: moving a widget changed neither a view nor a number"

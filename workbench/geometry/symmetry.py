@@ -48,11 +48,6 @@ class Symmetry:
         c = np.einsum("i,...ij,gj->...g", self.axis, e, ga)
         return np.arccos(np.clip(c.max(axis=-1), -1.0, 1.0))
 
-    @property
-    def order(self) -> int | float:
-        """The number of distinct turns (inf for a body of revolution)."""
-        return float("inf") if self.axis is not None else len(self.turns)
-
 
 def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     """The 3x3 rotation by `angle` (rad) about the unit `axis` (Rodrigues)."""

@@ -252,10 +252,12 @@ def _local(tri, f, o, x0, y, z0, ca, cb, ly):
 
 
 @njit(cache=True)
-def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max):
+def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max,
+                       block):
     """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y,
     local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
-    triangles and their unit normals by leaf slot."""
+    triangles and their unit normals by leaf slot. `block` (m, negative: off): a pad whose finite start's plane,
+    moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing."""
     cx, cz, hx, hz = rect[0], rect[1], rect[2], rect[3]
     radius = np.hypot(abs(cx) + hx, abs(cz) + hz)
     rad2 = radius * radius
@@ -375,7 +377,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                         # a pad starting inside a hole or cavity (a finite window) must start clear of the part: a
                         # triangle crossing its starting plane inside its footprint puts the pad into the part there
                         start = whi if si == 0 else wlo
-                        if np.isfinite(start) and _cuts_start(lx3, ly, lz3, start, hx, hz):
+                        if block >= 0 and np.isfinite(start) and _cuts_start(lx3, ly, lz3, start + side * block, hx, hz):
                             blocked = True
                             break
                         _candidates(lx3, ly, lz3, hx, hz, -cx, -cz, px, py, pz, valid)
@@ -439,17 +441,6 @@ def _morton(tri):
             c |= _spread(q) << a
         code[i] = c
     return code
-
-
-@njit(cache=True)
-def _by_slot(tri, normals, order, slots):
-    """The triangles and their normals in slot order (`order`), zero past the last triangle."""
-    tri_s = np.zeros((slots, 3, 3))
-    fn_s = np.zeros((slots, 3))
-    for s in range(order.shape[0]):
-        tri_s[s] = tri[order[s]]
-        fn_s[s] = normals[order[s]]
-    return tri_s, fn_s
 
 
 @njit(cache=True)
@@ -531,7 +522,10 @@ def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int = 4) -> tuple:
     slots = np.full(P * leaf, -1, dtype=np.int64)
     slots[:n] = order
     shape = np.empty((2 * P, 15))
-    tri_s, fn_s = _by_slot(tri, np.ascontiguousarray(normals, dtype=np.float64), order, P * leaf)
+    tri_s = np.zeros((P * leaf, 3, 3))
+    tri_s[:n] = tri[order]
+    fn_s = np.zeros((P * leaf, 3))
+    fn_s[:n] = np.asarray(normals, dtype=np.float64)[order]
     _node_shapes(tri_s, slots, leaf, shape)
     return shape, slots, leaf, tri_s, fn_s
 

@@ -43,6 +43,7 @@ from workbench.grasping.pads import (
     first_touches,
     gap_windows,
     pad_offsets,
+    pregrasp_touches,
     triangle_tree,
 )
 from workbench.grasping.placements import stable_placements
@@ -427,7 +428,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
         if params.gap_grasps and (src >= 0).all():  # gaps open from a surface sample along its normal
             w, win = gap_windows(mesh, o, a, gripper.jaw_max, params.pregrasp_margin)
             parts.append(first_touches(mesh, o[w], a[w], ang, gripper, ref=None if ref is None else ref[w],
-                                       windows=win))
+                                       windows=win, block=None))
             source.append(np.repeat(src[w], len(ang)))
             counts["gap"] += int(len(w))
     touch, source = _merge(parts), np.concatenate(source)
@@ -435,6 +436,10 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
         tips, tip_source = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source)
         touch, source = _merge([touch, tips]), np.concatenate([source, tip_source])
         counts["fingertip"] = int(len(tips))
+    # a pad that started inside a hole: its touches are those closing from the pre-grasp opening about its TCP
+    inside = touch.hit & np.isfinite(touch.window).any(axis=1)
+    again = pregrasp_touches(mesh, _subset(touch, inside), gripper, params.pregrasp_margin, params.finger_clearance)
+    touch = Touches(**{f: _put(getattr(touch, f), inside, getattr(again, f)) for f in Touches.__dataclass_fields__})
     timings["pads"] = time.perf_counter() - t0
     y = touch.poses[:, :3, 1]
     cos_f = np.cos(np.arctan(params.friction_coefficient))
@@ -466,6 +471,16 @@ def _support_normals(obj: ObjectModel) -> np.ndarray:
 
 def _merge(parts: list[Touches]) -> Touches:
     return Touches(**{f: np.concatenate([getattr(t, f) for t in parts]) for f in Touches.__dataclass_fields__})
+
+
+def _subset(touch: Touches, mask: np.ndarray) -> Touches:
+    return Touches(**{f: getattr(touch, f)[mask] for f in Touches.__dataclass_fields__})
+
+
+def _put(values: np.ndarray, mask: np.ndarray, new: np.ndarray) -> np.ndarray:
+    out = values.copy()
+    out[mask] = new
+    return out
 
 
 def rotation_about_axis(axes: np.ndarray, approach: np.ndarray) -> np.ndarray:
@@ -558,7 +573,7 @@ def _fingertip_variants(mesh, gripper, margin, touch: Touches, source: np.ndarra
     poses = touch.poses[cand]
     origins = poses[:, :3, 3] - d[:, None] * poses[:, :3, 2]
     return (first_touches(mesh, origins, poses[:, :3, 1], np.zeros(1), gripper, ref=poses[:, :3, 2],
-                          windows=touch.window[cand]), source[cand])
+                          windows=touch.window[cand], block=None), source[cand])
 
 
 def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, angle: float) -> np.ndarray:

@@ -20,8 +20,10 @@ a hole or a cavity and close outwards onto a wall (a washer's rim, a mug's wall,
 jaw): `gap_windows` finds those starts along the axis line and `first_touches` takes a window per axis, so each pad
 touches only what lies between its start and the TCP. `gap_windows` checks only the axis line; a pad whose starting
 plane cuts the part anywhere inside its footprint starts inside the material and touches nothing (else it would
-"touch" the material past its start, and a finger that is its pad would sit inside the part at the grasp). The hand
-at its pre-grasp opening is checked against the object afterwards (level 2).
+"touch" the material past its start, and a finger that is its pad would sit inside the part at the grasp).
+`pregrasp_touches` then searches each such grasp again from its own pre-grasp opening about its TCP, so its touches
+are what the pads meet as the hand closes from the opening it approached at. The hand at its pre-grasp opening is
+checked against the object afterwards (level 2).
 
 The work runs in a compiled kernel (`_padkernel`) over a bounding-volume hierarchy of the triangles: each pad at
 each rotation searches it by branch and bound, skipping every subtree outside its footprint or below the best touch
@@ -137,10 +139,13 @@ def _farthest(directions: np.ndarray, vertices: np.ndarray, dense: int = 10_000_
 
 def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, angles: np.ndarray,
                   gripper: Gripper, tie: float = 1e-6, ref: np.ndarray | None = None,
-                  windows: np.ndarray | None = None) -> Touches:
+                  windows: np.ndarray | None = None, block: float | None = 0.0) -> Touches:
     """First touches of both pads closing along each axis at each hand rotation (CONVENTIONS.md, Gripper); `ref`
     as in `axis_frames` (rotation 0 approaching along it); `windows` (K, 2), heights along each axis from its origin:
-    the right pad starts at the first and touches nothing below it, the left at the second (None: from outside)."""
+    the right pad starts at the first and touches nothing below it, the left at the second (None: from outside).
+    `block` (m): a pad whose start's plane, moved `block` beyond it (the intrusion tolerated), cuts the part inside
+    its footprint starts inside it and touches nothing (None: it touches what lies past its start, a candidate for
+    `pregrasp_touches`)."""
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
     axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
@@ -152,7 +157,32 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
     # the reference frames (rotation 0): the kernel turns every triangle into each rotation's pad coordinates from them
     fr0 = axis_frames(origins, axes, np.zeros(1), ref)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows)
+        return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block)
+
+
+def pregrasp_touches(mesh: trimesh.Trimesh, touch: Touches, gripper: Gripper, margin: float | None,
+                     clearance: float = 0.0, tol: float = 1e-6) -> Touches:
+    """The touches of `touch`'s hand poses closing from their own pre-grasp opening (the width plus `margin`, at
+    most the stroke; full opening when None) about their TCPs (CONVENTIONS.md, Gripper), with the starts clear of the
+    part inside the pads' footprints but for `clearance` (the hand's tolerated intrusion). A pad that started inside
+    a hole at full opening may have passed over material that the pad starting at the pre-grasp opening meets: its
+    touch moves there. Searched twice; a pose whose second search moves by more than `tol` is not a hit."""
+    once = _from_pregrasp(mesh, touch, gripper, margin, clearance, tol)
+    twice = _from_pregrasp(mesh, once, gripper, margin, clearance, tol)
+    same = (twice.hit & (np.abs(twice.width - once.width) <= tol)
+            & (np.linalg.norm(twice.poses[:, :3, 3] - once.poses[:, :3, 3], axis=1) <= tol))
+    return Touches(**{**{f: getattr(once, f) for f in Touches.__dataclass_fields__}, "hit": once.hit & same})
+
+
+def _from_pregrasp(mesh, touch: Touches, gripper: Gripper, margin: float | None, clearance: float,
+                   tol: float) -> Touches:
+    poses = touch.poses
+    width = np.where(touch.hit, touch.width, 0.0)
+    half = (np.full(len(poses), gripper.jaw_max) if margin is None else np.minimum(width + margin, gripper.jaw_max)) / 2
+    again = first_touches(mesh, poses[:, :3, 3], poses[:, :3, 1], np.zeros(1), gripper, ref=poses[:, :3, 2],
+                          windows=np.column_stack([-half - tol, half + tol]), block=clearance)
+    return Touches(**{**{f: getattr(again, f) for f in Touches.__dataclass_fields__},
+                      "hit": again.hit & touch.hit & (again.width <= gripper.jaw_max)})
 
 
 def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, jaw_max: float,
@@ -217,7 +247,7 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     return ray[j].astype(np.int64), np.column_stack([lo[j], hi[j]])
 
 
-def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows) -> Touches:
+def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: float | None) -> Touches:
     tri = np.ascontiguousarray(mesh.triangles, dtype=np.float64)
     fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
     flip = not mesh.is_watertight
@@ -226,7 +256,8 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows) -> Touch
     basis = np.ascontiguousarray(np.transpose(fr0[:, :3, :3], (0, 2, 1)))  # rows: x0, y, z0
     found, height, local, tri_id = first_touch_kernel(*tree, flip, np.ascontiguousarray(origins), basis,
                                                       np.ascontiguousarray(angles), rect, float(tie),
-                                                      np.ascontiguousarray(windows), float(gripper.jaw_max))
+                                                      np.ascontiguousarray(windows), float(gripper.jaw_max),
+                                                      -1.0 if block is None else float(block))
     hit = found.all(axis=1)
     res = {}
     for si, side in enumerate((1, -1)):

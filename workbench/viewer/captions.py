@@ -9,10 +9,11 @@ CAPTION_TEXT = {"pick": "pick: grasp the part at its start pose", "transfer": "t
                 "place": "place: put the part down at its goal pose"}
 
 CAPTION_SCRIPT = """(function () {
-  var d = TRACK;
+  var d = TRACK, live = d === null;
   function tick() {
     var v = window.viewer, a = v && v.animator && v.animator.actions[0];
-    if (d === null && v) { try { d = v.scene_tree.find(["Captions"]).object.workbench_captions || null; } catch (e) {} }
+    // the live view reads the track each frame: a new search sets another plan's track on the node
+    if (live && v) { try { d = v.scene_tree.find(["Captions"]).object.workbench_captions || d; } catch (e) {} }
     if (d) {
       var f = a ? Math.min(Math.floor(a.time * d.fps + 1e-6), d.steps.length - 1) : 0, k = d.steps[Math.max(f, 0)] || 0;
       var c = document.getElementById("wb-caption"), b = document.getElementById("wb-footer");
@@ -24,4 +25,4 @@ CAPTION_SCRIPT = """(function () {
   tick();
 })();"""
 """Shows the caption and footer of the frame playing: from the track given, or (TRACK = null, the live view) from the
-track `PlanView.play` set on the scene's /Captions node."""
+track `PlanView.play` last set on the scene's /Captions node."""
