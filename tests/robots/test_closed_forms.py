@@ -136,3 +136,68 @@ def test_other_decomposable_arms_through_eaik(tmp_path):
     assert form.kind.startswith("subproblem decomposition, EAIK")
     assert "EAIK" in describe(arm)
     _check(arm, np.random.default_rng(5).uniform(arm.lower, arm.upper, (N, 6)))
+
+
+def test_panda_wrist_shell_never_rejects_a_reachable_pose():
+    """The Panda fall-back's out-of-reach test (`solvers.wrist_shell`) against pinocchio's joint placements: the
+    shoulder and the wrist (joints 1 and 5 of the URDF) of 2,000 random configurations, their distance inside
+    [r_min, r_max] and reaching both ends over joint 4's range, the wrist on the circle about axis 7 in the TCP frame.
+    Of 4,000 random poses around the arm, the rejected ones nearest the shell are out of reach for Levenberg-Marquardt
+    from 48 seeds each (random configurations and the unlimited closed form's branches)."""
+    from workbench.robots.chain import solve_ik
+    from workbench.robots.solvers import wrist_shell
+
+    panda = get_robot("panda")
+    shell = wrist_shell(panda, 1e-4, 1e-3)
+    tight = wrist_shell(panda, 0.0, 0.0, margin=0.0)
+    rng = np.random.default_rng(7)
+    qs = rng.uniform(panda.lower, panda.upper, (N, 7))
+    qs[:400, 3] = np.linspace(panda.lower[3], panda.upper[3], 400)  # the elbow over its whole range
+    model = pin.buildModelFromXML(panda.spec.urdf)
+    data = model.createData()
+    j1, j5 = model.getJointId(panda.joint_names[0]), model.getJointId(panda.joint_names[4])
+    idx = [model.joints[model.getJointId(n)].idx_q for n in panda.joint_names]
+    poses = _fk(panda, qs)
+    dist, off = np.empty(N), np.empty((N, 2))
+    for k, q in enumerate(qs):
+        full = pin.neutral(model)
+        full[idx] = q
+        pin.forwardKinematics(model, data, full)
+        s = panda.base[:3, :3] @ data.oMi[j1].translation + panda.base[:3, 3]
+        w = panda.base[:3, :3] @ data.oMi[j5].translation + panda.base[:3, 3]
+        assert np.allclose(s, shell.shoulder, atol=1e-9)
+        dist[k] = np.linalg.norm(w - s)
+        local = np.linalg.solve(poses[k], np.append(w, 1.0))[:3] - shell.center
+        along = local @ shell.axis
+        off[k] = along, np.linalg.norm(local - along * shell.axis)
+    assert (dist >= tight.r_min - 1e-9).all() and (dist <= tight.r_max + 1e-9).all()
+    assert [dist.min(), dist.max()] == pytest.approx([tight.r_min, tight.r_max], abs=1e-4)
+    assert np.abs(off[:, 0]).max() < 1e-9 and np.abs(off[:, 1] - shell.radius).max() < 1e-9
+    assert tight(poses).all()
+
+    far = np.tile(np.eye(4), (2 * N, 1, 1))
+    far[:, :3, 3] = rng.uniform((-1.2, -1.2, -0.6), (1.2, 1.2, 1.4), (2 * N, 3))
+    far[:, :3, :3] = [pin.Quaternion(*(v / np.linalg.norm(v))).matrix() for v in rng.normal(size=(2 * N, 4))]
+    out = ~shell(far)
+    assert 0.2 < out.mean() < 0.95  # the test separates: some poses in, some out
+    # how far each rejected pose's circle lies outside the shell; the closest 40 are the hard cases
+    c = far[:, :3, :3] @ shell.center + far[:, :3, 3]
+    n = far[:, :3, :3] @ shell.axis
+    v = shell.shoulder - c
+    a = np.einsum("ij,ij->i", v, n)
+    b = np.linalg.norm(v - a[:, None] * n, axis=1)
+    gap = np.maximum(np.hypot(a, b - shell.radius) - shell.r_max, shell.r_min - np.hypot(a, b + shell.radius))
+    hard = np.flatnonzero(out)[np.argsort(gap[out])[:40]]
+    assert gap[hard].max() < 0.05  # the sample does come close to the shell
+    unlimited = closed_form(panda, limits=False)
+
+    def reached(targets: np.ndarray) -> np.ndarray:
+        qb, vb = unlimited.solve(targets)
+        out = np.empty(len(targets), dtype=bool)
+        for k, t in enumerate(targets):
+            seeds = np.vstack([rng.uniform(panda.lower, panda.upper, (32, 7)), qb[k][vb[k]][:16]])
+            out[k] = solve_ik(panda, np.repeat(t[None], len(seeds), axis=0), seeds, 300)[1].any()
+        return out
+    assert not reached(far[hard]).any()
+    # the same search does find most reachable poses at the shell's edge (the arm stretched out, near its singularity)
+    assert reached(poses[np.argsort(dist)[-10:]]).sum() >= 7

@@ -146,8 +146,9 @@ def run_report(args: argparse.Namespace) -> int:
     if rows:
         headers, table = wide_table(rows)
         print()
-        print_table(headers, table, title="parts x robots: reachable grips (IK-feasible at all five poses, of the tabletop "
-                                          "grips) and the regrasp graph's connected share (nodes in its largest component)")
+        print_table(headers, table, title="parts x (robot, gripper): reachable grips (IK-feasible at all five poses, of the "
+                                          "tabletop grips) and the regrasp graph's connected share (nodes in its largest "
+                                          "component)")
     if args.html is not None:
         out = write_text(args.html, html_page(rows, failures, meshes, f"Catalogue {Path(args.db).name}"))
         print(f"html: {out.resolve()}")

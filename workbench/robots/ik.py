@@ -52,7 +52,7 @@ from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
 from workbench.robots.model import Robot, RobotSpec, robot_from_spec
 from workbench.robots.selfcollision import SelfCollision
-from workbench.robots.solvers import closed_form, describe, nearby_form
+from workbench.robots.solvers import closed_form, describe, nearby_form, wrist_shell
 
 KINDS = ("grasp", "handx", "handxworldz", "worlda", "worldaworldz")
 HELD = np.array([False, False, False, True, True])  # kinds at which the object moves with the hand
@@ -317,6 +317,8 @@ class IKSolver:
         self.nearby = nearby_form(robot) if opts.solver == "auto" and self.analytic is None else None
         # a swept joint misses poses that need it between samples: its branches without the limits seed LM there
         self.unlimited = closed_form(robot, limits=False) if self.analytic is not None and robot.nq > 6 else None
+        # and skips the poses its wrist cannot reach at any joint 7 (no numerical solve could accept them)
+        self.shell = wrist_shell(robot, opts.tol_pos, opts.tol_rot) if self.unlimited is not None else None
         self.library = SeedLibrary(robot, opts.library if self.analytic is None else 64, opts.seed, collider=self.collider)
         self.prefilter = ReachFilter(robot, scene)
         self._wrap = bool((robot.upper - robot.lower > 2 * np.pi).any())  # a joint spanning more than a turn
@@ -395,9 +397,12 @@ class IKSolver:
                          q: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Poses a swept closed form misses within the limits although the arm reaches them: Levenberg-Marquardt from
         their branch nearest `ref` without the limits (clipped into them by the solver), which the free joint then
-        moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first; then `solve_from_seeds`."""
+        moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first; then `solve_from_seeds`. Poses the
+        wrist cannot reach at any angle of the swept joint (`solvers.wrist_shell`) are not tried: none would converge."""
         rows = np.flatnonzero(~valid.any(axis=1))
         rows = rows[self.prefilter(targets[rows])] if len(rows) else rows
+        if self.shell is not None and len(rows):
+            rows = rows[self.shell(targets[rows])]
         if not len(rows):
             return q, ok
         qu, vu = self.unlimited.solve(targets[rows])

@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from workbench.robots import analytic, parallel
-from workbench.robots.analytic import Chain, _limit, chain_of, reverse_poses, reversed_chain, sub_chain
+from workbench.robots.analytic import Chain, _limit, _rotation, chain_of, reverse_poses, reversed_chain, sub_chain
 
 SWEEP = 16  # samples of a 7-joint arm's swept joint
 
@@ -237,3 +237,92 @@ def describe(robot, numerical: bool = False) -> str:
         why = "forced" if numerical else "no closed form for its axes"
         return f"numerical (Levenberg-Marquardt from seeds; {why})"
     return f"closed form ({form.kind}, {form.branches} branches)"
+
+
+def _meet(p: np.ndarray, u: np.ndarray, q: np.ndarray, v: np.ndarray) -> np.ndarray | None:
+    """The point where the lines p + s u and q + t v meet (unit directions), or None when they miss by 1e-9 m or
+    are parallel."""
+    w, c = p - q, float(u @ v)
+    if 1.0 - abs(c) < 1e-12:
+        return None
+    s = (c * (v @ w) - (u @ w)) / (1.0 - c * c)
+    t = (v @ w) + c * s
+    a, b = p + s * u, q + t * v
+    return (a + b) / 2 if np.linalg.norm(a - b) < 1e-9 else None
+
+
+def _off_line(x: np.ndarray, p: np.ndarray, u: np.ndarray) -> float:
+    """Distance of the point x from the line p + s u (unit u)."""
+    d = x - p
+    return float(np.linalg.norm(d - (d @ u) * u))
+
+
+@dataclass(frozen=True)
+class WristShell:
+    """A necessary condition for a 7-joint arm to reach a TCP pose (the Panda's): axes 1-3 meet at the shoulder S
+    (fixed in the base), axes 5-6 meet at the wrist W, and |S - W| depends on joint 4 alone, within [r_min, r_max]
+    over its limits. W is fixed in link 6, so in the TCP frame it lies on a circle about axis 7 (`center`, `axis`,
+    `radius`) whatever joint 7 is. A pose whose circle stays farther than `margin` outside [r_min, r_max] is out of
+    reach; `margin` covers the solver's tolerances, so no pose the numerical solver can accept is rejected."""
+
+    shoulder: np.ndarray
+    center: np.ndarray
+    axis: np.ndarray
+    radius: float
+    r_min: float
+    r_max: float
+    margin: float
+
+    def __call__(self, poses: np.ndarray) -> np.ndarray:
+        """(N,) bool for TCP poses (N, 4, 4): False where the pose is out of reach."""
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        rot = poses[:, :3, :3]
+        c = rot @ self.center + poses[:, :3, 3]
+        n = rot @ self.axis
+        v = self.shoulder - c
+        along = np.einsum("ij,ij->i", v, n)
+        across = np.linalg.norm(v - along[:, None] * n, axis=1)
+        near = np.hypot(along, across - self.radius)
+        far = np.hypot(along, across + self.radius)
+        return (near <= self.r_max + self.margin) & (far >= self.r_min - self.margin)
+
+
+def wrist_shell(robot, tol_pos: float, tol_rot: float, margin: float = 1e-3) -> WristShell | None:
+    """The `WristShell` of a 7-revolute-joint arm read off its model, or None when its axes do not meet as there.
+
+    The margin is `margin` plus what a pose within `tol_pos` (m) and `tol_rot` (rad) of the target moves the circle:
+    tol_pos + tol_rot * (|center| + radius)."""
+    if robot.nq != 7 or robot.chain_prismatic.any():
+        return None
+    chain = chain_of(robot)
+    frames, m = [], chain.base.copy()
+    for k in range(7):
+        m = m @ chain.chain_placement[k]
+        frames.append(m.copy())
+    tcp = m @ chain.tip_in_joint
+    o = [f[:3, 3] for f in frames]
+    d = [f[:3, :3] @ (a / np.linalg.norm(a)) for f, a in zip(frames, chain.chain_axis)]
+    s = _meet(o[0], d[0], o[1], d[1])
+    w = _meet(o[4], d[4], o[5], d[5])
+    if s is None or w is None or _off_line(s, o[2], d[2]) > 1e-9:
+        return None
+    # |S - W|^2 over joint 4 is A + B cos q4 + C sin q4 (W turns about axis 4, S is fixed in link 3)
+    def dist2(q4: float) -> float:
+        rot = _rotation(chain.chain_axis[3], q4)
+        w4 = np.linalg.inv(frames[3]) @ np.append(w, 1.0)
+        x = frames[3][:3, :3] @ (rot @ w4[:3]) + o[3]
+        return float(np.sum((x - s) ** 2))
+    a0, api, ahalf = dist2(0.0), dist2(np.pi), dist2(np.pi / 2)
+    big, b, c = (a0 + api) / 2, (a0 - api) / 2, ahalf - (a0 + api) / 2
+    amp, phase = float(np.hypot(b, c)), float(np.arctan2(c, b))
+    lo, hi = float(chain.lower[3]), float(chain.upper[3])
+    cands = [lo, hi] + [x for k in range(-3, 4) for x in (phase + k * np.pi,) if lo < x < hi]
+    values = [big + amp * np.cos(x - phase) for x in cands]
+    r_min, r_max = np.sqrt(max(min(values), 0.0)), np.sqrt(max(values))
+    inv = np.linalg.inv(tcp)
+    wl = inv[:3, :3] @ w + inv[:3, 3]
+    pl, ul = inv[:3, :3] @ o[6] + inv[:3, 3], inv[:3, :3] @ d[6]
+    center = pl + ((wl - pl) @ ul) * ul
+    radius = float(np.linalg.norm(wl - center))
+    slack = margin + tol_pos + tol_rot * (float(np.linalg.norm(center)) + radius)
+    return WristShell(s, center, ul, radius, float(r_min), float(r_max), slack)
