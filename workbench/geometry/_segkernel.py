@@ -247,3 +247,30 @@ def by_triangle(tri_ptr, tri_index):
             tid[start[t]] = t
             start[t] += 1
     return fid, tid
+
+
+@njit(cache=True)
+def boundary_distances(edge_ptr, edges, normals, facet_ids, points):
+    """Distance from each point to the boundary edges (E, 2, 3) of its facet, both projected onto the facet's plane
+    (normal `normals[f]`): the least point-to-segment distance, inf for a facet without boundary. The sums of three
+    products go in numpy einsum's order (first and last, then the middle), so the distances are numpy's to the bit."""
+    k = facet_ids.shape[0]
+    out = np.full(k, np.inf)
+    for i in range(k):
+        f = facet_ids[i]
+        n0, n1, n2 = normals[f, 0], normals[f, 1], normals[f, 2]
+        p0, p1, p2 = points[i, 0], points[i, 1], points[i, 2]
+        best = np.inf
+        for e in range(edge_ptr[f], edge_ptr[f + 1]):
+            s = edges[e, 0]
+            h = ((s[0] - p0) * n0 + (s[2] - p2) * n2) + (s[1] - p1) * n1
+            a0, a1, a2 = s[0] - h * n0, s[1] - h * n1, s[2] - h * n2
+            s = edges[e, 1]
+            h = ((s[0] - p0) * n0 + (s[2] - p2) * n2) + (s[1] - p1) * n1
+            b0, b1, b2 = s[0] - h * n0 - a0, s[1] - h * n1 - a1, s[2] - h * n2 - a2
+            t = (((p0 - a0) * b0 + (p2 - a2) * b2) + (p1 - a1) * b1) / max((b0 * b0 + b2 * b2) + b1 * b1, 1e-300)
+            t = min(max(t, 0.0), 1.0)
+            q0, q1, q2 = p0 - (a0 + t * b0), p1 - (a1 + t * b1), p2 - (a2 + t * b2)
+            best = min(best, np.sqrt(q0 * q0 + q1 * q1 + q2 * q2))
+        out[i] = best
+    return out

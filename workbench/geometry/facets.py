@@ -20,6 +20,7 @@ import trimesh
 
 from workbench.errors import WorkbenchError
 from workbench.geometry._segkernel import (
+    boundary_distances,
     by_triangle,
     edge_groups,
     facet_boundaries,
@@ -93,40 +94,11 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
                   edges=mesh.vertices[be])
 
 
-def distance_to_boundary(facets: Facets, facet_ids: np.ndarray, points: np.ndarray, budget: int = 2_000_000) -> np.ndarray:
+def distance_to_boundary(facets: Facets, facet_ids: np.ndarray, points: np.ndarray) -> np.ndarray:
     """Distance from each point to the boundary of its facet, measured in the facet's plane (Section III, distance
-    filter). Points go in chunks of at most `budget` (point, boundary edge) rows, so memory stays bounded when facets
-    overlap heavily (the literal over-segmentation)."""
-    facet_ids = np.asarray(facet_ids, dtype=np.int64)
-    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    out = np.full(len(facet_ids), np.inf)
-    counts = facets.edge_ptr[facet_ids + 1] - facets.edge_ptr[facet_ids]
-    cum = np.cumsum(counts)
-    start = 0
-    while start < len(facet_ids):
-        base = cum[start - 1] if start else 0
-        stop = max(int(np.searchsorted(cum, base + budget, side="right")), start + 1)
-        out[start:stop] = _distance_chunk(facets, facet_ids[start:stop], points[start:stop], counts[start:stop])
-        start = stop
-    return out
-
-
-def _distance_chunk(facets: Facets, facet_ids: np.ndarray, points: np.ndarray, counts: np.ndarray) -> np.ndarray:
-    out = np.full(len(facet_ids), np.inf)
-    has = counts > 0
-    if not has.any():
-        return out
-    rows = np.repeat(np.arange(len(facet_ids)), counts)
-    starts = np.repeat(facets.edge_ptr[facet_ids] - np.cumsum(counts) + counts, counts)
-    seg = facets.edges[starts + np.arange(counts.sum())]
-    n = facets.normals[facet_ids][rows]
-    # project the segment and the point onto the facet plane, then point-to-segment distance
-    p = points[rows]
-    a = seg[:, 0] - (np.einsum("ij,ij->i", seg[:, 0] - p, n))[:, None] * n
-    b = seg[:, 1] - (np.einsum("ij,ij->i", seg[:, 1] - p, n))[:, None] * n
-    ab = b - a
-    t = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.einsum("ij,ij->i", ab, ab).clip(1e-300), 0.0, 1.0)
-    d = np.linalg.norm(p - (a + t[:, None] * ab), axis=1)
-    first = np.concatenate([[0], np.cumsum(counts[has])[:-1]])
-    out[has] = np.minimum.reduceat(d, first)
-    return out
+    filter); compiled, so memory stays bounded however many boundary edges the facets share (the literal
+    over-segmentation)."""
+    facet_ids = np.ascontiguousarray(facet_ids, dtype=np.int64)
+    points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    return boundary_distances(facets.edge_ptr, np.ascontiguousarray(facets.edges, dtype=np.float64),
+                              np.ascontiguousarray(facets.normals, dtype=np.float64), facet_ids, points)
