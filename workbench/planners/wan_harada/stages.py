@@ -16,9 +16,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+import trimesh
 
 from workbench.errors import PartialStageWarning, PlanningError, RobotError, StoreError
-from workbench.geometry.objects import MeshWarning, ObjectModel, from_arrays
+from workbench.geometry.objects import MeshWarning, ObjectModel, from_arrays, mesh_digest
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
 from workbench.grasping.placements import (
     PlacementParams,
@@ -427,7 +428,7 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
     pid = int(np.asarray(grips["idparamset"])) if "idparamset" in grips else int(idtabletop if idtabletop is not None else -1)
     ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
     rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz, worlda,
-                                          allowed_pairs(robot).to_json())
+                                          lambda: allowed_pairs(robot).to_json())
     done = robot_sql.stored_grips(store, rid, sid, kid)
 
     def skip(ix: np.ndarray) -> bool:
@@ -520,14 +521,20 @@ def stored_plan(store: Store, plan: Plan) -> int | None:
 
 
 def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
-    """The stored object `name` rebuilt as an ObjectModel (mesh in metres, the stored centre of mass)."""
+    """The stored object `name` rebuilt as an ObjectModel (mesh in metres, the stored centre of mass). A mesh whose
+    arrays still hash to the stored digest is the repaired one put there and is used as stored; any other is
+    repaired again."""
     oid, row = object_row(store, name)
-    with warnings.catch_warnings():  # the stored mesh was repaired, and its warnings shown, when it was loaded
-        warnings.simplefilter("ignore", MeshWarning)
-        obj = from_arrays(np.asarray(row["vertices"], dtype=np.float64), np.asarray(row["faces"], dtype=np.int64),
-                          scale=1.0, name=name, source=row["source"])
-    return oid, ObjectModel(name=name, mesh=obj.mesh, com=np.asarray(row["com"], dtype=np.float64),
-                            com_method=row["com_method"], scale=row["scale"], source=row["source"], digest=obj.digest)
+    vertices, faces = np.asarray(row["vertices"], dtype=np.float64), np.asarray(row["faces"], dtype=np.int64)
+    if vertices.ndim == 2 and faces.ndim == 2 and mesh_digest(vertices, faces) == row["digest"]:
+        mesh, digest = trimesh.Trimesh(vertices, faces, process=False, validate=False), row["digest"]
+    else:
+        with warnings.catch_warnings():  # the stored mesh was repaired, and its warnings shown, when it was loaded
+            warnings.simplefilter("ignore", MeshWarning)
+            obj = from_arrays(vertices, faces, scale=1.0, name=name, source=row["source"])
+        mesh, digest = obj.mesh, obj.digest
+    return oid, ObjectModel(name=name, mesh=mesh, com=np.asarray(row["com"], dtype=np.float64),
+                            com_method=row["com_method"], scale=row["scale"], source=row["source"], digest=digest)
 
 
 # ----------------------------------------------------------------------------------------------------------------
