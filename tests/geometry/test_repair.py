@@ -171,3 +171,22 @@ def test_exported_files_glb_scene_obj_materials_ply_colours(tmp_path):
     for path in (ply, objdir / "part.obj"):
         got = load_object(path)
         assert np.isclose(got.mesh.volume, a.volume) and got.mesh.is_watertight, path
+
+
+def test_edge_groups_match_a_stable_sort_of_the_vertex_pairs():
+    """The linear edge sort that repair and segmentation share gives numpy's stable argsort of the edges' vertex pairs,
+    on a fan's apex (a long run of one vertex), repeated and degenerate faces, and no faces."""
+    from workbench.geometry._segkernel import edge_groups
+
+    rng = np.random.default_rng(3)
+    meshes = [trimesh.creation.cone(radius=0.02, height=0.03, sections=300),
+              trimesh.Trimesh(rng.random((40, 3)), rng.integers(0, 40, (900, 3)), process=False), blob(seed=2)]
+    for m in meshes:
+        faces = np.asarray(m.faces, dtype=np.int64)
+        u, v = faces, np.roll(faces, -1, axis=1)
+        keys = (np.minimum(u, v) * len(m.vertices) + np.maximum(u, v)).ravel()
+        order, starts = edge_groups(faces, len(m.vertices))
+        assert np.array_equal(order, np.argsort(keys, kind="stable"))
+        assert np.array_equal(starts, np.flatnonzero(np.r_[True, np.diff(keys[order]) != 0, True]))
+    order, starts = edge_groups(np.zeros((0, 3), dtype=np.int64), 0)
+    assert len(order) == 0 and starts.tolist() == [0]

@@ -419,26 +419,3 @@ def test_closed_form_stores_the_free_branch_nearest_home_and_finds_what_the_nume
     q, ok = solver.solve(grips["rotmat"][rows[r]][None], grips["placement_rotmat"][rows[r]][None], joints[r, b][None], 1)
     assert ok[0] and np.allclose(q[0], joints[r, b]) and not np.allclose(q[0], stored[r])
 
-
-def test_stored_object_is_used_as_stored_unless_its_arrays_miss_the_digest(tmp_path):
-    """The IK stage reads the part's stored, repaired mesh without repairing it again; a mesh whose arrays no longer
-    hash to the stored digest is repaired again and named by its own digest."""
-    import trimesh
-
-    from workbench.geometry.objects import from_arrays, from_trimesh
-    from workbench.store.objects import put_object
-
-    obj = from_trimesh(trimesh.creation.icosphere(subdivisions=2, radius=0.03), "ball")
-    again = from_arrays(obj.mesh.vertices, obj.mesh.faces, 1.0, "ball", "<memory>")
-    assert again.digest == obj.digest  # a repaired mesh is its own repair: reading it as stored changes nothing
-    with Store(tmp_path / "s.duckdb") as store:
-        put_object(store, obj)
-        _, back = stages.get_object(store, "ball")
-        assert back.digest == obj.digest
-        assert np.array_equal(back.mesh.vertices, obj.mesh.vertices) and np.array_equal(back.mesh.faces, obj.mesh.faces)
-        moved = obj.mesh.vertices.copy()
-        moved[0] += 1e-3
-        store.run("UPDATE object SET vertices = ? WHERE name = 'ball'", [moved.tolist()])
-        _, changed = stages.get_object(store, "ball")
-    assert changed.digest == from_arrays(moved, obj.mesh.faces, 1.0, "ball", "<memory>").digest != obj.digest
-    assert np.allclose(changed.mesh.vertices[0], moved[0])

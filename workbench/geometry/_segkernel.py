@@ -95,16 +95,52 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
     return np.array(ptr, dtype=np.int64), out[:size].copy(), np.array(seeds, dtype=np.int64)
 
 
+@njit(cache=True)
+def _pair_order(lo, hi, n_vertices):
+    """The stable argsort of the vertex pairs (lo, hi) by lo, then hi, and where each distinct pair's run starts (then
+    the total): a counting sort by lo (each vertex starts a handful of edges), then each vertex's run by hi, in place
+    where it is short. Linear in the edges."""
+    m = lo.shape[0]
+    start = np.zeros(n_vertices + 1, dtype=np.int64)
+    for i in range(m):
+        start[lo[i] + 1] += 1
+    for b in range(n_vertices):
+        start[b + 1] += start[b]
+    pos = start[:-1].copy()
+    order = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        order[pos[lo[i]]] = i
+        pos[lo[i]] += 1
+    for b in range(n_vertices):
+        s, e = start[b], start[b + 1]
+        if e - s > 32:  # a fan's apex: a merge sort, stable too
+            run = order[s:e].copy()
+            order[s:e] = run[np.argsort(hi[run], kind="mergesort")]
+            continue
+        for i in range(s + 1, e):
+            x = order[i]
+            j = i - 1
+            while j >= s and hi[order[j]] > hi[x]:
+                order[j + 1] = order[j]
+                j -= 1
+            order[j + 1] = x
+    runs = np.empty(m + 1, dtype=np.int64)
+    r = 0
+    for i in range(m):
+        if i == 0 or lo[order[i]] != lo[order[i - 1]] or hi[order[i]] != hi[order[i - 1]]:
+            runs[r] = i
+            r += 1
+    runs[r] = m
+    return order, runs[:r + 1].copy()
+
+
 def edge_groups(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """The mesh's edges: every triangle edge (3 t + j: from corner j to j + 1) sorted by its vertex pair, and where
-    each pair's run starts in that order (one run per distinct edge, then the total). One sort of 3n keys."""
+    each pair's run starts in that order (one run per distinct edge, then the total). A linear sort of the 3n edges."""
     faces = np.asarray(faces, dtype=np.int64)
     u, v = faces, np.roll(faces, -1, axis=1)
-    keys = (np.minimum(u, v) * np.int64(n_vertices) + np.maximum(u, v)).ravel()
-    order = np.argsort(keys, kind="stable")
-    ks = keys[order]
-    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1], True]) if len(ks) else np.zeros(1, dtype=np.int64)
-    return order, starts
+    lo, hi = np.minimum(u, v).ravel(), np.maximum(u, v).ravel()
+    return _pair_order(lo, hi, max(int(n_vertices), int(lo.max(initial=-1)) + 1))
 
 
 @njit(cache=True)

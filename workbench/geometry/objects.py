@@ -136,12 +136,6 @@ def check_declared_size(path: Path) -> None:
                                 f"truncated or damaged; export it again")
 
 
-def mesh_digest(vertices: np.ndarray, faces: np.ndarray) -> str:
-    """The digest of a repaired mesh in metres (`ObjectModel.digest`): float64 vertices and int64 faces, hashed."""
-    return hashlib.sha256(np.ascontiguousarray(vertices, dtype=np.float64).tobytes()
-                          + np.ascontiguousarray(faces, dtype=np.int64).tobytes()).hexdigest()[:16]
-
-
 def from_trimesh(mesh: trimesh.Trimesh, name: str, scale: float = 1.0) -> ObjectModel:
     """Wrap a mesh built in code (already in metres unless `scale` says otherwise)."""
     return from_arrays(mesh.vertices, mesh.faces, scale=scale, name=name, source="<memory>")
@@ -188,9 +182,14 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         warnings.warn(f"{label} is not watertight: centre of mass weighted by area", MeshWarning, stacklevel=3)
         com = (mesh.triangles_center * mesh.area_faces[:, None]).sum(0) / mesh.area
         method = "area"
-    digest = mesh_digest(mesh.vertices, mesh.faces)
-    return ObjectModel(name=name, mesh=mesh, com=com, com_method=method, scale=scale, source=source, digest=digest,
-                       repairs=tuple(repairs))
+    return ObjectModel(name=name, mesh=mesh, com=com, com_method=method, scale=scale, source=source,
+                       digest=mesh_digest(mesh.vertices, mesh.faces), repairs=tuple(repairs))
+
+
+def mesh_digest(vertices: np.ndarray, faces: np.ndarray) -> str:
+    """The digest of a scaled, repaired mesh (float64 vertices, int64 faces): what stored results are keyed by."""
+    return hashlib.sha256(np.ascontiguousarray(vertices, dtype=np.float64).tobytes()
+                          + np.ascontiguousarray(faces, dtype=np.int64).tobytes()).hexdigest()[:16]
 
 
 def _scale_hint(extent: float, scale: float = 1.0) -> str:

@@ -522,10 +522,10 @@ def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int = 4) -> tuple:
     slots = np.full(P * leaf, -1, dtype=np.int64)
     slots[:n] = order
     shape = np.empty((2 * P, 15))
-    tri_s = np.zeros((P * leaf, 3, 3))
-    tri_s[:n] = tri[order]
-    fn_s = np.zeros((P * leaf, 3))
-    fn_s[:n] = np.asarray(normals, dtype=np.float64)[order]
+    tri_s, fn_s = np.empty((P * leaf, 3, 3)), np.empty((P * leaf, 3))
+    np.take(tri, order, axis=0, out=tri_s[:n])  # into place: a gathered copy copied again costs a third of the build
+    np.take(np.asarray(normals, dtype=np.float64), order, axis=0, out=fn_s[:n])
+    tri_s[n:], fn_s[n:] = 0.0, 0.0
     _node_shapes(tri_s, slots, leaf, shape)
     return shape, slots, leaf, tri_s, fn_s
 

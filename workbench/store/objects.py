@@ -48,11 +48,17 @@ def object_id(store: Store, name: str) -> int:
 
 
 def object_row(store: Store, name: str) -> tuple[int, dict]:
-    """The stored object `name`: its id and its row (source, scale, com, com_method, vertices, faces, digest)."""
+    """The stored object `name`: its id and its row (source, scale, com, com_method, digest, and the mesh's vertices
+    and faces as (N, 3) arrays)."""
     oid = object_id(store, name)
-    cols = ("source", "scale", "com", "com_method", "vertices", "faces", "digest")
-    row = store.one(f"SELECT {', '.join(cols)} FROM object WHERE idobject = ?", [oid])
-    return oid, dict(zip(cols, row))
+    cols = ("source", "scale", "com", "com_method", "digest")
+    row = dict(zip(cols, store.one(f"SELECT {', '.join(cols)} FROM object WHERE idobject = ?", [oid])))
+    # the mesh through Arrow, as it was written: a million triangles as Python lists take seconds
+    mesh = store.arrow("SELECT vertices, faces FROM object WHERE idobject = ?", [oid])
+    for col, dtype in (("vertices", np.float64), ("faces", np.int64)):
+        flat = mesh.column(col).combine_chunks().flatten().flatten()
+        row[col] = np.asarray(flat.to_numpy(zero_copy_only=False), dtype=dtype).reshape(-1, 3)
+    return oid, row
 
 
 def put_gripper(store: Store, gripper: Gripper) -> int:

@@ -225,7 +225,7 @@ def test_plan_html_caption_follows_the_timed_animation(planner, demo_result, tmp
     (a transfer or transit the step it carries the part or the hand to)."""
     plan = demo_result.plan
     page = plan_scene(plan, planner, tmp_path / "plan.html").read_text()
-    data = json.loads(re.search(r"var d = (\{.*?\});\n", page).group(1))
+    data = json.loads(re.search(r"var d = (\{.*?\}), live = ", page).group(1))
     duration = plan.segments[-1].t0 + plan.segments[-1].duration
     assert abs(len(data["steps"]) - (duration * data["fps"] + 1)) <= 1
     for seg in plan.segments:

@@ -521,12 +521,12 @@ def stored_plan(store: Store, plan: Plan) -> int | None:
 
 
 def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
-    """The stored object `name` rebuilt as an ObjectModel (mesh in metres, the stored centre of mass). A mesh whose
-    arrays still hash to the stored digest is the repaired one put there and is used as stored; any other is
-    repaired again."""
+    """The stored object `name` rebuilt as an ObjectModel (mesh in metres, the stored centre of mass). A stored mesh
+    whose bytes still give its stored digest is the repaired mesh itself and is used as it is; one that does not (a
+    row changed outside the workbench) is validated and repaired again, and its model carries the new digest."""
     oid, row = object_row(store, name)
-    vertices, faces = np.asarray(row["vertices"], dtype=np.float64), np.asarray(row["faces"], dtype=np.int64)
-    if vertices.ndim == 2 and faces.ndim == 2 and mesh_digest(vertices, faces) == row["digest"]:
+    vertices, faces = row["vertices"], row["faces"]
+    if mesh_digest(vertices, faces) == row["digest"]:
         mesh, digest = trimesh.Trimesh(vertices, faces, process=False, validate=False), row["digest"]
     else:
         with warnings.catch_warnings():  # the stored mesh was repaired, and its warnings shown, when it was loaded
