@@ -418,4 +418,3 @@ def test_closed_form_stores_the_free_branch_nearest_home_and_finds_what_the_nume
     r, b = other[np.argmax(free)]
     q, ok = solver.solve(grips["rotmat"][rows[r]][None], grips["placement_rotmat"][rows[r]][None], joints[r, b][None], 1)
     assert ok[0] and np.allclose(q[0], joints[r, b]) and not np.allclose(q[0], stored[r])
-
