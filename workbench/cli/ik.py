@@ -77,7 +77,8 @@ def add_retraction_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"lift of the held object straight up along world z ({RETRACT.describe(True)}; default {WORLDA}); "
                         f"then worldz more")
     p.add_argument("--workers", type=parse_number(WORKERS, "--workers"), default=None, metavar="N",
-                   help=f"IK processes ({WORKERS.describe(True)}; default: all cores)")
+                   help=f"IK processes ({WORKERS.describe(True)}; default: all cores, or one where a 6-joint arm's closed form "
+                        f"finishes sooner alone)")
     p.add_argument("--ik", choices=SOLVERS, default="auto",
                    help="auto (default): the arm's closed form where its axes admit one (all branches; spherical wrist, "
                         "spherical shoulder, three parallel axes, a 7-joint arm's last joint swept), else the numerical "

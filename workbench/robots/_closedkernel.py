@@ -136,10 +136,7 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
             _mul(mb[f, :3, :3], w, pw)
             for a in range(3):
                 pw[a] += mb[f, a, 3]
-            _mul(pr, kc[f], tmp)
-            _mul(rb[f], tmp, yc0)
-            _mul(pr, kd[f], tmp)
-            _mul(rb[f], tmp, yd0)
+            have_y0 = False  # R6 c and d: only once an elbow is within its limits
             a1, a2, a3 = ax[f, 0], ax[f, 1], ax[f, 2]
             d0, d1, d2 = pw[0] - o[f, 0], pw[1] - o[f, 1], pw[2] - o[f, 2]
             # 1. elbow: two q3
@@ -152,6 +149,12 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                     if not any_only:
                         _void(out_q, out_valid, i, 8 * f + 4 * i3, 4, cols, fixed_col, fixed[f])
                     continue
+                if not have_y0:
+                    _mul(pr, kc[f], tmp)
+                    _mul(rb[f], tmp, yc0)
+                    _mul(pr, kd[f], tmp)
+                    _mul(rb[f], tmp, yd0)
+                    have_y0 = True
                 _rot(a3, c3, s3, w3[f], False, tmp)
                 _mul(r3[f], tmp, v)
                 for a in range(3):
@@ -187,33 +190,53 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                         continue
                     # 4. wrist: Y c and Y d with Y = R4^T R03^T R6 (R5 R6)^T
                     free6 = any_only and upper[f, 5] - lower[f, 5] >= TWO_PI  # validity alone: any q6 is in range
-                    for which in range(1 if free6 else 2):
-                        yv0, yv = (yc0, yc) if which == 0 else (yd0, yd)
-                        _rot(a1, c1, s1, yv0, True, tmp)
-                        _mul_t(r2[f], tmp, u)
-                        _rot(a2, c2, s2, u, True, tmp)
-                        _mul_t(r3[f], tmp, u)
-                        _rot(a3, c3, s3, u, True, tmp)
-                        _mul_t(r4[f], tmp, yv)
+                    # Y c first: q5 needs it alone; Y d only once a branch has q4 and q5 within their limits
+                    _rot(a1, c1, s1, yc0, True, tmp)
+                    _mul_t(r2[f], tmp, u)
+                    _rot(a2, c2, s2, u, True, tmp)
+                    _mul_t(r3[f], tmp, u)
+                    _rot(a3, c3, s3, u, True, tmp)
+                    _mul_t(r4[f], tmp, yc)
+                    have_yd = False
                     _acs(consts[f, 4], consts[f, 5],
                          wa[f, 0] * yc[0] + wa[f, 1] * yc[1] + wa[f, 2] * yc[2] - consts[f, 6], r4c)
                     for i5 in range(2):
+                        col = 8 * f + 4 * i3 + 2 * i2 + i5
                         c5, s5 = r4c[2 * i5], r4c[2 * i5 + 1]
+                        # a joint out of reach or out of its limits voids the branch: the later ones are not solved
+                        qb[4] = _limit(np.arctan2(s5, c5), lower[f, 4], upper[f, 4])
+                        if np.isnan(qb[4]):
+                            if not any_only:
+                                _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f])
+                            continue
                         _rot(wb[f], c5, s5, wc[f], False, u)
                         c4, s4, q4 = _sub1(wa[f], u, yc)
-                        if not free6:
+                        qb[3] = _limit(q4, lower[f, 3], upper[f, 3])
+                        if np.isnan(qb[3]):
+                            if not any_only:
+                                _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f])
+                            continue
+                        if free6:
+                            qb[5] = 0.0
+                        else:
+                            if not have_yd:
+                                _rot(a1, c1, s1, yd0, True, tmp)
+                                _mul_t(r2[f], tmp, u)
+                                _rot(a2, c2, s2, u, True, tmp)
+                                _mul_t(r3[f], tmp, u)
+                                _rot(a3, c3, s3, u, True, tmp)
+                                _mul_t(r4[f], tmp, yd)
+                                have_yd = True
                             _rot(wa[f], c4, s4, yd, True, tmp)
                             _rot(wb[f], c5, s5, tmp, True, u)
-                        qb[3] = _limit(q4, lower[f, 3], upper[f, 3])
-                        qb[4] = _limit(np.arctan2(s5, c5), lower[f, 4], upper[f, 4])
-                        qb[5] = 0.0 if free6 else _limit(_sub1(wc[f], wd[f], u)[2], lower[f, 5], upper[f, 5])
-                        col = 8 * f + 4 * i3 + 2 * i2 + i5
-                        ok = True
-                        for j in range(6):
-                            ok = ok and not np.isnan(qb[j])
+                            qb[5] = _limit(_sub1(wc[f], wd[f], u)[2], lower[f, 5], upper[f, 5])
+                        ok = not np.isnan(qb[5])
                         out_valid[i, col] = ok
                         if any_only:
                             found = found or ok
+                            continue
+                        if not ok:
+                            _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f])
                             continue
                         for j in range(6):
                             out_q[i, col, cols[j]] = qb[j]

@@ -694,6 +694,16 @@ def diagnose_unreachable(robot: Robot, grips: dict[str, np.ndarray], scene: Scen
             f"found none; raise the IK effort (seeds, iterations) or check the retractions (--handx, --worldz)")
 
 
+SERIAL_CLOSED_GRIPS = 800_000  # grips a 6-joint closed form solves in one process sooner than workers start (~2 s each)
+
+
+def _one_process_sooner(robot: Robot, opts: IKOptions, grips: int) -> bool:
+    """Whether the default worker count should be one: a 6-joint arm's closed form (no numerical fall-back) solves
+    `grips` in less time than worker processes take to start and build their solvers."""
+    return (robot.nq == 6 and grips <= SERIAL_CLOSED_GRIPS
+            and not solver_kind(robot, opts).startswith("numerical"))
+
+
 def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: float, worldz: float,
             obj_mesh: trimesh.Trimesh | None = None, opts: IKOptions = IKOptions(), workers: int | None = None,
             skip: Callable[[np.ndarray], bool] | None = None, progress: bool = True, solver: IKSolver | None = None,
@@ -704,7 +714,7 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
     `grips` follows the placements contract (rotmat: TCP poses in the world, placement_rotmat: object poses,
     idfreeairgrip, tabletopposition, idtabletopgrips). Chunks for which `skip(indices)` is True are not computed
     (already stored). With one worker the chunks are solved here (by `solver`, or one built for this run); with
-    more (default: all cores) by an `IKPool` (`pool`, or one made for this run), whose processes each build the
+    more (default: all cores, or one when a 6-joint closed form finishes sooner alone) by an `IKPool` (`pool`, or one made for this run), whose processes each build the
     solver once."""
     poses = check_poses(grips["rotmat"])
     placements = check_poses(grips["placement_rotmat"], "object placement")
@@ -716,6 +726,8 @@ def iter_ik(robot: Robot, grips: dict[str, np.ndarray], scene: Scene, handx: flo
     todo = [(s, e) for s, e in bounds if skip is None or not skip(order[s:e])]
     if not todo:
         return
+    if workers is None and pool is None and _one_process_sooner(robot, opts, sum(e - s for s, e in todo)):
+        workers = 1
     workers = pool.workers if pool is not None else (workers or os.cpu_count() or 1)
     workers = max(1, min(workers, len(todo)))
     if pool is not None and pool.key != (robot.spec.digest, scene, opts, _mesh_key(obj_mesh)):

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -33,15 +34,18 @@ from workbench.store.identity import IK_STAGE, ik_runkey
 from workbench.store.objects import put_gripper
 
 
-def put_robot(store: Store, robot: Robot, allowed_pairs: str | None = None) -> int:
-    """The id of the robot's row (created if new; `allowed_pairs` JSON stored when given and missing); call inside a
-    transaction."""
+def put_robot(store: Store, robot: Robot, allowed_pairs: str | Callable[[], str] | None = None) -> int:
+    """The id of the robot's row (created if new; `allowed_pairs` JSON stored when given and missing, computed by
+    calling it only then when it is a function); call inside a transaction."""
     digest = robot.spec.digest
     row = store.one("SELECT idrobot, allowed_pairs FROM robot WHERE digest = ?", [digest])
     if row is not None:
         if row[1] is None and allowed_pairs is not None:
-            store.run("UPDATE robot SET allowed_pairs = ? WHERE idrobot = ?", [allowed_pairs, int(row[0])])
+            store.run("UPDATE robot SET allowed_pairs = ? WHERE idrobot = ?",
+                      [allowed_pairs() if callable(allowed_pairs) else allowed_pairs, int(row[0])])
         return int(row[0])
+    if callable(allowed_pairs):
+        allowed_pairs = allowed_pairs()
     name = robot.name
     if store.one("SELECT idrobot FROM robot WHERE name = ?", [name]) is not None:
         name = f"{robot.name}-{digest[:8]}"
@@ -86,7 +90,7 @@ def put_ikret(store: Store, handx: float, worldz: float, worlda: float) -> int:
 
 
 def prepare_run(store: Store, robot: Robot, scene_params: dict[str, Any], handx: float, worldz: float,
-                worlda: float, allowed_pairs: str | None = None) -> tuple[int, int, int]:
+                worlda: float, allowed_pairs: str | Callable[[], str] | None = None) -> tuple[int, int, int]:
     """Robot (with its allowed self-collision pairs, JSON), scene and ikret rows of one IK run in one transaction:
     (idrobot, idscene, idikret)."""
     with store.transaction():

@@ -428,7 +428,7 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
     pid = int(np.asarray(grips["idparamset"])) if "idparamset" in grips else int(idtabletop if idtabletop is not None else -1)
     ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
     rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz, worlda,
-                                          allowed_pairs(robot).to_json())
+                                          lambda: allowed_pairs(robot).to_json())
     done = robot_sql.stored_grips(store, rid, sid, kid)
 
     def skip(ix: np.ndarray) -> bool:
