@@ -19,6 +19,9 @@ def test_stored_mesh_round_trips_and_a_changed_row_is_repaired_again(tmp_path):
         put_object(store, obj)
         _, back = get_object(store, "box")
         assert back.digest == obj.digest and back.repairs == ()
+        assert back.mesh.is_watertight and back.mesh.is_winding_consistent  # known from the stored centre of mass
+        fresh = trimesh.Trimesh(back.mesh.vertices, back.mesh.faces, process=False)
+        assert fresh.is_watertight and fresh.is_winding_consistent
         assert np.array_equal(back.mesh.vertices, obj.mesh.vertices) and np.array_equal(back.mesh.faces, obj.mesh.faces)
         assert np.allclose(back.com, obj.com) and back.com_method == obj.com_method == "volume"
         # a third of the faces turned inside out behind the workbench's back: the digest no longer matches

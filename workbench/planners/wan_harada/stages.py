@@ -528,6 +528,8 @@ def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
     vertices, faces = row["vertices"], row["faces"]
     if mesh_digest(vertices, faces) == row["digest"]:
         mesh, digest = trimesh.Trimesh(vertices, faces, process=False, validate=False), row["digest"]
+        if row["com_method"] == "volume":  # weighted by volume only when closed and consistently wound (from_arrays)
+            mesh._cache["is_watertight"] = mesh._cache["is_winding_consistent"] = True
     else:
         with warnings.catch_warnings():  # the stored mesh was repaired, and its warnings shown, when it was loaded
             warnings.simplefilter("ignore", MeshWarning)
