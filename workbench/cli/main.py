@@ -6,17 +6,18 @@ Bad input prints one line and exits with status 2 (CONVENTIONS.md, Errors).
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import inspect
-import os
-import re
-import signal
 import sys
-import threading
-import warnings
 
 try:  # the slow part of loading the command line (under load a second or more): a Ctrl-C in it has started nothing
+    import argparse
+    import importlib
+    import inspect
+    import os
+    import re
+    import signal
+    import threading
+    import warnings
+
     import numpy  # noqa: F401
 except KeyboardInterrupt:
     _name = next((a for a in sys.argv[1:] if not a.startswith("-")), "")
