@@ -47,6 +47,17 @@ def _mul_t(r, v, out):
 
 
 @njit(cache=True, inline="always")
+def _into_wrist(a1, c1, s1, a2, c2, s2, a3, c3, s3, r2, r3, r4, v, tmp, u, out):
+    """R4^T R3^T ... of `v` through joints 1-3 and the fixed frames r2, r3, r4 into `out` (3,)."""
+    _rot(a1, c1, s1, v, True, tmp)
+    _mul_t(r2, tmp, u)
+    _rot(a2, c2, s2, u, True, tmp)
+    _mul_t(r3, tmp, u)
+    _rot(a3, c3, s3, u, True, tmp)
+    _mul_t(r4, tmp, out)
+
+
+@njit(cache=True, inline="always")
 def _acs(a, b, c, out):
     """Both x of a cos x + b sin x = c as out[0:2] = (cos, sin), out[2:4] = (cos, sin); NaN where there is none."""
     r = np.sqrt(a * a + b * b)
@@ -191,12 +202,7 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                     # 4. wrist: Y c and Y d with Y = R4^T R03^T R6 (R5 R6)^T
                     free6 = any_only and upper[f, 5] - lower[f, 5] >= TWO_PI  # validity alone: any q6 is in range
                     # Y c first: q5 needs it alone; Y d only once a branch has q4 and q5 within their limits
-                    _rot(a1, c1, s1, yc0, True, tmp)
-                    _mul_t(r2[f], tmp, u)
-                    _rot(a2, c2, s2, u, True, tmp)
-                    _mul_t(r3[f], tmp, u)
-                    _rot(a3, c3, s3, u, True, tmp)
-                    _mul_t(r4[f], tmp, yc)
+                    _into_wrist(a1, c1, s1, a2, c2, s2, a3, c3, s3, r2[f], r3[f], r4[f], yc0, tmp, u, yc)
                     have_yd = False
                     _acs(consts[f, 4], consts[f, 5],
                          wa[f, 0] * yc[0] + wa[f, 1] * yc[1] + wa[f, 2] * yc[2] - consts[f, 6], r4c)
@@ -220,12 +226,8 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                             qb[5] = 0.0
                         else:
                             if not have_yd:
-                                _rot(a1, c1, s1, yd0, True, tmp)
-                                _mul_t(r2[f], tmp, u)
-                                _rot(a2, c2, s2, u, True, tmp)
-                                _mul_t(r3[f], tmp, u)
-                                _rot(a3, c3, s3, u, True, tmp)
-                                _mul_t(r4[f], tmp, yd)
+                                _into_wrist(a1, c1, s1, a2, c2, s2, a3, c3, s3, r2[f], r3[f], r4[f], yd0, tmp, u,
+                                            yd)
                                 have_yd = True
                             _rot(wa[f], c4, s4, yd, True, tmp)
                             _rot(wb[f], c5, s5, tmp, True, u)
