@@ -613,13 +613,9 @@ def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, an
 
 def _facet_of(facets: Facets, tri: np.ndarray, direction: np.ndarray) -> np.ndarray:
     """For each triangle, the facet holding it whose normal best follows `direction` (-1 for none)."""
-    fid, tid = facets.membership()
     out = np.full(len(tri), -1, dtype=np.int64)
-    lo = np.searchsorted(tid, tri, side="left")
-    hi = np.searchsorted(tid, tri, side="right")
-    cnt = hi - lo
+    cnt, cand = facets.holding(tri)
     row = np.repeat(np.arange(len(tri)), cnt)
-    cand = fid[np.repeat(lo - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())]
     score = np.einsum("ij,ij->i", facets.normals[cand], direction[row])
     order = np.lexsort((-score, row))
     row, cand = row[order], cand[order]
@@ -688,12 +684,8 @@ def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: 
     leaving = (np.einsum("ij,ij->i", tn, na[ray]) < 0) & (depth > 10 * eps)
     locs, ray, tri, depth = locs[leaving], ray[leaving], tri[leaving], depth[leaving]
     # every facet containing the hit triangle is a candidate opposite facet
-    fid, tid = facets.membership()
-    lo = np.searchsorted(tid, tri, side="left")
-    hi = np.searchsorted(tid, tri, side="right")
-    cnt = hi - lo
+    cnt, fb = facets.holding(tri)
     hit = np.repeat(np.arange(len(tri)), cnt)
-    fb = fid[np.repeat(lo - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())]
     anti = -np.einsum("ij,ij->i", facets.normals[fb], na[ray[hit]])
     good = anti >= np.cos(params.parallel_angle)
     hit, fb, anti = hit[good], fb[good], anti[good]
