@@ -280,38 +280,31 @@ def boundary_distances(edge_ptr, edges, normals, facet_ids, points):
 def facets_holding(tri_ptr, tri_index, n_tri, queries):
     """For each triangle of `queries` (Q,), the facets holding it in ascending order: (counts (Q,), facet ids
     concatenated in query order), as `by_triangle` would give them for those triangles (none for a query outside
-    [0, n_tri), such as -1 for no triangle). One pass over the memberships
-    reading only the triangle ids, with no scatter of every membership."""
+    [0, n_tri), such as -1 for no triangle). Two passes over the memberships reading only their triangle ids against
+    a byte per triangle, with no scatter of every membership."""
     slot = np.full(n_tri, -1, dtype=np.int64)
+    asked = np.zeros(n_tri, dtype=np.bool_)  # a byte per triangle stays in cache as the memberships stream past
     distinct = 0
     for i in range(queries.shape[0]):
         t = queries[i]
-        if 0 <= t < n_tri and slot[t] < 0:
+        if 0 <= t < n_tri and not asked[t]:
             slot[t] = distinct
+            asked[t] = True
             distinct += 1
     per = np.zeros(distinct + 2, dtype=np.int64)  # the last slot: a query outside the mesh (-1), held by none
-    hit_u = np.empty(64, dtype=np.int64)
-    hit_f = np.empty(64, dtype=np.int64)
-    h = 0
-    for f in range(tri_ptr.shape[0] - 1):
-        for q in range(tri_ptr[f], tri_ptr[f + 1]):
-            u = slot[tri_index[q]]
-            if u >= 0:
-                if h == hit_u.shape[0]:
-                    hit_u = np.concatenate((hit_u, np.empty(h, dtype=np.int64)))
-                    hit_f = np.concatenate((hit_f, np.empty(h, dtype=np.int64)))
-                hit_u[h] = u
-                hit_f[h] = f
-                h += 1
-                per[u + 1] += 1
-    for u in range(distinct):
+    for q in range(tri_index.shape[0]):
+        if asked[tri_index[q]]:
+            per[slot[tri_index[q]] + 1] += 1
+    for u in range(distinct + 1):
         per[u + 1] += per[u]
-    grouped = np.empty(h, dtype=np.int64)
+    grouped = np.empty(per[distinct], dtype=np.int64)
     pos = per[:-1].copy()
-    for i in range(h):  # stable by triangle: the facets of each stay ascending
-        grouped[pos[hit_u[i]]] = hit_f[i]
-        pos[hit_u[i]] += 1
-    per[distinct + 1] = per[distinct]
+    for f in range(tri_ptr.shape[0] - 1):  # facets in order: the facets of each triangle stay ascending
+        for q in range(tri_ptr[f], tri_ptr[f + 1]):
+            if asked[tri_index[q]]:
+                u = slot[tri_index[q]]
+                grouped[pos[u]] = f
+                pos[u] += 1
     which = np.empty(queries.shape[0], dtype=np.int64)
     counts = np.empty(queries.shape[0], dtype=np.int64)
     total = 0
