@@ -410,7 +410,9 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     axis_sets = [(sel, origins, axes, angles, None)]
     counts["slice"] = 0
     if params.support_grasps:
+        t1 = time.perf_counter()
         downs = _support_normals(obj)
+        timings["supports"] = time.perf_counter() - t1
         k, y, z = support_axes(axes, downs, params.rotations, params.friction_coefficient)
         axis_sets.append((sel[k], origins[k], y, np.zeros(1), z))
         counts["support"] = int(len(k))
@@ -440,7 +442,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     inside = touch.hit & np.isfinite(touch.window).any(axis=1)
     again = pregrasp_touches(mesh, _subset(touch, inside), gripper, params.pregrasp_margin, params.finger_clearance)
     touch = Touches(**{f: _put(getattr(touch, f), inside, getattr(again, f)) for f in Touches.__dataclass_fields__})
-    timings["pads"] = time.perf_counter() - t0
+    timings["pads"] = time.perf_counter() - t0 - timings.get("supports", 0.0)
     y = touch.poses[:, :3, 1]
     cos_f = np.cos(np.arctan(params.friction_coefficient))
     width_ok = touch.hit & (touch.width <= gripper.jaw_max) & (touch.width >= gripper.jaw_min)
