@@ -11,6 +11,7 @@ fresh computation, array-equal.
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from typing import Callable
 
@@ -30,11 +31,17 @@ class RowMemo:
         self.blocks: OrderedDict[int, tuple[tuple[np.ndarray, ...], bytes, list[bytes]]] = OrderedDict()
         self.size = self.next = 0
         self.hits = self.misses = 0
+        self.lock = threading.Lock()
 
     def get(self, constants: bytes, inputs: np.ndarray,
             compute: Callable[[np.ndarray], tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
         """`compute(rows)`'s arrays (first axis: one entry per row of `inputs`) for every row of `inputs` (K, ...),
         calling `compute` only on the indices of the rows not remembered with the same `constants`."""
+        with self.lock:  # one part planned from two threads: each call sees whole blocks
+            return self._get(constants, inputs, compute)
+
+    def _get(self, constants: bytes, inputs: np.ndarray,
+             compute: Callable[[np.ndarray], tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
         keys = row_keys(inputs)
         table = self.rows.setdefault(constants, {})
         found = [table.get(k) for k in keys]
