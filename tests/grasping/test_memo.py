@@ -3,6 +3,8 @@ before from the part's memo, and plans exactly the grasps a fresh computation pl
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 
 from workbench.geometry.objects import load_object
@@ -35,6 +37,9 @@ def test_a_new_threshold_reuses_the_unchanged_axes_and_plans_the_same_grasps(han
     for name, a in want.items():
         b = got[name]
         assert (a is None and b is None) or (a.dtype == b.dtype and np.array_equal(a, b, equal_nan=True)), name
+    # the part still pickles (to a worker, say), with its memo left behind
+    again = pickle.loads(pickle.dumps(tube))
+    assert memo(again.mesh, "first_touches").rows == {} and np.array_equal(again.mesh.faces, tube.mesh.faces)
 
 
 def test_the_memo_keeps_to_its_limit_and_answers_as_the_computation():

@@ -33,6 +33,9 @@ class RowMemo:
         self.hits = self.misses = 0
         self.lock = threading.Lock()
 
+    def __reduce__(self):  # a pickled or copied part carries an empty memo: it is a cache, not data
+        return RowMemo, (self.limit,)
+
     def get(self, constants: bytes, inputs: np.ndarray,
             compute: Callable[[np.ndarray], tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
         """`compute(rows)`'s arrays (first axis: one entry per row of `inputs`) for every row of `inputs` (K, ...),
