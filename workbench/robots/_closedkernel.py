@@ -112,11 +112,12 @@ def _void(out_q, out_valid, i, col0, count, cols, fixed_col, fixed_val):
 
 @njit(cache=True, nogil=True)
 def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa, wb, wc, wd, consts, lower, upper,
-               cols, fixed_col, fixed, out_q, out_valid, any_only=False):
+               cols, fixed_col, fixed, out_q, out_valid, any_only=False, use=np.ones((0, 0), dtype=np.bool_)):
     """Spherical-wrist IK (`analytic._solve_block`, Section 5.2) of poses (N, 4, 4) for S forms (constants stacked
     on a leading axis S): the 8 branches of form s go to out_q[:, 8 s + b, cols] (branch b = 4 elbow + 2 shoulder +
     wrist flip), with out_q[:, 8 s + b, fixed_col] = fixed[s] when fixed_col >= 0; out_valid (N, 8 S). With
-    `any_only`, out_q is not touched and each pose stops at its first valid branch (out_valid must start False)."""
+    `any_only`, out_q is not touched and each pose stops at its first valid branch (out_valid must start False).
+    A non-empty `use` (N, S) solves form s of pose i only where use[i, s] (the others void)."""
     n, nf = poses.shape[0], mb.shape[0]
     k = np.empty(3)
     w = np.empty(3)
@@ -140,6 +141,10 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
         for f in range(nf):
             if found:  # any_only: this pose has a valid branch
                 break
+            if use.shape[0] and not use[i, f]:
+                if not any_only:
+                    _void(out_q, out_valid, i, 8 * f, 8, cols, fixed_col, fixed[f])
+                continue
             # the wrist centre in the joint-1 parent frame, and R6 (c, d) through the pose's rotation
             _mul(pr, kw[f], tmp)
             for a in range(3):
