@@ -173,8 +173,9 @@ def pregrasp_touches(mesh: trimesh.Trimesh, touch: Touches, gripper: Gripper, ma
     once_live = Touches(**{f: getattr(once, f)[live] for f in Touches.__dataclass_fields__})
     twice = _from_pregrasp(mesh, once_live, gripper, margin, clearance, tol)
     same = np.zeros(len(once), dtype=bool)
-    same[live] = (twice.hit & (np.abs(twice.width - once_live.width) <= tol)
-                  & (np.linalg.norm(twice.poses[:, :3, 3] - once_live.poses[:, :3, 3], axis=1) <= tol))
+    with np.errstate(invalid="ignore"):  # misses carry infinite widths
+        same[live] = (twice.hit & (np.abs(twice.width - once_live.width) <= tol)
+                      & (np.linalg.norm(twice.poses[:, :3, 3] - once_live.poses[:, :3, 3], axis=1) <= tol))
     return Touches(**{**{f: getattr(once, f) for f in Touches.__dataclass_fields__}, "hit": once.hit & same})
 
 
