@@ -9,7 +9,7 @@ import numpy as np
 
 from workbench.geometry.objects import load_object
 from workbench.grasping.grasps import GraspParams, plan_grasps
-from workbench.grasping.memo import RowMemo, forget, memo
+from workbench.grasping.memo import RowMemo, memo, remember
 from workbench.resources import bundled_objects
 
 
@@ -22,13 +22,15 @@ def _arrays(plan) -> dict[str, np.ndarray]:
 
 def test_a_new_threshold_reuses_the_unchanged_axes_and_plans_the_same_grasps(hand):
     tube = load_object(bundled_objects()["tube"])
-    forget(tube.mesh)
+    remember(tube.mesh)
     plan_grasps(tube, hand, GraspParams(tau=np.radians(18.0)))
     touches, hands = memo(tube.mesh, "first_touches"), memo(tube.mesh, "hand_hits")
     first_hits, first = touches.hits, touches.misses
     params = GraspParams(tau=np.radians(20.0))
     reused = plan_grasps(tube, hand, params)
-    fresh = plan_grasps(load_object(bundled_objects()["tube"]), hand, params)
+    other = load_object(bundled_objects()["tube"])
+    fresh = plan_grasps(other, hand, params)
+    assert memo(other.mesh, "first_touches") is None  # a part that did not ask keeps nothing
     # most axes keep their facet's normal, some do not: both memos answer part of the replan, not all of it
     new_hits, new_misses = touches.hits - first_hits, touches.misses - first
     assert new_hits > 2 * new_misses > 0 and hands.hits > 0

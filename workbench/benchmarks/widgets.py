@@ -88,7 +88,7 @@ def bench_grasps(rows: list, repeats: int, db: Path) -> None:
     ex.cache.size = 0  # every threshold change recomputes (the cache would answer the second visit)
     # values never planned before, a degree or a few from the last, as a slider moves: the jaw axes of the facets
     # that keep their normals come from the part's memo
-    fresh = tuple(tau + s * k for k in range(1, repeats) for s in (1, -1))[:max(2, repeats // 2)]
+    fresh = tuple(tau + s * k for k in range(1, repeats + 2) for s in (1, -1))[:max(2, repeats // 2)]
     _row(rows, "01", "threshold tau, a new value (recompute)", "recompute", "500 ms",
          measure(ex.tau, fresh, len(fresh), ex.vis))
     _row(rows, "01", "  the same with nothing remembered", "recompute", "-",

@@ -46,7 +46,7 @@ from workbench.grasping.pads import (
     pregrasp_touches,
     triangle_tree,
 )
-from workbench.grasping.memo import memo
+from workbench.grasping.memo import remembered
 from workbench.grasping.placements import stable_placements
 from workbench.params import Params, bounds, check_memory, param
 from workbench.robots.gripper import Gripper
@@ -355,8 +355,8 @@ def hand_hits(mesh: trimesh.Trimesh, pieces: list[np.ndarray], poses: np.ndarray
     packed = pack([convex_piece(p) for p in pieces])
     # a pose's answer follows from its placed pieces alone: poses checked before come from the part's memo
     constants = b"".join(np.ascontiguousarray(a).tobytes() for a in (*packed, [len(a) for a in packed]))
-    return memo(mesh, "hand_hits").get(constants, poses, lambda k: (hull_hits(shape, slots, leaf, tri, *packed,
-                                                                              poses[k], 0.0),))[0]
+    return remembered(mesh, "hand_hits", constants, poses,
+                      lambda k: (hull_hits(shape, slots, leaf, tri, *packed, poses[k], 0.0),))[0]
 
 
 def approach_collides(gripper: Gripper, poses: np.ndarray, openings: np.ndarray, mesh: trimesh.Trimesh,

@@ -6,7 +6,8 @@ threshold in notebook 01 changes some facets and keeps most: a sample whose face
 axis, bit for bit, hence the same first touches, the same pre-grasp re-search and the same hand checks. Each row's
 result is kept in the part's mesh cache (dropped with the mesh, or when the mesh changes) under the exact bytes of
 its inputs and of the call's constants, and only the rows not seen before are computed: the results are those of a
-fresh computation, array-equal.
+fresh computation, array-equal. Only a part that asks for it (`remember`, as the grasp explorer does) keeps rows: a
+command plans its part once, and a benchmark times the computation itself.
 """
 
 from __future__ import annotations
@@ -102,16 +103,34 @@ def row_keys(inputs: np.ndarray) -> list[bytes]:
     return flat.view(np.dtype((np.void, flat.dtype.itemsize * flat.shape[1]))).ravel().tolist()
 
 
-def memo(mesh: trimesh.Trimesh, name: str) -> RowMemo:
-    """The part's memo of the computation `name`, kept in the mesh's cache (dropped when the mesh changes)."""
-    key = "workbench_memo_" + name
-    found = mesh._cache[key]
-    if found is None:
-        found = mesh._cache[key] = RowMemo()
-    return found
+def remember(mesh: trimesh.Trimesh) -> None:
+    """Keep the rows of every later plan of `mesh` (notebook 01 does, for its part): until then, and for a command
+    or a benchmark that plans a part once or times its plans, every row is computed and nothing is kept."""
+    if mesh._cache[_KEY] is None:
+        mesh._cache[_KEY] = {}
+
+
+def remembered(mesh: trimesh.Trimesh, name: str, constants: bytes, inputs: np.ndarray,
+               compute: Callable[[np.ndarray], tuple[np.ndarray, ...]]) -> tuple[np.ndarray, ...]:
+    """`compute(rows)`'s arrays for every row of `inputs`: through the part's memo of the computation `name`
+    (`RowMemo.get`) when `remember(mesh)` turned it on, else computed."""
+    memos = mesh._cache[_KEY]
+    if memos is None:
+        return compute(np.arange(len(inputs)))
+    return memos.setdefault(name, RowMemo()).get(constants, inputs, compute)
+
+
+def memo(mesh: trimesh.Trimesh, name: str) -> RowMemo | None:
+    """The part's memo of the computation `name` (None while it is not remembered)."""
+    memos = mesh._cache[_KEY]
+    return None if memos is None else memos.setdefault(name, RowMemo())
 
 
 def forget(mesh: trimesh.Trimesh) -> None:
-    """Drop every memo of `mesh` (a benchmark measuring the cold computation)."""
-    for key in [k for k in mesh._cache.cache if str(k).startswith("workbench_memo_")]:
-        mesh._cache.cache.pop(key, None)
+    """Drop what the memos of `mesh` hold (a benchmark measuring the computation from nothing); they stay on."""
+    memos = mesh._cache[_KEY]
+    if memos is not None:
+        memos.clear()
+
+
+_KEY = "workbench_memos"  # in the mesh's cache: dropped when the mesh changes

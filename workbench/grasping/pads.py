@@ -38,7 +38,7 @@ import numpy as np
 import trimesh
 
 from workbench.grasping._padkernel import first_touch_kernel, line_crossings, triangle_bvh
-from workbench.grasping.memo import memo
+from workbench.grasping.memo import remembered
 from workbench.robots.gripper import Gripper
 
 
@@ -173,8 +173,9 @@ def pregrasp_touches(mesh: trimesh.Trimesh, touch: Touches, gripper: Gripper, ma
     once_live = Touches(**{f: getattr(once, f)[live] for f in Touches.__dataclass_fields__})
     twice = _from_pregrasp(mesh, once_live, gripper, margin, clearance, tol)
     same = np.zeros(len(once), dtype=bool)
-    same[live] = (twice.hit & (np.abs(twice.width - once_live.width) <= tol)
-                  & (np.linalg.norm(twice.poses[:, :3, 3] - once_live.poses[:, :3, 3], axis=1) <= tol))
+    with np.errstate(invalid="ignore"):  # misses carry infinite widths
+        same[live] = (twice.hit & (np.abs(twice.width - once_live.width) <= tol)
+                      & (np.linalg.norm(twice.poses[:, :3, 3] - once_live.poses[:, :3, 3], axis=1) <= tol))
     return Touches(**{**{f: getattr(once, f) for f in Touches.__dataclass_fields__}, "hit": once.hit & same})
 
 
@@ -268,8 +269,8 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: f
 
     # a jaw axis's rows follow from its origin, basis and window alone: those seen before come from the part's memo
     constants = np.concatenate([[float(flip), tie, jaw, block], rect, angles]).tobytes()
-    found, height, local, tri_id = (a.reshape(K * A, *a.shape[2:]) for a in memo(mesh, "first_touches").get(
-        constants, np.hstack([origins, basis.reshape(K, 9), windows]), rows))
+    found, height, local, tri_id = (a.reshape(K * A, *a.shape[2:]) for a in remembered(
+        mesh, "first_touches", constants, np.hstack([origins, basis.reshape(K, 9), windows]), rows))
     hit = found.all(axis=1)
     res = {}
     for si, side in enumerate((1, -1)):
