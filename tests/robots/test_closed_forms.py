@@ -14,7 +14,7 @@ import pinocchio as pin
 import pytest
 
 from workbench.resources import erd_robots
-from workbench.robots.solvers import SWEEP, closed_form, describe
+from workbench.robots.solvers import REFINE, SWEEP, closed_form, describe
 from workbench.robots.model import get_robot, pose_xyz_yaw, robot_from_urdf
 
 N = 2000
@@ -86,6 +86,47 @@ def test_panda_over_its_last_joint_sweep():
     _, valid = form.solve(_fk(panda, qs[:200]))
     per_sample = valid.reshape(200, SWEEP, 8).sum(axis=2)
     assert (per_sample <= 4).mean() > 0.95 and per_sample.max() > 0
+
+
+def test_panda_refines_its_sweep_between_samples():
+    """Configurations with the 7th joint between the sweep's samples: the refinement (REFINE sub-steps per interval,
+    only next to samples with a branch, or everywhere when none has one) returns only branches that reproduce their
+    poses within the limits, recovers the generating configuration wherever it solves its interval, and gives the IK
+    stage the poses whose valid window of joint 7 falls between two samples."""
+    from workbench.robots.collider import Scene
+    from workbench.robots.ik import IKOptions, IKSolver
+
+    panda = get_robot("panda")
+    form = closed_form(panda)
+    samples = np.linspace(panda.lower[6], panda.upper[6], SWEEP)
+    between = (samples[:-1, None] + np.arange(1, REFINE) / REFINE * np.diff(samples)[:, None]).ravel()
+    rng = np.random.default_rng(8)
+    qs = rng.uniform(panda.lower, panda.upper, (N, 7))
+    pick = rng.integers(0, len(between), N)
+    qs[:, 6] = between[pick]
+    poses = _fk(panda, qs)
+    _, coarse = form.solve(poses)
+    joints, valid = form.refine(poses, coarse)
+    assert joints.shape == (N, 8 * len(between), 7)
+    rows, cols = np.nonzero(valid)
+    sol = joints[rows, cols]
+    assert ((sol >= panda.lower - 1e-12) & (sol <= panda.upper + 1e-12)).all()
+    back = _fk(panda, sol)
+    assert np.linalg.norm(back[:, :3, 3] - poses[rows, :3, 3], axis=1).max() < 1e-4
+    assert np.abs(back[:, :3, :3] - poses[rows, :3, :3]).max() < 1e-6
+    per_sample = coarse.reshape(N, SWEEP, 8).any(axis=2)
+    interval = pick // (REFINE - 1)
+    used = per_sample[np.arange(N), interval] | per_sample[np.arange(N), interval + 1] | ~per_sample.any(axis=1)
+    assert used.mean() > 0.95
+    cols_of = 8 * pick[:, None] + np.arange(8)  # the generating angle's branches
+    gap = np.abs(np.angle(np.exp(1j * (np.take_along_axis(joints, cols_of[..., None], 1) - qs[:, None])))).max(axis=2)
+    mine = np.take_along_axis(valid, cols_of, 1)
+    assert (np.where(mine, gap, np.inf).min(axis=1) < 1e-6)[used].all()
+    assert not mine[~used].any()  # an interval away from every sample with a branch is not solved
+    missed = np.flatnonzero(~coarse.any(axis=1))
+    assert len(missed) >= 3  # windows of joint 7 narrower than the samples' spacing exist
+    stage = IKSolver(panda, Scene(workspace_min=(-9, -9, -9), workspace_max=(9, 9, 9)), IKOptions(collide=False))
+    assert stage.solve(poses[missed], poses[missed], None, 0)[1].all()
 
 
 def test_the_form_is_read_off_the_model_not_the_name():

@@ -257,3 +257,23 @@ def rest_probabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.n
     prob = np.bincount(end[landed], weights=omega[landed], minlength=len(groups))
     total = prob.sum()
     return (prob / total if total > 0 else prob), rocking
+
+
+def symmetric_average(values: np.ndarray, normals: np.ndarray, heights: np.ndarray, turns: np.ndarray,
+                      angle: float = np.radians(0.5), distance: float = 5e-4) -> np.ndarray:
+    """`values` (G,) of supports averaged over the orbits of a symmetry group: a turn g (of `turns` (K, 3, 3),
+    about the centre of mass) maps support i, with unit `normals[i]` (G, 3) and plane at `heights[i]` (G,) from
+    the centre of mass, onto the support j whose normal is within `angle` of g n_i and whose height is within
+    `distance`; the result is the mean of values over each support's images. Quantities that depend only on the
+    hull and the centre of mass, such as the rest probabilities, are equal on supports a symmetry swaps, whatever the
+    hull's triangulation makes of them; a turn that does not map every support onto a distinct one is skipped."""
+    values = np.asarray(values, dtype=np.float64)
+    total, used = np.zeros_like(values), 0
+    for g in np.asarray(turns, dtype=np.float64).reshape(-1, 3, 3):
+        cos = (normals @ g.T) @ normals.T  # (G, G): image of i against j
+        image = np.argmax(cos, axis=1)
+        ok = (cos[np.arange(len(values)), image] >= np.cos(angle)) & (np.abs(heights[image] - heights) <= distance)
+        if ok.all() and len(np.unique(image)) == len(values):
+            total += values[image]
+            used += 1
+    return total / used if used else values

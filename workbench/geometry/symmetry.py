@@ -56,11 +56,19 @@ def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * x + (1.0 - np.cos(angle)) * (x @ x)
 
 
-def part_symmetry(mesh: trimesh.Trimesh, tol: float = DEFAULT_TOL) -> Symmetry:
+def part_symmetry(mesh: trimesh.Trimesh, tol: float = DEFAULT_TOL, centre: np.ndarray | None = None) -> Symmetry:
     """The rotational symmetry of a watertight `mesh` (part frame, metres), within `tol` (see the module
-    docstring; under a second for the bundled parts)."""
-    centre = np.asarray(mesh.center_mass, dtype=np.float64)
-    moments, axes = np.linalg.eigh(np.asarray(mesh.moment_inertia, dtype=np.float64))
+    docstring; under a second for the bundled parts), about its centre of mass or about `centre` (3,) when given:
+    the turns about that point that map the mesh onto itself (a part's convex hull about the part's centre of
+    mass, for what depends on just those two, such as where a dropped part comes to rest)."""
+    inertia = np.asarray(mesh.moment_inertia, dtype=np.float64)
+    if centre is None:
+        centre = np.asarray(mesh.center_mass, dtype=np.float64)
+    else:  # the inertia about `centre` (parallel axes): the turns about it keep it
+        centre = np.asarray(centre, dtype=np.float64)
+        d = centre - np.asarray(mesh.center_mass, dtype=np.float64)
+        inertia = inertia + float(mesh.mass) * (float(d @ d) * np.eye(3) - np.outer(d, d))
+    moments, axes = np.linalg.eigh(inertia)
     scale = max(float(np.abs(moments).max()), 1e-30)
     equal = [abs(moments[i] - moments[j]) <= EQUAL_MOMENTS * scale for i, j in ((0, 1), (1, 2), (0, 2))]
     test = _Coincidence(mesh, centre, tol)

@@ -23,7 +23,9 @@ from scipy.spatial import ConvexHull
 
 from workbench.errors import MeshError
 from workbench.geometry.objects import ObjectModel
-from workbench.geometry.supports import coplanar_groups, rest_probabilities, stabilities, support_stability
+from workbench.geometry.supports import (coplanar_groups, rest_probabilities, stabilities, support_stability,
+                                        symmetric_average)
+from workbench.geometry.symmetry import part_symmetry
 from workbench.params import Params, param
 from workbench.robots.gripper import Gripper
 
@@ -132,6 +134,9 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     holds = stabilities(hull, obj.com, groups, normals) > 0
     holds[list(poses)] = stability[list(poses)] > 0
     prob, rocking = rest_probabilities(hull, obj.com, groups, normals, holds, params.rock_angle)
+    if len(groups) > 1:  # supports swapped by a turn of the hull about the centre of mass are equally likely
+        heights = np.array([float((verts[hull.faces[m[0], 0]] - obj.com) @ n) for m, n in zip(groups, normals)])
+        prob = symmetric_average(prob, normals, heights, part_symmetry(hull, centre=obj.com).turns)
     ok = (stability >= threshold) & np.isin(np.arange(len(groups)), list(poses)) & (prob >= params.min_probability)
     if params.reject_rocking:
         ok &= ~rocking

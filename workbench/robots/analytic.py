@@ -276,15 +276,17 @@ def kernel_constants(iks: list[AnalyticIK]) -> tuple[np.ndarray, ...]:
 
 def solve_into(consts: tuple[np.ndarray, ...], poses: np.ndarray, q: np.ndarray, valid: np.ndarray,
                cols: tuple[int, ...] = tuple(range(6)), fixed_col: int = -1, fixed: np.ndarray | None = None,
-               block: int = BLOCK) -> None:
+               block: int = BLOCK, use: np.ndarray | None = None) -> None:
     """The 8 branches of each of S forms (`kernel_constants`; form s in branches 8 s .. 8 s + 7) of poses (N, 4, 4),
     written into q (N, 8 S, n) at joint columns `cols` (and `fixed[s]` at `fixed_col`, a 7-joint arm's held joint)
-    and valid (N, 8 S), by the compiled kernel."""
+    and valid (N, 8 S), by the compiled kernel; with `use` (N, S), only the forms it marks (the others void)."""
     fixed = np.zeros(len(consts[0])) if fixed is None else np.ascontiguousarray(fixed, dtype=np.float64)
     cols_a = np.asarray(cols, dtype=np.int64)
     poses = np.ascontiguousarray(poses, dtype=np.float64)
+    use = np.ones((0, 0), dtype=bool) if use is None else np.ascontiguousarray(use, dtype=bool)
     for s in range(0, len(poses), block):
-        wrist_rows(poses[s:s + block], *consts, cols_a, fixed_col, fixed, q[s:s + block], valid[s:s + block])
+        wrist_rows(poses[s:s + block], *consts, cols_a, fixed_col, fixed, q[s:s + block], valid[s:s + block], False,
+                   use[s:s + block] if len(use) else use)
 
 
 def branch_distances(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,

@@ -185,9 +185,11 @@ def held_placements(targets: np.ndarray, placements: np.ndarray) -> np.ndarray:
     lifts (HELD) the placement carried along by the hand (T_k T_grasp^-1 placement)."""
     out = np.repeat(np.asarray(placements, dtype=np.float64)[:, None], targets.shape[1], axis=1)
     held = np.flatnonzero(HELD[:targets.shape[1]])
-    if len(held):
-        rel = targets[:, held] @ np.linalg.inv(targets[:, :1])
-        out[:, held] = rel @ out[:, held]
+    for k in held:
+        if np.array_equal(targets[:, k, :3, :3], targets[:, 0, :3, :3]):  # `retract`'s lifts: a translation
+            out[:, k, :3, 3] += targets[:, k, :3, 3] - targets[:, 0, :3, 3]
+        else:
+            out[:, k] = targets[:, k] @ np.linalg.inv(targets[:, 0]) @ out[:, k]
     return out
 
 
@@ -367,6 +369,16 @@ class IKSolver:
         m, n = len(targets), self.robot.nq
         joints, valid = self.analytic.solve(targets)
         ref = np.where(np.isfinite(q0), q0, 0.0) if q0 is not None else np.zeros((m, n))
+        q, ok = self._nearest_free(joints, valid, ref, placements)
+        if self.unlimited is not None:  # the fall-backs add solutions where there were none, never replace one
+            q, ok = self._between_samples(targets, placements, valid, ref, q, ok)
+            q, ok = self._refined(targets, placements, valid, ref, q, ok)
+        return q, ok
+
+    def _nearest_free(self, joints: np.ndarray, valid: np.ndarray, ref: np.ndarray,
+                      placements: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per row of branches (M, B, n), the collision-free valid one nearest `ref` (M, n) (rows of NaN: none)."""
+        m, n = len(joints), self.robot.nq
         dist = np.empty(valid.shape)
         rank = np.empty(valid.shape, dtype=np.int64)
         branch_order(joints, valid, np.ascontiguousarray(ref, dtype=np.float64), self.robot.lower, self.robot.upper,
@@ -389,8 +401,39 @@ class IKSolver:
                 free[sel[self.self_collision.collides(cand[sel])]] = False
             q[left[free]], ok[left[free]] = cand[free], True
             left = left[~free]
-        if self.unlimited is not None:
-            q, ok = self._between_samples(targets, placements, valid, ref, q, ok)
+        return q, ok
+
+    def _reachable_rows(self, targets: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """The `rows` of targets that pass the reach filter and a 7-joint arm's wrist shell."""
+        rows = rows[self.prefilter(targets[rows])] if len(rows) else rows
+        if self.shell is not None and len(rows):
+            rows = rows[self.shell(targets[rows])]
+        return rows
+
+    def _refined(self, targets: np.ndarray, placements: np.ndarray, valid: np.ndarray, ref: np.ndarray,
+                 q: np.ndarray, ok: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Poses still without a collision-free branch: the swept joint's angles between its samples (a window of
+        free branches narrower than the sweep's spacing, `ClosedForm.refine`), nearest `ref` first."""
+        rows = self._reachable_rows(targets, np.flatnonzero(~ok)) if self.analytic.refine is not None else []
+        if not len(rows):
+            return q, ok
+        joints, fine = self.analytic.refine(targets[rows], valid[rows])
+        dist = np.empty(fine.shape)
+        rank = np.empty(fine.shape, dtype=np.int64)
+        branch_order(joints, fine, np.ascontiguousarray(ref[rows], dtype=np.float64), self.robot.lower,
+                     self.robot.upper, self._wrap, dist, rank)
+        r, b = np.nonzero(fine)  # every valid branch in one check (few rows; most of them collide everywhere)
+        free = np.ones(len(r), dtype=bool)
+        if self.collider is not None and len(r):
+            free &= ~self.collider.collides_q(joints[r, b], placements[rows[r]])
+        if self.self_collision is not None and free.any():
+            sel = np.flatnonzero(free)
+            free[sel[self.self_collision.collides(joints[r[sel], b[sel]])]] = False
+        d = np.full(fine.shape, np.inf)
+        d[r[free], b[free]] = dist[r[free], b[free]]
+        best = np.argmin(d, axis=1)  # the nearest free one (ties: the first in branch order, as nearest-first does)
+        hit = np.isfinite(d[np.arange(len(rows)), best])
+        q[rows[hit]], ok[rows[hit]] = joints[np.flatnonzero(hit), best[hit]], True
         return q, ok
 
     def _between_samples(self, targets: np.ndarray, placements: np.ndarray, valid: np.ndarray, ref: np.ndarray,
@@ -399,10 +442,7 @@ class IKSolver:
         their branch nearest `ref` without the limits (clipped into them by the solver), which the free joint then
         moves off its sample, up to BETWEEN_TRIES branches nearest `ref` first; then `solve_from_seeds`. Poses the
         wrist cannot reach at any angle of the swept joint (`solvers.wrist_shell`) are not tried: none would converge."""
-        rows = np.flatnonzero(~valid.any(axis=1))
-        rows = rows[self.prefilter(targets[rows])] if len(rows) else rows
-        if self.shell is not None and len(rows):
-            rows = rows[self.shell(targets[rows])]
+        rows = self._reachable_rows(targets, np.flatnonzero(~valid.any(axis=1)))
         if not len(rows):
             return q, ok
         qu, vu = self.unlimited.solve(targets[rows])

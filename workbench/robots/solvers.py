@@ -9,7 +9,9 @@ order of preference:
 - **three parallel axes** (the UR family): axes 2-4 parallel and axes 5-6 meet, 8 branches (`robots.parallel`);
 - **7 joints, one swept** (He & Liu 2021 for the Franka Panda): a joint (the last one first) held at `samples` angles
   evenly spread over its limits, each leaving a 6R arm with one of the forms above (the Panda: a spherical shoulder),
-  8 branches per sample, of which the Panda's elbow limits (q4 < 0) mostly keep at most 4;
+  8 branches per sample, of which the Panda's elbow limits (q4 < 0) mostly keep at most 4; where a pose's branches at
+  the samples all miss or collide, `refine` solves it at REFINE sub-steps between the samples next to those with a
+  branch (a window of the swept joint narrower than the samples' spacing);
 - **subproblem decomposition** (EAIK, Ostermeier et al. 2024) for any other 6R arm whose axes decompose
   (intersecting or parallel), through the `eaik` package, one pose at a time in C++.
 
@@ -29,17 +31,22 @@ from workbench.robots import analytic, parallel
 from workbench.robots.analytic import Chain, _limit, _rotation, chain_of, reverse_poses, reversed_chain, sub_chain
 
 SWEEP = 16  # samples of a 7-joint arm's swept joint
+REFINE = 8  # sub-steps per interval between those samples, where a pose's branches at the samples all miss or collide
 
 
 @dataclass(frozen=True)
 class ClosedForm:
     """A robot's closed-form IK: its `kind` (said when the robot loads), the number of branches per pose, and
-    `solve(poses) -> (joints (N, branches, nq), valid (N, branches))`."""
+    `solve(poses) -> (joints (N, branches, nq), valid (N, branches))`. A swept joint's form also has
+    `refine(poses, valid) -> (joints, valid)`: the branches at the joint's angles between its samples (REFINE sub-steps
+    per interval), in the intervals next to a sample where `valid` (its `solve`'s) has a branch, or in all of them
+    where none has."""
 
     kind: str
     branches: int
     nq: int
     solve: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
+    refine: Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
 
 
 def _six(chain: Chain, limits: bool) -> tuple[str, bool, Callable, object] | None:
@@ -129,6 +136,7 @@ def _swept(chain: Chain, free: int, angles: np.ndarray, limits: bool) -> ClosedF
     wrists = None
     if isinstance(forms[0][3], analytic.AnalyticIK) and not (rev and free == 0):
         wrists = analytic.kernel_constants([f[3] for f in forms])
+    cols = tuple(others[::-1] if rev else others)
 
     def solve(poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
@@ -136,8 +144,7 @@ def _swept(chain: Chain, free: int, angles: np.ndarray, limits: bool) -> ClosedF
         valid = np.empty((len(poses), 8 * len(angles)), dtype=bool)
         x = reverse_poses(subs[0], poses) if rev else poses
         if wrists is not None:  # every sample in one compiled pass, written in place
-            analytic.solve_into(wrists, x, q, valid, cols=tuple(others[::-1] if rev else others), fixed_col=free,
-                                fixed=angles)
+            analytic.solve_into(wrists, x, q, valid, cols=cols, fixed_col=free, fixed=angles)
             return q, valid
         for k, (a, sub, f) in enumerate(zip(angles, subs, forms)):
             if rev and free == 0 and k:  # the held first joint moves the reversed chain's target
@@ -146,8 +153,23 @@ def _swept(chain: Chain, free: int, angles: np.ndarray, limits: bool) -> ClosedF
             q[:, 8 * k:8 * k + 8, others] = qk[..., ::-1] if rev else qk
             q[:, 8 * k:8 * k + 8, free] = a
         return q, valid
+
+    between = (angles[:-1, None] + np.arange(1, REFINE) / REFINE * np.diff(angles)[:, None]).ravel()
+    fine: list = []  # the in-between samples' constants, built on the first refinement
+
+    def refine(poses: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 4, 4)
+        if not fine:
+            fine.append(analytic.kernel_constants([_six(sub_chain(chain, {free: float(a)}), limits)[3] for a in between]))
+        coarse = np.asarray(valid).reshape(len(poses), len(angles), 8).any(axis=2)
+        near = coarse[:, :-1] | coarse[:, 1:] | ~coarse.any(axis=1, keepdims=True)
+        q = np.empty((len(poses), 8 * len(between), chain.nq))
+        ok = np.empty((len(poses), 8 * len(between)), dtype=bool)
+        analytic.solve_into(fine[0], reverse_poses(subs[0], poses) if rev else poses, q, ok, cols=cols, fixed_col=free,
+                            fixed=between, use=np.repeat(near, REFINE - 1, axis=1))
+        return q, ok
     return ClosedForm(f"{kind}, {chain.joint_names[free]} swept over {len(angles)} samples", 8 * len(angles), chain.nq,
-                      solve)
+                      solve, refine if wrists is not None and len(angles) > 1 else None)
 
 
 def _sweep7(chain: Chain, limits: bool, samples: int) -> ClosedForm | None:
@@ -210,7 +232,7 @@ def nearby_form(robot, samples: int = 4) -> ClosedForm | None:
 # rows go through) can change a stored `ik` row. The IK stage's digest holds the revisions of the solvers a robot
 # uses, so a store built by an older solver computes its rows again instead of reusing them.
 REVISIONS = {"collision checks": 1, "spherical wrist": 1, "spherical shoulder": 1, "three parallel axes": 1,
-             "subproblem decomposition": 1, "swept joint": 1, "numerical": 1}
+             "subproblem decomposition": 1, "swept joint": 2, "numerical": 1}
 
 
 def revision(robot, numerical: bool = False) -> dict[str, int]:
