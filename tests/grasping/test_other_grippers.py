@@ -70,7 +70,7 @@ WIDE = {"name": "wide110", "source": "written for this test", "stroke": [0.01, 0
 
 
 @pytest.mark.parametrize("part", ["tube", "blob_coarse"])
-def test_a_gripper_never_seen_before_plans_stores_and_checks(tmp_path, part):
+def test_a_gripper_never_seen_before_plans_stores_and_checks(tmp_path, part, capsys):
     import duckdb
     import yaml
 
@@ -98,3 +98,8 @@ def test_a_gripper_never_seen_before_plans_stores_and_checks(tmp_path, part):
     assert v.ok.all(), (int(v.ok.sum()), len(pick), int((~v.clear).sum()), int((~v.pads).sum()))
     for w in (widths[pick], np.full(len(pick), 0.11)):  # the stored grasps clear the part at the grasp and fully open
         assert not boxes_hit(obj.mesh, poses[pick], w, str(spec), GraspParams().finger_clearance + 1e-6).any()
+    # without --gripper a command on the stored grasps names the spec-file gripper they need, in one line
+    capsys.readouterr()
+    assert main(["placements", "--db", str(db), "--object", part]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "gripper 'wide110'" in err[0] and "--gripper FILE" in err[0], err

@@ -8,6 +8,7 @@ from __future__ import annotations
 import contextlib
 import io
 import json
+import shutil
 
 import coal
 import duckdb
@@ -44,6 +45,8 @@ def store(tmp_path_factory):
                          *GRID])
         assert code == 0, buf.getvalue()
         out[gripper] = buf.getvalue()
+        if gripper == "robotiq-2f85":  # a store of one gripper, for the commands' default
+            shutil.copy(db, work / "robotiq.duckdb")
     return work, db, out
 
 
@@ -126,6 +129,22 @@ def test_plan_with_each_gripper_uses_its_rows_and_validates(store, gripper, caps
     stored = con.execute("SELECT f.jawwidth FROM freeairgrip f JOIN gripper g USING (idgripper) WHERE g.name = ? AND "
                          "f.idfreeairgrip = ?", [name, plan["steps"][0]["idfreeairgrip"]]).fetchone()
     assert stored is not None and stored[0] == pytest.approx(widths[0])
+
+
+@pytest.mark.parametrize("only", [True, False])
+def test_without_gripper_a_plan_takes_the_stores_one_gripper_else_the_franka_hand(store, only, tmp_path):
+    work, db, out = store
+    db = str(work / "robotiq.duckdb") if only else db
+    pid = _ids(out["robotiq-2f85" if only else "franka"])[0]
+    js = tmp_path / "plan.json"
+    with contextlib.redirect_stdout(io.StringIO()):
+        code = main(["plan", "--db", db, "--object", "bracket", "--robot", "ur10_robot", "--start", f"{pid},0.45,0.1,0",
+                     "--goal", f"{pid},0.55,-0.1,90", "--alternatives", "0", "--no-save", "--json", str(js)])
+    assert code == 0
+    robot = json.loads(js.read_text())["plan"]["robot"]
+    con = duckdb.connect(db, read_only=True)
+    name = con.execute("SELECT g.name FROM robot r JOIN gripper g USING (idgripper) WHERE r.name = ?", [robot]).fetchone()
+    assert name == ("robotiq-2f85" if only else "franka_hand",)
 
 
 def test_plan_with_a_gripper_the_store_lacks_is_refused_in_one_line(store, capsys):

@@ -15,7 +15,7 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from workbench.cli.gripper import add_gripper_argument, gripper_from_args, stored_robot_gripper
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args, grippers_of, stored_robot_gripper
 from workbench.cli.ik import RETRACT
 from workbench.cli.outputs import add_output, write_text
 from workbench.cli.plan import add_motion_arguments, exec_options, write_trajectory
@@ -42,6 +42,7 @@ from workbench.planners.tournassoud.stages import (
 from workbench.viewer.tournassoud import plan_page
 from workbench.robots.collider import Scene, default_scene
 from workbench.store import Store
+from workbench.store.objects import stored_grippers
 
 
 def _nums(text: str, label: str, n: int, sep: str = ",") -> list[str]:
@@ -278,7 +279,10 @@ def run_stored(args: argparse.Namespace) -> int:
     plan = load_stored(args.db, args.plan)
     if args.object is not None and args.object != plan.object:
         raise WorkbenchError(f"plan {args.plan} in {args.db} is of {plan.object!r}, not --object {args.object!r}")
-    r = load_planner(args.db, plan.object, plan.robot, gripper=gripper_from_args(args), idtable=plan.ids["idtabletop"])
+    with Store(args.db, read_only=True) as store:
+        gripper = gripper_from_args(args, grippers_of(stored_grippers(store), robot=plan.robot),
+                                    f"plan {args.plan} in store {args.db}")
+    r = load_planner(args.db, plan.object, plan.robot, gripper=gripper, idtable=plan.ids["idtabletop"])
     scene = stored_scene(args.db, args.plan)
     print(f"plan {args.plan} from {args.db}: " + plan.summary())
     for line in plan.lines():
@@ -326,7 +330,9 @@ def run(args: argparse.Namespace) -> int:
             gripper, stored = stored_robot_gripper(store, robot, args)
             robot = stored or robot
     else:
-        gripper = gripper_from_args(args)
+        with Store(args.db, read_only=True) as store:
+            gripper = gripper_from_args(args, grippers_of(stored_grippers(store), obj=args.object),
+                                        f"object {args.object!r} in store {args.db}")
     r = load_planner(args.db, args.object, robot, gripper=gripper)
     scene = default_scene(r.robot.name)
     if args.table:

@@ -14,15 +14,16 @@ from workbench.cli import warn
 from workbench.errors import GripperError, StoreError
 from workbench.robots.gripper import BUNDLED, Gripper, load_gripper
 from workbench.store import Store
-from workbench.store.objects import gripper_row
+from workbench.store.objects import gripper_row, stored_grippers
 from workbench.store.robots import robot_grippers, robot_ids, robot_row, robot_with_gripper
 
 
 def add_gripper_argument(parser: argparse.ArgumentParser) -> None:
     """--gripper NAME|FILE|own and --gripper-hand, --gripper-fingers, --gripper-tcp (for a URDF or `own`)."""
     g = parser.add_argument_group("gripper")
-    g.add_argument("--gripper", default="franka", metavar="NAME|FILE|own",
-                   help=f"the parallel-jaw gripper: {', '.join(BUNDLED)} (bundled; default franka), a spec file "
+    g.add_argument("--gripper", default=None, metavar="NAME|FILE|own",
+                   help=f"the parallel-jaw gripper: {', '.join(BUNDLED)} (bundled; default franka, or, for a command "
+                        f"reading the store, the one gripper it was built with), a spec file "
                         f"(.json/.yaml: stroke, tcp, pad, finger, palm), a gripper URDF (.urdf, its parts named by the "
                         f"options below or by NAME.gripper.yaml beside it), or own: the robot's own hand in its URDF "
                         f"(--robot URDF --tip LINK --gripper-fingers LEFT,RIGHT)")
@@ -45,8 +46,8 @@ def add_grippers_argument(parser: argparse.ArgumentParser) -> None:
 def grippers_from_args(args: argparse.Namespace) -> list[Gripper] | None:
     """The grippers of --grippers (or of a --gripper other than the default), None when neither is given."""
     if args.grippers is None:
-        return None if args.gripper == "franka" else [gripper_from_args(args)]
-    if args.gripper != "franka":
+        return None if args.gripper in (None, "franka") else [gripper_from_args(args)]
+    if args.gripper not in (None, "franka"):
         raise GripperError("give --gripper or --grippers, not both")
     names = [n.strip() for n in args.grippers.split(",") if n.strip()]
     if not names:
@@ -54,13 +55,42 @@ def grippers_from_args(args: argparse.Namespace) -> list[Gripper] | None:
     return [gripper_from_args(argparse.Namespace(**{**vars(args), "gripper": n})) for n in names]
 
 
-def gripper_from_args(args: argparse.Namespace) -> Gripper:
-    """The gripper named by `add_gripper_argument`'s options (for `own`, from the command's --robot and --tip)."""
+def gripper_from_args(args: argparse.Namespace, stored: list[dict] | None = None, what: str = "") -> Gripper:
+    """The gripper named by `add_gripper_argument`'s options (for `own`, from the command's --robot and --tip).
+
+    Without --gripper it is the Franka hand, unless `stored` (the store's grippers this command could read: dicts
+    with name and digest, `what` saying of what) holds just one other: that one when it is bundled, else a one-line
+    GripperError naming it, since a spec file or URDF is not kept in the store."""
+    if args.gripper is None:
+        return _stored_default(stored or [], what)
     fingers = _fingers(args)
     own = args.gripper == "own"
     gripper = load_gripper(args.gripper, hand_link=args.gripper_hand, finger_joints=fingers, tcp_frame=args.gripper_tcp,
                            robot_urdf=getattr(args, "robot", None) if own else None, tip=getattr(args, "tip", None))
     return _noted(gripper)
+
+
+def _stored_default(stored: list[dict], what: str) -> Gripper:
+    digests = {g["digest"]: g["name"] for g in stored}
+    default = load_gripper("franka")
+    if len(digests) != 1 or default.digest in digests:
+        return default
+    (digest, name), = digests.items()
+    for choice in BUNDLED:
+        if choice != "franka":
+            gripper = load_gripper(choice)
+            if gripper.digest == digest:
+                return _noted(gripper)
+    raise GripperError(f"{what} was built with gripper {name!r}, a spec file or URDF the store does not keep; give it "
+                       f"with --gripper FILE (and --gripper-fingers etc. as given to build)")
+
+
+def grippers_of(stored: list[dict], obj: str | None = None, robot: str | None = None) -> list[dict]:
+    """The entries of `store.objects.stored_grippers` with grasps of object `obj`, or with robot `robot` (NAME or
+    NAME-DIGEST) when given."""
+    if obj is not None:
+        return [g for g in stored if obj in g["objects"]]
+    return [g for g in stored if any(r == robot or r.startswith(f"{robot}-") for r in g["robots"])]
 
 
 def _noted(gripper: Gripper) -> Gripper:
@@ -81,7 +111,8 @@ def stored_robot_gripper(store: Store, name: str, args: argparse.Namespace) -> t
     or --gripper-hand) with --gripper-fingers, the newest row whose gripper digest it reproduces; so
     `build --gripper own` and `plan --gripper own` name the same rows, as the URDF form would."""
     if args.gripper != "own":
-        gripper = gripper_from_args(args)
+        gripper = gripper_from_args(args, grippers_of(stored_grippers(store), robot=name),
+                                    f"robot {name!r} in store {store.path}")
         return gripper, robot_with_gripper(store, name, gripper.digest)
     ids = robot_ids(store, name)
     if not ids:

@@ -14,7 +14,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from workbench.cli import warn
-from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args, grippers_of
 from workbench.errors import RobotError
 from workbench.params import add_param, cli_bound, parse_number
 from workbench.planners.wan_harada.stages import empty_stage, run_ik
@@ -22,6 +22,7 @@ from workbench.robots.collider import Scene, default_scene
 from workbench.robots.ik import SOLVERS, WORLDA, IKOptions, solver_kind
 from workbench.robots.model import ROBOTS, Robot, get_robot, pose_xyz_yaw
 from workbench.store import Store
+from workbench.store.objects import stored_grippers
 
 HANDX = 0.05
 WORLDZ = 0.10
@@ -100,12 +101,13 @@ def add_robot_arguments(p: argparse.ArgumentParser) -> None:
     add_gripper_argument(p)
 
 
-def robot_and_scene(args: argparse.Namespace) -> tuple[Robot, Scene]:
-    """The robot and table of `add_robot_arguments`' options."""
+def robot_and_scene(args: argparse.Namespace, stored: list[dict] | None = None, what: str = "") -> tuple[Robot, Scene]:
+    """The robot and table of `add_robot_arguments`' options (`stored`, `what`: the default gripper's, see
+    `gripper_from_args`)."""
     base = parse_base(args.base) if args.base else None
     mount = parse_mount(args.mount) if args.mount else None
     hand = tuple(h.strip() for h in (args.hand_links or "").split(",") if h.strip())
-    robot = get_robot(args.robot, base=base, tip_frame=args.tip, mount=mount, hand_links=hand, gripper=gripper_from_args(args))
+    robot = get_robot(args.robot, base=base, tip_frame=args.tip, mount=mount, hand_links=hand, gripper=gripper_from_args(args, stored, what))
     scene = default_scene(robot.name)
     if args.table or args.table_thickness is not None:
         t = _floats(args.table, 4, "--table (XMIN,YMIN,XMAX,YMAX)") if args.table else [*scene.table_min, *scene.table_max]
@@ -137,8 +139,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def main(args: argparse.Namespace) -> int:
 
-    robot, scene = robot_and_scene(args)
     with Store(args.db, create=False) as store:
+        robot, scene = robot_and_scene(args, grippers_of(stored_grippers(store), obj=args.object),
+                                       f"object {args.object!r} in store {args.db}")
         opts = IKOptions(solver=args.ik, self_collide=True)
         run = run_ik(store, args.object, robot, scene, args.handx, args.worldz, opts, args.workers,
                      progress=not args.no_progress, idtabletop=args.tabletop, worlda=args.worlda)

@@ -17,8 +17,9 @@ from workbench.planners.wan_harada.stages import (
     get_object,
 )
 from workbench.planners.wan_harada.tabletop import TabletopParams
-from workbench.cli.gripper import add_gripper_argument, gripper_from_args
+from workbench.cli.gripper import add_gripper_argument, gripper_from_args, grippers_of
 from workbench.store import Store
+from workbench.store.objects import stored_grippers
 from workbench.store.grasps import STAGE as GRASP_STAGE, latest_paramset_for
 
 
@@ -88,10 +89,11 @@ def register(sub: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
 
     pparams, tparams = placement_params(args)
-    gripper = gripper_from_args(args)
     t0 = time.perf_counter()
     with Store(args.db, create=False) as store:
         oid, obj = get_object(store, args.object)
+        gripper = gripper_from_args(args, grippers_of(stored_grippers(store), obj=args.object),
+                                    f"object {args.object!r} in store {args.db}")
         grasps = latest_paramset_for(store, GRASP_STAGE, oid, gripper, "grasps")
         result = ensure_placements(store, oid, obj, grasps, gripper, pparams, tparams)
         reason = empty_stage(store, args.object)

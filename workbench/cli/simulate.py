@@ -12,7 +12,7 @@ from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.errors import PlanningError
 from workbench.params import add_param, from_cli
 from workbench.simulation.replay import SimParams
-from workbench.simulation.stages import StoredSimulation, simulate_stored
+from workbench.simulation.stages import StoredSimulation, plan_gripper, simulate_stored
 from workbench.store import Store
 
 HELP = "replay a stored plan in MuJoCo physics: does the part stay in the hand and end at its goal?"
@@ -51,8 +51,8 @@ def run(args: argparse.Namespace) -> int:
     params = sim_params(args)
     if not Path(args.db).is_file():
         raise PlanningError(f"store {args.db} does not exist; make a plan with `workbench plan --db {args.db} ...` first")
-    gripper = gripper_from_args(args)
     with Store(args.db, create=False) as store:
+        gripper = gripper_from_args(args, plan_gripper(store, args.plan), f"plan {args.plan} in store {args.db}")
         out = simulate_stored(store, args.plan, params, gripper=gripper)
     print_simulation(out, args.plan, args.db)
     return 0

@@ -46,6 +46,7 @@ from workbench.grasping.pads import (
     pregrasp_touches,
     triangle_tree,
 )
+from workbench.grasping.memo import remembered
 from workbench.grasping.placements import stable_placements
 from workbench.params import Params, bounds, check_memory, param
 from workbench.robots.gripper import Gripper
@@ -351,7 +352,11 @@ def hand_hits(mesh: trimesh.Trimesh, pieces: list[np.ndarray], poses: np.ndarray
     if len(poses) == 0:
         return np.zeros(0, dtype=bool)
     shape, slots, leaf, tri, _ = triangle_tree(mesh)
-    return hull_hits(shape, slots, leaf, tri, *pack([convex_piece(p) for p in pieces]), poses, 0.0)
+    packed = pack([convex_piece(p) for p in pieces])
+    # a pose's answer follows from its placed pieces alone: poses checked before come from the part's memo
+    constants = b"".join(np.ascontiguousarray(a).tobytes() for a in (*packed, [len(a) for a in packed]))
+    return remembered(mesh, "hand_hits", constants, poses,
+                      lambda k: (hull_hits(shape, slots, leaf, tri, *packed, poses[k], 0.0),))[0]
 
 
 def approach_collides(gripper: Gripper, poses: np.ndarray, openings: np.ndarray, mesh: trimesh.Trimesh,

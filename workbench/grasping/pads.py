@@ -38,6 +38,7 @@ import numpy as np
 import trimesh
 
 from workbench.grasping._padkernel import first_touch_kernel, line_crossings, triangle_bvh
+from workbench.grasping.memo import remembered
 from workbench.robots.gripper import Gripper
 
 
@@ -168,10 +169,13 @@ def pregrasp_touches(mesh: trimesh.Trimesh, touch: Touches, gripper: Gripper, ma
     a hole at full opening may have passed over material that the pad starting at the pre-grasp opening meets: its
     touch moves there. Searched twice; a pose whose second search moves by more than `tol` is not a hit."""
     once = _from_pregrasp(mesh, touch, gripper, margin, clearance, tol)
-    twice = _from_pregrasp(mesh, once, gripper, margin, clearance, tol)
-    with np.errstate(invalid="ignore"):  # misses carry NaN widths and poses
-        same = (twice.hit & (np.abs(twice.width - once.width) <= tol)
-                & (np.linalg.norm(twice.poses[:, :3, 3] - once.poses[:, :3, 3], axis=1) <= tol))
+    live = np.flatnonzero(once.hit)  # a pose the first search missed stays a miss: only the others are searched again
+    once_live = Touches(**{f: getattr(once, f)[live] for f in Touches.__dataclass_fields__})
+    twice = _from_pregrasp(mesh, once_live, gripper, margin, clearance, tol)
+    same = np.zeros(len(once), dtype=bool)
+    with np.errstate(invalid="ignore"):  # misses carry infinite widths
+        same[live] = (twice.hit & (np.abs(twice.width - once_live.width) <= tol)
+                      & (np.linalg.norm(twice.poses[:, :3, 3] - once_live.poses[:, :3, 3], axis=1) <= tol))
     return Touches(**{**{f: getattr(once, f) for f in Touches.__dataclass_fields__}, "hit": once.hit & same})
 
 
@@ -255,10 +259,18 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: f
     rect = np.array(pad_rectangle(gripper))
     tree = _tree(mesh, tri, fn)
     basis = np.ascontiguousarray(np.transpose(fr0[:, :3, :3], (0, 2, 1)))  # rows: x0, y, z0
-    found, height, local, tri_id = first_touch_kernel(*tree, flip, np.ascontiguousarray(origins), basis,
-                                                      np.ascontiguousarray(angles), rect, float(tie),
-                                                      np.ascontiguousarray(windows), float(gripper.jaw_max),
-                                                      -1.0 if block is None else float(block))
+    origins, angles, windows = (np.ascontiguousarray(a) for a in (origins, angles, windows))
+    tie, jaw, block = float(tie), float(gripper.jaw_max), -1.0 if block is None else float(block)
+    K, A = len(origins), len(angles)
+
+    def rows(k: np.ndarray) -> tuple[np.ndarray, ...]:
+        out = first_touch_kernel(*tree, flip, origins[k], basis[k], angles, rect, tie, windows[k], jaw, block)
+        return tuple(a.reshape(len(k), A, *a.shape[1:]) for a in out)
+
+    # a jaw axis's rows follow from its origin, basis and window alone: those seen before come from the part's memo
+    constants = np.concatenate([[float(flip), tie, jaw, block], rect, angles]).tobytes()
+    found, height, local, tri_id = (a.reshape(K * A, *a.shape[2:]) for a in remembered(
+        mesh, "first_touches", constants, np.hstack([origins, basis.reshape(K, 9), windows]), rows))
     hit = found.all(axis=1)
     res = {}
     for si, side in enumerate((1, -1)):

@@ -422,121 +422,233 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                             out_q[i, col, fixed_col] = fixed[f]
 
 
+@njit(cache=True, inline="always")
+def _turn(q):
+    """q moved by a whole turn into (-pi, pi] (a sum of two angles each in [-pi, pi])."""
+    if q > np.pi:
+        return q - TWO_PI
+    if q <= -np.pi:
+        return q + TWO_PI
+    return q
+
+
+@njit(cache=True, inline="always")
+def _half(c, r):
+    """(cos, sin) of the angle d in [0, pi] with cos d = c / r (NaN when |c / r| > 1)."""
+    x = c / r
+    if abs(x) <= 1.0 + 1e-10:
+        x = min(1.0, max(-1.0, x))
+    else:
+        x = np.nan
+    return x, np.sqrt(1.0 - x * x)
+
+
+@njit(cache=True)
+def _unrot(k, v):
+    """(A, B, C) with R_k(x)^T v = A cos x + B sin x + C for every angle x (Rodrigues, split by its terms)."""
+    kv = k * (k @ v)
+    return v - kv, -np.cross(k, v), kv
+
+
+@njit(cache=True)
+def _plane(k):
+    """Two unit vectors completing the unit axis k to a right-handed frame (e1, e2 = k x e1)."""
+    e = np.cross(k, np.array([1.0, 0.0, 0.0])) if abs(k[0]) < 0.9 else np.cross(k, np.array([0.0, 1.0, 0.0]))
+    e = e / np.sqrt(e @ e)
+    return e, np.cross(k, e)
+
+
+@njit(cache=True, inline="always")
+def _angle(y, x):
+    """atan2 as subproblem 1 reports it: 0 where the projections vanish (a singular axis)."""
+    if x == 0.0 and y == 0.0:
+        return 0.0
+    return np.arctan2(y, x)
+
+
 @njit(cache=True, nogil=True)
 def parallel_rows(poses, pre, tip_inv, rm, tm, ax, n1, kk, c6v, n5, d4, lower, upper, out_q, out_valid):
     """Three-parallel-axes IK (`parallel`'s module docstring, the UR family) of poses (N, 4, 4): 8 branches
-    (4 shoulder + 2 wrist + elbow) into out_q (N, 8, 6) and out_valid (N, 8). rm, tm: placements of joints 2..6."""
+    (4 shoulder + 2 wrist + elbow) into out_q (N, 8, 6) and out_valid (N, 8). rm, tm: placements of joints 2..6.
+
+    The work is shared down the tree q1 pair -> q5 pair -> q6 -> q3 pair, and a branch stops (NaN joints) at the
+    first joint with no real solution or outside its limits. Every rotation by a joint that is not yet known is
+    folded into constants (A cos q + B sin q + C), and angles about an axis are read in a fixed basis of the plane
+    across it (one atan2 each). Steps 2 and 4 have constant coefficients, so each root pair is one phase plus and
+    minus a half-angle (one atan2 per pair); q4 is the angle of joint 4's reference direction at q2 = q3 = 0 less
+    the turn q2 and q3 give it about the parallel axes, one atan2 per wrist branch."""
     n = poses.shape[0]
     a1, a2, a3, a4, a5, a6 = ax[0], ax[1], ax[2], ax[3], ax[4], ax[5]
     r2, r3, r4, r5, r6 = rm[0], rm[1], rm[2], rm[3], rm[4]
     t2, t3, t4, t5, t6 = tm[0], tm[1], tm[2], tm[3], tm[4]
-    # constants of the four steps
-    par = a1 * (a1[0] * n1[0] + a1[1] * n1[1] + a1[2] * n1[2])
+    # 1. shoulder: n(q1) = par + perp cos q1 + cr sin q1
+    par = a1 * (a1 @ n1)
     perp = n1 - par
     cr = np.cross(a1, n1)
+    # r2^T R1(q1)^T = q1a cos q1 + q1b sin q1 + q1c
+    ka = np.array([[0.0, -a1[2], a1[1]], [a1[2], 0.0, -a1[0]], [-a1[1], a1[0], 0.0]])
+    q1c = np.ascontiguousarray(r2.T) @ np.outer(a1, a1)
+    q1a = np.ascontiguousarray(r2.T) - q1c
+    q1b = -(np.ascontiguousarray(r2.T) @ ka)
+    r2t2 = r2.T @ t2
+    # 2. wrist: n . R5(q5) c = n . z6, m5a cos q5 + m5b sin q5 = n . z6 - m5c
     c = r6 @ a6
     cpar = a5 * (a5 @ c)
     m5a, m5b, m5c = n5 @ (c - cpar), n5 @ np.cross(a5, c), n5 @ cpar
+    m5r, p5 = np.sqrt(m5a * m5a + m5b * m5b), np.arctan2(m5b, m5a)
+    c5p, s5p = m5a / m5r, m5b / m5r
+    # 3. n seen from joint 5 in the tool frame, r6^T R5(q5)^T n5, on the plane across axis 6 (basis f1, f2)
+    f1, f2 = _plane(a6)
+    va, vb, vc = _unrot(a5, n5)
+    v6 = np.empty((3, 2))
+    for k, vec in enumerate((va, vb, vc)):
+        w6 = r6.T @ vec
+        v6[k, 0], v6[k, 1] = f1 @ w6, f2 @ w6
+    # 4. joint 4's origin (g5 through joint 5 and the tool) and reference direction (gd), r6^T (R5(q5)^T g + t)
     g5 = r5.T @ t5
     gd = r5.T @ d4
+    vg = np.empty((3, 3))
+    vd = np.empty((3, 3))
+    ga, gb, gc = _unrot(a5, g5)
+    da, db, dc = _unrot(a5, gd)
+    vg[0], vg[1], vg[2] = r6.T @ ga, r6.T @ gb, r6.T @ (gc + t6)
+    vd[0], vd[1], vd[2] = r6.T @ da, r6.T @ db, r6.T @ dc
+    #    elbow: |x2|^2 / 2 = e3a cos q3 + e3b sin q3 + e3c
     g = r3.T @ t3
     t4par = a3 * (a3 @ t4)
     e3a, e3b, e3c = g @ (t4 - t4par), g @ np.cross(a3, t4), 0.5 * (t3 @ t3 + t4 @ t4) + g @ t4par
-    tt = np.empty((4, 4))
-    w = np.empty(3)
-    nw = np.empty(3)
-    n6 = np.empty(3)
-    v6 = np.empty(3)
-    tmp = np.empty(3)
-    u = np.empty(3)
-    p4 = np.empty(3)
-    x2 = np.empty(3)
-    y = np.empty(3)
-    s1r = np.empty(4)
-    s5r = np.empty(4)
-    s3r = np.empty(4)
-    qb = np.empty(6)
+    e3r, p3 = np.sqrt(e3a * e3a + e3b * e3b), np.arctan2(e3b, e3a)
+    c3p, s3p = e3a / e3r, e3b / e3r
+    #    joint 4's origin from joint 2 at q2 = 0, r3 R3(q3) t4 + t3, on the plane across axis 2 (basis e1, e2)
+    e1, e2 = _plane(a2)
+    u3 = np.empty((3, 2))
+    for k, w3 in enumerate((r3 @ (t4 - t4par), r3 @ np.cross(a3, t4), r3 @ t4par + t3)):
+        u3[k, 0], u3[k, 1] = e1 @ w3, e2 @ w3
+    #    joint 4's reference direction d4 and a4 x d4 seen in joint 2's frame at q3 = 0
+    r34 = r3 @ r4
+    ex, ey = r34 @ d4, r34 @ np.cross(a4, d4)
+    sg = 1.0 if a3 @ (r3.T @ a2) > 0 else -1.0   # axis 2 seen from joint 3: +- axis 3
+    tau = 1.0 if a4 @ (r4.T @ a3) > 0 else -1.0  # axis 3 seen from joint 4: +- axis 4
+    tt = np.empty((3, 4))
     pt = np.empty((4, 4))
+    m1 = np.empty((3, 3))
+    nn = np.empty((3, 3))
+    w = np.empty(3)
+    trf1 = np.empty(3)
+    trf2 = np.empty(3)
+    z6 = np.empty(3)
+    b1 = np.empty(3)
+    nex = np.empty(3)
+    ney = np.empty(3)
+    ug = np.empty(3)
+    ud = np.empty(3)
+    tmp = np.empty(3)
+    x2 = np.empty(3)
     for i in range(n):
+        for col in range(8):
+            out_valid[i, col] = False
+            for j in range(6):
+                out_q[i, col, j] = np.nan
         for k in range(4):  # joint-6 frame in joint 1's parent frame: pre (P tip^-1)
             for b in range(4):
                 acc2 = 0.0
                 for l in range(4):
                     acc2 += poses[i, k, l] * tip_inv[l, b]
                 pt[k, b] = acc2
-        for a in range(4):
+        for a in range(3):
             for b in range(4):
                 acc = 0.0
                 for k in range(4):
                     acc += pre[a, k] * pt[k, b]
                 tt[a, b] = acc
-        tr = tt[:3, :3]
+        tr = tt[:, :3]
         _mul(tr, c6v, w)
         for a in range(3):
             w[a] += tt[a, 3]
-        # 1. shoulder: n(q1) . W = K
-        _acs(_dot(perp, w), _dot(cr, w), kk - _dot(par, w), s1r)
+        pa, pb = _dot(perp, w), _dot(cr, w)
+        r1 = np.sqrt(pa * pa + pb * pb)
+        x1, sd = _half(kk - _dot(par, w), r1)
+        if np.isnan(sd):
+            continue
+        ca, sa = pa / r1, pb / r1
+        _mul(tr, f1, trf1)
+        _mul(tr, f2, trf2)
+        _mul(tr, a6, z6)
         for i1 in range(2):
-            c1, s1 = s1r[2 * i1], s1r[2 * i1 + 1]
-            qb[0] = _limit(np.arctan2(s1, c1), lower[0], upper[0])
+            sd1 = sd if i1 == 0 else -sd
+            c1, s1 = ca * x1 - sa * sd1, sa * x1 + ca * sd1
+            q1 = _limit(np.arctan2(s1, c1), lower[0], upper[0])
+            if np.isnan(q1):
+                continue
+            nw0, nw1, nw2 = par[0] + perp[0] * c1 + cr[0] * s1, par[1] + perp[1] * c1 + cr[1] * s1, \
+                par[2] + perp[2] * c1 + cr[2] * s1
+            x5, sd5 = _half(nw0 * z6[0] + nw1 * z6[1] + nw2 * z6[2] - m5c, m5r)
+            if np.isnan(sd5):
+                continue
+            d5 = np.arctan2(sd5, x5)
+            n6x = nw0 * trf1[0] + nw1 * trf1[1] + nw2 * trf1[2]  # n seen from the tool, on the plane across axis 6
+            n6y = nw0 * trf2[0] + nw1 * trf2[1] + nw2 * trf2[2]
+            for a in range(3):  # r2^T R1(q1)^T, then through the tool's rotation
+                for b in range(3):
+                    m1[a, b] = q1a[a, b] * c1 + q1b[a, b] * s1 + q1c[a, b]
             for a in range(3):
-                nw[a] = par[a] + perp[a] * c1 + cr[a] * s1
-            # 2. wrist: n . R5(q5) c = n . z6
-            sz = nw[0] * (tr[0, 0] * a6[0] + tr[0, 1] * a6[1] + tr[0, 2] * a6[2]) \
-                + nw[1] * (tr[1, 0] * a6[0] + tr[1, 1] * a6[1] + tr[1, 2] * a6[2]) \
-                + nw[2] * (tr[2, 0] * a6[0] + tr[2, 1] * a6[1] + tr[2, 2] * a6[2])
-            _acs(m5a, m5b, sz - m5c, s5r)
-            _mul_t(tr, nw, n6)
+                for b in range(3):
+                    nn[a, b] = m1[a, 0] * tr[0, b] + m1[a, 1] * tr[1, b] + m1[a, 2] * tr[2, b]
+                b1[a] = m1[a, 0] * tt[0, 3] + m1[a, 1] * tt[1, 3] + m1[a, 2] * tt[2, 3] - r2t2[a]
+            _mul_t(nn, ex, nex)
+            _mul_t(nn, ey, ney)
             for i5 in range(2):
-                c5, s5 = s5r[2 * i5], s5r[2 * i5 + 1]
-                qb[4] = _limit(np.arctan2(s5, c5), lower[4], upper[4])
-                qb[5] = np.nan
+                sgn5 = 1.0 if i5 == 0 else -1.0
+                c5, s5 = c5p * x5 - s5p * sgn5 * sd5, s5p * x5 + c5p * sgn5 * sd5
+                q5 = _limit(_turn(p5 + sgn5 * d5), lower[4], upper[4])
+                if np.isnan(q5):
+                    continue
                 # 3. q6 turns n seen from the tool onto n seen from joint 5
-                _rot(a5, c5, s5, n5, True, tmp)
-                _mul_t(r6, tmp, v6)
-                c6, s6, q6 = _sub1(a6, n6, v6)
-                qb[5] = _limit(q6, lower[5], upper[5])
-                # 4. joint 4's origin T_t - T_R G_R^T G_t
-                _rot(a5, c5, s5, g5, True, tmp)
+                vx = v6[0, 0] * c5 + v6[1, 0] * s5 + v6[2, 0]
+                vy = v6[0, 1] * c5 + v6[1, 1] * s5 + v6[2, 1]
+                yy, xx = n6x * vy - n6y * vx, n6x * vx + n6y * vy
+                hh = np.sqrt(xx * xx + yy * yy)
+                if not hh > 0.0:  # zero (a singular axis: any angle, 0 chosen) or NaN (no solution upstream)
+                    c6, s6, q6 = 1.0, yy, np.arctan2(yy, 1.0)
+                else:
+                    c6, s6, q6 = xx / hh, yy / hh, np.arctan2(yy, xx)
+                q6 = _limit(q6, lower[5], upper[5])
+                if np.isnan(q6):
+                    continue
+                # 4. joint 4's origin x2 in joint 2's frame, and its reference direction's angle at q2 = q3 = 0
                 for a in range(3):
-                    tmp[a] += t6[a]
-                _mul_t(r6, tmp, u)
-                _rot(a6, c6, s6, u, True, tmp)
-                _mul(tr, tmp, u)
+                    tmp[a] = vg[0, a] * c5 + vg[1, a] * s5 + vg[2, a]
+                _rot(a6, c6, s6, tmp, True, ug)
                 for a in range(3):
-                    p4[a] = tt[a, 3] - u[a]
-                _rot(a1, c1, s1, p4, True, tmp)
+                    tmp[a] = vd[0, a] * c5 + vd[1, a] * s5 + vd[2, a]
+                _rot(a6, c6, s6, tmp, True, ud)
                 for a in range(3):
-                    tmp[a] -= t2[a]
-                _mul_t(r2, tmp, x2)
-                _acs(e3a, e3b, 0.5 * (x2[0] * x2[0] + x2[1] * x2[1] + x2[2] * x2[2]) - e3c, s3r)
-                # R4's reference direction through the known frames (shared by both elbows up to q2, q3)
-                _rot(a5, c5, s5, gd, True, tmp)
-                _mul_t(r6, tmp, u)
-                _rot(a6, c6, s6, u, True, tmp)
-                _mul(tr, tmp, u)
-                _rot(a1, c1, s1, u, True, tmp)
-                _mul_t(r2, tmp, y)
+                    x2[a] = b1[a] - (nn[a, 0] * ug[0] + nn[a, 1] * ug[1] + nn[a, 2] * ug[2])
+                x3, sd3 = _half(0.5 * (x2[0] * x2[0] + x2[1] * x2[1] + x2[2] * x2[2]) - e3c, e3r)
+                if np.isnan(sd3):
+                    continue
+                d3 = np.arctan2(sd3, x3)
+                q40 = _angle(_dot(ney, ud), _dot(nex, ud))
+                xe1, xe2 = _dot(e1, x2), _dot(e2, x2)
                 for i3 in range(2):
-                    c3, s3 = s3r[2 * i3], s3r[2 * i3 + 1]
-                    _rot(a3, c3, s3, t4, False, tmp)
-                    _mul(r3, tmp, u)
-                    for a in range(3):
-                        u[a] += t3[a]
-                    c2, s2, q2 = _sub1(a2, u, x2)
-                    _rot(a2, c2, s2, y, True, tmp)
-                    _mul_t(r3, tmp, u)
-                    _rot(a3, c3, s3, u, True, tmp)
-                    _mul_t(r4, tmp, u)
-                    qb[1] = _limit(q2, lower[1], upper[1])
-                    qb[2] = _limit(np.arctan2(s3, c3), lower[2], upper[2])
-                    qb[3] = _limit(_sub1(a4, d4, u)[2], lower[3], upper[3])
+                    sgn3 = 1.0 if i3 == 0 else -1.0
+                    c3, s3 = c3p * x3 - s3p * sgn3 * sd3, s3p * x3 + c3p * sgn3 * sd3
+                    q3 = _limit(_turn(p3 + sgn3 * d3), lower[2], upper[2])
+                    if np.isnan(q3):
+                        continue
+                    ux = u3[0, 0] * c3 + u3[1, 0] * s3 + u3[2, 0]
+                    uy = u3[0, 1] * c3 + u3[1, 1] * s3 + u3[2, 1]
+                    q2 = _limit(_angle(ux * xe2 - uy * xe1, ux * xe1 + uy * xe2), lower[1], upper[1])
+                    if np.isnan(q2):
+                        continue
+                    q4 = q40 - tau * (q3 + sg * q2)
+                    q4 = _limit(q4 - TWO_PI * np.rint(q4 / TWO_PI), lower[3], upper[3])
+                    if np.isnan(q4):
+                        continue
                     col = 4 * i1 + 2 * i5 + i3
-                    ok = True
-                    for j in range(6):
-                        out_q[i, col, j] = qb[j]
-                        ok = ok and not np.isnan(qb[j])
-                    out_valid[i, col] = ok
+                    out_q[i, col, 0], out_q[i, col, 1], out_q[i, col, 2] = q1, q2, q3
+                    out_q[i, col, 3], out_q[i, col, 4], out_q[i, col, 5] = q4, q5, q6
+                    out_valid[i, col] = True
 
 
 @njit(cache=True, nogil=True)

@@ -50,6 +50,7 @@ class ParallelIK:
     d4: np.ndarray           # a unit vector orthogonal to axis 4 (step 4)
     lower: np.ndarray
     upper: np.ndarray
+    kernel: tuple = ()       # the constants above as the compiled kernel takes them (contiguous, built once)
 
 
 def _parallel(u: np.ndarray, v: np.ndarray) -> bool:
@@ -93,10 +94,15 @@ def parallel_ik(robot, limits: bool = True) -> ParallelIK:
     n4 = pl[3][:3, :3].T @ pl[2][:3, :3].T @ ax[1]
     d = np.cross(ax[3], [1.0, 0, 0]) if abs(ax[3][0]) < 0.9 else np.cross(ax[3], [0, 1.0, 0])
     big = np.full(6, np.inf)
-    return ParallelIK(pre=inv(pl[0]) @ inv(robot.base), tip_inv=inv(robot.tip_in_joint),
-                      m=tuple((pl[k][:3, :3].copy(), pl[k][:3, 3].copy()) for k in range(1, 6)), axes=ax.copy(),
-                      n1=n1, k=float(n1 @ w1), c6=c6, n5=pl[4][:3, :3].T @ n4, d4=d / np.linalg.norm(d),
-                      lower=robot.lower.copy() if limits else -big, upper=robot.upper.copy() if limits else big)
+    lower, upper = (robot.lower.copy(), robot.upper.copy()) if limits else (-big, big)
+    m = tuple((pl[k][:3, :3].copy(), pl[k][:3, 3].copy()) for k in range(1, 6))
+    pre, tip_inv, n5, d4 = inv(pl[0]) @ inv(robot.base), inv(robot.tip_in_joint), pl[4][:3, :3].T @ n4, d / np.linalg.norm(d)
+    k = float(n1 @ w1)
+    f64 = np.ascontiguousarray
+    kernel = (f64(pre), f64(tip_inv), f64(np.stack([r for r, _ in m])), f64(np.stack([t for _, t in m])), f64(ax),
+              f64(n1), k, f64(c6), f64(n5), f64(d4), f64(lower), f64(upper))
+    return ParallelIK(pre=pre, tip_inv=tip_inv, m=m, axes=ax.copy(), n1=n1, k=k, c6=c6, n5=n5, d4=d4, lower=lower,
+                      upper=upper, kernel=kernel)
 
 
 def solve(ik: ParallelIK, poses: np.ndarray, block: int = BLOCK) -> tuple[np.ndarray, np.ndarray]:
@@ -108,10 +114,6 @@ def solve(ik: ParallelIK, poses: np.ndarray, block: int = BLOCK) -> tuple[np.nda
     n = len(poses)
     q = np.empty((n, 8, 6))
     valid = np.empty((n, 8), dtype=bool)
-    f64 = np.ascontiguousarray
-    rm, tm = f64(np.stack([r for r, _ in ik.m])), f64(np.stack([t for _, t in ik.m]))
     for s in range(0, n, block):
-        parallel_rows(poses[s:s + block], f64(ik.pre), f64(ik.tip_inv), rm, tm, f64(ik.axes), f64(ik.n1), ik.k,
-                      f64(ik.c6), f64(ik.n5), f64(ik.d4), f64(ik.lower), f64(ik.upper), q[s:s + block],
-                      valid[s:s + block])
+        parallel_rows(poses[s:s + block], *ik.kernel, q[s:s + block], valid[s:s + block])
     return q, valid

@@ -19,6 +19,7 @@ from workbench.simulation.decomposition import convex_parts
 from workbench.simulation.replay import SimParams, SimResult, resolve, simulate
 from workbench.store import Store
 from workbench.store import simulation as sql
+from workbench.store.objects import gripper_row
 from workbench.store.robots import robot_row, scene_row
 
 
@@ -35,6 +36,12 @@ class StoredSimulation:
     final_error: float
     final_angle: float
     result: SimResult | None
+
+
+def plan_gripper(store: Store, idplan: int) -> list[dict]:
+    """The gripper stored plan `idplan`'s robot was built with (a list of one dict: name, digest; empty when none)."""
+    row = robot_row(store, sql.plan_inputs(store, idplan)["idrobot"])
+    return [] if row["idgripper"] is None else [gripper_row(store, row["idgripper"])]
 
 
 def simulate_stored(store: Store, idplan: int, params: SimParams = SimParams(),

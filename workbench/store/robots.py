@@ -140,8 +140,11 @@ def insert_ik(store: Store, idrobot: int, idscene: int, idikret: int, grip_ids: 
         n = len(grip_ids)
         if n == 0:
             return 0
+        # ids in the given order; rows appended in key order, which DuckDB's key and index checks take ~2x faster
+        ids, by_key = store.new_ids("ik", n), np.argsort(grip_ids, kind="stable")
+        ids, grip_ids, feasible, joints = ids[by_key], grip_ids[by_key], feasible[by_key], joints[by_key]
         store.insert("ik", {
-            "idik": store.new_ids("ik", n), "idrobot": np.full(n, idrobot, dtype=np.int64),
+            "idik": ids, "idrobot": np.full(n, idrobot, dtype=np.int64),
             "idtabletopgrips": grip_ids, "idikret": np.full(n, idikret, dtype=np.int64),
             "idscene": np.full(n, idscene, dtype=np.int64),
             **{c: feasible[:, i] for i, c in enumerate(FEASIBILITY)},

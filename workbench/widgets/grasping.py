@@ -11,6 +11,7 @@ import numpy as np
 
 from workbench.geometry.objects import ObjectModel
 from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
+from workbench.grasping.memo import remember
 from workbench.robots.gripper import BUNDLED, Gripper, load_gripper
 from workbench.viewer import scenes as viz
 from workbench.viewer.live import (
@@ -40,8 +41,8 @@ def counts_table(counts: dict, title: str = "") -> str:
 class GraspExplorer(BesideView):
     """Tune segmentation, sampling, filters and rotations; see facets, samples, pairs and hands (Section III).
 
-    A parameter slider replans (results cached by parameter digest: going back to a value is instant) and sends the
-    scene's geometry once; the layer boxes, the highlighted facet, the number of hands and the selected grasp only
+    A parameter slider replans (results cached by parameter digest: going back to a value is instant; the part's
+    first touches and hand checks are remembered row by row, `grasping.memo`) and sends the scene's geometry once; the layer boxes, the highlighted facet, the number of hands and the selected grasp only
     show, hide and move what was sent."""
 
     LAYERS = (("facets", True), ("all samples", False), ("after neighbour filter", False),
@@ -50,6 +51,7 @@ class GraspExplorer(BesideView):
     def __init__(self, obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspParams(), vis=None,
                  max_hands: int = 40):
         self.obj, self.gripper, self.max_hands = obj, gripper, max_hands
+        remember(obj.mesh)  # a new threshold recomputes only the jaw axes of facets whose normal changed
         self.base = params  # parameters without a widget (merge_angle, parallel_angle, com_max, seed, ...) stay as given
         self.vis = vis if vis is not None else viz.new_scene()
         self.plan: GraspPlan | None = None
