@@ -166,43 +166,66 @@ def _reach(shape, node, o, u, slack):
 
 
 @njit(cache=True)
-def _key(shape, node, o, y, ux, uz, slack, si, wlo, whi, a_max, a_min, tie, cx, cz, hx, hz):
+def _height_key(shape, node, o, y, slack, si, wlo, whi, a_max, a_min, tie):
     """How high (the left pad, si 0) or low (the right, as minus the height) a node's points can be first touched;
-    -inf for an empty node, one outside the pad's footprint or window, or one wholly between the axis's crossings
-    (touched by neither pad)."""
+    -inf for an empty node, one outside the pads' window, or one wholly between the axis's crossings (touched by
+    neither pad)."""
     if shape[node, 0] > shape[node, 3]:
         return -np.inf
     ymn, ymx = _reach(shape, node, o, y, slack)
     if ymx < wlo or ymn > whi or (ymx < a_max - tie and ymn > a_min + tie):
         return -np.inf
-    xmn, xmx = _project(shape, node, o, ux, slack)
-    if xmn - cx > hx or xmx - cx < -hx:
-        return -np.inf
-    zmn, zmx = _project(shape, node, o, uz, slack)
-    if zmn - cz > hz or zmx - cz < -hz:
-        return -np.inf
     return ymx if si == 0 else -ymn
 
 
 @njit(cache=True)
-def _heap_push(key, node, n, k, v):
-    """Push (k, v) on the max-heap of size n; returns its new size."""
+def _footprints(shape, node, o, x0, z0, cs, ua, wa, mask, slack, cx, cz, hx, hz):
+    """The rotations of `mask` (bit j: rotation (cs[j, 0], cs[j, 1]), whose pad axes' absolute components are ua[j]
+    and wa[j]) whose pad footprint meets the node's box widened by `slack`."""
+    mx0, mz0 = 0.0, 0.0
+    h0, h1, h2 = 0.5 * (shape[node, 3] - shape[node, 0]), 0.5 * (shape[node, 4] - shape[node, 1]), \
+        0.5 * (shape[node, 5] - shape[node, 2])
+    for a in range(3):
+        d = 0.5 * (shape[node, a] + shape[node, 3 + a]) - o[a]
+        mx0 += d * x0[a]
+        mz0 += d * z0[a]
+    out = np.int64(0)
+    m = mask
+    j = 0
+    while m:
+        if m & 1:
+            c, s = cs[j, 0], cs[j, 1]
+            mid = c * mx0 - s * mz0 - cx
+            rad = h0 * ua[j, 0] + h1 * ua[j, 1] + h2 * ua[j, 2] + slack
+            if mid - rad <= hx and mid + rad >= -hx:
+                mid = c * mz0 + s * mx0 - cz
+                rad = h0 * wa[j, 0] + h1 * wa[j, 1] + h2 * wa[j, 2] + slack
+                if mid - rad <= hz and mid + rad >= -hz:
+                    out |= np.int64(1) << j
+        m >>= 1
+        j += 1
+    return out
+
+
+@njit(cache=True)
+def _heap_push(key, node, mask, n, k, v, m):
+    """Push (k, v, m) on the max-heap (by k) of size n; returns its new size."""
     i = n
     while i > 0:
         parent = (i - 1) // 2
         if key[parent] >= k:
             break
-        key[i], node[i] = key[parent], node[parent]
+        key[i], node[i], mask[i] = key[parent], node[parent], mask[parent]
         i = parent
-    key[i], node[i] = k, v
+    key[i], node[i], mask[i] = k, v, m
     return n + 1
 
 
 @njit(cache=True)
-def _heap_pop(key, node, n):
+def _heap_pop(key, node, mask, n):
     """Remove the top of the max-heap of size n; returns its new size."""
     n -= 1
-    k, v = key[n], node[n]
+    k, v, m = key[n], node[n], mask[n]
     i = 0
     while True:
         c = 2 * i + 1
@@ -212,9 +235,9 @@ def _heap_pop(key, node, n):
             c += 1
         if key[c] <= k:
             break
-        key[i], node[i] = key[c], node[c]
+        key[i], node[i], mask[i] = key[c], node[c], mask[c]
         i = c
-    key[i], node[i] = k, v
+    key[i], node[i], mask[i] = k, v, m
     return n
 
 
@@ -252,16 +275,45 @@ def _local(tri, f, o, x0, y, z0, ca, cb, ly):
 
 
 @njit(cache=True)
+def _pad_touch(cb, ca, ly, c, s, side, start, block, wlo, whi, tie, rect, lx3, lz3, px, py, pz, valid):
+    """One triangle (coordinates `cb`, `ca` along the axis frame's x0, z0; heights `ly`) for one pad at the rotation
+    (cos, sin) `c, s`: (-1, ...) when it puts the pad's start inside the part (`block`), (0, ...) when it is not
+    touched, else (1, height score, candidate index into px/py/pz, squared distance from the axis)."""
+    cx, cz, hx, hz = rect[0], rect[1], rect[2], rect[3]
+    xmn3, xmx3, zmn3, zmx3 = np.inf, -np.inf, np.inf, -np.inf
+    for v in range(3):
+        lz3[v] = c * ca[v] + s * cb[v] - cz
+        lx3[v] = c * cb[v] - s * ca[v] - cx
+        xmn3, xmx3 = min(xmn3, lx3[v]), max(xmx3, lx3[v])
+        zmn3, zmx3 = min(zmn3, lz3[v]), max(zmx3, lz3[v])
+    if xmn3 > hx or xmx3 < -hx or zmn3 > hz or zmx3 < -hz:
+        return 0, 0.0, -1, 0.0
+    # a pad starting inside a hole or cavity (a finite window) must start clear of the part: a triangle crossing its
+    # starting plane inside its footprint puts the pad into the part there
+    if block >= 0 and np.isfinite(start) and _cuts_start(lx3, ly, lz3, start + side * block, hx, hz):
+        return -1, 0.0, -1, 0.0
+    _candidates(lx3, ly, lz3, hx, hz, -cx, -cz, px, py, pz, valid)
+    tp, b, d2 = _pick(px, py, pz, valid, side, wlo, whi, tie, cx, cz)
+    if b < 0:
+        return 0, 0.0, -1, 0.0
+    return 1, tp, b, d2
+
+
+@njit(cache=True)
 def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max,
                        block):
     """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y,
     local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
     triangles and their unit normals by leaf slot. `block` (m, negative: off): a pad whose finite start's plane,
-    moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing."""
+    moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing.
+
+    The rotations about one axis share one best-first search per pad: a node is opened for the rotations whose
+    footprint meets it and whose best touch so far it may reach within `tie` of, highest first (lowest for the right
+    pad), so the nodes near the axis that every rotation needs are bounded and opened once."""
     cx, cz, hx, hz = rect[0], rect[1], rect[2], rect[3]
     radius = np.hypot(abs(cx) + hx, abs(cz) + hz)
     rad2 = radius * radius
-    K, A, T = origins.shape[0], angles.shape[0], slots.shape[0]
+    K, A = origins.shape[0], angles.shape[0]
     P = shape.shape[0] // 2  # leaves are the nodes P .. 2P-1 of the implicit tree, the root is node 1
     found = np.zeros((K * A, 2), dtype=np.bool_)
     height = np.zeros((K * A, 2))
@@ -277,17 +329,25 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
     stack = np.empty(_STACK, dtype=np.int64)
     hkey = np.empty(P + 1)  # the open nodes of a best-first search: fewer than the leaves
     hnode = np.empty(P + 1, dtype=np.int64)
-    # the rows of one pose and pad: triangle, top, local point, d2, align
-    rt = np.empty(T, dtype=np.int64)
-    rs = np.empty(T)
-    rp = np.empty((T, 3))
-    rd = np.empty(T)
-    ra = np.empty(T)
+    hmask = np.empty(P + 1, dtype=np.int64)
+    # the touches of one axis and pad: rotation, triangle, score, local point, d2, align; grown as needed
+    cap = 1024
+    rj = np.empty(cap, dtype=np.int64)
+    rt = np.empty(cap, dtype=np.int64)
+    rs = np.empty(cap)
+    rp = np.empty((cap, 3))
+    rd = np.empty(cap)
+    ra = np.empty(cap)
     ca, cb, ly = np.empty(3), np.empty(3), np.empty(3)
     lx3, lz3 = np.empty(3), np.empty(3)
     px, py, pz = np.empty(20), np.empty(20), np.empty(20)
     valid = np.empty(20, dtype=np.bool_)
-    ux, uz = np.empty(3), np.empty(3)
+    # per rotation of a group of at most 64 (one bit each): cos, sin; |ux|, |uz| by world axis; best score; blocked
+    cs, ua, wa = np.empty((64, 2)), np.empty((64, 3)), np.empty((64, 3))
+    g = np.empty(64)
+    blocked = np.empty(64, dtype=np.bool_)
+    bkey, balign, btri = np.empty(64), np.empty(64), np.empty(64, dtype=np.int64)
+    best = np.empty(64, dtype=np.int64)
     for k in range(K):
         o = origins[k]
         x0, y, z0 = frames0[k, 0], frames0[k, 1], frames0[k, 2]
@@ -329,31 +389,53 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
         # an axis whose own crossings are farther apart than the jaw opens cannot be grasped at any rotation
         if np.isfinite(a_max - a_min) and a_max - a_min > jaw_max + tie:
             continue
-        for j in range(A):
-            c, s = np.cos(angles[j]), np.sin(angles[j])
-            for a in range(3):
-                ux[a] = c * x0[a] - s * z0[a]
-                uz[a] = c * z0[a] + s * x0[a]
-            hrow = k * A + j
+        for j0 in range(0, A, 64):
+            n_rot = min(A - j0, 64)
+            full = np.int64(-1) if n_rot == 64 else (np.int64(1) << n_rot) - 1
+            for j in range(n_rot):
+                c, s = np.cos(angles[j0 + j]), np.sin(angles[j0 + j])
+                cs[j, 0], cs[j, 1] = c, s
+                for a in range(3):
+                    ua[j, a] = abs(c * x0[a] - s * z0[a])
+                    wa[j, a] = abs(c * z0[a] + s * x0[a])
             for si in range(2):
                 side = 1 if si == 0 else -1
+                start = whi if si == 0 else wlo
+                g[:n_rot] = -np.inf
+                blocked[:n_rot] = False
                 nr = 0
-                g = -np.inf
-                blocked = False
-                # best first: the node that may reach highest (lowest for the right pad) is opened next, and the
-                # search ends once no open node reaches within `tie` of the best touch
-                kk = _key(shape, 1, o, y, ux, uz, slack, si, wlo, whi, a_max, a_min, tie, cx, cz, hx, hz)
-                hn = _heap_push(hkey, hnode, 0, kk, 1) if kk > -np.inf else 0
+                hn = 0
+                kk = _height_key(shape, 1, o, y, slack, si, wlo, whi, a_max, a_min, tie)
+                if kk > -np.inf:
+                    m = _footprints(shape, 1, o, x0, z0, cs, ua, wa, full, slack, cx, cz, hx, hz)
+                    if m:
+                        hn = _heap_push(hkey, hnode, hmask, 0, kk, 1, m)
                 while hn > 0:
-                    if hkey[0] < g - tie:
+                    # the rotations the top node may still serve; none: every search is over
+                    kt = hkey[0]
+                    live = np.int64(0)
+                    for j in range(n_rot):
+                        if not blocked[j] and kt >= g[j] - tie:
+                            live |= np.int64(1) << j
+                    if live == 0:
                         break
-                    node = hnode[0]
-                    hn = _heap_pop(hkey, hnode, hn)
+                    node, m = hnode[0], hmask[0] & live
+                    hn = _heap_pop(hkey, hnode, hmask, hn)
+                    if m == 0:
+                        continue
                     if node < P:
                         for child in (2 * node, 2 * node + 1):
-                            kk = _key(shape, child, o, y, ux, uz, slack, si, wlo, whi, a_max, a_min, tie, cx, cz, hx, hz)
-                            if kk > -np.inf and kk >= g - tie:
-                                hn = _heap_push(hkey, hnode, hn, kk, child)
+                            kk = _height_key(shape, child, o, y, slack, si, wlo, whi, a_max, a_min, tie)
+                            if kk == -np.inf:
+                                continue
+                            cm = np.int64(0)
+                            for j in range(n_rot):
+                                if (m >> j) & 1 and kk >= g[j] - tie:
+                                    cm |= np.int64(1) << j
+                            if cm:
+                                cm = _footprints(shape, child, o, x0, z0, cs, ua, wa, cm, slack, cx, cz, hx, hz)
+                            if cm:
+                                hn = _heap_push(hkey, hnode, hmask, hn, kk, child, cm)
                         continue
                     for qs in range((node - P) * leaf, (node - P + 1) * leaf):
                         f = slots[qs]
@@ -364,51 +446,50 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                             continue
                         if not (mx >= a_max - tie or mn <= a_min + tie):
                             continue
-                        if (mx if si == 0 else -mn) < g - tie:
-                            continue
-                        xmn3, xmx3, zmn3, zmx3 = np.inf, -np.inf, np.inf, -np.inf
-                        for v in range(3):
-                            lz3[v] = c * ca[v] + s * cb[v] - cz
-                            lx3[v] = c * cb[v] - s * ca[v] - cx
-                            xmn3, xmx3 = min(xmn3, lx3[v]), max(xmx3, lx3[v])
-                            zmn3, zmx3 = min(zmn3, lz3[v]), max(zmx3, lz3[v])
-                        if xmn3 > hx or xmx3 < -hx or zmn3 > hz or zmx3 < -hz:
-                            continue
-                        # a pad starting inside a hole or cavity (a finite window) must start clear of the part: a
-                        # triangle crossing its starting plane inside its footprint puts the pad into the part there
-                        start = whi if si == 0 else wlo
-                        if block >= 0 and np.isfinite(start) and _cuts_start(lx3, ly, lz3, start + side * block, hx, hz):
-                            blocked = True
-                            break
-                        _candidates(lx3, ly, lz3, hx, hz, -cx, -cz, px, py, pz, valid)
-                        tp, b, d2 = _pick(px, py, pz, valid, side, wlo, whi, tie, cx, cz)
-                        if b < 0:
-                            continue
+                        sc = mx if si == 0 else -mn
                         ny = fn[qs, 0] * y[0] + fn[qs, 1] * y[1] + fn[qs, 2] * y[2]
-                        rt[nr] = f
-                        rs[nr] = tp
-                        rp[nr, 0], rp[nr, 1], rp[nr, 2] = px[b] + cx, py[b], pz[b] + cz
-                        rd[nr] = d2
-                        ra[nr] = abs(ny) if flip else side * ny
-                        nr += 1
-                        g = max(g, tp)
-                    if blocked:
-                        break
-                if nr == 0 or blocked:
-                    continue
-                # among the touches within `tie` of the best: nearest the axis, then best facing, then lowest index
-                best = -1
-                bkey, balign, btri = np.inf, -np.inf, -1
+                        for j in range(n_rot):
+                            if not (m >> j) & 1 or blocked[j] or sc < g[j] - tie:
+                                continue
+                            st, tp, b, d2 = _pad_touch(cb, ca, ly, cs[j, 0], cs[j, 1], side, start, block, wlo, whi,
+                                                       tie, rect, lx3, lz3, px, py, pz, valid)
+                            if st < 0:
+                                blocked[j] = True
+                                continue
+                            if st == 0:
+                                continue
+                            if nr == cap:
+                                cap *= 2
+                                rj2, rt2 = np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64)
+                                rs2, rp2, rd2, ra2 = np.empty(cap), np.empty((cap, 3)), np.empty(cap), np.empty(cap)
+                                rj2[:nr], rt2[:nr], rs2[:nr], rp2[:nr], rd2[:nr], ra2[:nr] = rj, rt, rs, rp, rd, ra
+                                rj, rt, rs, rp, rd, ra = rj2, rt2, rs2, rp2, rd2, ra2
+                            rj[nr], rt[nr], rs[nr] = j, f, tp
+                            rp[nr, 0], rp[nr, 1], rp[nr, 2] = px[b] + cx, py[b], pz[b] + cz
+                            rd[nr] = d2
+                            ra[nr] = abs(ny) if flip else side * ny
+                            nr += 1
+                            g[j] = max(g[j], tp)
+                # per rotation, among the touches within `tie` of its best: nearest the axis, then best facing, then
+                # lowest index
+                bkey[:n_rot], balign[:n_rot], btri[:n_rot], best[:n_rot] = np.inf, -np.inf, -1, -1
                 for r in range(nr):
-                    if rs[r] < g - tie:
+                    j = rj[r]
+                    if blocked[j] or rs[r] < g[j] - tie:
                         continue
                     key = np.rint(rd[r] / tie ** 2)
-                    if key < bkey or (key == bkey and (ra[r] > balign or (ra[r] == balign and rt[r] < btri))):
-                        bkey, balign, btri, best = key, ra[r], rt[r], r
-                found[hrow, si] = True
-                height[hrow, si] = side * rs[best]
-                local[hrow, si] = rp[best]
-                tri_id[hrow, si] = rt[best]
+                    if key < bkey[j] or (key == bkey[j] and (ra[r] > balign[j] or (ra[r] == balign[j]
+                                                                                   and rt[r] < btri[j]))):
+                        bkey[j], balign[j], btri[j], best[j] = key, ra[r], rt[r], r
+                for j in range(n_rot):
+                    r = best[j]
+                    if r < 0:
+                        continue
+                    hrow = k * A + j0 + j
+                    found[hrow, si] = True
+                    height[hrow, si] = side * rs[r]
+                    local[hrow, si] = rp[r]
+                    tri_id[hrow, si] = rt[r]
     return found, height, local, tri_id
 
 
