@@ -12,7 +12,7 @@ import yaml
 
 from workbench.cli.main import main
 from workbench.errors import GripperError
-from workbench.resources import erd_robots
+from workbench.resources import erd_robots, erd_share
 from workbench.robots.gripper import BUNDLED, franka_hand, gripper_from_urdf, load_gripper
 
 ROBOTIQ = BUNDLED["robotiq-2f85"]
@@ -207,3 +207,23 @@ def test_another_gripper_on_a_builtin_robot_sits_where_the_franka_hand_does(name
     hand_a = a.tcp_pose(q) @ np.linalg.inv(franka_hand().tcp_in_hand)
     hand_b = b.tcp_pose(q) @ np.linalg.inv(robotiq.tcp_in_hand)
     assert np.allclose(hand_a, hand_b, atol=1e-9)
+
+
+def test_franka_hand_visuals_are_those_of_a_full_parse_without_the_arms_meshes():
+    """The arm's visual meshes are not read; the hand's and fingers' visuals are pinocchio's full parse's, in order,
+    at the same poses relative to the hand."""
+    urdf = erd_robots() / "panda_description" / "urdf" / "panda.urdf"
+    model = pin.buildModelFromUrdf(str(urdf))
+    vis = pin.buildGeomFromUrdf(model, str(urdf), pin.VISUAL, package_dirs=[str(erd_share())])
+    data, vdata = model.createData(), vis.createData()
+    pin.framesForwardKinematics(model, data, pin.neutral(model))
+    pin.updateGeometryPlacements(model, data, vis, vdata)
+    hand_frame = model.getFrameId("panda_hand")
+    mine = [o for o in vis.geometryObjects if model.frames[o.parentFrame].name in
+            ("panda_hand", "panda_leftfinger", "panda_rightfinger")]
+    got = franka_hand().visuals
+    assert [v.path for v in got] == [o.meshPath for o in mine] and len(got) == 3
+    hand = data.oMf[hand_frame].homogeneous
+    body = [k for k, o in enumerate(vis.geometryObjects) if model.frames[o.parentFrame].name == "panda_hand"][0]
+    rel = np.linalg.inv(hand) @ vdata.oMg[body].homogeneous   # the body's visual in the hand frame, from pinocchio
+    assert np.allclose(franka_hand().tcp_in_hand @ got[0].pose, rel, atol=1e-9)

@@ -82,6 +82,10 @@ def classify_rows(q, base, pl, axis, prism, joint, obb_r, obb_c, obb_h, vstart, 
     am = np.empty((3, 3))
     ac = np.empty(3)
     has_obj = places.shape[0] > 0
+    cw = np.empty(3)
+    rad = np.empty(nparts)  # a part's box lies in the ball of its half-diagonal: a cheap first test of each pair
+    for p in range(nparts):
+        rad[p] = np.sqrt(obb_h[p, 0] ** 2 + obb_h[p, 1] ** 2 + obb_h[p, 2] ** 2) * (1.0 + 1e-12) + 1e-12
     for b in range(nb):
         _frames(q[b], base, pl, axis, prism, rot, pos)
         if has_obj:
@@ -104,12 +108,22 @@ def classify_rows(q, base, pl, axis, prism, joint, obb_r, obb_c, obb_h, vstart, 
             rj = rot[j]
             for a in range(3):
                 c = pos[j, a]
-                h = 0.0
                 for k in range(3):
                     c += rj[a, k] * obb_c[p, k]
+                cw[a] = c
+            r = rad[p]  # the box's world extent along each axis is at most the ball's: no box, no pair
+            if not (cw[0] - r <= tmax[0] and cw[1] - r <= tmax[1] and cw[2] - r <= tmax[2]
+                    and cw[0] + r >= tmin[0] and cw[1] + r >= tmin[1] and cw[2] + r >= tmin[2]):
+                if not (has_obj and vs_object[p] and cw[0] - r <= omax[0] and cw[1] - r <= omax[1]
+                        and cw[2] - r <= omax[2] and cw[0] + r >= omin[0] and cw[1] + r >= omin[1]
+                        and cw[2] + r >= omin[2]):
+                    continue
+            for a in range(3):
+                h = 0.0
+                for k in range(3):
                     w = rj[a, 0] * obb_r[p, 0, k] + rj[a, 1] * obb_r[p, 1, k] + rj[a, 2] * obb_r[p, 2, k]
                     h += abs(w) * obb_h[p, k]
-                lo[a], hi[a] = c - h, c + h
+                lo[a], hi[a] = cw[a] - h, cw[a] + h
             ct = _overlap(lo, hi, tmin, tmax)
             co = has_obj and vs_object[p] and _overlap(lo, hi, omin, omax)
             if not ct and not co:

@@ -180,6 +180,37 @@ def _mimics(text: str) -> dict[str, tuple[str, float, float]]:
     return out
 
 
+def _gripper_visuals_only(text: str, hand_link: str, finger_joints: tuple[str, ...]) -> str | None:
+    """The URDF text without the `<visual>` elements of links outside the subtrees of `hand_link` and of the finger
+    joints' links (a whole arm's visual meshes would be read only to be dropped: most of the parse), or None when
+    there is nothing to drop or the hand link is not a link of the text."""
+    root = ElementTree.fromstring(text)
+    children: dict[str, list[str]] = {}
+    tops = [hand_link]
+    for j in root.findall("joint"):
+        parent, child = j.find("parent"), j.find("child")
+        if parent is not None and child is not None:
+            children.setdefault(parent.get("link", ""), []).append(child.get("link", ""))
+            if j.get("name") in finger_joints:
+                tops.append(child.get("link", ""))
+    links = root.findall("link")
+    if not any(link.get("name") == hand_link for link in links):
+        return None
+    keep, stack = set(), tops
+    while stack:
+        name = stack.pop()
+        if name not in keep:
+            keep.add(name)
+            stack.extend(children.get(name, ()))
+    dropped = False
+    for link in links:
+        if link.get("name") not in keep:
+            for v in link.findall("visual"):
+                link.remove(v)
+                dropped = True
+    return ElementTree.tostring(root, encoding="unicode") if dropped else None
+
+
 def _descends(model, joint: int, ancestor: int) -> bool:
     while joint > 0:
         if joint == ancestor:
@@ -258,14 +289,21 @@ def gripper_from_urdf(urdf: str | Path, hand_link: str, tcp_frame: str | None, f
     where = f"gripper URDF {urdf}"
     dirs = [str(erd_share())] + list(package_dirs or []) + [str(urdf.parent), str(urdf.parent.parent)]
     try:
-        if text is None:
-            text = urdf.read_text()
+        given = text
+        text = urdf.read_text() if text is None else text
+        lean = _gripper_visuals_only(text, hand_link, finger_joints)
+        if given is None:
             model = pin.buildModelFromUrdf(str(urdf))  # from the file: relative mesh paths are the file's
-            geom, vis = (pin.buildGeomFromUrdf(model, str(urdf), kind, package_dirs=dirs) for kind in (pin.COLLISION, pin.VISUAL))
+            geom = pin.buildGeomFromUrdf(model, str(urdf), pin.COLLISION, package_dirs=dirs)
         else:
             model = pin.buildModelFromXML(text)
-            geom, vis = (pin.buildGeomFromUrdfString(model, text, kind, package_dirs=dirs)
-                         for kind in (pin.COLLISION, pin.VISUAL))
+            geom = pin.buildGeomFromUrdfString(model, text, pin.COLLISION, package_dirs=dirs)
+        if lean is not None:
+            vis = pin.buildGeomFromUrdfString(model, lean, pin.VISUAL, package_dirs=dirs)
+        elif given is None:
+            vis = pin.buildGeomFromUrdf(model, str(urdf), pin.VISUAL, package_dirs=dirs)
+        else:
+            vis = pin.buildGeomFromUrdfString(model, text, pin.VISUAL, package_dirs=dirs)
         mimic = _mimics(text)
     except Exception as exc:
         raise GripperError(f"{where} could not be parsed: {_first_line(exc)}") from None

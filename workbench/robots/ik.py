@@ -185,9 +185,11 @@ def held_placements(targets: np.ndarray, placements: np.ndarray) -> np.ndarray:
     lifts (HELD) the placement carried along by the hand (T_k T_grasp^-1 placement)."""
     out = np.repeat(np.asarray(placements, dtype=np.float64)[:, None], targets.shape[1], axis=1)
     held = np.flatnonzero(HELD[:targets.shape[1]])
-    if len(held):
-        rel = targets[:, held] @ np.linalg.inv(targets[:, :1])
-        out[:, held] = rel @ out[:, held]
+    for k in held:
+        if np.array_equal(targets[:, k, :3, :3], targets[:, 0, :3, :3]):  # `retract`'s lifts: a translation
+            out[:, k, :3, 3] += targets[:, k, :3, 3] - targets[:, 0, :3, 3]
+        else:
+            out[:, k] = targets[:, k] @ np.linalg.inv(targets[:, 0]) @ out[:, k]
     return out
 
 

@@ -136,13 +136,14 @@ def insert_ik(store: Store, idrobot: int, idscene: int, idikret: int, grip_ids: 
                                     "idtabletopgrips BETWEEN ? AND ?", [idrobot, idscene, idikret, int(grip_ids.min()),
                                                                           int(grip_ids.max())])["idtabletopgrips"]
         new = ~np.isin(grip_ids, np.asarray(stored, dtype=np.int64))
-        grip_ids, feasible, joints = grip_ids[new], feasible[new], joints[new]
-        n = len(grip_ids)
+        n = int(new.sum())
         if n == 0:
             return 0
         # ids in the given order; rows appended in key order, which DuckDB's key and index checks take ~2x faster
-        ids, by_key = store.new_ids("ik", n), np.argsort(grip_ids, kind="stable")
-        ids, grip_ids, feasible, joints = ids[by_key], grip_ids[by_key], feasible[by_key], joints[by_key]
+        take = np.flatnonzero(new)
+        take = take[np.argsort(grip_ids[take], kind="stable")]
+        ids = store.new_ids("ik", n)[(np.cumsum(new) - 1)[take]]
+        grip_ids, feasible, joints = grip_ids[take], feasible[take], joints[take]
         store.insert("ik", {
             "idik": ids, "idrobot": np.full(n, idrobot, dtype=np.int64),
             "idtabletopgrips": grip_ids, "idikret": np.full(n, idikret, dtype=np.int64),
