@@ -66,6 +66,11 @@ def test_cylinder_over_segmentation_overlaps(cylinder):
         tris = over.triangles_of(f)
         cosines = cylinder.mesh.face_normals[tris] @ cylinder.mesh.face_normals[over.seeds[f]]
         assert (cosines >= np.cos(over.tau) - 1e-12).all()
+    # the facets holding a few triangles (repeats and "no triangle" included) are those a brute-force scan finds
+    tri = np.r_[np.random.default_rng(0).integers(0, len(cylinder.mesh.faces), 40), -1, 3, 3]
+    counts, held = over.holding(tri)
+    brute = [[f for f in range(len(over)) if t in over.triangles_of(f)] for t in tri]
+    assert counts.tolist() == [len(b) for b in brute] and held.tolist() == sum(brute, [])
 
 
 def test_over_segmentation_plans_more_grasps_on_curved_objects(cylinder, hand, tube_paper):

@@ -274,3 +274,51 @@ def boundary_distances(edge_ptr, edges, normals, facet_ids, points):
             best = min(best, np.sqrt(q0 * q0 + q1 * q1 + q2 * q2))
         out[i] = best
     return out
+
+
+@njit(cache=True)
+def facets_holding(tri_ptr, tri_index, n_tri, queries):
+    """For each triangle of `queries` (Q,), the facets holding it in ascending order: (counts (Q,), facet ids
+    concatenated in query order), as `by_triangle` would give them for those triangles (none for a query outside
+    [0, n_tri), such as -1 for no triangle). Two passes over the memberships reading only their triangle ids against
+    a byte per triangle, with no scatter of every membership."""
+    slot = np.full(n_tri, -1, dtype=np.int64)
+    asked = np.zeros(n_tri, dtype=np.bool_)  # a byte per triangle stays in cache as the memberships stream past
+    distinct = 0
+    for i in range(queries.shape[0]):
+        t = queries[i]
+        if 0 <= t < n_tri and not asked[t]:
+            slot[t] = distinct
+            asked[t] = True
+            distinct += 1
+    per = np.zeros(distinct + 2, dtype=np.int64)  # the last slot: a query outside the mesh (-1), held by none
+    for q in range(tri_index.shape[0]):
+        if asked[tri_index[q]]:
+            per[slot[tri_index[q]] + 1] += 1
+    for u in range(distinct + 1):
+        per[u + 1] += per[u]
+    grouped = np.empty(per[distinct], dtype=np.int64)
+    pos = per[:-1].copy()
+    for f in range(tri_ptr.shape[0] - 1):  # facets in order: the facets of each triangle stay ascending
+        for q in range(tri_ptr[f], tri_ptr[f + 1]):
+            if asked[tri_index[q]]:
+                u = slot[tri_index[q]]
+                grouped[pos[u]] = f
+                pos[u] += 1
+    which = np.empty(queries.shape[0], dtype=np.int64)
+    counts = np.empty(queries.shape[0], dtype=np.int64)
+    total = 0
+    for i in range(queries.shape[0]):
+        t = queries[i]
+        u = slot[t] if 0 <= t < n_tri else distinct
+        which[i] = u
+        counts[i] = per[u + 1] - per[u]
+        total += counts[i]
+    out = np.empty(total, dtype=np.int64)
+    k = 0
+    for i in range(queries.shape[0]):
+        u = which[i]
+        for q in range(per[u], per[u + 1]):
+            out[k] = grouped[q]
+            k += 1
+    return counts, out

@@ -25,6 +25,7 @@ from workbench.geometry._segkernel import (
     edge_groups,
     facet_boundaries,
     facet_sums,
+    facets_holding,
     grow_facets,
     neighbour_table,
 )
@@ -59,6 +60,16 @@ class Facets:
     def membership(self) -> tuple[np.ndarray, np.ndarray]:
         """(facet id, triangle id) for every membership, sorted by triangle (then facet); computed once (read-only)."""
         return self._membership
+
+    def holding(self, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The facets holding each of `triangles` (Q,): (how many (Q,), their ids, ascending per triangle, concatenated
+        in query order); the rows `membership` gives for those triangles, without sorting every membership."""
+        tri = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1)
+        return facets_holding(self.tri_ptr, self.tri_index, self._n_tri, tri)
+
+    @cached_property
+    def _n_tri(self) -> int:
+        return int(self.tri_index.max(initial=-1)) + 1
 
     @cached_property
     def _membership(self) -> tuple[np.ndarray, np.ndarray]:

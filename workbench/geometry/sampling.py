@@ -84,15 +84,9 @@ def distribute(mesh: trimesh.Trimesh, facets: Facets, count: int, radius: float,
     distance filter."""
     points, faces = sample_surface(mesh, count, seed)
     kept = neighbour_filter(points, mesh.face_normals[faces], radius, facets.tau)
-    fid, tid = facets.membership()
     ks = np.flatnonzero(kept)
-    # all facets of each kept sample's triangle, via the triangle-sorted membership
-    lo = np.searchsorted(tid, faces[ks], side="left")
-    hi = np.searchsorted(tid, faces[ks], side="right")
-    counts = hi - lo
+    counts, pair_facet = facets.holding(faces[ks])  # all facets of each kept sample's triangle
     pair_sample = np.repeat(ks, counts)
-    starts = np.repeat(lo - np.cumsum(counts) + counts, counts)
-    pair_facet = fid[starts + np.arange(counts.sum())]
     pair_dist = distance_to_boundary(facets, pair_facet, points[pair_sample])
     pair_ok = (pair_dist >= dist_min) & (pair_dist <= dist_max)
     return Samples(points=points, faces=faces, kept=kept, pair_facet=pair_facet, pair_sample=pair_sample,

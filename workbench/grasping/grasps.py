@@ -415,7 +415,9 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     axis_sets = [(sel, origins, axes, angles, None)]
     counts["slice"] = 0
     if params.support_grasps:
+        t1 = time.perf_counter()
         downs = _support_normals(obj)
+        timings["supports"] = time.perf_counter() - t1
         k, y, z = support_axes(axes, downs, params.rotations, params.friction_coefficient)
         axis_sets.append((sel[k], origins[k], y, np.zeros(1), z))
         counts["support"] = int(len(k))
@@ -445,7 +447,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     inside = touch.hit & np.isfinite(touch.window).any(axis=1)
     again = pregrasp_touches(mesh, _subset(touch, inside), gripper, params.pregrasp_margin, params.finger_clearance)
     touch = Touches(**{f: _put(getattr(touch, f), inside, getattr(again, f)) for f in Touches.__dataclass_fields__})
-    timings["pads"] = time.perf_counter() - t0
+    timings["pads"] = time.perf_counter() - t0 - timings.get("supports", 0.0)
     y = touch.poses[:, :3, 1]
     cos_f = np.cos(np.arctan(params.friction_coefficient))
     width_ok = touch.hit & (touch.width <= gripper.jaw_max) & (touch.width >= gripper.jaw_min)
@@ -618,13 +620,9 @@ def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, an
 
 def _facet_of(facets: Facets, tri: np.ndarray, direction: np.ndarray) -> np.ndarray:
     """For each triangle, the facet holding it whose normal best follows `direction` (-1 for none)."""
-    fid, tid = facets.membership()
     out = np.full(len(tri), -1, dtype=np.int64)
-    lo = np.searchsorted(tid, tri, side="left")
-    hi = np.searchsorted(tid, tri, side="right")
-    cnt = hi - lo
+    cnt, cand = facets.holding(tri)
     row = np.repeat(np.arange(len(tri)), cnt)
-    cand = fid[np.repeat(lo - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())]
     score = np.einsum("ij,ij->i", facets.normals[cand], direction[row])
     order = np.lexsort((-score, row))
     row, cand = row[order], cand[order]
@@ -693,12 +691,8 @@ def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: 
     leaving = (np.einsum("ij,ij->i", tn, na[ray]) < 0) & (depth > 10 * eps)
     locs, ray, tri, depth = locs[leaving], ray[leaving], tri[leaving], depth[leaving]
     # every facet containing the hit triangle is a candidate opposite facet
-    fid, tid = facets.membership()
-    lo = np.searchsorted(tid, tri, side="left")
-    hi = np.searchsorted(tid, tri, side="right")
-    cnt = hi - lo
+    cnt, fb = facets.holding(tri)
     hit = np.repeat(np.arange(len(tri)), cnt)
-    fb = fid[np.repeat(lo - np.cumsum(cnt) + cnt, cnt) + np.arange(cnt.sum())]
     anti = -np.einsum("ij,ij->i", facets.normals[fb], na[ray[hit]])
     good = anti >= np.cos(params.parallel_angle)
     hit, fb, anti = hit[good], fb[good], anti[good]
