@@ -147,7 +147,7 @@ def _project(shape, node, o, u, slack):
 @njit(cache=True)
 def _reach(shape, node, o, u, slack):
     """The range (min, max) along the unit vector `u`, from `o`, of a node's points: the box's range, narrowed by the
-    node's bounding sphere cut by its slab (centre, radius, normal n, offsets d0..d1 along n; `_node_shapes`). For a
+    node's bounding sphere cut by its slab (centre, radius, normal n, offsets d0..d1 along n; `_build`). For a
     patch nearly facing `u` the slab is far tighter than the box, so the search stays near the touch."""
     lo_b, hi_b = _project(shape, node, o, u, slack)
     c = 0.0
@@ -304,7 +304,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                        block):
     """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y,
     local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
-    triangles and their unit normals by leaf slot. `block` (m, negative: off): a pad whose finite start's plane,
+    triangles by leaf slot and their unit normals by triangle. `block` (m, negative: off): a pad whose finite start's plane,
     moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing.
 
     The rotations about one axis share one best-first search per pad: a node is opened for the rotations whose
@@ -447,7 +447,6 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                         if not (mx >= a_max - tie or mn <= a_min + tie):
                             continue
                         sc = mx if si == 0 else -mn
-                        ny = fn[qs, 0] * y[0] + fn[qs, 1] * y[1] + fn[qs, 2] * y[2]
                         for j in range(n_rot):
                             if not (m >> j) & 1 or blocked[j] or sc < g[j] - tie:
                                 continue
@@ -464,6 +463,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                                 rs2, rp2, rd2, ra2 = np.empty(cap), np.empty((cap, 3)), np.empty(cap), np.empty(cap)
                                 rj2[:nr], rt2[:nr], rs2[:nr], rp2[:nr], rd2[:nr], ra2[:nr] = rj, rt, rs, rp, rd, ra
                                 rj, rt, rs, rp, rd, ra = rj2, rt2, rs2, rp2, rd2, ra2
+                            ny = fn[f, 0] * y[0] + fn[f, 1] * y[1] + fn[f, 2] * y[2]
                             rj[nr], rt[nr], rs[nr] = j, f, tp
                             rp[nr, 0], rp[nr, 1], rp[nr, 2] = px[b] + cx, py[b], pz[b] + cz
                             rd[nr] = d2
@@ -503,112 +503,158 @@ def _spread(v):
 
 
 @njit(cache=True)
-def _morton(tri):
-    """The Morton code (T,) of every triangle's centre, on a 1024^3 grid over the centres' bounds."""
+def _morton_order(tri):
+    """The triangles' indices (T,) in Morton order of their centres on a 1024^3 grid over the centres' bounds, ties
+    by index: the codes above the indices in one word, sorted by their 30 bits ten at a time (a stable radix sort)."""
     n = tri.shape[0]
-    centre = np.empty((n, 3))
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for i in range(n):
         for a in range(3):
-            centre[i, a] = (tri[i, 0, a] + tri[i, 1, a] + tri[i, 2, a]) / 3.0
-    lo, width = np.empty(3), np.empty(3)
+            c = (tri[i, 0, a] + tri[i, 1, a] + tri[i, 2, a]) / 3.0
+            lo[a] = min(lo[a], c)
+            hi[a] = max(hi[a], c)
+    width = np.empty(3)
     for a in range(3):
-        lo[a] = centre[:, a].min()
-        width[a] = max(centre[:, a].max() - lo[a], 1e-300)
-    code = np.empty(n, dtype=np.int64)
+        width[a] = max(hi[a] - lo[a], 1e-300)
+    word = np.empty(n, dtype=np.int64)
     for i in range(n):
-        c = 0
+        code = 0
         for a in range(3):
-            q = min(max(np.int64((centre[i, a] - lo[a]) / width[a] * 1023), 0), 1023)
-            c |= _spread(q) << a
-        code[i] = c
-    return code
+            c = (tri[i, 0, a] + tri[i, 1, a] + tri[i, 2, a]) / 3.0
+            code |= _spread(min(max(np.int64((c - lo[a]) / width[a] * 1023), 0), 1023)) << a
+        word[i] = (code << 32) | i
+    other = np.empty(n, dtype=np.int64)
+    count = np.empty(1025, dtype=np.int64)
+    for shift in (32, 42, 52):
+        count[:] = 0
+        for i in range(n):
+            count[((word[i] >> shift) & 1023) + 1] += 1
+        for b in range(1024):
+            count[b + 1] += count[b]
+        for i in range(n):
+            b = (word[i] >> shift) & 1023
+            other[count[b]] = word[i]
+            count[b] += 1
+        word, other = other, word
+    for i in range(n):
+        other[i] = word[i] & 0xFFFFFFFF
+    return other
 
 
 @njit(cache=True)
-def _node_shapes(tri, slots, leaf, shape):  # tri by leaf slot
-    """Fill `shape`: per node its box (lo, hi; empty: lo > hi), the box centre c, the radius of a sphere about c holding
-    the node's points, the unit mean normal n of its triangles (area-weighted; any unit vector where they cancel) and
-    the least and largest offsets of its points along n. Exact at the leaves; a parent's sphere and offsets hold its
-    children's (their reach along n by `_reach`), so the tree is built in one pass over the triangles."""
+def _build(tri, leaf, slots, tri_s, shape):
+    """Fill the hierarchy in one pass over the triangles in Morton order: `slots` (the triangle of every leaf slot,
+    -1 for none), `tri_s` (the triangles by slot) and `shape`: per node its box (lo, hi; empty: lo > hi), the box
+    centre c, the radius of a sphere about c holding the node's points, the unit mean normal n of its triangles
+    (area-weighted; any unit vector where they cancel) and the least and largest offsets of its points along n. Exact
+    at the leaves; a parent's sphere and offsets hold its children's (their reach along n by `_reach`)."""
+    n = tri.shape[0]
     N = shape.shape[0]
     P = N // 2
-    nsum = np.zeros((N, 3))
-    shape[:, 0:3] = np.inf
-    shape[:, 3:6] = -np.inf
+    order = _morton_order(tri)
+    nsum = np.empty((N, 3))
+    c, nn = np.empty(3), np.empty(3)
     for node in range(P, N):
-        for q in range((node - P) * leaf, (node - P + 1) * leaf):
-            if slots[q] < 0:
+        q0 = (node - P) * leaf
+        s0, s1, s2 = 0.0, 0.0, 0.0
+        for a in range(3):
+            shape[node, a] = np.inf
+            shape[node, 3 + a] = -np.inf
+        for q in range(q0, q0 + leaf):
+            if q >= n:
+                slots[q] = -1
                 continue
+            f = order[q]
+            slots[q] = f
             for v in range(3):
                 for a in range(3):
-                    shape[node, a] = min(shape[node, a], tri[q, v, a])
-                    shape[node, 3 + a] = max(shape[node, 3 + a], tri[q, v, a])
-            e1 = tri[q, 1] - tri[q, 0]
-            e2 = tri[q, 2] - tri[q, 0]
-            nsum[node, 0] += e1[1] * e2[2] - e1[2] * e2[1]
-            nsum[node, 1] += e1[2] * e2[0] - e1[0] * e2[2]
-            nsum[node, 2] += e1[0] * e2[1] - e1[1] * e2[0]
-    for node in range(P - 1, 0, -1):
-        nsum[node] = nsum[2 * node] + nsum[2 * node + 1]
+                    x = tri[f, v, a]
+                    tri_s[q, v, a] = x
+                    shape[node, a] = min(shape[node, a], x)
+                    shape[node, 3 + a] = max(shape[node, 3 + a], x)
+            e10, e11, e12 = tri_s[q, 1, 0] - tri_s[q, 0, 0], tri_s[q, 1, 1] - tri_s[q, 0, 1], tri_s[q, 1, 2] - tri_s[q, 0, 2]
+            e20, e21, e22 = tri_s[q, 2, 0] - tri_s[q, 0, 0], tri_s[q, 2, 1] - tri_s[q, 0, 1], tri_s[q, 2, 2] - tri_s[q, 0, 2]
+            s0 += e11 * e22 - e12 * e21
+            s1 += e12 * e20 - e10 * e22
+            s2 += e10 * e21 - e11 * e20
+        nsum[node, 0], nsum[node, 1], nsum[node, 2] = s0, s1, s2
+        if shape[node, 0] > shape[node, 3]:
+            shape[node, 6:] = 0.0
+            continue
+        _unit_normal(nsum, node, nn)
         for a in range(3):
+            c[a] = 0.5 * (shape[node, a] + shape[node, 3 + a])
+        r2, d0, d1 = 0.0, np.inf, -np.inf
+        for q in range(q0, min(q0 + leaf, n)):
+            for v in range(3):
+                w0, w1, w2 = tri_s[q, v, 0] - c[0], tri_s[q, v, 1] - c[1], tri_s[q, v, 2] - c[2]
+                r2 = max(r2, w0 * w0 + w1 * w1 + w2 * w2)
+                d = w0 * nn[0] + w1 * nn[1] + w2 * nn[2]
+                d0 = min(d0, d)
+                d1 = max(d1, d)
+        _set_shape(shape, node, c, np.sqrt(r2), nn, d0, d1)
+    for node in range(P - 1, 0, -1):
+        for a in range(3):
+            nsum[node, a] = nsum[2 * node, a] + nsum[2 * node + 1, a]
             shape[node, a] = min(shape[2 * node, a], shape[2 * node + 1, a])
             shape[node, 3 + a] = max(shape[2 * node, 3 + a], shape[2 * node + 1, 3 + a])
-    for node in range(N - 1, 0, -1):
         if shape[node, 0] > shape[node, 3]:
+            shape[node, 6:] = 0.0
             continue
-        c = 0.5 * (shape[node, 0:3] + shape[node, 3:6])
-        ln = np.sqrt(nsum[node, 0] ** 2 + nsum[node, 1] ** 2 + nsum[node, 2] ** 2)
-        n = nsum[node] / ln if ln > 0 else np.array([0.0, 0.0, 1.0])
-        r2, d0, d1 = 0.0, np.inf, -np.inf
-        if node >= P:
-            for q in range((node - P) * leaf, (node - P + 1) * leaf):
-                if slots[q] < 0:
-                    continue
-                for v in range(3):
-                    w0, w1, w2 = tri[q, v, 0] - c[0], tri[q, v, 1] - c[1], tri[q, v, 2] - c[2]
-                    r2 = max(r2, w0 * w0 + w1 * w1 + w2 * w2)
-                    d = w0 * n[0] + w1 * n[1] + w2 * n[2]
-                    d0 = min(d0, d)
-                    d1 = max(d1, d)
-            r = np.sqrt(r2)
-        else:
-            r = 0.0
-            for child in (2 * node, 2 * node + 1):
-                if shape[child, 0] > shape[child, 3]:
-                    continue
-                gap = np.sqrt(((shape[child, 6:9] - c) ** 2).sum())
-                r = max(r, gap + shape[child, 9])
-                a, b = _reach(shape, child, c, n, 0.0)
-                d0 = min(d0, a)
-                d1 = max(d1, b)
-            r = min(r, np.sqrt(((shape[node, 3:6] - shape[node, 0:3]) ** 2).sum()) / 2)  # the box's own sphere
-        shape[node, 6:9] = c
-        shape[node, 9] = r
-        shape[node, 10:13] = n
-        shape[node, 13], shape[node, 14] = d0, d1
+        _unit_normal(nsum, node, nn)
+        for a in range(3):
+            c[a] = 0.5 * (shape[node, a] + shape[node, 3 + a])
+        r, d0, d1 = 0.0, np.inf, -np.inf
+        for child in (2 * node, 2 * node + 1):
+            if shape[child, 0] > shape[child, 3]:
+                continue
+            gap = np.sqrt((shape[child, 6] - c[0]) ** 2 + (shape[child, 7] - c[1]) ** 2 + (shape[child, 8] - c[2]) ** 2)
+            r = max(r, gap + shape[child, 9])
+            a, b = _reach(shape, child, c, nn, 0.0)
+            d0 = min(d0, a)
+            d1 = max(d1, b)
+        box = np.sqrt((shape[node, 3] - shape[node, 0]) ** 2 + (shape[node, 4] - shape[node, 1]) ** 2
+                      + (shape[node, 5] - shape[node, 2]) ** 2) / 2
+        _set_shape(shape, node, c, min(r, box), nn, d0, d1)  # no larger than the box's own sphere
 
 
-def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int = 4) -> tuple:
+@njit(cache=True)
+def _unit_normal(nsum, node, out):
+    """`nsum[node]` made a unit vector into `out` (z where it vanishes)."""
+    ln = np.sqrt(nsum[node, 0] ** 2 + nsum[node, 1] ** 2 + nsum[node, 2] ** 2)
+    if ln > 0:
+        for a in range(3):
+            out[a] = nsum[node, a] / ln
+    else:
+        out[0], out[1], out[2] = 0.0, 0.0, 1.0
+
+
+@njit(cache=True)
+def _set_shape(shape, node, c, r, n, d0, d1):
+    """Write a node's sphere (centre c, radius r) and slab (normal n, offsets d0..d1) into `shape`."""
+    for a in range(3):
+        shape[node, 6 + a] = c[a]
+        shape[node, 10 + a] = n[a]
+    shape[node, 9] = r
+    shape[node, 13], shape[node, 14] = d0, d1
+
+
+def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int = 16) -> tuple:
     """A bounding-volume hierarchy over triangles (T, 3, 3) for `first_touch_kernel`: the triangles in Morton order of
     their centres, `leaf` to a leaf, and a complete binary tree over the leaves (node 1 the root, node i's children
     2i and 2i + 1, the leaves P .. 2P - 1). Returns the node shapes (2P, 15): box lo, hi (empty: lo > hi), and the
-    sphere and slab of `_node_shapes`; the triangle of every leaf slot (P * leaf, -1 for none); `leaf`; and the
-    triangles and their `normals` (T, 3) by slot, so that a leaf's triangles lie together in memory. `leaf` >= T gives
-    one leaf: a scan of every triangle."""
+    sphere and slab of `_build`; the triangle of every leaf slot (P * leaf, -1 for none); `leaf`; the triangles by
+    slot (T, 3, 3), so that a leaf's triangles lie together in memory; and the triangles' `normals` (T, 3). `leaf` >= T
+    gives one leaf: a scan of every triangle."""
     tri = np.ascontiguousarray(tri, dtype=np.float64).reshape(-1, 3, 3)
     n, leaf = len(tri), max(int(leaf), 1)
-    order = np.argsort(_morton(tri), kind="stable") if n else np.zeros(0, dtype=np.int64)
-    leaves = max(-(-n // leaf), 1)
-    P = 1 << int(np.ceil(np.log2(leaves)))
-    slots = np.full(P * leaf, -1, dtype=np.int64)
-    slots[:n] = order
+    P = 1 << int(np.ceil(np.log2(max(-(-n // leaf), 1))))
+    slots = np.empty(P * leaf, dtype=np.int64)
+    tri_s = np.empty((n, 3, 3))
     shape = np.empty((2 * P, 15))
-    tri_s, fn_s = np.empty((P * leaf, 3, 3)), np.empty((P * leaf, 3))
-    np.take(tri, order, axis=0, out=tri_s[:n])  # into place: a gathered copy copied again costs a third of the build
-    np.take(np.asarray(normals, dtype=np.float64), order, axis=0, out=fn_s[:n])
-    tri_s[n:], fn_s[n:] = 0.0, 0.0
-    _node_shapes(tri_s, slots, leaf, shape)
-    return shape, slots, leaf, tri_s, fn_s
+    shape[0] = 0.0  # node 0 is not in the tree
+    _build(tri, leaf, slots, tri_s, shape)
+    return shape, slots, leaf, tri_s, np.ascontiguousarray(normals, dtype=np.float64)
 
 
 @njit(cache=True)

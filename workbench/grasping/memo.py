@@ -20,7 +20,7 @@ import numpy as np
 import trimesh
 
 LIMIT = 32 * 2**20
-"""Bytes of results kept per part and computation (keys included); the oldest calls are dropped first."""
+"""Bytes of results kept per part and computation (keys included); the calls used least recently go first."""
 
 
 class RowMemo:
@@ -66,6 +66,7 @@ class RowMemo:
             sel = block == b
             for o, a in zip(out, self.blocks[int(b)][0]):
                 o[hit[sel]] = a[at[sel]]
+            self.blocks.move_to_end(int(b))  # used: the last to be dropped
         if new is not None:
             for o, a in zip(out, new):
                 o[miss] = a

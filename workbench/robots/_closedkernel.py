@@ -100,14 +100,59 @@ def _limit(q, lo, hi):
 
 
 @njit(cache=True, inline="always")
-def _void(out_q, out_valid, i, col0, count, cols, fixed_col, fixed_val):
-    """Branches col0 .. col0 + count - 1 of pose i without a solution: NaN joints (the held joint still written)."""
+def _void(out_q, out_valid, i, col0, count, cols, fixed_col, fixed_val, full_rows):
+    """Branches col0 .. col0 + count - 1 of pose i without a solution: NaN joints (the held joint still written);
+    with `full_rows` (cols and fixed_col cover every column), whole rows at once."""
     for col in range(col0, col0 + count):
-        for j in range(cols.shape[0]):
-            out_q[i, col, cols[j]] = np.nan
+        if full_rows:
+            for j in range(out_q.shape[2]):
+                out_q[i, col, j] = np.nan
+        else:
+            for j in range(cols.shape[0]):
+                out_q[i, col, cols[j]] = np.nan
         if fixed_col >= 0:
             out_q[i, col, fixed_col] = fixed_val
         out_valid[i, col] = False
+
+
+@njit(cache=True, inline="always")
+def _mul_row(r, m, row, out):
+    """out[row] = r (3, 3) times m[row] (3,)."""
+    x = r[0, 0] * m[row, 0] + r[0, 1] * m[row, 1] + r[0, 2] * m[row, 2]
+    y = r[1, 0] * m[row, 0] + r[1, 1] * m[row, 1] + r[1, 2] * m[row, 2]
+    z = r[2, 0] * m[row, 0] + r[2, 1] * m[row, 1] + r[2, 2] * m[row, 2]
+    out[row, 0], out[row, 1], out[row, 2] = x, y, z
+
+
+@njit(cache=True, inline="always")
+def _sub1_parts(k, u, v):
+    """`_sub1` without its arctangent: (cos, sin, y, x) with the angle arctan2(y, x), computed only where needed."""
+    ku = k[0] * u[0] + k[1] * u[1] + k[2] * u[2]
+    kv = k[0] * v[0] + k[1] * v[1] + k[2] * v[2]
+    u0, u1, u2 = u[0] - k[0] * ku, u[1] - k[1] * ku, u[2] - k[2] * ku
+    v0, v1, v2 = v[0] - k[0] * kv, v[1] - k[1] * kv, v[2] - k[2] * kv
+    y = k[0] * (u1 * v2 - u2 * v1) + k[1] * (u2 * v0 - u0 * v2) + k[2] * (u0 * v1 - u1 * v0)
+    x = u0 * v0 + u1 * v1 + u2 * v2
+    h = np.sqrt(x * x + y * y)
+    if not h > 0.0:  # zero (a singular axis: any angle, 0 chosen) or NaN (no solution upstream)
+        return 1.0, y, y, 1.0
+    return x / h, y / h, y, x
+
+
+@njit(cache=True, inline="always")
+def _inside(c, s, cm, sm, thr_in):
+    """Whether the angle (c, s) is surely within a joint's limits, with a representative `_limit` finds: thr_in is
+    cos((hi - lo) / 2) + 1e-9 for limits narrower than a turn within [-2 pi, 2 pi] (`_out`), -inf without limits,
+    inf otherwise (never sure). Its arctangent can then wait until a branch below it is output."""
+    return c * cm + s * sm >= thr_in
+
+
+@njit(cache=True, inline="always")
+def _out(c, s, cm, sm, thr):
+    """Whether the angle (c, s) is surely outside a joint's limits [lo, hi] narrower than a turn: (cm, sm) is the
+    direction of their middle, thr = cos((hi - lo) / 2) - 1e-9 (-inf for wider limits), so that no representative
+    of the angle (`_limit`) can lie within them when c cm + s sm < thr (NaN: outside)."""
+    return not (c * cm + s * sm >= thr)
 
 
 @njit(cache=True, nogil=True)
@@ -117,9 +162,13 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
     on a leading axis S): the 8 branches of form s go to out_q[:, 8 s + b, cols] (branch b = 4 elbow + 2 shoulder +
     wrist flip), with out_q[:, 8 s + b, fixed_col] = fixed[s] when fixed_col >= 0; out_valid (N, 8 S). With
     `any_only`, out_q is not touched and each pose stops at its first valid branch (out_valid must start False).
-    A non-empty `use` (N, S) solves form s of pose i only where use[i, s] (the others void)."""
+    A non-empty `use` (N, S) solves form s of pose i only where use[i, s] (the others void).
+
+    What does not change from form to form (a 7-joint arm's swept samples share all but the first placement) is
+    computed once per pose; a joint's limits are tested on its (cos, sin) first (`_out`, `_inside`), and its
+    arctangent is taken only where that test is not sure, or for the output once a branch below it is valid: the same
+    values, bit for bit, as solving each form on its own."""
     n, nf = poses.shape[0], mb.shape[0]
-    k = np.empty(3)
     w = np.empty(3)
     pw = np.empty(3)
     tmp = np.empty(3)
@@ -131,44 +180,103 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
     yd = np.empty(3)
     u = np.empty(3)
     t2 = np.empty(3)
-    r4_ = np.empty(4)
-    r4b = np.empty(4)
-    r4c = np.empty(4)
     qb = np.empty(6)
+    pkw = np.empty((nf, 3))  # the pose's rotation times kw, kc, kd, in the slot of the first form with the same ones
+    pkc = np.empty((nf, 3))
+    pkd = np.empty((nf, 3))
+    # per form: the elbow equation's constant amplitude and phase, the first form with the same kw / kc and kd
+    er, eca, esa = np.empty(nf), np.empty(nf), np.empty(nf)
+    done_w = np.empty(nf, dtype=np.bool_)
+    done_c = np.empty(nf, dtype=np.bool_)
+    same_w = np.empty(nf, dtype=np.int64)
+    same_c = np.empty(nf, dtype=np.int64)
+    cm, sm, thr, thr_in = np.empty((nf, 6)), np.empty((nf, 6)), np.empty((nf, 6)), np.empty((nf, 6))
+    for f in range(nf):
+        a, b = consts[f, 0], consts[f, 1]
+        er[f] = np.sqrt(a * a + b * b)
+        eca[f], esa[f] = a / er[f], b / er[f]
+        same_w[f], same_c[f] = f, f
+        for g in range(f):
+            if kw[g, 0] == kw[f, 0] and kw[g, 1] == kw[f, 1] and kw[g, 2] == kw[f, 2]:
+                same_w[f] = g
+                break
+        for g in range(f):
+            if (kc[g, 0] == kc[f, 0] and kc[g, 1] == kc[f, 1] and kc[g, 2] == kc[f, 2] and kd[g, 0] == kd[f, 0]
+                    and kd[g, 1] == kd[f, 1] and kd[g, 2] == kd[f, 2]):
+                same_c[f] = g
+                break
+        for j in range(6):
+            lo, hi = lower[f, j], upper[f, j]
+            cm[f, j], sm[f, j], thr[f, j], thr_in[f, j] = 1.0, 0.0, -np.inf, np.inf
+            if np.isfinite(lo) and np.isfinite(hi) and hi - lo < TWO_PI:
+                mid, half = (lo + hi) / 2, (hi - lo) / 2
+                cm[f, j], sm[f, j], thr[f, j] = np.cos(mid), np.sin(mid), np.cos(half) - 1e-9
+                if lo >= -TWO_PI and hi <= TWO_PI:  # a representative within a turn of (-pi, pi], as `_limit` tries
+                    thr_in[f, j] = np.cos(half) + 1e-9
+            elif lo == -np.inf and hi == np.inf:
+                thr_in[f, j] = -np.inf
+    full_rows = cols.shape[0] + (1 if fixed_col >= 0 else 0) == out_q.shape[2]
     for i in range(n):
         pr = poses[i, :3, :3]
         found = False
+        done_w[:] = False
+        done_c[:] = False
         for f in range(nf):
             if found:  # any_only: this pose has a valid branch
                 break
             if use.shape[0] and not use[i, f]:
                 if not any_only:
-                    _void(out_q, out_valid, i, 8 * f, 8, cols, fixed_col, fixed[f])
+                    _void(out_q, out_valid, i, 8 * f, 8, cols, fixed_col, fixed[f], full_rows)
                 continue
             # the wrist centre in the joint-1 parent frame, and R6 (c, d) through the pose's rotation
-            _mul(pr, kw[f], tmp)
+            g = same_w[f]
+            if not done_w[g]:
+                _mul_row(pr, kw, g, pkw)
+                done_w[g] = True
             for a in range(3):
-                w[a] = tmp[a] + poses[i, a, 3]
+                w[a] = pkw[g, a] + poses[i, a, 3]
             _mul(mb[f, :3, :3], w, pw)
             for a in range(3):
                 pw[a] += mb[f, a, 3]
-            have_y0 = False  # R6 c and d: only once an elbow is within its limits
             a1, a2, a3 = ax[f, 0], ax[f, 1], ax[f, 2]
             d0, d1, d2 = pw[0] - o[f, 0], pw[1] - o[f, 1], pw[2] - o[f, 2]
-            # 1. elbow: two q3
-            _acs(consts[f, 0], consts[f, 1], d0 * d0 + d1 * d1 + d2 * d2 - consts[f, 2], r4_)
+            # 1. elbow: two q3 (`_acs` with the form's constant amplitude)
+            xe = (d0 * d0 + d1 * d1 + d2 * d2 - consts[f, 2]) / er[f]
+            if not abs(xe) <= 1.0 + 1e-10:  # out of reach (or NaN): the form's 8 branches are void
+                if not any_only:
+                    _void(out_q, out_valid, i, 8 * f, 8, cols, fixed_col, fixed[f], full_rows)
+                continue
+            xe = min(1.0, max(-1.0, xe))
+            sde = np.sqrt(1.0 - xe * xe)
+            have_y0 = False  # R6 c and d: only once an elbow is within its limits
             h = a1[0] * pw[0] + a1[1] * pw[1] + a1[2] * pw[2] - consts[f, 3]
             for i3 in range(2):
-                c3, s3 = r4_[2 * i3], r4_[2 * i3 + 1]
-                qb[2] = _limit(np.arctan2(s3, c3), lower[f, 2], upper[f, 2])
+                if i3 == 0:
+                    c3, s3 = eca[f] * xe - esa[f] * sde, esa[f] * xe + eca[f] * sde
+                else:
+                    c3, s3 = eca[f] * xe + esa[f] * sde, esa[f] * xe - eca[f] * sde
+                d3 = _inside(c3, s3, cm[f, 2], sm[f, 2], thr_in[f, 2])
+                if d3:
+                    qb[2] = 0.0
+                elif _out(c3, s3, cm[f, 2], sm[f, 2], thr[f, 2]):
+                    qb[2] = np.nan
+                else:
+                    qb[2] = _limit(np.arctan2(s3, c3), lower[f, 2], upper[f, 2])
                 if np.isnan(qb[2]):  # no elbow (or out of its limits): its 4 branches are void
                     if not any_only:
-                        _void(out_q, out_valid, i, 8 * f + 4 * i3, 4, cols, fixed_col, fixed[f])
+                        _void(out_q, out_valid, i, 8 * f + 4 * i3, 4, cols, fixed_col, fixed[f], full_rows)
                     continue
                 if not have_y0:
-                    _mul(pr, kc[f], tmp)
+                    g = same_c[f]
+                    if not done_c[g]:
+                        _mul_row(pr, kc, g, pkc)
+                        _mul_row(pr, kd, g, pkd)
+                        done_c[g] = True
+                    for a in range(3):
+                        tmp[a] = pkc[g, a]
                     _mul(rb[f], tmp, yc0)
-                    _mul(pr, kd[f], tmp)
+                    for a in range(3):
+                        tmp[a] = pkd[g, a]
                     _mul(rb[f], tmp, yd0)
                     have_y0 = True
                 _rot(a3, c3, s3, w3[f], False, tmp)
@@ -182,14 +290,32 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                 x1 = a2[2] * v[0] - a2[0] * v[2]
                 x2 = a2[0] * v[1] - a2[1] * v[0]
                 ap = a1p[f]
-                _acs(ap[0] * vp0 + ap[1] * vp1 + ap[2] * vp2, ap[0] * x0 + ap[1] * x1 + ap[2] * x2,
-                     h - av2 * (ap[0] * a2[0] + ap[1] * a2[1] + ap[2] * a2[2]), r4b)
+                sa_ = ap[0] * vp0 + ap[1] * vp1 + ap[2] * vp2
+                sb_ = ap[0] * x0 + ap[1] * x1 + ap[2] * x2
+                sr = np.sqrt(sa_ * sa_ + sb_ * sb_)
+                xs = (h - av2 * (ap[0] * a2[0] + ap[1] * a2[1] + ap[2] * a2[2])) / sr
+                if not abs(xs) <= 1.0 + 1e-10:
+                    if not any_only:
+                        _void(out_q, out_valid, i, 8 * f + 4 * i3, 4, cols, fixed_col, fixed[f], full_rows)
+                    continue
+                xs = min(1.0, max(-1.0, xs))
+                sds = np.sqrt(1.0 - xs * xs)
+                sca, ssa = sa_ / sr, sb_ / sr
                 for i2 in range(2):
-                    c2, s2 = r4b[2 * i2], r4b[2 * i2 + 1]
-                    qb[1] = _limit(np.arctan2(s2, c2), lower[f, 1], upper[f, 1])
+                    if i2 == 0:
+                        c2, s2 = sca * xs - ssa * sds, ssa * xs + sca * sds
+                    else:
+                        c2, s2 = sca * xs + ssa * sds, ssa * xs - sca * sds
+                    d2 = _inside(c2, s2, cm[f, 1], sm[f, 1], thr_in[f, 1])
+                    if d2:
+                        qb[1] = 0.0
+                    elif _out(c2, s2, cm[f, 1], sm[f, 1], thr[f, 1]):
+                        qb[1] = np.nan
+                    else:
+                        qb[1] = _limit(np.arctan2(s2, c2), lower[f, 1], upper[f, 1])
                     if np.isnan(qb[1]):
                         if not any_only:
-                            _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f])
+                            _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f], full_rows)
                         continue
                     t2[0] = a2[0] * av2 + vp0 * c2 + x0 * s2
                     t2[1] = a2[1] * av2 + vp1 * c2 + x1 * s2
@@ -198,34 +324,64 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                     for a in range(3):
                         x[a] += p2[f, a]
                     # 3. base: x onto W about axis 1
-                    c1, s1, q1 = _sub1(a1, x, pw)
-                    qb[0] = _limit(q1, lower[f, 0], upper[f, 0])
+                    c1, s1, y1, x1_ = _sub1_parts(a1, x, pw)
+                    d1 = _inside(c1, s1, cm[f, 0], sm[f, 0], thr_in[f, 0])
+                    if d1:
+                        qb[0] = 0.0
+                    elif _out(c1, s1, cm[f, 0], sm[f, 0], thr[f, 0]):
+                        qb[0] = np.nan
+                    else:
+                        qb[0] = _limit(np.arctan2(y1, x1_), lower[f, 0], upper[f, 0])
                     if np.isnan(qb[0]):
                         if not any_only:
-                            _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f])
+                            _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f], full_rows)
                         continue
                     # 4. wrist: Y c and Y d with Y = R4^T R03^T R6 (R5 R6)^T
                     free6 = any_only and upper[f, 5] - lower[f, 5] >= TWO_PI  # validity alone: any q6 is in range
                     # Y c first: q5 needs it alone; Y d only once a branch has q4 and q5 within their limits
                     _into_wrist(a1, c1, s1, a2, c2, s2, a3, c3, s3, r2[f], r3[f], r4[f], yc0, tmp, u, yc)
                     have_yd = False
-                    _acs(consts[f, 4], consts[f, 5],
-                         wa[f, 0] * yc[0] + wa[f, 1] * yc[1] + wa[f, 2] * yc[2] - consts[f, 6], r4c)
+                    wa0, wa1, wa2 = wa[f, 0], wa[f, 1], wa[f, 2]
+                    qa, qbb = consts[f, 4], consts[f, 5]
+                    qr = np.sqrt(qa * qa + qbb * qbb)
+                    x5 = (wa0 * yc[0] + wa1 * yc[1] + wa2 * yc[2] - consts[f, 6]) / qr
+                    if not abs(x5) <= 1.0 + 1e-10:
+                        if not any_only:
+                            _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f], full_rows)
+                        continue
+                    x5 = min(1.0, max(-1.0, x5))
+                    sd5 = np.sqrt(1.0 - x5 * x5)
+                    ca5, sa5 = qa / qr, qbb / qr
                     for i5 in range(2):
                         col = 8 * f + 4 * i3 + 2 * i2 + i5
-                        c5, s5 = r4c[2 * i5], r4c[2 * i5 + 1]
+                        if i5 == 0:
+                            c5, s5 = ca5 * x5 - sa5 * sd5, sa5 * x5 + ca5 * sd5
+                        else:
+                            c5, s5 = ca5 * x5 + sa5 * sd5, sa5 * x5 - ca5 * sd5
                         # a joint out of reach or out of its limits voids the branch: the later ones are not solved
-                        qb[4] = _limit(np.arctan2(s5, c5), lower[f, 4], upper[f, 4])
+                        d5 = _inside(c5, s5, cm[f, 4], sm[f, 4], thr_in[f, 4])
+                        if d5:
+                            qb[4] = 0.0
+                        elif _out(c5, s5, cm[f, 4], sm[f, 4], thr[f, 4]):
+                            qb[4] = np.nan
+                        else:
+                            qb[4] = _limit(np.arctan2(s5, c5), lower[f, 4], upper[f, 4])
                         if np.isnan(qb[4]):
                             if not any_only:
-                                _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f])
+                                _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f], full_rows)
                             continue
                         _rot(wb[f], c5, s5, wc[f], False, u)
-                        c4, s4, q4 = _sub1(wa[f], u, yc)
-                        qb[3] = _limit(q4, lower[f, 3], upper[f, 3])
+                        c4, s4, y4, x4 = _sub1_parts(wa[f], u, yc)
+                        d4 = _inside(c4, s4, cm[f, 3], sm[f, 3], thr_in[f, 3])
+                        if d4:
+                            qb[3] = 0.0
+                        elif _out(c4, s4, cm[f, 3], sm[f, 3], thr[f, 3]):
+                            qb[3] = np.nan
+                        else:
+                            qb[3] = _limit(np.arctan2(y4, x4), lower[f, 3], upper[f, 3])
                         if np.isnan(qb[3]):
                             if not any_only:
-                                _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f])
+                                _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f], full_rows)
                             continue
                         if free6:
                             qb[5] = 0.0
@@ -236,15 +392,30 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                                 have_yd = True
                             _rot(wa[f], c4, s4, yd, True, tmp)
                             _rot(wb[f], c5, s5, tmp, True, u)
-                            qb[5] = _limit(_sub1(wc[f], wd[f], u)[2], lower[f, 5], upper[f, 5])
+                            c6, s6, y6, x6 = _sub1_parts(wc[f], wd[f], u)
+                            if _out(c6, s6, cm[f, 5], sm[f, 5], thr[f, 5]):
+                                qb[5] = np.nan
+                            else:
+                                qb[5] = _limit(np.arctan2(y6, x6), lower[f, 5], upper[f, 5])
                         ok = not np.isnan(qb[5])
                         out_valid[i, col] = ok
                         if any_only:
                             found = found or ok
                             continue
                         if not ok:
-                            _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f])
+                            _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f], full_rows)
                             continue
+                        # the arctangents put off above, once per joint value this branch is the first to output
+                        if d3:
+                            qb[2], d3 = _limit(np.arctan2(s3, c3), lower[f, 2], upper[f, 2]), False
+                        if d2:
+                            qb[1], d2 = _limit(np.arctan2(s2, c2), lower[f, 1], upper[f, 1]), False
+                        if d1:
+                            qb[0], d1 = _limit(np.arctan2(y1, x1_), lower[f, 0], upper[f, 0]), False
+                        if d5:
+                            qb[4] = _limit(np.arctan2(s5, c5), lower[f, 4], upper[f, 4])
+                        if d4:
+                            qb[3] = _limit(np.arctan2(y4, x4), lower[f, 3], upper[f, 3])
                         for j in range(6):
                             out_q[i, col, cols[j]] = qb[j]
                         if fixed_col >= 0:
