@@ -103,6 +103,8 @@ def test_repaired_boxes_give_the_clean_box_grasp_rows(tmp_path, hand):
             assert np.array_equal(g[key], ref[3][key]), (label, key)
     once = canonical(clean)
     assert np.array_equal(canonical(once).faces, once.faces) and np.isclose(once.volume, clean.volume)
+    f = np.asarray(once.faces)  # faces in lexicographic order, each from its lowest vertex
+    assert np.array_equal(np.lexsort((f[:, 2], f[:, 1], f[:, 0])), np.arange(len(f))) and (f[:, 0] == f.min(axis=1)).all()
 
 
 def _pieces() -> list[trimesh.Trimesh]:

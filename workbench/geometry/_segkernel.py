@@ -322,3 +322,26 @@ def facets_holding(tri_ptr, tri_index, n_tri, queries):
             out[k] = grouped[q]
             k += 1
     return counts, out
+
+
+@njit(cache=True)
+def connected(table):
+    """Whether the faces form one body across the edges of `table` (`neighbour_table`: n where none)."""
+    n = table.shape[0]
+    if n == 0:
+        return True
+    seen = np.zeros(n, dtype=np.bool_)
+    queue = np.empty(n, dtype=np.int64)
+    queue[0] = 0
+    seen[0] = True
+    head, tail = 0, 1
+    while head < tail:
+        t = queue[head]
+        head += 1
+        for j in range(table.shape[1]):
+            c = table[t, j]
+            if c < n and not seen[c]:
+                seen[c] = True
+                queue[tail] = c
+                tail += 1
+    return tail == n
