@@ -46,12 +46,14 @@ def test_first_touch_is_the_highest_surface_point_in_the_pad_footprint(hand):
 
 def test_hierarchy_and_scan_give_the_same_touches(hand):
     """The triangle hierarchy only chooses which triangles are tested: its touches equal a scan of every triangle
-    (one leaf holding them all), on a curved mesh and on a flat-subdivided one where many triangles tie."""
+    (one leaf holding them all), on a curved mesh and on a flat-subdivided one where many triangles tie; with more
+    hand rotations than one search serves at once (64), and each rotation's touches equal its search alone."""
     for mesh in (_bumpy(5), trimesh.creation.box((0.04, 0.05, 0.03)).subdivide().subdivide().subdivide()):
         rng = np.random.default_rng(2)
         face = rng.choice(len(mesh.faces), 40, replace=False)
         origins, axes = mesh.triangles_center[face], mesh.face_normals[face]
-        angles = 2 * np.pi * np.arange(4) / 4
+        angles = 2 * np.pi * np.arange(70) / 70
+        alone = first_touches(mesh, origins, axes, angles[[3, 67]], hand)
         tree = first_touches(mesh, origins, axes, angles, hand)
         scan = _padkernel.triangle_bvh(np.asarray(mesh.triangles), np.asarray(mesh.face_normals), leaf=len(mesh.faces))
         assert len(scan[0]) == 2  # one leaf: the root
@@ -61,6 +63,8 @@ def test_hierarchy_and_scan_give_the_same_touches(hand):
         assert np.array_equal(tree.hit, brute.hit)
         assert np.array_equal(tree.tri0, brute.tri0) and np.array_equal(tree.tri1, brute.tri1)
         assert np.allclose(tree.poses, brute.poses, atol=1e-12)
+        both = tree.poses.reshape(40, 70, 4, 4)[:, [3, 67]].reshape(-1, 4, 4)
+        assert np.array_equal(both, alone.poses)
 
 
 def test_pad_offsets_place_contacts_on_the_pads(hand):

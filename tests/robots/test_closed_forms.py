@@ -7,6 +7,7 @@ The solver is read off the model: UR3 and UR10 loaded from their URDF files as a
 
 from __future__ import annotations
 
+import copy
 import warnings
 
 import numpy as np
@@ -14,6 +15,7 @@ import pinocchio as pin
 import pytest
 
 from workbench.resources import erd_robots
+from workbench.robots import parallel
 from workbench.robots.solvers import REFINE, SWEEP, closed_form, describe
 from workbench.robots.model import get_robot, pose_xyz_yaw, robot_from_urdf
 
@@ -63,6 +65,22 @@ def test_ur5_three_parallel_axes_8_branches():
     qs = np.random.default_rng(1).uniform(ur5.lower, ur5.upper, (N, 6))
     n, found = _check(ur5, qs)
     assert found > 4 * n  # most poses have several real branches within the UR's +/- 2 pi limits
+
+
+def test_ur5_joint_limits_keep_exactly_the_branches_within_them():
+    """Limits narrower than a turn: a branch is kept iff each of its joints, moved by whole turns, fits its limits
+    (checked on the branches solved without limits), and its joints are then those representatives."""
+    robot = copy.copy(get_robot("ur5"))
+    robot.lower = np.array([-1.0, -3.5, -2.0, -4.0, 0.5, -1.5])
+    robot.upper = np.array([2.5, 0.5, 2.5, 1.0, 5.0, 1.5])
+    poses = _fk(robot, np.random.default_rng(3).uniform(robot.lower, robot.upper, (300, 6)))
+    q, valid = parallel.solve(parallel.parallel_ik(robot), poses)
+    qu, vu = parallel.solve(parallel.parallel_ik(robot, limits=False), poses)
+    turns = qu[..., None] + 2 * np.pi * np.array([0.0, -1.0, 1.0])          # q, q - 2 pi, q + 2 pi
+    fits = (turns >= robot.lower[:, None]) & (turns <= robot.upper[:, None])
+    assert (valid == (vu & fits.any(-1).all(-1))).all() and 0 < valid.sum() < vu.sum()
+    pick = np.take_along_axis(turns, np.argmax(fits, -1)[..., None], -1)[..., 0]
+    assert np.abs(q[valid] - pick[valid]).max() < 1e-12 and np.isnan(q[~valid]).all()
 
 
 def test_puma560_spherical_wrist():

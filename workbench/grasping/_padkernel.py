@@ -179,9 +179,9 @@ def _height_key(shape, node, o, y, slack, si, wlo, whi, a_max, a_min, tie):
 
 
 @njit(cache=True)
-def _footprints(shape, node, o, x0, z0, cs, ua, wa, mask, slack, cx, cz, hx, hz):
-    """The rotations of `mask` (bit j: rotation (cs[j, 0], cs[j, 1]), whose pad axes' absolute components are ua[j]
-    and wa[j]) whose pad footprint meets the node's box widened by `slack`."""
+def _footprints(shape, node, o, x0, z0, cs, ua, wa, mask, n_rot, slack, cx, cz, hx, hz):
+    """The rotations of `mask` (bit j < n_rot: rotation (cs[j, 0], cs[j, 1]), whose pad axes' absolute components are
+    ua[j] and wa[j]) whose pad footprint meets the node's box widened by `slack`."""
     mx0, mz0 = 0.0, 0.0
     h0, h1, h2 = 0.5 * (shape[node, 3] - shape[node, 0]), 0.5 * (shape[node, 4] - shape[node, 1]), \
         0.5 * (shape[node, 5] - shape[node, 2])
@@ -190,10 +190,8 @@ def _footprints(shape, node, o, x0, z0, cs, ua, wa, mask, slack, cx, cz, hx, hz)
         mx0 += d * x0[a]
         mz0 += d * z0[a]
     out = np.int64(0)
-    m = mask
-    j = 0
-    while m:
-        if m & 1:
+    for j in range(n_rot):
+        if (mask >> j) & 1:
             c, s = cs[j, 0], cs[j, 1]
             mid = c * mx0 - s * mz0 - cx
             rad = h0 * ua[j, 0] + h1 * ua[j, 1] + h2 * ua[j, 2] + slack
@@ -202,8 +200,6 @@ def _footprints(shape, node, o, x0, z0, cs, ua, wa, mask, slack, cx, cz, hx, hz)
                 rad = h0 * wa[j, 0] + h1 * wa[j, 1] + h2 * wa[j, 2] + slack
                 if mid - rad <= hz and mid + rad >= -hz:
                     out |= np.int64(1) << j
-        m >>= 1
-        j += 1
     return out
 
 
@@ -407,7 +403,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                 hn = 0
                 kk = _height_key(shape, 1, o, y, slack, si, wlo, whi, a_max, a_min, tie)
                 if kk > -np.inf:
-                    m = _footprints(shape, 1, o, x0, z0, cs, ua, wa, full, slack, cx, cz, hx, hz)
+                    m = _footprints(shape, 1, o, x0, z0, cs, ua, wa, full, n_rot, slack, cx, cz, hx, hz)
                     if m:
                         hn = _heap_push(hkey, hnode, hmask, 0, kk, 1, m)
                 while hn > 0:
@@ -433,7 +429,8 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                                 if (m >> j) & 1 and kk >= g[j] - tie:
                                     cm |= np.int64(1) << j
                             if cm:
-                                cm = _footprints(shape, child, o, x0, z0, cs, ua, wa, cm, slack, cx, cz, hx, hz)
+                                cm = _footprints(shape, child, o, x0, z0, cs, ua, wa, cm, n_rot, slack, cx, cz,
+                                                 hx, hz)
                             if cm:
                                 hn = _heap_push(hkey, hnode, hmask, hn, kk, child, cm)
                         continue
