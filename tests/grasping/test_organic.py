@@ -231,3 +231,16 @@ def test_organic_objects_go_through_placements_ik_and_a_plan(organic_objects, tm
     assert best.steps[0].kind == "pick" and best.steps[-1].kind == "place"
     for s in best.steps:
         assert np.allclose(s.object_pose @ s.grasp, s.tcp, atol=1e-9)
+
+
+def test_paper_pairs_on_an_open_bowl_name_the_stage_that_found_none(hand):
+    """The paper's contact pairs on a thin open bowl whose rays leave through no parallel facet: no pair, and the
+    stage that found none named, not an indexing error."""
+    from workbench.benchmarks.organic import open_bowl
+    from workbench.geometry.objects import MeshWarning
+
+    with pytest.warns(MeshWarning):
+        obj = from_trimesh(open_bowl(), "bowl")
+    plan = plan_grasps(obj, hand, GraspParams(contact_model="paper", lengths="fixed"))
+    assert plan.counts["facet_samples_distance"] > 0 and plan.counts["contact_pairs"] == 0 and len(plan.grasps) == 0
+    assert plan.empty_reason.startswith("contact_pairs:")

@@ -28,6 +28,7 @@ from workbench.geometry._segkernel import (
     facets_holding,
     grow_facets,
     neighbour_table,
+    triangle_centres,
 )
 
 
@@ -96,7 +97,7 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     tri_ptr, tri_index, seeds = grow_facets(np.ascontiguousarray(normals, dtype=np.float64), nbr, seed_order,
                                             method == "conventional", float(np.cos(tau)), float(np.cos(merge)))
     wn, wc, area = facet_sums(tri_ptr, tri_index, np.ascontiguousarray(normals, dtype=np.float64),
-                              np.ascontiguousarray(mesh.triangles_center, dtype=np.float64),
+                              triangle_centres(np.ascontiguousarray(mesh.vertices, dtype=np.float64), faces),
                               np.ascontiguousarray(areas, dtype=np.float64))
     edge_ptr, be = facet_boundaries(faces, tri_ptr, tri_index, len(mesh.vertices), order, starts, nbr)
     return Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index,

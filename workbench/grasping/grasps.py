@@ -701,12 +701,12 @@ def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: 
     # best opposite facet per hit, then one pair per (sample, hit triangle): the most antiparallel
     order = np.lexsort((-anti, hit))
     hit, fb, anti = hit[order], fb[order], anti[order]
-    first = np.r_[True, hit[1:] != hit[:-1]]
+    first = np.r_[True, hit[1:] != hit[:-1]] if len(hit) else np.zeros(0, dtype=bool)
     hit, fb, anti = hit[first], fb[first], anti[first]
     r = ray[hit]
     key = sa[r].astype(np.int64) * len(mesh.faces) + tri[hit]
     order = np.lexsort((-anti, key))
-    keep = order[np.r_[True, key[order][1:] != key[order][:-1]]]
+    keep = order[np.r_[True, key[order][1:] != key[order][:-1]]] if len(key) else order
     keep.sort()
     hit, fb, r = hit[keep], fb[keep], r[keep]
     p0, p1 = p[r], locs[hit]
