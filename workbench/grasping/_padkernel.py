@@ -636,15 +636,20 @@ def _set_shape(shape, node, c, r, n, d0, d1):
     shape[node, 13], shape[node, 14] = d0, d1
 
 
-def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int = 16) -> tuple:
+def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int | None = None) -> tuple:
     """A bounding-volume hierarchy over triangles (T, 3, 3) for `first_touch_kernel`: the triangles in Morton order of
-    their centres, `leaf` to a leaf, and a complete binary tree over the leaves (node 1 the root, node i's children
-    2i and 2i + 1, the leaves P .. 2P - 1). Returns the node shapes (2P, 15): box lo, hi (empty: lo > hi), and the
+    their centres, `leaf` to a leaf (None: by the count, 4 to 16), and a complete binary tree over the leaves (node 1
+    the root, node i's children 2i and 2i + 1, the leaves P .. 2P - 1). Returns the node shapes (2P, 15): box lo, hi (empty: lo > hi), and the
     sphere and slab of `_build`; the triangle of every leaf slot (P * leaf, -1 for none); `leaf`; the triangles by
     slot (T, 3, 3), so that a leaf's triangles lie together in memory; and the triangles' `normals` (T, 3). `leaf` >= T
     gives one leaf: a scan of every triangle."""
     tri = np.ascontiguousarray(tri, dtype=np.float64).reshape(-1, 3, 3)
-    n, leaf = len(tri), max(int(leaf), 1)
+    n = len(tri)
+    if leaf is None:
+        # wide leaves halve the build and shorten the pads' searches at full resolution; on a coarse mesh, whose
+        # triangles are large beside the hand, narrow ones spare the hand's separating-axis tests
+        leaf = 4 if n < 8_192 else 8 if n < 262_144 else 16
+    leaf = max(int(leaf), 1)
     P = 1 << int(np.ceil(np.log2(max(-(-n // leaf), 1))))
     slots = np.empty(P * leaf, dtype=np.int64)
     tri_s = np.empty((n, 3, 3))
