@@ -194,3 +194,17 @@ def test_edge_groups_match_a_stable_sort_of_the_vertex_pairs():
         assert np.array_equal(starts, np.flatnonzero(np.r_[True, np.diff(keys[order]) != 0, True]))
     order, starts = edge_groups(np.zeros((0, 3), dtype=np.int64), 0)
     assert len(order) == 0 and starts.tolist() == [0]
+
+
+def test_compiled_face_areas_and_volume_sign_are_trimeshs():
+    """The repair's compiled face areas are trimesh's to the bit, and its volume sum has trimesh's volume's sign, with
+    an error bound far below it, on a closed scan and the same scan inside out."""
+    from workbench.geometry._repairkernel import face_areas, volume_terms
+
+    m = blob(seed=2, noise=1e-4)
+    for faces in (m.faces, m.faces[:, ::-1]):
+        mesh = trimesh.Trimesh(m.vertices, faces, process=False)
+        v, f = np.ascontiguousarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64)
+        assert np.array_equal(face_areas(v, f), mesh.area_faces)
+        s, bound = volume_terms(v, f)
+        assert np.sign(s) == np.sign(mesh.volume) and abs(s) > 1e6 * bound and np.isclose(s / 6, mesh.volume, rtol=1e-9)

@@ -21,6 +21,7 @@ import numpy as np
 import trimesh
 
 from workbench.errors import MeshError
+from workbench.geometry._repairkernel import face_areas, volume_terms
 from workbench.geometry._segkernel import connected, edge_groups, neighbour_table
 from workbench.geometry.collision import mesh_distance
 
@@ -48,7 +49,7 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
     if indexed and len(mesh.vertices) < nv:
         notes.append(f"merged {nv - len(mesh.vertices)} duplicate vertices")
     faces = mesh.faces
-    areas = mesh.area_faces
+    areas = face_areas(np.ascontiguousarray(mesh.vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
     degenerate = repeated | (areas <= 1e-14 * max(1.0, float(areas.max(initial=0.0))))
     if degenerate.all():
@@ -84,7 +85,7 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
         trimesh.repair.fix_normals(mesh)  # consistent winding, and outward when closed
         notes.append("faces were not consistently oriented; re-oriented them")
         watertight, winding = edge_flags(mesh.faces, len(mesh.vertices))
-    if watertight and volume_centre(mesh)[0] < 0:
+    if watertight and _inside_out(mesh):
         mesh.invert()
         notes.append("turned the normals outward (the mesh was inside out)")
     out = canonical(mesh)
@@ -136,6 +137,13 @@ def volume_centre(mesh: trimesh.Trimesh) -> tuple[float, np.ndarray]:
     integral[1:4] = (crosses * f2).T
     integrated = integral.sum(axis=1) / np.array([6, 24, 24, 24], dtype=np.float64)
     return float(integrated[0]), integrated[1:4] / integrated[0]
+
+
+def _inside_out(mesh: trimesh.Trimesh) -> bool:
+    """Whether a closed mesh's signed volume is negative (its normals point inward): the sign of the compiled sum of
+    `volume_centre`'s volume terms where it exceeds the bound on any summation order's error, else `volume_centre`'s."""
+    s, bound = volume_terms(np.ascontiguousarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64))
+    return bool(s < 0) if abs(s) > bound else volume_centre(mesh)[0] < 0
 
 
 def canonical(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
