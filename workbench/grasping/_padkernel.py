@@ -1,7 +1,7 @@
 """Compiled first-touch kernel of the pad contact model (`pads.first_touches`): a bounding-volume hierarchy over the
-triangles, searched per jaw axis, hand rotation and pad by branch and bound (a pad's first touch is the highest point
-in its footprint, so a subtree whose bounds lie below the best touch so far, or outside the footprint, is skipped).
-Numba, cached on disk after the first compile."""
+triangles, searched per jaw axis and pad by branch and bound for every hand rotation at once (a pad's first touch is
+the highest point in its footprint, so a subtree whose bounds lie below a rotation's best touch so far, or outside
+its footprint, is skipped for that rotation). Numba, cached on disk after the first compile."""
 
 from __future__ import annotations
 
