@@ -23,7 +23,9 @@ def test_flipped_faces_and_inside_out_mesh_are_reoriented():
     good = blob(seed=1)
     faces = good.faces.copy()
     faces[::5] = faces[::5, ::-1]
-    obj = _load(trimesh.Trimesh(good.vertices, faces, process=False), "flipped")
+    given = trimesh.Trimesh(good.vertices, faces, process=False)
+    obj = _load(given, "flipped")
+    assert np.array_equal(given.faces, faces) and np.array_equal(given.vertices, good.vertices)  # the caller's mesh kept
     assert obj.mesh.is_winding_consistent and obj.mesh.volume > 0
     assert obj.com_method == "volume" and np.allclose(obj.com, good.center_mass, atol=1e-9)
     assert any("re-oriented" in r for r in obj.repairs)

@@ -163,8 +163,9 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     if extent > MAX_EXTENT or (MIN_EXTENT > extent > 0):
         raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
                         f"(allowed: {PART_SIZE.describe()}); {_scale_hint(extent, scale)}")
-    mesh = trimesh.Trimesh(vertices * scale, faces, process=False, validate=False)
-    mesh, repairs = repair(mesh, label, pieces=pieces)
+    # built from copies (the scaled vertices, the faces) that the repairs may change in place: no second copy
+    mesh = trimesh.Trimesh(vertices * scale, faces.copy(), process=False, validate=False)
+    mesh, repairs = repair(mesh, label, pieces=pieces, copy=False)
     for note in repairs:
         warnings.warn(f"{label}: {note}", MeshWarning, stacklevel=3)
     extent = float(mesh.extents.max())

@@ -26,9 +26,11 @@ from workbench.geometry.collision import mesh_distance
 
 
 def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: float = 0.01,
-           debris: float = 0.1, pieces: np.ndarray | None = None) -> tuple[trimesh.Trimesh, list[str]]:
+           debris: float = 0.1, pieces: np.ndarray | None = None,
+           copy: bool = True) -> tuple[trimesh.Trimesh, list[str]]:
     """The repaired mesh and one line per repair made (empty when nothing was needed). `pieces` (per face, optional):
-    which of the file's meshes each face came from (a glTF scene's nodes)."""
+    which of the file's meshes each face came from (a glTF scene's nodes). `copy=False` lets the repairs change
+    `mesh` itself, for a caller that built it only to repair it."""
     notes: list[str] = []
     if pieces is not None and len(np.unique(pieces)) > 1:
         # the file's own pieces first: merged together, coincident faces of pieces meeting face to face would be taken
@@ -40,7 +42,8 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
     # an STL stores every face's own corners: merging them is loading, not repairing; an indexed mesh (OBJ, PLY)
     # that repeats vertices has seams, and merging those is a repair worth reporting
     indexed = bool(np.bincount(np.asarray(mesh.faces).ravel(), minlength=nv).max(initial=0) > 1)
-    mesh = mesh.copy()
+    if copy:
+        mesh = mesh.copy()
     mesh.merge_vertices()
     if indexed and len(mesh.vertices) < nv:
         notes.append(f"merged {nv - len(mesh.vertices)} duplicate vertices")
