@@ -672,13 +672,19 @@ def branch_order(joints, valid, ref, lower, upper, wrap, dist, rank):
                         joints[i, b, j] = x
                 d += abs(x - ref[i, j])
             dist[i, b] = d
-        for b in range(nb):  # insertion sort: stable, and few branches per pose are valid
-            rank[i, b] = b
-        for b in range(1, nb):
-            k = rank[i, b]
-            v = dist[i, k]
-            c = b - 1
+        # stable: the valid branches by distance (insertion sort among the few), then the others in branch order
+        m_ = 0
+        for b in range(nb):
+            v = dist[i, b]
+            if not v < np.inf:
+                continue
+            c = m_ - 1
             while c >= 0 and dist[i, rank[i, c]] > v:
                 rank[i, c + 1] = rank[i, c]
                 c -= 1
-            rank[i, c + 1] = k
+            rank[i, c + 1] = b
+            m_ += 1
+        for b in range(nb):
+            if not dist[i, b] < np.inf:
+                rank[i, m_] = b
+                m_ += 1
