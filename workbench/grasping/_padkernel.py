@@ -1,7 +1,7 @@
 """Compiled first-touch kernel of the pad contact model (`pads.first_touches`): a bounding-volume hierarchy over the
-triangles, searched per jaw axis, hand rotation and pad by branch and bound (a pad's first touch is the highest point
-in its footprint, so a subtree whose bounds lie below the best touch so far, or outside the footprint, is skipped).
-Numba, cached on disk after the first compile."""
+triangles, searched per jaw axis and pad by branch and bound for every hand rotation at once (a pad's first touch is
+the highest point in its footprint, so a subtree whose bounds lie below a rotation's best touch so far, or outside
+its footprint, is skipped for that rotation). Numba, cached on disk after the first compile."""
 
 from __future__ import annotations
 
@@ -300,8 +300,8 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                        block):
     """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y,
     local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
-    triangles by leaf slot and their unit normals by triangle. `block` (m, negative: off): a pad whose finite start's plane,
-    moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing.
+    triangles by leaf slot and their unit normals by triangle. `block` (m, negative: off): a pad whose finite start's
+    plane, moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing.
 
     The rotations about one axis share one best-first search per pad: a node is opened for the rotations whose
     footprint meets it and whose best touch so far it may reach within `tie` of, highest first (lowest for the right
@@ -569,8 +569,10 @@ def _build(tri, leaf, slots, tri_s, shape):
                     tri_s[q, v, a] = x
                     shape[node, a] = min(shape[node, a], x)
                     shape[node, 3 + a] = max(shape[node, 3 + a], x)
-            e10, e11, e12 = tri_s[q, 1, 0] - tri_s[q, 0, 0], tri_s[q, 1, 1] - tri_s[q, 0, 1], tri_s[q, 1, 2] - tri_s[q, 0, 2]
-            e20, e21, e22 = tri_s[q, 2, 0] - tri_s[q, 0, 0], tri_s[q, 2, 1] - tri_s[q, 0, 1], tri_s[q, 2, 2] - tri_s[q, 0, 2]
+            e10, e11, e12 = (tri_s[q, 1, 0] - tri_s[q, 0, 0], tri_s[q, 1, 1] - tri_s[q, 0, 1],
+                             tri_s[q, 1, 2] - tri_s[q, 0, 2])
+            e20, e21, e22 = (tri_s[q, 2, 0] - tri_s[q, 0, 0], tri_s[q, 2, 1] - tri_s[q, 0, 1],
+                             tri_s[q, 2, 2] - tri_s[q, 0, 2])
             s0 += e11 * e22 - e12 * e21
             s1 += e12 * e20 - e10 * e22
             s2 += e10 * e21 - e11 * e20
@@ -639,10 +641,10 @@ def _set_shape(shape, node, c, r, n, d0, d1):
 def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int | None = None) -> tuple:
     """A bounding-volume hierarchy over triangles (T, 3, 3) for `first_touch_kernel`: the triangles in Morton order of
     their centres, `leaf` to a leaf (None: by the count, 4 to 16), and a complete binary tree over the leaves (node 1
-    the root, node i's children 2i and 2i + 1, the leaves P .. 2P - 1). Returns the node shapes (2P, 15): box lo, hi (empty: lo > hi), and the
-    sphere and slab of `_build`; the triangle of every leaf slot (P * leaf, -1 for none); `leaf`; the triangles by
-    slot (T, 3, 3), so that a leaf's triangles lie together in memory; and the triangles' `normals` (T, 3). `leaf` >= T
-    gives one leaf: a scan of every triangle."""
+    the root, node i's children 2i and 2i + 1, the leaves P .. 2P - 1). Returns the node shapes (2P, 15): box lo, hi
+    (empty: lo > hi), and the sphere and slab of `_build`; the triangle of every leaf slot (P * leaf, -1 for none);
+    `leaf`; the triangles by slot (T, 3, 3), so that a leaf's triangles lie together in memory; and the triangles'
+    `normals` (T, 3). `leaf` >= T gives one leaf: a scan of every triangle."""
     tri = np.ascontiguousarray(tri, dtype=np.float64).reshape(-1, 3, 3)
     n = len(tri)
     if leaf is None:

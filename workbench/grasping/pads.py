@@ -25,9 +25,10 @@ plane cuts the part anywhere inside its footprint starts inside the material and
 are what the pads meet as the hand closes from the opening it approached at. The hand at its pre-grasp opening is
 checked against the object afterwards (level 2).
 
-The work runs in a compiled kernel (`_padkernel`) over a bounding-volume hierarchy of the triangles: each pad at
-each rotation searches it by branch and bound, skipping every subtree outside its footprint or below the best touch
-found so far, so the cost follows the triangles near the first touch, not the mesh.
+The work runs in a compiled kernel (`_padkernel`) over a bounding-volume hierarchy of the triangles: each pad
+searches it by branch and bound for all the hand's rotations about an axis at once, skipping every subtree outside
+a rotation's footprint or below its best touch found so far, so the cost follows the triangles near the first
+touches, not the mesh, and the nodes near the axis that every rotation needs are opened once.
 """
 
 from __future__ import annotations
