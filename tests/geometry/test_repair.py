@@ -208,3 +208,17 @@ def test_compiled_face_areas_and_volume_sign_are_trimeshs():
         assert np.array_equal(face_areas(v, f), mesh.area_faces)
         s, bound = volume_terms(v, f)
         assert np.sign(s) == np.sign(mesh.volume) and abs(s) > 1e6 * bound and np.isclose(s / 6, mesh.volume, rtol=1e-9)
+
+
+def test_vertex_merging_is_skipped_only_where_trimesh_would_merge_none():
+    """Distinct positions at trimesh's merge precision: a clean scan's vertices are, and a vertex repeated 1e-12 m
+    away is not, as trimesh's own merge says."""
+    from workbench.geometry.repair import _distinct_positions
+
+    m = blob(seed=2)
+    v = np.vstack([m.vertices, m.vertices[:1] + 1e-12])
+    f = np.vstack([m.faces, [[len(m.vertices), 1, 2]]])
+    for vertices, faces, distinct in ((m.vertices, m.faces, True), (v, f, False)):
+        merged = trimesh.Trimesh(vertices, faces, process=False)
+        merged.merge_vertices()
+        assert _distinct_positions(vertices) is distinct and (len(merged.vertices) == len(vertices)) is distinct

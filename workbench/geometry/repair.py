@@ -42,10 +42,12 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
     nv = len(mesh.vertices)
     # an STL stores every face's own corners: merging them is loading, not repairing; an indexed mesh (OBJ, PLY)
     # that repeats vertices has seams, and merging those is a repair worth reporting
-    indexed = bool(np.bincount(np.asarray(mesh.faces).ravel(), minlength=nv).max(initial=0) > 1)
+    uses = np.bincount(np.asarray(mesh.faces).ravel(), minlength=nv)
+    indexed = bool(uses.max(initial=0) > 1)
     if copy:
         mesh = mesh.copy()
-    mesh.merge_vertices()
+    if not (uses.all() and _distinct_positions(mesh.vertices)):  # else merging would change nothing
+        mesh.merge_vertices()
     if indexed and len(mesh.vertices) < nv:
         notes.append(f"merged {nv - len(mesh.vertices)} duplicate vertices")
     faces = mesh.faces
@@ -226,6 +228,15 @@ def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarr
     notes.append(f"kept {len(keep)} touching bodies together as one part (no union: not every piece is closed; "
                  f"{int((~outer).sum())} faces inside another piece dropped)")
     return kept, "; ".join(notes)
+
+
+def _distinct_positions(vertices: np.ndarray) -> bool:
+    """Whether no two vertices share a position at trimesh's merge precision (`tol.merge`), as its `merge_vertices`
+    rounds them: then, every vertex being used, merging keeps the mesh as it is. One sort of one int64 hash per vertex;
+    a hash shared by two positions answers False, and trimesh then merges as usual."""
+    q = (np.asarray(vertices) * (10 ** trimesh.util.decimal_to_digits(trimesh.tol.merge))).round().astype(np.int64)
+    h = np.sort(q[:, 0] * np.int64(0x9E3779B97F4A7C1) + q[:, 1] * np.int64(0x632BE59BD9B4E01) + q[:, 2])  # wraps
+    return bool((h[1:] != h[:-1]).all())
 
 
 def _repeated_triples(faces: np.ndarray, n_vertices: int) -> bool:
