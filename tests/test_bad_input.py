@@ -773,8 +773,7 @@ def assert_interrupted(res: subprocess.CompletedProcess, command: str) -> None:
     assert "Traceback" not in res.stderr and "KeyboardInterrupt" not in res.stderr, res.stderr[-3000:]
     lines = [ln for ln in res.stderr.replace("\r", "\n").splitlines() if ln.strip() and "/s]" not in ln
              and "it/s" not in ln and not ln.startswith("dask:")]
-    # 130, or death by the SIGINT itself (-2), which a shell also reports as status 130: Python ends that way when
-    # the Ctrl-C lands in its import machinery while numpy loads, after the one line below is printed
+    # 130, or death by the SIGINT itself (-2), which a shell also reports as status 130 (a worker process's end)
     assert res.returncode in (130, -signal.SIGINT), (res.returncode, res.stderr[-2000:])
     assert lines == [f"workbench {command}: interrupted; the store keeps only completed stages"], lines
 

@@ -6,26 +6,41 @@ Bad input prints one line and exits with status 2 (CONVENTIONS.md, Errors).
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
 
-try:  # the slow part of loading the command line (under load a second or more): a Ctrl-C in it has started nothing
-    import argparse
-    import importlib
-    import inspect
-    import os
-    import re
-    import signal
-    import threading
-    import warnings
 
-    import numpy  # noqa: F401
-except KeyboardInterrupt:
-    _name = next((a for a in sys.argv[1:] if not a.startswith("-")), "")
-    sys.stderr.write(f"workbench {_name}: interrupted; the store keeps only completed stages\n".replace("  ", " "))
-    raise SystemExit(130) from None
+def _stopped_while_loading(signum, frame) -> None:  # pragma: no cover - exercised in a subprocess by the tests
+    name = next((a for a in sys.argv[1:] if not a.startswith("-")), "")
+    os.write(2, f"workbench {name}: interrupted; the store keeps only completed stages\n".replace("  ", " ").encode())
+    os._exit(130)
+
+
+# Loading the command line is the slow part of a start (under load a second or more). A Ctrl-C in it has started
+# nothing, so it ends the process at once: raised as KeyboardInterrupt inside an extension's import, numpy's among
+# them, it would surface as an ImportError with a traceback instead.
+_SIGINT = signal.getsignal(signal.SIGINT)
+if _SIGINT is signal.default_int_handler:
+    try:
+        signal.signal(signal.SIGINT, _stopped_while_loading)
+    except ValueError:  # imported outside the main thread: Python's default stays
+        _SIGINT = None
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import inspect  # noqa: E402
+import re  # noqa: E402
+import threading  # noqa: E402
+import warnings  # noqa: E402
+
+import numpy  # noqa: E402, F401
 
 from workbench.errors import WorkbenchError
 from workbench.params import BUDGET_ENV, WAIT_ENV, check_workers, cli_bound, parse_number, parse_size
+
+if _SIGINT is signal.default_int_handler:
+    signal.signal(signal.SIGINT, _SIGINT)
 
 WAIT = cli_bound(0, 86400, unit="s", help="seconds to wait for a store another process holds")
 
