@@ -259,21 +259,22 @@ def rest_probabilities(hull: trimesh.Trimesh, com: np.ndarray, groups: list[np.n
     return (prob / total if total > 0 else prob), rocking
 
 
-def symmetric_average(values: np.ndarray, normals: np.ndarray, heights: np.ndarray, turns: np.ndarray,
-                      angle: float = np.radians(0.5), distance: float = 5e-4) -> np.ndarray:
-    """`values` (G,) of supports averaged over the orbits of a symmetry group: a turn g (of `turns` (K, 3, 3),
-    about the centre of mass) maps support i, with unit `normals[i]` (G, 3) and plane at `heights[i]` (G,) from
-    the centre of mass, onto the support j whose normal is within `angle` of g n_i and whose height is within
-    `distance`; the result is the mean of values over each support's images. Quantities that depend only on the
-    hull and the centre of mass, such as the rest probabilities, are equal on supports a symmetry swaps, whatever the
-    hull's triangulation makes of them; a turn that does not map every support onto a distinct one is skipped."""
+def support_image(turn: np.ndarray, normals: np.ndarray, heights: np.ndarray, angle: float = np.radians(0.5),
+                  distance: float = 5e-4) -> np.ndarray | None:
+    """Where a turn (3, 3) about the centre of mass maps supports with unit `normals` (G, 3) and planes at `heights`
+    (G,) from it: image (G,), the support whose normal is within `angle` of the turned normal and whose height is
+    within `distance`; None unless every support maps onto a distinct one."""
+    cos = (normals @ np.asarray(turn, dtype=np.float64).T) @ normals.T  # (G, G): image of i against j
+    image = np.argmax(cos, axis=1) if len(normals) else np.zeros(0, dtype=np.int64)
+    ok = (cos[np.arange(len(image)), image] >= np.cos(angle)) & (np.abs(heights[image] - heights) <= distance)
+    return image if ok.all() and len(np.unique(image)) == len(image) else None
+
+
+def symmetric_average(values: np.ndarray, normals: np.ndarray, heights: np.ndarray, turns: np.ndarray) -> np.ndarray:
+    """`values` (G,) of supports averaged over the orbits of a symmetry group `turns` (K, 3, 3) about the centre of
+    mass (`support_image` of each turn; a turn that does not map the supports onto themselves is skipped): the mean
+    of values over each support's images. Quantities that depend only on the hull and the centre of mass, such as
+    the rest probabilities, are equal on supports a symmetry swaps, whatever the hull's triangulation makes of them."""
     values = np.asarray(values, dtype=np.float64)
-    total, used = np.zeros_like(values), 0
-    for g in np.asarray(turns, dtype=np.float64).reshape(-1, 3, 3):
-        cos = (normals @ g.T) @ normals.T  # (G, G): image of i against j
-        image = np.argmax(cos, axis=1)
-        ok = (cos[np.arange(len(values)), image] >= np.cos(angle)) & (np.abs(heights[image] - heights) <= distance)
-        if ok.all() and len(np.unique(image)) == len(values):
-            total += values[image]
-            used += 1
-    return total / used if used else values
+    images = [im for im in (support_image(g, normals, heights) for g in np.asarray(turns).reshape(-1, 3, 3)) if im is not None]
+    return np.mean([values[im] for im in images], axis=0) if images else values

@@ -13,6 +13,7 @@ given no symmetry: its principal axes are not determined by its inertia.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -56,11 +57,14 @@ def rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * x + (1.0 - np.cos(angle)) * (x @ x)
 
 
-def part_symmetry(mesh: trimesh.Trimesh, tol: float = DEFAULT_TOL, centre: np.ndarray | None = None) -> Symmetry:
+def part_symmetry(mesh: trimesh.Trimesh, tol: float = DEFAULT_TOL, centre: np.ndarray | None = None,
+                  admits: Callable[[np.ndarray], bool] | None = None) -> Symmetry:
     """The rotational symmetry of a watertight `mesh` (part frame, metres), within `tol` (see the module
     docstring; under a second for the bundled parts), about its centre of mass or about `centre` (3,) when given:
     the turns about that point that map the mesh onto itself (a part's convex hull about the part's centre of
-    mass, for what depends on just those two, such as where a dropped part comes to rest)."""
+    mass, for what depends on just those two, such as where a dropped part comes to rest). `admits(turn)` (3, 3),
+    when given, is a cheap necessary condition checked before the mesh is: a candidate it refuses is not a
+    symmetry (the result is then the symmetry among the turns it admits)."""
     inertia = np.asarray(mesh.moment_inertia, dtype=np.float64)
     if centre is None:
         centre = np.asarray(mesh.center_mass, dtype=np.float64)
@@ -71,7 +75,11 @@ def part_symmetry(mesh: trimesh.Trimesh, tol: float = DEFAULT_TOL, centre: np.nd
     moments, axes = np.linalg.eigh(inertia)
     scale = max(float(np.abs(moments).max()), 1e-30)
     equal = [abs(moments[i] - moments[j]) <= EQUAL_MOMENTS * scale for i, j in ((0, 1), (1, 2), (0, 2))]
-    test = _Coincidence(mesh, centre, tol)
+    coincide = _Coincidence(mesh, centre, tol)
+
+    def test(r: np.ndarray) -> bool:
+        return (admits is None or bool(admits(r))) and coincide(r)
+
     turns = [np.eye(3)]
     axis = None
     if sum(equal) == 0:

@@ -24,7 +24,7 @@ from scipy.spatial import ConvexHull
 from workbench.errors import MeshError
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.supports import (coplanar_groups, rest_probabilities, stabilities, support_stability,
-                                        symmetric_average)
+                                        support_image, symmetric_average)
 from workbench.geometry.symmetry import part_symmetry
 from workbench.params import Params, param
 from workbench.robots.gripper import Gripper
@@ -134,9 +134,12 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     holds = stabilities(hull, obj.com, groups, normals) > 0
     holds[list(poses)] = stability[list(poses)] > 0
     prob, rocking = rest_probabilities(hull, obj.com, groups, normals, holds, params.rock_angle)
-    if len(groups) > 1:  # supports swapped by a turn of the hull about the centre of mass are equally likely
-        heights = np.array([float((verts[hull.faces[m[0], 0]] - obj.com) @ n) for m, n in zip(groups, normals)])
-        prob = symmetric_average(prob, normals, heights, part_symmetry(hull, centre=obj.com).turns)
+    held = np.flatnonzero(holds)  # the supports a drop can end on: a symmetry permutes them
+    if len(held) > 1:  # supports swapped by a turn of the hull about the centre of mass are equally likely
+        heights = np.array([float((verts[hull.faces[groups[g][0], 0]] - obj.com) @ normals[g]) for g in held])
+        sym = part_symmetry(hull, centre=obj.com,
+                            admits=lambda turn: support_image(turn, normals[held], heights) is not None)
+        prob[held] = symmetric_average(prob[held], normals[held], heights, sym.turns)
     ok = (stability >= threshold) & np.isin(np.arange(len(groups)), list(poses)) & (prob >= params.min_probability)
     if params.reject_rocking:
         ok &= ~rocking
