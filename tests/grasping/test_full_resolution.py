@@ -82,3 +82,26 @@ def test_hand_volumes_meet_the_part_exactly_where_coal_says(hand):
             assert got[k] == bool(coal.collide(probe, target, coal.CollisionRequest(), coal.CollisionResult())), k
         hits += int(got.sum())
     assert 40 <= hits <= 200
+
+
+def test_hull_and_hierarchy_built_beside_segmentation_give_the_same_plan(hand, monkeypatch):
+    """A large part's first plan builds its convex hull and triangle hierarchy in a second thread: the grasps, the
+    hull and the hierarchy are array-equal to those of a plan that builds them in turn (forced here on the bundled
+    tube, by lowering the size from which the thread starts)."""
+    import workbench.grasping.grasps as grasps
+
+    mesh = load_object(bundled_objects()["tube"]).mesh
+    plans, meshes = [], []
+    for size in (10**12, 0):
+        monkeypatch.setattr(grasps, "PREBUILD_TRIANGLES", size)
+        obj = from_trimesh(mesh.copy(), "tube")
+        plans.append(plan_grasps(obj, hand, GraspParams(rotations=4)))
+        meshes.append(obj.mesh)
+    serial, threaded = plans
+    assert len(serial.grasps) > 0
+    for f in serial.grasps.__dataclass_fields__:
+        assert np.array_equal(getattr(serial.grasps, f), getattr(threaded.grasps, f)), f
+    a, b = (m.convex_hull for m in meshes)
+    assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
+    for x, y in zip(*(m._cache["workbench_pad_bvh"] for m in meshes)):
+        assert np.array_equal(x, y)

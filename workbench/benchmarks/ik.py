@@ -236,6 +236,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="comma-separated robots (default: panda,ur5,talos,puma560); a robot with a closed form is "
                              "also run with the numerical solver, for comparison")
     parser.add_argument("--ik", choices=SOLVERS, default="auto", help="paper protocol: the IK solver (default auto)")
+    parser.add_argument("--grasps", choices=["all", "paper"], default="all",
+                        help="paper protocol: every grasp family (default), or only the paper's grasps (its parallel-facet contact model, no "
+                             "support or gap grasps), the grasp set of the paper's Table I")
     parser.add_argument("--grips", type=int, default=40000, help="interactive protocol: tabletop grips (default 40,000)")
     parser.add_argument("--poses", type=int, default=20000,
                         help="solver table: random configurations per robot (default 20,000; the numerical solver takes "
@@ -318,7 +321,8 @@ def run_paper(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         for label, row, obj in paper_task_objects(args.objects):
             db = Path(tmp) / f"{obj.name}.duckdb"
-            g = ensure_grasps(db, obj, hand, GraspParams())
+            families = {} if args.grasps == "all" else {"contact_model": "paper", "support_grasps": False, "gap_grasps": False}
+            g = ensure_grasps(db, obj, hand, GraspParams(**families))
             p = ensure_placements(db, g.idobject, obj, g.idparamset, hand, PlacementParams(), TabletopParams())
             for name in args.robots.split(","):
                 with Store(db) as store:
@@ -339,7 +343,9 @@ def run_paper(args: argparse.Namespace) -> int:
     print_table(["object", "robot", "ik", "dof", "#-tpg", "t-tpgik (s)", "CPU (s)", "#feasible grasp", "#feasible all five",
                  "grips/s", "sample", "sample: feasible (this ik / numerical)", "numerical only", "paper #-tpg", "paper t-tpgikn (s)",
                  "paper t-tpgikh (s)"], rows,
-                title=f"IK feasibility, protocol paper: every tabletop grip of each object (all grasps, 168 placements per free "
+                title=f"IK feasibility, protocol paper: every tabletop grip of each object ("
+                      f"{'all grasps' if args.grasps == 'all' else 'only the paper grasps: parallel facet pairs, no support or gap grasps'}"
+                      f", 168 placements per free "
                       f"placement) at the grasp, handx {args.handx} m, + worldz {args.worldz} m, worlda {args.worlda} m and "
                       f"+ worldz; one cold run in a fresh store; CPU: the seconds of processor time it took, its worker "
                       f"processes' included (what a loaded machine does not stretch). Sample: {args.compare:,} seeded grips solved again by this "

@@ -1,6 +1,7 @@
 """Compiled region growing and facet boundaries of the segmentation (`facets.segment`): linear in the triangles a
 facet holds, so full-resolution scans segment in a fraction of a second. Numba, cached on disk after the first
-compile."""
+compile; the segmentation's kernels release the GIL, so a large part's hull and triangle hierarchy build beside them
+(`grasps.plan_grasps`)."""
 
 from __future__ import annotations
 
@@ -32,7 +33,7 @@ def _sorted(values, m, bits, tmp):
     return src.copy()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
     """Grow a facet from every seed in `order` (Wan & Harada, Section III, Fig. 2): across shared edges to every
     triangle whose normal is within tau of the seed's. Conventional: each triangle in one facet; over-segmentation: a
@@ -95,7 +96,7 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
     return np.array(ptr, dtype=np.int64), out[:size].copy(), np.array(seeds, dtype=np.int64)
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def _pair_order(lo, hi, n_vertices):
     """The stable argsort of the vertex pairs (lo, hi) by lo, then hi, and where each distinct pair's run starts (then
     the total): a counting sort by lo (each vertex starts a handful of edges), then each vertex's run by hi, in place
@@ -143,7 +144,7 @@ def edge_groups(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndar
     return _pair_order(lo, hi, max(int(n_vertices), int(lo.max(initial=-1)) + 1))
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def neighbour_table(order, starts, n):
     """(n, 3) the triangle across each edge of every triangle, n where none: edges shared by exactly two triangles
     (as trimesh's face adjacency; an edge of three or more triangles joins none)."""
@@ -158,7 +159,7 @@ def neighbour_table(order, starts, n):
     return table
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def facet_boundaries(faces, tri_ptr, tri_index, n_vertices, order, starts, nbr):
     """Boundary edges of every facet: the edges its triangles use once, in ascending order of their sorted vertex
     pair per facet; linear in the memberships (`neighbour_table` gives the triangle across an edge two triangles
@@ -208,7 +209,7 @@ def facet_boundaries(faces, tri_ptr, tri_index, n_vertices, order, starts, nbr):
     return edge_ptr, out[:e].copy()
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def triangle_centres(vertices, faces):
     """(n, 3) each triangle's centre, as numpy's mean of its three corners (the same operations, so the same bits as
     trimesh's `triangles_center`), without gathering the corners first."""
@@ -220,7 +221,7 @@ def triangle_centres(vertices, faces):
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)
 def facet_sums(tri_ptr, tri_index, normals, centres, areas):
     """Per facet the sums over its triangles of normal * area, centre * area and area (in membership order)."""
     m = tri_ptr.shape[0] - 1

@@ -538,7 +538,7 @@ def _morton_order(tri):
     return other
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)  # a large part's first plan builds it beside segmentation (grasps._prebuild)
 def _build(tri, leaf, slots, tri_s, shape):
     """Fill the hierarchy in one pass over the triangles in Morton order: `slots` (the triangle of every leaf slot,
     -1 for none), `tri_s` (the triangles by slot) and `shape`: per node its box (lo, hi; empty: lo > hi), the box

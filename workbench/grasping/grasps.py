@@ -23,8 +23,10 @@ grasps. `lengths="fixed"` uses the fixed values as given.
 
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 import trimesh
@@ -36,6 +38,7 @@ from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
 from workbench.grasping._handkernel import convex_piece, hull_hits, pack
+from workbench.grasping._padkernel import triangle_bvh
 from workbench.grasping.pads import (
     Touches,
     axis_frames,
@@ -54,6 +57,9 @@ from workbench.robots.gripper import Gripper
 DEG = 180.0 / np.pi  # radians in the library, degrees on the command line
 PREGRASP_MARGIN = 0.010
 """How much wider than the grasp the jaw opens to approach it (m), CONVENTIONS.md (Gripper)."""
+PREBUILD_TRIANGLES = 65_536
+"""Triangles from which a part's first plan builds its triangle hierarchy and convex hull in a second thread while
+segmentation and sampling run (the same arrays as built in turn; below this the thread costs more than it saves)."""
 
 
 @dataclass(frozen=True)
@@ -261,6 +267,7 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
     lengths = params.scaled(mesh)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
+    prebuilt = _prebuild(mesh, params)
     facets = segment(mesh, params.tau, params.segmentation, params.merge_angle)
     timings["segmentation"] = time.perf_counter() - t0
     t0 = time.perf_counter()
@@ -274,6 +281,7 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
     samples = distribute(mesh, facets, n, radius, 0.0, lengths["dist_max"], params.seed)
     margin = boundary_margin(facets, lengths["dist_min"])
     samples = Samples(**{**samples.__dict__, "pair_ok": samples.pair_ok & (samples.pair_dist >= margin[samples.pair_facet])})
+    prebuilt()
     timings["sampling"] = time.perf_counter() - t0
     counts = {
         "triangles": int(len(mesh.faces)),
@@ -299,6 +307,43 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
     return GraspPlan(params=params, facets=facets, samples=samples, pairs=pairs, candidate_poses=poses,
                      candidate_pair=cand_pair, candidate_free=free, grasps=grasps, counts=counts, timings=timings,
                      lengths=lengths, empty_reason=empty_reason(counts, params, lengths, gripper, pairs))
+
+
+def _prebuild(mesh: trimesh.Trimesh, params: GraspParams) -> Callable[[], None]:
+    """On a large part not planned before, start building what the pad model uses after sampling, the triangle
+    hierarchy (`pads.triangle_tree`) and, for the levelled support grasps, the convex hull, in a thread: both are
+    compiled or qhull work on arrays taken here, overlapping the segmentation's compiled kernels, which release the
+    GIL. Returns the call that waits for them (timed with sampling) and keeps them in the mesh's cache, as building
+    them in turn does."""
+    todo = {}
+    if params.contact_model == "pads" and len(mesh.faces) >= PREBUILD_TRIANGLES:
+        if mesh._cache["workbench_pad_bvh"] is None:
+            tri = np.ascontiguousarray(mesh.triangles, dtype=np.float64)
+            fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
+            todo["workbench_pad_bvh"] = lambda: triangle_bvh(tri, fn)
+        if params.support_grasps and mesh._cache["convex_hull"] is None:
+            points = mesh.vertices.view(np.ndarray)
+            todo["convex_hull"] = lambda: trimesh.convex.convex_hull(points)
+    if not todo:
+        return lambda: None
+    built: dict = {}
+
+    def build() -> None:
+        for key, make in todo.items():
+            try:
+                built[key] = make()
+            except Exception:  # left to the stage that needs it, which raises in the main thread as without this
+                return
+
+    thread = threading.Thread(target=build, name="workbench-prebuild", daemon=True)
+    thread.start()
+
+    def keep() -> None:
+        thread.join()
+        for key, value in built.items():
+            if mesh._cache[key] is None:
+                mesh._cache[key] = value
+    return keep
 
 
 def _level2(gripper: Gripper, poses: np.ndarray, widths: np.ndarray, mesh: trimesh.Trimesh, params: GraspParams,
