@@ -99,7 +99,7 @@ def _limit(q, lo, hi):
     return np.nan
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="never")  # a call, not ten inlined copies: a smaller kernel runs faster
 def _void(out_q, out_valid, i, col0, count, cols, fixed_col, fixed_val, full_rows):
     """Branches col0 .. col0 + count - 1 of pose i without a solution: NaN joints (the held joint still written);
     with `full_rows` (cols and fixed_col cover every column), whole rows at once."""
