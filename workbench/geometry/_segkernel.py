@@ -8,29 +8,15 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from workbench.geometry._radix import radix_sort
+
 
 @njit(cache=True)
 def _sorted(values, m, bits, tmp):
     """values[:m] (distinct, in [0, 2^bits)) sorted: a radix sort in 11-bit digits above 256 values, linear in m."""
     if m <= 256:
         return np.sort(values[:m])
-    src = values[:m].copy()
-    dst = tmp[:m]
-    count = np.empty(2049, dtype=np.int64)
-    shift = 0
-    while shift < bits:
-        count[:] = 0
-        for i in range(m):
-            count[((src[i] >> shift) & 2047) + 1] += 1
-        for d in range(2048):
-            count[d + 1] += count[d]
-        for i in range(m):
-            d = (src[i] >> shift) & 2047
-            dst[count[d]] = src[i]
-            count[d] += 1
-        src, dst = dst, src
-        shift += 11
-    return src.copy()
+    return radix_sort(values[:m].copy(), tmp[:m], 0, bits, 11).copy()
 
 
 @njit(cache=True, nogil=True)

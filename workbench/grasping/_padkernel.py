@@ -8,6 +8,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from workbench.geometry._radix import radix_sort
+
 _EPS = 1e-12
 _STACK = 256  # deeper than any tree: the implicit tree of 2^62 leaves has 63 levels, a search holds one child per level
 
@@ -520,22 +522,20 @@ def _morton_order(tri):
             c = (tri[i, 0, a] + tri[i, 1, a] + tri[i, 2, a]) / 3.0
             code |= _spread(min(max(np.int64((c - lo[a]) / width[a] * 1023), 0), 1023)) << a
         word[i] = (code << 32) | i
-    other = np.empty(n, dtype=np.int64)
-    count = np.empty(1025, dtype=np.int64)
-    for shift in (32, 42, 52):
-        count[:] = 0
-        for i in range(n):
-            count[((word[i] >> shift) & 1023) + 1] += 1
-        for b in range(1024):
-            count[b + 1] += count[b]
-        for i in range(n):
-            b = (word[i] >> shift) & 1023
-            other[count[b]] = word[i]
-            count[b] += 1
-        word, other = other, word
-    for i in range(n):
-        other[i] = word[i] & 0xFFFFFFFF
-    return other
+    return radix_sort(word, np.empty(n, dtype=np.int64), 32, 62, 10) & 0xFFFFFFFF
+
+
+@njit(cache=True, inline="always")
+def _centre_normal(shape, nsum, node, c, nn):
+    """A built node's box centre into c and unit mean normal into nn (`_unit_normal`); False, with its sphere and
+    offsets zeroed, for an empty node."""
+    if shape[node, 0] > shape[node, 3]:
+        shape[node, 6:] = 0.0
+        return False
+    _unit_normal(nsum, node, nn)
+    for a in range(3):
+        c[a] = 0.5 * (shape[node, a] + shape[node, 3 + a])
+    return True
 
 
 @njit(cache=True, nogil=True)  # a large part's first plan builds it beside segmentation (grasps._prebuild)
@@ -577,12 +577,8 @@ def _build(tri, leaf, slots, tri_s, shape):
             s1 += e12 * e20 - e10 * e22
             s2 += e10 * e21 - e11 * e20
         nsum[node, 0], nsum[node, 1], nsum[node, 2] = s0, s1, s2
-        if shape[node, 0] > shape[node, 3]:
-            shape[node, 6:] = 0.0
+        if not _centre_normal(shape, nsum, node, c, nn):
             continue
-        _unit_normal(nsum, node, nn)
-        for a in range(3):
-            c[a] = 0.5 * (shape[node, a] + shape[node, 3 + a])
         r2, d0, d1 = 0.0, np.inf, -np.inf
         for q in range(q0, min(q0 + leaf, n)):
             for v in range(3):
@@ -597,12 +593,8 @@ def _build(tri, leaf, slots, tri_s, shape):
             nsum[node, a] = nsum[2 * node, a] + nsum[2 * node + 1, a]
             shape[node, a] = min(shape[2 * node, a], shape[2 * node + 1, a])
             shape[node, 3 + a] = max(shape[2 * node, 3 + a], shape[2 * node + 1, 3 + a])
-        if shape[node, 0] > shape[node, 3]:
-            shape[node, 6:] = 0.0
+        if not _centre_normal(shape, nsum, node, c, nn):
             continue
-        _unit_normal(nsum, node, nn)
-        for a in range(3):
-            c[a] = 0.5 * (shape[node, a] + shape[node, 3 + a])
         r, d0, d1 = 0.0, np.inf, -np.inf
         for child in (2 * node, 2 * node + 1):
             if shape[child, 0] > shape[child, 3]:

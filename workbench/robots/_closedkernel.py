@@ -73,21 +73,6 @@ def _acs(a, b, c, out):
 
 
 @njit(cache=True, inline="always")
-def _sub1(k, u, v):
-    """(cos, sin, angle) of the rotation taking u onto v about the unit axis k (Paden-Kahan subproblem 1)."""
-    ku = k[0] * u[0] + k[1] * u[1] + k[2] * u[2]
-    kv = k[0] * v[0] + k[1] * v[1] + k[2] * v[2]
-    u0, u1, u2 = u[0] - k[0] * ku, u[1] - k[1] * ku, u[2] - k[2] * ku
-    v0, v1, v2 = v[0] - k[0] * kv, v[1] - k[1] * kv, v[2] - k[2] * kv
-    y = k[0] * (u1 * v2 - u2 * v1) + k[1] * (u2 * v0 - u0 * v2) + k[2] * (u0 * v1 - u1 * v0)
-    x = u0 * v0 + u1 * v1 + u2 * v2
-    h = np.sqrt(x * x + y * y)
-    if not h > 0.0:  # zero (a singular axis: any angle, 0 chosen) or NaN (no solution upstream)
-        return 1.0, y, np.arctan2(y, 1.0)
-    return x / h, y / h, np.arctan2(y, x)
-
-
-@njit(cache=True, inline="always")
 def _limit(q, lo, hi):
     """q in (-pi, pi] moved by a whole turn into [lo, hi] (the representative nearest to 0), NaN if none."""
     if q >= lo and q <= hi:
@@ -126,7 +111,8 @@ def _mul_row(r, m, row, out):
 
 @njit(cache=True, inline="always")
 def _sub1_parts(k, u, v):
-    """`_sub1` without its arctangent: (cos, sin, y, x) with the angle arctan2(y, x), computed only where needed."""
+    """The rotation taking u onto v about the unit axis k (Paden-Kahan subproblem 1) as (cos, sin, y, x): its angle
+    is arctan2(y, x), taken only where needed."""
     ku = k[0] * u[0] + k[1] * u[1] + k[2] * u[2]
     kv = k[0] * v[0] + k[1] * v[1] + k[2] * v[2]
     u0, u1, u2 = u[0] - k[0] * ku, u[1] - k[1] * ku, u[2] - k[2] * ku
