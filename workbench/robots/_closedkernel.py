@@ -134,6 +134,18 @@ def _inside(c, s, cm, sm, thr_in):
 
 
 @njit(cache=True, inline="always")
+def _joint(c, s, y, x, cm, sm, thr_in, thr, lo, hi):
+    """A joint's value for the angle (c, s) = arctan2(y, x) and whether its arctangent was put off: (0, True) when
+    surely within the limits (`_inside`), (NaN, False) when surely outside them (`_out`), else (`_limit` of it,
+    False)."""
+    if _inside(c, s, cm, sm, thr_in):
+        return 0.0, True
+    if _out(c, s, cm, sm, thr):
+        return np.nan, False
+    return _limit(np.arctan2(y, x), lo, hi), False
+
+
+@njit(cache=True, inline="always")
 def _out(c, s, cm, sm, thr):
     """Whether the angle (c, s) is surely outside a joint's limits [lo, hi] narrower than a turn: (cm, sm) is the
     direction of their middle, thr = cos((hi - lo) / 2) - 1e-9 (-inf for wider limits), so that no representative
@@ -241,13 +253,8 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                     c3, s3 = eca[f] * xe - esa[f] * sde, esa[f] * xe + eca[f] * sde
                 else:
                     c3, s3 = eca[f] * xe + esa[f] * sde, esa[f] * xe - eca[f] * sde
-                d3 = _inside(c3, s3, cm[f, 2], sm[f, 2], thr_in[f, 2])
-                if d3:
-                    qb[2] = 0.0
-                elif _out(c3, s3, cm[f, 2], sm[f, 2], thr[f, 2]):
-                    qb[2] = np.nan
-                else:
-                    qb[2] = _limit(np.arctan2(s3, c3), lower[f, 2], upper[f, 2])
+                qb[2], d3 = _joint(c3, s3, s3, c3, cm[f, 2], sm[f, 2], thr_in[f, 2], thr[f, 2],
+                                   lower[f, 2], upper[f, 2])
                 if np.isnan(qb[2]):  # no elbow (or out of its limits): its 4 branches are void
                     if not any_only:
                         _void(out_q, out_valid, i, 8 * f + 4 * i3, 4, cols, fixed_col, fixed[f], full_rows)
@@ -292,13 +299,8 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                         c2, s2 = sca * xs - ssa * sds, ssa * xs + sca * sds
                     else:
                         c2, s2 = sca * xs + ssa * sds, ssa * xs - sca * sds
-                    d2 = _inside(c2, s2, cm[f, 1], sm[f, 1], thr_in[f, 1])
-                    if d2:
-                        qb[1] = 0.0
-                    elif _out(c2, s2, cm[f, 1], sm[f, 1], thr[f, 1]):
-                        qb[1] = np.nan
-                    else:
-                        qb[1] = _limit(np.arctan2(s2, c2), lower[f, 1], upper[f, 1])
+                    qb[1], d2 = _joint(c2, s2, s2, c2, cm[f, 1], sm[f, 1], thr_in[f, 1], thr[f, 1],
+                                       lower[f, 1], upper[f, 1])
                     if np.isnan(qb[1]):
                         if not any_only:
                             _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f], full_rows)
@@ -311,13 +313,8 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                         x[a] += p2[f, a]
                     # 3. base: x onto W about axis 1
                     c1, s1, y1, x1_ = _sub1_parts(a1, x, pw)
-                    d1 = _inside(c1, s1, cm[f, 0], sm[f, 0], thr_in[f, 0])
-                    if d1:
-                        qb[0] = 0.0
-                    elif _out(c1, s1, cm[f, 0], sm[f, 0], thr[f, 0]):
-                        qb[0] = np.nan
-                    else:
-                        qb[0] = _limit(np.arctan2(y1, x1_), lower[f, 0], upper[f, 0])
+                    qb[0], d1 = _joint(c1, s1, y1, x1_, cm[f, 0], sm[f, 0], thr_in[f, 0], thr[f, 0],
+                                       lower[f, 0], upper[f, 0])
                     if np.isnan(qb[0]):
                         if not any_only:
                             _void(out_q, out_valid, i, 8 * f + 4 * i3 + 2 * i2, 2, cols, fixed_col, fixed[f], full_rows)
@@ -345,26 +342,16 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                         else:
                             c5, s5 = ca5 * x5 + sa5 * sd5, sa5 * x5 - ca5 * sd5
                         # a joint out of reach or out of its limits voids the branch: the later ones are not solved
-                        d5 = _inside(c5, s5, cm[f, 4], sm[f, 4], thr_in[f, 4])
-                        if d5:
-                            qb[4] = 0.0
-                        elif _out(c5, s5, cm[f, 4], sm[f, 4], thr[f, 4]):
-                            qb[4] = np.nan
-                        else:
-                            qb[4] = _limit(np.arctan2(s5, c5), lower[f, 4], upper[f, 4])
+                        qb[4], d5 = _joint(c5, s5, s5, c5, cm[f, 4], sm[f, 4], thr_in[f, 4], thr[f, 4],
+                                           lower[f, 4], upper[f, 4])
                         if np.isnan(qb[4]):
                             if not any_only:
                                 _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f], full_rows)
                             continue
                         _rot(wb[f], c5, s5, wc[f], False, u)
                         c4, s4, y4, x4 = _sub1_parts(wa[f], u, yc)
-                        d4 = _inside(c4, s4, cm[f, 3], sm[f, 3], thr_in[f, 3])
-                        if d4:
-                            qb[3] = 0.0
-                        elif _out(c4, s4, cm[f, 3], sm[f, 3], thr[f, 3]):
-                            qb[3] = np.nan
-                        else:
-                            qb[3] = _limit(np.arctan2(y4, x4), lower[f, 3], upper[f, 3])
+                        qb[3], d4 = _joint(c4, s4, y4, x4, cm[f, 3], sm[f, 3], thr_in[f, 3], thr[f, 3],
+                                           lower[f, 3], upper[f, 3])
                         if np.isnan(qb[3]):
                             if not any_only:
                                 _void(out_q, out_valid, i, col, 1, cols, fixed_col, fixed[f], full_rows)
