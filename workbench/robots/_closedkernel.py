@@ -68,8 +68,8 @@ def _acs(a, b, c, out):
         x = np.nan
     sd = np.sqrt(1.0 - x * x)
     ca, sa = a / r, b / r
-    out[0], out[1] = ca * x - sa * sd, sa * x + ca * sd
-    out[2], out[3] = ca * x + sa * sd, sa * x - ca * sd
+    out[0], out[1] = _root(ca, sa, x, sd, 0)
+    out[2], out[3] = _root(ca, sa, x, sd, 1)
 
 
 @njit(cache=True, inline="always")
@@ -131,6 +131,15 @@ def _inside(c, s, cm, sm, thr_in):
     cos((hi - lo) / 2) + 1e-9 for limits narrower than a turn within [-2 pi, 2 pi] (`_out`), -inf without limits,
     inf otherwise (never sure). Its arctangent can then wait until a branch below it is output."""
     return c * cm + s * sm >= thr_in
+
+
+@njit(cache=True, inline="always")
+def _root(ca, sa, x, sd, which):
+    """(cos, sin) of root `which` (0 or 1) of a cos q + b sin q = c, given (ca, sa) = (a, b) / r, x = c / r and
+    sd = sqrt(1 - x^2)."""
+    if which == 0:
+        return ca * x - sa * sd, sa * x + ca * sd
+    return ca * x + sa * sd, sa * x - ca * sd
 
 
 @njit(cache=True, inline="always")
@@ -249,10 +258,7 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
             have_y0 = False  # R6 c and d: only once an elbow is within its limits
             h = a1[0] * pw[0] + a1[1] * pw[1] + a1[2] * pw[2] - consts[f, 3]
             for i3 in range(2):
-                if i3 == 0:
-                    c3, s3 = eca[f] * xe - esa[f] * sde, esa[f] * xe + eca[f] * sde
-                else:
-                    c3, s3 = eca[f] * xe + esa[f] * sde, esa[f] * xe - eca[f] * sde
+                c3, s3 = _root(eca[f], esa[f], xe, sde, i3)
                 qb[2], d3 = _joint(c3, s3, s3, c3, cm[f, 2], sm[f, 2], thr_in[f, 2], thr[f, 2],
                                    lower[f, 2], upper[f, 2])
                 if np.isnan(qb[2]):  # no elbow (or out of its limits): its 4 branches are void
@@ -295,10 +301,7 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                 sds = np.sqrt(1.0 - xs * xs)
                 sca, ssa = sa_ / sr, sb_ / sr
                 for i2 in range(2):
-                    if i2 == 0:
-                        c2, s2 = sca * xs - ssa * sds, ssa * xs + sca * sds
-                    else:
-                        c2, s2 = sca * xs + ssa * sds, ssa * xs - sca * sds
+                    c2, s2 = _root(sca, ssa, xs, sds, i2)
                     qb[1], d2 = _joint(c2, s2, s2, c2, cm[f, 1], sm[f, 1], thr_in[f, 1], thr[f, 1],
                                        lower[f, 1], upper[f, 1])
                     if np.isnan(qb[1]):
@@ -337,10 +340,7 @@ def wrist_rows(poses, mb, kw, rb, kc, kd, o, ax, r2, p2, r3, p3, r4, w3, a1p, wa
                     ca5, sa5 = qa / qr, qbb / qr
                     for i5 in range(2):
                         col = 8 * f + 4 * i3 + 2 * i2 + i5
-                        if i5 == 0:
-                            c5, s5 = ca5 * x5 - sa5 * sd5, sa5 * x5 + ca5 * sd5
-                        else:
-                            c5, s5 = ca5 * x5 + sa5 * sd5, sa5 * x5 - ca5 * sd5
+                        c5, s5 = _root(ca5, sa5, x5, sd5, i5)
                         # a joint out of reach or out of its limits voids the branch: the later ones are not solved
                         qb[4], d5 = _joint(c5, s5, s5, c5, cm[f, 4], sm[f, 4], thr_in[f, 4], thr[f, 4],
                                            lower[f, 4], upper[f, 4])
