@@ -572,7 +572,7 @@ def parallel_rows(poses, pre, tip_inv, rm, tm, ax, n1, kk, c6v, n5, d4, lower, u
             _mul_t(nn, ey, ney)
             for i5 in range(2):
                 sgn5 = 1.0 if i5 == 0 else -1.0
-                c5, s5 = c5p * x5 - s5p * sgn5 * sd5, s5p * x5 + c5p * sgn5 * sd5
+                c5, s5 = _root(c5p, s5p, x5, sd5, i5)
                 q5 = _limit(_turn(p5 + sgn5 * d5), lower[4], upper[4])
                 if np.isnan(q5):
                     continue
@@ -605,7 +605,7 @@ def parallel_rows(poses, pre, tip_inv, rm, tm, ax, n1, kk, c6v, n5, d4, lower, u
                 xe1, xe2 = _dot(e1, x2), _dot(e2, x2)
                 for i3 in range(2):
                     sgn3 = 1.0 if i3 == 0 else -1.0
-                    c3, s3 = c3p * x3 - s3p * sgn3 * sd3, s3p * x3 + c3p * sgn3 * sd3
+                    c3, s3 = _root(c3p, s3p, x3, sd3, i3)
                     q3 = _limit(_turn(p3 + sgn3 * d3), lower[2], upper[2])
                     if np.isnan(q3):
                         continue
