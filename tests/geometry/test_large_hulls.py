@@ -1,4 +1,4 @@
-"""The paths for full-resolution hulls give what the dense computations give on hulls small enough for both."""
+"""The paths for full-resolution hulls give what plain dense computations give on hulls small enough for both."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from workbench.geometry.objects import load_object
-from workbench.geometry.supports import coplanar_groups
+from workbench.geometry.objects import from_trimesh, load_object
+from workbench.geometry.supports import FACET_TOLERANCE, coplanar_groups
+from workbench.grasping.placements import stable_placements
 from workbench.grasping.pads import _farthest
 from workbench.resources import bundled_objects
 
@@ -21,15 +22,66 @@ def _hulls():
             load_object(bundled_objects()["bracket"]).mesh.convex_hull]
 
 
+def _greedy(verts, faces, normals, areas, facet_of, distance, flat, cos_a):
+    """The greedy grouping written plainly, every free facet tested against each seed: (group of every face)."""
+    T = facet_of.max() + 1
+    order = np.argsort(facet_of, kind="stable")
+    starts = np.flatnonzero(np.r_[True, np.diff(facet_of[order]) != 0])
+    area = np.bincount(facet_of, weights=areas, minlength=T)
+    fn = np.column_stack([np.bincount(facet_of, weights=normals[:, a] * areas, minlength=T) for a in range(3)])
+    length = np.linalg.norm(fn, axis=1, keepdims=True)
+    fn = np.where(length > 1e-300, fn / np.where(length > 1e-300, length, 1), normals[order[starts]])
+    label = np.full(T, -1)
+    group = 0
+    for seed in np.lexsort((np.arange(T), -area)):
+        if label[seed] >= 0:
+            continue
+        h = verts @ fn[seed]
+        top = h[faces[facet_of == seed]].max()
+        low = np.minimum.reduceat(h[faces[order]].min(axis=1), starts) - top  # per facet, its lowest vertex
+        facing = fn @ fn[seed]
+        join = (label < 0) & (((low >= -distance) & (facing >= cos_a)) | ((low >= -flat) & (facing > 0)))
+        join[seed] = True
+        label[join] = group
+        group += 1
+    return label[facet_of]
+
+
 @pytest.mark.parametrize("distance,angle", [(5e-4, np.radians(3.0)), (2e-3, np.radians(10.0))])
-def test_walked_hull_groups_equal_the_dense_pass(distance, angle):
+def test_walked_hull_groups_equal_a_plain_greedy_pass(distance, angle):
     for hull in _hulls():
-        dense, n_dense = coplanar_groups(hull, distance, angle)
-        walked, n_walked = coplanar_groups(hull, distance, angle, walk_above=0)
-        assert len(walked) == len(dense)
-        assert all(np.array_equal(a, b) for a, b in zip(walked, dense))
-        assert np.array_equal(n_walked, n_dense)
-    assert len(dense) < len(hull.faces)  # some faces were merged, not only singletons compared
+        verts, faces = np.asarray(hull.vertices), np.asarray(hull.faces)
+        normals, areas = np.asarray(hull.face_normals), np.asarray(hull.area_faces)
+        tol = FACET_TOLERANCE * max(np.abs(verts).max(), np.ptp(verts, axis=0).max())
+        facets = _greedy(verts, faces, normals, areas, np.arange(len(faces)), tol, tol, 2.0)
+        label = _greedy(verts, faces, normals, areas, facets, distance, 0.25 * distance, np.cos(angle))
+        groups, n = coplanar_groups(hull, distance, angle)
+        assert len(groups) == label.max() + 1
+        assert all(np.array_equal(g, np.flatnonzero(label == i)) for i, g in enumerate(groups))
+        wn = np.array([(normals[g] * areas[g, None]).sum(axis=0) for g in groups])
+        assert np.allclose(n, wn / np.linalg.norm(wn, axis=1, keepdims=True), rtol=0, atol=1e-12)
+        assert len(groups) < len(hull.faces)  # some faces were merged, not only singletons compared
+
+
+@pytest.mark.parametrize("seed", [2, 6, 8])
+def test_a_part_subdivided_and_saved_as_stl_keeps_its_placements(tmp_path, seed):
+    """A part subdivided (the same surface) and written to STL (float32) has its hull's edges and flat sides rounded
+    into slivers: it keeps the coarse part's placements, stabilities, probabilities and rocking flags."""
+    rng = np.random.default_rng(seed)
+    # an irregular polyhedron: many tilted neighbours, supports held with small margins
+    coarse = trimesh.convex.convex_hull(rng.standard_normal((60, 3)) * [0.03, 0.024, 0.02])
+    fine = coarse
+    for _ in range(3):
+        fine = fine.subdivide()
+    fine.export(tmp_path / "fine.stl")
+    part = load_object(tmp_path / "fine.stl")
+    assert len(trimesh.convex.convex_hull(part.mesh.vertices).faces) > 2 * len(coarse.faces)  # rounding split it
+    a = stable_placements(from_trimesh(coarse, "coarse"))
+    b = stable_placements(part)
+    assert len(a) >= 5 and len(b) == len(a)
+    assert np.allclose(b.normals, a.normals, atol=1e-5)
+    assert np.allclose(b.stability, a.stability, atol=1e-4)
+    assert np.allclose(b.probability, a.probability, atol=1e-4) and np.array_equal(b.rocking, a.rocking)
 
 
 def test_blocked_extents_equal_the_dense_ones():

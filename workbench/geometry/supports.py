@@ -1,14 +1,15 @@
 """Support faces of a convex hull, merged when coplanar within a tolerance (Wan & Harada, Section IV).
 
 A scanned base is flat only to a tolerance: its convex hull is many small faces whose normals differ by a degree
-or so, none of which holds the centre of mass's projection on its own. Hull faces are grouped greedily, largest
-first: a face joins a group when its normal is within `angle` of the group's seed and all its vertices lie within
-`distance` of the seed's plane, or when its vertices lie within a quarter of `distance` whatever its tilt (thin
-slivers along the rim of a noisy base), as long as it does not face away from the seed. A group is one candidate
-support resting on its area-weighted normal; its support polygon is the convex hull of the group's vertices (all
-within `distance` of the table). Only the group's own vertices count: on a curved side (a cylinder's flat strips)
-vertices of neighbouring strips also lie within half a millimetre of the table, but the object would roll, not
-rest on them.
+or so, none of which holds the centre of mass's projection on its own. The hull's faces are first joined into
+facets (faces in one plane to rounding, however the hull triangulated them), and facets are grouped greedily,
+largest first: a facet joins a group when its normal is within `angle` of the group's seed and all its vertices lie
+within `distance` of the seed's plane, or when its vertices lie within a quarter of `distance` whatever its tilt
+(thin slivers along the rim of a noisy base), as long as it does not face away from the seed. A group is one
+candidate support resting on its area-weighted normal; its support polygon is the convex hull of the group's
+vertices (all within `distance` of the table). Only the group's own vertices count: on a curved side (a cylinder's
+flat strips) vertices of neighbouring strips also lie within half a millimetre of the table, but the object would
+roll, not rest on them.
 """
 
 from __future__ import annotations
@@ -16,55 +17,58 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
-from workbench.geometry._hullkernel import group_faces
+from workbench.geometry._hullkernel import group_facets
 
 
-def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float,
-                    walk_above: int = 20_000) -> tuple[list[np.ndarray], np.ndarray]:
-    """Groups of hull faces (lists of face ids, largest seed first) and their area-weighted outward unit normals.
-    A hull of more than `walk_above` faces (a smooth full-resolution scan's) is grouped by walking its edges from
-    each seed (`_hullkernel.group_faces`), the same groups at a cost that follows their sizes."""
-    normals = np.asarray(hull.face_normals)
+FACET_TOLERANCE = 1e-6  # of the hull's size: faces this close to one plane are one facet (STL's float32 rounds at 6e-8)
+
+
+def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float) -> tuple[list[np.ndarray], np.ndarray]:
+    """Groups of hull faces (arrays of face ids, largest seed first) and their area-weighted outward unit normals.
+
+    The hull's faces are first joined into facets, the faces within FACET_TOLERANCE of one plane: a flat side is one
+    facet however it is triangulated, with the slivers that rounding puts along its edges (a subdivided part saved
+    as STL). Facets are grouped greedily, largest first, as a whole: a tilted facet joins a group only when all of it
+    lies within the tolerance, never the few of its triangles that happen to lie near the seed's edge. The walk
+    (`_hullkernel.group_facets`) costs what each group's size costs, not the hull's."""
+    faces = np.asarray(hull.faces, dtype=np.int64)
+    verts = np.asarray(hull.vertices, dtype=np.float64)
+    normals = np.asarray(hull.face_normals, dtype=np.float64)
     areas = np.asarray(hull.area_faces)
-    tri = np.asarray(hull.triangles)
-    order = np.lexsort((np.arange(len(areas)), -areas))
-    if len(areas) > walk_above:
-        groups = _walked_groups(hull, normals, order, distance, angle)
-        wn = np.array([(normals[g] * areas[g, None]).sum(axis=0) for g in groups]).reshape(-1, 3)
-        return groups, wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300)
-    free = np.ones(len(areas), dtype=bool)
-    cos_a = np.cos(angle)
-    groups = []
-    block = max(1, min(128, 2_000_000 // max(len(areas), 1)))
-    # the tests of a block of upcoming seeds against every free face at once (rows: seeds); the greedy pass reads them
-    while free.any():
-        cand = np.flatnonzero(free)
-        seeds = order[free[order]][:block]  # the next free faces, largest first
-        n = normals[seeds]
-        t = tri[cand]
-        low = np.minimum(np.minimum(n @ t[:, 0].T, n @ t[:, 1].T), n @ t[:, 2].T)
-        low -= np.einsum("sj,sj->s", tri[seeds, 0], n)[:, None]
-        # within the angle and the distance; or, whatever its tilt, flat against the plane to a quarter of the
-        # distance (the slivers a noisy scan's hull puts along the rim of its base)
-        # (never a face turned away from the seed: both sides of a foil thinner than the distance are not one support)
-        facing = n @ normals[cand].T
-        near = (low >= -distance) & ((facing >= cos_a) | ((low >= -0.25 * distance) & (facing > 0)))
-        at = np.searchsorted(cand, seeds)
-        for j, f in enumerate(seeds):
-            if not free[f]:
-                continue
-            ok = near[j] & free[cand]
-            ok[at[j]] = True
-            g = cand[ok]
-            free[g] = False
-            groups.append(g)
+    if len(faces) == 0:
+        return [], np.zeros((0, 3))
+    graph = _hull_graph(hull)
+    size = max(float(np.abs(verts).max()), float(np.ptp(verts, axis=0).max()))
+    tol = FACET_TOLERANCE * size
+    # faces into facets: each face its own facet, joined when within the tolerance of a larger one's plane
+    single = np.arange(len(faces), dtype=np.int64)
+    facet_of = group_facets(verts, faces, single, np.arange(len(faces) + 1, dtype=np.int64), single,
+                            np.ascontiguousarray(normals), np.lexsort((single, -areas)), *graph, tol, tol, 2.0)
+    label = _grouped(verts, faces, normals, areas, facet_of, graph, distance, 0.25 * distance, float(np.cos(angle)))
+    k = np.argsort(label, kind="stable")
+    groups = np.split(k, np.cumsum(np.bincount(label, minlength=int(label.max()) + 1))[:-1])
     wn = np.array([(normals[g] * areas[g, None]).sum(axis=0) for g in groups]).reshape(-1, 3)
-    wn /= np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300)
-    return groups, wn
+    return groups, wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300)
 
 
-def _walked_groups(hull: trimesh.Trimesh, normals: np.ndarray, order: np.ndarray, distance: float,
-                   angle: float) -> list[np.ndarray]:
+def _grouped(verts, faces, normals, areas, facet_of, graph, distance, flat, cos_a) -> np.ndarray:
+    """The group of every face: facets (`facet_of`, numbered 0..T-1) grouped by `group_facets`, seeds by area."""
+    T = int(facet_of.max()) + 1
+    members = np.argsort(facet_of, kind="stable")
+    m_ptr = np.concatenate([[0], np.cumsum(np.bincount(facet_of, minlength=T))])
+    area = np.bincount(facet_of, weights=areas, minlength=T)
+    fn = np.column_stack([np.bincount(facet_of, weights=normals[:, a] * areas, minlength=T) for a in range(3)])
+    length = np.linalg.norm(fn, axis=1, keepdims=True)
+    first = normals[members[m_ptr[:-1]]]  # a facet of slivers only: its first face's normal
+    fn = np.where(length > 1e-300, fn / np.where(length > 1e-300, length, 1.0), first)
+    order = np.lexsort((np.arange(T), -area))
+    label = group_facets(verts, faces, facet_of, m_ptr, members.astype(np.int64), np.ascontiguousarray(fn), order,
+                         *graph, float(distance), float(flat), float(cos_a))
+    return label[facet_of]
+
+
+def _hull_graph(hull: trimesh.Trimesh) -> tuple[np.ndarray, ...]:
+    """The hull's vertex neighbours and each vertex's faces, both in CSR form: (v_ptr, v_adj, f_ptr, f_idx)."""
     faces = np.asarray(hull.faces, dtype=np.int64)
     nv = len(hull.vertices)
     e = np.asarray(hull.edges_unique, dtype=np.int64)
@@ -74,10 +78,7 @@ def _walked_groups(hull: trimesh.Trimesh, normals: np.ndarray, order: np.ndarray
     fv = faces.ravel()
     k = np.argsort(fv, kind="stable")
     f_ptr, f_idx = np.searchsorted(fv[k], np.arange(nv + 1)), k // 3
-    label = group_faces(np.asarray(hull.vertices, dtype=np.float64), faces, np.ascontiguousarray(normals), order,
-                        v_ptr, v_adj, f_ptr, f_idx, float(distance), float(np.cos(angle)))
-    k = np.argsort(label, kind="stable")
-    return np.split(k, np.cumsum(np.bincount(label, minlength=int(label.max()) + 1))[:-1])
+    return v_ptr, v_adj, f_ptr, f_idx
 
 
 def support_stability(points: np.ndarray, com: np.ndarray, normal: np.ndarray) -> float:

@@ -35,6 +35,7 @@ from scipy.spatial import QhullError
 from workbench.errors import MeshError, ParameterError
 from workbench.geometry.collision import cylinders_collide, object_collider
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
+from workbench.geometry.hull import convex_hull, part_hull
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
 from workbench.grasping._handkernel import convex_piece, hull_hits, pack
@@ -321,9 +322,9 @@ def _prebuild(mesh: trimesh.Trimesh, params: GraspParams) -> Callable[[], None]:
             tri = np.ascontiguousarray(mesh.triangles, dtype=np.float64)
             fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
             todo["workbench_pad_bvh"] = lambda: triangle_bvh(tri, fn)
-        if params.support_grasps and mesh._cache["convex_hull"] is None:
+        if params.support_grasps and mesh._cache["workbench_hull"] is None:
             points = mesh.vertices.view(np.ndarray)
-            todo["convex_hull"] = lambda: trimesh.convex.convex_hull(points)
+            todo["workbench_hull"] = lambda: convex_hull(points)
     if not todo:
         return lambda: None
     built: dict = {}
@@ -625,7 +626,7 @@ def _fingertip_variants(mesh, gripper, margin, touch: Touches, source: np.ndarra
     approach, the TCP moved back by `pads.fingertip_shifts`), and their sources."""
     cand = np.flatnonzero(touch.hit & (touch.width <= gripper.jaw_max))
     try:
-        extreme = np.asarray(mesh.convex_hull.vertices)
+        extreme = np.asarray(part_hull(mesh).vertices)
     except QhullError:  # a flat sheet has no hull; its own vertices bound it as well
         extreme = np.unique(np.asarray(mesh.vertices), axis=0)
     d = fingertip_shifts(extreme, touch.poses[cand], gripper, margin) if len(cand) else np.zeros(0)

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.spatial import ConvexHull
 
 from workbench.errors import MeshError
+from workbench.geometry.hull import part_hull
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.supports import (coplanar_groups, rest_probabilities, stabilities, support_stability,
                                         support_image, symmetric_average)
@@ -115,7 +116,7 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
     if thickness <= 1e-9 * max(float(obj.mesh.scale), 1e-12):
         raise MeshError(f"{obj.source or obj.name} is flat (every vertex lies in one plane): it has no volume to rest on the "
                         f"table; give a mesh of a solid part (a closed surface, or a sheet with thickness)")
-    hull = obj.mesh.convex_hull
+    hull = part_hull(obj.mesh)
     verts = np.asarray(hull.vertices)
     groups, normals = coplanar_groups(hull, params.coplanar_distance, params.coplanar_angle)
     threshold = max(params.min_stability, 1e-9)
@@ -155,7 +156,7 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
 def stability_hint(obj: ObjectModel, params: PlacementParams = PlacementParams()) -> str:
     """Why no placement reached `min_stability`, for the zero-placement message: the best support's stability and the
     threshold that keeps at least one placement (a rounded base rocks on a small support; a ball has none)."""
-    hull = obj.mesh.convex_hull
+    hull = part_hull(obj.mesh)
     groups, normals = coplanar_groups(hull, params.coplanar_distance, params.coplanar_angle)
     best = float(stabilities(hull, obj.com, groups, normals).max(initial=0.0))
     if best <= 0:

@@ -17,6 +17,7 @@ import numpy as np
 import trimesh
 
 from workbench.errors import PlanningError
+from workbench.geometry.hull import part_hull
 from workbench.geometry.objects import ObjectModel, load_object
 from workbench.grasping.naming import describe_placement, per_part_numbers
 from workbench.grasping.placements import (
@@ -458,7 +459,7 @@ class PlacementExplorer(BesideView):
                 lambda: plan_tabletop(pl.poses, self.ftg[0], self.ftg[1], self.ftg[2], self.grasp_poses, grid))
             self.vis["placements/roadmap"].delete()
             self.switches.forget("placements/roadmap")
-            hull, colors = self.obj.mesh.convex_hull, viz.palette(max(len(pl), 1))
+            hull, colors = part_hull(self.obj.mesh), viz.palette(max(len(pl), 1))
             for p in range(len(pl)):
                 parts = [hull.copy().apply_transform(m) for m in self.tt.poses[self.tt.placement == p]]
                 if parts:
