@@ -30,6 +30,11 @@ def _table_clearance(grip_poses: np.ndarray, openings: np.ndarray) -> np.ndarray
 
 @pytest.mark.parametrize("name, mesh, width", [
     ("130 mm ring of a 30 mm tube", torus(major=0.05, minor=0.015, sections=128, minor_sections=24), 0.030),
+    # the same ring in other tessellations: 64 and 96 facets round, 24 or 32 about the tube, the jaw axis's phase
+    # against the inner wall's facets decides whether the inner pad's edge touch lies inside the friction cone
+    ("130 mm ring, 64 x 24 facets", torus(major=0.05, minor=0.015, sections=64, minor_sections=24), 0.030),
+    ("130 mm ring, 96 x 32 facets", torus(major=0.05, minor=0.015, sections=96, minor_sections=32), 0.030),
+    ("130 mm ring, 48 x 24 facets", torus(major=0.05, minor=0.015, sections=48, minor_sections=24), 0.030),
     ("132 mm ring of a 28.8 mm tube", torus(major=0.0516, minor=0.0144, sections=64, minor_sections=24), 0.0288),
     ("100 mm ring 10 mm thick", washer(outer=0.05, inner=0.04, thickness=0.01, sections=96), 0.010),
 ])

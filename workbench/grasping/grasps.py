@@ -42,6 +42,7 @@ from workbench.grasping._handkernel import convex_piece, hull_hits, pack
 from workbench.grasping._padkernel import triangle_bvh
 from workbench.grasping.pads import (
     Touches,
+    line_surface_points,
     axis_frames,
     fingertip_shifts,
     first_touches,
@@ -460,6 +461,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     # (sources, origins, jaw axes, rotations, approach references): the facet-normal axes, then the levelled ones
     axis_sets = [(sel, origins, axes, angles, None)]
     counts["slice"] = 0
+    slice_gaps = None
     if params.support_grasps:
         t1 = time.perf_counter()
         downs = _support_normals(obj)
@@ -474,6 +476,12 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                                  params.friction_coefficient)
             axis_sets.append((np.full(len(o), -1), o, y, np.zeros(1), z))  # no surface sample: source -1
             counts["slice"] = int(len(o))
+            if params.gap_grasps:
+                # a slice line through a ring or a frame lying flat crosses its rim twice on either side of the hole:
+                # the pads close across the rim, one starting in the hole (the grip a person uses)
+                line, point, outward = line_surface_points(mesh, o, y)
+                w, win = gap_windows(mesh, point, outward, gripper.jaw_max, params.pregrasp_margin)
+                slice_gaps = (np.full(len(w), -1), point[w], outward[w], np.zeros(1), z[line[w]], win)
     parts, source = [], []
     for src, o, a, ang, ref in axis_sets:
         parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref))
@@ -484,6 +492,11 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                                        windows=win, block=None))
             source.append(np.repeat(src[w], len(ang)))
             counts["gap"] += int(len(w))
+    if slice_gaps is not None:
+        src, o, a, ang, ref, win = slice_gaps
+        parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref, windows=win, block=None))
+        source.append(src)
+        counts["gap"] += int(len(src))
     touch, source = _merge(parts), np.concatenate(source)
     if params.fingertip_margin is not None:
         tips, tip_source = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source)
@@ -583,7 +596,7 @@ def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, direct
                friction: float, flat_share: float = 0.9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Level jaw axes across the part as it rests on each support, approaching straight down: origins (K, 3) on the
     vertical line through the centre of mass at heights `spacing` apart (2 to 12 levels), `directions` jaw
-    directions about the vertical, and the approach z = the support's outward normal d, all in the part's frame.
+    directions about the vertical (each level's turned by its own fraction of their spacing), and the approach z = the support's outward normal d, all in the part's frame.
 
     On a rounded part (a pebble, a duck, a bottle lying down) the facet normals are level only on a thin band
     round its widest section, and the surface samples that fall in that band are few; top-down grasps of the part
@@ -594,7 +607,10 @@ def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, direct
     its facet samples give those grasps already. `downs` (S, 3) unit outward support normals.
     """
     v = np.asarray(mesh.vertices, dtype=np.float64)
-    theta = 2 * np.pi * np.arange(directions) / directions
+    # each level's directions turned by a different fraction of their spacing (golden-ratio steps), so that the
+    # levels meet the facets of a ring or a round part at different phases
+    phase = np.mod(np.arange(12) * (np.sqrt(5.0) - 1) / 2, 1.0)
+    theta = 2 * np.pi * (np.arange(directions)[None, :] + phase[:, None]) / directions  # (level, direction)
     origins, axes, approach = [], [], []
     tilt = np.abs(mesh.face_normals @ np.asarray(downs, dtype=np.float64).T)  # (F, S): |sin| of a face's tilt from vertical
     area = np.asarray(mesh.area_faces)
@@ -612,10 +628,11 @@ def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, direct
         e2 = np.cross(up, e1)
         base = com - (com @ up) * up
         o = base[None] + h[:, None] * up[None]
-        y = np.cos(theta)[:, None] * e1[None] + np.sin(theta)[:, None] * e2[None]
-        origins.append(np.repeat(o, len(theta), axis=0))
-        axes.append(np.tile(y, (n, 1)))
-        approach.append(np.tile(d, (n * len(theta), 1)))
+        turn = theta[:n].reshape(-1)
+        y = np.cos(turn)[:, None] * e1[None] + np.sin(turn)[:, None] * e2[None]
+        origins.append(np.repeat(o, directions, axis=0))
+        axes.append(y)
+        approach.append(np.tile(d, (n * directions, 1)))
     if not origins:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
     return np.concatenate(origins), np.concatenate(axes), np.concatenate(approach)

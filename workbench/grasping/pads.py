@@ -253,6 +253,28 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     return ray[j].astype(np.int64), np.column_stack([lo[j], hi[j]])
 
 
+def line_surface_points(mesh: trimesh.Trimesh, points: np.ndarray, directions: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Where the lines through `points` (K, 3) along unit `directions` (K, 3) cross the surface: (line (C,), crossing
+    (C, 3), the line's direction turned to the side the surface faces (C, 3)), line-major in order along each line;
+    one crossing per line and height where the line passes through an edge or a corner. The crossings and these
+    directions are surface points and outward axes for `gap_windows`."""
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
+    reach = 1.1 * float(np.linalg.norm(mesh.extents)) + 1e-3 + float(np.abs(points - mesh.centroid).max(initial=0.0))
+    start = np.ascontiguousarray(points - reach * directions)
+    shape, slots, leaf, tri_s, _ = triangle_tree(mesh)
+    ray, tri, along = line_crossings(shape, slots, leaf, tri_s, start, np.ascontiguousarray(directions))
+    facing = np.einsum("ij,ij->i", mesh.face_normals[tri], directions[ray])
+    order = np.lexsort((tri, along, ray))
+    ray, tri, along, facing = ray[order], tri[order], along[order], facing[order]
+    again = np.r_[False, (ray[1:] == ray[:-1]) & (along[1:] - along[:-1] <= 1e-9 * reach)
+                  & (np.sign(facing[1:]) == np.sign(facing[:-1]))]
+    keep = ~again & (facing != 0)
+    ray, along, facing = ray[keep], along[keep], facing[keep]
+    return ray, start[ray] + along[:, None] * directions[ray], np.sign(facing)[:, None] * directions[ray]
+
+
 def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: float | None) -> Touches:
     tri = np.ascontiguousarray(mesh.triangles, dtype=np.float64)
     fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
