@@ -1121,3 +1121,21 @@ def test_two_builds_of_different_parts_run_side_by_side(work, built, tmp_path):
     assert {k: v for k, v in box.items() if k not in ("ik", "ik complete")} == \
         {k: v for k, v in reference.items() if k not in ("ik", "ik complete")}
     assert box["ik"][0] == box["tabletopgrips"][0]
+
+
+def test_ctrl_c_inside_a_finaliser_is_noted_not_reported(capsys):
+    """A Ctrl-C that lands in a finaliser (llvmlite's, while numba loads a kernel) cannot propagate: the command notes
+    it, to stop with its one line, and Python does not print it as an ignored exception with a traceback."""
+    from workbench.cli.main import _CtrlC
+
+    class Finalised:
+        def __del__(self):
+            raise KeyboardInterrupt
+
+    hook = sys.unraisablehook
+    with _CtrlC() as ctrl_c:
+        ctrl_c.loaded()
+        Finalised()  # dropped at once: its finaliser raises where Python cannot pass the exception on
+    err = capsys.readouterr().err
+    assert ctrl_c.seen and "KeyboardInterrupt" not in err and "Traceback" not in err
+    assert sys.unraisablehook is hook  # outside the command, the reports are Python's (here pytest's) again

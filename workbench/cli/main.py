@@ -123,17 +123,28 @@ class _CtrlC:
     """While the command's modules load, SIGINT is only noted, so no KeyboardInterrupt lands inside an extension's
     import or in a library that catches everything there (trimesh does); `loaded()` then stops a noted Ctrl-C. After
     that SIGINT raises KeyboardInterrupt, as Python's default does, and is still noted: a library that swallows it
-    cannot make a Ctrl-C'd command end as if it had finished."""
+    cannot make a Ctrl-C'd command end as if it had finished. A KeyboardInterrupt raised where Python cannot pass
+    it on (a finaliser, such as llvmlite's when numba loads a kernel) is not reported as an ignored exception: it is
+    noted, and the command stops with its one line."""
 
     def __init__(self) -> None:
         self.seen = False
         self.loading = True
         self.old = None
+        self.old_hook = None
 
     def __enter__(self) -> "_CtrlC":
         if threading.current_thread() is threading.main_thread():
             self.old = signal.signal(signal.SIGINT, self._handle)
+            self.old_hook = sys.unraisablehook
+            sys.unraisablehook = self._unraisable
         return self
+
+    def _unraisable(self, unraisable) -> None:
+        if isinstance(unraisable.exc_value, KeyboardInterrupt):
+            self.seen = True
+            return
+        self.old_hook(unraisable)
 
     def _handle(self, signum, frame) -> None:
         self.seen = True
@@ -149,6 +160,7 @@ class _CtrlC:
     def __exit__(self, *exc) -> None:
         if self.old is not None:
             signal.signal(signal.SIGINT, self.old)
+            sys.unraisablehook = self.old_hook
 
 
 def main(argv: list[str] | None = None) -> int:
