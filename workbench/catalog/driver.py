@@ -482,13 +482,13 @@ class _Build:
             for unit, path in self.to_merge.pop(_key(run)):
                 self.done[unit["digest"]] = unit
                 self.rows.add(unit["digest"])
-                path.unlink(missing_ok=True)
+                _drop(path)
             self._run_over(run)
         for then in after:
             then()
         for unit, folder in parts:
             if self.readers.get(unit["digest"], 0) == 0:
-                shutil.rmtree(folder, ignore_errors=True)
+                _drop(folder)
         if self.result.write_seconds > 0:
             self.bar.note(f"{self.result.rows_written / self.result.write_seconds:,.0f} rows/s merged")
 
@@ -630,6 +630,16 @@ class _Build:
 def shard_path(folder: Path, digest: str) -> Path:
     """The Parquet file of an IK unit's rows in the units folder."""
     return folder / f"ik-{digest}{SHARD_SUFFIX}"
+
+
+def _drop(path: Path) -> None:
+    """Delete a merged unit's file or folder, and what writers killed while writing it left beside it (its
+    `.PID.tmp` files: Dask ran the unit again elsewhere, and nothing else will read them)."""
+    for p in [path, *path.parent.glob(f"{path.name}.*.tmp")]:
+        if p.is_dir():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
 
 
 def open_shards(folder: Path, done: dict) -> dict[str, Path]:
