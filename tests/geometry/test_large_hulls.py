@@ -7,7 +7,8 @@ import pytest
 import trimesh
 
 from workbench.geometry.objects import from_trimesh, load_object
-from workbench.geometry.supports import FACET_TOLERANCE, coplanar_groups
+from workbench.geometry.hull import merge_tolerance
+from workbench.geometry.supports import coplanar_groups
 from workbench.grasping.placements import stable_placements
 from workbench.grasping.pads import _farthest
 from workbench.resources import bundled_objects
@@ -52,7 +53,7 @@ def test_walked_hull_groups_equal_a_plain_greedy_pass(distance, angle):
     for hull in _hulls():
         verts, faces = np.asarray(hull.vertices), np.asarray(hull.faces)
         normals, areas = np.asarray(hull.face_normals), np.asarray(hull.area_faces)
-        tol = FACET_TOLERANCE * max(np.abs(verts).max(), np.ptp(verts, axis=0).max())
+        tol = merge_tolerance(verts)
         facets = _greedy(verts, faces, normals, areas, np.arange(len(faces)), tol, tol, 2.0)
         label = _greedy(verts, faces, normals, areas, facets, distance, 0.25 * distance, np.cos(angle))
         groups, n = coplanar_groups(hull, distance, angle)

@@ -18,16 +18,14 @@ import numpy as np
 import trimesh
 
 from workbench.geometry._hullkernel import group_facets
-
-
-FACET_TOLERANCE = 1e-6  # of the hull's size: faces this close to one plane are one facet (STL's float32 rounds at 6e-8)
+from workbench.geometry.hull import merge_tolerance
 
 
 def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float) -> tuple[list[np.ndarray], np.ndarray]:
     """Groups of hull faces (arrays of face ids, largest seed first) and their area-weighted outward unit normals.
 
-    The hull's faces are first joined into facets, the faces within FACET_TOLERANCE of one plane: a flat side is one
-    facet however it is triangulated, with the slivers that rounding puts along its edges (a subdivided part saved
+    The hull's faces are first joined into facets, the faces within `hull.merge_tolerance` of one plane: a flat side
+    is one facet however it is triangulated, with the slivers that rounding puts along its edges (a subdivided part saved
     as STL). Facets are grouped greedily, largest first, as a whole: a tilted facet joins a group only when all of it
     lies within the tolerance, never the few of its triangles that happen to lie near the seed's edge. The walk
     (`_hullkernel.group_facets`) costs what each group's size costs, not the hull's."""
@@ -38,8 +36,7 @@ def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float) -> tup
     if len(faces) == 0:
         return [], np.zeros((0, 3))
     graph = _hull_graph(hull)
-    size = max(float(np.abs(verts).max()), float(np.ptp(verts, axis=0).max()))
-    tol = FACET_TOLERANCE * size
+    tol = merge_tolerance(verts)
     # faces into facets: each face its own facet, joined when within the tolerance of a larger one's plane
     single = np.arange(len(faces), dtype=np.int64)
     facet_of = group_facets(verts, faces, single, np.arange(len(faces) + 1, dtype=np.int64), single,

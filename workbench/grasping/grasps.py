@@ -42,11 +42,11 @@ from workbench.grasping._handkernel import convex_piece, hull_hits, pack
 from workbench.grasping._padkernel import triangle_bvh
 from workbench.grasping.pads import (
     Touches,
-    line_surface_points,
     axis_frames,
     fingertip_shifts,
     first_touches,
     gap_windows,
+    line_surface_points,
     pad_offsets,
     pregrasp_touches,
     triangle_tree,
