@@ -472,8 +472,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
         # after the sampling filters, as every other axis (zero samples: zero axes); twice the hand rotations in
         # direction, as the pads of a scan first touch bumps, whose normals vary
         if len(sel):
-            o, y, z = slice_axes(mesh, obj.com, downs, 2 * params.rotations, max(lengths["neighbour_radius"] / 2, 1e-4),
-                                 params.friction_coefficient)
+            o, y, z = slice_axes(mesh, obj.com, downs, 2 * params.rotations, max(lengths["neighbour_radius"] / 2, 1e-4))
             axis_sets.append((np.full(len(o), -1), o, y, np.zeros(1), z))  # no surface sample: source -1
             counts["slice"] = int(len(o))
             if params.gap_grasps:
@@ -593,7 +592,7 @@ def support_axes(normals: np.ndarray, downs: np.ndarray, rotations: int, frictio
 
 
 def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, directions: int, spacing: float,
-               friction: float, flat_share: float = 0.9) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               flat_share: float = 0.9, wall: float = float(np.arctan(0.3))) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Level jaw axes across the part as it rests on each support, approaching straight down: origins (K, 3) on the
     vertical line through the centre of mass at heights `spacing` apart (2 to 12 levels), `directions` jaw
     directions about the vertical (each level's turned by its own fraction of their spacing), and the approach z = the support's outward normal d, all in the part's frame.
@@ -603,8 +602,9 @@ def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, direct
     where it lies are what a regrasp needs most (Section IV keeps only grasps that clear the table). These axes
     close the pads across the part at fixed heights whatever the sampling; the friction cone, the width and the
     hand checks then decide as for every other axis. A support whose sides are flat (at least `flat_share` of the
-    surface within 45 degrees of vertical is within the friction angle of it, as a CAD part's walls) is skipped:
-    its facet samples give those grasps already. `downs` (S, 3) unit outward support normals.
+    surface within 45 degrees of vertical is within `wall` of it, as a CAD part's walls) is skipped: its facet
+    samples give those grasps already. The test is of the shape alone, not of the friction, so that a higher
+    --friction never takes these axes away. `downs` (S, 3) unit outward support normals.
     """
     v = np.asarray(mesh.vertices, dtype=np.float64)
     # each level's directions turned by a different fraction of their spacing (golden-ratio steps), so that the
@@ -616,7 +616,7 @@ def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, direct
     area = np.asarray(mesh.area_faces)
     for d, t in zip(np.asarray(downs, dtype=np.float64), tilt.T):
         side = area[t <= np.sin(np.pi / 4)].sum()
-        if side <= 0 or area[t <= np.sin(np.arctan(friction))].sum() >= flat_share * side:
+        if side <= 0 or area[t <= np.sin(wall)].sum() >= flat_share * side:
             continue
         up = -d
         heights = v @ up
