@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 import trimesh
+from scipy.spatial import ConvexHull
 
 MERGE = 1e-7  # of the part's size: facets this close to one plane are one
 ROUNDING = 5e-7  # of the largest coordinate: several times single precision's rounding (6e-8)
@@ -25,12 +26,53 @@ def merge_tolerance(points: np.ndarray) -> float:
 
 
 def convex_hull(points: np.ndarray) -> trimesh.Trimesh:
-    """The convex hull of `points` (N, 3) with facets within `merge_tolerance` of one plane merged (qhull C-n,
-    measured in the unit box that QbB scales the points to), triangulated (Qt), outward-facing."""
+    """The convex hull of `points` (N, 3), triangulated (qhull Qt), outward-facing, with facets within
+    `merge_tolerance` of one plane merged. Qhull runs once as usual; only when two neighbouring facets of its hull
+    lie in one plane to that tolerance (rounding split a flat side) does it run again with its pre-merge (C-n,
+    measured in the unit box that QbB scales the points to), on the first hull's vertices."""
     points = np.asarray(points, dtype=np.float64)
-    extent = float(np.ptp(points, axis=0).max()) if len(points) else 0.0
-    premerge = 2.0 * merge_tolerance(points) / extent if extent > 0 else 0.0
-    return trimesh.convex.convex_hull(points, qhull_options=f"QbB Pp Qt C-{premerge:.3g}")
+    hull = ConvexHull(points, qhull_options="QbB Pp Qt")
+    tol = merge_tolerance(points)
+    if _split(hull, tol):
+        corners = points[hull.vertices]
+        extent = float(np.ptp(corners, axis=0).max())
+        hull = ConvexHull(corners, qhull_options=f"QbB Pp Qt C-{2.0 * tol / extent:.3g}")
+    return _mesh(hull)
+
+
+def _planes(hull: ConvexHull) -> tuple[np.ndarray, np.ndarray]:
+    """Each simplex's unit normal (F, 3) (either way round) and its first vertex (F, 3), in the points' own frame
+    (qhull's equations are in the unit box QbB scaled them to)."""
+    tri = hull.points[hull.simplices]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(length > 0, length, 1.0), tri[:, 0]
+
+
+def _split(hull: ConvexHull, tol: float) -> bool:
+    """Whether two neighbouring facets of `hull` that qhull kept apart lie in one plane within `tol`: the vertex of
+    each simplex across an edge from a simplex of another facet lies within `tol` of that simplex's plane."""
+    n, p0 = _planes(hull)
+    i = np.repeat(np.arange(len(hull.simplices)), 3)
+    j = hull.neighbors.reshape(-1)  # simplex j lies across from vertex k of simplex i
+    across = np.flatnonzero(np.any(hull.equations[i] != hull.equations[j], axis=1))  # not one of qhull's facets
+    k = np.argmax(hull.neighbors[j[across]] == i[across, None], axis=1)  # the vertex of j opposite to i
+    far = hull.points[hull.simplices[j[across], k]]
+    return bool(np.any(np.abs(np.einsum("ij,ij->i", far - p0[i[across]], n[i[across]])) <= tol))
+
+
+def _mesh(hull: ConvexHull) -> trimesh.Trimesh:
+    """The hull as an outward-facing mesh of its vertices, zero-area simplices dropped."""
+    n, p0 = _planes(hull)
+    keep = np.linalg.norm(n, axis=1) > 0
+    centre = hull.points[hull.vertices].mean(axis=0)  # strictly inside a hull with volume
+    faces = hull.simplices[keep]
+    out = np.einsum("ij,ij->i", n[keep], p0[keep] - centre) < 0
+    faces[out] = faces[out][:, ::-1]
+    vid = np.sort(hull.vertices)
+    index = np.zeros(len(hull.points), dtype=np.int64)
+    index[vid] = np.arange(len(vid))
+    return trimesh.Trimesh(vertices=hull.points[vid], faces=index[faces], process=True, validate=False)
 
 
 def part_hull(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
