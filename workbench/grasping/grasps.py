@@ -476,11 +476,15 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
             axis_sets.append((np.full(len(o), -1), o, y, np.zeros(1), z))  # no surface sample: source -1
             counts["slice"] = int(len(o))
             if params.gap_grasps:
-                # a slice line through a ring or a frame lying flat crosses its rim twice on either side of the hole:
-                # the pads close across the rim, one starting in the hole (the grip a person uses)
-                line, point, outward = line_surface_points(mesh, o, y)
+                # a ring, a washer or a frame lying flat, its centre of mass in the hole (the vertical through it
+                # misses the part): each slice line crosses the rim on either side of the hole, and the pads close
+                # across the rim, one starting in the hole (the grip a person uses)
+                hit, _, _ = line_surface_points(mesh, np.tile(obj.com, (len(downs), 1)), downs)
+                holes = downs[np.setdiff1d(np.arange(len(downs)), hit)]
+                ring = np.flatnonzero((z[:, None, :] == holes[None, :, :]).all(axis=2).any(axis=1))
+                line, point, outward = line_surface_points(mesh, o[ring], y[ring])
                 w, win = gap_windows(mesh, point, outward, gripper.jaw_max, params.pregrasp_margin)
-                slice_gaps = (np.full(len(w), -1), point[w], outward[w], np.zeros(1), z[line[w]], win)
+                slice_gaps = (np.full(len(w), -1), point[w], outward[w], np.zeros(1), z[ring][line[w]], win)
     parts, source = [], []
     for src, o, a, ang, ref in axis_sets:
         parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref))
