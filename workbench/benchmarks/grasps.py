@@ -188,9 +188,9 @@ def _scale(args: argparse.Namespace) -> int:
                      f"{w / base[2]:.1f}x", r, f"{r / base[1]:.1f}x", tm["segmentation"], tm["sampling"],
                      tm["supports"], tm["pads"], tm["level2"], tm["fingers"], plan.counts.get("hand_poses", 0)])
         mesh = mesh.subdivide()
-    print_table(["#-tri", "grasps", "grasps from STL", "t load cpu s", "t plan cpu s", "t plan wall s", "cpu vs 960", "wall vs 960",
-                 "t replan cpu s", "replan vs 960", "t seg s", "t sample s", "t supports s", "t pads s", "t hand s",
-                 "t fingers s", "hand poses"], rows,
+    print_table(["#-tri", "grasps", "grasps from STL", "t load cpu s", "t plan cpu s", "t plan wall s", "cpu vs 960",
+                 "wall vs 960", "t replan cpu s", "replan vs 960", "t seg s", "t sample s", "t supports s", "t pads s",
+                 "t hand s", "t fingers s", "hand poses"], rows,
                 title=f"Grasp planning against triangle count: one blob scan subdivided (the same surface), Franka hand, "
                       f"pad contact model (median of {args.repeats} runs per level; 'plan': the first plan of a newly "
                       f"loaded part, as `workbench grasps` on a new part, building its convex hull, supports and "
@@ -203,6 +203,6 @@ def _scale(args: argparse.Namespace) -> int:
                       f"segmentation is not given a decimated copy, as it runs in compiled code linear in the "
                       f"triangles, and the facets of a copy would not hold the full mesh's triangles that the pads "
                       f"touch and the stored grasps name. 'grasps from STL': the level written to an STL file "
-                      f"(single precision) and loaded as a user's part. Targets: <= 2 s at 1M triangles, 230k triangles within 3x "
-                      f"the 960-triangle time, grasp counts stable across levels")
+                      f"(single precision) and loaded as a user's part. Targets: <= 2 s at 1M triangles, 230k "
+                      f"triangles within 3x the 960-triangle time, grasp counts stable across levels")
     return 0

@@ -32,12 +32,14 @@ def convex_hull(points: np.ndarray) -> trimesh.Trimesh:
     measured in the unit box that QbB scales the points to), on the first hull's vertices."""
     points = np.asarray(points, dtype=np.float64)
     hull = ConvexHull(points, qhull_options="QbB Pp Qt")
+    planes = _planes(hull)
     tol = merge_tolerance(points)
-    if _split(hull, tol):
+    if _split(hull, planes, tol):
         corners = points[hull.vertices]
         extent = float(np.ptp(corners, axis=0).max())
         hull = ConvexHull(corners, qhull_options=f"QbB Pp Qt C-{2.0 * tol / extent:.3g}")
-    return _mesh(hull)
+        planes = _planes(hull)
+    return _mesh(hull, planes)
 
 
 def _planes(hull: ConvexHull) -> tuple[np.ndarray, np.ndarray]:
@@ -49,10 +51,11 @@ def _planes(hull: ConvexHull) -> tuple[np.ndarray, np.ndarray]:
     return n / np.where(length > 0, length, 1.0), tri[:, 0]
 
 
-def _split(hull: ConvexHull, tol: float) -> bool:
+def _split(hull: ConvexHull, planes: tuple[np.ndarray, np.ndarray], tol: float) -> bool:
     """Whether two neighbouring facets of `hull` that qhull kept apart lie in one plane within `tol`: the vertex of
-    each simplex across an edge from a simplex of another facet lies within `tol` of that simplex's plane."""
-    n, p0 = _planes(hull)
+    each simplex across an edge from a simplex of another facet lies within `tol` of that simplex's plane. `planes`:
+    `_planes(hull)`."""
+    n, p0 = planes
     i = np.repeat(np.arange(len(hull.simplices)), 3)
     j = hull.neighbors.reshape(-1)  # simplex j lies across from vertex k of simplex i
     across = np.flatnonzero(np.any(hull.equations[i] != hull.equations[j], axis=1))  # not one of qhull's facets
@@ -61,9 +64,9 @@ def _split(hull: ConvexHull, tol: float) -> bool:
     return bool(np.any(np.abs(np.einsum("ij,ij->i", far - p0[i[across]], n[i[across]])) <= tol))
 
 
-def _mesh(hull: ConvexHull) -> trimesh.Trimesh:
-    """The hull as an outward-facing mesh of its vertices, zero-area simplices dropped."""
-    n, p0 = _planes(hull)
+def _mesh(hull: ConvexHull, planes: tuple[np.ndarray, np.ndarray]) -> trimesh.Trimesh:
+    """The hull as an outward-facing mesh of its vertices, zero-area simplices dropped. `planes`: `_planes(hull)`."""
+    n, p0 = planes
     keep = np.linalg.norm(n, axis=1) > 0
     centre = hull.points[hull.vertices].mean(axis=0)  # strictly inside a hull with volume
     faces = hull.simplices[keep]

@@ -25,9 +25,9 @@ def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float) -> tup
     """Groups of hull faces (arrays of face ids, largest seed first) and their area-weighted outward unit normals.
 
     The hull's faces are first joined into facets, the faces within `hull.merge_tolerance` of one plane: a flat side
-    is one facet however it is triangulated, with the slivers that rounding puts along its edges (a subdivided part saved
-    as STL). Facets are grouped greedily, largest first, as a whole: a tilted facet joins a group only when all of it
-    lies within the tolerance, never the few of its triangles that happen to lie near the seed's edge. The walk
+    is one facet however it is triangulated, with the slivers that rounding puts along its edges (a subdivided part
+    saved as STL). Facets are grouped greedily, largest first, as a whole: a tilted facet joins a group only when all
+    of it lies within the tolerance, never the few of its triangles that happen to lie near the seed's edge. The walk
     (`_hullkernel.group_facets`) costs what each group's size costs, not the hull's."""
     faces = np.asarray(hull.faces, dtype=np.int64)
     verts = np.asarray(hull.vertices, dtype=np.float64)

@@ -472,7 +472,8 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
         # after the sampling filters, as every other axis (zero samples: zero axes); twice the hand rotations in
         # direction, as the pads of a scan first touch bumps, whose normals vary
         if len(sel):
-            o, y, z = slice_axes(mesh, obj.com, downs, 2 * params.rotations, max(lengths["neighbour_radius"] / 2, 1e-4))
+            o, y, z, held = slice_axes(mesh, obj.com, downs, 2 * params.rotations,
+                                       max(lengths["neighbour_radius"] / 2, 1e-4))
             axis_sets.append((np.full(len(o), -1), o, y, np.zeros(1), z))  # no surface sample: source -1
             counts["slice"] = int(len(o))
             if params.gap_grasps:
@@ -480,8 +481,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                 # misses the part): each slice line crosses the rim on either side of the hole, and the pads close
                 # across the rim, one starting in the hole (the grip a person uses)
                 hit, _, _ = line_surface_points(mesh, np.tile(obj.com, (len(downs), 1)), downs)
-                holes = downs[np.setdiff1d(np.arange(len(downs)), hit)]
-                ring = np.flatnonzero((z[:, None, :] == holes[None, :, :]).all(axis=2).any(axis=1))
+                ring = np.flatnonzero(~np.isin(held, hit))
                 line, point, outward = line_surface_points(mesh, o[ring], y[ring])
                 w, win = gap_windows(mesh, point, outward, gripper.jaw_max, params.pregrasp_margin)
                 slice_gaps = (np.full(len(w), -1), point[w], outward[w], np.zeros(1), z[ring][line[w]], win)
@@ -596,10 +596,12 @@ def support_axes(normals: np.ndarray, downs: np.ndarray, rotations: int, frictio
 
 
 def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, directions: int, spacing: float,
-               flat_share: float = 0.9, wall: float = float(np.arctan(0.3))) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+               flat_share: float = 0.9, wall: float = float(np.arctan(0.3)), levels: int = 12
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Level jaw axes across the part as it rests on each support, approaching straight down: origins (K, 3) on the
-    vertical line through the centre of mass at heights `spacing` apart (2 to 12 levels), `directions` jaw
-    directions about the vertical (each level's turned by its own fraction of their spacing), and the approach z = the support's outward normal d, all in the part's frame.
+    vertical line through the centre of mass at heights `spacing` apart (2 to `levels` levels), `directions` jaw
+    directions about the vertical (each level's turned by its own fraction of their spacing), the approach z = the
+    support's outward normal d, all in the part's frame, and the support (K,) each axis belongs to.
 
     On a rounded part (a pebble, a duck, a bottle lying down) the facet normals are level only on a thin band
     round its widest section, and the surface samples that fall in that band are few; top-down grasps of the part
@@ -613,19 +615,19 @@ def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, direct
     v = np.asarray(mesh.vertices, dtype=np.float64)
     # each level's directions turned by a different fraction of their spacing (golden-ratio steps), so that the
     # levels meet the facets of a ring or a round part at different phases
-    phase = np.mod(np.arange(12) * (np.sqrt(5.0) - 1) / 2, 1.0)
+    phase = np.mod(np.arange(levels) * (np.sqrt(5.0) - 1) / 2, 1.0)
     theta = 2 * np.pi * (np.arange(directions)[None, :] + phase[:, None]) / directions  # (level, direction)
-    origins, axes, approach = [], [], []
+    origins, axes, approach, held = [], [], [], []
     tilt = np.abs(mesh.face_normals @ np.asarray(downs, dtype=np.float64).T)  # (F, S): |sin| of a face's tilt from vertical
     area = np.asarray(mesh.area_faces)
-    for d, t in zip(np.asarray(downs, dtype=np.float64), tilt.T):
+    for s, (d, t) in enumerate(zip(np.asarray(downs, dtype=np.float64), tilt.T)):
         side = area[t <= np.sin(np.pi / 4)].sum()
         if side <= 0 or area[t <= np.sin(wall)].sum() >= flat_share * side:
             continue
         up = -d
         heights = v @ up
         lo, hi = heights.min(), heights.max()
-        n = int(np.clip(np.ceil((hi - lo) / spacing), 2, 12))
+        n = int(np.clip(np.ceil((hi - lo) / spacing), 2, levels))
         h = lo + (np.arange(n) + 0.5) / n * (hi - lo)
         e1 = np.cross(up, [1.0, 0, 0] if abs(up[0]) < 0.9 else [0, 1.0, 0])
         e1 /= np.linalg.norm(e1)
@@ -637,9 +639,10 @@ def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, direct
         origins.append(np.repeat(o, directions, axis=0))
         axes.append(y)
         approach.append(np.tile(d, (n * directions, 1)))
+        held.append(np.full(n * directions, s))
     if not origins:
-        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
-    return np.concatenate(origins), np.concatenate(axes), np.concatenate(approach)
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    return np.concatenate(origins), np.concatenate(axes), np.concatenate(approach), np.concatenate(held)
 
 
 def _fingertip_variants(mesh, gripper, margin, touch: Touches, source: np.ndarray) -> tuple[Touches, np.ndarray]:

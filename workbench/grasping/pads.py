@@ -261,7 +261,8 @@ def line_surface_points(mesh: trimesh.Trimesh, points: np.ndarray, directions: n
     directions are surface points and outward axes for `gap_windows`."""
     points = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     directions = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
-    reach = 1.1 * float(np.linalg.norm(mesh.extents)) + 1e-3 + float(np.abs(points - mesh.bounds.mean(axis=0)).max(initial=0.0))
+    off = float(np.abs(points - mesh.bounds.mean(axis=0)).max(initial=0.0))  # how far the points lie from the part
+    reach = 1.1 * float(np.linalg.norm(mesh.extents)) + 1e-3 + off
     start = np.ascontiguousarray(points - reach * directions)
     shape, slots, leaf, tri_s, _ = triangle_tree(mesh)
     ray, tri, along = line_crossings(shape, slots, leaf, tri_s, start, np.ascontiguousarray(directions))
