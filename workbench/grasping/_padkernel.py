@@ -177,7 +177,9 @@ def _height_key(shape, node, o, y, slack, si, wlo, whi, a_max, a_min, tie):
     ymn, ymx = _reach(shape, node, o, y, slack)
     if ymx < wlo or ymn > whi or (ymx < a_max - tie and ymn > a_min + tie):
         return -np.inf
-    return ymx if si == 0 else -ymn
+    # no touch lies past the pad's start: a node reaching beyond it is keyed at the start (a triangle crossing the
+    # start, which may block the pad, is then opened first)
+    return min(ymx, whi) if si == 0 else -max(ymn, wlo)
 
 
 @njit(cache=True)
@@ -396,6 +398,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                 for a in range(3):
                     ua[j, a] = abs(c * x0[a] - s * z0[a])
                     wa[j, a] = abs(c * z0[a] + s * x0[a])
+            todo = full  # the rotations still to search: the right pad only where the left one touched
             for si in range(2):
                 side = 1 if si == 0 else -1
                 start = whi if si == 0 else wlo
@@ -403,9 +406,9 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                 blocked[:n_rot] = False
                 nr = 0
                 hn = 0
-                kk = _height_key(shape, 1, o, y, slack, si, wlo, whi, a_max, a_min, tie)
+                kk = _height_key(shape, 1, o, y, slack, si, wlo, whi, a_max, a_min, tie) if todo else -np.inf
                 if kk > -np.inf:
-                    m = _footprints(shape, 1, o, x0, z0, cs, ua, wa, full, n_rot, slack, cx, cz, hx, hz)
+                    m = _footprints(shape, 1, o, x0, z0, cs, ua, wa, todo, n_rot, slack, cx, cz, hx, hz)
                     if m:
                         hn = _heap_push(hkey, hnode, hmask, 0, kk, 1, m)
                 while hn > 0:
@@ -445,7 +448,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                             continue
                         if not (mx >= a_max - tie or mn <= a_min + tie):
                             continue
-                        sc = mx if si == 0 else -mn
+                        sc = min(mx, whi) if si == 0 else -max(mn, wlo)
                         for j in range(n_rot):
                             if not (m >> j) & 1 or blocked[j] or sc < g[j] - tie:
                                 continue
@@ -480,10 +483,12 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                     if key < bkey[j] or (key == bkey[j] and (ra[r] > balign[j] or (ra[r] == balign[j]
                                                                                    and rt[r] < btri[j]))):
                         bkey[j], balign[j], btri[j], best[j] = key, ra[r], rt[r], r
+                todo = np.int64(0)
                 for j in range(n_rot):
                     r = best[j]
                     if r < 0:
                         continue
+                    todo |= np.int64(1) << j
                     hrow = k * A + j0 + j
                     found[hrow, si] = True
                     height[hrow, si] = side * rs[r]
