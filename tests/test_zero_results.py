@@ -205,3 +205,37 @@ def test_a_friction_beyond_the_declared_range_is_named_as_none_would_do():
     hint = friction_hint(0.3, pairs)
     assert hint.startswith(f"no --friction in its range ({bounds(GraspParams)['friction'][0].describe(True)}) would do")
     assert "raise --friction" not in hint
+
+
+def test_a_flange_lying_flat_is_told_the_friction_its_rim_grips_need(tmp_path):
+    """A 120 mm flange 8 mm thick with a 50 mm bore, lying flat, is gripped from above across its rim, one pad in
+    the bore. A flat pad meets the bore at its own edges, 20 degrees or more off the jaw axis: no grip at friction
+    0.3, and the placements' warning names the --friction that gives some. Planned again at it, the stored grips
+    are across the rim: one contact on the bore, the other on the outer wall (radii from the contacts)."""
+    import manifold3d
+
+    disc = manifold3d.Manifold.cylinder(0.008, 0.06, 0.06, 96) - manifold3d.Manifold.cylinder(
+        0.02, 0.025, 0.025, 96).translate([0.0, 0.0, -0.005])
+    m = disc.to_mesh()
+    trimesh.Trimesh(m.vert_properties[:, :3], m.tri_verts).export(tmp_path / "flange.stl")
+    assert _cli("grasps", "flange.stl", "--db", "f.duckdb", cwd=tmp_path).returncode == 0
+    out = _cli("placements", "--db", "f.duckdb", "--object", "flange", cwd=tmp_path)
+    assert out.returncode == 0 and "stage free tabletop grips" in out.stderr, out.stderr
+    need = re.search(r"`workbench grasps --friction ([0-9.]+)` keeps ([0-9]+) grasps", out.stderr)
+    assert need is not None, out.stderr
+    mu = float(need.group(1))
+    assert 0.3 < mu <= 1.0
+    assert _cli("grasps", "flange.stl", "--db", "g.duckdb", "--friction", need.group(1), cwd=tmp_path).returncode == 0
+    out = _cli("placements", "--db", "g.duckdb", "--object", "flange", cwd=tmp_path)
+    assert out.returncode == 0 and "no tabletop grip" not in out.stderr, out.stderr
+    con = duckdb.connect(str(tmp_path / "g.duckdb"), read_only=True)
+    rows = con.execute("SELECT DISTINCT g.contactpoint0, g.contactpoint1, g.contactnormal0, g.contactnormal1, g.rotmat "
+                       "FROM freetabletopgrip t JOIN freeairgrip g USING (idfreeairgrip)").fetchall()
+    con.close()
+    assert len(rows) == int(need.group(2)), (len(rows), need.group(0))
+    for c0, c1, n0, n1, rot in rows:
+        radii = sorted(np.hypot(*np.array(c)[:2]) for c in (c0, c1))
+        assert abs(radii[0] - 0.025) <= 1e-3 and abs(radii[1] - 0.06) <= 1e-3, radii
+        y = np.array(rot).reshape(4, 4)[:3, 1]
+        off = np.degrees(np.arccos(np.clip([np.dot(n0, y), -np.dot(n1, y)], -1, 1)))
+        assert off.max() <= np.degrees(np.arctan(mu)) + 1e-6 and off.max() > np.degrees(np.arctan(0.3)), off

@@ -23,7 +23,7 @@ import pyarrow.parquet as pq
 import trimesh
 
 from workbench.geometry.objects import ObjectModel, load_object
-from workbench.grasping.grasps import GraspParams, GraspSet, plan_grasps
+from workbench.grasping.grasps import GraspParams, GraspSet, plan_grasps, table_friction_hint
 from workbench.grasping.placements import (
     PlacementParams,
     Placements,
@@ -113,7 +113,9 @@ def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams
     t1 = time.perf_counter()
     placements = stable_placements(obj, pparams)
     p_idx, g_idx, poses = free_tabletop_grips(placements, grasps.poses, hand, pparams)
-    reason = plan.empty_reason or empty_placement_stage(obj, pparams, placements.poses, len(p_idx))
+    reason = plan.empty_reason or empty_placement_stage(
+        obj, pparams, placements.poses, len(p_idx),
+        lambda: table_friction_hint(obj, hand, gparams, placements.poses, pparams.clearance))
     t2 = time.perf_counter()
     tt = plan_tabletop(placements.poses, p_idx, g_idx, poses, grasps.poses, tparams)
     t3 = time.perf_counter()

@@ -96,7 +96,7 @@ def run(args: argparse.Namespace) -> int:
                                     f"object {args.object!r} in store {args.db}")
         grasps = latest_paramset_for(store, GRASP_STAGE, oid, gripper, "grasps")
         result = ensure_placements(store, oid, obj, grasps, gripper, pparams, tparams)
-        reason = empty_stage(store, args.object)
+        reason = empty_stage(store, args.object, gripper=gripper)
     print_placements(args.object, result, time.perf_counter() - t0)
     if reason:
         warn(f"no tabletop grip of {args.object}; stage {reason}")

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -52,7 +52,7 @@ from workbench.grasping.pads import (
     triangle_tree,
 )
 from workbench.grasping.memo import remembered
-from workbench.grasping.placements import stable_placements
+from workbench.grasping.placements import grips_above_table, stable_placements
 from workbench.params import Params, bounds, check_memory, param
 from workbench.robots.gripper import Gripper
 
@@ -850,6 +850,40 @@ def friction_hint(mu: float, pairs: ContactPairs | None) -> str:
         return (f"the jaw axes tried need a friction beyond --friction's range ({bound.describe(True)}); {least}, so only "
                 f"other jaw axes could (a finer --density or --tau-deg)")
     return f"--friction {_ceil(tried)} passes the cone for the jaw axes tried ({bound.describe(True)}); {least}"
+
+
+def table_friction_hint(obj: ObjectModel, gripper: Gripper, params: GraspParams, placement_poses: np.ndarray,
+                        clearance: float, upto: float = 1.0) -> str:
+    """What --friction would give grasps that clear the table at the stable placements (P, 4, 4), for the zero-grip
+    message, or "" when no friction up to `upto` would, or the cone is not what removed them.
+
+    A part lying flat with a bore or an inner wall (a flange, a bushing, a ring) is gripped from above with one pad
+    inside: a flat pad meets a concave wall at its own edges, where the wall's normal lies further off the jaw axis
+    than the friction cone of the default friction allows. The grasps are planned again at `upto`; the friction the
+    best of those that clear the table needs is checked by planning at it, so the hint names only what it found."""
+    mu = params.friction_coefficient
+    if len(placement_poses) == 0 or mu >= upto:
+        return ""
+
+    def clear(friction: float) -> tuple[GraspSet, np.ndarray]:
+        g = plan_grasps(obj, gripper, replace(params, friction=friction)).grasps
+        return g, grips_above_table(placement_poses, g.poses, gripper, clearance).any(axis=0)
+
+    g, above = clear(upto)
+    if not above.any():
+        return ""
+    y = g.poses[above][:, :3, 1]
+    off = np.maximum(np.arccos(np.clip(np.einsum("ij,ij->i", g.normal0[above], y), -1.0, 1.0)),
+                     np.arccos(np.clip(-np.einsum("ij,ij->i", g.normal1[above], y), -1.0, 1.0)))
+    need = _ceil(float(np.tan(off.min())))
+    if float(need) <= mu:
+        return ""
+    found = int(clear(float(need))[1].sum())
+    if not found:
+        return ""
+    return (f"; `workbench grasps --friction {need}` keeps {found} grasps that clear the table: their contact normals "
+            f"lie {np.degrees(off.min()):.3g} degrees or more off the jaw axis, outside the "
+            f"{np.degrees(np.arctan(mu)):.3g}-degree cone of friction {mu:.2g}")
 
 
 def _ceil(value: float) -> str:

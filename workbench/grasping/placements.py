@@ -17,6 +17,7 @@ above the table.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 from scipy.spatial import ConvexHull
@@ -184,13 +185,14 @@ def no_grip_hint(obj: ObjectModel, placement_poses: np.ndarray) -> str:
 
 
 def empty_placement_stage(obj: ObjectModel, params: PlacementParams, placement_poses: np.ndarray,
-                          n_free_grips: int) -> str | None:
+                          n_free_grips: int, grips_hint: Callable[[], str] | None = None) -> str | None:
     """"placements: why" when no placement is stable, "free tabletop grips: why" when no grasp clears the table at
-    any, else None (the stage that kept nothing, for `workbench build` and the catalogue alike)."""
+    any, else None (the stage that kept nothing, for `workbench build` and the catalogue alike). `grips_hint`, when
+    given, adds what a grasp parameter would change to the second (`grasps.table_friction_hint`)."""
     if len(placement_poses) == 0:
         return f"placements: {stability_hint(obj, params)}"
     if n_free_grips == 0:
-        return f"free tabletop grips: {no_grip_hint(obj, placement_poses)}"
+        return f"free tabletop grips: {no_grip_hint(obj, placement_poses)}{grips_hint() if grips_hint else ''}"
     return None
 
 

@@ -20,7 +20,7 @@ import trimesh
 
 from workbench.errors import PartialStageWarning, PlanningError, RobotError, StoreError
 from workbench.geometry.objects import MeshWarning, ObjectModel, from_arrays, mesh_digest
-from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
+from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps, table_friction_hint
 from workbench.grasping.placements import (
     PlacementParams,
     empty_placement_stage,
@@ -346,7 +346,7 @@ def build_all(db, obj, robot: str | Robot, gparams: GraspParams = GraspParams(),
         out.robot = run.robot
         out.timings["ik"], out.reused["ik"] = time.perf_counter() - t0, run.reused
         out.empty = (g.plan.empty_reason if g.plan is not None and g.count == 0
-                     else run.empty_reason() or empty_stage(store, obj.name, run.robot))
+                     else run.empty_reason() or empty_stage(store, obj.name, run.robot, hand))
         if out.empty is not None:  # zero is a result: no graph to build, the stage that emptied is named
             out.ids = {"idgrasps": g.idparamset, "idplacements_set": p.idplacements, **ik_ids}
             return out
@@ -543,9 +543,12 @@ def get_object(store: Store, name: str) -> tuple[int, ObjectModel]:
 # Zero results: which stage stored no rows, and what to try.
 
 
-def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -> str | None:
+def empty_stage(store: Store, object_name: str, robot_name: str | None = None,
+                gripper: Gripper | None = None) -> str | None:
     """The first stage of `object_name`'s latest stored runs that kept nothing, as "stage: why; what to try", or None
-    when every stage (grasps, placements, free tabletop grips, tabletop grips, and IK for `robot_name`) has rows."""
+    when every stage (grasps, placements, free tabletop grips, tabletop grips, and IK for `robot_name`) has rows.
+    With the `gripper` of the grasps, no grasp clearing the table also names the --friction that would give some
+    (`grasps.table_friction_hint`)."""
     oid, obj = get_object(store, object_name)
     try:
         grasps = load_grasps(store, oid)
@@ -559,8 +562,11 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None) -
     except StoreError:  # no placements run yet: nothing empty so far
         return None
     pl = sql.placements_of_tabletop(store, tt)
-    reason = empty_placement_stage(obj, PlacementParams.from_dict(store.params_of(pl)), load_placements(store, pl)["rotmat"],
-                                   len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]))
+    pparams, poses = PlacementParams.from_dict(store.params_of(pl)), load_placements(store, pl)["rotmat"]
+    gparams = GraspParams.from_dict(store.params_of(int(store.params_of(pl).get("grasps", -1))))
+    hint = None if gripper is None else (
+        lambda: table_friction_hint(obj, gripper, gparams, poses, pparams.clearance))  # noqa: E731
+    reason = empty_placement_stage(obj, pparams, poses, len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]), hint)
     if reason is not None:
         return reason
     if tabletop_counts(store, tt)[1] == 0:
