@@ -507,15 +507,20 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
         counts["fingertip"] = int(len(tips))
     # a pad that started inside a hole: its touches are those closing from the pre-grasp opening about its TCP
     inside = touch.hit & np.isfinite(touch.window).any(axis=1)
-    again = pregrasp_touches(mesh, _subset(touch, inside), gripper, params.pregrasp_margin, params.finger_clearance)
+
+    def filters(t: Touches) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # the opening, the cone, the centre of mass
+        y = t.poses[:, :3, 1]
+        cos_f = np.cos(np.arctan(params.friction_coefficient))
+        width = t.hit & (t.width <= gripper.jaw_max) & (t.width >= gripper.jaw_min)
+        cone = width & (np.einsum("ij,ij->i", t.normal0, y) >= cos_f) & (np.einsum("ij,ij->i", t.normal1, -y) >= cos_f)
+        return width, cone, cone & (np.linalg.norm(0.5 * (t.point0 + t.point1) - obj.com, axis=1) <= lengths["com_max"])
+
+    again = pregrasp_touches(mesh, _subset(touch, inside), gripper, params.pregrasp_margin, params.finger_clearance,
+                             wanted=lambda t: filters(t)[2])
     touch = Touches(**{f: _put(getattr(touch, f), inside, getattr(again, f)) for f in Touches.__dataclass_fields__})
     timings["pads"] = time.perf_counter() - t0 - timings.get("supports", 0.0)
+    width_ok, cone_ok, com_ok = filters(touch)
     y = touch.poses[:, :3, 1]
-    cos_f = np.cos(np.arctan(params.friction_coefficient))
-    width_ok = touch.hit & (touch.width <= gripper.jaw_max) & (touch.width >= gripper.jaw_min)
-    cone = (np.einsum("ij,ij->i", touch.normal0, y) >= cos_f) & (np.einsum("ij,ij->i", touch.normal1, -y) >= cos_f)
-    cone_ok = width_ok & cone
-    com_ok = cone_ok & (np.linalg.norm(0.5 * (touch.point0 + touch.point1) - obj.com, axis=1) <= lengths["com_max"])
     counts.update(hand_poses=int(len(touch)), pads_width=int(width_ok.sum()), pads_cone=int(cone_ok.sum()),
                   pads_com=int(com_ok.sum()))
     sampled = source >= 0

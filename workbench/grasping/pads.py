@@ -34,6 +34,7 @@ touches, not the mesh, and the nodes near the axis that every rotation needs are
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 import trimesh
@@ -163,17 +164,21 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
 
 
 def pregrasp_touches(mesh: trimesh.Trimesh, touch: Touches, gripper: Gripper, margin: float | None,
-                     clearance: float = 0.0, tol: float = 1e-6) -> Touches:
+                     clearance: float = 0.0, tol: float = 1e-6,
+                     wanted: Callable[[Touches], np.ndarray] | None = None) -> Touches:
     """The touches of `touch`'s hand poses closing from their own pre-grasp opening (the width plus `margin`, at
     most the stroke; full opening when None) about their TCPs (CONVENTIONS.md, Gripper), with the starts clear of the
     part inside the pads' footprints but for `clearance` (the hand's tolerated intrusion). A pad that started inside
     a hole at full opening may have passed over material that the pad starting at the pre-grasp opening meets: its
-    touch moves there. Searched twice; a pose whose second search moves by more than `tol` is not a hit."""
+    touch moves there. Searched twice; a pose whose second search moves by more than `tol` is not a hit. `wanted`
+    (touches -> mask), when given, names the poses of the first search worth the second (those whose contacts pass
+    the later filters); the others keep the first search's touches, which those filters remove."""
     once = _from_pregrasp(mesh, touch, gripper, margin, clearance, tol)
-    live = np.flatnonzero(once.hit)  # a pose the first search missed stays a miss: only the others are searched again
+    # a pose the first search missed stays a miss: only the others are searched again
+    live = np.flatnonzero(once.hit & (True if wanted is None else wanted(once)))
     once_live = Touches(**{f: getattr(once, f)[live] for f in Touches.__dataclass_fields__})
     twice = _from_pregrasp(mesh, once_live, gripper, margin, clearance, tol)
-    same = np.zeros(len(once), dtype=bool)
+    same = np.ones(len(once), dtype=bool)
     with np.errstate(invalid="ignore"):  # misses carry infinite widths
         same[live] = (twice.hit & (np.abs(twice.width - once_live.width) <= tol)
                       & (np.linalg.norm(twice.poses[:, :3, 3] - once_live.poses[:, :3, 3], axis=1) <= tol))
