@@ -131,7 +131,10 @@ def volume_centre(mesh: trimesh.Trimesh) -> tuple[float, np.ndarray]:
     (`trimesh.triangles.mass_properties`, the same operations, so the same bits) without the inertia's terms, which
     cost two thirds of it."""
     tri = np.asarray(mesh.triangles, dtype=np.float64)
-    crosses = np.asarray(mesh.triangles_cross)
+    crosses = mesh._cache["triangles_cross"]
+    if crosses is None:  # trimesh's own operations on plain arrays: the same bits, without its tracked arrays' overhead
+        crosses = mesh._cache["triangles_cross"] = trimesh.triangles.cross(tri.view(np.ndarray))
+    crosses = np.asarray(crosses)
     f1 = tri[:, 0, :] + tri[:, 1, :] + tri[:, 2, :]
     f2 = tri[:, 0, :] ** 2 + tri[:, 1, :] ** 2 + tri[:, 0, :] * tri[:, 1, :] + tri[:, 2, :] * f1
     integral = np.zeros((4, len(f1)))
