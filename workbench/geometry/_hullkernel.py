@@ -76,3 +76,31 @@ def group_facets(vertices, faces, facet_of, m_ptr, members, normals, order, v_pt
                     label[t] = group
         group += 1
     return label
+
+
+@njit(cache=True, nogil=True)
+def flat_vertices(faces, normals, n_vertices, sin2):
+    """(V,) whether every face at a vertex has the unit normal of the first one there to within an angle whose sine
+    squared is `sin2` (cross products: a dot product cannot resolve angles below 1e-8 rad). On a closed mesh such a
+    vertex lies inside the flat fan of its faces, within that angle times their size of its plane, so it is not a
+    vertex of the convex hull. A vertex no face uses is not flat."""
+    ref = np.full(n_vertices, -1, dtype=np.int64)
+    flat = np.ones(n_vertices, dtype=np.bool_)
+    for t in range(faces.shape[0]):
+        for k in range(3):
+            v = faces[t, k]
+            r = ref[v]
+            if r < 0:
+                ref[v] = t
+                continue
+            if not flat[v]:
+                continue
+            a0, a1, a2 = normals[t, 0], normals[t, 1], normals[t, 2]
+            b0, b1, b2 = normals[r, 0], normals[r, 1], normals[r, 2]
+            c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+            if a0 * b0 + a1 * b1 + a2 * b2 <= 0.0 or c0 * c0 + c1 * c1 + c2 * c2 > sin2:
+                flat[v] = False
+    for v in range(n_vertices):
+        if ref[v] < 0:
+            flat[v] = False
+    return flat

@@ -35,7 +35,7 @@ from scipy.spatial import QhullError
 from workbench.errors import MeshError, ParameterError
 from workbench.geometry.collision import cylinders_collide, object_collider
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
-from workbench.geometry.hull import convex_hull, part_hull
+from workbench.geometry.hull import convex_hull, hull_points, part_hull
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
 from workbench.grasping._handkernel import convex_piece, hull_hits, pack
@@ -324,8 +324,9 @@ def _prebuild(mesh: trimesh.Trimesh, params: GraspParams) -> Callable[[], None]:
             fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
             todo["workbench_pad_bvh"] = lambda: triangle_bvh(tri, fn)
         if params.support_grasps and mesh._cache["workbench_hull"] is None:
-            points = mesh.vertices.view(np.ndarray)
-            todo["workbench_hull"] = lambda: convex_hull(points)
+            points, faces, normals = mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray), mesh.face_normals
+            closed = mesh.is_watertight
+            todo["workbench_hull"] = lambda: convex_hull(hull_points(points, faces, normals, closed))
     if not todo:
         return lambda: None
     built: dict = {}
