@@ -42,7 +42,7 @@ def test_gap_windows_on_a_frame_bar_follow_the_line_crossings(frame, hand):
     J = hand.jaw_max
     origins = np.array([[0.05, 0.0, 0.0], [0.038, 0.0, 0.0]])
     axes = np.array([[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0]])
-    idx, win = gap_windows(frame.mesh, origins, axes, J)
+    idx, win, _ = gap_windows(frame.mesh, origins, axes, J)
     assert idx.tolist() == [0, 1]
     want = np.array([[-0.006 - J / 2, -0.006 + J / 2]] * 2)
     assert np.allclose(win, want, atol=1e-6)
@@ -60,7 +60,7 @@ def test_a_hole_too_small_for_the_open_jaw_is_entered_at_the_pre_grasp_opening(h
     small = _frame(outer=0.06, inner=0.03, thickness=0.008)
     origin, axis = np.array([[0.03, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]])
     assert len(gap_windows(small, origin, axis, hand.jaw_max)[0]) == 0
-    idx, win = gap_windows(small, origin, axis, hand.jaw_max, margin=0.01)
+    idx, win, _ = gap_windows(small, origin, axis, hand.jaw_max, margin=0.01)
     assert idx.tolist() == [0] and np.allclose(win, [[-0.0075 - 0.0125, -0.0075 + 0.0125]], atol=1e-6)
     big = np.array([[0.05, 0.0, 0.0]])
     assert np.array_equal(gap_windows(_frame(), big, axis, hand.jaw_max, margin=0.01)[1],
@@ -80,16 +80,51 @@ def test_a_hole_too_small_for_the_open_jaw_is_entered_at_the_pre_grasp_opening(h
     assert v.ok.all()
 
 
+def test_a_pad_blocked_at_full_opening_starts_again_at_the_pre_grasp_opening(hand):
+    """The 100 mm frame with a bridge across its hole on its top face, at x = 0 to 8 mm: along the axis through the
+    +x bar the hole is clear (the line meets the bar at x = 50 and 38 mm, then the far bar), so the full-opening
+    window stands, but the inner pad starting there (x = 4 mm) cuts the bridge inside its footprint at every
+    rotation. The narrow window (the bar's 12 mm plus the 10 mm margin) starts it 5 mm inside the hole, clear:
+    `gap_touches` finds the 12 mm grasp across the bar there, and the planned grasps across the bar pass the
+    independent check."""
+    from workbench.grasping.grasps import gap_touches
+
+    bridge = trimesh.creation.box((0.008, 0.1, 0.0045))
+    bridge.apply_translation((0.004, 0.0, 0.00575))
+    part = _frame().union(bridge)
+    origin, axis = np.array([[0.05, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]])
+    idx, win, narrow = gap_windows(part, origin, axis, hand.jaw_max, margin=0.01)
+    assert idx.tolist() == [0]
+    assert np.allclose(win, [[-0.006 - hand.jaw_max / 2, -0.006 + hand.jaw_max / 2]], atol=1e-6)
+    assert np.allclose(narrow, [[-0.006 - 0.011, -0.006 + 0.011]], atol=1e-6)
+    assert np.isnan(gap_windows(part, origin, axis, hand.jaw_max)[2]).all()  # no margin: no narrow window
+    angles = 2 * np.pi * np.arange(8) / 8
+    full = first_touches(part, origin, axis, angles, hand, windows=win, block=5e-4)
+    assert not full.hit.any()
+    t = gap_touches(part, origin, axis, angles, hand, None, win, narrow, 5e-4)
+    assert t.hit.all() and np.allclose(t.width, 0.012, atol=1e-6) and np.allclose(t.poses[:, 0, 3], 0.044, atol=1e-6)
+    obj = from_trimesh(part, "bridged frame")
+    params = GraspParams()
+    g = plan_grasps(obj, hand, params).grasps
+    across = np.flatnonzero(np.isclose(g.jawwidth, 0.012, atol=1e-4) & (np.abs(g.poses[:, 0, 1]) > 0.999)
+                            & (g.poses[:, 0, 3] > 0.04))
+    assert len(across) > 0
+    v = check_grasps(obj.mesh, g.poses[across], g.jawwidth[across], g.contact0[across], g.contact1[across],
+                     g.normal0[across], g.normal1[across], params.friction_coefficient,
+                     pregrasp_margin=params.pregrasp_margin)
+    assert v.ok.all()
+
+
 def test_no_gap_window_where_the_pads_start_outside_or_cannot_reach(box, hand):
     """A solid box narrower than the jaw is gripped from outside only; one wider than the jaw along the axis has no
     surface facing the other pad within reach."""
     m = box.mesh
     c = m.bounds.mean(axis=0)
     origins = np.array([[m.bounds[1, 0], c[1], c[2]]])
-    idx, _ = gap_windows(m, origins, np.array([[1.0, 0.0, 0.0]]), hand.jaw_max)
+    idx, _, _ = gap_windows(m, origins, np.array([[1.0, 0.0, 0.0]]), hand.jaw_max)
     assert len(idx) == 0
     wide = trimesh.creation.box((0.12, 0.03, 0.03))
-    idx, _ = gap_windows(wide, np.array([[0.06, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]]), hand.jaw_max)
+    idx, _, _ = gap_windows(wide, np.array([[0.06, 0.0, 0.0]]), np.array([[1.0, 0.0, 0.0]]), hand.jaw_max)
     assert len(idx) == 0
 
 

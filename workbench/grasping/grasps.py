@@ -484,21 +484,21 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                 hit, _, _ = line_surface_points(mesh, np.tile(obj.com, (len(downs), 1)), downs)
                 ring = np.flatnonzero(~np.isin(held, hit))
                 line, point, outward = line_surface_points(mesh, o[ring], y[ring])
-                w, win = gap_windows(mesh, point, outward, gripper.jaw_max, params.pregrasp_margin)
-                slice_gaps = (np.full(len(w), -1), point[w], outward[w], np.zeros(1), z[ring][line[w]], win)
+                w, win, narrow = gap_windows(mesh, point, outward, gripper.jaw_max, params.pregrasp_margin)
+                slice_gaps = (np.full(len(w), -1), point[w], outward[w], np.zeros(1), z[ring][line[w]], win, narrow)
     parts, source = [], []
     for src, o, a, ang, ref in axis_sets:
         parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref))
         source.append(np.repeat(src, len(ang)))
         if params.gap_grasps and (src >= 0).all():  # gaps open from a surface sample along its normal
-            w, win = gap_windows(mesh, o, a, gripper.jaw_max, params.pregrasp_margin)
-            parts.append(first_touches(mesh, o[w], a[w], ang, gripper, ref=None if ref is None else ref[w],
-                                       windows=win, block=None))
+            w, win, narrow = gap_windows(mesh, o, a, gripper.jaw_max, params.pregrasp_margin)
+            parts.append(gap_touches(mesh, o[w], a[w], ang, gripper, None if ref is None else ref[w], win, narrow,
+                                     params.finger_clearance))
             source.append(np.repeat(src[w], len(ang)))
             counts["gap"] += int(len(w))
     if slice_gaps is not None:
-        src, o, a, ang, ref, win = slice_gaps
-        parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref, windows=win, block=None))
+        src, o, a, ang, ref, win, narrow = slice_gaps
+        parts.append(gap_touches(mesh, o, a, ang, gripper, ref, win, narrow, params.finger_clearance))
         source.append(src)
         counts["gap"] += int(len(src))
     touch, source = _merge(parts), np.concatenate(source)
@@ -534,6 +534,31 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     free = _level2(gripper, touch.poses[live], touch.width[live], mesh, params, counts, timings, pads=False)
     kept = touch.poses[live]
     return pairs, kept, live, rotation_about_axis(kept[:, :3, 1], kept[:, :3, 2]), free
+
+
+def gap_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, angles: np.ndarray, gripper: Gripper,
+                ref: np.ndarray | None, windows: np.ndarray, narrow: np.ndarray, clearance: float) -> Touches:
+    """First touches of pads starting inside a hole (`pads.gap_windows`' windows and narrow windows, per axis).
+
+    A pad whose start's plane cuts the part inside its footprint (but for `clearance`) starts inside it and touches
+    nothing, so its search ends at that cut. Where the axis has a narrow window (the hole leaves room along it for
+    the pre-grasp opening of its crossings), such a pose is searched again from there, and if that pad too starts
+    inside the part, from the full opening through the part: its touches then only place the centre about which
+    `pads.pregrasp_touches` searches every hit again from its own pre-grasp opening. A pose blocked at the full
+    opening on an axis without a narrow window is a miss, which spares the costliest searches (a pad inside the
+    part meets every triangle crossing its start) on parts whose holes do not take a finger."""
+    touch = first_touches(mesh, origins, axes, angles, gripper, ref=ref, windows=windows, block=clearance)
+    axis = np.repeat(np.arange(len(origins)), len(angles))
+    for win, block in ((narrow, clearance), (np.where(np.isfinite(narrow), windows, np.nan), None)):
+        redo = np.flatnonzero(~touch.hit & np.isfinite(win[axis, 0]))
+        if len(redo) == 0:
+            continue
+        again = first_touches(mesh, origins[axis[redo]], axes[axis[redo]], np.zeros(1), gripper,
+                              ref=touch.poses[redo, :3, 2], windows=win[axis[redo]], block=block)
+        mask = np.zeros(len(touch), dtype=bool)
+        mask[redo] = True
+        touch = Touches(**{f: _put(getattr(touch, f), mask, getattr(again, f)) for f in Touches.__dataclass_fields__})
+    return touch
 
 
 def _support_normals(obj: ObjectModel) -> np.ndarray:

@@ -197,9 +197,9 @@ def _from_pregrasp(mesh, touch: Touches, gripper: Gripper, margin: float | None,
 
 
 def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, jaw_max: float,
-                margin: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+                margin: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pad starts inside a hole or cavity for jaw axes through surface points `origins` (K, 3) along their outward
-    normals `axes` (K, 3): (axis index (W,), window (W, 2)) for `first_touches`.
+    normals `axes` (K, 3): (axis index (W,), window (W, 2), narrow window (W, 2)) for `first_touches`.
 
     Along the axis line, the left pad touches the origin's surface and the right pad a surface below it facing down
     (any surface on an open mesh) at most `jaw_max` away; with the TCP midway, the pads start `jaw_max` / 2 either
@@ -207,6 +207,9 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     opening: `margin` wider than the span between the two crossings, at most `jaw_max` (CONVENTIONS.md, Gripper:
     the hand approaches at the pre-grasp opening). Each start must leave the line clear up to its touch. The windows
     where both starts lie outside the part along the line are the ordinary grasp from outside and are not returned.
+    The narrow window is that pre-grasp window where the full opening was returned and the pre-grasp one is narrower
+    and leaves the line clear too (NaN elsewhere): where the open pads start inside the part off the line, the pads
+    at the pre-grasp opening may not.
     """
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
@@ -216,7 +219,7 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     ray, tri, along = line_crossings(shape, slots, leaf, tri_s, np.ascontiguousarray(start),
                                      np.ascontiguousarray(-axes))
     if len(ray) == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros((0, 2))
+        return np.zeros(0, dtype=np.int64), np.zeros((0, 2)), np.zeros((0, 2))
     # heights along the axis from the origin, on the crossed triangle's plane
     tn = mesh.face_normals[tri]
     a = axes[ray]
@@ -247,15 +250,19 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     base = (hit_origin[group] & (np.arange(n) > top[group]) & down & (span > eps) & (span <= jaw_max)
             & ~(np.isinf(ceiling) & np.isinf(floor)))  # not both outside the part: the ordinary grasp
     ok = base & (hi < ceiling - eps) & (lo > floor + eps)  # both starts in free space along the line
+    narrow = np.full((n, 2), np.nan)
     if margin is not None:
         # where the line leaves no room for the open jaw, the pre-grasp opening; the opening from the crossings
         # on the line, not from the touches off it, so where the open jaw fits it stays (its touches may lie higher)
         half = np.minimum(span + margin, jaw_max) / 2
-        pre = base & ~ok & (mid + half < ceiling - eps) & (mid - half > floor + eps)
+        fits = base & (mid + half < ceiling - eps) & (mid - half > floor + eps)
+        pre = fits & ~ok
+        both = ok & fits & (half < jaw_max / 2)
+        narrow[both] = np.column_stack([mid - half, mid + half])[both]
         lo, hi = np.where(pre, mid - half, lo), np.where(pre, mid + half, hi)
         ok |= pre
     j = np.flatnonzero(ok)
-    return ray[j].astype(np.int64), np.column_stack([lo[j], hi[j]])
+    return ray[j].astype(np.int64), np.column_stack([lo[j], hi[j]]), narrow[j]
 
 
 def line_surface_points(mesh: trimesh.Trimesh, points: np.ndarray, directions: np.ndarray
