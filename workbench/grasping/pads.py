@@ -21,7 +21,8 @@ jaw): `gap_windows` finds those starts along the axis line and `first_touches` t
 touches only what lies between its start and the TCP. `gap_windows` checks only the axis line; a pad whose starting
 plane cuts the part anywhere inside its footprint starts inside the material and touches nothing (else it would
 "touch" the material past its start, and a finger that is its pad would sit inside the part at the grasp).
-`pregrasp_touches` then searches each such grasp again from its own pre-grasp opening about its TCP, so its touches
+`grasps.gap_touches` then tries such a pad from the narrower pre-grasp window `gap_windows` also gives, and
+`pregrasp_touches` searches each grasp found again from its own pre-grasp opening about its TCP, so its touches
 are what the pads meet as the hand closes from the opening it approached at. The hand at its pre-grasp opening is
 checked against the object afterwards (level 2).
 
