@@ -8,18 +8,22 @@ import numpy as np
 from numba import njit
 
 
+@njit(cache=True, inline="always")
+def _edge_cross(vertices, a, b, c):
+    """The cross product (x, y, z) of the edges (corner 1 - corner 0) x (corner 2 - corner 1) of the face (a, b, c),
+    in numpy's order of operations (trimesh's `triangles.cross`)."""
+    u0, u1, u2 = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
+    w0, w1, w2 = vertices[c, 0] - vertices[b, 0], vertices[c, 1] - vertices[b, 1], vertices[c, 2] - vertices[b, 2]
+    return u1 * w2 - u2 * w1, u2 * w0 - u0 * w2, u0 * w1 - u1 * w0
+
+
 @njit(cache=True)
 def face_areas(vertices, faces):
     """(n,) each face's area as trimesh's `area_faces` computes it, to the bit: half the norm of the cross product of
-    its edges (corner 1 - corner 0) x (corner 2 - corner 1), in numpy's order of operations."""
+    its edges (`_edge_cross`)."""
     out = np.empty(faces.shape[0])
     for t in range(faces.shape[0]):
-        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
-        u0, u1, u2 = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
-        w0, w1, w2 = vertices[c, 0] - vertices[b, 0], vertices[c, 1] - vertices[b, 1], vertices[c, 2] - vertices[b, 2]
-        x = u1 * w2 - u2 * w1
-        y = u2 * w0 - u0 * w2
-        z = u0 * w1 - u1 * w0
+        x, y, z = _edge_cross(vertices, faces[t, 0], faces[t, 1], faces[t, 2])
         out[t] = np.sqrt((x * x + y * y) + z * z) / 2.0
     return out
 
@@ -51,11 +55,7 @@ def centre_terms(vertices, faces):
     terms = np.empty((4, n))
     for t in range(n):
         a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
-        u0, u1, u2 = vertices[b, 0] - vertices[a, 0], vertices[b, 1] - vertices[a, 1], vertices[b, 2] - vertices[a, 2]
-        w0, w1, w2 = vertices[c, 0] - vertices[b, 0], vertices[c, 1] - vertices[b, 1], vertices[c, 2] - vertices[b, 2]
-        cx = u1 * w2 - u2 * w1
-        cy = u2 * w0 - u0 * w2
-        cz = u0 * w1 - u1 * w0
+        cx, cy, cz = _edge_cross(vertices, a, b, c)
         cross[t, 0], cross[t, 1], cross[t, 2] = cx, cy, cz
         for k in range(3):
             p, q, r = vertices[a, k], vertices[b, k], vertices[c, k]
