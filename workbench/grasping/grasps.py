@@ -912,8 +912,8 @@ def table_friction_hint(obj: ObjectModel, gripper: Gripper, params: GraspParams,
     found = int(clear(float(need))[1].sum())
     if not found:
         return ""
-    return (f"; `workbench grasps --friction {need}` keeps {found} grasps that clear the table: their contact normals "
-            f"lie {np.degrees(off.min()):.3g} degrees or more off the jaw axis, outside the "
+    return (f"; --friction {need} (`workbench grasps` or `build`) keeps {found} grasps that clear the table: their "
+            f"contact normals lie {np.degrees(off.min()):.3g} degrees or more off the jaw axis, outside the "
             f"{np.degrees(np.arctan(mu)):.3g}-degree cone of friction {mu:.2g}")
 
 
