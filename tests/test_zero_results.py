@@ -239,3 +239,29 @@ def test_a_flange_lying_flat_is_told_the_friction_its_rim_grips_need(tmp_path):
         y = np.array(rot).reshape(4, 4)[:3, 1]
         off = np.degrees(np.arccos(np.clip([np.dot(n0, y), -np.dot(n1, y)], -1, 1)))
         assert off.max() <= np.degrees(np.arctan(mu)) + 1e-6 and off.max() > np.degrees(np.arctan(0.3)), off
+
+
+def test_the_zero_placement_hint_quotes_the_settled_stability_and_the_filter_that_removed_the_rest():
+    """A capsule lying on its faceted side: no support reaches --min-stability 0.1. The hint quotes the best support's
+    stability as `stable_placements` scores the settled part (below the threshold, and the highest of the placements
+    a lower threshold keeps), and the lower threshold it names keeps the count it says. A box whose faces all pass
+    the stability filter but not --min-probability 0.5 is told that filter and its likeliest face's probability."""
+    from dataclasses import replace
+
+    from workbench.grasping.placements import PlacementParams, stability_hint, stable_placements
+
+    capsule = from_trimesh(trimesh.creation.capsule(0.06, 0.012), "capsule")
+    assert len(stable_placements(capsule)) == 0
+    text = stability_hint(capsule)
+    best = float(re.search(r"scores ([0-9.]+)", text).group(1))
+    lower, kept = re.search(r"--min-stability ([0-9.]+) keeps ([0-9]+)", text).groups()
+    some = stable_placements(capsule, PlacementParams(min_stability=float(lower)))
+    assert best < 0.1 and len(some) == int(kept) > 0
+    assert abs(some.stability.max() - best) <= 1e-3 * best, (some.stability.max(), text)
+    box = from_trimesh(trimesh.creation.box((0.04, 0.03, 0.02)), "box")
+    strict = PlacementParams(min_probability=0.5)
+    assert len(stable_placements(box, strict)) == 0
+    text = stability_hint(box, strict)
+    likeliest = float(re.search(r"the likeliest has ([0-9.]+)", text).group(1))
+    assert "--min-probability 0.5" in text and "--reject-rocking" not in text
+    assert abs(likeliest - stable_placements(box, replace(strict, min_probability=0.0)).probability.max()) <= 0.01

@@ -155,13 +155,21 @@ def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParam
 
 
 def stability_hint(obj: ObjectModel, params: PlacementParams = PlacementParams()) -> str:
-    """Why no placement reached `min_stability`, for the zero-placement message: the best support's stability and the
-    threshold that keeps at least one placement (a rounded base rocks on a small support; a ball has none)."""
-    hull = part_hull(obj.mesh)
-    groups, normals = coplanar_groups(hull, params.coplanar_distance, params.coplanar_angle)
-    best = float(stabilities(hull, obj.com, groups, normals).max(initial=0.0))
+    """Why no placement was kept, for the zero-placement message: the best support's stability and the threshold
+    that keeps at least one placement (a rounded base rocks on a small support; a ball has none), or the probability
+    or rocking filter that removed the steady ones. The stability is that of the part settled on each support, as
+    `stable_placements` scores it."""
+    every = stable_placements(obj, replace(params, min_stability=1e-9, min_probability=0.0, reject_rocking=False))
+    best = float(every.stability.max(initial=0.0))
     if best <= 0:
         return "no convex-hull face holds the centre of mass above its support (the part rolls or tips)"
+    if best >= params.min_stability:
+        steady = every.stability >= params.min_stability
+        by = ([f"--min-probability {params.min_probability:g} (the likeliest has "
+               f"{float(every.probability[steady].max()):.2g})"] if params.min_probability > 0 else []) + \
+            (["--reject-rocking (they rock: a small tilt rolls the part on)"] if params.reject_rocking else [])
+        return (f"{int(steady.sum())} supports reach --min-stability {params.min_stability:g}, and every one is removed by "
+                f"{' or '.join(by)}; lower or drop {'that filter' if len(by) == 1 else 'those filters'}")
     step = 10.0 ** np.floor(np.log10(best))
     lower = float(np.floor(best / step) * step)  # rounded down to one significant digit
     kept = len(stable_placements(obj, replace(params, min_stability=lower)))
