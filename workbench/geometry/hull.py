@@ -96,11 +96,15 @@ def hull_points(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, cl
     return vertices[~flat] if flat.any() and not flat.all() else vertices
 
 
+def mesh_hull(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, closed: bool) -> trimesh.Trimesh:
+    """`convex_hull` of a mesh's vertices (those `hull_points` keeps), from its arrays (a thread can build it)."""
+    return convex_hull(hull_points(vertices, faces, normals, closed))
+
+
 def part_hull(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
-    """`convex_hull` of a part's vertices (those `hull_points` keeps), built once per mesh (kept in its cache,
-    dropped when the mesh changes)."""
+    """`mesh_hull` of a part, built once per mesh (kept in its cache, dropped when the mesh changes)."""
     hull = mesh._cache["workbench_hull"]
     if hull is None:
-        hull = mesh._cache["workbench_hull"] = convex_hull(
-            hull_points(mesh.vertices.view(np.ndarray), mesh.faces, mesh.face_normals, mesh.is_watertight))
+        hull = mesh._cache["workbench_hull"] = mesh_hull(mesh.vertices.view(np.ndarray), mesh.faces, mesh.face_normals,
+                                                         mesh.is_watertight)
     return hull

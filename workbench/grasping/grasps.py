@@ -35,7 +35,7 @@ from scipy.spatial import QhullError
 from workbench.errors import MeshError, ParameterError
 from workbench.geometry.collision import cylinders_collide, object_collider
 from workbench.geometry.facets import Facets, distance_to_boundary, segment
-from workbench.geometry.hull import convex_hull, hull_points, part_hull
+from workbench.geometry.hull import mesh_hull, part_hull
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
 from workbench.grasping._handkernel import convex_piece, hull_hits, pack
@@ -324,9 +324,8 @@ def _prebuild(mesh: trimesh.Trimesh, params: GraspParams) -> Callable[[], None]:
             fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
             todo["workbench_pad_bvh"] = lambda: triangle_bvh(tri, fn)
         if params.support_grasps and mesh._cache["workbench_hull"] is None:
-            points, faces, normals = mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray), mesh.face_normals
-            closed = mesh.is_watertight
-            todo["workbench_hull"] = lambda: convex_hull(hull_points(points, faces, normals, closed))
+            arrays = (mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray), mesh.face_normals, mesh.is_watertight)
+            todo["workbench_hull"] = lambda: mesh_hull(*arrays)
     if not todo:
         return lambda: None
     built: dict = {}
@@ -484,23 +483,23 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                 hit, _, _ = line_surface_points(mesh, np.tile(obj.com, (len(downs), 1)), downs)
                 ring = np.flatnonzero(~np.isin(held, hit))
                 line, point, outward = line_surface_points(mesh, o[ring], y[ring])
-                w, win, narrow = gap_windows(mesh, point, outward, gripper.jaw_max, params.pregrasp_margin)
-                slice_gaps = (np.full(len(w), -1), point[w], outward[w], np.zeros(1), z[ring][line[w]], win, narrow)
+                slice_gaps = (np.full(len(point), -1), point, outward, np.zeros(1), z[ring][line])
     parts, source = [], []
+
+    def add_gaps(src, o, a, ang, ref) -> None:  # pads starting inside a hole along the axes through surface points
+        w, win, narrow = gap_windows(mesh, o, a, gripper.jaw_max, params.pregrasp_margin)
+        parts.append(gap_touches(mesh, o[w], a[w], ang, gripper, None if ref is None else ref[w], win, narrow,
+                                 params.finger_clearance))
+        source.append(np.repeat(src[w], len(ang)))
+        counts["gap"] += int(len(w))
+
     for src, o, a, ang, ref in axis_sets:
         parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref))
         source.append(np.repeat(src, len(ang)))
         if params.gap_grasps and (src >= 0).all():  # gaps open from a surface sample along its normal
-            w, win, narrow = gap_windows(mesh, o, a, gripper.jaw_max, params.pregrasp_margin)
-            parts.append(gap_touches(mesh, o[w], a[w], ang, gripper, None if ref is None else ref[w], win, narrow,
-                                     params.finger_clearance))
-            source.append(np.repeat(src[w], len(ang)))
-            counts["gap"] += int(len(w))
+            add_gaps(src, o, a, ang, ref)
     if slice_gaps is not None:
-        src, o, a, ang, ref, win, narrow = slice_gaps
-        parts.append(gap_touches(mesh, o, a, ang, gripper, ref, win, narrow, params.finger_clearance))
-        source.append(src)
-        counts["gap"] += int(len(src))
+        add_gaps(*slice_gaps)
     touch, source = _merge(parts), np.concatenate(source)
     if params.fingertip_margin is not None:
         tips, tip_source = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source)
@@ -518,7 +517,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
 
     again = pregrasp_touches(mesh, _subset(touch, inside), gripper, params.pregrasp_margin, params.finger_clearance,
                              wanted=lambda t: filters(t)[2])
-    touch = Touches(**{f: _put(getattr(touch, f), inside, getattr(again, f)) for f in Touches.__dataclass_fields__})
+    touch = _put_rows(touch, inside, again)
     timings["pads"] = time.perf_counter() - t0 - timings.get("supports", 0.0)
     width_ok, cone_ok, com_ok = filters(touch)
     y = touch.poses[:, :3, 1]
@@ -555,9 +554,7 @@ def gap_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, an
             continue
         again = first_touches(mesh, origins[axis[redo]], axes[axis[redo]], np.zeros(1), gripper,
                               ref=touch.poses[redo, :3, 2], windows=win[axis[redo]], block=block)
-        mask = np.zeros(len(touch), dtype=bool)
-        mask[redo] = True
-        touch = Touches(**{f: _put(getattr(touch, f), mask, getattr(again, f)) for f in Touches.__dataclass_fields__})
+        touch = _put_rows(touch, redo, again)
     return touch
 
 
@@ -585,10 +582,13 @@ def _subset(touch: Touches, mask: np.ndarray) -> Touches:
     return Touches(**{f: getattr(touch, f)[mask] for f in Touches.__dataclass_fields__})
 
 
-def _put(values: np.ndarray, mask: np.ndarray, new: np.ndarray) -> np.ndarray:
-    out = values.copy()
-    out[mask] = new
-    return out
+def _put_rows(touch: Touches, rows: np.ndarray, new: Touches) -> Touches:
+    """`touch` with its `rows` (a mask, or ascending indices) replaced by those of `new`, in order."""
+    out = {}
+    for f in Touches.__dataclass_fields__:
+        out[f] = getattr(touch, f).copy()
+        out[f][rows] = getattr(new, f)
+    return Touches(**out)
 
 
 def rotation_about_axis(axes: np.ndarray, approach: np.ndarray) -> np.ndarray:
@@ -857,6 +857,13 @@ def swept_pads_collide(gripper: Gripper, point0: np.ndarray, point1: np.ndarray,
     return out
 
 
+def off_axis(normal0: np.ndarray, normal1: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """(N,) the angle (rad) of the contact normal further from its side of the jaw axis: `normal0` from y, `normal1`
+    from -y; a contact pair is inside the friction cone of friction mu when this is at most atan(mu)."""
+    return np.maximum(np.arccos(np.clip(np.einsum("ij,ij->i", normal0, axes), -1.0, 1.0)),
+                      np.arccos(np.clip(-np.einsum("ij,ij->i", normal1, axes), -1.0, 1.0)))
+
+
 def friction_hint(mu: float, pairs: ContactPairs | None) -> str:
     """What --friction would change an empty friction cone, quoting its declared range: the friction the contacts
     tried need with their own jaw axes (the smallest over the pairs that fit the jaw: the cone half-angle of the
@@ -871,10 +878,7 @@ def friction_hint(mu: float, pairs: ContactPairs | None) -> str:
     if pairs.axis is None:
         tried = np.tan(half)
     else:
-        y = pairs.axis[pairs.width_ok]
-        worst = np.maximum(np.arccos(np.clip(np.einsum("ij,ij->i", n0, y), -1.0, 1.0)),
-                           np.arccos(np.clip(-np.einsum("ij,ij->i", n1, y), -1.0, 1.0)))
-        tried = float(np.tan(min(worst.min(), np.pi / 2 - 1e-9)))
+        tried = float(np.tan(min(off_axis(n0, n1, pairs.axis[pairs.width_ok]).min(), np.pi / 2 - 1e-9)))
     if bound.problem(tried) is not None and bound.problem(np.tan(half)) is not None:
         return f"no --friction in its range ({bound.describe(True)}) would do: {least}"
     if bound.problem(tried) is not None:
@@ -903,9 +907,7 @@ def table_friction_hint(obj: ObjectModel, gripper: Gripper, params: GraspParams,
     g, above = clear(upto)
     if not above.any():
         return ""
-    y = g.poses[above][:, :3, 1]
-    off = np.maximum(np.arccos(np.clip(np.einsum("ij,ij->i", g.normal0[above], y), -1.0, 1.0)),
-                     np.arccos(np.clip(-np.einsum("ij,ij->i", g.normal1[above], y), -1.0, 1.0)))
+    off = off_axis(g.normal0[above], g.normal1[above], g.poses[above][:, :3, 1])
     need = _ceil(float(np.tan(off.min())))
     if float(need) <= mu:
         return ""

@@ -562,10 +562,10 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None,
     except StoreError:  # no placements run yet: nothing empty so far
         return None
     pl = sql.placements_of_tabletop(store, tt)
-    pparams, poses = PlacementParams.from_dict(store.params_of(pl)), load_placements(store, pl)["rotmat"]
-    gparams = GraspParams.from_dict(store.params_of(int(store.params_of(pl).get("grasps", -1))))
-    hint = None if gripper is None else (
-        lambda: table_friction_hint(obj, gripper, gparams, poses, pparams.clearance))  # noqa: E731
+    stored = store.params_of(pl)
+    pparams, poses = PlacementParams.from_dict(stored), load_placements(store, pl)["rotmat"]
+    hint = None if gripper is None else lambda: table_friction_hint(  # noqa: E731 (the grasps' parameters, read only then)
+        obj, gripper, GraspParams.from_dict(store.params_of(int(stored.get("grasps", -1)))), poses, pparams.clearance)
     reason = empty_placement_stage(obj, pparams, poses, len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]), hint)
     if reason is not None:
         return reason
