@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+import manifold3d
 import trimesh
 
 from workbench.benchmarks.organic import blob, holed
@@ -144,6 +145,33 @@ def test_pieces_a_few_microns_apart_are_joined_and_bodies_5mm_apart_are_refused(
     far = trimesh.creation.box((0.03, 0.03, 0.03)).apply_translation([0.035, 0, 0])
     with pytest.raises(MeshError, match=r"nearest 5 mm apart"):
         _load(trimesh.util.concatenate([a, far]), "apart")
+
+
+def test_boxes_sharing_a_face_exactly_are_one_closed_part_with_its_volume_centre(tmp_path):
+    """Two closed boxes exported as one STL, sharing the plane x = 0 corner for corner but triangulated with other
+    diagonals there: merged corners make the wall's edges shared by four faces, so splitting by edges gave four open
+    pieces. The wall goes; the part is the closed 60 x 30 x 20 mm union, its centre of mass the volume's."""
+    a = trimesh.creation.box((0.04, 0.03, 0.02)).apply_translation([0.02, 0, 0])
+    b = trimesh.creation.box((0.02, 0.03, 0.02)).apply_translation([-0.01, 0, 0])
+    walls = [np.sort(m.faces[np.isclose(m.triangles_center[:, 0], 0.0)], axis=1) for m in (a, b)]
+    wall_a = {tuple(np.round(a.vertices[f].mean(axis=0), 9)) for f in walls[0]}
+    wall_b = {tuple(np.round(b.vertices[f].mean(axis=0), 9)) for f in walls[1]}
+    assert wall_a != wall_b  # other diagonals: no face of one wall repeats a face of the other
+    path = tmp_path / "two_boxes.stl"
+    trimesh.util.concatenate([a, b]).export(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        obj = load_object(path)
+    assert any("walls where pieces meet face to face" in r for r in obj.repairs), obj.repairs
+    assert obj.mesh.is_watertight and obj.mesh.body_count == 1 and obj.com_method == "volume"
+    union = manifold3d.Manifold.cube([0.06, 0.03, 0.02]).translate([-0.02, -0.015, -0.01])
+    assert np.isclose(obj.mesh.volume, union.volume(), rtol=1e-9)
+    assert np.allclose(obj.com, [0.01, 0, 0], atol=1e-9)  # (40 x 20 mm + 20 x -10 mm) / 60 mm along x
+    assert np.isclose(obj.mesh.area, union.surface_area(), rtol=1e-9)
+    # a smaller block standing on part of a face is not a wall: the union joins it, keeping the uncovered rest
+    c = trimesh.creation.box((0.02, 0.03, 0.04)).apply_translation([-0.01, 0, 0.01])
+    obj = _load(trimesh.util.concatenate([a, c]), "step")
+    assert obj.mesh.is_watertight and np.isclose(obj.mesh.volume, 0.04 * 0.03 * 0.02 + 0.02 * 0.03 * 0.04)
 
 
 def test_exported_files_glb_scene_obj_materials_ply_colours(tmp_path):

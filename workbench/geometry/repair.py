@@ -71,6 +71,14 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: f
             notes.append(f"dropped {nf - len(mesh.faces)} duplicate faces")
     mesh.remove_unreferenced_vertices()
     groups = edge_groups(mesh.faces, len(mesh.vertices))
+    if (np.diff(groups[1]) > 2).any():  # an edge of more than two faces: pieces may meet face to face there
+        walls = _coplanar_walls(mesh)
+        if walls.any() and not walls.all():
+            mesh.update_faces(~walls)
+            mesh.remove_unreferenced_vertices()
+            notes.append(f"removed {int(walls.sum())} faces of the walls where pieces meet face to face (coplanar "
+                         f"faces of opposite normals covering each other)")
+            groups = edge_groups(mesh.faces, len(mesh.vertices))
     whole = mesh
     mesh, body_note = _one_body(mesh, label, debris, groups=groups)
     if body_note:
@@ -280,6 +288,54 @@ def _inner_walls(faces: np.ndarray) -> np.ndarray:
     pos = np.bincount(inv, weights=even, minlength=n)
     neg = np.bincount(inv, weights=~even, minlength=n)
     return ((pos > 0) & (neg > 0))[inv]
+
+
+def _coplanar_walls(mesh: trimesh.Trimesh, rel: float = 1e-9) -> np.ndarray:
+    """Mask of the faces of walls where two closed pieces meet face to face, triangulated differently on either side
+    (`_inner_walls` finds the same triangles twice): in one plane (within about 1e3 `rel` of the part's size), the
+    faces of either normal whose centres lie on faces of the other, when the corners of each side's such faces lie
+    on the other side's too (the same region, not a small block standing on a larger one, which the union joins)."""
+    n = np.asarray(mesh.face_normals)
+    tri = np.asarray(mesh.triangles)
+    size = max(float(mesh.extents.max()), 1e-12)
+    # a plane's key: its normal made to point into the upper half space, and its offset along it
+    flip = np.where((n[:, 2] < 0) | ((n[:, 2] == 0) & ((n[:, 1] < 0) | ((n[:, 1] == 0) & (n[:, 0] < 0)))), -1.0, 1.0)
+    un = n * flip[:, None]
+    off = np.einsum("ij,ij->i", un, tri[:, 0])
+    key = np.column_stack([np.round(un * 1e6), np.round(off / (1e3 * rel * size))]).astype(np.int64)
+    with np.errstate(over="ignore"):  # one hash per plane (wrapping)
+        h = key @ np.array([0x9E3779B97F4A7C1, 0x632BE59BD9B4E01, 0x2545F4914F6CDD1D, 1], dtype=np.int64)
+    order = np.argsort(h, kind="stable")
+    hs = h[order]
+    starts = np.flatnonzero(np.r_[True, hs[1:] != hs[:-1], True])
+    plane = np.empty(len(h), dtype=np.int64)
+    plane[order] = np.repeat(np.arange(len(starts) - 1), np.diff(starts))
+    both = np.flatnonzero((np.bincount(plane[flip > 0], minlength=len(starts) - 1) > 0)
+                          & (np.bincount(plane[flip < 0], minlength=len(starts) - 1) > 0))
+    out = np.zeros(len(tri), dtype=bool)
+    for p in both:
+        faces = order[starts[p]:starts[p + 1]]
+        centres = tri[faces].mean(axis=1)
+        side = flip[faces] > 0
+        up, down = faces[side], faces[~side]
+        up, down = up[_on_triangles(centres[side], tri[down])], down[_on_triangles(centres[~side], tri[up])]
+        if (len(up) and len(down) and _on_triangles(tri[up].reshape(-1, 3), tri[down]).all()
+                and _on_triangles(tri[down].reshape(-1, 3), tri[up]).all()):
+            out[up] = out[down] = True
+    return out
+
+
+def _on_triangles(points: np.ndarray, tri: np.ndarray, chunk: int = 1 << 20) -> np.ndarray:
+    """(P,) whether each point, in the plane of the coplanar triangles `tri` (T, 3, 3), lies on one of them."""
+    hit = np.zeros(len(points), dtype=bool)
+    if len(tri) == 0:
+        return hit
+    step = max(1, chunk // len(tri))
+    for s in range(0, len(points), step):
+        q = points[s:s + step]
+        bary = trimesh.triangles.points_to_barycentric(np.tile(tri, (len(q), 1, 1)), np.repeat(q, len(tri), axis=0))
+        hit[s:s + step] = (bary >= -1e-9).all(axis=1).reshape(len(q), len(tri)).any(axis=1)
+    return hit
 
 
 def _submesh(mesh: trimesh.Trimesh, faces: np.ndarray) -> trimesh.Trimesh:
