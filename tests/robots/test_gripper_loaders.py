@@ -116,6 +116,9 @@ BAD = [
     ({"finger__size": [0.027, -0.014, 0.06]}, "'finger.size' must be positive"),
     ({"tcp": [0.0, 0.0, 0.05]}, "outside the hand"),
     ({"tcp": [0.2, 0.0, 0.15]}, "outside the hand"),
+    # lengths written in millimetres
+    ({"stroke": [0, 85]}, "'stroke' reaches 85 m, implausible for a gripper"),
+    ({"pad__thickness": 5}, "divide millimetres by 1000"),
 ]
 
 

@@ -522,6 +522,7 @@ def parametric_gripper(pad_size: tuple[float, float] = (0.02, 0.02), pad_thickne
     return Gripper(name=name, body=body, finger_boxes=boxes, pad=0, jaw_min=jaw_range[0], jaw_max=jaw_range[1])
 
 
+SPEC_LENGTH_MAX = 1.0  # m: no parallel-jaw gripper's stroke, pad, finger, palm or TCP offset reaches this
 SPEC_FIELDS = ("name", "stroke", "tcp", "rpy", "pad", "finger", "palm", "mass", "max_force", "friction", "source")
 
 
@@ -632,8 +633,15 @@ def gripper_from_spec(path: str | Path) -> Gripper:
         size = _spec_numbers(_spec_get(spec, "palm.size", where), "palm.size", where, 3, positive=True)
         offset = _spec_numbers(palm.get("offset", [0.0, 0.0, size[2] / 2]), "palm.offset", where, 3)
         palm_mesh = trimesh.creation.box(extents=size, transform=_pose(offset, np.zeros(3)))
-    tcp_in_hand = _pose(tcp, rpy)
     lo, hi = palm_mesh.bounds
+    lengths = {"stroke": stroke.max(), "tcp": np.abs(tcp).max(), "pad.size": pad_size.max(), "pad.thickness": pad_t,
+               "finger.size": finger.max(), "palm": float((hi - lo).max())}
+    field, big = max(lengths.items(), key=lambda kv: kv[1])
+    if big > SPEC_LENGTH_MAX:
+        raise GripperError(f"gripper spec {where}: field {field!r} reaches {big:g} m, implausible for a gripper (over "
+                           f"{SPEC_LENGTH_MAX:g} m); a spec's lengths are in metres (50 mm is 0.05): divide "
+                           f"millimetres by 1000")
+    tcp_in_hand = _pose(tcp, rpy)
     if not (lo[0] - 1e-9 <= tcp[0] <= hi[0] + 1e-9 and lo[1] - 1e-9 <= tcp[1] <= hi[1] + 1e-9):
         raise GripperError(f"gripper spec {where}: field 'tcp' {tcp.tolist()} lies outside the hand (beside the palm, "
                            f"which spans x {lo[0]:g}..{hi[0]:g}, y {lo[1]:g}..{hi[1]:g})")
