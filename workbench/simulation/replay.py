@@ -32,15 +32,14 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from workbench.errors import SimulationError
 from workbench.geometry.symmetry import Symmetry, part_symmetry
 from workbench.params import Params, param
 from workbench.simulation.decomposition import Decomposition
-from workbench.simulation.scene import build_scene, mass_properties, mujoco_module, part_scene
+from workbench.simulation.scene import body_poses, build_scene, mass_properties, mujoco_module, part_qpos, part_scene
 
-MODEL_VERSION = 4  # bump when the scene or the verdict changes what a stored simulation means
+MODEL_VERSION = 5  # bump when the scene or the verdict changes what a stored simulation means
 DEGREE = math.pi / 180
 SQUEEZE = 0.02  # m: closing aims this far past the closed stop, so the finger force sits at its limit
 DEFAULT_GRIP_FORCE = 70.0  # N: the Franka hand's continuous grasp force
@@ -166,13 +165,6 @@ def spec_value(gripper, key: str) -> float | None:
     return None if value is None else float(value)
 
 
-def _poses(pos: np.ndarray, quat_wxyz: np.ndarray) -> np.ndarray:
-    out = np.tile(np.eye(4), (len(pos), 1, 1))
-    out[:, :3, :3] = Rotation.from_quat(quat_wxyz[:, [1, 2, 3, 0]]).as_matrix()
-    out[:, :3, 3] = pos
-    return out
-
-
 def _angle(ra: np.ndarray, rb: np.ndarray) -> np.ndarray:
     """Rotation angle between rotation matrices (..., 3, 3)."""
     c = (np.einsum("...ij,...ij->...", ra, rb) - 1.0) / 2.0
@@ -237,10 +229,7 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
     data.qpos[ss.arm_qpos] = segs[0].traj.q[0]
     data.qpos[ss.finger_qpos] = gripper.jaw_max / 2
     start = np.asarray(plan.start_pose, dtype=np.float64)
-    data.qpos[ss.part_qpos:ss.part_qpos + 3] = start[:3, 3]
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(start[:3, :3]).ravel())
-    data.qpos[ss.part_qpos + 3:ss.part_qpos + 7] = quat
+    data.qpos[ss.part_qpos:ss.part_qpos + 7] = part_qpos(start, ss.part_com)
     mujoco.mj_forward(m, data)
 
     pads = {m.geom("left_pad").id, m.geom("right_pad").id}
@@ -283,8 +272,8 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
             a[fell + 1:] = a[fell]
     if not np.isfinite(part_pos).all():
         raise SimulationError(f"the physics diverged (timestep {dt:g} s); give a smaller --timestep")
-    part = _poses(part_pos, part_quat)
-    hand = _poses(hand_pos, hand_quat)
+    part = body_poses(part_pos, part_quat, ss.part_com)
+    hand = body_poses(hand_pos, hand_quat)
     sym = symmetry if symmetry is not None else part_symmetry(mesh)
     rows, failures, final = _verdict(plan, robot, segs, times, seg_end, part, hand, touching, ss.part_com, params, start,
                                      sym)
@@ -462,11 +451,9 @@ def rest_on_table(mesh, hulls: list[tuple[np.ndarray, np.ndarray]], pose: np.nda
     as after a release (`settled`, over `settle_time` plus `hold_end`): (None or why it rolls, its final pose)."""
     mujoco = mujoco_module()
     m, body = part_scene(mesh, hulls, scene, params.density, friction, params.timestep, params.impratio)
+    _, com, _ = mass_properties(mesh, params.density)
     data = mujoco.MjData(m)
-    data.qpos[:3] = pose[:3, 3]
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, np.ascontiguousarray(pose[:3, :3]).ravel())
-    data.qpos[3:7] = quat
+    data.qpos[:7] = part_qpos(pose, com)
     n = int(math.ceil((params.settle_time + params.hold_end) / params.timestep))
     pos, q = np.empty((n + 1, 3)), np.empty((n + 1, 4))
     mujoco.mj_forward(m, data)
@@ -474,8 +461,7 @@ def rest_on_table(mesh, hulls: list[tuple[np.ndarray, np.ndarray]], pose: np.nda
     for k in range(n):
         mujoco.mj_step(m, data)
         pos[k + 1], q[k + 1] = data.xpos[body], data.xquat[body]
-    part = _poses(pos, q)
-    _, com, _ = mass_properties(mesh, params.density)
+    part = body_poses(pos, q, com)
     _, _, what = settled(part, com, params.timestep, 0, pose, params, part_symmetry(mesh))
     return what, part[-1]
 

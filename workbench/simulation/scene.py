@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from workbench.errors import SimulationError
 from workbench.geometry.collision import pinocchio_geometry
@@ -295,22 +296,42 @@ def _add_table(spec, scene, friction: float) -> None:
 
 
 def _add_part(spec, mesh: trimesh.Trimesh, hulls, density: float, friction: float) -> tuple[float, np.ndarray]:
-    """The part as a free body (frame: the part's) with its mesh's mass properties and one geom per convex hull."""
+    """The part as a free body with its mesh's mass properties and one geom per convex hull. The body's frame is the
+    part's moved to its centre of mass (`part_qpos`, `body_poses`): a free joint integrates about its frame's
+    origin, and an origin far from the mass (a CAD part exported in assembly coordinates) makes each step's small
+    turn a large, unstable move."""
     mujoco = mujoco_module()
     mass, com, inertia = mass_properties(mesh, density)
     part = spec.worldbody.add_body(name="part")
     part.add_freejoint(name="part")
     part.explicitinertial = True
     part.mass = mass
-    part.ipos = com
+    part.ipos = np.zeros(3)
     part.fullinertia = _full_inertia(inertia)
     for k, (v, f) in enumerate(hulls):
-        spec.add_mesh(name=f"hull{k}", uservert=np.asarray(v, dtype=np.float32).ravel(),
+        spec.add_mesh(name=f"hull{k}", uservert=(np.asarray(v, dtype=np.float64) - com).astype(np.float32).ravel(),
                       userface=np.asarray(f, dtype=np.int32).ravel())
         part.add_geom(name=f"hull{k}", type=mujoco.mjtGeom.mjGEOM_MESH, meshname=f"hull{k}", condim=4,
                       friction=[friction, TORSION, 0.0], solref=SOLREF, solimp=SOLIMP, contype=ENV_TYPE,
                       conaffinity=ENV_AFFINITY)
     return mass, com
+
+
+def part_qpos(pose: np.ndarray, com: np.ndarray) -> np.ndarray:
+    """(7,) the part body's free-joint position and quaternion (w, x, y, z) for the part at `pose` (4, 4)."""
+    out = np.zeros(7)
+    out[:3] = pose[:3, :3] @ com + pose[:3, 3]
+    mujoco_module().mju_mat2Quat(out[3:], np.ascontiguousarray(pose[:3, :3]).ravel())
+    return out
+
+
+def body_poses(pos: np.ndarray, quat_wxyz: np.ndarray, com: np.ndarray | None = None) -> np.ndarray:
+    """(N, 4, 4) poses from a body's positions (N, 3) and quaternions (N, 4; w, x, y, z); with `com`, the part's
+    poses from its body's (`_add_part`)."""
+    out = np.tile(np.eye(4), (len(pos), 1, 1))
+    out[:, :3, :3] = Rotation.from_quat(quat_wxyz[:, [1, 2, 3, 0]]).as_matrix()
+    out[:, :3, 3] = pos if com is None else pos - out[:, :3, :3] @ com
+    return out
 
 
 def part_scene(mesh: trimesh.Trimesh, hulls, scene, density: float, friction: float, timestep: float,
