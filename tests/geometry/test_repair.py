@@ -250,3 +250,16 @@ def test_vertex_merging_is_skipped_only_where_trimesh_would_merge_none():
         merged = trimesh.Trimesh(vertices, faces, process=False)
         merged.merge_vertices()
         assert _distinct_positions(vertices) is distinct and (len(merged.vertices) == len(vertices)) is distinct
+
+
+def test_an_open_mesh_is_named_open_with_its_widest_hole():
+    """A box without its 40 x 30 mm lid keeps its hole (far beyond the small holes closed at load); the warning says
+    the mesh is open, how many edges border the hole and how wide it is."""
+    from workbench.geometry.objects import MeshWarning
+
+    box = trimesh.creation.box((0.04, 0.03, 0.02))
+    lid = box.face_normals[:, 2] > 0.5
+    box.update_faces(~lid)
+    with pytest.warns(MeshWarning, match=r"not watertight \(open: 4 edges border its holes, the widest 40 mm across"):
+        obj = from_arrays(box.vertices, box.faces, scale=1.0, name="open", source="<memory>")
+    assert obj.com_method == "area" and not obj.mesh.is_watertight

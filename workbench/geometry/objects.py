@@ -12,7 +12,7 @@ import numpy as np
 import trimesh
 
 from workbench.errors import MeshError
-from workbench.geometry.repair import repair, volume_centre
+from workbench.geometry.repair import HOLE_EDGES, HOLE_SIZE, open_border, repair, volume_centre
 from workbench.params import HAND_SIZED, PART_SIZE, SCALE
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254}
@@ -180,7 +180,12 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     if volume > 0:
         com, method = centre, "volume"
     else:
-        warnings.warn(f"{label} is not watertight: centre of mass weighted by area", MeshWarning, stacklevel=3)
+        edges, span = open_border(mesh)
+        why = (f"open: {edges} edges border its holes, the widest {span * 1e3:.3g} mm across; holes up to "
+               f"{HOLE_SIZE * 1e3:.3g} mm and {HOLE_EDGES} edges are closed at load" if edges
+               else "its faces do not close a volume")
+        warnings.warn(f"{label} is not watertight ({why}): centre of mass weighted by area; a closed export gives "
+                      f"the solid's", MeshWarning, stacklevel=3)
         com = (mesh.triangles_center * mesh.area_faces[:, None]).sum(0) / mesh.area
         method = "area"
     return ObjectModel(name=name, mesh=mesh, com=com, com_method=method, scale=scale, source=source,

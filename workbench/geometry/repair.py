@@ -26,7 +26,10 @@ from workbench.geometry._segkernel import connected, edge_groups, neighbour_tabl
 from workbench.geometry.collision import mesh_distance
 
 
-def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = 32, hole_size: float = 0.01,
+HOLE_EDGES, HOLE_SIZE = 32, 0.01  # the holes closed at load: loops of at most this many edges and metres across
+
+
+def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole_size: float = HOLE_SIZE,
            debris: float = 0.1, pieces: np.ndarray | None = None,
            copy: bool = True) -> tuple[trimesh.Trimesh, list[str]]:
     """The repaired mesh and one line per repair made (empty when nothing was needed). `pieces` (per face, optional):
@@ -416,6 +419,22 @@ def _outer_faces(pieces: list[trimesh.Trimesh]) -> np.ndarray:
                 inside |= q.contains(p.triangles_center)
         masks.append(~inside)
     return np.concatenate(masks)
+
+
+def open_border(mesh: trimesh.Trimesh) -> tuple[int, float]:
+    """The edges used by one face only (the border of the mesh's holes) and the largest extent (m) of one connected
+    run of them: (0, 0.0) for a mesh without holes."""
+    e = np.asarray(mesh.faces)[:, [[0, 1], [1, 2], [2, 0]]].reshape(-1, 2)
+    order, starts = edge_groups(mesh.faces, len(mesh.vertices))
+    single = order[starts[:-1][np.diff(starts) == 1]]
+    if len(single) == 0:
+        return 0, 0.0
+    border = e[single]
+    labels = trimesh.graph.connected_component_labels(border, node_count=len(mesh.vertices))
+    v = np.asarray(mesh.vertices)
+    run = labels[border[:, 0]]
+    span = max(float(np.ptp(v[np.unique(border[run == r])], axis=0).max()) for r in np.unique(run))
+    return int(len(border)), span
 
 
 def _fill_loops(mesh: trimesh.Trimesh, max_edges: int, max_size: float) -> int:
