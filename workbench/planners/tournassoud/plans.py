@@ -232,16 +232,20 @@ class Removal:
                 "reason": self.reason, "samples": int(self.samples)}
 
 
-def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser, attempts: int = 40,
-            copy: bool = True, log: list[Removal] | None = None, **kw) -> tuple[Sequence, list[Conjunction]]:
+def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realiser: Realiser,
+            attempts: int | None = None, copy: bool = True, log: list[Removal] | None = None,
+            **kw) -> tuple[Sequence, list[Conjunction]]:
     """Answer `query` (grasp_query or placement_query with keyword arguments `kw`) and give every conjunction its
     joint vectors; failing conjunctions are removed from a copy of the table (from `table` itself when not `copy`),
-    with the failing samples of the rest of their phi row, and the query re-run. Each removal is appended to
-    `log`."""
+    with the failing samples of the rest of their phi row, and the query re-run until an answer's conjunctions all
+    have joint vectors or the table has no answer (each attempt removes at least one sample; `attempts` caps them).
+    Each removal is appended to `log`."""
     work = working_copy(table) if copy else table
     rows_done: set[tuple] = set()
     legal = int(work.q.sum())
-    for _ in range(attempts):
+    tries = 0
+    while attempts is None or tries < attempts:
+        tries += 1
         try:
             seq = query(work, **kw)
         except NoSequence as exc:
@@ -305,7 +309,7 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
             log.append(Removal("ik", _step_of(seq.kind, len(pairs), k), ((c, t), (j, f)),
                                "no IK branch whose grasp, approach and lifts are all free of collisions",
                                before - int(work.q.sum())))
-    raise NoSequence(f"no executable regrasp sequence after {attempts} attempts: the table's conjunctions fail their approach, "
+    raise NoSequence(f"no executable regrasp sequence after {tries} attempts: the table's conjunctions fail their approach, "
                         f"retract or arm collision checks; try another table point or larger handx/worldz")
 
 
