@@ -174,6 +174,20 @@ def test_boxes_sharing_a_face_exactly_are_one_closed_part_with_its_volume_centre
     assert obj.mesh.is_watertight and np.isclose(obj.mesh.volume, 0.04 * 0.03 * 0.02 + 0.02 * 0.03 * 0.04)
 
 
+def test_pieces_whose_union_has_vertices_closer_than_the_merge_tolerance_are_joined():
+    """Two cubes 2 um apart and 1-5 nm askew (convex pieces as a decomposition exports them): their union, grown to
+    touch, has vertices nanometres apart; merged, they would pinch its edges into edges of four faces. The union is
+    kept as manifold3d gives it: one closed body with both cubes' volume."""
+    for skew in (1e-9, 3e-9, 5e-9):
+        a = trimesh.creation.box((0.03, 0.03, 0.03))
+        b = trimesh.creation.box((0.03, 0.03, 0.03)).apply_translation([0.03 + 2e-6, skew, skew])
+        obj = _load(trimesh.util.concatenate([a, b]), "askew")
+        assert any("joined 2 touching bodies" in r for r in obj.repairs), obj.repairs
+        assert obj.mesh.is_watertight and obj.mesh.body_count == 1 and obj.com_method == "volume"
+        assert np.isclose(obj.mesh.volume, 2 * 0.03**3, rtol=1e-3)
+        assert np.isclose(obj.mesh.area, 10 * 0.03**2, rtol=1e-3)  # the touching faces are inside
+
+
 def test_exported_files_glb_scene_obj_materials_ply_colours(tmp_path):
     """A GLB scene of two pieces placed by the scene graph, an OBJ with materials and a PLY with vertex colours load
     as the one part they hold (metres)."""

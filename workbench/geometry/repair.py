@@ -251,7 +251,9 @@ def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarr
     kept = trimesh.util.concatenate(pieces)
     kept.update_faces(outer)
     kept.remove_unreferenced_vertices()
-    notes.append(f"kept {len(keep)} touching bodies together as one part (no union: not every piece is closed; "
+    why = ("not every piece is closed" if not all(p.is_watertight for p in pieces)
+           else "manifold3d did not join the closed pieces into one solid")
+    notes.append(f"kept {len(keep)} touching bodies together as one part (no union: {why}; "
                  f"{int((~outer).sum())} faces inside another piece dropped)")
     return kept, "; ".join(notes)
 
@@ -398,8 +400,10 @@ def _union(pieces: list[trimesh.Trimesh], tol: float) -> trimesh.Trimesh | None:
         if u.status() != manifold3d.Error.NoError or u.is_empty() or len(u.decompose()) > 1:
             return None
         out = u.to_mesh64()
+        # as manifold3d gives it: merging its vertices (trimesh's processing) would pinch apart vertices closer than
+        # the merge tolerance into edges of four faces
         joined = trimesh.Trimesh(np.asarray(out.vert_properties)[:, :3], np.asarray(out.tri_verts, dtype=np.int64),
-                                 process=True)
+                                 process=False)
         return joined if joined.is_watertight and joined.body_count == 1 else None
 
     for grow in (0.0, 1e-3 * tol, 1e-2 * tol, 0.1 * tol, tol):
