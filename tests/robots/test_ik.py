@@ -328,6 +328,41 @@ def test_a_stored_urdf_robot_is_rebuilt_from_its_row_with_every_field(tmp_path):
         _robot_from_row({**row, "digest": "0" * 24})
 
 
+def test_the_stored_urdf_names_the_tcp_frame_even_where_the_robots_own_urdf_lacks_it(tmp_path):
+    """A UR5 with the Franka hand mounted on its flange: its URDF has no TCP link, so the stored URDF text gains one,
+    fixed to the tip at the mount. Pinocchio on that text alone (no library) finds the TCP by the stored name, and
+    base @ oMf(TCP) is the library's TCP at random joint vectors; the library rebuilds the robot from the row as
+    before (same digest). The Panda's URDF has its TCP and is stored as given."""
+    import duckdb
+
+    from workbench.planners.wan_harada.stages import _robot_from_row
+
+    ur5 = get_robot("ur5")
+    with Store(tmp_path / "tcp.duckdb") as store:
+        with store.transaction():
+            rids = [sql.put_robot(store, r) for r in (ur5, get_robot("panda"))]
+        rows = [sql.robot_row(store, rid) for rid in rids]
+    assert _robot_from_row(rows[0]).spec.digest == ur5.spec.digest
+    with duckdb.connect(str(tmp_path / "tcp.duckdb"), read_only=True) as con:
+        stored = con.execute("SELECT urdf, tcp_frame, base, joint_names FROM robot ORDER BY idrobot").fetchall()
+    assert stored[0][0] != ur5.spec.urdf and stored[1][0] == get_robot("panda").spec.urdf
+    text, tcp, base, names = stored[0]
+    assert f'<link name="{tcp}"/>' not in ur5.spec.urdf and f'<link name="{tcp}"/>' in text
+    model = pin.buildModelFromXML(text)
+    data = model.createData()
+    fid = model.getFrameId(tcp)
+    assert fid < model.nframes
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q = rng.uniform(-np.pi, np.pi, len(names))
+        full = pin.neutral(model)
+        for name, v in zip(names, q):
+            full[model.joints[model.getJointId(name)].idx_q] = v
+        pin.framesForwardKinematics(model, data, full)
+        tcp_pose = np.asarray(base).reshape(4, 4) @ data.oMf[fid].homogeneous
+        assert np.allclose(tcp_pose, ur5.tcp_pose(q), atol=1e-9)
+
+
 def test_no_feasible_grip_names_its_cause(tmp_path):
     """Zero feasible grips is a result that names its cause (issue 10): a UR5 loaded from its URDF with the Franka
     hand at the flange (no mount) reaches into the part with its wrist, and the diagnosis says to give the mount;

@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
 import pyarrow as pa
+from scipy.spatial.transform import Rotation
 
 from workbench.errors import StoreError
 from workbench.robots.collider import Scene
@@ -53,12 +55,44 @@ def put_robot(store: Store, robot: Robot, allowed_pairs: str | Callable[[], str]
     gid = put_gripper(store, robot.gripper)
     store.run("INSERT INTO robot (idrobot, name, urdf, tcp_frame, tip_frame, mount, base, joint_names, locked, "
               "drop_geometry, digest, package_dirs, idgripper, allowed_pairs) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-              [rid, name, robot.spec.urdf, robot.spec.tcp_frame, robot.spec.tip_frame, robot.mount.ravel().tolist(),
+              [rid, name, with_tcp_link(robot.spec.urdf, robot.spec.tip_frame, robot.spec.tcp_frame, robot.mount), robot.spec.tcp_frame, robot.spec.tip_frame, robot.mount.ravel().tolist(),
                robot.base.ravel().tolist(), list(robot.joint_names),
                json.dumps({k: float(v) for k, v in robot.spec.locked}, sort_keys=True), list(robot.spec.drop_geometry),
                digest, list(robot.package_dirs),
                gid, allowed_pairs])
     return rid
+
+
+_TCP_BEGIN = "<!-- workbench: the TCP frame, fixed to the tip at the mount -->"
+_TCP_END = "<!-- workbench: end of the TCP frame -->"
+
+
+def with_tcp_link(urdf: str, tip: str, tcp: str, mount: np.ndarray) -> str:
+    """The URDF text as stored: where it has no link named `tcp`, one is added, fixed to the link `tip` at `mount`
+    (4, 4), so that the TCP is found by its name in the stored URDF alone (CONVENTIONS.md, Store). Unchanged when
+    the TCP is the tip, the URDF has it, or the tip is not a link."""
+    def has_link(name: str) -> bool:
+        return re.search(rf"<link\s+name\s*=\s*[\"']{re.escape(name)}[\"']", urdf) is not None
+
+    if tcp == tip or has_link(tcp) or not has_link(tip) or "</robot>" not in urdf:
+        return urdf
+    mount = np.asarray(mount, dtype=np.float64).reshape(4, 4)
+    xyz = " ".join(repr(float(v)) for v in mount[:3, 3])
+    rpy = " ".join(repr(float(v)) for v in Rotation.from_matrix(mount[:3, :3]).as_euler("xyz"))  # URDF's roll, pitch, yaw
+    block = (f"  {_TCP_BEGIN}\n  <link name=\"{tcp}\"/>\n  <joint name=\"{tcp}_fixed\" type=\"fixed\">\n"
+             f"    <parent link=\"{tip}\"/>\n    <child link=\"{tcp}\"/>\n    <origin xyz=\"{xyz}\" rpy=\"{rpy}\"/>\n"
+             f"  </joint>\n  {_TCP_END}\n")
+    at = urdf.rindex("</robot>")
+    return urdf[:at] + block + urdf[at:]
+
+
+def without_tcp_link(urdf: str) -> str:
+    """The URDF text the robot was given (`with_tcp_link` undone): the library adds the TCP frame itself."""
+    begin = urdf.find(f"  {_TCP_BEGIN}")
+    if begin < 0:
+        return urdf
+    end = urdf.index(_TCP_END, begin) + len(_TCP_END) + 1
+    return urdf[:begin] + urdf[end:]
 
 
 def put_scene(store: Store, params: dict[str, Any]) -> int:
@@ -204,7 +238,7 @@ def robot_row(store: Store, robot: int | str) -> dict[str, Any]:
         raise StoreError(f"store {store.path} has no robot {robot!r} (it has: {', '.join(names) or 'none'}); "
                          f"run `workbench ik --robot NAME` or `workbench build --robot NAME` first")
     rid, name, urdf, tcp, tip, mount, base, joints, locked, drop, digest, dirs, gid, allowed = row
-    return {"idrobot": int(rid), "name": name, "urdf": urdf, "tcp_frame": tcp, "tip_frame": tip,
+    return {"idrobot": int(rid), "name": name, "urdf": without_tcp_link(urdf), "tcp_frame": tcp, "tip_frame": tip,
             "mount": np.asarray(mount, dtype=np.float64).reshape(4, 4), "base": np.asarray(base, dtype=np.float64).reshape(4, 4),
             "joint_names": list(joints), "locked": json.loads(locked), "drop_geometry": list(drop), "digest": digest,
             "package_dirs": list(dirs or []), "idgripper": None if gid is None else int(gid), "allowed_pairs": allowed}
