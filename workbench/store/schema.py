@@ -6,7 +6,8 @@ The ten tables of the paper keep their names and columns (lowercase). Poses are 
 Paper tables
 - object(idobject, name, ...): one row per object; extra columns keep the scaled mesh (vertices, faces),
   its digest, scale, source path, centre of mass and how it was computed (volume or area).
-- robot(idrobot, name, ...): what rebuilds the kinematic chain without the library: urdf text, tcp_frame,
+- robot(idrobot, name, ...): what rebuilds the kinematic chain without the library: urdf text (with a link named
+  tcp_frame fixed to tip_frame at the mount where the robot's own URDF lacks it), tcp_frame,
   tip_frame, mount (tip to TCP), base (base pose in the world), joint_names (order of stored joint vectors),
   locked (JSON {joint: value} for URDF joints outside joint_names that are not at 0, e.g. a humanoid's other arm
   tucked away) and drop_geometry (link-name prefixes whose collision geometry is replaced by the planning gripper).
