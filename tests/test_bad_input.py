@@ -423,6 +423,9 @@ def test_busy_store_is_one_line_or_waited_for(work, db, reference):
         for name in ("plan", "ik", "catalog report"):
             res = cli(*_reader(name, db), cwd=work)
             assert_refused(res, "busy", f"process {holder.pid}", "--wait")
+            # --wait after a subcommand too (catalog report); a wait that ends says how long it waited
+            res = cli(*_reader(name, db), "--wait", "0.5", cwd=work)
+            assert_refused(res, "still busy after waiting 0.5 s", f"process {holder.pid}", "longer --wait")
     finally:
         holder.kill()
         holder.wait()

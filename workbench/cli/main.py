@@ -108,14 +108,18 @@ def build_parser(argv: list[str] | None = None, full: bool = False) -> argparse.
                 register(sub)
         else:
             sub.add_parser(name, help=text, add_help=False)
-    for name, child in sub.choices.items():
-        if full or name == chosen:
+    for name, parent in sub.choices.items():
+        if not (full or name == chosen):
+            continue
+        # a command with subcommands (catalog build, ...) takes the options after its subcommand, as the others do
+        nested = [a for a in parent._actions if isinstance(a, argparse._SubParsersAction)]
+        for child in [p for a in nested for p in a.choices.values()] or [parent]:
             child.add_argument("--memory-budget", type=_budget, default=None, metavar="SIZE",
                                help=f"largest memory a step may plan to use, e.g. 4GiB (default: half this machine's "
                                     f"memory, or {BUDGET_ENV}); larger work is refused before it starts")
             child.add_argument("--wait", type=parse_number(WAIT, "--wait"), default=None, metavar="SECONDS",
-                               help=f"when another process holds the store, wait up to SECONDS for it ({WAIT.describe(True)}; "
-                                    f"default 0: say it is busy and stop; or {WAIT_ENV})")
+                               help=f"when another process holds the store, wait up to SECONDS for it "
+                                    f"({WAIT.describe(True)}; default 0: say it is busy and stop; or {WAIT_ENV})")
     return parser
 
 

@@ -75,13 +75,17 @@ def check_path(path: Path, must_exist: bool) -> None:
         raise StoreError(f"store path {path} is not a regular file; give a file path")
 
 
-def open_error(path: Path, exc: BaseException) -> StoreError:
-    """One line for a file DuckDB cannot open or write: what happened and what to do."""
+def open_error(path: Path, exc: BaseException, waited: float = 0.0) -> StoreError:
+    """One line for a file DuckDB cannot open or write: what happened and what to do (`waited`: the seconds a busy
+    store was waited for)."""
     msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
     low = msg.lower()
     if is_lock_error(exc):
         held = re.search(r"\(PID (\d+)\)", msg)
         who = f"process {held.group(1)}" if held else "another process"
+        if waited > 0:
+            return StoreError(f"store {path} is still busy after waiting {waited:g} s: locked by {who} that is writing "
+                              f"it (or a notebook kernel holding it); retry when it is done, or give a longer --wait")
         return StoreError(f"store {path} is busy: locked by {who} that is writing it (or a notebook kernel holding it); "
                           f"retry when it is done, or give --wait SECONDS to wait for it")
     if "different configuration" in low:
