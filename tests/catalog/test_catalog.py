@@ -82,16 +82,18 @@ PAPER_TABLES = ("object", "robot", "freeairgrip", "freetabletopplacement", "free
                 "tabletopgrips", "ikret", "ik", "gripper", "scene")
 
 
-def _content(db: Path) -> dict[str, list]:
-    """Every row of the paper's tables (and the gripper and scene) without its ids, timestamps and IK joint vectors
+def _content(db: Path, ids: bool = False) -> dict[str, list]:
+    """Every row of the paper's tables (and the gripper and scene) without its timestamps and IK joint vectors
     (compared to 1e-12 by `_joints`; BLAS sums in another order), sorted: what two builds of the same inputs share
-    whatever order they wrote in."""
+    whatever order they wrote in; with `ids`, their ids too (the same when both wrote in the same order), but for
+    the `ik` rows' own (a build numbers them as its IK solver finishes its chunks)."""
     out = {}
     with Store(db, read_only=True) as s:
         for t in PAPER_TABLES:
             cols = [c for c, kind in s.run("SELECT column_name, data_type FROM information_schema.columns WHERE "
                                            "table_name = ? ORDER BY ordinal_position", [t])
-                    if not c.startswith("id") and not c.startswith("jnt_") and "TIMESTAMP" not in kind
+                    if (ids and c != "idik" or not c.startswith("id")) and not c.startswith("jnt_")
+                    and "TIMESTAMP" not in kind
                     and c not in ("used", "created")]
             cols = list(dict.fromkeys(cols))  # a Parquet catalogue's view and the table beneath it list them twice
             out[t] = sorted(map(repr, s.run(f"SELECT {', '.join(cols)} FROM {t}")))
@@ -149,9 +151,16 @@ def test_cluster_build_equals_serial_and_reports_broken_part(parts, robots, seri
     rows = _rows(db)
     _same(rows, serial)
     assert rows["ik rows"][0] == rows["ik rows"][1] == sum(len(v) for k, v in rows.items() if isinstance(k, tuple))
-    mine, theirs = _content(db), _content(serial_db)
-    for t in PAPER_TABLES:  # every table, row for row
+    # every table, row for row, ids included: the catalogue writes in the listed order whichever unit finishes first
+    mine, theirs = _content(db, ids=True), _content(serial_db, ids=True)
+    for t in PAPER_TABLES:
         assert mine[t] == theirs[t] and mine[t], t
+    with Store(db, read_only=True) as s:  # the ik rows' ids follow the parts, then the robots, then the grips
+        rows = s.run("SELECT k.idik, f.idobject, r.name, k.idtabletopgrips FROM ik k JOIN robot r USING (idrobot) "
+                     "JOIN tabletopgrips g USING (idtabletopgrips) JOIN tabletopplacements p USING (idtabletopplacements) "
+                     "JOIN freetabletopplacement f USING (idfreetabletopplacement) ORDER BY k.idik")
+    assert [r[0] for r in rows] == list(range(1, len(rows) + 1))
+    assert [r[1:] for r in rows] == sorted((r[1:] for r in rows), key=lambda r: (r[0], ROBOTS.index(r[1]), r[2]))
     assert [(f["part"], f["kind"]) for f in res.failures] == [("broken", "part")]
     assert "holds no triangle mesh" in res.failures[0]["error"] and "\n" not in res.failures[0]["error"]
     assert {(r["part"], r["robot"]) for r in res.rows} == {(p.stem, r) for p in parts[:-1] for r in ROBOTS}

@@ -221,7 +221,14 @@ class _Build:
         # parts a DuckDB store holds already: written by the stage writers (a Parquet catalogue's merge reuses them)
         self.stored_names = stages.object_names(store) if store.dataset is None else set()
         self.queue_parts: list[tuple[dict, Path]] = []  # part units on disk, waiting for the next merge
+        self.queue_direct: list[tuple[object, dict, dict]] = []  # part units of stored names, waiting to be written
         self.queue_runs: list[dict] = []  # (part, gripper, robot) runs whose IK units are all on disk
+        # rows are written in the listed order (parts x grippers, then each part's robots), whichever unit finishes
+        # first, so that the ids are those of `workbench build` of each in that order, for any worker count
+        self.place: dict[tuple[str, int], int] = {}  # (part, idgripper) -> its place in the listed order
+        self.waiting: set[int] | None = set()  # places whose part unit is still computing (None: the last merge)
+        self.head = 0  # every place before it is written (or failed, or was stored already)
+        self.runs_over: set[tuple] = set()  # runs written, failed or broken
         self.readers: dict[str, int] = {}  # part digest -> its runs still reading its folder
         self.last_merge = time.monotonic()
 
@@ -265,11 +272,13 @@ class _Build:
         digest = _digest("part", _file_digest(path), path.stem, hand.digest,
                          {**p.part_dict(), "scale": scale, "units": units})
         unit = {"digest": digest, "kind": "part", "part": path.stem, "source": str(path), "idgripper": idgripper}
+        self.place[path.stem, idgripper] = len(self.place)
         if digest in self.done:
             self._skip("part")
             self.schedule_stored({**self.done[digest], "idgripper": idgripper})
             return
         priority = PART_PRIORITY + min(path.stat().st_size if path.is_file() else 0, PART_PRIORITY - 1)
+        self.waiting.add(self.place[path.stem, idgripper])
         if path.stem in self.stored_names:  # the store holds this part: the driver writes it with the stage writers
             self._submit(unit, part_unit, str(path), path.stem, scale, units, p.grasps, p.placements, p.tabletop,
                          hand, priority=priority)
@@ -278,6 +287,7 @@ class _Build:
         record = stages.read_record(folder) if folder.is_dir() else None
         if record is not None:  # computed by a run that stopped before merging it
             self._skip("part")
+            self.waiting.discard(self.place[path.stem, idgripper])
             self.part_ready(unit, record, folder)
             return
         unit["folder"] = folder
@@ -415,6 +425,7 @@ class _Build:
 
     def _run_over(self, run: dict) -> None:
         """A run no longer reads its part's folder: the folder goes when the part's last run is over."""
+        self.runs_over.add(_key(run))
         d = run["part_digest"]
         self.readers[d] -= 1
         if self.readers[d] == 0 and all(u["digest"] != d for u, _ in self.queue_parts):
@@ -422,31 +433,84 @@ class _Build:
 
     # -- merging -------------------------------------------------------------------------------------------------
     def merge(self, force: bool = False) -> None:
-        """Merge what waits (part folders, then the shards and graphs of complete runs) in one transaction, when
-        `MERGE_UNITS` units wait, `MERGE_SECONDS` passed since the last merge, or `force`."""
-        waiting = len(self.queue_parts) + sum(len(self.to_merge[_key(r)]) for r in self.queue_runs)
-        if not (self.queue_parts or self.queue_runs):
+        """Merge what waits and may be written in the listed order (part folders and part units of stored names up
+        to the first part still computing, then the complete runs of written parts up to the first run still
+        computing) when `MERGE_UNITS` units wait, `MERGE_SECONDS` passed since the last merge, or `force`."""
+        waiting = (len(self.queue_parts) + len(self.queue_direct)
+                   + sum(len(self.to_merge[_key(r)]) for r in self.queue_runs))
+        if not (self.queue_parts or self.queue_direct or self.queue_runs):
             return
         if not force and waiting < MERGE_UNITS and time.monotonic() - self.last_merge < MERGE_SECONDS:
             return
-        parts, runs = self.queue_parts, self.queue_runs
-        self.queue_parts, self.queue_runs = [], []
+        for kind, items in self._next_parts():
+            if kind == "direct":
+                self.write_parts(items)
+            else:
+                self._merge_checked(items, [])
+        runs = self._next_runs()
+        if runs:
+            self._merge_checked([], runs)
+        self.last_merge = time.monotonic()
+
+    def _next_parts(self) -> list[tuple[str, list]]:
+        """The waiting part units from the first unwritten place up to the first one still computing, taken off their
+        queues, as runs of one kind ("folder": (unit, folder); "direct": (future, unit, tables)) in the listed order."""
+        ready = {self.place[u["part"], u["idgripper"]]: ("folder", (u, f)) for u, f in self.queue_parts}
+        ready.update({self.place[d[1]["part"], d[1]["idgripper"]]: ("direct", d) for d in self.queue_direct})
+        out: list[tuple[str, list]] = []
+        while self.head < len(self.place) and (self.waiting is None or self.head not in self.waiting):
+            if self.head in ready:
+                kind, item = ready.pop(self.head)
+                if out and out[-1][0] == kind:
+                    out[-1][1].append(item)
+                else:
+                    out.append((kind, [item]))
+            self.head += 1
+        self.queue_parts = [item for kind, item in ready.values() if kind == "folder"]
+        self.queue_direct = [item for kind, item in ready.values() if kind == "direct"]
+        return out
+
+    def _next_runs(self) -> list[dict]:
+        """The complete runs of written parts, in the listed order (part, then robot) up to the first run still
+        computing, taken off their queue."""
+        def order(key: tuple) -> tuple[int, int]:
+            part, gid, robot = key
+            return self.place[part, gid], list(self.columns[gid]).index(robot)
+
+        queued = {_key(r): r for r in self.queue_runs}
+        out = []
+        for key in sorted((k for k in self.runs if k not in self.runs_over), key=order):
+            if order(key)[0] >= self.head:
+                break
+            if key not in queued:
+                if self.waiting is None:  # the last merge: nothing computes any more, so nothing is to come
+                    continue
+                break
+            out.append(queued.pop(key))
+        self.queue_runs = list(queued.values())
+        return out
+
+    def _merge_checked(self, parts: list[tuple[dict, Path]], runs: list[dict]) -> None:
+        """`_merge` in one transaction, or, when that fails, each part and run alone (the one that cannot be merged
+        is recorded as failed, the others stored)."""
+        for run in [r for r in runs if r["part_digest"] not in self.done]:  # its part could not be written
+            runs.remove(run)
+            self._merge_failed([], [run], WorkbenchError("its part unit could not be merged"))
+        if not (parts or runs):
+            return
         try:
             self._merge(parts, runs)
         except WorkbenchError as exc:
             if len(parts) + len(runs) == 1:
                 self._merge_failed(parts, runs, exc)
                 return
-            for item in parts:  # one at a time: the unit that cannot be merged is reported, the others stored
-                self.queue_parts = [item]
-                self.merge(force=True)
+            for item in parts:
+                self._merge_checked([item], [])
             for run in runs:
                 if run["part_digest"] not in self.done:  # its part could not be merged
                     self._merge_failed([], [run], WorkbenchError("its part unit could not be merged"))
                     continue
-                self.queue_runs = [run]
-                self.merge(force=True)
-        self.last_merge = time.monotonic()
+                self._merge_checked([], [run])
 
     def _merge(self, parts: list[tuple[dict, Path]], runs: list[dict]) -> None:
         after: list[Callable[[], None]] = []
@@ -515,6 +579,7 @@ class _Build:
         self._account(unit, meta)
         fut.release()
         self.bar.done("part")
+        self.waiting.discard(self.place[unit["part"], unit["idgripper"]])
         self.part_ready(unit, json.loads(table.column("record")[0].as_py()), unit.pop("folder"))
 
     def write_parts(self, items: list[tuple[object, dict, dict]]) -> None:
@@ -586,6 +651,8 @@ class _Build:
         """Record a unit that raised or could not be written (`counted`: already counted as finished)."""
         reason = one_line(exc)
         unit.pop("folder", None)
+        if unit["kind"] == "part" and self.waiting is not None:
+            self.waiting.discard(self.place.get((unit["part"], unit["idgripper"]), -1))
         stages.record_failure(self.store, {**unit, "fresh": unit["digest"] not in self.rows}, reason)
         self.rows.add(unit["digest"])
         scheduling = unit["kind"] == "ik" and unit.get("chunk") is None  # a part whose IK could not be scheduled
@@ -620,9 +687,12 @@ class _Build:
                     self.part_done(fut, unit, result)
                 else:
                     direct.append((fut, unit, result))
-            if direct:
-                self.write_parts(direct)
-            self.merge()
+            for item in direct:
+                self.waiting.discard(self.place[item[1]["part"], item[1]["idgripper"]])
+            self.queue_direct += direct
+            # a part the store held is written as soon as its turn comes: its IK units start only then
+            self.merge(force=bool(self.queue_direct))
+        self.waiting = None  # nothing computes any more: the last merge writes whatever waits
         self.merge(force=True)
         self.bar.close()
 

@@ -234,26 +234,31 @@ def put_units(store: Store, units: list[dict[str, Any]]) -> None:
 def merge_ik_runs(store: Store, runs: list[dict[str, Any]]) -> int:
     """The `ik` rows of many IK runs' shard files whose grips have no row yet (`paths`, `idrobot`, `idscene`,
     `idikret`, `nq`, `offset` per run; see `merge_ik_shards`), in one insert per joint count inside the caller's
-    transaction; ids follow the runs' order, then the grips'. Returns the rows inserted."""
+    transaction; ids follow the runs' order (whatever their joint counts), then the grips'. Returns the rows
+    inserted."""
     n = 0
+    # each run's first id: the runs before it take as many as their shards hold rows (the footers say)
+    sizes = [sum(pq.ParquetFile(str(p)).metadata.num_rows for p in r["paths"]) for r in runs]
+    bases = store.next_id("ik", "idik") + np.concatenate([[0], np.cumsum(sizes)[:-1]]).astype(np.int64)
     for nq in sorted({r["nq"] for r in runs}):
         group = [(k, r) for k, r in enumerate(runs) if r["nq"] == nq and r["paths"]]
         if not group:
             continue
         files = [(str(p), k, r) for k, r in group for p in r["paths"]]
         table = pa.table({"file": [f for f, _, _ in files], "ord": [k for _, k, _ in files],
+                          "base": [int(bases[k]) for _, k, _ in files],
                           **{c: [int(r[c]) for _, _, r in files] for c in ("idrobot", "idscene", "idikret", "offset")},
                           **{c: [str(r[c]) for _, _, r in files] for c in ("part", "robot")}})
-        first = store.next_id("ik", "idik")
         with store.transaction():
             store.con.register("_wb_runs", table)
             try:
                 n += _put(store, "ik",
-                          "? - 1 + row_number() OVER (ORDER BY r.ord, s.idtabletopgrips + r.offset) AS idik, r.idrobot, "
+                          "r.base - 1 + row_number() OVER (PARTITION BY r.ord ORDER BY s.idtabletopgrips + r.offset) "
+                          "AS idik, r.idrobot, "
                           f"s.idtabletopgrips + r.offset AS idtabletopgrips, r.idikret, r.idscene, {_ik_columns(nq)}",
                           "FROM (SELECT filename, idtabletopgrips, feasible::BOOLEAN[] AS f, joints::DOUBLE[] AS j "
                           "FROM read_parquet(?, filename = true)) s JOIN _wb_runs r ON r.file = s.filename",
-                          [first, [f for f, _, _ in files]], {"part": "r.part", "robot": "r.robot"})
+                          [[f for f, _, _ in files]], {"part": "r.part", "robot": "r.robot"})
             except duckdb.IOException as exc:
                 raise StoreError(f"a shard of an IK run cannot be read ({str(exc).splitlines()[0]})") from None
             finally:
