@@ -374,7 +374,8 @@ def run(args: argparse.Namespace) -> int:
             write_text(args.html, table_html(r.table, r.classes, None, title=f"{r.obj.name} with {r.robot.name}: no sequence"))
         return 0
     t = r.table
-    print(f"{r.obj.name} with {r.robot.name}: {seq.regrasps} regrasp(s), chaining {seq.levels} step(s) in {seq.seconds * 1000:.2f} ms")
+    print(f"{r.obj.name} with {r.robot.name}: {seq.regrasps} regrasp(s), {len(seq.grasps)} grasp(s); backward chaining "
+          f"{seq.levels} level(s) in {seq.seconds * 1000:.2f} ms")
     for k, (c, ti) in enumerate(seq.grasps):
         print(f"  grasp {k}: class {c} ({r.classes[c].kind}) theta {np.degrees(t.theta[ti]):6.1f} deg")
     for k, (j, fi) in enumerate(seq.placements):

@@ -344,6 +344,13 @@ def test_an_unserved_angle_is_a_result_naming_the_served_ones():
         placement_query(t, (0, np.radians(90)), (1, np.radians(150)))
     with pytest.raises(NoSequence, match=r"no grasp can put the object at placement 1, 0.0 deg; .*grasps at 150 deg"):
         placement_query(t, (0, 0.0), (1, 0.0))
+    # a placement no grasp holds at any angle: not another angle, but more grasp points or another table point
+    q[1, 1] = False
+    t = GraspPlacementTable(theta=t.theta, phi=phi, hand_object=q.any(axis=(1, 3)), hand_table=q.any(axis=3), q=q,
+                            placements=t.placements, frame=np.eye(4))
+    with pytest.raises(NoSequence, match=r"placement 1, 0.0 deg; no angle of placement 1 has a grasp at this table "
+                                         r"point: more grasp points per class \(`workbench gptable --points N`\)"):
+        placement_query(t, (0, 0.0), (1, 0.0))
 
 
 def test_minimum_contact_area(box, hand):

@@ -219,9 +219,16 @@ def _served_angles(table: GraspPlacementTable, p: int) -> str:
     `p`."""
     spans = runs(table.q[:, p].any(axis=(0, 1)), np.degrees(table.phi))
     if not spans:
-        return f"no angle of placement {p} has a grasp"
+        return (f"no angle of placement {p} has a grasp at this table point: more grasp points per class "
+                f"(`workbench gptable --points N`) or another --table-point may give some")
     text = [f"{a:.0f}" if a == b else f"{a:.0f} to {b:.0f}{' through 0' if a > b else ''}" for a, b in spans]
     return f"placement {p} has grasps at {', '.join(text[:6])}{' ...' if len(text) > 6 else ''} deg"
+
+
+def _other_angle(table: GraspPlacementTable, p: int) -> str:
+    """What to try when no grasp holds placement `p` at the asked angle: another angle, where some has a grasp."""
+    served = _served_angles(table, p)
+    return served if served.startswith("no angle") else f"choose another angle ({served})"
 
 
 def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: tuple[int, float]) -> Sequence:
@@ -237,11 +244,11 @@ def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: 
     a = table.q[:, ps, :, fs]
     b = table.q[:, pg, :, fg]
     if not a.any():
-        raise NoSequence(f"no grasp can pick the object at placement {ps}, {np.degrees(phs):.1f} deg; choose another angle "
-                         f"({_served_angles(table, ps)})")
+        raise NoSequence(f"no grasp can pick the object at placement {ps}, {np.degrees(phs):.1f} deg; "
+                         f"{_other_angle(table, ps)}")
     if not b.any():
-        raise NoSequence(f"no grasp can put the object at placement {pg}, {np.degrees(phg):.1f} deg; choose another angle "
-                         f"({_served_angles(table, pg)})")
+        raise NoSequence(f"no grasp can put the object at placement {pg}, {np.degrees(phg):.1f} deg; "
+                         f"{_other_angle(table, pg)}")
     levels = chain(table, a, b)
     if levels is None:
         raise NoSequence(f"no regrasp sequence from placement {ps} to placement {pg}: the table does not connect them: "
