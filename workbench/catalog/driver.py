@@ -477,6 +477,8 @@ class _Build:
             part, gid, robot = key
             return self.place[part, gid], list(self.columns[gid]).index(robot)
 
+        if not self.queue_runs:
+            return []
         queued = {_key(r): r for r in self.queue_runs}
         out = []
         for key in sorted((k for k in self.runs if k not in self.runs_over), key=order):
