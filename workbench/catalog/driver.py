@@ -509,9 +509,6 @@ class _Build:
             for item in parts:
                 self._merge_checked([item], [])
             for run in runs:
-                if run["part_digest"] not in self.done:  # its part could not be merged
-                    self._merge_failed([], [run], WorkbenchError("its part unit could not be merged"))
-                    continue
                 self._merge_checked([], [run])
 
     def _merge(self, parts: list[tuple[dict, Path]], runs: list[dict]) -> None:
