@@ -355,3 +355,21 @@ def test_first_touches_of_one_rotation_match_the_full_set(tube_paper, hand):
         assert np.allclose(one.poses[hit], full.poses[rows][hit], atol=1e-12)
         assert np.allclose(one.point0[hit], full.point0[rows][hit], atol=1e-12)
         assert np.allclose(one.point1[hit], full.point1[rows][hit], atol=1e-12)
+
+
+def test_a_mesh_is_segmented_once_per_parameters_and_again_when_it_changes():
+    """Planning a part again with the same segmentation parameters (another density, friction or gripper) reuses its
+    facets; other parameters, or a changed mesh, segment again, equal to a fresh mesh's segmentation."""
+    mesh = trimesh.creation.icosphere(subdivisions=3, radius=0.03)
+    first = segment(mesh, np.radians(18))
+    assert segment(mesh, np.radians(18)) is first
+    with pytest.raises(ValueError):
+        first.tri_index[0] = 1  # shared by every plan of the mesh: read-only
+    other = segment(mesh, np.radians(10))
+    fresh = segment(mesh.copy(), np.radians(10))
+    assert other is not first and len(other) == len(fresh) and np.array_equal(other.tri_index, fresh.tri_index)
+    mesh.vertices = mesh.vertices * np.array([1.0, 1.0, 2.0])  # stretched: other normals, other facets
+    again = segment(mesh, np.radians(10))
+    stretched = segment(trimesh.Trimesh(mesh.vertices, mesh.faces, process=False), np.radians(10))
+    assert again is not other and np.array_equal(again.tri_ptr, stretched.tri_ptr)
+    assert np.array_equal(again.tri_index, stretched.tri_index) and not np.array_equal(again.tri_ptr, other.tri_ptr)

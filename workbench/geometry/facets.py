@@ -87,6 +87,12 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     if not 0 < tau < np.pi / 2:
         raise WorkbenchError(f"segmentation threshold tau must be between 0 and 90 degrees, got {np.degrees(tau):.3g} degrees")
     merge = tau / 2 if merge_angle is None else float(merge_angle)
+    # the last segmentation of this mesh, kept in trimesh's cache (dropped when the mesh changes): planning again with
+    # other sampling, filters or gripper (a widget's slider) segments once
+    key = (method, float(tau), merge)
+    kept = mesh._cache["workbench_facets"]
+    if kept is not None and kept[0] == key:
+        return kept[1]
     normals = np.asarray(mesh.face_normals)
     areas = np.asarray(mesh.area_faces)
     n_tri = len(normals)
@@ -100,10 +106,14 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
                               triangle_centres(np.ascontiguousarray(mesh.vertices, dtype=np.float64), faces),
                               np.ascontiguousarray(areas, dtype=np.float64))
     edge_ptr, be = facet_boundaries(faces, tri_ptr, tri_index, len(mesh.vertices), order, starts, nbr)
-    return Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index,
-                  normals=wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300),
-                  centers=wc / area[:, None].clip(1e-300), areas=area, seeds=seeds, edge_ptr=edge_ptr,
-                  edges=mesh.vertices[be])
+    out = Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index,
+                 normals=wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300),
+                 centers=wc / area[:, None].clip(1e-300), areas=area, seeds=seeds, edge_ptr=edge_ptr,
+                 edges=mesh.vertices[be])
+    for a in (out.tri_ptr, out.tri_index, out.normals, out.centers, out.areas, out.seeds, out.edge_ptr, out.edges):
+        a.flags.writeable = False  # shared by every plan of the mesh
+    mesh._cache["workbench_facets"] = (key, out)
+    return out
 
 
 def distance_to_boundary(facets: Facets, facet_ids: np.ndarray, points: np.ndarray) -> np.ndarray:
