@@ -70,10 +70,15 @@ NEGATIVE = re.compile(r"^-\.?\d")
 
 class _Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs) -> None:
+        # no abbreviations: `plan`'s --start given to `gpplan` must be refused, not taken for its --start-held
+        kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = NEGATIVE
 
     def error(self, message: str) -> None:  # one line, status 2, like WorkbenchError
+        command = getattr(self, "command", None)
+        if command and message.startswith("unrecognized arguments"):
+            message += f" (`workbench {command} --help` lists its options)"
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
@@ -99,6 +104,7 @@ def build_parser(argv: list[str] | None = None, full: bool = False) -> argparse.
                                                    "(--y -0.3,0.3,3) or joined with = (--y=-0.3,0.3,3).")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     chosen = None if full else _selected(sys.argv[1:] if argv is None else argv)
+    parser.command = chosen
     for name, text in COMMANDS.items():
         if full or name == chosen:
             register = importlib.import_module(f"workbench.cli.{name}").register
