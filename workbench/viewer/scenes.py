@@ -315,11 +315,15 @@ def beside_hand(approach: np.ndarray) -> np.ndarray:
     return side + 0.6 * a  # from the side, a little ahead of the jaw
 
 
-def static_html(vis: meshcat.Visualizer, out: str | Path) -> Path:
-    """Write the scene (with any animation) as one HTML file that opens without a server."""
+def static_html(vis: meshcat.Visualizer, out: str | Path, title: str | None = None) -> Path:
+    """Write the scene (with any animation) as one HTML file that opens without a server; `title` names the page
+    (its browser tab) instead of meshcat's "MeshCat"."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(vis.static_html())
+    page = vis.static_html()
+    if title:
+        page = page.replace("<title>MeshCat</title>", f"<title>{html.escape(title)}</title>", 1)
+    out.write_text(page)
     return out
 
 

@@ -30,7 +30,15 @@ from workbench.viewer.scenes import (
     static_html,
 )
 from workbench.viewer.live import Switches
-from workbench.viewer.wan_harada import PlanView, caption_track, frame_plan, plan_frames, plan_overlay, show_plan
+from workbench.viewer.wan_harada import (
+    PlanView,
+    caption_track,
+    frame_plan,
+    plan_frames,
+    plan_overlay,
+    plan_title,
+    show_plan,
+)
 
 FEATURE_COLOR = 0xDD3333
 PART_AT_H = 0xE0A030
@@ -147,9 +155,10 @@ def plan_page(plan, robot, mesh: trimesh.Trimesh, table: tuple, out) -> Path:
     PlanView(vis, robot, mesh, table, kind="collision").play(plan, frames=frames)
     show_plan_task(vis, plan, mesh)
     frame_plan(vis, plan, robot)
-    path = static_html(vis, out)
+    title = plan_title(plan.object, robot)
+    path = static_html(vis, out, title)
     page = path.read_text()
-    path.write_text(page.replace("</body>", plan_overlay(caption_track(plan, frames)) + "</body>", 1))
+    path.write_text(page.replace("</body>", plan_overlay(caption_track(plan, frames), title=title) + "</body>", 1))
     return path
 
 

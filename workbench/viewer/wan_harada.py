@@ -285,23 +285,30 @@ def plan_scene(plan, planner, out: str | Path | None = None, vis: meshcat.Visual
     frame_plan(vis, plan, planner.robot)
     if out is None:
         return vis
-    path = static_html(vis, out)
+    title = plan_title(plan.object, planner.robot)
+    path = static_html(vis, out, title)
     page = path.read_text()
     path.write_text(page.replace("</body>", plan_overlay(caption_track(plan, frames, numbers=numbers),
-                                                         simulated=simulated is not None) + "</body>", 1))
+                                                         simulated=simulated is not None, title=title) + "</body>", 1))
     return path
 
 
-def plan_overlay(track: dict, simulated: bool = False) -> str:
-    """HTML for a static plan page: a colour key (top left; `simulated`: it names the part in physics), the caption
-    naming the step playing (under the key) and its footer (bottom), both read from `caption_track` at the meshcat
-    animation's clock."""
+def plan_title(part: str, robot) -> str:
+    """What a plan page shows: the part, the robot and its planning gripper."""
+    return f"{part} · {robot.name} · {robot.gripper.name}"
+
+
+def plan_overlay(track: dict, simulated: bool = False, title: str | None = None) -> str:
+    """HTML for a static plan page: the `title` (part, robot, gripper) over a colour key (top left; `simulated`: it
+    names the part in physics), the caption naming the step playing (under the key) and its footer (bottom), both
+    read from `caption_track` at the meshcat animation's clock."""
     keys = KEY[:1] + (((SIMULATED_COLOR, "the part in physics"),) if simulated else ()) + KEY[1:]
     legend = "".join(f"<span style='margin-right:12px;white-space:nowrap'><span style='display:inline-block;width:11px;"
                      f"height:11px;margin-right:4px;border:1px solid #555;background:#{c:06x}'></span>{t}</span>"
                      for c, t in keys)
     box = "position:fixed;left:0;background:rgba(255,255,255,.88);font:14px sans-serif;padding:6px 12px;z-index:10"
-    return (f"<div id='wb-legend' style='{box};top:0'>{legend}<br><b id='wb-caption' style='font-size:16px'>"
+    head = f"<b id='wb-title' style='font-size:15px'>{html.escape(title)}</b><br>" if title else ""
+    return (f"<div id='wb-legend' style='{box};top:0'>{head}{legend}<br><b id='wb-caption' style='font-size:16px'>"
             f"{html.escape(track['captions'][0])}</b></div>"
             f"<div id='wb-footer' style='{box};bottom:0;right:0;font-size:13px'>{html.escape(track['footers'][0])}</div>"
             f"<script>{CAPTION_SCRIPT.replace('TRACK', json.dumps(track))}</script>")

@@ -225,6 +225,9 @@ def test_plan_html_caption_follows_the_timed_animation(planner, demo_result, tmp
     (a transfer or transit the step it carries the part or the hand to)."""
     plan = demo_result.plan
     page = plan_scene(plan, planner, tmp_path / "plan.html").read_text()
+    # two pages are told apart by their part, robot and gripper: in the browser tab and over the colour key
+    title = f"{plan.object} · {planner.robot.name} · {planner.robot.gripper.name}"
+    assert f"<title>{title}</title>" in page and f"<b id='wb-title' style='font-size:15px'>{title}</b>" in page
     data = json.loads(re.search(r"var d = (\{.*?\}), live = ", page).group(1))
     duration = plan.segments[-1].t0 + plan.segments[-1].duration
     assert abs(len(data["steps"]) - (duration * data["fps"] + 1)) <= 1
