@@ -15,6 +15,7 @@ import ast
 import logging
 from pathlib import Path
 
+from mkdocs.plugins import event_priority
 from mkdocs.structure.files import File
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -46,7 +47,7 @@ def _modules(package: str) -> list[str]:
         return []
     out = []
     for p in sorted(base.glob("*.py")):
-        if p.name != "__init__.py":
+        if not p.name.startswith("_"):  # the package's own and its private (compiled kernel) modules are not API
             out.append(f"workbench.{package}.{p.stem}")
     return out
 
@@ -115,6 +116,7 @@ def _store_page() -> str:
     return "\n".join(lines)
 
 
+@event_priority(50)  # before mkdocs-jupyter's, which renders the notebooks it finds among the files
 def on_files(files, config):
     """Add the generated pages and the notebooks to the site."""
     def add(uri: str, content: str | bytes) -> None:
@@ -125,8 +127,9 @@ def on_files(files, config):
     for package, title in API.items():
         if _modules(package):
             add(f"api/{package}.md", _api_page(package, title))
-    for nb in sorted((ROOT / "notebooks").glob("*.ipynb")):
-        add(f"notebooks/{nb.name}", nb.read_bytes())
+    for nb in sorted((ROOT / "notebooks").glob("*.ipynb")):  # the files themselves: mkdocs-jupyter reads their path
+        files.append(File(f"notebooks/{nb.name}", src_dir=str(ROOT), dest_dir=config["site_dir"],
+                          use_directory_urls=config["use_directory_urls"]))
     return files
 
 
