@@ -11,7 +11,7 @@ DOCSDEPS := $(VENV)/.installed-docs
 # JupyterLab refuses to start as root without --allow-root; a user never needs it.
 LAB_ROOT := $(if $(filter 0,$(shell id -u)),--allow-root,)
 
-.PHONY: venv demo test docs lab bench clean
+.PHONY: venv dev demo test docs lab bench clean
 
 $(RUNTIME): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -28,6 +28,9 @@ $(DOCSDEPS): $(RUNTIME) pyproject.toml
 	touch $(DOCSDEPS)
 
 venv: $(RUNTIME)
+
+# the venv with the test tools (pytest, nbmake, nbstripout), without running the suite
+dev: $(TESTDEPS)
 
 demo: $(RUNTIME)
 	$(BIN)/workbench demo --out build/demo

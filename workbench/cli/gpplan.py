@@ -117,10 +117,12 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "held at either end, the insertion and the obstacles), print it and validate it again; with "
                         "--json, --trajectory and --plan-html, export it")
     p.add_argument("--robot", default=None, help="robot name in the store (default: the newest table's robot)")
-    p.add_argument("--initial", default=None, help="initial grasp CLASS,THETA (degrees)")
-    p.add_argument("--goal", default=None, help="goal class and theta range CLASS,MIN:MAX (degrees)")
-    p.add_argument("--from", dest="from_", default=None, help="start placement P,PHI (degrees), instead of --initial")
-    p.add_argument("--to", default=None, help="goal placement P,PHI (degrees), instead of --goal")
+    p.add_argument("--initial", default=None, metavar="CLASS,THETA", help="initial grasp CLASS,THETA (degrees)")
+    p.add_argument("--goal", default=None, metavar="CLASS,MIN:MAX",
+                   help="goal class and theta range CLASS,MIN:MAX (degrees); a goal pose on the table is --to")
+    p.add_argument("--from", dest="from_", default=None, metavar="P,PHI",
+                   help="start placement P,PHI (PHI: the turn about the vertical, degrees), instead of --initial")
+    p.add_argument("--to", default=None, metavar="P,PHI", help="goal placement P,PHI (degrees), instead of --goal")
     p.add_argument("--pickup", default=None,
                    help="the task's pick-up (Section 5.1, Fig. 1 (a)): the part resting in placement class P at X,Y (m) "
                         "turned by PHI (degrees) about the vertical, as P,X,Y,PHI; with --destination, the plan starts by "

@@ -34,7 +34,9 @@ def add_object_arguments(parser: argparse.ArgumentParser) -> None:
 def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
     """Grasp-planning parameters; angles in degrees, lengths in metres."""
     add_param(parser, GraspParams, "tau")
-    parser.add_argument("--segmentation", choices=["over", "conventional"], default=GraspParams().segmentation)
+    parser.add_argument("--segmentation", choices=["over", "conventional"], default=GraspParams().segmentation,
+                        help="over: a facet grown from every seed triangle, facets overlapping (Wan & Harada's "
+                             "over-segmentation); conventional: each triangle in one facet (default: %(default)s)")
     for name in ("density", "neighbour_radius", "dist_min", "dist_max", "parallel_angle", "com_max", "rotations", "seed"):
         add_param(parser, GraspParams, name)
     parser.add_argument("--contact-model", choices=["pads", "paper"], default=GraspParams().contact_model,
