@@ -68,3 +68,21 @@ def test_no_user_facing_text_cites_an_issue():
     for py in sorted((ROOT / "workbench").rglob("*.py")):  # docstrings and messages reach users (the API docs)
         found += [f"{py.relative_to(ROOT)}: {m.group(0)}" for m in CITATION.finditer(py.read_text())]
     assert not found, found[:20]
+
+
+def test_a_newcomers_slips_get_one_line_naming_what_to_type(capsys):
+    """No option abbreviations (plan's --start given to gpplan is refused, not read as --start-held), an unknown
+    option points to the command's help, a command without its subcommand names them, and --version answers."""
+    from workbench.cli.main import main
+
+    cases = [(["gpplan", "--db", "x.duckdb", "--start", "1,0.45,0.1,0"],
+              "unrecognized arguments: --start 1,0.45,0.1,0 (`workbench gpplan --help` lists its options)"),
+             (["grasps", "part.stl", "--db", "x.duckdb", "--unit", "mm"], "unrecognized arguments: --unit mm"),
+             (["bench"], "name one of: grasps, placements, ik,"),
+             (["catalog"], "name one of: build, report")]
+    for argv, words in cases:
+        assert main(argv) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and words in err[0], err
+    assert main(["--version"]) == 0
+    assert re.fullmatch(r"workbench \d+\.\d+\.\d+", capsys.readouterr().out.strip())

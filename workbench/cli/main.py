@@ -79,7 +79,20 @@ class _Parser(argparse.ArgumentParser):
         command = getattr(self, "command", None)
         if command and message.startswith("unrecognized arguments"):
             message += f" (`workbench {command} --help` lists its options)"
+        missing = re.fullmatch(r"the following arguments are required: (\w+)", message)
+        subs = [a for a in self._actions if isinstance(a, argparse._SubParsersAction) and a.dest == (missing and missing[1])]
+        if subs:  # a command without its subcommand: name them
+            message = f"name one of: {', '.join(subs[0].choices)} (`{self.prog} --help` says what each does)"
         self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("regrasp-workbench")
+    except PackageNotFoundError:  # run from a source tree that is not installed
+        return "(not installed)"
 
 
 def _budget(text: str) -> int:
@@ -102,6 +115,7 @@ def build_parser(argv: list[str] | None = None, full: bool = False) -> argparse.
     imported); the others are listed with their help. `full` registers every command (the CLI reference)."""
     parser = _Parser(prog="workbench", description="Regrasp planning workbench. Negative values parse as they are "
                                                    "(--y -0.3,0.3,3) or joined with = (--y=-0.3,0.3,3).")
+    parser.add_argument("--version", action="version", version=f"%(prog)s {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     chosen = None if full else _selected(sys.argv[1:] if argv is None else argv)
     parser.command = chosen
