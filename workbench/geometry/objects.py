@@ -161,7 +161,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     # size first, on the referenced vertices: merging vertices of a sub-micron part would make every face degenerate
     extent = float(np.ptp(vertices[np.bincount(faces.ravel(), minlength=len(vertices)) > 0] * scale, axis=0).max())
     if extent > MAX_EXTENT or (MIN_EXTENT > extent > 0):
-        raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
+        raise MeshError(f"{label} is {extent:.4g} m across {_read_as(scale)}, implausible for a gripper "
                         f"(allowed: {PART_SIZE.describe()}); {_scale_hint(extent, scale)}")
     # built from copies (the scaled vertices, the faces) that the repairs may change in place: no second copy
     mesh = trimesh.Trimesh(vertices * scale, faces.copy(), process=False, validate=False)
@@ -171,7 +171,7 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     extent = float(mesh.extents.max())
     if extent > MAX_EXTENT or extent < MIN_EXTENT:
         hint = _scale_hint(extent, scale)
-        raise MeshError(f"{label} is {extent:.4g} m across after scale {scale:g}, implausible for a gripper "
+        raise MeshError(f"{label} is {extent:.4g} m across {_read_as(scale)}, implausible for a gripper "
                         f"(allowed: {PART_SIZE.describe()}); {hint}")
     if extent > TYPICAL[1] and scale == 1.0:
         warnings.warn(f"{label} is {extent:.3g} m across read in metres, larger than a gripper-sized part; "
@@ -196,6 +196,11 @@ def mesh_digest(vertices: np.ndarray, faces: np.ndarray) -> str:
     """The digest of a scaled, repaired mesh (float64 vertices, int64 faces): what stored results are keyed by."""
     return hashlib.sha256(np.ascontiguousarray(vertices, dtype=np.float64).tobytes()
                           + np.ascontiguousarray(faces, dtype=np.int64).tobytes()).hexdigest()[:16]
+
+
+def _read_as(scale: float) -> str:
+    """How the file was read, for the size messages."""
+    return "read in metres (no --units or --scale)" if scale == 1.0 else f"after scale {scale:g}"
 
 
 def _scale_hint(extent: float, scale: float = 1.0) -> str:
