@@ -700,6 +700,9 @@ def load_gripper(choice: str = "franka", hand_link: str | None = None, finger_jo
         if len(finger_joints) != 2:
             raise GripperError(f"--gripper own needs --gripper-fingers LEFT,RIGHT: the two finger joints of the hand in "
                                f"{robot_urdf}")
+        if robot_text is None and not Path(robot_urdf).is_file():
+            raise GripperError(f"robot URDF {robot_urdf} does not exist (--gripper own takes the hand from it); give the "
+                               f"path of a .urdf file")
         return gripper_from_urdf(robot_urdf, hand_link or tip, tcp_frame, tuple(finger_joints), package_dirs,
                                  name=f"{Path(robot_urdf).stem}-hand", text=robot_text)
     path = BUNDLED.get(choice) or Path(choice)
