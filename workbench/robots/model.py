@@ -426,8 +426,9 @@ def robot_from_urdf(urdf: str | Path, tip_frame: str, base: np.ndarray | None = 
                       f"[-360, 360] degrees", RobotWarning, stacklevel=2)
     if past and not drop_geometry:
         drop_geometry = past
-        warnings.warn(f"robot URDF {path}: the planning gripper replaces the links past {tip_frame} "
-                      f"({', '.join(past[:4])}{', ...' if len(past) > 4 else ''}); their geometry is not checked",
+        hand = gripper.name if gripper is not None else "franka_hand"
+        warnings.warn(f"robot URDF {path}: the planning gripper ({hand}) is checked for collisions in place of the "
+                      f"links past {tip_frame} ({', '.join(past[:4])}{', ...' if len(past) > 4 else ''})",
                       RobotWarning, stacklevel=2)
     if mount is None and gripper is not None and gripper.digest != franka_hand().digest:
         mount = gripper.tcp_in_hand  # another gripper's hand frame bolted onto the tip
