@@ -3,6 +3,8 @@ grips over a table grid (Wan & Harada, Section IV)."""
 
 from __future__ import annotations
 
+import re
+
 import argparse
 import time
 
@@ -107,7 +109,8 @@ def roadmap_grasps_line(label: str, roadmap: int, usable: int) -> str:
     """One line naming how many free-air grasps the roadmap carries, and the cap when there is one."""
     if label == "all grasps":
         return f"roadmap grasps: all {roadmap} usable grasps"
-    return f"roadmap grasps: {roadmap} of {usable} usable, {label}"
+    extra = ", plus a few so that every placement keeps 4" if roadmap > int(re.sub(r"\D", "", label) or roadmap) else ""
+    return f"roadmap grasps: {roadmap} of {usable} usable, {label}{extra}"
 
 
 def print_placements(name: str, result, seconds: float) -> None:
