@@ -3,9 +3,8 @@ grips over a table grid (Wan & Harada, Section IV)."""
 
 from __future__ import annotations
 
-import re
-
 import argparse
+import re
 import time
 
 import numpy as np

@@ -55,7 +55,8 @@ def put_robot(store: Store, robot: Robot, allowed_pairs: str | Callable[[], str]
     gid = put_gripper(store, robot.gripper)
     store.run("INSERT INTO robot (idrobot, name, urdf, tcp_frame, tip_frame, mount, base, joint_names, locked, "
               "drop_geometry, digest, package_dirs, idgripper, allowed_pairs) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
-              [rid, name, with_tcp_link(robot.spec.urdf, robot.spec.tip_frame, robot.spec.tcp_frame, robot.mount), robot.spec.tcp_frame, robot.spec.tip_frame, robot.mount.ravel().tolist(),
+              [rid, name, with_tcp_link(robot.spec.urdf, robot.spec.tip_frame, robot.spec.tcp_frame, robot.mount),
+               robot.spec.tcp_frame, robot.spec.tip_frame, robot.mount.ravel().tolist(),
                robot.base.ravel().tolist(), list(robot.joint_names),
                json.dumps({k: float(v) for k, v in robot.spec.locked}, sort_keys=True), list(robot.spec.drop_geometry),
                digest, list(robot.package_dirs),
