@@ -80,7 +80,8 @@ class _Parser(argparse.ArgumentParser):
         if command and message.startswith("unrecognized arguments"):
             message += f" (`workbench {command} --help` lists its options)"
         missing = re.fullmatch(r"the following arguments are required: (\w+)", message)
-        subs = [a for a in self._actions if isinstance(a, argparse._SubParsersAction) and a.dest == (missing and missing[1])]
+        subs = [a for a in self._actions
+                if isinstance(a, argparse._SubParsersAction) and a.dest == (missing and missing[1])]
         if subs:  # a command without its subcommand: name them
             message = f"name one of: {', '.join(subs[0].choices)} (`{self.prog} --help` says what each does)"
         self.exit(2, f"{self.prog}: error: {message}\n")

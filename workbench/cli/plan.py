@@ -52,7 +52,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                         "RRT-Connect), timed under the URDF's velocity limits and --acc.")
     parser.add_argument("--db", required=True, help="DuckDB store file (built with `workbench build`)")
     parser.add_argument("--object", required=True, help="object name in the store")
-    parser.add_argument("--robot", required=True, help="the robot's name in the store: a built-in (panda, ur5, talos, puma560) or a URDF robot's, as `build` printed it")
+    parser.add_argument("--robot", required=True, help="the robot's name in the store: a built-in (panda, ur5, talos, "
+                                                        "puma560) or a URDF robot's, as `build` printed it")
     parser.add_argument("--start", required=True, metavar="P,X,Y,YAW", help="start pose, yaw in degrees, e.g. 1,0.45,-0.1,0")
     parser.add_argument("--goal", required=True, metavar="P,X,Y,YAW", help="goal pose, yaw in degrees, e.g. 3,0.55,0.1,90")
     parser.add_argument("--alternatives", type=parse_number(ALTERNATIVES, "--alternatives", 2), default=2, metavar="N",

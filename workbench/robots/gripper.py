@@ -701,8 +701,8 @@ def load_gripper(choice: str = "franka", hand_link: str | None = None, finger_jo
             raise GripperError(f"--gripper own needs --gripper-fingers LEFT,RIGHT: the two finger joints of the hand in "
                                f"{robot_urdf}")
         if robot_text is None and not Path(robot_urdf).is_file():
-            raise GripperError(f"robot URDF {robot_urdf} does not exist (--gripper own takes the hand from it); give the "
-                               f"path of a .urdf file")
+            raise GripperError(f"robot URDF {robot_urdf} does not exist (--gripper own takes the hand from it); give "
+                               f"the path of a .urdf file")
         return gripper_from_urdf(robot_urdf, hand_link or tip, tcp_frame, tuple(finger_joints), package_dirs,
                                  name=f"{Path(robot_urdf).stem}-hand", text=robot_text)
     path = BUNDLED.get(choice) or Path(choice)

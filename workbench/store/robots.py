@@ -79,7 +79,8 @@ def with_tcp_link(urdf: str, tip: str, tcp: str, mount: np.ndarray) -> str:
         return urdf
     mount = np.asarray(mount, dtype=np.float64).reshape(4, 4)
     xyz = " ".join(repr(float(v)) for v in mount[:3, 3])
-    rpy = " ".join(repr(float(v)) for v in Rotation.from_matrix(mount[:3, :3]).as_euler("xyz"))  # URDF's roll, pitch, yaw
+    # URDF's roll, pitch, yaw: fixed axes x, y, z
+    rpy = " ".join(repr(float(v)) for v in Rotation.from_matrix(mount[:3, :3]).as_euler("xyz"))
     block = (f"  {_TCP_BEGIN}\n  <link name=\"{tcp}\"/>\n  <joint name=\"{tcp}_fixed\" type=\"fixed\">\n"
              f"    <parent link=\"{tip}\"/>\n    <child link=\"{tcp}\"/>\n    <origin xyz=\"{xyz}\" rpy=\"{rpy}\"/>\n"
              f"  </joint>\n  {_TCP_END}\n")

@@ -309,8 +309,8 @@ def realise(query, table: GraspPlacementTable, classes: list[GraspClass], realis
             log.append(Removal("ik", _step_of(seq.kind, len(pairs), k), ((c, t), (j, f)),
                                "no IK branch whose grasp, approach and lifts are all free of collisions",
                                before - int(work.q.sum())))
-    raise NoSequence(f"no executable regrasp sequence after {tries} attempts: the table's conjunctions fail their approach, "
-                        f"retract or arm collision checks; try another table point or larger handx/worldz")
+    raise NoSequence(f"no executable regrasp sequence after {tries} attempts: the table's conjunctions fail their "
+                     f"approach, retract or arm collision checks; try another table point or larger handx/worldz")
 
 
 def _task_end(seq: Sequence, k: int, n: int) -> str | None:
