@@ -435,9 +435,12 @@ def open_border(mesh: trimesh.Trimesh) -> tuple[int, float]:
         return 0, 0.0
     border = e[single]
     labels = trimesh.graph.connected_component_labels(border, node_count=len(mesh.vertices))
-    v = np.asarray(mesh.vertices)
-    run = labels[border[:, 0]]
-    span = max(float(np.ptp(v[np.unique(border[run == r])], axis=0).max()) for r in np.unique(run))
+    # each run's box, from its vertices grouped by run (a scan may have thousands of holes)
+    verts = np.unique(border)
+    order = np.argsort(labels[verts], kind="stable")
+    run, pts = labels[verts][order], np.asarray(mesh.vertices)[verts[order]]
+    starts = np.flatnonzero(np.r_[True, run[1:] != run[:-1]])
+    span = float((np.maximum.reduceat(pts, starts, axis=0) - np.minimum.reduceat(pts, starts, axis=0)).max())
     return int(len(border)), span
 
 
