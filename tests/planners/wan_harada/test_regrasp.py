@@ -328,3 +328,26 @@ def test_command_line_yaw_is_in_degrees_and_bounded():
     assert np.isclose(parse_pose("1,0.5,0.1,1.5708").yaw, 1.5708)  # the library takes radians
     with pytest.raises(PlanningError, match=r"outside \[-360, 360\]"):
         parse_pose("3,0.55,-0.1,400", "--goal", degrees=True)
+
+
+def test_a_regrasp_graph_above_the_memory_budget_is_refused_before_loading_or_solving(small_store, monkeypatch, bundled):
+    """The graph's memory grows with the tabletop grips (about 6 kB each once loaded): above the budget, loading the
+    planner and solving the IK it needs are refused in one line naming the grip count and what to lower, and the
+    store is left as it was."""
+    from workbench.params import BUDGET_ENV, MemoryBudgetError
+    from workbench.planners.wan_harada.stages import load_planner, run_ik
+    from workbench.robots.model import get_robot
+    from workbench.store import Store
+
+    with Store(small_store, read_only=True) as store:
+        grips = store.one("SELECT count(*) FROM tabletopgrips")[0]
+        ik_rows = store.one("SELECT count(*) FROM ik")[0]
+    monkeypatch.setenv(BUDGET_ENV, str(6000 * grips - 1))
+    with pytest.raises(MemoryBudgetError, match=rf"the regrasp graph of {grips:,} tabletop grips .*--max-grasps"):
+        load_planner(small_store, "tube", "panda")
+    with Store(small_store) as store, pytest.raises(MemoryBudgetError, match="regrasp graph"):
+        run_ik(store, "tube", get_robot("ur5"), workers=1, progress=False)
+    with Store(small_store, read_only=True) as store:
+        assert store.one("SELECT count(*) FROM ik")[0] == ik_rows
+    monkeypatch.setenv(BUDGET_ENV, str(6000 * grips + 1))
+    assert load_planner(small_store, "tube", "panda").roadmap.n_grips == grips

@@ -30,7 +30,7 @@ from workbench.grasping.placements import (
 from workbench.planners.wan_harada.planner import Planner
 from workbench.planners.wan_harada.plans import Plan, PlanObstacle, PlanStep, plan_rows
 from workbench.planners.wan_harada.query import PoseQuery
-from workbench.planners.wan_harada.roadmap import build_roadmap, grid_index
+from workbench.planners.wan_harada.roadmap import build_roadmap, check_graph_memory, grid_index
 from workbench.planners.wan_harada.tabletop import (
     TabletopParams,
     plan_tabletop,
@@ -228,6 +228,7 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
                                 f"run `workbench ik --db {store.path} --object {object_name} --robot {robot_name}` first")
         idscene, idikret = runs[0][0], runs[0][1]
         rows_done, grips, complete = robot_sql.ik_progress(store, tt, rrow["idrobot"], idscene, idikret)
+        check_graph_memory(grips)
         if not complete:
             what = (f"the IK stage of {object_name} for robot {rrow['name']} in {store.path} is incomplete ({rows_done:,} of "
                     f"{grips:,} tabletop grips); finish it with `workbench ik --db {store.path} --object {object_name} "
@@ -427,6 +428,7 @@ def run_ik(store, obj_name: str, robot: Robot, scene: Scene | None = None, handx
     grips = load_tabletop_grips(store, oid, idtabletop)
     pid = int(np.asarray(grips["idparamset"])) if "idparamset" in grips else int(idtabletop if idtabletop is not None else -1)
     ids = np.asarray(grips["idtabletopgrips"], dtype=np.int64)
+    check_graph_memory(len(ids))  # before the IK, whose rows only the graph uses
     rid, sid, kid = robot_sql.prepare_run(store, robot, scene_params(robot, scene, opts), handx, worldz, worlda,
                                           lambda: allowed_pairs(robot).to_json())
     done = robot_sql.stored_grips(store, rid, sid, kid)
