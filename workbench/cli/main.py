@@ -10,18 +10,17 @@ import os
 import signal
 import sys
 
-
-def _stopped_while_loading(signum, frame) -> None:  # pragma: no cover - exercised in a subprocess by the tests
-    name = next((a for a in sys.argv[1:] if not a.startswith("-")), "")
-    os.write(2, f"workbench {name}: interrupted; the store keeps only completed stages\n".replace("  ", " ").encode())
-    os._exit(130)
-
+import workbench  # noqa: E402
+from workbench import _stopped_while_loading  # noqa: E402
 
 # Loading the command line is the slow part of a start (under load a second or more). A Ctrl-C in it has started
 # nothing, so it ends the process at once: raised as KeyboardInterrupt inside an extension's import, numpy's among
-# them, it would surface as an ImportError with a traceback instead.
+# them, it would surface as an ImportError with a traceback instead. The package installs the handler first when it
+# is run as the command line; imported by a test or a script, this module does.
 _SIGINT = signal.getsignal(signal.SIGINT)
-if _SIGINT is signal.default_int_handler:
+if _SIGINT is _stopped_while_loading:
+    _SIGINT = workbench.SIGINT_BEFORE_LOADING
+elif _SIGINT is signal.default_int_handler:
     try:
         signal.signal(signal.SIGINT, _stopped_while_loading)
     except ValueError:  # imported outside the main thread: Python's default stays
