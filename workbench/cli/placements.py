@@ -4,7 +4,6 @@ grips over a table grid (Wan & Harada, Section IV)."""
 from __future__ import annotations
 
 import argparse
-import re
 import time
 
 import numpy as np
@@ -108,8 +107,7 @@ def roadmap_grasps_line(label: str, roadmap: int, usable: int) -> str:
     """One line naming how many free-air grasps the roadmap carries, and the cap when there is one."""
     if label == "all grasps":
         return f"roadmap grasps: all {roadmap} usable grasps"
-    extra = ", plus a few so that every placement keeps 4" if roadmap > int(re.sub(r"\D", "", label) or roadmap) else ""
-    return f"roadmap grasps: {roadmap} of {usable} usable, {label}{extra}"
+    return f"roadmap grasps: {roadmap} of {usable} usable, {label}"
 
 
 def print_placements(name: str, result, seconds: float) -> None:

@@ -163,11 +163,12 @@ def ensure_placements(db: str | Path | Store, idobject: int, obj: ObjectModel, g
             store.mark_used(pl_pid)
             store.mark_used(tt_pid)
         n_tp, n_tg = tabletop_counts(store, tt_pid)
+        n_roadmap = tabletop_grasp_count(store, tt_pid)
         return PlacementsResult(idplacements=pl_pid, idtabletop=tt_pid, reused=reused, placements=stored,
                                 n_free_grips=np.bincount(fp_index, minlength=len(stored["stability"])),
                                 n_tabletop_placements=int(n_tp), n_tabletop_grips=int(n_tg), timings=timings,
                                 n_usable_grasps=len(np.unique(ftg["idfreeairgrip"])),
-                                n_roadmap_grasps=tabletop_grasp_count(store, tt_pid), grasps_label=tparams.grasps_label())
+                                n_roadmap_grasps=n_roadmap, grasps_label=tparams.grasps_label(n_roadmap))
     finally:
         if not isinstance(db, Store):
             store.close()

@@ -48,9 +48,13 @@ class TabletopParams(Params):
     def angle_values(self) -> np.ndarray:
         return 2 * np.pi * np.arange(self.angles) / self.angles
 
-    def grasps_label(self) -> str:
-        """How many free-air grasps enter the roadmap, for every printed output."""
-        return "all grasps" if self.max_grasps is None else f"grasps capped at {self.max_grasps} (--max-grasps)"
+    def grasps_label(self, chosen: int | None = None) -> str:
+        """How many free-air grasps enter the roadmap, for every printed output; `chosen`, the grasps
+        `select_grasps` took, when known (above the cap: those that keep every placement some)."""
+        if self.max_grasps is None:
+            return "all grasps"
+        extra = ", plus a few so that every placement keeps 4" if chosen is not None and chosen > self.max_grasps else ""
+        return f"grasps capped at {self.max_grasps} (--max-grasps){extra}"
 
 
 def paper_grid() -> TabletopParams:
