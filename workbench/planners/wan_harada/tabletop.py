@@ -53,7 +53,8 @@ class TabletopParams(Params):
         `select_grasps` took, when known (above the cap: those that keep every placement some)."""
         if self.max_grasps is None:
             return "all grasps"
-        extra = ", plus a few so that every placement keeps 4" if chosen is not None and chosen > self.max_grasps else ""
+        above = chosen is not None and chosen > self.max_grasps
+        extra = ", plus a few so that every placement keeps 4" if above else ""
         return f"grasps capped at {self.max_grasps} (--max-grasps){extra}"
 
 
