@@ -97,3 +97,46 @@ def test_memory_budget(monkeypatch):
         check_memory(2**21, "work", "lower it")
     with pytest.raises(ParameterError):
         parse_size("lots")
+
+
+def test_single_blas_holds_the_blas_pool_to_one_thread_and_gives_it_back():
+    """Inside a stage that `single_blas` wraps (grasp planning, placements, loading a part), numpy's BLAS runs one
+    thread, whose pool cannot spin on the core the stage's own second thread needs; the pool is given back after,
+    also when the stage raises."""
+    import trimesh
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    import workbench.grasping.grasps as grasps
+    from workbench.geometry.objects import from_trimesh
+    from workbench.params import single_blas
+    from workbench.robots.gripper import franka_hand
+
+    def blas_threads() -> list[int]:
+        return [p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"]
+
+    assert blas_threads(), "numpy has a BLAS"
+    with threadpool_limits(2, user_api="blas"):
+        seen = []
+        original = grasps.segment
+
+        def probe(*args, **kwargs):
+            seen.append(blas_threads())
+            return original(*args, **kwargs)
+
+        grasps.segment = probe
+        try:
+            grasps.plan_grasps(from_trimesh(trimesh.creation.box((0.04, 0.03, 0.02)), "box"), franka_hand(),
+                               GraspParams(rotations=2))
+        finally:
+            grasps.segment = original
+        assert seen and all(n == [1] * len(n) for n in seen), seen
+        assert blas_threads() == [2] * len(blas_threads())
+
+        @single_blas
+        def fails():
+            assert blas_threads() == [1] * len(blas_threads())
+            raise ValueError("inside")
+
+        with pytest.raises(ValueError, match="inside"):
+            fails()
+        assert blas_threads() == [2] * len(blas_threads())

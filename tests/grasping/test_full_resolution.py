@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import coal
 import numpy as np
+import pytest
 import trimesh
 
 from workbench.geometry.objects import from_trimesh, load_object
@@ -54,13 +55,17 @@ def test_full_resolution_grasps_touch_and_clear_the_full_mesh(hand):
             assert not coal.collide(box, target, creq, coal.CollisionResult())
 
 
-def test_hand_volumes_meet_the_part_exactly_where_coal_says(hand):
+@pytest.mark.parametrize("subdivisions", [0, 2])
+def test_hand_volumes_meet_the_part_exactly_where_coal_says(hand, subdivisions):
     """The compiled hand check (`hand_hits`: convex volumes against the pad model's triangle hierarchy) agrees with
     coal's boolean collision, pose by pose, for the hand's own swept body and a finger box placed at random about
-    the bundled wheel, half of them touching it."""
+    the bundled wheel, half of them touching it; also on the wheel subdivided 16-fold (a deeper hierarchy, whose
+    nodes lie inside most of the body's face planes)."""
     from workbench.grasping.grasps import box_corners, hand_hits, swept_body
 
     mesh = load_object(bundled_objects()["wheel"]).mesh
+    for _ in range(subdivisions):
+        mesh = mesh.subdivide()
     target = _coal_mesh(mesh)
     rng = np.random.default_rng(3)
     q = rng.normal(size=(120, 4))

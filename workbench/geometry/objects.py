@@ -13,7 +13,7 @@ import trimesh
 
 from workbench.errors import MeshError
 from workbench.geometry.repair import HOLE_EDGES, HOLE_SIZE, open_border, repair, volume_centre
-from workbench.params import HAND_SIZED, PART_SIZE, SCALE
+from workbench.params import HAND_SIZED, PART_SIZE, SCALE, single_blas
 
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "inch": 0.0254}
 NAMES = {"m": "metres", "cm": "centimetres", "mm": "millimetres", "in": "inches"}
@@ -141,6 +141,7 @@ def from_trimesh(mesh: trimesh.Trimesh, name: str, scale: float = 1.0) -> Object
     return from_arrays(mesh.vertices, mesh.faces, scale=scale, name=name, source="<memory>")
 
 
+@single_blas
 def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str, source: str,
                 pieces: np.ndarray | None = None) -> ObjectModel:
     """Validate vertex and face arrays, scale to metres, repair what is safe to repair (geometry/repair.py), compute

@@ -29,8 +29,11 @@ def _piece(data: bytes, shape: tuple[int, ...]) -> tuple[np.ndarray, np.ndarray,
     v = np.asarray(hull.vertices, dtype=np.float64)
     n = np.asarray(hull.face_normals, dtype=np.float64)
     d = np.einsum("ij,ij->i", n, v[hull.faces[:, 0]])
-    _, first = np.unique(np.round(np.column_stack([n, d]), 12), axis=0, return_index=True)
-    first.sort()
+    _, first, plane = np.unique(np.round(np.column_stack([n, d]), 12), axis=0, return_index=True,
+                                return_inverse=True)
+    # the largest faces first: a hand's flat sides set most of the part apart, so the search stops at them early
+    area = np.bincount(plane.reshape(-1), weights=hull.area_faces, minlength=len(first))
+    first = first[np.lexsort((first, -np.round(area, 15)))]
     e = v[hull.edges_unique[:, 1]] - v[hull.edges_unique[:, 0]]
     e /= np.linalg.norm(e, axis=1, keepdims=True)
     sign = np.sign(e[np.arange(len(e)), np.argmax(np.abs(e), axis=1)])
@@ -51,21 +54,28 @@ def pack(pieces: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]) ->
 
 
 @njit(cache=True)
-def _separated(tri, q, wv, v0, v1, wn, wd, f0, f1, we, e0, e1, eps):
-    """Is triangle (slot) q separated from the placed convex piece: by one of its face planes, by the triangle's
-    plane, or by an axis across a triangle edge and a piece edge (the separating axis theorem)."""
+def _by_faces(tri, q, wn, wd, faces, nf, eps):
+    """Triangle (slot) q against the placed piece's face planes `faces[:nf]` (it lies inside the others'): 1 when
+    one separates them, 0 when a corner of it lies in the piece (they meet), -1 when the faces do not decide."""
     in0, in1, in2 = True, True, True  # which of the triangle's corners lie in the piece
-    for f in range(f0, f1):
+    for i in range(nf):
+        f = faces[i]
         p0 = tri[q, 0, 0] * wn[f, 0] + tri[q, 0, 1] * wn[f, 1] + tri[q, 0, 2] * wn[f, 2]
         p1 = tri[q, 1, 0] * wn[f, 0] + tri[q, 1, 1] * wn[f, 1] + tri[q, 1, 2] * wn[f, 2]
         p2 = tri[q, 2, 0] * wn[f, 0] + tri[q, 2, 1] * wn[f, 1] + tri[q, 2, 2] * wn[f, 2]
         if min(p0, p1, p2) > wd[f] + eps:
-            return True
+            return 1
         in0 = in0 and p0 <= wd[f] + eps
         in1 = in1 and p1 <= wd[f] + eps
         in2 = in2 and p2 <= wd[f] + eps
-    if in0 or in1 or in2:  # a corner inside: they meet, no other axis can separate them
-        return False
+    return 0 if in0 or in1 or in2 else -1
+
+
+@njit(cache=True)
+def _by_other_axes(tri, q, wv, v0, v1, we, e0, e1, eps):
+    """Is triangle (slot) q, which no face plane of the placed piece separates and none of whose corners lies in
+    it, separated from it by the triangle's plane, or by an axis across a triangle edge and a piece edge (the
+    separating axis theorem)?"""
     ux, uy, uz = tri[q, 1, 0] - tri[q, 0, 0], tri[q, 1, 1] - tri[q, 0, 1], tri[q, 1, 2] - tri[q, 0, 2]
     vx, vy, vz = tri[q, 2, 0] - tri[q, 0, 0], tri[q, 2, 1] - tri[q, 0, 1], tri[q, 2, 2] - tri[q, 0, 2]
     mx, my, mz = uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx
@@ -107,10 +117,29 @@ def _separated(tri, q, wv, v0, v1, wn, wd, f0, f1, we, e0, e1, eps):
 
 
 @njit(cache=True)
+def _outside_box(tri, q, R, cw, h, eps):
+    """Is triangle (slot) q wholly outside the box (centre cw, axes the columns of R, half extents h)?"""
+    for a in range(3):
+        lo, hi = np.inf, -np.inf
+        for v in range(3):
+            p = ((tri[q, v, 0] - cw[0]) * R[0, a] + (tri[q, v, 1] - cw[1]) * R[1, a]
+                 + (tri[q, v, 2] - cw[2]) * R[2, a])
+            lo, hi = min(lo, p), max(hi, p)
+        if lo > h[a] + eps or hi < -h[a] - eps:
+            return True
+    return False
+
+
+@njit(cache=True)
 def hull_hits(shape, slots, leaf, tri, verts, normals, offsets, edges, vptr, fptr, eptr, poses, eps):
     """(N,) whether any convex piece p, placed at poses[n, p] (N, P, 4, 4, in the part's frame), meets a triangle of
     the hierarchy (`_padkernel.triangle_bvh`: node shapes, slots, leaf size, triangles by slot), within `eps`. A piece
-    is solid: a triangle inside it meets it."""
+    is solid: a triangle inside it meets it.
+
+    Each placed piece is first bounded by its box in its own frame: a node or triangle outside that box is apart
+    after three axes. The piece's face planes are placed only once a node meets the box, its vertices and edges once
+    a triangle needs them (a swept hand has hundreds of faces and edges; most poses meet few nodes, and most
+    triangles are decided by the faces)."""
     N, P = poses.shape[0], poses.shape[1]
     M = shape.shape[0] // 2
     out = np.zeros(N, dtype=np.bool_)
@@ -121,7 +150,26 @@ def hull_hits(shape, slots, leaf, tri, verts, normals, offsets, edges, vptr, fpt
     wd = np.empty(normals.shape[0])
     we = np.empty((edges.shape[0], 3))
     stack = np.empty(_STACK, dtype=np.int64)
-    lo, hi = np.empty(3), np.empty(3)
+    # per stack entry, the faces whose planes its node's box straddles: a box wholly inside a face's plane holds its
+    # children's, so below it that face separates nothing and is not tested again
+    width = 1
+    for p in range(P):
+        width = max(width, fptr[p + 1] - fptr[p])
+    act = np.empty((_STACK, width), dtype=np.int64)
+    nact = np.empty(_STACK, dtype=np.int64)
+    diag = 0.0
+    for a in range(3):
+        diag += (shape[1, 3 + a] - shape[1, a]) ** 2
+    slack = 1e-9 * (1.0 + np.sqrt(diag))  # a face is dropped only with room to spare against rounding
+    # each piece's box in its own frame: centre and half extents
+    bc, bh = np.empty((P, 3)), np.empty((P, 3))
+    for p in range(P):
+        for a in range(3):
+            lo_a, hi_a = np.inf, -np.inf
+            for i in range(vptr[p], vptr[p + 1]):
+                lo_a, hi_a = min(lo_a, verts[i, a]), max(hi_a, verts[i, a])
+            bc[p, a], bh[p, a] = 0.5 * (lo_a + hi_a), 0.5 * (hi_a - lo_a)
+    cw, ext = np.empty(3), np.empty(3)
     for n in range(N):
         for p in range(P):
             R = poses[n, p, :3, :3]
@@ -129,22 +177,16 @@ def hull_hits(shape, slots, leaf, tri, verts, normals, offsets, edges, vptr, fpt
             v0, v1 = vptr[p], vptr[p + 1]
             f0, f1 = fptr[p], fptr[p + 1]
             e0, e1 = eptr[p], eptr[p + 1]
-            lo[:] = np.inf
-            hi[:] = -np.inf
-            for i in range(v0, v1):
-                for a in range(3):
-                    wv[i, a] = R[a, 0] * verts[i, 0] + R[a, 1] * verts[i, 1] + R[a, 2] * verts[i, 2] + t[a]
-                    lo[a] = min(lo[a], wv[i, a])
-                    hi[a] = max(hi[a], wv[i, a])
-            for f in range(f0, f1):
-                for a in range(3):
-                    wn[f, a] = R[a, 0] * normals[f, 0] + R[a, 1] * normals[f, 1] + R[a, 2] * normals[f, 2]
-                wd[f] = offsets[f] + wn[f, 0] * t[0] + wn[f, 1] * t[1] + wn[f, 2] * t[2]
-            for g in range(e0, e1):
-                for a in range(3):
-                    we[g, a] = R[a, 0] * edges[g, 0] + R[a, 1] * edges[g, 1] + R[a, 2] * edges[g, 2]
+            h = bh[p]
+            for a in range(3):
+                cw[a] = R[a, 0] * bc[p, 0] + R[a, 1] * bc[p, 1] + R[a, 2] * bc[p, 2] + t[a]
+                ext[a] = abs(R[a, 0]) * h[0] + abs(R[a, 1]) * h[1] + abs(R[a, 2]) * h[2]  # the box's world extents
+            placed = edged = False
             hit = False
             stack[0] = 1
+            nact[0] = f1 - f0
+            for i in range(f1 - f0):
+                act[0, i] = f0 + i
             top = 1
             while top > 0 and not hit:
                 top -= 1
@@ -152,29 +194,74 @@ def hull_hits(shape, slots, leaf, tri, verts, normals, offsets, edges, vptr, fpt
                 if shape[node, 0] > shape[node, 3]:
                     continue
                 apart = False
-                for a in range(3):
-                    if shape[node, a] > hi[a] + eps or shape[node, 3 + a] < lo[a] - eps:
+                for a in range(3):  # the world axes
+                    mid = 0.5 * (shape[node, a] + shape[node, 3 + a]) - cw[a]
+                    if abs(mid) > ext[a] + 0.5 * (shape[node, 3 + a] - shape[node, a]) + eps:
                         apart = True
-                if not apart:  # the node's box wholly outside one face plane
-                    for f in range(f0, f1):
-                        c, r = 0.0, 0.0
-                        for a in range(3):
-                            c += 0.5 * (shape[node, a] + shape[node, 3 + a]) * wn[f, a]
-                            r += 0.5 * (shape[node, 3 + a] - shape[node, a]) * abs(wn[f, a])
-                        if c - r > wd[f] + eps:
+                        break
+                if not apart:  # the box's own axes
+                    for a in range(3):
+                        mid, r = 0.0, h[a]
+                        for b in range(3):
+                            mid += (0.5 * (shape[node, b] + shape[node, 3 + b]) - cw[b]) * R[b, a]
+                            r += 0.5 * (shape[node, 3 + b] - shape[node, b]) * abs(R[b, a])
+                        if abs(mid) > r + eps:
                             apart = True
                             break
                 if apart:
                     continue
+                if not placed:  # the piece's face planes, placed once a node meets its box
+                    for f in range(f0, f1):
+                        for a in range(3):
+                            wn[f, a] = R[a, 0] * normals[f, 0] + R[a, 1] * normals[f, 1] + R[a, 2] * normals[f, 2]
+                        wd[f] = offsets[f] + wn[f, 0] * t[0] + wn[f, 1] * t[1] + wn[f, 2] * t[2]
+                    placed = True
+                kept = 0  # the node's box wholly outside one face plane, or wholly inside some
+                for i in range(nact[top]):
+                    f = act[top, i]
+                    c, r = 0.0, 0.0
+                    for a in range(3):
+                        c += 0.5 * (shape[node, a] + shape[node, 3 + a]) * wn[f, a]
+                        r += 0.5 * (shape[node, 3 + a] - shape[node, a]) * abs(wn[f, a])
+                    if c - r > wd[f] + eps:
+                        apart = True
+                        break
+                    if c + r > wd[f] - slack:
+                        act[top, kept] = f
+                        kept += 1
+                if apart:
+                    continue
+                if kept == 0:  # the node's box inside every face plane: its triangles lie in the piece
+                    hit = True
+                    break
                 if node < M:
                     stack[top] = 2 * node
                     stack[top + 1] = 2 * node + 1
+                    nact[top] = nact[top + 1] = kept
+                    for i in range(kept):
+                        act[top + 1, i] = act[top, i]
                     top += 2
                     continue
                 for q in range((node - M) * leaf, (node - M + 1) * leaf):
-                    if slots[q] >= 0 and not _separated(tri, q, wv, v0, v1, wn, wd, f0, f1, we, e0, e1, eps):
-                        hit = True
-                        break
+                    if slots[q] < 0 or _outside_box(tri, q, R, cw, h, eps):
+                        continue
+                    faces = _by_faces(tri, q, wn, wd, act[top], kept, eps)
+                    if faces == 1:
+                        continue
+                    if faces == -1:
+                        if not edged:  # the piece's vertices and edges, placed once some triangle needs them
+                            for i in range(v0, v1):
+                                for a in range(3):
+                                    wv[i, a] = (R[a, 0] * verts[i, 0] + R[a, 1] * verts[i, 1]
+                                                + R[a, 2] * verts[i, 2] + t[a])
+                            for g in range(e0, e1):
+                                for a in range(3):
+                                    we[g, a] = R[a, 0] * edges[g, 0] + R[a, 1] * edges[g, 1] + R[a, 2] * edges[g, 2]
+                            edged = True
+                        if _by_other_axes(tri, q, wv, v0, v1, we, e0, e1, eps):
+                            continue
+                    hit = True
+                    break
             if hit:
                 out[n] = True
                 break

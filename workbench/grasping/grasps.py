@@ -53,7 +53,7 @@ from workbench.grasping.pads import (
 )
 from workbench.grasping.memo import remembered
 from workbench.grasping.placements import grips_above_table, stable_placements
-from workbench.params import Params, bounds, check_memory, param
+from workbench.params import Params, bounds, check_memory, param, single_blas
 from workbench.robots.gripper import Gripper
 
 DEG = 180.0 / np.pi  # radians in the library, degrees on the command line
@@ -263,6 +263,7 @@ def boundary_margin(facets: Facets, dist_min: float) -> np.ndarray:
     return np.minimum(dist_min, 0.5 * inradius)
 
 
+@single_blas
 def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspParams()) -> GraspPlan:
     """Plan collision-free parallel-jaw grasps of `obj` (Section III; contacts per CONVENTIONS.md, Gripper)."""
     mesh = obj.mesh

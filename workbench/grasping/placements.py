@@ -28,7 +28,7 @@ from workbench.geometry.objects import ObjectModel
 from workbench.geometry.supports import (coplanar_groups, rest_probabilities, stabilities, support_stability,
                                         support_image, symmetric_average)
 from workbench.geometry.symmetry import part_symmetry
-from workbench.params import Params, param
+from workbench.params import Params, param, single_blas
 from workbench.robots.gripper import Gripper
 
 
@@ -102,6 +102,7 @@ def rest_pose(normal: np.ndarray, com: np.ndarray, vertices: np.ndarray) -> np.n
     return pose
 
 
+@single_blas
 def stable_placements(obj: ObjectModel, params: PlacementParams = PlacementParams()) -> Placements:
     """Stable placements of `obj` on its convex-hull faces (Section IV, freetabletopplacement).
 

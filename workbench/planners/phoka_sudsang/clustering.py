@@ -23,13 +23,9 @@ import numpy as np
 from scipy.linalg import eigh
 
 from workbench.errors import WorkbenchError
-from workbench.params import Params, check_memory, memory_budget, param
+from workbench.params import Params, check_memory, memory_budget, param, single_blas
 from workbench.planners.phoka_sudsang.contacts import ContactSet
-from workbench.planners.phoka_sudsang.forceclosure import (
-    FrictionParams,
-    friction_pyramid,
-    single_blas,
-)
+from workbench.planners.phoka_sudsang.forceclosure import FrictionParams, friction_pyramid
 
 MAX_CONTACTS = 4000
 TORQUE_SCALES = ("none", "radius")

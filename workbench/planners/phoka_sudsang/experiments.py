@@ -8,7 +8,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from workbench.planners.phoka_sudsang.forceclosure import ForceClosure, single_blas
+from workbench.params import single_blas
+from workbench.planners.phoka_sudsang.forceclosure import ForceClosure
 from workbench.planners.phoka_sudsang.linking import (
     algorithm1,
     algorithm1_applies,

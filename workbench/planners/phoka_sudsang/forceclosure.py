@@ -22,10 +22,9 @@ inside their convex hull. Two tests:
 
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass
 from itertools import combinations
-from typing import Callable, TypeVar
+from typing import Callable
 
 import numpy as np
 from scipy.optimize import linprog
@@ -38,26 +37,6 @@ SPAN_TOL = 1e-12
 # Pivots per item before the batched simplex hands an item to HiGHS.
 MAX_PIVOTS = 60
 _PAIRS6 = np.array([(0, 1, 2, 3), (0, 2, 1, 3), (0, 3, 1, 2), (1, 2, 0, 3), (1, 3, 0, 2), (2, 3, 0, 1)])
-
-
-F = TypeVar("F", bound=Callable)
-
-
-def single_blas(fn: F) -> F:
-    """Run `fn` with BLAS/OpenMP pools limited to one thread.
-
-    The arrays here are small; on a 2-core machine shared with other work, library thread pools only contend
-    and spin (a 500 x 500 eigensolve was seen taking seconds instead of milliseconds). The batched simplex
-    uses its own two threads.
-    """
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        from threadpoolctl import threadpool_limits
-
-        with threadpool_limits(1):
-            return fn(*args, **kwargs)
-
-    return wrapper  # type: ignore[return-value]
 
 
 class ForceClosureError(WorkbenchError):

@@ -12,11 +12,8 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import breadth_first_order
 
-from workbench.planners.phoka_sudsang.forceclosure import (
-    ForceClosure,
-    combinations_array,
-    single_blas,
-)
+from workbench.params import single_blas
+from workbench.planners.phoka_sudsang.forceclosure import ForceClosure, combinations_array
 from workbench.planners.phoka_sudsang.switching import (
     FingerPlanner,
     Roadmap,

@@ -10,7 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from workbench.planners.phoka_sudsang.forceclosure import ForceClosure, single_blas
+from workbench.params import single_blas
+from workbench.planners.phoka_sudsang.forceclosure import ForceClosure
 from workbench.planners.phoka_sudsang.linking import (
     extend_roadmap,
     link,

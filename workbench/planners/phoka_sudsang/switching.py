@@ -22,7 +22,8 @@ from workbench.planners.phoka_sudsang.clustering import (
     cluster_contacts,
 )
 from workbench.planners.phoka_sudsang.contacts import ContactSet
-from workbench.planners.phoka_sudsang.forceclosure import ForceClosure, single_blas
+from workbench.params import single_blas
+from workbench.planners.phoka_sudsang.forceclosure import ForceClosure
 
 
 class FingerPlanningError(PlanningError):
