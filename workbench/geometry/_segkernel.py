@@ -20,12 +20,13 @@ def _sorted(values, m, bits, tmp):
 
 
 @njit(cache=True, nogil=True)
-def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
+def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, areas):
     """Grow a facet from every seed in `order` (Wan & Harada, Section III, Fig. 2): across shared edges to every
     triangle whose normal is within tau of the seed's. Conventional: each triangle in one facet; over-segmentation: a
     seed is skipped when a facet holding it has a seed normal within the merge angle of its own. `nbr` (n, k)
-    neighbours padded with n. Returns (tri_ptr, tri_index, seeds): facet f holds the sorted triangles
-    tri_index[tri_ptr[f]:tri_ptr[f + 1]]."""
+    neighbours padded with n. Returns (tri_ptr, tri_index, seeds, wn, wc, ar): facet f holds the sorted triangles
+    tri_index[tri_ptr[f]:tri_ptr[f + 1]]; per facet the sums over them, in that order, of normal * area, centre *
+    area (`centres` (n, 3)) and area (`areas` (n,)), taken while they are written."""
     n = normals.shape[0]
     k = nbr.shape[1]
     visited = np.zeros(n, dtype=np.bool_)
@@ -35,6 +36,8 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
     out = np.empty(max(n, 16), dtype=np.int64)
     ptr = [0]
     seeds = []
+    sums = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
+    sums.pop()
     size = 0
     tmp = np.empty(n, dtype=np.int64)
     bits = 1
@@ -66,10 +69,19 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
             grown = np.empty(max(2 * out.shape[0], size + tail), dtype=np.int64)
             grown[:size] = out[:size]
             out = grown
+        sn0, sn1, sn2, sc0, sc1, sc2, sa = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         for i in range(tail):
             t = region[i]
             visited[t] = False
             out[size + i] = t
+            a = areas[t]
+            sn0 += normals[t, 0] * a
+            sn1 += normals[t, 1] * a
+            sn2 += normals[t, 2] * a
+            sc0 += centres[t, 0] * a
+            sc1 += centres[t, 1] * a
+            sc2 += centres[t, 2] * a
+            sa += a
             if conventional:
                 assigned[t] = True
             else:
@@ -79,7 +91,12 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge):
         size += tail
         ptr.append(size)
         seeds.append(seed)
-    return np.array(ptr, dtype=np.int64), out[:size].copy(), np.array(seeds, dtype=np.int64)
+        sums.append((sn0, sn1, sn2, sc0, sc1, sc2, sa))
+    m = len(seeds)
+    wn, wc, ar = np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m)
+    for f in range(m):
+        wn[f, 0], wn[f, 1], wn[f, 2], wc[f, 0], wc[f, 1], wc[f, 2], ar[f] = sums[f]
+    return np.array(ptr, dtype=np.int64), out[:size].copy(), np.array(seeds, dtype=np.int64), wn, wc, ar
 
 
 @njit(cache=True, nogil=True)
@@ -205,24 +222,6 @@ def triangle_centres(vertices, faces):
         for k in range(3):
             out[t, k] = ((vertices[a, k] + vertices[b, k]) + vertices[c, k]) / 3.0
     return out
-
-
-@njit(cache=True, nogil=True)
-def facet_sums(tri_ptr, tri_index, normals, centres, areas):
-    """Per facet the sums over its triangles of normal * area, centre * area and area (in membership order)."""
-    m = tri_ptr.shape[0] - 1
-    wn = np.zeros((m, 3))
-    wc = np.zeros((m, 3))
-    ar = np.zeros(m)
-    for f in range(m):
-        for q in range(tri_ptr[f], tri_ptr[f + 1]):
-            t = tri_index[q]
-            a = areas[t]
-            for i in range(3):
-                wn[f, i] += normals[t, i] * a
-                wc[f, i] += centres[t, i] * a
-            ar[f] += a
-    return wn, wc, ar
 
 
 @njit(cache=True)

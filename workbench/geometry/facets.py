@@ -24,7 +24,6 @@ from workbench.geometry._segkernel import (
     by_triangle,
     edge_groups,
     facet_boundaries,
-    facet_sums,
     facets_holding,
     grow_facets,
     neighbour_table,
@@ -100,11 +99,11 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     order, starts = edge_groups(faces, len(mesh.vertices))
     nbr = neighbour_table(order, starts, n_tri)
     seed_order = np.lexsort((np.arange(n_tri), -np.round(areas, 12)))
-    tri_ptr, tri_index, seeds = grow_facets(np.ascontiguousarray(normals, dtype=np.float64), nbr, seed_order,
-                                            method == "conventional", float(np.cos(tau)), float(np.cos(merge)))
-    wn, wc, area = facet_sums(tri_ptr, tri_index, np.ascontiguousarray(normals, dtype=np.float64),
-                              triangle_centres(np.ascontiguousarray(mesh.vertices, dtype=np.float64), faces),
-                              np.ascontiguousarray(areas, dtype=np.float64))
+    tri_ptr, tri_index, seeds, wn, wc, area = grow_facets(
+        np.ascontiguousarray(normals, dtype=np.float64), nbr, seed_order, method == "conventional",
+        float(np.cos(tau)), float(np.cos(merge)),
+        triangle_centres(np.ascontiguousarray(mesh.vertices, dtype=np.float64), faces),
+        np.ascontiguousarray(areas, dtype=np.float64))
     edge_ptr, be = facet_boundaries(faces, tri_ptr, tri_index, len(mesh.vertices), order, starts, nbr)
     out = Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index,
                  normals=wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300),
