@@ -169,15 +169,14 @@ def _reach(shape, node, o, u, slack):
 
 
 @njit(cache=True)
-def _height_key(shape, node, o, y, slack, si, wlo, whi, a_max, a_min, tie, slab):
+def _height_key(shape, node, o, y, slack, si, wlo, whi, slab):
     """How high (the left pad, si 0) or low (the right, as minus the height) a node's points can be first touched;
-    -inf for an empty node, one outside the pads' window, or one wholly between the axis's crossings (touched by
-    neither pad). The range along y is the box's, narrowed by the node's sphere and slab when `slab` (a fine mesh,
+    -inf for an empty node or one outside the pads' window. The range along y is the box's, narrowed by the node's sphere and slab when `slab` (a fine mesh,
     whose patches are flat beside their size: there the tighter bound saves more nodes than it costs)."""
     if shape[node, 0] > shape[node, 3]:
         return -np.inf
     ymn, ymx = _reach(shape, node, o, y, slack) if slab else _project(shape, node, o, y, slack)
-    if ymx < wlo or ymn > whi or (ymx < a_max - tie and ymn > a_min + tie):
+    if ymx < wlo or ymn > whi:
         return -np.inf
     # no touch lies past the pad's start: a node reaching beyond it is keyed at the start (a triangle crossing the
     # start, which may block the pad, is then opened first)
@@ -355,43 +354,6 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
         o = origins[k]
         x0, y, z0 = frames0[k, 0], frames0[k, 1], frames0[k, 2]
         wlo, whi = windows[k, 0], windows[k, 1]
-        # where the axis itself crosses the surface: points inside every rotation's footprint
-        a_max, a_min = -np.inf, np.inf
-        stack[0] = 1
-        top = 1
-        while top > 0:
-            top -= 1
-            node = stack[top]
-            if shape[node, 0] > shape[node, 3] or not _line_meets_box(shape, node, o, y, slack):
-                continue
-            if node < P:
-                stack[top] = 2 * node
-                stack[top + 1] = 2 * node + 1
-                top += 2
-                continue
-            for q in range((node - P) * leaf, (node - P + 1) * leaf):
-                if slots[q] < 0:
-                    continue
-                mn, mx = _local(tri, q, o, x0, y, z0, ca, cb, ly)
-                if mx < wlo or mn > whi or not _meets_disc(cb, ca, rad2):
-                    continue
-                e1x, e1z = cb[1] - cb[0], ca[1] - ca[0]
-                e2x, e2z = cb[2] - cb[0], ca[2] - ca[0]
-                det = e1x * e2z - e2x * e1z
-                if abs(det) > 1e-18:
-                    inv = 1.0 / det
-                    qx, qz = -cb[0], -ca[0]
-                    u = (qx * e2z - e2x * qz) * inv
-                    v = (e1x * qz - qx * e1z) * inv
-                    if u >= -1e-12 and v >= -1e-12 and u + v <= 1 + 1e-12:
-                        h = ly[0] + u * (ly[1] - ly[0]) + v * (ly[2] - ly[0])
-                        if h <= whi:
-                            a_max = max(a_max, h)
-                        if h >= wlo:
-                            a_min = min(a_min, h)
-        # an axis whose own crossings are farther apart than the jaw opens cannot be grasped at any rotation
-        if np.isfinite(a_max - a_min) and a_max - a_min > jaw_max + tie:
-            continue
         for j0 in range(0, A, 64):
             n_rot = min(A - j0, 64)
             full = np.int64(-1) if n_rot == 64 else (np.int64(1) << n_rot) - 1
@@ -409,7 +371,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                 blocked[:n_rot] = False
                 nr = 0
                 hn = 0
-                kk = _height_key(shape, 1, o, y, slack, si, wlo, whi, a_max, a_min, tie, slab) if todo else -np.inf
+                kk = _height_key(shape, 1, o, y, slack, si, wlo, whi, slab) if todo else -np.inf
                 if kk > -np.inf:
                     m = _footprints(shape, 1, o, x0, z0, cs, ua, wa, todo, n_rot, slack, cx, cz, hx, hz)
                     if m:
@@ -429,7 +391,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                         continue
                     if node < P:
                         for child in (2 * node, 2 * node + 1):
-                            kk = _height_key(shape, child, o, y, slack, si, wlo, whi, a_max, a_min, tie, slab)
+                            kk = _height_key(shape, child, o, y, slack, si, wlo, whi, slab)
                             if kk == -np.inf:
                                 continue
                             cm = np.int64(0)
@@ -448,8 +410,6 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                             continue
                         mn, mx = _local(tri, qs, o, x0, y, z0, ca, cb, ly)
                         if not _meets_disc(cb, ca, rad2) or mx < wlo or mn > whi:
-                            continue
-                        if not (mx >= a_max - tie or mn <= a_min + tie):
                             continue
                         sc = min(mx, whi) if si == 0 else -max(mn, wlo)
                         for j in range(n_rot):
@@ -497,7 +457,68 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                     height[hrow, si] = side * rs[r]
                     local[hrow, si] = rp[r]
                     tri_id[hrow, si] = rt[r]
+        # an axis whose own crossings are farther apart than the jaw opens cannot be grasped at any rotation: none
+        # of its rotations is a touch. The axis point lies in every rotation's footprint, so a rotation's touches
+        # lie at least as far apart as the crossings: the line is searched only where some rotation's do not fit
+        wide = False
+        for j in range(A):
+            hrow = k * A + j
+            if found[hrow, 0] and found[hrow, 1] and height[hrow, 0] - height[hrow, 1] > jaw_max + tie:
+                wide = True
+                break
+        if wide:
+            a_max, a_min = _axis_crossings(shape, slots, leaf, tri, o, x0, y, z0, wlo, whi, slack, rad2, stack,
+                                           ca, cb, ly)
+            if np.isfinite(a_max - a_min) and a_max - a_min > jaw_max + tie:
+                for j in range(A):
+                    hrow = k * A + j
+                    found[hrow, 0] = found[hrow, 1] = False
+                    height[hrow, 0] = height[hrow, 1] = 0.0
+                    local[hrow, 0, :] = 0.0
+                    local[hrow, 1, :] = 0.0
+                    tri_id[hrow, 0] = tri_id[hrow, 1] = -1
     return found, height, local, tri_id
+
+
+@njit(cache=True)
+def _axis_crossings(shape, slots, leaf, tri, o, x0, y, z0, wlo, whi, slack, rad2, stack, ca, cb, ly):
+    """The highest and lowest heights (a_max, a_min) at which the axis (o, y) crosses a triangle within the window
+    [wlo, whi] (-inf, inf: none)."""
+    a_max, a_min = -np.inf, np.inf
+    P = shape.shape[0] // 2
+    stack[0] = 1
+    top = 1
+    while top > 0:
+        top -= 1
+        node = stack[top]
+        if shape[node, 0] > shape[node, 3] or not _line_meets_box(shape, node, o, y, slack):
+            continue
+        if node < P:
+            stack[top] = 2 * node
+            stack[top + 1] = 2 * node + 1
+            top += 2
+            continue
+        for q in range((node - P) * leaf, (node - P + 1) * leaf):
+            if slots[q] < 0:
+                continue
+            mn, mx = _local(tri, q, o, x0, y, z0, ca, cb, ly)
+            if mx < wlo or mn > whi or not _meets_disc(cb, ca, rad2):
+                continue
+            e1x, e1z = cb[1] - cb[0], ca[1] - ca[0]
+            e2x, e2z = cb[2] - cb[0], ca[2] - ca[0]
+            det = e1x * e2z - e2x * e1z
+            if abs(det) > 1e-18:
+                inv = 1.0 / det
+                qx, qz = -cb[0], -ca[0]
+                u = (qx * e2z - e2x * qz) * inv
+                v = (e1x * qz - qx * e1z) * inv
+                if u >= -1e-12 and v >= -1e-12 and u + v <= 1 + 1e-12:
+                    h = ly[0] + u * (ly[1] - ly[0]) + v * (ly[2] - ly[0])
+                    if h <= whi:
+                        a_max = max(a_max, h)
+                    if h >= wlo:
+                        a_min = min(a_min, h)
+    return a_max, a_min
 
 
 @njit(cache=True)
