@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import trimesh
+from numba import njit
 from scipy.spatial import cKDTree
 
 from workbench.geometry.facets import Facets, distance_to_boundary
@@ -67,14 +68,22 @@ def neighbour_filter(points: np.ndarray, normals: np.ndarray, radius: float, tau
     if len(pairs) == 0:
         return np.ones(n, dtype=bool)
     # neighbour lists of lower-indexed samples, for the greedy pass in index order
-    i, j = pairs[:, 0], pairs[:, 1]
-    order = np.argsort(j, kind="stable")
-    i, j = i[order], j[order]
-    ptr = np.searchsorted(j, np.arange(n + 1))
-    kept = np.ones(n, dtype=bool)
-    for k in np.unique(j):
-        if kept[i[ptr[k]:ptr[k + 1]]].any():
-            kept[k] = False
+    lo, hi = pairs.min(axis=1), pairs.max(axis=1)
+    order = np.argsort(hi, kind="stable")
+    return _greedy_keep(np.ascontiguousarray(lo[order], dtype=np.int64),
+                        np.searchsorted(hi[order], np.arange(n + 1)).astype(np.int64), n)
+
+
+@njit(cache=True)
+def _greedy_keep(lower, ptr, n):
+    """Samples kept in index order: sample k is dropped when one of its lower-indexed neighbours
+    lower[ptr[k]:ptr[k + 1]] is kept."""
+    kept = np.ones(n, dtype=np.bool_)
+    for k in range(n):
+        for q in range(ptr[k], ptr[k + 1]):
+            if kept[lower[q]]:
+                kept[k] = False
+                break
     return kept
 
 

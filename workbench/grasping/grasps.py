@@ -26,6 +26,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
@@ -369,10 +370,16 @@ def swept_body(gripper: Gripper, length: float) -> trimesh.Trimesh:
     """The volume the hand body sweeps moving `length` along the approach to its pose (TCP frame): the convex hull
     of the body and its copy `length` back along -z. Exact for a convex body (the Franka hand's hull is within
     0.01% of its volume), conservative otherwise."""
-    v = np.asarray(gripper.body.vertices, dtype=np.float64)
-    if length <= 0:
-        return gripper.body.convex_hull
-    return trimesh.Trimesh(np.vstack([v, v - [0.0, 0.0, length]])).convex_hull
+    v = np.ascontiguousarray(gripper.body.vertices, dtype=np.float64)
+    return _swept_hull(v.tobytes(), v.shape, float(length)).copy()
+
+
+@lru_cache(maxsize=64)
+def _swept_hull(data: bytes, shape: tuple[int, ...], length: float) -> trimesh.Trimesh:
+    """`swept_body` of the body's vertices (their bytes and shape), computed once per hand and length (every plan
+    of a widget's slider sweeps the same hand)."""
+    v = np.frombuffer(data, dtype=np.float64).reshape(shape)
+    return trimesh.Trimesh(v if length <= 0 else np.vstack([v, v - [0.0, 0.0, length]])).convex_hull
 
 
 def swept_fingers(boxes: list[tuple[np.ndarray, np.ndarray]], length: float,
