@@ -171,8 +171,9 @@ def _reach(shape, node, o, u, slack):
 @njit(cache=True)
 def _height_key(shape, node, o, y, slack, si, wlo, whi, slab):
     """How high (the left pad, si 0) or low (the right, as minus the height) a node's points can be first touched;
-    -inf for an empty node or one outside the pads' window. The range along y is the box's, narrowed by the node's sphere and slab when `slab` (a fine mesh,
-    whose patches are flat beside their size: there the tighter bound saves more nodes than it costs)."""
+    -inf for an empty node or one outside the pads' window. The range along y is the box's, narrowed by the node's
+    sphere and slab when `slab` (a fine mesh, whose patches are flat beside their size: there the tighter bound saves
+    more nodes than it costs)."""
     if shape[node, 0] > shape[node, 3]:
         return -np.inf
     ymn, ymx = _reach(shape, node, o, y, slack) if slab else _project(shape, node, o, y, slack)
