@@ -81,6 +81,25 @@ def test_each_grasp_filter_is_named_when_it_removes_the_last_candidate(hand):
     assert len(ok.grasps) > 0 and ok.empty_reason is None
 
 
+def test_a_part_thinner_than_the_closed_jaw_is_named_narrower_not_wider(tmp_path):
+    """A 10 mm rod and a gripper that closes only to 30 mm: the message says the part is narrower than the smallest
+    opening, with its widest contact pair, not that it is wider than the full opening."""
+    import yaml
+
+    from workbench.robots.gripper import load_gripper
+
+    spec = tmp_path / "narrow.yaml"
+    spec.write_text(yaml.safe_dump({"name": "closes-to-30", "stroke": [0.03, 0.12], "tcp": [0.0, 0.0, 0.15],
+                                    "pad": {"size": [0.022, 0.038], "thickness": 0.007},
+                                    "finger": {"size": [0.022, 0.012, 0.07]},
+                                    "palm": {"size": [0.1, 0.2, 0.1], "offset": [0.0, 0.0, 0.05]}}))
+    rod = from_trimesh(trimesh.creation.box((0.2, 0.01, 0.01)), "rod")
+    plan = plan_grasps(rod, load_gripper(str(spec)), GraspParams())
+    assert len(plan.grasps) == 0
+    assert plan.empty_reason.startswith("pads_width: every contact pair is narrower than the gripper's 30 mm smallest "
+                                        "opening (the widest is 10 mm)"), plan.empty_reason
+
+
 def test_a_card_lying_flat_is_named_too_thin_to_grip(tmp_path):
     """A 0.8 mm card has grasps in free air but none that reaches it on the table: `build` exits 0, stores its
     placements and says the part is too thin, with its height. Built with an 80 mm retraction (`--handx 0.08`), its

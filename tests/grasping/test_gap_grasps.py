@@ -152,7 +152,7 @@ def test_an_open_bin_standing_up_is_gripped_by_its_wall_from_above(open_bin, han
     c0, c1 = np.abs(g.contact0[sel, :2]).max(axis=1), np.abs(g.contact1[sel, :2]).max(axis=1)
     assert np.allclose(np.sort(np.c_[c0, c1], axis=1), [0.041, 0.045], atol=1e-6)
     v = check_grasps(open_bin.mesh, g.poses[sel], g.jawwidth[sel], g.contact0[sel], g.contact1[sel], g.normal0[sel],
-                     g.normal1[sel], GraspParams().friction)
+                     g.normal1[sel], GraspParams().friction_coefficient)
     assert v.ok.all()
 
 

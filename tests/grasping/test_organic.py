@@ -73,7 +73,7 @@ def test_graspable_organic_objects_get_20_independently_valid_grasps(organic_obj
     assert len(g) >= 20, f"{name}: {plan.counts}"
     pick = np.unique(np.linspace(0, len(g) - 1, CHECKED).astype(int))
     v = check_grasps(obj.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick], g.normal0[pick],
-                     g.normal1[pick], params.friction)
+                     g.normal1[pick], params.friction_coefficient)
     bad = np.flatnonzero(~v.ok)
     assert len(bad) == 0, (f"{name}: {len(bad)} of {len(pick)} grasps fail: surface {(~v.surface).sum()}, normal "
                            f"{(~v.normal).sum()}, cone {(~v.cone).sum()}, pads {(~v.pads).sum()}, hand into the part "
@@ -148,7 +148,7 @@ def test_support_grasps_grip_a_ring_lying_flat_from_above(organic_objects, hand)
     new = np.flatnonzero(np.abs(plan.grasps.poses[:, :3, 1] @ base.normals[flat[0]]) < 1e-9)
     g = plan.grasps
     v = check_grasps(obj.mesh, g.poses[new], g.jawwidth[new], g.contact0[new], g.contact1[new], g.normal0[new],
-                     g.normal1[new], GraspParams().friction)
+                     g.normal1[new], GraspParams().friction_coefficient)
     assert len(new) >= 8 and v.ok.all()
     # the stored rotation is still the right-handed angle from the reference approach about the jaw axis
     y, z = g.poses[:, :3, 1], g.poses[:, :3, 2]
@@ -182,7 +182,7 @@ def test_slice_grasps_grip_a_rounded_part_from_above_where_it_lies(hand):
     assert top.sum() >= 20 and top.sum() >= 3 * _top_down_clear(obj, hand, plain.grasps, base.poses[k]).sum()
     g, idx = plan.grasps, np.flatnonzero(top)
     v = check_grasps(obj.mesh, g.poses[idx], g.jawwidth[idx], g.contact0[idx], g.contact1[idx], g.normal0[idx],
-                     g.normal1[idx], GraspParams().friction)
+                     g.normal1[idx], GraspParams().friction_coefficient)
     assert v.ok.all()
 
 

@@ -42,12 +42,13 @@ def boxes_hit(mesh, poses, widths, hand: str, shrink: float) -> np.ndarray:
 def test_grasps_of_another_gripper_are_valid_by_an_independent_check(name, part):
     obj = load_object(bundled_objects()[part]) if part in bundled_objects() else from_trimesh(ORGANIC[part](), part)
     gripper = load_gripper(name)
-    g = plan_grasps(obj, gripper, GraspParams()).grasps
+    plan = plan_grasps(obj, gripper, GraspParams())
+    g = plan.grasps
     assert len(g) >= 20
     assert (g.jawwidth >= gripper.jaw_min - 1e-9).all() and (g.jawwidth <= gripper.jaw_max + 1e-9).all()
     pick = np.unique(np.linspace(0, len(g) - 1, 25).astype(int))
     v = check_grasps(obj.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick], g.normal0[pick],
-                     g.normal1[pick], GraspParams().friction_coefficient, hand=HANDS[name])
+                     g.normal1[pick], plan.params.friction_coefficient, hand=HANDS[name])
     assert v.ok.all(), (int(v.ok.sum()), len(pick), int((~v.clear).sum()))
     tol = GraspParams().finger_clearance + 1e-6
     for widths in (g.jawwidth[pick], np.full(len(pick), gripper.jaw_max)):  # at the grasp and fully open
@@ -103,3 +104,51 @@ def test_a_gripper_never_seen_before_plans_stores_and_checks(tmp_path, part, cap
     assert main(["placements", "--db", str(db), "--object", part]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "gripper 'wide110'" in err[0] and "--gripper FILE" in err[0], err
+
+
+def test_a_spec_stating_its_pad_friction_plans_with_it_unless_told_otherwise(tmp_path, capsys):
+    """A spec's `friction` is the friction cone grasp planning uses when none is given (the default, on the command
+    line and in the library): its grasps are those of that friction given outright, more than a 0.3 cone keeps,
+    each with both normals inside its cone and some outside the 0.3 cone; the parameter set stores the friction
+    used; --friction overrides the spec, and a spec stating none plans with 0.3."""
+    import json
+
+    import duckdb
+    import yaml
+
+    from workbench.cli.main import main
+
+    stated = {**WIDE, "name": "rubber", "friction": 0.8}
+    spec = tmp_path / "rubber.yaml"
+    spec.write_text(yaml.safe_dump(stated))
+    hand = load_gripper(str(spec))
+    obj = load_object(bundled_objects()["tail"])
+    left = plan_grasps(obj, hand, GraspParams()).grasps
+    given = plan_grasps(obj, hand, GraspParams(friction=0.8)).grasps
+    narrow = plan_grasps(obj, hand, GraspParams(friction=0.3)).grasps
+    for f in left.__dataclass_fields__:
+        assert np.array_equal(getattr(left, f), getattr(given, f)), f
+    assert len(left) > len(narrow) > 0
+    y = left.poses[:, :3, 1]
+    cos0, cos1 = np.einsum("ij,ij->i", left.normal0, y), np.einsum("ij,ij->i", left.normal1, -y)
+    assert (np.minimum(cos0, cos1) >= np.cos(np.arctan(0.8)) - 1e-9).all()
+    assert (np.minimum(cos0, cos1) < np.cos(np.arctan(0.3))).any()
+
+    mesh = tmp_path / "tail.stl"
+    obj.mesh.export(mesh)
+    frictions = {}
+    for label, extra in (("spec", []), ("override", ["--friction", "0.3"])):
+        db = tmp_path / f"{label}.duckdb"
+        capsys.readouterr()
+        assert main(["grasps", str(mesh), "--db", str(db), "--gripper", str(spec), *extra]) == 0
+        out = capsys.readouterr().out
+        assert ("friction 0.8: the friction gripper rubber's spec states" in out) == (label == "spec"), out
+        con = duckdb.connect(str(db), read_only=True)
+        frictions[label] = [json.loads(r[0])["friction"] for r in con.execute("SELECT params FROM paramset").fetchall()]
+        count = con.execute("SELECT count(*) FROM freeairgrip").fetchone()[0]
+        con.close()
+        assert count == len(left if label == "spec" else narrow)
+    assert frictions == {"spec": [0.8], "override": [0.3]}
+    plain = {k: v for k, v in stated.items() if k != "friction"}
+    spec.write_text(yaml.safe_dump({**plain, "name": "plain"}))
+    assert GraspParams(friction=None).for_gripper(load_gripper(str(spec))).friction == 0.3

@@ -73,7 +73,7 @@ def _grippers(args: argparse.Namespace) -> int:
             g = plan.grasps
             pick = np.unique(np.linspace(0, len(g) - 1, min(len(g), args.checked)).astype(int)) if len(g) else np.zeros(0, int)
             v = check_grasps(obj.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick],
-                             g.normal0[pick], g.normal1[pick], params.friction_coefficient, hand=check,
+                             g.normal0[pick], g.normal1[pick], plan.params.friction_coefficient, hand=check,
                              pregrasp_margin=params.pregrasp_margin)
             inside = bool(((g.jawwidth >= hand.jaw_min - 1e-9) & (g.jawwidth <= hand.jaw_max + 1e-9)).all())
             rows.append([name, label, len(g), f"{int(v.ok.sum())}/{len(pick)}",
@@ -144,7 +144,7 @@ def _organic(args: argparse.Namespace) -> int:
         g = plan.grasps
         pick = np.unique(np.linspace(0, len(g) - 1, min(len(g), args.checked)).astype(int)) if len(g) else np.zeros(0, int)
         v = check_grasps(obj.mesh, g.poses[pick], g.jawwidth[pick], g.contact0[pick], g.contact1[pick],
-                         g.normal0[pick], g.normal1[pick], params.friction_coefficient,
+                         g.normal0[pick], g.normal1[pick], plan.params.friction_coefficient,
                          pregrasp_margin=params.pregrasp_margin)
         graspable = min_width(mesh) < hand.jaw_max
         tm = plan.timings

@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
                 at_pose = int(collide_at_poses(body, live, target).sum())
                 centre = 0.5 * (g.contact0 + g.contact1)
                 v = check_grasps(obj.mesh, g.poses, g.jawwidth, g.contact0, g.contact1, g.normal0, g.normal1,
-                                 params.friction_coefficient, pregrasp_margin=margin)
+                                 plan.params.friction_coefficient, pregrasp_margin=margin)
                 rows.append([label, lengths, "full" if margin is None else f"+{margin * 1e3:.0f} mm",
                              plan.lengths["com_max"] * 1e3, c["hand_poses"], c["pads_width"], c["pads_cone"],
                              c["pads_com"], at_pose, c["hand_open"], c["grasps"], int((centre[:, 2] > height - 0.012).sum()),

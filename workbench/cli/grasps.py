@@ -11,7 +11,7 @@ from workbench.cli import warn
 from workbench.cli.outputs import add_output
 from workbench.cli.gripper import add_gripper_argument, gripper_from_args
 from workbench.geometry.objects import load_object
-from workbench.grasping.grasps import GraspParams, GraspPlan, plan_grasps
+from workbench.grasping.grasps import DEFAULT_FRICTION, GraspParams, GraspPlan, plan_grasps
 from workbench.params import HAND_SIZED, PART_SIZE, SCALE, add_param, from_cli, parse_number
 from workbench.planners.wan_harada.stages import ensure_grasps
 from workbench.viewer.scenes import grasp_scene
@@ -42,7 +42,10 @@ def add_grasp_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--contact-model", choices=["pads", "paper"], default=GraspParams().contact_model,
                         help="pads: each pad closes until it first touches (CONVENTIONS.md); paper: parallel facet pairs "
                              "and swept cylinders")
-    for name in ("friction", "finger_clearance", "fingertip_margin", "pregrasp_margin", "approach_length"):
+    add_param(parser, GraspParams, "friction", cli_default=None,
+              help=f"pad friction coefficient, the cone of the pad model (default: the gripper spec's `friction`, "
+                   f"else {DEFAULT_FRICTION:g})")
+    for name in ("finger_clearance", "fingertip_margin", "pregrasp_margin", "approach_length"):
         add_param(parser, GraspParams, name)
     parser.add_argument("--full-opening", action="store_true",
                         help="approach every grasp with the jaw fully open instead of at the grasp's opening plus "
@@ -95,6 +98,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"{obj.name}: {obj.n_triangles} triangles, centre of mass {np.round(obj.com, 4).tolist()} m ({obj.com_method})")
     for note in obj.repairs:
         print(f"repaired: {note}")
+    if args.friction is None and gripper.spec_value("friction") is not None:
+        print(f"friction {gripper.spec_value('friction'):g}: the friction gripper {gripper.name}'s spec states "
+              f"(--friction overrides it)")
     if result.plan is not None:
         print(grasp_counts(result.plan))
     print(f"{verb} {result.count} free-air grasps for gripper {gripper.name} in {args.db} (parameter set {result.idparamset}) in {dt:.2f} s")

@@ -89,7 +89,8 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
         pieces = np.repeat(np.arange(len(geoms)), [len(g.faces) for g in geoms])
         loaded = trimesh.util.concatenate(geoms)
     if isinstance(loaded, trimesh.PointCloud):
-        raise MeshError(f"object file {path} has {len(loaded.vertices)} vertices but no triangle faces")
+        raise MeshError(f"object file {path} has {_count(len(loaded.vertices), 'vertex', 'vertices')} but no "
+                        f"triangle faces")
     if not isinstance(loaded, trimesh.Trimesh):
         raise MeshError(f"object file {path} is not a triangle mesh (got {type(loaded).__name__})")
     if scale is None and units is None and not accept_size and len(loaded.faces):
@@ -156,7 +157,8 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
     check_triangle_count(len(faces), label, len(vertices))
     if not np.isfinite(vertices).all():
         bad = int((~np.isfinite(vertices)).any(axis=1).sum())
-        raise MeshError(f"{label} has {bad} vertices with NaN or infinite coordinates; repair the file")
+        raise MeshError(f"{label} has {_count(bad, 'vertex', 'vertices')} with NaN or infinite coordinates; repair "
+                        f"the file")
     if faces.min() < 0 or faces.max() >= len(vertices):
         raise MeshError(f"{label} has faces that index missing vertices; repair the file")
     # size first, on the referenced vertices: merging vertices of a sub-micron part would make every face degenerate
@@ -224,3 +226,8 @@ def _scale_hint(extent: float, scale: float = 1.0) -> str:
                 f"({SCALE.describe()}); check the file's units, or the part is too small to grip")
     return (f"it would take --scale {need:.3g} or less ({SCALE.describe()}); pass the scale that converts the file's "
             f"units to metres")
+
+
+def _count(n: int, one: str, many: str) -> str:
+    """`n` and the noun in the number it takes ("1 vertex", "3 vertices")."""
+    return f"{n:,} {one if n == 1 else many}"

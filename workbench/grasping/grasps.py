@@ -60,6 +60,7 @@ from workbench.robots.gripper import Gripper
 DEG = 180.0 / np.pi  # radians in the library, degrees on the command line
 PREGRASP_MARGIN = 0.010
 """How much wider than the grasp the jaw opens to approach it (m), CONVENTIONS.md (Gripper)."""
+DEFAULT_FRICTION = 0.3  # the pads' friction coefficient where neither the parameters nor the gripper give one
 PREBUILD_TRIANGLES = 65_536
 """Triangles from which a part's first plan builds its triangle hierarchy and convex hull in a second thread while
 segmentation and sampling run (the same arrays as built in turn; below this the thread costs more than it saves)."""
@@ -76,8 +77,9 @@ class GraspParams(Params):
     margin gets half its own inradius, see `boundary_margin`). parallel_angle: the paper model's largest deviation
     from antiparallel facet normals (10 degrees). com_max: largest distance from the contacts' centre to the centre of
     mass (50 mm). rotations: hand rotations about the jaw axis (8). seed: sampling seed. contact_model: "pads"
-    (CONVENTIONS.md) or "paper". friction: friction coefficient of the pads (0.3, a 16.7-degree cone, conservative
-    for rubber pads; None: tan(parallel_angle), the paper's antiparallel tolerance as a cone). finger_clearance: how far the hand and fingers at the grasp's opening may reach into the
+    (CONVENTIONS.md) or "paper". friction: friction coefficient of the pads (None, the default: the one the
+    gripper's spec states, else 0.3, a 16.7-degree cone, conservative for rubber pads; `for_gripper`).
+    finger_clearance: how far the hand and fingers at the grasp's opening may reach into the
     object (0.5 mm). lengths: "adaptive" (scaled with the part) or "fixed". reference_size: the part size at which
     the fixed lengths apply unscaled (60 mm). axis_angle: the pad model tries one jaw axis per sample and group of
     facet normals within this angle (None: tau/2; 0: every facet sample, see `distinct_axes`). fingertip_margin:
@@ -104,7 +106,8 @@ class GraspParams(Params):
     rotations: int = param(8, ge=1, le=360, integer=True, help="hand rotations about the contact axis")
     seed: int = param(0, ge=0, le=2**32 - 1, integer=True, help="sampling seed")
     contact_model: str = "pads"
-    friction: float | None = param(0.3, ge=0, le=10.0, optional=True, help="pad friction coefficient (the cone of the pad model)")
+    friction: float | None = param(None, ge=0, le=10.0, optional=True,
+                                   help="pad friction coefficient (the cone of the pad model)")
     finger_clearance: float = param(5e-4, ge=0, le=0.01, unit="m",
                                     help="how far hand and fingers at the grasp's opening may reach into the object")
     lengths: str = "adaptive"
@@ -142,7 +145,16 @@ class GraspParams(Params):
 
     @property
     def friction_coefficient(self) -> float:
-        return float(np.tan(self.parallel_angle)) if self.friction is None else float(self.friction)
+        """The pads' friction coefficient: `friction`, or 0.3 where it is left to a gripper (`for_gripper`)."""
+        return DEFAULT_FRICTION if self.friction is None else float(self.friction)
+
+    def for_gripper(self, gripper: Gripper) -> "GraspParams":
+        """These parameters with `friction` left to the gripper (None) set: the friction its spec states
+        (CONVENTIONS.md, Gripper spec), else 0.3. Grasps are planned and stored with the value set."""
+        if self.friction is not None:
+            return self
+        stated = gripper.spec_value("friction")
+        return replace(self, friction=DEFAULT_FRICTION if stated is None else stated)
 
     def scaled(self, mesh: trimesh.Trimesh) -> dict[str, float]:
         """The lengths used on `mesh`: neighbour_radius, dist_min, dist_max, com_max, and the factor applied."""
@@ -267,6 +279,7 @@ def boundary_margin(facets: Facets, dist_min: float) -> np.ndarray:
 @single_blas
 def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspParams()) -> GraspPlan:
     """Plan collision-free parallel-jaw grasps of `obj` (Section III; contacts per CONVENTIONS.md, Gripper)."""
+    params = params.for_gripper(gripper)
     mesh = obj.mesh
     lengths = params.scaled(mesh)
     timings: dict[str, float] = {}
@@ -904,7 +917,7 @@ def table_friction_hint(obj: ObjectModel, gripper: Gripper, params: GraspParams,
     inside: a flat pad meets a concave wall at its own edges, where the wall's normal lies further off the jaw axis
     than the friction cone of the default friction allows. The grasps are planned again at `upto`; the friction the
     best of those that clear the table needs is checked by planning at it, so the hint names only what it found."""
-    mu = params.friction_coefficient
+    mu = params.for_gripper(gripper).friction_coefficient
     if len(placement_poses) == 0 or mu >= upto:
         return ""
 
@@ -933,6 +946,19 @@ def _ceil(value: float) -> str:
     return f"{np.ceil(value * 10**digits) / 10**digits:.{max(digits, 0)}f}"
 
 
+def outside_stroke(what: str, pairs: ContactPairs | None, gripper: Gripper) -> str:
+    """Why no `what` fits the jaw: all narrower than its closed opening, all wider than its full one, or some of
+    each (from the widths of `pairs`, when given)."""
+    lo, hi = gripper.jaw_min * 1e3, gripper.jaw_max * 1e3
+    w = np.zeros(0) if pairs is None else np.asarray(pairs.width)[np.isfinite(pairs.width)] * 1e3
+    if len(w) and (w < lo).all():
+        return (f"every {what} is narrower than the gripper's {lo:.3g} mm smallest opening (the widest is "
+                f"{w.max():.3g} mm): a gripper that closes further grips this part")
+    if len(w) and not (w > hi).all():
+        return f"every {what} lies outside the gripper's {lo:.3g}-{hi:.3g} mm stroke"
+    return f"every {what} is wider than the gripper's {hi:.0f} mm opening"
+
+
 def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Gripper,
                  pairs: ContactPairs | None = None) -> str | None:
     """Which stage removed the last candidate, and what to try; None when grasps remain. An empty friction stage
@@ -950,8 +976,8 @@ def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Grip
         ("axes", "no jaw axis to try"),
         ("contact_pairs", f"no sample has a parallel facet opposite it (within {np.degrees(params.parallel_angle):.3g} "
                           f"degrees); raise --parallel-deg or use --contact-model pads"),
-        ("pairs_width", f"every facet pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
-        ("pads_width", f"every contact pair is wider than the gripper's {gripper.jaw_max * 1e3:.0f} mm opening"),
+        ("pairs_width", outside_stroke("facet pair", pairs, gripper)),
+        ("pads_width", outside_stroke("contact pair", pairs, gripper)),
         ("pads_cone", f"no pad contact has both normals within the friction cone (friction {mu:.2g}, "
                       f"{np.degrees(np.arctan(mu)):.3g} degrees); {friction_hint(mu, pairs)}"),
         ("pairs_com", f"every contact pair is more than {lengths['com_max'] * 1e3:.3g} mm from the centre of mass; "

@@ -85,6 +85,17 @@ class Gripper:
         """The pad's length along the approach axis (m)."""
         return float(self.finger_boxes[self.pad][0][2])
 
+    def spec_value(self, key: str) -> float | None:
+        """An optional field of the gripper's spec (`mass`, `max_force`, `friction`; CONVENTIONS.md, Gripper spec),
+        or None when the gripper states none (a gripper from a URDF, the built-in Franka hand)."""
+        if not self.extra.startswith("{"):
+            return None
+        try:  # a spec gripper keeps its spec as JSON followed by the palm mesh's sha256
+            value = json.loads(self.extra[:-64]).get(key)
+        except ValueError:
+            return None
+        return None if value is None else float(value)
+
     @property
     def finger_span(self) -> float:
         """How far the open fingers reach either side of the TCP along the jaw axis (m): half the stroke plus the

@@ -148,21 +148,9 @@ class SimResult:
 def resolve(params: SimParams, gripper, friction: float) -> tuple[float, float, float]:
     """The grip force (N; the gripper's `max_force`, else the Franka hand's continuous 70 N), the pad friction (the
     plan's grasp friction) and the table friction (the pad's) where `params` leaves them to their defaults."""
-    force = float(params.grip_force if params.grip_force is not None else spec_value(gripper, "max_force") or DEFAULT_GRIP_FORCE)
+    force = float(params.grip_force if params.grip_force is not None else gripper.spec_value("max_force") or DEFAULT_GRIP_FORCE)
     mu = float(params.friction if params.friction is not None else friction)
     return force, mu, float(params.table_friction if params.table_friction is not None else mu)
-
-
-def spec_value(gripper, key: str) -> float | None:
-    """An optional field of the gripper's spec (`mass`, `max_force`, `friction`; CONVENTIONS.md, Gripper spec), or
-    None when the gripper states none (a gripper from a URDF, the built-in Franka hand)."""
-    value = getattr(gripper, key, None)
-    if value is None and str(getattr(gripper, "extra", "")).startswith("{"):
-        try:  # a spec gripper keeps its spec as JSON followed by the palm mesh's sha256
-            value = json.loads(gripper.extra[:-64]).get(key)
-        except ValueError:
-            value = None
-    return None if value is None else float(value)
 
 
 def _angle(ra: np.ndarray, rb: np.ndarray) -> np.ndarray:
@@ -203,7 +191,7 @@ def simulate(plan, robot, mesh, scene, friction: float, hulls: list[tuple[np.nda
     grip_force, mu, mu_table = resolve(params, gripper, friction)
     t_build = time.perf_counter()
     ss = build_scene(robot, gripper, scene, mesh, hulls, params.density, grip_force, mu, mu_table, params.timestep,
-                     spec_value(gripper, "mass"), self_pairs, params.impratio)
+                     gripper.spec_value("mass"), self_pairs, params.impratio)
     m = ss.model
     data = mujoco.MjData(m)
     build_seconds = time.perf_counter() - t_build

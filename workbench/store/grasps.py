@@ -14,8 +14,9 @@ STAGE = "grasps"
 
 
 def grasp_param_dict(params: GraspParams, gripper: Gripper) -> dict:
-    """The grasp stage's parameter set as stored: the parameters and the gripper's digest."""
-    return {**params.as_dict(), "gripper": gripper.digest}
+    """The grasp stage's parameter set as stored: the parameters (a friction left to the gripper set,
+    `GraspParams.for_gripper`) and the gripper's digest."""
+    return {**params.for_gripper(gripper).as_dict(), "gripper": gripper.digest}
 
 
 def find_grasps(store: Store, idobject: int, gripper: Gripper, params: GraspParams) -> int | None:

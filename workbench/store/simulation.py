@@ -9,9 +9,9 @@ from typing import Any
 import numpy as np
 
 from workbench.errors import StoreError
+from workbench.grasping.grasps import DEFAULT_FRICTION
 from workbench.store import Store
 
-DEFAULT_FRICTION = 0.3  # GraspParams' default
 STEP_COLUMNS = ("seq", "step", "kind", "caption", "t", "planned", "simulated", "error", "angle", "slip", "slip_angle",
                 "settle", "touching", "ok")
 
