@@ -36,8 +36,7 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
     out = np.empty(max(n, 16), dtype=np.int64)
     ptr = [0]
     seeds = []
-    sums = [(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
-    sums.pop()
+    sums = []
     size = 0
     tmp = np.empty(n, dtype=np.int64)
     bits = 1
