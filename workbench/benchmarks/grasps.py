@@ -15,6 +15,7 @@ from workbench.benchmarks.graspcheck import CHECKS, check_grasps, failures
 from workbench.benchmarks.pregrasp import run as mug_table
 from workbench.benchmarks.organic import ORGANIC, blob, min_width
 from workbench.benchmarks.paper import TABLE_I, bench_objects
+from workbench.geometry.facets import FACETS_KEY
 from workbench.geometry.objects import from_trimesh, load_object
 from workbench.grasping.grasps import PREBUILD_TRIANGLES, GraspParams, plan_grasps
 from workbench.grasping.pads import edge_share
@@ -56,7 +57,7 @@ def _check_hand(name: str) -> str:
 def _plan_anew(obj, hand, params: GraspParams):
     """`plan_grasps` segmenting the part again, as the papers' grasp planning times count it (the hull and triangle
     hierarchy that `plan_grasps` keeps on the mesh are kept)."""
-    obj.mesh._cache.delete("workbench_facets")
+    obj.mesh._cache.delete(FACETS_KEY)
     return plan_grasps(obj, hand, params)
 
 

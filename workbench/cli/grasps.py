@@ -98,9 +98,9 @@ def run(args: argparse.Namespace) -> int:
     print(f"{obj.name}: {obj.n_triangles} triangles, centre of mass {np.round(obj.com, 4).tolist()} m ({obj.com_method})")
     for note in obj.repairs:
         print(f"repaired: {note}")
-    if args.friction is None and gripper.spec_value("friction") is not None:
-        print(f"friction {gripper.spec_value('friction'):g}: the friction gripper {gripper.name}'s spec states "
-              f"(--friction overrides it)")
+    stated = gripper.spec_value("friction")
+    if args.friction is None and stated is not None:
+        print(f"friction {stated:g}: the friction gripper {gripper.name}'s spec states (--friction overrides it)")
     if result.plan is not None:
         print(grasp_counts(result.plan))
     print(f"{verb} {result.count} free-air grasps for gripper {gripper.name} in {args.db} (parameter set {result.idparamset}) in {dt:.2f} s")

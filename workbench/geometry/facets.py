@@ -78,6 +78,9 @@ class Facets:
         return fid, tid
 
 
+FACETS_KEY = "workbench_facets"  # the mesh cache entry holding its last segmentation (`segment`)
+
+
 def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = "over",
             merge_angle: float | None = None) -> Facets:
     """Segment `mesh` into facets: `method` "over" (over-segmentation) or "conventional" (Fig. 2)."""
@@ -89,7 +92,7 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     # the last segmentation of this mesh, kept in trimesh's cache (dropped when the mesh changes): planning again with
     # other sampling, filters or gripper (a widget's slider) segments once
     key = (method, float(tau), merge)
-    kept = mesh._cache["workbench_facets"]
+    kept = mesh._cache[FACETS_KEY]
     if kept is not None and kept[0] == key:
         return kept[1]
     normals = np.asarray(mesh.face_normals)
@@ -111,7 +114,7 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
                  edges=mesh.vertices[be])
     for a in (out.tri_ptr, out.tri_index, out.normals, out.centers, out.areas, out.seeds, out.edge_ptr, out.edges):
         a.flags.writeable = False  # shared by every plan of the mesh
-    mesh._cache["workbench_facets"] = (key, out)
+    mesh._cache[FACETS_KEY] = (key, out)
     return out
 
 

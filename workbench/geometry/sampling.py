@@ -68,7 +68,7 @@ def neighbour_filter(points: np.ndarray, normals: np.ndarray, radius: float, tau
     if len(pairs) == 0:
         return np.ones(n, dtype=bool)
     # neighbour lists of lower-indexed samples, for the greedy pass in index order
-    lo, hi = pairs.min(axis=1), pairs.max(axis=1)
+    lo, hi = pairs[:, 0], pairs[:, 1]  # query_pairs gives i < j
     order = np.argsort(hi, kind="stable")
     return _greedy_keep(np.ascontiguousarray(lo[order], dtype=np.int64),
                         np.searchsorted(hi[order], np.arange(n + 1)).astype(np.int64), n)

@@ -330,6 +330,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
     slack = 1e-9 * (1.0 + np.sqrt(diag))
     slab = tri.shape[0] >= SLAB_MIN
     stack = np.empty(_STACK, dtype=np.int64)
+    leaves = np.empty(P, dtype=np.int64)  # the leaves a line meets (`_axis_crossings`)
     hkey = np.empty(P + 1)  # the open nodes of a best-first search: fewer than the leaves
     hnode = np.empty(P + 1, dtype=np.int64)
     hmask = np.empty(P + 1, dtype=np.int64)
@@ -469,7 +470,7 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                 break
         if wide:
             a_max, a_min = _axis_crossings(shape, slots, leaf, tri, o, x0, y, z0, wlo, whi, slack, rad2, stack,
-                                           ca, cb, ly)
+                                           leaves, ca, cb, ly)
             if np.isfinite(a_max - a_min) and a_max - a_min > jaw_max + tie:
                 for j in range(A):
                     hrow = k * A + j
@@ -482,23 +483,36 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
 
 
 @njit(cache=True)
-def _axis_crossings(shape, slots, leaf, tri, o, x0, y, z0, wlo, whi, slack, rad2, stack, ca, cb, ly):
-    """The highest and lowest heights (a_max, a_min) at which the axis (o, y) crosses a triangle within the window
-    [wlo, whi] (-inf, inf: none)."""
-    a_max, a_min = -np.inf, np.inf
+def _line_leaves(shape, o, d, slack, stack, leaves):
+    """The leaves of the hierarchy whose boxes (widened by `slack`) the line through `o` along `d` passes through,
+    into `leaves` (at least as long as the leaves are many), depth first; returns how many."""
     P = shape.shape[0] // 2
+    n = 0
     stack[0] = 1
     top = 1
     while top > 0:
         top -= 1
         node = stack[top]
-        if shape[node, 0] > shape[node, 3] or not _line_meets_box(shape, node, o, y, slack):
+        if shape[node, 0] > shape[node, 3] or not _line_meets_box(shape, node, o, d, slack):
             continue
         if node < P:
             stack[top] = 2 * node
             stack[top + 1] = 2 * node + 1
             top += 2
             continue
+        leaves[n] = node
+        n += 1
+    return n
+
+
+@njit(cache=True)
+def _axis_crossings(shape, slots, leaf, tri, o, x0, y, z0, wlo, whi, slack, rad2, stack, leaves, ca, cb, ly):
+    """The highest and lowest heights (a_max, a_min) at which the axis (o, y) crosses a triangle within the window
+    [wlo, whi] (-inf, inf: none)."""
+    a_max, a_min = -np.inf, np.inf
+    P = shape.shape[0] // 2
+    for i in range(_line_leaves(shape, o, y, slack, stack, leaves)):
+        node = leaves[i]
         for q in range((node - P) * leaf, (node - P + 1) * leaf):
             if slots[q] < 0:
                 continue
@@ -702,20 +716,11 @@ def line_crossings(shape, slots, leaf, tri, starts, dirs):
         diag += (shape[1, 3 + a] - shape[1, a]) ** 2
     slack = 1e-9 * (1.0 + np.sqrt(diag))
     stack = np.empty(_STACK, dtype=np.int64)
+    leaves = np.empty(P, dtype=np.int64)
     for k in range(K):
         o, d = starts[k], dirs[k]
-        stack[0] = 1
-        top = 1
-        while top > 0:
-            top -= 1
-            node = stack[top]
-            if shape[node, 0] > shape[node, 3] or not _line_meets_box(shape, node, o, d, slack):
-                continue
-            if node < P:
-                stack[top] = 2 * node
-                stack[top + 1] = 2 * node + 1
-                top += 2
-                continue
+        for i in range(_line_leaves(shape, o, d, slack, stack, leaves)):
+            node = leaves[i]
             for q in range((node - P) * leaf, (node - P + 1) * leaf):
                 if slots[q] < 0:
                     continue

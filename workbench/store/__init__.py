@@ -95,7 +95,7 @@ class Store:
             except (StoreError, duckdb.Error) as exc:
                 self.con.close()
                 if isinstance(exc, duckdb.Error):
-                    raise open_error(self.path, exc, self._wait) from None
+                    raise self._open_error(exc) from None
                 raise
         if self.dataset is not None:
             dataset_views(self)
@@ -145,7 +145,7 @@ class Store:
             con = self._connect(read_only=True, translate=False)
         except duckdb.Error as exc:
             if "different configuration" not in str(exc):
-                raise open_error(self.path, exc, self._wait) from None
+                raise self._open_error(exc) from None
             con, checked_read_only = self._connect(read_only), read_only
         try:
             self.identity = inspect(con, self.path, ALL_TABLES + META_TABLES + MIGRATIONS)
@@ -153,7 +153,7 @@ class Store:
         except BaseException as exc:
             con.close()
             if isinstance(exc, duckdb.Error):
-                raise open_error(self.path, exc, self._wait) from None
+                raise self._open_error(exc) from None
             raise
         if checked_read_only != read_only:
             con.close()
@@ -172,7 +172,7 @@ class Store:
                     continue
                 if not translate and isinstance(exc, duckdb.Error):
                     raise
-                raise open_error(self.path, exc, self._wait) from None
+                raise self._open_error(exc) from None
 
     def _create(self) -> None:
         """The schema and metadata of a new store, or the upgrade of an older one, in one transaction."""
@@ -246,8 +246,12 @@ class Store:
 
     def _write_error(self, exc: BaseException) -> BaseException:
         if is_disk_full(exc) or isinstance(exc, (duckdb.IOException, duckdb.FatalException)):
-            return open_error(self.path, exc, self._wait)
+            return self._open_error(exc)
         return exc
+
+    def _open_error(self, exc: BaseException) -> StoreError:
+        """`identity.open_error` for this store, naming how long it waited for a busy file."""
+        return open_error(self.path, exc, self._wait)
 
     def run(self, sql: str, params: list[Any] | tuple[Any, ...] = ()) -> list[tuple]:
         """Execute one statement with bound parameters and return all its rows (DuckDB needs results finished).

@@ -214,21 +214,16 @@ def grasp_set_query(table: GraspPlacementTable, start: np.ndarray, goal: np.ndar
     return Sequence("grasp", grasps, placements, len(levels) - 1, time.perf_counter() - t0, theta_ini=theta_ini)
 
 
-def _served_angles(table: GraspPlacementTable, p: int) -> str:
-    """The angles phi (degrees, as runs of samples, wrapping around) at which some grasp of the table holds placement
-    `p`."""
+def _other_angle(table: GraspPlacementTable, p: int) -> str:
+    """What to try when no grasp holds placement `p` at the asked angle: another angle phi (degrees, as runs of
+    samples, wrapping around) at which some grasp of the table holds it, or, with none, another table."""
     spans = runs(table.q[:, p].any(axis=(0, 1)), np.degrees(table.phi))
     if not spans:
         return (f"no angle of placement {p} has a grasp at this table point: more grasp points per class "
                 f"(`workbench gptable --points N`) or another --table-point may give some")
     text = [f"{a:.0f}" if a == b else f"{a:.0f} to {b:.0f}{' through 0' if a > b else ''}" for a, b in spans]
-    return f"placement {p} has grasps at {', '.join(text[:6])}{' ...' if len(text) > 6 else ''} deg"
-
-
-def _other_angle(table: GraspPlacementTable, p: int) -> str:
-    """What to try when no grasp holds placement `p` at the asked angle: another angle, where some has a grasp."""
-    served = _served_angles(table, p)
-    return served if served.startswith("no angle") else f"choose another angle ({served})"
+    more = " ..." if len(text) > 6 else ""
+    return f"choose another angle (placement {p} has grasps at {', '.join(text[:6])}{more} deg)"
 
 
 def placement_query(table: GraspPlacementTable, start: tuple[int, float], goal: tuple[int, float]) -> Sequence:
