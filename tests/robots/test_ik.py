@@ -453,3 +453,33 @@ def test_closed_form_stores_the_free_branch_nearest_home_and_finds_what_the_nume
     r, b = other[np.argmax(free)]
     q, ok = solver.solve(grips["rotmat"][rows[r]][None], grips["placement_rotmat"][rows[r]][None], joints[r, b][None], 1)
     assert ok[0] and np.allclose(q[0], joints[r, b]) and not np.allclose(q[0], stored[r])
+
+
+def _nearest_turn(q: np.ndarray, ref: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Whether each joint of `q` (M, n) is, among its whole-turn equivalents within the limits, the one nearest `ref`."""
+    cand = q[..., None] + 2 * np.pi * np.arange(-3, 4)
+    inside = (cand >= lower[:, None]) & (cand <= upper[:, None])
+    best = np.where(inside, np.abs(cand - np.asarray(ref)[..., None]), np.inf).min(axis=-1)
+    return np.abs(q - ref) <= best + 1e-9
+
+
+def test_numerical_solutions_take_the_whole_turns_nearest_home_and_their_neighbours():
+    """A joint spanning more than a turn (the UR5's, +-2 pi) reaches each pose at angles a turn apart. Solved
+    numerically from seeds far from home, the stored grasp takes the equivalent nearest the robot's home on every
+    joint, and every retraction and lift the one nearest its neighbour's on the way, so that no motion swings a joint
+    round a whole turn; the poses are unchanged (pinocchio forward kinematics of the stored joints)."""
+    ur5 = get_robot("ur5")
+    grips, mesh, _ = synthetic_grips(**{**SMALL, "angles": 2})
+    res = ik_feasibility(ur5, grips, default_scene("ur5"), HANDX, WORLDZ, mesh, OPTS, workers=1, progress=False)
+    rows = np.flatnonzero(res.feasible.all(axis=1))
+    assert len(rows) > 10
+    q = res.joints[rows]
+    assert _nearest_turn(q[:, 0], ur5.home(), ur5.lower, ur5.upper).all()
+    for k, prev in ((1, 0), (2, 1), (3, 0), (4, 3)):
+        assert _nearest_turn(q[:, k], q[:, prev], ur5.lower, ur5.upper).all()
+    # the same TCP poses as asked: the stored grasp joints through pinocchio against the grips' world TCP poses
+    model, data = ur5.model, ur5.model.createData()
+    for r, qq in zip(rows[:20], q[:20, 0]):
+        pin.framesForwardKinematics(model, data, qq)
+        tcp = ur5.base @ data.oMf[ur5.tcp_id].homogeneous
+        assert np.allclose(tcp, grips["rotmat"][r], atol=2e-4)

@@ -66,6 +66,32 @@ def test_a_continuous_joint_without_a_velocity_limit_is_refused_in_one_line(tmp_
         get_robot(str(urdf), tip_frame="a")
 
 
+def test_an_arm_joint_that_mimics_another_is_refused_and_a_mimic_finger_past_the_tip_is_not(tmp_path):
+    """Pinocchio reads a <mimic> joint as a joint of its own: an arm with one on its chain to the tip would be planned
+    at joint values the coupled arm cannot take, so it is refused in one line naming both joints; a hand's mimic
+    finger past the tip (replaced by the planning gripper) loads."""
+    def arm(mimic_on: str) -> str:
+        joints = []
+        for i, (parent, child) in enumerate((("base", "l1"), ("l1", "l2"), ("l2", "tool"), ("tool", "finger"))):
+            kind = "prismatic" if child == "finger" else "revolute"
+            mimic = '<mimic joint="j0" multiplier="1"/>' if f"j{i}" == mimic_on else ""
+            joints.append(f'<joint name="j{i}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+                          f'<origin xyz="0 0 0.3"/><axis xyz="0 1 0"/>{mimic}'
+                          f'<limit lower="-1" upper="1" effort="10" velocity="1"/></joint>')
+        links = "".join(f'<link name="{n}"/>' for n in ("base", "l1", "l2", "tool", "finger"))
+        return f'<robot name="m">{links}{"".join(joints)}</robot>'
+
+    coupled = tmp_path / "coupled.urdf"
+    coupled.write_text(arm("j2"))
+    with pytest.raises(RobotError, match="arm joint 'j2' .*mimics joint 'j0'") as err:
+        get_robot(str(coupled), tip_frame="tool")
+    assert "\n" not in str(err.value)
+    fingers = tmp_path / "fingers.urdf"
+    fingers.write_text(arm("j3"))
+    robot = get_robot(str(fingers), tip_frame="tool")
+    assert robot.nq == 3 and tuple(robot.joint_names) == ("j0", "j1", "j2")
+
+
 def test_a_urdf_in_a_ros_package_finds_its_meshes_and_the_row_lets_pinocchio_load_them(tmp_path):
     pkg = tmp_path / "ws" / "src" / "my_xarm"
     shutil.copytree(erd_robots() / "xarm_description", pkg)

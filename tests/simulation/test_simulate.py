@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import trimesh
+from scipy.spatial.transform import Rotation
 
 from workbench.cli.main import main
 from workbench.errors import PlanningError, SimulationError
@@ -403,3 +404,37 @@ def test_a_part_placed_beside_the_table_drops_to_the_floor_at_once(demo):
     # it lies on the floor: the replay stops at the step whose contacts first reach it, a step's fall (about 3.8
     # m/s for 2 ms) past the first touch at most
     assert abs(low.min() - FLOOR_Z) < np.sqrt(2 * 9.81 * -FLOOR_Z) * SimParams().timestep + 1e-3
+
+
+def test_a_urdf_link_inertia_that_is_no_rigid_bodys_is_made_one_that_mujoco_takes():
+    """A URDF may give a link principal moments with A + B < C, which no rigid body has and MuJoCo refuses; the scene
+    raises the two smaller moments just enough, about the same principal axes, and MuJoCo compiles the body."""
+    import mujoco
+
+    from workbench.simulation.scene import physical_inertia
+
+    turn = Rotation.from_euler("xyz", [0.3, -0.5, 1.1]).as_matrix()
+    bad = turn @ np.diag([0.001, 0.002, 0.005]) @ turn.T  # 0.001 + 0.002 < 0.005
+
+    def compiles(inertia: np.ndarray) -> bool:
+        spec = mujoco.MjSpec()
+        body = spec.worldbody.add_body(name="link")
+        body.explicitinertial = True
+        body.mass = 1.0
+        body.fullinertia = [inertia[0, 0], inertia[1, 1], inertia[2, 2], inertia[0, 1], inertia[0, 2], inertia[1, 2]]
+        body.add_joint(type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, 1])
+        try:
+            spec.compile()
+        except ValueError:
+            return False
+        return True
+
+    assert not compiles(bad)
+    fixed, changed = physical_inertia(bad, 1.0)
+    assert changed and compiles(fixed)
+    e, v = np.linalg.eigh(fixed)
+    assert e[0] + e[1] >= e[2] and e[2] == pytest.approx(0.005)
+    assert np.allclose(np.abs(v.T @ turn), np.eye(3), atol=1e-9)  # the same principal axes, in the same order
+    good = turn @ np.diag([0.002, 0.003, 0.004]) @ turn.T
+    same, changed = physical_inertia(good, 1.0)
+    assert not changed and np.allclose(same, good)

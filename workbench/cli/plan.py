@@ -19,7 +19,6 @@ from workbench.cli.simulate import INSTALL, add_sim_arguments, print_simulation,
 from workbench.errors import PlanningError
 from workbench.params import cli_bound, parse_number
 from workbench.planners.wan_harada.motions import DEFAULT_ACC, ExecOptions
-from workbench.grasping.naming import per_part_numbers
 from workbench.planners.wan_harada.query import PoseQuery, parse_pose
 from workbench.planners.wan_harada.roadmap import NO_RESULT
 from workbench.planners.wan_harada.stages import (
@@ -37,6 +36,7 @@ from workbench.viewer.wan_harada import caption_track, plan_scene
 
 ALTERNATIVES = cli_bound(0, 100, integer=True, help="next best plans")
 ACC = cli_bound(0, 1000, lo_open=True, unit="rad/s^2", help="joint acceleration limit")
+SPEED = cli_bound(0, 1, lo_open=True, help="share of the URDF's joint velocity limits")
 BUDGET = cli_bound(0, 3600, lo_open=True, unit="s", help="RRT-Connect time budget per motion")
 REMOVED = cli_bound(0, 100_000, integer=True, help="motions that may fail before giving up")
 SEED = cli_bound(0, 2**32 - 1, integer=True, help="motion planner seed")
@@ -49,7 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                                         "x and y in metres on the table (top at z = 0), yaw in degrees about z (within "
                                         "[-360, 360]). Every plan comes with its motions: straight TCP lines to take and put "
                                         "down the part, collision-free joint-space transfers and transits (straight, else "
-                                        "RRT-Connect), timed under the URDF's velocity limits and --acc.")
+                                        "RRT-Connect), timed under the URDF's velocity limits (times --speed) and --acc.")
     parser.add_argument("--db", required=True, help="DuckDB store file (built with `workbench build`)")
     parser.add_argument("--object", required=True, help="object name in the store")
     parser.add_argument("--robot", required=True, help="the robot's name in the store: a built-in (panda, ur5, talos, "
@@ -109,7 +109,7 @@ def run(args: argparse.Namespace) -> int:
         planner = load_planner(store, args.object, args.robot, args.handx, args.worldz, allow_partial=args.allow_partial,
                                gripper=gripper)
         t_load = time.perf_counter() - t0
-        numbers = per_part_numbers(planner.free["idfreetabletopplacement"])
+        numbers = planner.numbers
         start, goal = store_placement(start, numbers, args.object, "--start"), store_placement(goal, numbers, args.object, "--goal")
         turn = (goal.yaw - start.yaw + math.pi) % (2 * math.pi) - math.pi
         if (start.idfreetabletopplacement == goal.idfreetabletopplacement in planner.placement_ids()
@@ -187,10 +187,14 @@ def report_graph(planner, t_load: float) -> None:
 
 
 def add_motion_arguments(parser: argparse.ArgumentParser, removed: str) -> None:
-    """--acc, --budget, --max-removed (of `removed`, what a failing motion takes out) and --seed, read by
+    """--acc, --speed, --budget, --max-removed (of `removed`, what a failing motion takes out) and --seed, read by
     `exec_options`."""
     parser.add_argument("--acc", type=parse_number(ACC, "--acc", DEFAULT_ACC), default=DEFAULT_ACC, metavar="X",
                         help=f"joint acceleration limit ({ACC.describe(True)}; default {DEFAULT_ACC:g})")
+    parser.add_argument("--speed", type=parse_number(SPEED, "--speed", 1.0), default=1.0, metavar="X",
+                        help=f"time the motions under this share of the URDF's joint velocity limits ({SPEED.describe(True)}; "
+                             f"default 1): a URDF that states its drives' peak speeds gives motions at which a held "
+                             f"part slips, which `--simulate` shows")
     parser.add_argument("--budget", type=parse_number(BUDGET, "--budget", 1.0), default=1.0, metavar="S",
                         help=f"RRT-Connect time budget per motion ({BUDGET.describe(True)}; default 1)")
     parser.add_argument("--max-removed", type=parse_number(REMOVED, "--max-removed", 10), default=10, metavar="N",
@@ -200,8 +204,9 @@ def add_motion_arguments(parser: argparse.ArgumentParser, removed: str) -> None:
 
 
 def exec_options(args: argparse.Namespace) -> ExecOptions:
-    """Motion settings from --acc, --budget, --max-removed and --seed (their ranges checked while parsing)."""
-    return ExecOptions(acc=args.acc, max_removed=args.max_removed, motion=MotionOptions(budget=args.budget, seed=args.seed))
+    """Motion settings from --acc, --speed, --budget, --max-removed and --seed (their ranges checked while parsing)."""
+    return ExecOptions(acc=args.acc, max_removed=args.max_removed, motion=MotionOptions(budget=args.budget, seed=args.seed),
+                       speed=args.speed)
 
 
 def write_trajectory(plan, out: str | Path) -> str:
@@ -228,10 +233,7 @@ def store_placement(query: PoseQuery, numbers: dict[int, int], name: str, flag: 
 
 def pose_text(query: PoseQuery, numbers: dict[int, int] | None) -> str:
     """`PLACEMENT,X,Y,YAW` (degrees) with the placement's number within the part when `numbers` are given."""
-    if numbers:
-        query = replace(query, idfreetabletopplacement=numbers.get(query.idfreetabletopplacement,
-                                                                   query.idfreetabletopplacement))
-    return query.text_degrees()
+    return query.text_degrees(numbers)
 
 
 def print_plan(plan, numbers: dict[int, int] | None = None) -> None:
@@ -252,7 +254,8 @@ def print_plan(plan, numbers: dict[int, int] | None = None) -> None:
                  "dwell": "jaw actions"}
         parts = ", ".join(f"{n} {names.get(k, k)}" for k, n in sorted(methods.items()))
         print(f"motions: {len(plan.segments)} segments ({parts}); trajectory {plan.duration:.1f} s at "
-              f"acceleration limit {max(plan.acc) if plan.acc else DEFAULT_ACC:g} rad/s^2; planned in {t.get('motion', 0):.2f} s; "
+              f"acceleration limit {max(plan.acc) if plan.acc else DEFAULT_ACC:g} rad/s^2"
+              f"{f' and {plan.speed:.0%} of the velocity limits' if plan.speed < 1 else ''}; planned in {t.get('motion', 0):.2f} s; "
               f"{plan.removed} roadmap node(s) or grip(s) removed because their motions failed")
 
 

@@ -289,15 +289,30 @@ def solve_into(consts: tuple[np.ndarray, ...], poses: np.ndarray, q: np.ndarray,
                    use[s:s + block] if len(use) else use)
 
 
+def whole_turns(joints: np.ndarray, q_ref: np.ndarray, lower: np.ndarray, upper: np.ndarray,
+                revolute: np.ndarray | None = None) -> np.ndarray:
+    """`joints` (..., n) with each joint that spans more than a turn moved by whole turns toward `q_ref` (broadcast
+    to them) where that stays within the limits: the same arm pose, the equivalent angles nearest the reference.
+    `revolute` (n,) marks the joints that turn (default all; a prismatic joint's metres are left as they are)."""
+    lower, upper = np.asarray(lower, dtype=np.float64), np.asarray(upper, dtype=np.float64)
+    turns = upper - lower > 2 * np.pi
+    if revolute is not None:
+        turns &= np.asarray(revolute, dtype=bool)
+    if not turns.any():
+        return joints
+    with np.errstate(invalid="ignore"):  # NaN rows (no solution) stay NaN
+        alt = joints + 2 * np.pi * np.round((q_ref - joints) / (2 * np.pi))
+        return np.where(turns & (alt >= lower) & (alt <= upper), alt, joints)
+
+
 def branch_distances(joints: np.ndarray, valid: np.ndarray, q_ref: np.ndarray, lower: np.ndarray | None = None,
                      upper: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Branches (N, B, n) moved by whole turns toward `q_ref` ((n,) or (N, n)) where that stays within the limits
     (a joint spanning more than a turn), and their L1 distances to it (N, B), inf where not valid."""
     ref = np.asarray(q_ref, dtype=np.float64)
     ref = np.broadcast_to(ref[:, None] if ref.ndim == 2 else ref, joints.shape)
-    if lower is not None and upper is not None and (np.asarray(upper) - np.asarray(lower) > 2 * np.pi).any():
-        alt = joints + 2 * np.pi * np.round((ref - joints) / (2 * np.pi))
-        joints = np.where((alt >= lower) & (alt <= upper), alt, joints)
+    if lower is not None and upper is not None:
+        joints = whole_turns(joints, ref, lower, upper)
     with np.errstate(invalid="ignore"):  # NaN joints of invalid branches
         return joints, np.where(valid, np.abs(joints - ref).sum(axis=2), np.inf)
 

@@ -47,7 +47,7 @@ from tqdm.auto import tqdm
 from workbench.errors import ParameterError, RobotError
 from workbench.params import Params, param
 from workbench.robots._closedkernel import branch_order
-from workbench.robots.analytic import branch_distances
+from workbench.robots.analytic import branch_distances, whole_turns
 from workbench.robots.chain import forward, solve_ik
 from workbench.robots.collider import Collider, Scene
 from workbench.robots.model import Robot, RobotSpec, robot_from_spec
@@ -502,7 +502,7 @@ class IKSolver:
         for k, prev in ((0, -1), (1, 0), (2, 1), (3, 0), (4, 3))[:nk]:
             warm = joints[:, prev] if prev >= 0 else np.full((c, n), np.nan)
             joints[:, k], feas[:, k] = self.solve_from_seeds(targets[:, k], place[:, k], warm)
-        return feas, joints
+        return feas, chain_turns(self.robot, joints)
 
     def solve_from_seeds(self, targets: np.ndarray, placements: np.ndarray, warm: np.ndarray,
                          numeric: bool = False) -> tuple[np.ndarray, np.ndarray]:
@@ -550,6 +550,25 @@ class IKSolver:
             if not left.any():
                 break
         return q_out, good
+
+
+def chain_turns(robot: Robot, joints: np.ndarray) -> np.ndarray:
+    """Joints (M, K, n) of grips at the KINDS' poses with every joint spanning more than a turn moved by whole turns
+    (`analytic.whole_turns`, the same arm poses): the grasp's toward the robot's home configuration, each other pose's
+    toward its neighbour's on the way (handx toward the grasp, handxworldz toward handx, worlda toward the grasp,
+    worldaworldz toward worlda; toward the grasp's where the neighbour has none), as the closed form's branch choice
+    does. A numerical solution from a far seed may lie turns away from home, and the arm would swing them round."""
+    if joints.shape[1] == 0 or not (robot.upper - robot.lower > 2 * np.pi).any():
+        return joints
+    revolute = ~np.asarray(robot.chain_prismatic, dtype=bool)
+    out = joints.copy()
+    home = robot.home()
+    out[:, 0] = whole_turns(out[:, 0], home, robot.lower, robot.upper, revolute)
+    grasp = np.where(np.isfinite(out[:, 0]), out[:, 0], home)
+    for k, prev in ((1, 0), (2, 1), (3, 0), (4, 3))[: joints.shape[1] - 1]:
+        ref = np.where(np.isfinite(out[:, prev]).all(axis=1, keepdims=True), out[:, prev], grasp)
+        out[:, k] = whole_turns(out[:, k], ref, robot.lower, robot.upper, revolute)
+    return out
 
 
 _MASK64 = np.uint64(0xFFFFFFFFFFFFFFFF)

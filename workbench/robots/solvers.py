@@ -232,7 +232,7 @@ def nearby_form(robot, samples: int = 4) -> ClosedForm | None:
 # rows go through) can change a stored `ik` row. The IK stage's digest holds the revisions of the solvers a robot
 # uses, so a store built by an older solver computes its rows again instead of reusing them.
 REVISIONS = {"collision checks": 1, "spherical wrist": 1, "spherical shoulder": 1, "three parallel axes": 1,
-             "subproblem decomposition": 1, "swept joint": 2, "numerical": 1}
+             "subproblem decomposition": 1, "swept joint": 2, "numerical": 1, "whole turns": 1}
 
 
 def revision(robot, numerical: bool = False) -> dict[str, int]:
@@ -242,6 +242,8 @@ def revision(robot, numerical: bool = False) -> dict[str, int]:
     keys = ["collision checks"]
     if form is None:
         keys.append("numerical")
+        if (robot.upper - robot.lower > 2 * np.pi).any():  # its solutions moved by whole turns toward home
+            keys.append("whole turns")
         nearby = None if numerical else nearby_form(robot)
         if nearby is not None:  # its seeds come from a swept closed form
             keys += [k for k in REVISIONS if nearby.kind.startswith(k)] + ["swept joint"]

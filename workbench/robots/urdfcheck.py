@@ -3,8 +3,9 @@
 urdfdom and pinocchio trust their input: a joint loop (a link with two parent joints) crashes pinocchio's model
 builder, NaN limits print several lines of parser output, and inverted or empty limits or a joint given as the
 tip frame only show up later as "nothing is reachable". Here the kinematic tree is checked to be a tree (one
-root, every link reached from it once), the tip to be a link, and every moving joint's limits and every origin
-to be finite, with lower below upper.
+root, every link reached from it once), the tip to be a link, no joint between the root and the tip to mimic
+another (pinocchio would read it as a joint of its own), and every moving joint's limits and every origin to be
+finite, with lower below upper.
 """
 
 from __future__ import annotations
@@ -83,6 +84,12 @@ def check_urdf(root: Element, tip_frame: str, label: str = "robot URDF") -> None
         chain.append(by_child[at])
         at = parent_link[at]
     moving = [j for j in chain if j.get("type") in MOVING]  # none: the model says the tip is not moved by any joint
+    for j in moving:
+        mimic = j.find("mimic")
+        if mimic is not None:
+            raise RobotError(f"{label}: arm joint {j.get('name')!r} (on the chain to {tip_frame!r}) mimics joint "
+                             f"{mimic.get('joint', '')!r}; the planner moves every arm joint on its own, so it would "
+                             f"plan poses the coupled arm cannot take (a mimic joint in the hand past the tip is fine)")
     ranges = [_range(j) for j in moving if j.get("type") != "continuous"]
     if moving and len(ranges) == len(moving) and all(hi - lo <= 0 for lo, hi in ranges):
         raise RobotError(f"{label}: every joint from the root to {tip_frame!r} has an empty range (lower = upper), so the "

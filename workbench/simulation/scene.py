@@ -21,13 +21,14 @@ Friction: the pads with the part use the plan's grasp friction, the table with t
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from workbench.errors import SimulationError
+from workbench.errors import RobotWarning, SimulationError
 from workbench.geometry.collision import pinocchio_geometry
 
 ARM_KP = 4000.0  # N m / rad: position gain of every arm joint (tracking error I a / kp, under 0.1 mm at the TCP here)
@@ -103,6 +104,22 @@ def _full_inertia(i: np.ndarray) -> list[float]:
     return [i[0, 0], i[1, 1], i[2, 2], i[0, 1], i[0, 2], i[1, 2]]
 
 
+def physical_inertia(inertia: np.ndarray, mass: float) -> tuple[np.ndarray, bool]:
+    """A link's inertia tensor (3, 3) as physics accepts it, and whether it had to change: a tensor that is not
+    positive definite becomes a small sphere's (1e-4 m^2 times the mass); one whose principal moments break the
+    triangle inequality (A + B >= C, which every rigid body's meet and a hand-written URDF may not) gets its two
+    smaller moments raised by the same amount until they meet it, its axes kept (MuJoCo refuses it otherwise)."""
+    ii = 0.5 * (np.asarray(inertia, dtype=np.float64) + np.asarray(inertia, dtype=np.float64).T)
+    e, v = np.linalg.eigh(ii)  # ascending
+    if e[0] <= 1e-8:
+        return np.eye(3) * 1e-4 * mass, True
+    short = e[2] - e[0] - e[1]
+    if short <= 1e-9 * e[2]:
+        return ii, False
+    e = e + np.array([1.0, 1.0, 0.0]) * (0.5 * short + 1e-6 * e[2])
+    return (v * e) @ v.T, True
+
+
 def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[np.ndarray, np.ndarray]],
                 density: float, grip_force: float, pad_friction: float, table_friction: float,
                 timestep: float, hand_mass: float | None = None, self_pairs: list[tuple[str, str]] | None = None,
@@ -119,7 +136,7 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
     base = robot.base
     parent = spec.worldbody.add_body(name="robot_base", pos=base[:3, 3], quat=_quat(base[:3, :3]))
     model = robot.model
-    arm_joints = []
+    arm_joints, balanced = [], []
     bodies = {0: parent}
     for j in range(1, model.njoints):
         placement = robot.chain_placement[j - 1]
@@ -129,8 +146,10 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
         body.explicitinertial = True
         body.mass = mass
         body.ipos = np.asarray(inertia.lever, dtype=np.float64)
-        ii = np.asarray(inertia.inertia, dtype=np.float64)
-        body.fullinertia = _full_inertia(ii if np.linalg.eigvalsh(ii).min() > 1e-8 else np.eye(3) * 1e-4 * mass)
+        ii, changed = physical_inertia(inertia.inertia, mass)
+        body.fullinertia = _full_inertia(ii)
+        if changed:
+            balanced.append(robot.joint_names[j - 1])
         kind = mujoco.mjtJoint.mjJNT_SLIDE if robot.chain_prismatic[j - 1] else mujoco.mjtJoint.mjJNT_HINGE
         name = robot.joint_names[j - 1]
         body.add_joint(name=name, type=kind, axis=robot.chain_axis[j - 1], range=[robot.lower[j - 1], robot.upper[j - 1]],
@@ -139,6 +158,10 @@ def build_scene(robot, gripper, scene, mesh: trimesh.Trimesh, hulls: list[tuple[
         bodies[j] = body
         parent = body
 
+    if balanced:
+        warnings.warn(f"robot {robot.name!r}: the URDF inertias of the links moved by {', '.join(balanced)} are not a "
+                      f"rigid body's (not positive definite, or principal moments with A + B < C); simulated with the "
+                      f"nearest valid ones", RobotWarning, stacklevel=2)
     tip = robot.tip_in_joint
     hand_mass = float(hand_mass or HAND_MASS)
     hand = parent.add_body(name="hand", pos=tip[:3, 3], quat=_quat(tip[:3, :3]), gravcomp=1.0)

@@ -49,7 +49,7 @@ Extra tables
   chunk by chunk; runkey names its tabletop set, robot, scene and retractions). A stage written in one
   transaction is complete when its paramset row exists. Consumers refuse an incomplete IK run unless asked.
 - plan rows are unique per query and motions: a re-run of the same query with the same motion settings finds the
-  stored answer (store.wan_harada.find_plan); another --acc, or motions timed otherwise, is a new plan.
+  stored answer (store.wan_harada.find_plan); another --acc or --speed, or motions timed otherwise, is a new plan.
 - a task's plan (the grasp-placement table's Fig. 1 task) keeps its task: plan.start_held and plan.end_held (the
   motions begin with the part already in the hand / end with it still held), plan.insertion (unit world
   direction, NULL without one) and plan.insertion_depth (m), plan.obstacles (digest of the obstacles, NULL without
@@ -211,7 +211,8 @@ ALL_TABLES: tuple[str, ...] = CORE_TABLES
 # rows when the step is on the grid, joint vectors for approach (handx), grasp and retract (handx + worldz)).
 # Motions (CONVENTIONS.md, Plans and motions): plan.duration (s, the whole timed trajectory),
 # plan.removed (roadmap nodes or start/goal grips removed because their motions failed before this plan was found),
-# plan.t_motion (s spent planning and timing motions), plan.acc (the acceleration limits used, rad/s^2 per joint);
+# plan.t_motion (s spent planning and timing motions), plan.acc (the acceleration limits used, rad/s^2 per joint),
+# plan.speed (the share of the URDF's joint velocity limits the motions were timed under; NULL read as 1);
 # plansegment: one row per motion in order (seq): kind (approach, retract, transit, transfer, gripper), caption (the
 # step it serves: pick, transfer, release, regrasp, place), step (planstep seq), holding (object in the hand), t0 (s
 # from the plan's start), duration (s), method (tcp-line, line, rrtconnect, dwell), jaw (m) and its knots: t (s from
@@ -518,6 +519,7 @@ MIGRATIONS: tuple[str, ...] = (
     "ALTER TABLE freetabletopplacement ADD COLUMN IF NOT EXISTS probability DOUBLE",
     "ALTER TABLE freetabletopplacement ADD COLUMN IF NOT EXISTS rocking BOOLEAN",
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS acc DOUBLE[]",
+    "ALTER TABLE plan ADD COLUMN IF NOT EXISTS speed DOUBLE",
     # the planner that answered: 'wan_harada' (the roadmap planner, every plan stored before) or 'tournassoud'
     "ALTER TABLE plan ADD COLUMN IF NOT EXISTS planner VARCHAR DEFAULT 'wan_harada'",
     # a task's plan: the part in the hand at the start or the end, the insertion, the obstacles; the held part's lift

@@ -84,8 +84,8 @@ QUERY_COLUMNS = ("idobject", "idrobot", "idscene", "idikret", "idtabletop", "sta
 def find_plan(store: Store, plan: dict[str, Any], segments: dict[str, Any] | None = None) -> int | None:
     """The id of a stored plan answering the same query (object, robot, scene, retractions, tabletop set, start and
     goal placements and poses to 1e-9, rank, and a task's held ends, insertion and obstacles), or None. With its
-    `segments`, only a plan with the same motions counts: the same acceleration limits, duration and number of knots
-    (another --acc, or a trajectory timed otherwise by another version, is a new plan)."""
+    `segments`, only a plan with the same motions counts: the same acceleration limits, speed, duration and number of
+    knots (another --acc or --speed, or a trajectory timed otherwise by another version, is a new plan)."""
     where = " AND ".join(f"{c} = ?" for c in QUERY_COLUMNS)
     args = [*(plan[c] for c in QUERY_COLUMNS), list(plan["start_xyyaw"]), list(plan["goal_xyyaw"])]
     same = (" AND coalesce(start_held, false) = ? AND coalesce(end_held, false) = ? AND obstacles IS NOT DISTINCT FROM ?"
@@ -94,9 +94,10 @@ def find_plan(store: Store, plan: dict[str, Any], segments: dict[str, Any] | Non
              plan.get("insertion"), plan.get("insertion_depth")]
     if segments is not None:
         knots = pc.sum(pc.list_value_length(segments["t"])).as_py() or 0
-        same += (" AND acc IS NOT DISTINCT FROM ?::DOUBLE[] AND duration IS NOT DISTINCT FROM ?"
+        same += (" AND acc IS NOT DISTINCT FROM ?::DOUBLE[] AND coalesce(speed, 1.0) = ?"
+                " AND duration IS NOT DISTINCT FROM ?"
                 " AND (SELECT coalesce(sum(len(s.t)), 0) FROM plansegment s WHERE s.idplan = plan.idplan) = ?")
-        args += [plan.get("acc"), plan.get("duration"), int(knots)]
+        args += [plan.get("acc"), float(plan.get("speed") or 1.0), plan.get("duration"), int(knots)]
     row = store.one(f"SELECT min(idplan) FROM plan WHERE {where} AND list_distance(start_xyyaw, ?::DOUBLE[3]) < 1e-9 "
                     f"AND list_distance(goal_xyyaw, ?::DOUBLE[3]) < 1e-9{same}", args)
     return None if row is None or row[0] is None else int(row[0])

@@ -13,7 +13,7 @@ import pinocchio as pin
 import pytest
 
 from workbench.benchmarks.regrasp import random_pairs
-from workbench.errors import PlanningError
+from workbench.errors import ParameterError, PlanningError
 from workbench.geometry.objects import load_object
 from workbench.planners.wan_harada.motions import ExecOptions, plan_executable
 from workbench.planners.wan_harada.plans import Plan
@@ -180,6 +180,32 @@ def test_plan_with_motions_round_trips_json_and_store(planner, demo_result, tmp_
         assert all(np.isclose(t[0], t0) for t, t0 in zip(ts, table["t0"]))
         assert all(np.isclose(a[-1], b[0]) for a, b in zip(ts[:-1], ts[1:]))
         assert (np.diff(np.concatenate(ts)) >= 0).all() and np.isclose(ts[-1][-1], plan.duration)
+
+
+def test_a_slower_speed_times_the_same_motions_under_that_share_of_the_velocity_limits(planner, demo_result, tmp_path):
+    """--speed times the motions under a share of the URDF's velocity limits: the same paths take longer, every knot's
+    joint speed stays within that share (the full-speed plan goes beyond it), the plan still validates, and the
+    store keeps both plans apart with their speeds (the same query at another speed is another plan)."""
+    from workbench.planners.wan_harada.stages import load_plan, save_plan
+    from workbench.store import Store
+
+    start, goal = choose_task(planner, 0)
+    fast = demo_result.plan
+    slow = plan_executable(planner, start, goal, ExecOptions(acc=ACC, speed=0.4)).plan
+    vlim = np.asarray(planner.robot.model.velocityLimit)
+    share = lambda p: max(float((np.abs(s.traj.qd) / vlim).max()) for s in p.segments)  # noqa: E731
+    assert share(fast) > 0.4 + 1e-3 and share(slow) <= 0.4 + 1e-9
+    assert slow.duration > fast.duration and slow.speed == 0.4 and fast.speed == 1.0
+    assert [s.q_grasp.tolist() for s in slow.steps] == [s.q_grasp.tolist() for s in fast.steps]
+    assert planner.validate(slow, require_motion=True).ok
+    assert Plan.from_json(slow.to_json()).speed == 0.4
+    db = Path(planner.roadmap.key[0])
+    with Store(db) as store:
+        ids = save_plan(store, fast), save_plan(store, slow), save_plan(store, slow)
+        speeds = [load_plan(store, i).speed for i in ids]
+    assert ids[0] != ids[1] == ids[2] and speeds == [1.0, 0.4, 0.4]
+    with pytest.raises(ParameterError, match=r"\(0, 1\]"):
+        ExecOptions(speed=1.5)
 
 
 def test_planner_plan_returns_executable_validated_plans(planner):

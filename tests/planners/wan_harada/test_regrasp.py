@@ -290,8 +290,13 @@ def test_impossible_queries_say_why(planner):
         planner.plan(PoseQuery(ids[0], 3.0, 0.0, 0.0), PoseQuery(ids[0], 0.5, 0.0, 0.0))
     with pytest.raises(PlanningError, match="NaN"):
         planner.plan(PoseQuery(ids[0], float("nan"), 0.0, 0.0), PoseQuery(ids[0], 0.5, 0.0, 0.0))
-    with pytest.raises(PlanningError, match="goal pose .* is not reachable by panda"):
+    with pytest.raises(PlanningError, match="goal pose .* is not reachable by panda: .* every grasp is beyond the "
+                                            "arm's reach .*move the part closer"):
         planner.plan(PoseQuery(ids[-1], 0.5, 0.0, 0.0), PoseQuery(ids[-1], 0.95, 0.75, 0.0))
+    # on the robot's own base: within reach, where the arm stands in the way (not "move it closer")
+    with pytest.raises(PlanningError, match=r"goal pose .* not reachable .* the grasps within the arm's reach \(0.05 m "
+                                            r"from the robot's base\) collide .* clear of the robot"):
+        planner.plan(PoseQuery(ids[-1], 0.5, 0.0, 0.0), PoseQuery(ids[-1], 0.05, 0.0, 0.0))
     # a pose given as a 4x4 transform that rests on no stable placement
     pose = PoseQuery(ids[0], 0.5, 0.0, 0.0).move() @ planner.free["rotmat"][0]
     pose[:3, 3] += [0, 0, 0.03]
@@ -310,16 +315,20 @@ def test_unconnected_start_and_goal_get_their_message(planner):
                            "rotmat": np.zeros((0, 4, 4)), "placement_rotmat": np.zeros((0, 4, 4)),
                            "tabletopposition": np.zeros((0, 3)), "angle": np.zeros(0), "jawwidth": np.zeros(0),
                            "joints": np.zeros((0, 3, planner.robot.nq))})
-    cut = Planner(empty, planner.free, planner.ftg, planner.object, planner.robot, planner.scene, planner.handx,
-                  planner.worldz, planner.ids, planner.ik_opts)
+    # the placements' store ids as in a store holding other parts before this one: messages number them within the part
+    shift = lambda rows: {**rows, "idfreetabletopplacement": np.asarray(rows["idfreetabletopplacement"]) + 100}  # noqa: E731
+    cut = Planner(empty, shift(planner.free), shift(planner.ftg), planner.object, planner.robot, planner.scene,
+                  planner.handx, planner.worldz, planner.ids, planner.ik_opts)
     cut._ik = planner.ik
     start, goal = PoseQuery(pair[0], 0.45, 0.0, 0.0), PoseQuery(pair[1], 0.55, 0.05, 1.0)
     try:
         planner.search(start, goal, alternatives=0)  # both reachable in the full graph?
     except PlanningError as exc:
         pytest.skip(f"this pair is not reachable: {exc}")
-    with pytest.raises(PlanningError, match="not connected in the regrasp graph"):
-        cut.plan(start, goal)
+    a, b = planner.numbers[pair[0]], planner.numbers[pair[1]]
+    with pytest.raises(PlanningError, match="not connected in the regrasp graph") as err:
+        cut.plan(PoseQuery(pair[0] + 100, 0.45, 0.0, 0.0), PoseQuery(pair[1] + 100, 0.55, 0.05, 1.0))
+    assert f"start ({a},0.45,0,0 deg) and goal ({b},0.55,0.05,57.2958 deg)" in str(err.value)
 
 
 def test_command_line_yaw_is_in_degrees_and_bounded():

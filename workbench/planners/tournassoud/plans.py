@@ -46,7 +46,7 @@ from workbench.planners.tournassoud.chaining import (
 from workbench.planners.tournassoud.classes import GraspClass
 from workbench.planners.tournassoud.table import GraspPlacementTable, rz
 from workbench.planners.tournassoud.task import task_query
-from workbench.planners.wan_harada.motions import ExecOptions, MotionResult, plan_motion
+from workbench.planners.wan_harada.motions import ExecOptions, MotionResult, attach_motions, plan_motion
 from workbench.planners.wan_harada.plans import Plan, PlanObstacle, PlanStep
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
@@ -471,20 +471,15 @@ def to_plan(seq: Sequence, conj: list[Conjunction], table: GraspPlacementTable, 
 def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResult:
     """Plan and time the motions of a plan with the roadmap planner's motion planner (`wan_harada.motions.plan_motion`,
     CONVENTIONS.md "Plans and motions"); on success they are attached to the plan (segments, the waypoints on the
-    IK branch the motions use, acceleration limits, time)."""
+    IK branch the motions use, acceleration limits and speed, time)."""
     robot = realiser.robot
     checker = realiser.motion_checker(opts)
-    vlim = np.asarray(robot.model.velocityLimit, dtype=np.float64)
+    vlim = float(opts.speed) * np.asarray(robot.model.velocityLimit, dtype=np.float64)
     t0 = time.perf_counter()
     res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz,
                              plan.start_held, plan.end_held, pregrasp_margin=realiser.pregrasp_margin)
     if res.ok:
-        for st, ln in zip(plan.steps, lines):
-            st.q_retract, st.q_approach, st.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp
-            st.q_worlda, st.q_worldaworldz = ln.q_worlda, ln.q_worldaworldz
-        plan.segments = res.segments
-        plan.acc = np.broadcast_to(np.asarray(opts.acc, dtype=np.float64), (robot.nq,)).tolist()
-        plan.timings["motion"] = time.perf_counter() - t0
+        attach_motions(plan, res, lines, plan.removed, time.perf_counter() - t0, opts, robot.nq)
     return res
 
 

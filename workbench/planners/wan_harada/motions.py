@@ -24,7 +24,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from workbench.errors import PlanningError
+from workbench.errors import ParameterError, PlanningError
 from workbench.grasping.grasps import pregrasp_widths
 from workbench.planners.wan_harada.plans import make_plan
 from workbench.planners.wan_harada.roadmap import build_roadmap
@@ -390,12 +390,19 @@ DEFAULT_ACC = 3.0
 
 @dataclass(frozen=True)
 class ExecOptions:
-    """Motion settings of a query: acceleration limit (scalar or per joint), how many failing nodes or grips may be
-    removed before giving up, and the motion planner's options (resolution, RRT-Connect budget, seed)."""
+    """Motion settings of a query: acceleration limit (scalar or per joint), the share `speed` in (0, 1] of the
+    URDF's joint velocity limits the motions are timed under (a URDF may state a drive's peak, at which a held part
+    slips), how many failing nodes or grips may be removed before giving up, and the motion planner's options
+    (resolution, RRT-Connect budget, seed)."""
 
     acc: float | tuple[float, ...] = DEFAULT_ACC
     max_removed: int = 10
     motion: MotionOptions = field(default_factory=MotionOptions)
+    speed: float = 1.0
+
+    def __post_init__(self):
+        if not (isinstance(self.speed, (int, float)) and 0 < self.speed <= 1):
+            raise ParameterError(f"motion speed must be a share of the URDF's velocity limits in (0, 1], got {self.speed!r}")
 
 
 def motion_checker(planner, allowed: AllowedPairs | None = None, opts: MotionOptions = MotionOptions()) -> MotionChecker:
@@ -445,7 +452,7 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
     allowed = allowed if allowed is not None else getattr(planner, "allowed", None)
     checker = motion_checker(planner, allowed, opts.motion)
     robot = planner.robot
-    vlim = np.asarray(robot.model.velocityLimit, dtype=np.float64)
+    vlim = float(opts.speed) * np.asarray(robot.model.velocityLimit, dtype=np.float64)
     s_side, g_side = planner.side(start, "start"), planner.side(goal, "goal")
     full = planner.roadmap
     rm, keep = full, np.ones(full.n_nodes, dtype=bool)
@@ -457,7 +464,7 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
         if not result.routes:
             if removed == 0:
                 planner.explain(result)
-            err = PlanningError(f"no executable plan from {s_side.query.text()} to {g_side.query.text()}: the graph ran out of "
+            err = PlanningError(f"no executable plan from {s_side.query.text(planner.numbers)} to {g_side.query.text(planner.numbers)}: the graph ran out of "
                                 f"alternatives after removing {removed} node(s) or grip(s) whose motions failed "
                                 f"(last: {failures[-1] if failures else 'none'})")
             err.reason = "exhausted"
@@ -472,7 +479,7 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
         seconds += time.perf_counter() - t0
         verdict = None
         if motion.ok:
-            _attach(plan, motion, lines, removed, seconds, opts.acc, robot.nq)
+            attach_motions(plan, motion, lines, removed, seconds, opts, robot.nq)
             verdict = physics(plan) if physics is not None else None
             if verdict is not None:
                 motion.reason, motion.blame = verdict[1], ("step", int(verdict[0]))
@@ -490,14 +497,14 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
                     m, ls = plan_motion(checker, alt.steps, vlim, opts.acc, opts.motion.seed, alt.worlda, alt.worldz,
                                         pregrasp_margin=planner.pregrasp_margin)
                     if m.ok:
-                        _attach(alt, m, ls, removed, time.perf_counter() - t1, opts.acc, robot.nq)
+                        attach_motions(alt, m, ls, removed, time.perf_counter() - t1, opts, robot.nq)
                         out.alternatives.append(alt)
                     if len(out.alternatives) >= alternatives:
                         break
             return out
         failures.append(motion.reason)
         if removed >= opts.max_removed:
-            err = PlanningError(f"no executable plan from {s_side.query.text()} to {g_side.query.text()} after removing "
+            err = PlanningError(f"no executable plan from {s_side.query.text(planner.numbers)} to {g_side.query.text(planner.numbers)} after removing "
                                 f"{removed} node(s) or grip(s) (limit --max-removed {opts.max_removed}"
                                 f"{_physics_share(failures[:-1])}); last failure: {motion.reason}")
             err.reason = "exhausted"
@@ -523,14 +530,16 @@ def _physics_share(failures: list[str]) -> str:
     return f", {n} of them after failing in simulation" if n else ""
 
 
-def _attach(plan, motion: MotionResult, lines: list[StepLines], removed: int, seconds: float, acc, nq: int) -> None:
+def attach_motions(plan, motion: MotionResult, lines: list[StepLines], removed: int, seconds: float, opts: ExecOptions,
+            nq: int) -> None:
     """Put the motions on the plan: waypoints on the IK branch the motions use, segments, removals, limits, time."""
     for step, ln in zip(plan.steps, lines):
         step.q_retract, step.q_approach, step.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp
         step.q_worlda, step.q_worldaworldz = ln.q_worlda, ln.q_worldaworldz
     plan.segments = motion.segments
     plan.removed = removed
-    plan.acc = np.broadcast_to(np.asarray(acc, dtype=np.float64), (nq,)).tolist()
+    plan.acc = np.broadcast_to(np.asarray(opts.acc, dtype=np.float64), (nq,)).tolist()
+    plan.speed = float(opts.speed)
     plan.timings["motion"] = seconds
 
 

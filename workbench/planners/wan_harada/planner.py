@@ -75,6 +75,7 @@ class Planner:
         order = np.argsort(ftg["idfreetabletopplacement"], kind="stable")
         self._ftg_order = order
         self._ftg_keys = np.asarray(ftg["idfreetabletopplacement"])[order]
+        self.numbers = per_part_numbers(free["idfreetabletopplacement"])  # store id -> number within the part
 
     @property
     def ik(self) -> GripIK:
@@ -121,7 +122,7 @@ class Planner:
         hi = np.searchsorted(self._ftg_keys, query.idfreetabletopplacement, side="right")
         rows = self._ftg_order[lo:hi]
         if len(rows) == 0:
-            number = per_part_numbers(self.free["idfreetabletopplacement"])
+            number = self.numbers
             has = ", ".join(str(number[i]) for i in self.placement_ids(gripped=True)) or "none has"
             raise _failure("nogrip", f"{label} placement {number[query.idfreetabletopplacement]} of {self.object.name} "
                                 f"(store id {query.idfreetabletopplacement}) has no grasp that clears the table; choose a "
@@ -194,21 +195,33 @@ class Planner:
         for side in (s, g):
             if side.n_feasible == 0:
                 raise _failure(
-                    "unreachable", f"{side.label} pose ({side.query.text()}) is not reachable by {self.robot.name}: none of its {len(side.grasp)} grasps "
+                    "unreachable", f"{side.label} pose ({side.query.text(self.numbers)}) is not reachable by {self.robot.name}: none of its {len(side.grasp)} grasps "
                     f"has IK at the grasp, both retractions and both lifts (handx {self.handx:g} m, worldz {self.worldz:g} m, "
-                    f"worlda {self.worlda:g} m) without collision; "
-                    f"move it closer to the robot or choose another placement")
+                    f"worlda {self.worlda:g} m) without collision; {self._unreachable_hint(side)}")
         a, b = self.attach(s), self.attach(g)
-        head = (f"start ({s.query.text()}) and goal ({g.query.text()}) are not connected in the regrasp graph of {self.object.name} for "
+        head = (f"start ({s.query.text(self.numbers)}) and goal ({g.query.text(self.numbers)}) are not connected in the regrasp graph of {self.object.name} for "
                 f"{self.robot.name}: no feasible grasp serves both, and the start's {s.n_feasible} feasible grasps reach roadmap components "
                 f"{sorted(a['components']) or 'none'} while the goal's {g.n_feasible} reach {sorted(b['components']) or 'none'}")
         p, q = s.query.idfreetabletopplacement, g.query.idfreetabletopplacement
         if not self.placements_linked(p, q):
             raise _failure("unconnected", f"{head}; no robot could: no chain of stable placements sharing grasps that clear the table "
-                           f"links placement {p} to {q} (a part flipped over needs a placement in between, held by a grasp "
+                           f"links placement {self.numbers.get(p, p)} to {self.numbers.get(q, q)} (a part flipped over needs a placement in between, held by a grasp "
                            f"both allow); choose another goal placement or plan more grasps")
         raise _failure("unconnected", f"{head}; add grid positions, angles or grasps (workbench placements "
                                       f"--x/--y/--angles/--max-grasps) and rebuild")
+
+    def _unreachable_hint(self, side: Side) -> str:
+        """What to change for a pose none of whose grips is feasible: closer when every grip is beyond the arm's reach
+        (`robots.ik.ReachFilter`), else another position clear of the robot or another placement (the grips within
+        reach collide, or have no IK within the joint limits)."""
+        base = self.robot.base[:2, 3]
+        far = f"{float(np.hypot(side.query.x - base[0], side.query.y - base[1])):.2f} m from the robot's base"
+        targets = self.ik.targets(side.tcp)
+        reach = np.asarray(self.ik.solver.prefilter(targets.reshape(-1, 4, 4)), dtype=bool).reshape(len(targets), -1)
+        if not reach.all(axis=1).any():
+            return f"every grasp is beyond the arm's reach ({far}): move the part closer to the robot"
+        return (f"the grasps within the arm's reach ({far}) collide with the table, the part or the robot, or have no "
+                f"IK within the joint limits: choose another position, clear of the robot, or another placement")
 
     def placements_linked(self, a: int, b: int) -> bool:
         """Whether stable placements `a` and `b` are joined by a chain of placements in which consecutive ones share a
@@ -287,7 +300,7 @@ class Planner:
             reports = [self.validate(p, require_motion=motion) for p in plans]
             good = [p for p, rep in zip(plans, reports) if rep.ok]
             if not good:
-                raise PlanningError(f"the plan found from {plans[0].start.text()} to {plans[0].goal.text()} fails validation: "
+                raise PlanningError(f"the plan found from {plans[0].start.text(self.numbers)} to {plans[0].goal.text(self.numbers)} fails validation: "
                                     f"{reports[0].errors[0]}; report this with the store")
             for rank, p in enumerate(good):
                 p.rank = rank

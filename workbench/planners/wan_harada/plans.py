@@ -150,7 +150,7 @@ class PlanObstacle:
 class Plan:
     """A regrasp plan for one object and robot from a start to a goal pose (Section V); `rank` 0 is the best of a
     search, higher ranks its alternatives. `timings` holds the search's connect and search times and the motion
-    planning time (s); `segments`, `removed` and `acc` its timed motions (see the module docstring)."""
+    planning time (s); `segments`, `removed`, `acc` and `speed` its timed motions (see the module docstring)."""
 
     object: str
     robot: str
@@ -169,6 +169,7 @@ class Plan:
     segments: list[TimedSegment] = field(default_factory=list)
     removed: int = 0
     acc: list[float] = field(default_factory=list)
+    speed: float = 1.0  # the share of the URDF's joint velocity limits the motions were timed under
     planner: str = "wan_harada"
     start_held: bool = False  # the motions begin with the part already in the hand at the first step's grasp
     end_held: bool = False  # they end with it still in the hand at the last step's grasp (Tournassoud Fig. 1 (a), (d))
@@ -205,7 +206,7 @@ class Plan:
                 "regrasps": self.regrasps, "transfers": self.transfers, "timings": {k: float(v) for k, v in self.timings.items()},
                 "ids": {k: int(v) for k, v in self.ids.items()}, "steps": [s.as_dict() for s in self.steps],
                 "motion": {"duration": self.duration, "removed": self.removed, "acc": [float(a) for a in self.acc],
-                           "segments": [s.as_dict() for s in self.segments]},
+                           "speed": float(self.speed), "segments": [s.as_dict() for s in self.segments]},
                 "start_held": self.start_held, "end_held": self.end_held, "obstacles": [o.as_dict() for o in self.obstacles],
                 "insertion": _list(self.insertion), "insertion_depth": float(self.insertion_depth)}
 
@@ -220,6 +221,7 @@ class Plan:
                    rank=int(d.get("rank", 0)), timings=dict(d.get("timings", {})), ids=dict(d.get("ids", {})),
                    segments=[TimedSegment.from_dict(s) for s in (d.get("motion") or {}).get("segments", [])],
                    removed=int((d.get("motion") or {}).get("removed", 0)), acc=list((d.get("motion") or {}).get("acc", [])),
+                   speed=float((d.get("motion") or {}).get("speed", 1.0)),
                    planner=str(d.get("planner", "wan_harada")), start_held=bool(d.get("start_held", False)),
                    end_held=bool(d.get("end_held", False)),
                    obstacles=[PlanObstacle.from_dict(o) for o in d.get("obstacles") or []],
@@ -338,7 +340,8 @@ def plan_rows(plan: Plan) -> tuple[dict, dict, dict]:
            "goal_xyyaw": [plan.goal.x, plan.goal.y, plan.goal.yaw], "rank": plan.rank, "regrasps": plan.regrasps,
            "transfers": plan.transfers, "t_connect": plan.timings.get("connect"), "t_search": plan.timings.get("search"),
            "duration": plan.duration if plan.segments else None, "removed": plan.removed,
-           "t_motion": plan.timings.get("motion"), "acc": [float(a) for a in plan.acc] or None, "planner": plan.planner,
+           "t_motion": plan.timings.get("motion"), "acc": [float(a) for a in plan.acc] or None,
+           "speed": float(plan.speed) if plan.segments else None, "planner": plan.planner,
            "start_held": bool(plan.start_held), "end_held": bool(plan.end_held), "insertion": _list(plan.insertion),
            "insertion_depth": float(plan.insertion_depth) if plan.insertion is not None else None,
            "obstacles": obstacles_digest(plan.obstacles)}

@@ -24,6 +24,7 @@ from workbench.robots.ik import (
     WORLDA,
     IKOptions,
     IKSolver,
+    chain_turns,
     held_placements,
     retract,
 )
@@ -56,13 +57,15 @@ class PoseQuery:
         m[:2, 3] = (self.x, self.y)
         return m
 
-    def text(self) -> str:
-        """`PLACEMENT,X,Y,YAW deg` for messages: the yaw in degrees with its unit, as the command line takes it."""
-        return f"{self.text_degrees()} deg"
+    def text(self, numbers: dict[int, int] | None = None) -> str:
+        """`PLACEMENT,X,Y,YAW deg` for messages: the yaw in degrees with its unit, as the command line takes it; the
+        placement by its number within the part where `numbers` (store id -> number) are given."""
+        return f"{self.text_degrees(numbers)} deg"
 
-    def text_degrees(self) -> str:
-        """`PLACEMENT,X,Y,YAW` with the yaw in degrees, as the command line takes it."""
-        return f"{self.idfreetabletopplacement},{self.x:g},{self.y:g},{math.degrees(self.yaw):.6g}"
+    def text_degrees(self, numbers: dict[int, int] | None = None) -> str:
+        """`PLACEMENT,X,Y,YAW` with the yaw in degrees, as the command line takes it (placement as in `text`)."""
+        place = (numbers or {}).get(self.idfreetabletopplacement, self.idfreetabletopplacement)
+        return f"{place},{self.x:g},{self.y:g},{math.degrees(self.yaw):.6g}"
 
     def as_dict(self) -> dict:
         return {"placement": self.idfreetabletopplacement, "x": self.x, "y": self.y, "yaw": self.yaw}
@@ -220,7 +223,7 @@ class GripIK:
                     win = hit[np.unique(owner[hit], return_index=True)[1]]
                     q_out[rows2[owner[win]]], good[rows2[owner[win]]] = q[win], True
         feas = good.reshape(n, nk).all(axis=1) & alive.reshape(n, nk)[:, 0]
-        return feas, q_out.reshape(n, nk, robot.nq)
+        return feas, chain_turns(robot, q_out.reshape(n, nk, robot.nq))
 
 
 @dataclass
