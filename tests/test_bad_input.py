@@ -27,6 +27,7 @@ import pytest
 import trimesh
 
 from workbench.store import Store
+from workbench.store.identity import SCHEMA_VERSION
 
 ROOT = Path(__file__).resolve().parents[1]
 CLI = [sys.executable, "-m", "workbench.cli"]
@@ -537,6 +538,27 @@ def test_plan_refuses_an_incomplete_ik_stage_unless_allowed(work, db, reference)
     assert res.returncode == 0, res.stderr[-2000:]
 
 
+def test_the_resume_command_of_an_incomplete_ik_run_carries_its_retractions(work, db):
+    """An IK run with its own --handx killed part-way: plan's message names the command that resumes that run (with
+    its --handx, not the default run's), and running it completes the run, so the plan is made."""
+    res = cli("ik", "--db", db, "--object", "box", "--robot", "panda", "--handx", "0.08", "--workers", "1", cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    con = duckdb.connect(str(db))
+    run = con.execute("SELECT idikret FROM ikret WHERE abs(handx - 0.08) < 1e-9").fetchall()[0][0]
+    first = con.execute("SELECT min(idik) FROM ik WHERE idikret = ?", [run]).fetchall()[0][0]
+    con.execute("DELETE FROM ik WHERE idikret = ? AND idik > ?", [run, first + 100])
+    con.execute("DELETE FROM stagedone WHERE stage = 'ik' AND runkey LIKE ?", [f"%ikret={run}"])
+    con.close()
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", "--handx", "0.08", *QUERY, cwd=work)
+    err = assert_refused(res, "incomplete", "workbench ik")
+    command = re.search(r"`workbench (ik [^`]*)`", err).group(1).split()
+    assert command[command.index("--handx") + 1] == "0.08"
+    res = cli(*command, "--workers", "1", cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", "--handx", "0.08", *QUERY, "--no-save", cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+
+
 def test_plan_rerun_answers_from_the_store_without_a_duplicate(work, db):
     first = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, cwd=work)
     assert first.returncode == 0, first.stderr[-2000:]
@@ -732,7 +754,26 @@ def test_schema_2_plans_move_to_plan_time(work, tmp_path):
     back = con.execute("SELECT idplansegment, t0, t FROM plansegment ORDER BY idplan, seq").fetchall()
     version = con.execute("SELECT value FROM workbench_meta WHERE key = 'schema_version'").fetchall()[0][0]
     con.close()
-    assert version == "3" and all(np.allclose(a[2], b[2]) for a, b in zip(now, back))
+    assert version == str(SCHEMA_VERSION) and all(np.allclose(a[2], b[2]) for a, b in zip(now, back))
+
+
+def test_a_schema_3_store_is_upgraded_when_plan_reads_it(work, tmp_path):
+    """Schema 3 had no plan.speed, which the lookup of a stored plan reads: `plan`, which opens a current store for
+    reading only, opens a schema-3 store read-write once, so that the column is added before it is read, and
+    answers with no traceback."""
+    db = tmp_path / "p.duckdb"
+    res = cli("build", work / "box.stl", "--db", db, *BUILD, cwd=work)
+    assert res.returncode == 0, res.stderr[-2000:]
+    con = duckdb.connect(str(db))
+    con.execute("UPDATE workbench_meta SET value = '3' WHERE key = 'schema_version'")
+    con.close()
+    res = cli("plan", "--db", db, "--object", "box", "--robot", "panda", *QUERY, cwd=work)
+    assert res.returncode == 0 and "Traceback" not in res.stderr, res.stderr[-2000:]
+    con = duckdb.connect(str(db), read_only=True)
+    version = con.execute("SELECT value FROM workbench_meta WHERE key = 'schema_version'").fetchall()[0][0]
+    speeds = con.execute("SELECT speed FROM plan").fetchall()
+    con.close()
+    assert version == str(SCHEMA_VERSION) and speeds and all(v == 1.0 for (v,) in speeds)
 
 
 def test_store_left_by_an_older_version(work, db, reference):

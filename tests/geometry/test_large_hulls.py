@@ -8,7 +8,7 @@ import trimesh
 
 from workbench.geometry.objects import from_trimesh, load_object
 from workbench.geometry.hull import merge_tolerance
-from workbench.geometry.supports import coplanar_groups
+from workbench.geometry.supports import SLIVER_SHARE, SLIVER_TILT, coplanar_groups
 from workbench.grasping.placements import stable_placements
 from workbench.grasping.pads import _farthest
 from workbench.resources import bundled_objects
@@ -23,8 +23,9 @@ def _hulls():
             load_object(bundled_objects()["bracket"]).mesh.convex_hull]
 
 
-def _greedy(verts, faces, normals, areas, facet_of, distance, flat, cos_a):
-    """The greedy grouping written plainly, every free facet tested against each seed: (group of every face)."""
+def _greedy(verts, faces, normals, areas, facet_of, distance, flat, cos_a, share=np.inf, cos_flat=2.0):
+    """The greedy grouping written plainly, every free facet tested against each seed: (group of every face). A
+    facet within `flat` but tilted joins only with at most `share` of the seed's area or within `cos_flat`."""
     T = facet_of.max() + 1
     order = np.argsort(facet_of, kind="stable")
     starts = np.flatnonzero(np.r_[True, np.diff(facet_of[order]) != 0])
@@ -41,7 +42,8 @@ def _greedy(verts, faces, normals, areas, facet_of, distance, flat, cos_a):
         top = h[faces[facet_of == seed]].max()
         low = np.minimum.reduceat(h[faces[order]].min(axis=1), starts) - top  # per facet, its lowest vertex
         facing = fn @ fn[seed]
-        join = (label < 0) & (((low >= -distance) & (facing >= cos_a)) | ((low >= -flat) & (facing > 0)))
+        sliver = (area <= share * area[seed]) | (facing >= cos_flat)
+        join = (label < 0) & (((low >= -distance) & (facing >= cos_a)) | ((low >= -flat) & (facing > 0) & sliver))
         join[seed] = True
         label[join] = group
         group += 1
@@ -55,7 +57,8 @@ def test_walked_hull_groups_equal_a_plain_greedy_pass(distance, angle):
         normals, areas = np.asarray(hull.face_normals), np.asarray(hull.area_faces)
         tol = merge_tolerance(verts)
         facets = _greedy(verts, faces, normals, areas, np.arange(len(faces)), tol, tol, 2.0)
-        label = _greedy(verts, faces, normals, areas, facets, distance, 0.25 * distance, np.cos(angle))
+        label = _greedy(verts, faces, normals, areas, facets, distance, 0.25 * distance, np.cos(angle),
+                        SLIVER_SHARE, np.cos(SLIVER_TILT))
         groups, n = coplanar_groups(hull, distance, angle)
         assert len(groups) == label.max() + 1
         assert all(np.array_equal(g, np.flatnonzero(label == i)) for i, g in enumerate(groups))

@@ -76,6 +76,23 @@ def test_tube_stands_on_rims_not_on_curved_side():
     assert np.allclose(pl.rejected_stability, np.tan(np.pi / 64), rtol=1e-6)
 
 
+@pytest.mark.parametrize("radius", [0.003, 0.005])
+def test_a_thin_faceted_rod_rests_on_its_strips_not_on_the_edges_between_them(radius):
+    """A 32-sided rod 6 mm across: each side strip lies within the sliver distance of its neighbour's plane, but is
+    as large as it, so the two are not one support (joined, the rod would rest on the edge between them, scored on
+    a polygon that only touches the table along that edge). Every side rests on its own strip, as on a 10 mm rod:
+    stability tan(pi / 32), below the default threshold, and the strip flat on the table."""
+    rod = from_trimesh(trimesh.creation.cylinder(radius=radius, height=0.2, sections=32), "rod")
+    assert len(stable_placements(rod)) == 0
+    pl = stable_placements(rod, PlacementParams(min_stability=0.09))
+    assert len(pl) == 32 and np.allclose(pl.stability, np.tan(np.pi / 32), rtol=1e-6)
+    hull = np.asarray(rod.mesh.convex_hull.vertices)
+    for pose in pl.poses:
+        z = (hull @ pose[:3, :3].T + pose[:3, 3])[:, 2]
+        assert z.min() == pytest.approx(0.0, abs=1e-12)
+        assert (np.abs(z) <= 1e-9).sum() == 4  # the strip's four corners touch, not an edge's two
+
+
 def test_foil_thinner_than_the_coplanar_tolerance_rests_on_either_side():
     """A 10 micron foil: its two sides lie within the 0.5 mm merge distance of each other but face away from each
     other, so they stay two supports (merged, their normals cancelled and the placement stage divided by zero)."""
@@ -254,12 +271,14 @@ def test_grasp_cap_keeps_every_placement_in_the_roadmap():
     assert len(select_grasps(poses, usable, None)) == 295  # every usable grasp when uncapped
 
 
-def test_a_washer_lying_flat_is_gripped_from_above_by_the_fingertips(hand):
-    """A 6 mm washer lying flat: a pad centred on the rim would reach 9.5 mm below it, into the table, so without
-    fingertip grasps no grasp survives either placement. With them (GraspParams.fingertip_margin) some do, and each
-    kept grip, checked here by brute force on the gripper's collision mesh and finger boxes, stays above the table
-    with both contacts on the pads' faces and the part between them."""
-    washer = from_trimesh(trimesh.creation.annulus(r_min=0.010, r_max=0.025, height=0.006), "washer")
+@pytest.mark.parametrize("r_min,r_max,height", [(0.010, 0.025, 0.006), (0.015, 0.030, 0.005)])
+def test_a_washer_lying_flat_is_gripped_from_above_by_the_fingertips(hand, r_min, r_max, height):
+    """A washer 5 or 6 mm thick lying flat: a pad centred on the rim would reach 9.5 mm below it, into the table, so
+    without fingertip grasps no grasp survives either placement. With them (GraspParams.fingertip_margin) some do on
+    both sides, also where the hand moved back lifts the jaw axis off the part (the pads then close on the rim with
+    their tips), and each kept grip, checked here by brute force on the gripper's collision mesh and finger boxes,
+    stays above the table with both contacts on the pads' faces and the part between them."""
+    washer = from_trimesh(trimesh.creation.annulus(r_min=r_min, r_max=r_max, height=height), "washer")
     places = stable_placements(washer)
     assert len(places) == 2  # flat on either side
     centre_only = plan_grasps(washer, hand, GraspParams(fingertip_margin=None)).grasps
@@ -270,6 +289,7 @@ def test_a_washer_lying_flat_is_gripped_from_above_by_the_fingertips(hand):
     assert plan.counts["fingertip"] > 0
     p, k, world = free_tabletop_grips(places, g.poses, hand)
     assert len(p) > 0 and set(p.tolist()) == {0, 1}
+    assert abs(int((p == 0).sum()) - int((p == 1).sum())) <= 0.2 * len(p)  # the two sides alike
     body = np.asarray(hand.collision_mesh().vertices)
     for pi, gi, tcp in zip(p, k, world):
         pts = [body] + [trimesh.creation.box(ext, pose).vertices + [0, np.sign(pose[1, 3]) * g.jawwidth[gi] / 2, 0]
@@ -279,9 +299,9 @@ def test_a_washer_lying_flat_is_gripped_from_above_by_the_fingertips(hand):
         # the contacts lie on the pads (within their rectangles) and inside the washer's 6 mm height on the table
         for c in (g.contact0[gi], g.contact1[gi]):
             z = (places.poses[pi] @ np.r_[c, 1.0])[2]
-            assert -1e-9 <= z <= 0.006 + 1e-9
+            assert -1e-9 <= z <= height + 1e-9
         # the TCP sits above the part: the hand was moved back along its approach
-        assert tcp[2, 3] > 0.006
+        assert tcp[2, 3] > height
 
 
 def _ray_shares(mesh: trimesh.Trimesh, com: np.ndarray, normals: np.ndarray, n: int = 40000) -> np.ndarray:

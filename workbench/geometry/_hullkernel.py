@@ -10,12 +10,12 @@ from numba import njit
 
 @njit(cache=True)
 def group_facets(vertices, faces, facet_of, m_ptr, members, normals, order, v_ptr, v_adj, f_ptr, f_idx, distance,
-                 flat, cos_a):
+                 flat, cos_a, areas, flat_share, cos_flat):
     """The group of every facet (T,), groups numbered in seed order. A facet is a set of hull faces (`facet_of` (F,),
-    its members `m_ptr, members` in CSR) with unit outward normal `normals[t]`; seeds are taken in `order`. A seed's
-    plane is its normal through its highest vertex; it takes every free facet all of whose vertices lie within
-    `distance` below that plane and that faces it within the angle (cos_a), or lie within `flat` and that does not
-    face away. On a convex polytope the vertices above any plane form a connected part of its edge graph, so a walk
+    its members `m_ptr, members` in CSR) with unit outward normal `normals[t]` and area `areas[t]`; seeds are taken
+    in `order`. A seed's plane is its normal through its highest vertex; it takes every free facet all of whose
+    vertices lie within `distance` below that plane and that faces it within the angle (cos_a), or lie within `flat`,
+    do not face away and have at most `flat_share` of the seed's area (a sliver, whatever its tilt). On a convex polytope the vertices above any plane form a connected part of its edge graph, so a walk
     from the seed's vertices finds all of them. `v_ptr, v_adj`: vertex neighbours (CSR); `f_ptr, f_idx`: faces of
     each vertex (CSR)."""
     T, V = m_ptr.shape[0] - 1, vertices.shape[0]
@@ -72,7 +72,8 @@ def group_facets(vertices, faces, facet_of, m_ptr, members, normals, order, v_pt
                         a = faces[members[r], j]
                         low = min(low, height[a] if vmark[a] == seed else -np.inf)
                 facing = n0 * normals[t, 0] + n1 * normals[t, 1] + n2 * normals[t, 2]
-                if (low >= -distance and facing >= cos_a) or (low >= -flat and facing > 0):
+                if (low >= -distance and facing >= cos_a) or (low >= -flat and facing > 0 and (
+                        areas[t] <= flat_share * areas[seed] or facing >= cos_flat)):
                     label[t] = group
         group += 1
     return label

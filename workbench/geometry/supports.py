@@ -5,7 +5,9 @@ or so, none of which holds the centre of mass's projection on its own. The hull'
 facets (faces in one plane to rounding, however the hull triangulated them), and facets are grouped greedily,
 largest first: a facet joins a group when its normal is within `angle` of the group's seed and all its vertices lie
 within `distance` of the seed's plane, or when its vertices lie within a quarter of `distance` whatever its tilt
-(thin slivers along the rim of a noisy base), as long as it does not face away from the seed. A group is one
+(thin slivers along the rim of a noisy base), as long as it does not face away from the seed and is a sliver beside
+it (at most `SLIVER_SHARE` of the seed's area): the equal strips of a thin faceted rod are its sides, each tilted
+from the next, and joined in pairs they would make a support out of the edge between them. A group is one
 candidate support resting on its area-weighted normal; its support polygon is the convex hull of the group's
 vertices (all within `distance` of the table). Only the group's own vertices count: on a curved side (a cylinder's
 flat strips) vertices of neighbouring strips also lie within half a millimetre of the table, but the object would
@@ -40,12 +42,17 @@ def coplanar_groups(hull: trimesh.Trimesh, distance: float, angle: float) -> tup
     # faces into facets: each face its own facet, joined when within the tolerance of a larger one's plane
     single = np.arange(len(faces), dtype=np.int64)
     facet_of = group_facets(verts, faces, single, np.arange(len(faces) + 1, dtype=np.int64), single,
-                            np.ascontiguousarray(normals), np.lexsort((single, -areas)), *graph, tol, tol, 2.0)
+                            np.ascontiguousarray(normals), np.lexsort((single, -areas)), *graph, tol, tol, 2.0,
+                            np.ascontiguousarray(areas, dtype=np.float64), np.inf, 2.0)
     label = _grouped(verts, faces, normals, areas, facet_of, graph, distance, 0.25 * distance, float(np.cos(angle)))
     k = np.argsort(label, kind="stable")
     groups = np.split(k, np.cumsum(np.bincount(label, minlength=int(label.max()) + 1))[:-1])
     wn = np.array([(normals[g] * areas[g, None]).sum(axis=0) for g in groups]).reshape(-1, 3)
     return groups, wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300)
+
+
+SLIVER_SHARE = 0.25  # a tilted facet joins a support as a sliver only with at most this share of its seed's area
+SLIVER_TILT = float(np.radians(5.0))  # or when tilted less than this from it
 
 
 def _grouped(verts, faces, normals, areas, facet_of, graph, distance, flat, cos_a) -> np.ndarray:
@@ -60,7 +67,8 @@ def _grouped(verts, faces, normals, areas, facet_of, graph, distance, flat, cos_
     fn = np.where(length > 1e-300, fn / np.where(length > 1e-300, length, 1.0), first)
     order = np.lexsort((np.arange(T), -area))
     label = group_facets(verts, faces, facet_of, m_ptr, members.astype(np.int64), np.ascontiguousarray(fn), order,
-                         *graph, float(distance), float(flat), float(cos_a))
+                         *graph, float(distance), float(flat), float(cos_a), area, SLIVER_SHARE,
+                         float(np.cos(SLIVER_TILT)))
     return label[facet_of]
 
 

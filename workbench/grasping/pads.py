@@ -121,15 +121,21 @@ def fingertip_shifts(vertices: np.ndarray, poses: np.ndarray, gripper: Gripper, 
 
     With the TCP at the pad's centre, a part thinner than half a pad beyond the contact (a washer or a bracket
     lying flat, gripped from above) leaves the fingertips poking past it, into the table in every placement with
-    that side down. Moving the hand back by d = (pad tip) - (extent) + margin puts the contact on the pad's tip
-    end; it is possible while the contact stays `min_contact` inside the pad. `vertices`: the part's convex hull
-    vertices (the extent along a direction is a hull vertex's); `poses` (H, 4, 4) TCP poses in the part's frame.
+    that side down. Moving the hand back by d = (pad tip) - (extent) + margin puts the pad's tip `margin` short of
+    the far side; it is possible while the pad still covers at least `min_contact` of the part along the approach
+    (the pads then close on what lies there: the jaw axis may leave the part, as across a 5 mm washer). `vertices`:
+    the part's convex hull vertices (the extent along a direction is a hull vertex's); `poses` (H, 4, 4) TCP poses
+    in the part's frame.
     """
     _, cz, _, hz = pad_rectangle(gripper)
     tip = cz + hz
-    extent = _farthest(poses[:, :3, 2], vertices) - np.einsum("hj,hj->h", poses[:, :3, 2], poses[:, :3, 3])
+    z = poses[:, :3, 2]
+    at = np.einsum("hj,hj->h", z, poses[:, :3, 3])
+    extent = _farthest(z, vertices) - at  # the far side, from the TCP along the approach
+    near = -_farthest(-z, vertices) - at  # the near side
     d = tip - extent + margin
-    return np.where((d > 0) & (d <= tip - min_contact), d, np.nan)
+    covered = (extent - margin) - np.maximum(near, tip - 2 * hz - d)  # the part's span along the pad, once moved
+    return np.where((d > 0) & (covered >= min_contact), d, np.nan)
 
 
 def _farthest(directions: np.ndarray, vertices: np.ndarray, dense: int = 10_000_000) -> np.ndarray:

@@ -24,8 +24,9 @@ if TYPE_CHECKING:
     from workbench.store import Store
 
 APPLICATION = "regrasp-workbench"
-SCHEMA_VERSION = 3  # 1: no metadata, no completion records; 2: workbench_meta and stagedone; 3: plansegment.t in
-# plan time (s from the plan's start, CONVENTIONS.md), it was from the segment's start
+SCHEMA_VERSION = 4  # 1: no metadata, no completion records; 2: workbench_meta and stagedone; 3: plansegment.t in
+# plan time (s from the plan's start, CONVENTIONS.md), it was from the segment's start; 4: plan.speed, which the
+# lookup of a stored plan reads (a schema-3 store is opened read-write once, to add it)
 
 META_TABLES: tuple[str, ...] = (
     """CREATE TABLE IF NOT EXISTS workbench_meta (

@@ -84,8 +84,10 @@ def parse_pose(text: str, label: str = "pose", degrees: bool = False) -> PoseQue
         x, y, yaw = (float(v) for v in parts[1:])
     except ValueError:
         raise PlanningError(f"{label} {text!r}: PLACEMENT must be an integer id and X, Y, YAW numbers (m, m, {unit})") from None
+    if not all(math.isfinite(v) for v in (x, y, yaw)):
+        raise PlanningError(f"{label} {text!r} has NaN or infinite values; give finite x, y (m) and yaw ({unit})")
     if degrees:
-        if math.isfinite(yaw) and abs(yaw) > 360:
+        if abs(yaw) > 360:
             raise PlanningError(f"{label} {text!r}: yaw {yaw:g} deg is outside [-360, 360]; give the yaw in degrees, e.g. {example}")
         yaw = math.radians(yaw)
     return check_query(PoseQuery(pid, x, y, yaw), label)

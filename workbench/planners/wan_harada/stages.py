@@ -231,9 +231,12 @@ def load_planner(db: str | Path | Store, object_name: str, robot_name: str | int
         rows_done, grips, complete = robot_sql.ik_progress(store, tt, rrow["idrobot"], idscene, idikret)
         check_graph_memory(grips)
         if not complete:
+            ret = ikret_row(store, idikret)  # the run's own retractions, so that the command resumes this run
+            given = "".join(f" --{k} {ret[k]:g}" for k, default in (("handx", HANDX), ("worldz", WORLDZ), ("worlda", WORLDA))
+                            if abs(ret[k] - default) > 1e-12)
             what = (f"the IK stage of {object_name} for robot {rrow['name']} in {store.path} is incomplete ({rows_done:,} of "
                     f"{grips:,} tabletop grips); finish it with `workbench ik --db {store.path} --object {object_name} "
-                    f"--robot {rrow['name']}` (it resumes)")
+                    f"--robot {rrow['name']}{given}` (it resumes)")
             if not allow_partial:
                 raise PlanningError(f"{what}, or plan on the partial graph with --allow-partial")
             warnings.warn(f"{what}; planning on the partial graph (--allow-partial)", PartialStageWarning, stacklevel=2)
