@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import heapq
 import json
+import re
 
 import numpy as np
 import pytest
@@ -288,6 +289,13 @@ def test_impossible_queries_say_why(planner):
         planner.plan(PoseQuery(max(ids) + 7, 0.5, 0.0, 0.0), PoseQuery(ids[0], 0.5, 0.0, 0.0))
     with pytest.raises(PlanningError, match="off the table"):
         planner.plan(PoseQuery(ids[0], 3.0, 0.0, 0.0), PoseQuery(ids[0], 0.5, 0.0, 0.0))
+    # the centre of mass on the table, 1 mm from its edge: half the part's support overhangs it
+    edge = float(planner.scene.table_max[0]) - 0.001
+    placed = np.asarray(planner.object.mesh.vertices) @ planner.free["rotmat"][0][:3, :3].T + planner.free["rotmat"][0][:3, 3]
+    overhang = float(placed[placed[:, 2] <= placed[:, 2].min() + 1e-4, 0].max()) - 0.001  # the support's reach in x
+    with pytest.raises(PlanningError, match="mm of tube's support past the table's edge") as err:
+        planner.plan(PoseQuery(ids[0], 0.5, 0.0, 0.0), PoseQuery(ids[0], edge, 0.0, 0.0))
+    assert float(re.search(r"puts ([0-9.]+) mm", str(err.value)).group(1)) == pytest.approx(overhang * 1000, abs=0.15)
     with pytest.raises(PlanningError, match="NaN"):
         planner.plan(PoseQuery(ids[0], float("nan"), 0.0, 0.0), PoseQuery(ids[0], 0.5, 0.0, 0.0))
     with pytest.raises(PlanningError, match="goal pose .* is not reachable by panda: .* every grasp is beyond the "
