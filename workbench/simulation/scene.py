@@ -107,7 +107,7 @@ def _full_inertia(i: np.ndarray) -> list[float]:
 def physical_inertia(inertia: np.ndarray, mass: float) -> tuple[np.ndarray, bool]:
     """A link's inertia tensor (3, 3) as physics accepts it, and whether it had to change: a tensor that is not
     positive definite becomes a small sphere's (1e-4 m^2 times the mass); one whose principal moments break the
-    triangle inequality (A + B >= C, which every rigid body's meet and a hand-written URDF may not) gets its two
+    triangle inequality (A + B >= C, which every rigid body's moments meet and a hand-written URDF's may not) gets its two
     smaller moments raised by the same amount until they meet it, its axes kept (MuJoCo refuses it otherwise)."""
     ii = 0.5 * (np.asarray(inertia, dtype=np.float64) + np.asarray(inertia, dtype=np.float64).T)
     e, v = np.linalg.eigh(ii)  # ascending

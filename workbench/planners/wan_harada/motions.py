@@ -530,8 +530,8 @@ def _physics_share(failures: list[str]) -> str:
     return f", {n} of them after failing in simulation" if n else ""
 
 
-def attach_motions(plan, motion: MotionResult, lines: list[StepLines], removed: int, seconds: float, opts: ExecOptions,
-            nq: int) -> None:
+def attach_motions(plan, motion: MotionResult, lines: list[StepLines], removed: int, seconds: float,
+                   opts: ExecOptions, nq: int) -> None:
     """Put the motions on the plan: waypoints on the IK branch the motions use, segments, removals, limits, time."""
     for step, ln in zip(plan.steps, lines):
         step.q_retract, step.q_approach, step.q_grasp = ln.q_retract, ln.q_approach, ln.q_grasp
