@@ -10,7 +10,7 @@ from workbench.geometry.objects import from_trimesh, load_object
 from workbench.geometry.hull import merge_tolerance
 from workbench.geometry.supports import SLIVER_SHARE, SLIVER_TILT, coplanar_groups
 from workbench.grasping.placements import stable_placements
-from workbench.grasping.pads import _farthest
+from workbench.grasping.pads import _extents
 from workbench.resources import bundled_objects
 
 
@@ -93,5 +93,7 @@ def test_blocked_extents_equal_the_dense_ones():
     d = rng.standard_normal((300, 3))
     d /= np.linalg.norm(d, axis=1, keepdims=True)
     v = rng.standard_normal((5000, 3))
-    assert np.allclose(_farthest(d, v, dense=1000), (d @ v.T).max(axis=1), rtol=0, atol=1e-12)
-    assert np.allclose(_farthest(d, v), (d @ v.T).max(axis=1), rtol=0, atol=1e-12)
+    for dense in (1000, 10_000_000):
+        hi, lo = _extents(d, v, dense=dense)
+        assert np.allclose(hi, (d @ v.T).max(axis=1), rtol=0, atol=1e-12)
+        assert np.allclose(lo, (d @ v.T).min(axis=1), rtol=0, atol=1e-12)

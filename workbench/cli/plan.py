@@ -231,15 +231,10 @@ def store_placement(query: PoseQuery, numbers: dict[int, int], name: str, flag: 
     return replace(query, idfreetabletopplacement=ids[query.idfreetabletopplacement])
 
 
-def pose_text(query: PoseQuery, numbers: dict[int, int] | None) -> str:
-    """`PLACEMENT,X,Y,YAW` (degrees) with the placement's number within the part when `numbers` are given."""
-    return query.text_degrees(numbers)
-
-
 def print_plan(plan, numbers: dict[int, int] | None = None) -> None:
     """The plan's start, goal and steps as the plan view's footer names them (placements by `numbers`, the store's id
     -> its number within the part), and what it took."""
-    print(f"start {pose_text(plan.start, numbers)} -> goal {pose_text(plan.goal, numbers)} "
+    print(f"start {plan.start.text_degrees(numbers)} -> goal {plan.goal.text_degrees(numbers)} "
           f"(PLACEMENT,X,Y,YAW in m and degrees)")
     for line in caption_track(plan, [], numbers=numbers)["footers"][1:]:
         print("  " + line)

@@ -15,8 +15,9 @@ def group_facets(vertices, faces, facet_of, m_ptr, members, normals, order, v_pt
     its members `m_ptr, members` in CSR) with unit outward normal `normals[t]` and area `areas[t]`; seeds are taken
     in `order`. A seed's plane is its normal through its highest vertex; it takes every free facet all of whose
     vertices lie within `distance` below that plane and that faces it within the angle (cos_a), or lie within `flat`,
-    do not face away and have at most `flat_share` of the seed's area (a sliver, whatever its tilt). On a convex polytope the vertices above any plane form a connected part of its edge graph, so a walk
-    from the seed's vertices finds all of them. `v_ptr, v_adj`: vertex neighbours (CSR); `f_ptr, f_idx`: faces of
+    do not face away and either have at most `flat_share` of the seed's area (a sliver, whatever its tilt) or face
+    it within `cos_flat`. On a convex polytope the vertices above any plane form a connected part of its edge graph,
+    so a walk from the seed's vertices finds all of them. `v_ptr, v_adj`: vertex neighbours (CSR); `f_ptr, f_idx`: faces of
     each vertex (CSR)."""
     T, V = m_ptr.shape[0] - 1, vertices.shape[0]
     label = np.full(T, -1, dtype=np.int64)

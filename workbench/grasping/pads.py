@@ -131,20 +131,26 @@ def fingertip_shifts(vertices: np.ndarray, poses: np.ndarray, gripper: Gripper, 
     tip = cz + hz
     z = poses[:, :3, 2]
     at = np.einsum("hj,hj->h", z, poses[:, :3, 3])
-    extent = _farthest(z, vertices) - at  # the far side, from the TCP along the approach
-    near = -_farthest(-z, vertices) - at  # the near side
+    far, near = _extents(z, vertices)
+    extent, near = far - at, near - at  # the far and the near side, from the TCP along the approach
     d = tip - extent + margin
     covered = (extent - margin) - np.maximum(near, tip - 2 * hz - d)  # the part's span along the pad, once moved
     return np.where((d > 0) & (covered >= min_contact), d, np.nan)
 
 
-def _farthest(directions: np.ndarray, vertices: np.ndarray, dense: int = 10_000_000) -> np.ndarray:
-    """The largest extent (H,) of `vertices` (V, 3) along each direction (H, 3). Above `dense` direction-vertex
-    pairs (a full-resolution scan's hull) as matrix products in blocks of about `dense` pairs."""
+def _extents(directions: np.ndarray, vertices: np.ndarray, dense: int = 10_000_000) -> tuple[np.ndarray, np.ndarray]:
+    """The largest and smallest extents (H,), (H,) of `vertices` (V, 3) along each direction (H, 3), from one product
+    of the two. Above `dense` direction-vertex pairs (a full-resolution scan's hull) as matrix products in blocks of
+    about `dense` pairs."""
     if len(directions) * len(vertices) <= dense:
-        return np.einsum("hj,vj->hv", directions, vertices).max(axis=1)
+        d = np.einsum("hj,vj->hv", directions, vertices)
+        return d.max(axis=1), d.min(axis=1)
     step = max(1, dense // max(len(vertices), 1))
-    return np.concatenate([(directions[i:i + step] @ vertices.T).max(axis=1) for i in range(0, len(directions), step)])
+    hi, lo = np.empty(len(directions)), np.empty(len(directions))
+    for i in range(0, len(directions), step):
+        d = directions[i:i + step] @ vertices.T
+        hi[i:i + step], lo[i:i + step] = d.max(axis=1), d.min(axis=1)
+    return hi, lo
 
 
 def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, angles: np.ndarray,

@@ -109,7 +109,8 @@ def physical_inertia(inertia: np.ndarray, mass: float) -> tuple[np.ndarray, bool
     positive definite becomes a small sphere's (1e-4 m^2 times the mass); one whose principal moments break the
     triangle inequality (A + B >= C, which every rigid body's moments meet and a hand-written URDF's may not) gets its two
     smaller moments raised by the same amount until they meet it, its axes kept (MuJoCo refuses it otherwise)."""
-    ii = 0.5 * (np.asarray(inertia, dtype=np.float64) + np.asarray(inertia, dtype=np.float64).T)
+    ii = np.asarray(inertia, dtype=np.float64)
+    ii = 0.5 * (ii + ii.T)
     e, v = np.linalg.eigh(ii)  # ascending
     if e[0] <= 1e-8:
         return np.eye(3) * 1e-4 * mass, True

@@ -13,9 +13,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from workbench.errors import PlanningError
-from workbench.geometry.hull import part_hull
 from workbench.grasping.naming import per_part_numbers
-from workbench.grasping.placements import PlacementParams
 from workbench.planners.wan_harada.motions import (
     DEFAULT_ACC,
     ExecOptions,
@@ -110,18 +108,18 @@ class Planner:
         if not (lo[0] <= query.x <= hi[0] and lo[1] <= query.y <= hi[1]):
             raise PlanningError(f"{label} position ({query.x:g}, {query.y:g}) is off the table (x {lo[0]:g}..{hi[0]:g}, "
                                 f"y {lo[1]:g}..{hi[1]:g} m); give a position on it")
-        pose = query.move() @ self.free["rotmat"][hit[0]]
-        # the part rests on its support polygon: all of it must lie on the table, not only the centre of mass
-        hull = np.asarray(part_hull(self.object.mesh).vertices)
-        placed = hull @ pose[:3, :3].T + pose[:3, 3]
-        support = placed[placed[:, 2] <= placed[:, 2].min() + PlacementParams().support_tolerance, :2]
+        move = query.move()
+        # the part rests on its support polygon (stored in the free placement's table frame): all of it must lie on
+        # the table, not only the centre of mass
+        polygon = np.asarray(self.free["support"][hit[0]], dtype=np.float64).reshape(-1, 3)
+        support = polygon[:, :2] @ move[:2, :2].T + move[:2, 3]
         over = float(np.max(np.r_[lo[0] - support[:, 0], support[:, 0] - hi[0], lo[1] - support[:, 1],
                                   support[:, 1] - hi[1], 0.0]))
         if over > 1e-9:
             raise PlanningError(f"{label} pose ({query.text(self.numbers)}) puts {over * 1000:.1f} mm of "
                                 f"{self.object.name}'s support past the table's edge (x {lo[0]:g}..{hi[0]:g}, "
                                 f"y {lo[1]:g}..{hi[1]:g} m); move it at least that far onto the table")
-        return pose
+        return move @ self.free["rotmat"][hit[0]]
 
     def side(self, query: Query, label: str = "start") -> Side:
         """The grips of a start or goal pose (Section V, Fig. 8): the placement's free tabletop grips moved with it.
