@@ -175,3 +175,27 @@ def test_gap_grasps_change_nothing_on_a_part_without_holes(box, hand):
     plan = plan_grasps(box, hand, GraspParams())
     assert plan.counts["gap"] == 0
     assert np.array_equal(plan.grasps.poses, plain.grasps.poses)
+
+
+def test_the_friction_cone_check_during_the_search_changes_no_grasp(frame, open_bin, hand, monkeypatch):
+    """The search skips the right pad of a pose whose left touch is outside the friction cone, except where a
+    fingertip variant or a pre-grasp search may still make it a grasp. Planned again with that check off (every pose
+    searched in full), a frame, a bin, a washer, a ring and a bumpy blob get bit-identical grasps and counts."""
+    from workbench.benchmarks.organic import blob, torus, washer
+    from workbench.grasping import pads
+
+    parts = [frame, open_bin, from_trimesh(washer(0.06, 0.03, 0.005), "washer"),
+             from_trimesh(torus(0.05, 0.012), "ring"), from_trimesh(blob(seed=3), "blob")]
+    fields = ("poses", "jawwidth", "contact0", "contact1", "normal0", "normal1", "facet0", "facet1")
+    keys = ("hand_poses", "pads_left", "pads_width", "pads_cone", "pads_com", "hand_open", "grasps")
+    early = [plan_grasps(p, hand, GraspParams()) for p in parts]
+    searched = pads._touches
+    monkeypatch.setattr(pads, "_touches", lambda *a: searched(*a[:9], -2.0, *a[10:]))  # cone off
+    for part, plan in zip(parts, early):
+        part.mesh._cache.clear()
+        full = plan_grasps(part, hand, GraspParams())
+        assert len(plan.grasps) > 0, part.name
+        for f in fields:
+            assert np.array_equal(getattr(plan.grasps, f), getattr(full.grasps, f)), (part.name, f)
+        assert [plan.counts[k] for k in keys] == [full.counts[k] for k in keys], part.name
+    assert sum(p.counts["pads_left"] < p.counts["hand_poses"] for p in early) >= 3  # the check had poses to skip

@@ -195,7 +195,8 @@ def test_counts_are_monotone(box, hand, box_plan):
     # centre of mass, level 2
     assert c["facet_samples_distance"] >= c["axes"]
     assert c["hand_poses"] == c["axes"] * box_plan.params.rotations + c["fingertip"]
-    assert c["hand_poses"] >= c["pads_width"] >= c["pads_cone"] >= c["pads_com"] >= c["hand_open"] >= c["grasps"]
+    assert (c["hand_poses"] >= c["pads_left"] >= c["pads_width"] >= c["pads_cone"] >= c["pads_com"] >= c["hand_open"]
+            >= c["grasps"])
     paper = plan_grasps(box, hand, GraspParams(contact_model="paper")).counts
     assert paper["contact_pairs"] >= paper["pairs_width"] >= paper["pairs_com"] >= paper["pairs_level1"]
     assert paper["hand_poses"] == paper["pairs_level1"] * box_plan.params.rotations >= paper["hand_open"] >= paper["grasps"]

@@ -114,3 +114,63 @@ def test_parallel60_grasps_of_the_planebody_keep_both_fingers_out_of_it():
     v = check_grasps(obj.mesh, g.poses, g.jawwidth, g.contact0, g.contact1, g.normal0, g.normal1,
                      params.friction_coefficient, hand="parallel60", pregrasp_margin=params.pregrasp_margin)
     assert v.ok.all(), np.flatnonzero(~v.ok)
+
+
+def test_a_first_touch_outside_the_friction_cone_skips_only_the_right_pad(hand):
+    """With the cone given, a pose whose left touch's normal (the mesh's own face normal, read here) lies outside it
+    keeps its left touch and is not a hit; every other pose, and every pose `need` names, is exactly the full
+    search's."""
+    mesh = _bumpy(4)
+    rng = np.random.default_rng(5)
+    face = rng.choice(len(mesh.faces), 60, replace=False)
+    axes = mesh.face_normals[face] + rng.normal(scale=0.25, size=(60, 3))  # jaw axes off the surface normals
+    origins, angles = mesh.triangles_center[face], np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    cos_f = np.cos(np.arctan(0.3))
+    need = rng.random(60 * 8) < 0.2
+    full = first_touches(mesh, origins, axes, angles, hand)
+    early = first_touches(mesh, origins, axes, angles, hand, cone=cos_f, need=need)
+    y = full.poses[:, :3, 1]
+    inside = (full.tri0 >= 0) & (np.einsum("ij,ij->i", mesh.face_normals[np.maximum(full.tri0, 0)], y) >= cos_f)
+    skipped = (full.tri0 >= 0) & ~inside & ~need
+    assert skipped.sum() > 50 and (inside & full.hit).sum() > 50
+    kept = ~skipped
+    assert np.array_equal(early.hit[kept], full.hit[kept])
+    assert np.array_equal(early.tri0, full.tri0) and np.array_equal(early.tri1[kept], full.tri1[kept])
+    assert np.array_equal(early.poses[kept], full.poses[kept]) and np.array_equal(early.point0, full.point0)
+    assert not early.hit[skipped].any() and (early.tri1[skipped] == -1).all()
+
+
+def test_the_hierarchy_splits_space_at_every_node():
+    """The triangles are ordered so that every node of the implicit tree holds those of one box of space: at each
+    node, the centres of its left child's triangles all come before its right child's along some axis."""
+    from workbench.grasping._padkernel import _select
+
+    mesh = _bumpy(4)
+    shape, slots, leaf, tri_s, _ = _padkernel.triangle_bvh(np.asarray(mesh.triangles), np.asarray(mesh.face_normals))
+    assert np.array_equal(np.sort(slots[slots >= 0]), np.arange(len(mesh.faces)))
+    centre = mesh.triangles_center
+    P = len(shape) // 2
+
+    def members(node: int) -> np.ndarray:
+        lo, hi = node, node
+        while lo < P:
+            lo, hi = 2 * lo, 2 * hi + 1
+        s = slots[(lo - P) * leaf:(hi - P + 1) * leaf]
+        return s[s >= 0]
+
+    split = 0
+    for node in range(1, P):
+        a, b = members(2 * node), members(2 * node + 1)
+        if len(a) and len(b):
+            split += 1
+            assert any(centre[a, k].max() <= centre[b, k].min() for k in range(3)), node
+    assert split > 100
+    # the selection it rests on, against a sort: ties broken by index
+    rng = np.random.default_rng(0)
+    for n in (2, 3, 4, 9, 200):
+        pc = rng.integers(0, 4, size=(n, 3)).astype(float)
+        order = rng.permutation(n).astype(np.int64)
+        key = sorted(zip(pc[:, 1], order))
+        k = int(rng.integers(0, n))
+        _select(pc, order, 1, 0, n, k)
+        assert sorted(zip(pc[:k, 1], order[:k])) == key[:k]

@@ -51,11 +51,11 @@ def run(args: argparse.Namespace) -> int:
                 v = check_grasps(obj.mesh, g.poses, g.jawwidth, g.contact0, g.contact1, g.normal0, g.normal1,
                                  plan.params.friction_coefficient, pregrasp_margin=margin)
                 rows.append([label, lengths, "full" if margin is None else f"+{margin * 1e3:.0f} mm",
-                             plan.lengths["com_max"] * 1e3, c["hand_poses"], c["pads_width"], c["pads_cone"],
+                             plan.lengths["com_max"] * 1e3, c["hand_poses"], c["pads_left"], c["pads_width"], c["pads_cone"],
                              c["pads_com"], at_pose, c["hand_open"], c["grasps"], int((centre[:, 2] > height - 0.012).sum()),
                              f"{int(v.ok.sum())}/{len(g)}", failures(v), t])
-    print_table(["part", "lengths", "opening", "com max mm", "hand poses", "width ok", "cone ok", "com ok",
-                 "body hits at pose", "hand clear", "grasps", "rim grasps", "valid", "failing", "t-fg s"], rows,
+    print_table(["part", "lengths", "opening", "com max mm", "hand poses", "first pad cone ok", "width ok", "cone ok",
+                 "com ok", "body hits at pose", "hand clear", "grasps", "rim grasps", "valid", "failing", "t-fg s"], rows,
                 title=f"Grasp candidates of a mug with a handle, Franka hand, by filter (median of {args.repeats} runs; "
                       "opening: the pads start and the hand approaches at the grasp's opening plus the margin, or fully "
                       "open; 'body hits at pose': candidates past the centre-of-mass filter whose hand body meets the mug at "

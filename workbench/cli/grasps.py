@@ -121,7 +121,8 @@ def grasp_counts(plan: GraspPlan) -> str:
     head = (f"facets {c['facets']}, samples {c['samples']} -> {c['samples_neighbour']} neighbour filter -> "
             f"{c['facet_samples_distance']} of {c['facet_samples']} facet samples after the boundary distance")
     if "pads_width" in c:
-        body = (f"hand poses {c['hand_poses']} -> {c['pads_width']} opening fits -> {c['pads_cone']} friction cone -> "
+        body = (f"hand poses {c['hand_poses']} -> {c['pads_left']} first pad in the friction cone -> {c['pads_width']} "
+                f"opening fits -> {c['pads_cone']} both pads in the friction cone -> "
                 f"{c['pads_com']} near the centre of mass -> {c['hand_open']} approach free -> {c['grasps']} fingers free")
     else:
         body = (f"contact pairs {c['contact_pairs']} -> {c['pairs_width']} jaw -> {c['pairs_com']} com -> "

@@ -109,19 +109,22 @@ def _cuts_start(x, y, z, start, hx, hz):
     """Does the triangle (pad coordinates x, z from the pad's centre; heights y) cross the plane y = `start`, the
     pad's starting height, inside the rectangle [-hx, hx] x [-hz, hz]? Then the pad starts inside the part."""
     n = 0
-    sx, sz = np.empty(2), np.empty(2)
+    sx0, sz0, sx1, sz1 = 0.0, 0.0, 0.0, 0.0  # the section's ends (scalars: no array per call in the search)
     for e in range(3):
         i, j = e, (e + 1) % 3
         if (y[i] - start) * (y[j] - start) < 0 and n < 2:
             t = (start - y[i]) / (y[j] - y[i])
-            sx[n], sz[n] = x[i] + t * (x[j] - x[i]), z[i] + t * (z[j] - z[i])
+            if n == 0:
+                sx0, sz0 = x[i] + t * (x[j] - x[i]), z[i] + t * (z[j] - z[i])
+            else:
+                sx1, sz1 = x[i] + t * (x[j] - x[i]), z[i] + t * (z[j] - z[i])
             n += 1
     if n < 2:
         return False
     # the section's segment against the rectangle (Liang-Barsky clipping)
     t0, t1 = 0.0, 1.0
-    dx, dz = sx[1] - sx[0], sz[1] - sz[0]
-    for p, q in ((-dx, sx[0] + hx), (dx, hx - sx[0]), (-dz, sz[0] + hz), (dz, hz - sz[0])):
+    dx, dz = sx1 - sx0, sz1 - sz0
+    for p, q in ((-dx, sx0 + hx), (dx, hx - sx0), (-dz, sz0 + hz), (dz, hz - sz0)):
         if abs(p) <= _EPS:
             if q < 0:
                 return False
@@ -303,11 +306,14 @@ def _pad_touch(cb, ca, ly, c, s, side, start, block, wlo, whi, tie, rect, lx3, l
 
 @njit(cache=True)
 def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max,
-                       block):
+                       block, cone, lift, need):
     """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y,
     local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
     triangles by leaf slot and their unit normals by triangle. `block` (m, negative: off): a pad whose finite start's
     plane, moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing.
+    `cone`: the cosine of the friction cone's half-angle (below -1: off); a pose whose left touch's normal lies
+    outside the cone about +y is not a grasp, so its right pad is not searched (not found), unless `need` (K, A)
+    names it or the touch lies less than `lift` below the left pad's start.
 
     The rotations about one axis share one best-first search per pad: a node is opened for the rotations whose
     footprint meets it and whose best touch so far it may reach within `tie` of, highest first (lowest for the right
@@ -453,15 +459,17 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                     r = best[j]
                     if r < 0:
                         continue
-                    todo |= np.int64(1) << j
+                    if ra[r] >= cone or need[k, j0 + j] or rs[r] + lift > whi:
+                        todo |= np.int64(1) << j
                     hrow = k * A + j0 + j
                     found[hrow, si] = True
                     height[hrow, si] = side * rs[r]
                     local[hrow, si] = rp[r]
                     tri_id[hrow, si] = rt[r]
         # an axis whose own crossings are farther apart than the jaw opens cannot be grasped at any rotation: none
-        # of its rotations is a touch. The axis point lies in every rotation's footprint, so a rotation's touches
-        # lie at least as far apart as the crossings: the line is searched only where some rotation's do not fit
+        # of its rotations is a hit (both pads found). The axis point lies in every rotation's footprint, so a
+        # rotation's touches lie at least as far apart as the crossings: the line is searched only where some
+        # rotation's do not fit
         wide = False
         for j in range(A):
             hrow = k * A + j
@@ -472,13 +480,12 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
             a_max, a_min = _axis_crossings(shape, slots, leaf, tri, o, x0, y, z0, wlo, whi, slack, rad2, stack,
                                            leaves, ca, cb, ly)
             if np.isfinite(a_max - a_min) and a_max - a_min > jaw_max + tie:
-                for j in range(A):
+                for j in range(A):  # the right pad's touch dropped: the left one stays, for what it faces
                     hrow = k * A + j
-                    found[hrow, 0] = found[hrow, 1] = False
-                    height[hrow, 0] = height[hrow, 1] = 0.0
-                    local[hrow, 0, :] = 0.0
+                    found[hrow, 1] = False
+                    height[hrow, 1] = 0.0
                     local[hrow, 1, :] = 0.0
-                    tri_id[hrow, 0] = tri_id[hrow, 1] = -1
+                    tri_id[hrow, 1] = -1
     return found, height, local, tri_id
 
 
@@ -570,6 +577,105 @@ def _morton_order(tri):
 
 
 @njit(cache=True, inline="always")
+def _before(pc, order, ax, i, j):
+    """Does the triangle at position i come before the one at j along axis `ax` (centres `pc` by position, ties by
+    triangle index: a strict order)?"""
+    return pc[i, ax] < pc[j, ax] or (pc[i, ax] == pc[j, ax] and order[i] < order[j])
+
+
+@njit(cache=True, inline="always")
+def _swap(pc, order, i, j):
+    order[i], order[j] = order[j], order[i]
+    for a in range(3):
+        pc[i, a], pc[j, a] = pc[j, a], pc[i, a]
+
+
+@njit(cache=True)
+def _select(pc, order, ax, a, b, k):
+    """Rearrange positions a..b-1 (`order` and the centres `pc` with it) so that a..k-1 hold their k - a first along
+    axis `ax` (`_before`), in linear expected time (quickselect, median-of-three pivots)."""
+    lo, hi = a, b - 1
+    while lo < hi:
+        if hi - lo < 3:  # three or fewer: in order by insertion
+            for i in range(lo + 1, hi + 1):
+                j = i
+                while j > lo and _before(pc, order, ax, j, j - 1):
+                    _swap(pc, order, j, j - 1)
+                    j -= 1
+            return
+        mid = (lo + hi) >> 1
+        if _before(pc, order, ax, mid, lo):
+            _swap(pc, order, mid, lo)
+        if _before(pc, order, ax, hi, lo):
+            _swap(pc, order, hi, lo)
+        if _before(pc, order, ax, hi, mid):
+            _swap(pc, order, hi, mid)
+        _swap(pc, order, mid, hi - 1)  # the pivot, out of the way at hi - 1
+        p = hi - 1
+        i, j = lo, hi - 1
+        while True:
+            i += 1
+            while _before(pc, order, ax, i, p):
+                i += 1
+            j -= 1
+            while j > lo and _before(pc, order, ax, p, j):
+                j -= 1
+            if i >= j:
+                break
+            _swap(pc, order, i, j)
+        _swap(pc, order, i, hi - 1)  # the pivot to its place, i
+        if k == i:
+            return
+        if k < i:
+            hi = i - 1
+        else:
+            lo = i + 1
+
+
+@njit(cache=True)
+def _split_order(tri, leaf, P):
+    """The triangles' indices (T,) in the order of a top-down spatial split matching the implicit tree of P leaves of
+    `leaf` slots, filled from the left: a node's triangles, split along the longest side of their centres' bounds
+    (ties by index), give its left child the first as many as it holds and its right child the rest. Each node then
+    holds the triangles of one box of space, where the Morton order's nodes may straddle a jump of its curve.
+    Started from the Morton order, whose nodes' triangles already lie near each other in memory."""
+    n = tri.shape[0]
+    order = _morton_order(tri)
+    pc = np.empty((n, 3))
+    for i in range(n):
+        f = order[i]
+        for a in range(3):
+            pc[i, a] = (tri[f, 0, a] + tri[f, 1, a] + tri[f, 2, a]) / 3.0
+    # (first, end, capacity in slots) of the nodes still to split
+    todo_a, todo_b, todo_c = np.empty(128, dtype=np.int64), np.empty(128, dtype=np.int64), np.empty(128, dtype=np.int64)
+    todo_a[0], todo_b[0], todo_c[0] = 0, n, P * leaf
+    top = 1
+    while top > 0:
+        top -= 1
+        a, b, cap = todo_a[top], todo_b[top], todo_c[top]
+        if cap <= leaf or b - a <= 1:
+            continue
+        half = cap // 2
+        if b - a > half:
+            lo0, lo1, lo2, hi0, hi1, hi2 = np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf
+            for i in range(a, b):
+                lo0, hi0 = min(lo0, pc[i, 0]), max(hi0, pc[i, 0])
+                lo1, hi1 = min(lo1, pc[i, 1]), max(hi1, pc[i, 1])
+                lo2, hi2 = min(lo2, pc[i, 2]), max(hi2, pc[i, 2])
+            ax = 0
+            if hi1 - lo1 > hi0 - lo0:
+                ax = 1
+            if hi2 - lo2 > max(hi0 - lo0, hi1 - lo1):
+                ax = 2
+            _select(pc, order, ax, a, b, a + half)
+        m = min(b, a + half)
+        todo_a[top], todo_b[top], todo_c[top] = m, b, half
+        todo_a[top + 1], todo_b[top + 1], todo_c[top + 1] = a, m, half
+        top += 2
+    return order
+
+
+@njit(cache=True, inline="always")
 def _centre_normal(shape, nsum, node, c, nn):
     """A built node's box centre into c and unit mean normal into nn (`_unit_normal`); False, with its sphere and
     offsets zeroed, for an empty node."""
@@ -584,7 +690,7 @@ def _centre_normal(shape, nsum, node, c, nn):
 
 @njit(cache=True, nogil=True)  # a large part's first plan builds it beside segmentation (grasps._prebuild)
 def _build(tri, leaf, slots, tri_s, shape):
-    """Fill the hierarchy in one pass over the triangles in Morton order: `slots` (the triangle of every leaf slot,
+    """Fill the hierarchy in one pass over the triangles in the order of `_split_order`: `slots` (the triangle of every leaf slot,
     -1 for none), `tri_s` (the triangles by slot) and `shape`: per node its box (lo, hi; empty: lo > hi), the box
     centre c, the radius of a sphere about c holding the node's points, the unit mean normal n of its triangles
     (area-weighted; any unit vector where they cancel) and the least and largest offsets of its points along n. Exact
@@ -592,7 +698,7 @@ def _build(tri, leaf, slots, tri_s, shape):
     n = tri.shape[0]
     N = shape.shape[0]
     P = N // 2
-    order = _morton_order(tri)
+    order = _split_order(tri, leaf, P)
     nsum = np.empty((N, 3))
     c, nn = np.empty(3), np.empty(3)
     for node in range(P, N):
@@ -675,8 +781,8 @@ def _set_shape(shape, node, c, r, n, d0, d1):
 
 
 def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int | None = None) -> tuple:
-    """A bounding-volume hierarchy over triangles (T, 3, 3) for `first_touch_kernel`: the triangles in Morton order of
-    their centres, `leaf` to a leaf (None: by the count, 4 to 16), and a complete binary tree over the leaves (node 1
+    """A bounding-volume hierarchy over triangles (T, 3, 3) for `first_touch_kernel`: the triangles split in space
+    node by node (`_split_order`), `leaf` to a leaf (None: by the count, 4 to 16), and a complete binary tree over the leaves (node 1
     the root, node i's children 2i and 2i + 1, the leaves P .. 2P - 1). Returns the node shapes (2P, 15): box lo, hi
     (empty: lo > hi), and the sphere and slab of `_build`; the triangle of every leaf slot (P * leaf, -1 for none);
     `leaf`; the triangles by slot (T, 3, 3), so that a leaf's triangles lie together in memory; and the triangles'
@@ -724,22 +830,24 @@ def line_crossings(shape, slots, leaf, tri, starts, dirs):
             for q in range((node - P) * leaf, (node - P + 1) * leaf):
                 if slots[q] < 0:
                     continue
-                e1 = tri[q, 1] - tri[q, 0]
-                e2 = tri[q, 2] - tri[q, 0]
-                px = d[1] * e2[2] - d[2] * e2[1]
-                py = d[2] * e2[0] - d[0] * e2[2]
-                pz = d[0] * e2[1] - d[1] * e2[0]
-                det = e1[0] * px + e1[1] * py + e1[2] * pz
+                # scalars, not array slices: an array temporary per triangle costs more than the test
+                a0, a1, a2 = tri[q, 0, 0], tri[q, 0, 1], tri[q, 0, 2]
+                e10, e11, e12 = tri[q, 1, 0] - a0, tri[q, 1, 1] - a1, tri[q, 1, 2] - a2
+                e20, e21, e22 = tri[q, 2, 0] - a0, tri[q, 2, 1] - a1, tri[q, 2, 2] - a2
+                px = d[1] * e22 - d[2] * e21
+                py = d[2] * e20 - d[0] * e22
+                pz = d[0] * e21 - d[1] * e20
+                det = e10 * px + e11 * py + e12 * pz
                 if det == 0.0:
                     continue
                 inv = 1.0 / det
-                sx, sy, sz = o[0] - tri[q, 0, 0], o[1] - tri[q, 0, 1], o[2] - tri[q, 0, 2]
+                sx, sy, sz = o[0] - a0, o[1] - a1, o[2] - a2
                 u = (sx * px + sy * py + sz * pz) * inv
                 if u < 0.0 or u > 1.0:
                     continue
-                qx = sy * e1[2] - sz * e1[1]
-                qy = sz * e1[0] - sx * e1[2]
-                qz = sx * e1[1] - sy * e1[0]
+                qx = sy * e12 - sz * e11
+                qy = sz * e10 - sx * e12
+                qz = sx * e11 - sy * e10
                 v = (d[0] * qx + d[1] * qy + d[2] * qz) * inv
                 if v < 0.0 or u + v > 1.0:
                     continue
@@ -749,6 +857,6 @@ def line_crossings(shape, slots, leaf, tri, starts, dirs):
                     ray2[:m], tid2[:m], dist2[:m] = ray[:m], tid[:m], dist[:m]
                     ray, tid, dist = ray2, tid2, dist2
                 ray[m], tid[m] = k, slots[q]
-                dist[m] = (e2[0] * qx + e2[1] * qy + e2[2] * qz) * inv
+                dist[m] = (e20 * qx + e21 * qy + e22 * qz) * inv
                 m += 1
     return ray[:m].copy(), tid[:m].copy(), dist[:m].copy()

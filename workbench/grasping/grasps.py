@@ -42,6 +42,7 @@ from workbench.geometry.sampling import Samples, distribute, sample_count
 from workbench.grasping._handkernel import convex_piece, hull_hits, pack
 from workbench.grasping._padkernel import triangle_bvh
 from workbench.grasping.pads import (
+    PREGRASP_TOL,
     Touches,
     axis_frames,
     fingertip_shifts,
@@ -184,7 +185,8 @@ class ContactPairs:
     """Candidate contact pairs (one row each) and the filter each passed.
 
     point0/normal0 on the left finger's side (+y of the TCP), point1/normal1 on the right's; normals are outward.
-    With the pad model a row is one hand pose (axis and rotation) and its first touches. Masks (cumulative):
+    With the pad model a row is one hand pose (axis and rotation) and its first touches, and the facets of its
+    contacts are named where `com_ok` holds or the row is a facet sample's (-1 elsewhere). Masks (cumulative):
     `width_ok`, `com_ok` (after the friction cone with the pad model), `level1_ok` (pads touch inside the cone with
     the pad model; the swept cylinders are free with the paper model).
     """
@@ -505,59 +507,88 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
                 ring = np.flatnonzero(~np.isin(held, hit))
                 line, point, outward = line_surface_points(mesh, o[ring], y[ring])
                 slice_gaps = (np.full(len(point), -1), point, outward, np.zeros(1), z[ring][line])
-    parts, source = [], []
+    # a pose whose left pad touches outside the friction cone is no grasp: its right pad is searched only where its
+    # fingertip variant (`_fingertip_variants`, from this pose's TCP) may be one, and a gap pose's only where its
+    # pre-grasp search (`pads.pregrasp_touches`) may start the left pad higher than the gap search did (at most half
+    # the pre-grasp margin above its touch). The cone is loosened by rounding's width, so the filters below still
+    # decide every pose at its edge.
+    cos_f = np.cos(np.arctan(params.friction_coefficient))
+    lift = (gripper.jaw_max if params.pregrasp_margin is None else params.pregrasp_margin) / 2 + PREGRASP_TOL + 1e-9
+    tips = None if params.fingertip_margin is None else (_hull_points(mesh), params.fingertip_margin)
 
-    def add_gaps(src, o, a, ang, ref) -> None:  # pads starting inside a hole along the axes through surface points
-        w, win, narrow = gap_windows(mesh, o, a, gripper.jaw_max, params.pregrasp_margin)
-        parts.append(gap_touches(mesh, o[w], a[w], ang, gripper, None if ref is None else ref[w], win, narrow,
-                                 params.finger_clearance))
-        source.append(np.repeat(src[w], len(ang)))
-        counts["gap"] += int(len(w))
+    def needed(o, a, ang, ref) -> np.ndarray | None:
+        if tips is None:
+            return None
+        return np.isfinite(fingertip_shifts(tips[0], axis_frames(o, a, ang, ref), gripper, tips[1], slack=1e-9))
 
-    for src, o, a, ang, ref in axis_sets:
-        parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref))
-        source.append(np.repeat(src, len(ang)))
-        if params.gap_grasps and (src >= 0).all():  # gaps open from a surface sample along its normal
-            add_gaps(src, o, a, ang, ref)
-    if slice_gaps is not None:
-        add_gaps(*slice_gaps)
-    touch, source = _merge(parts), np.concatenate(source)
-    if params.fingertip_margin is not None:
-        tips, tip_source = _fingertip_variants(mesh, gripper, params.fingertip_margin, touch, source)
-        touch, source = _merge([touch, tips]), np.concatenate([source, tip_source])
-        counts["fingertip"] = int(len(tips))
-    # a pad that started inside a hole: its touches are those closing from the pre-grasp opening about its TCP
-    inside = touch.hit & np.isfinite(touch.window).any(axis=1)
-
-    def filters(t: Touches) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # the opening, the cone, the centre of mass
+    def filters(t: Touches) -> tuple[np.ndarray, ...]:
+        """The left touch within the cone, the opening within the stroke, both touches within the cone and the
+        contacts' centre near the centre of mass."""
         y = t.poses[:, :3, 1]
-        cos_f = np.cos(np.arctan(params.friction_coefficient))
+        left = (t.tri0 >= 0) & (np.einsum("ij,ij->i", t.normal0, y) >= cos_f)
         width = t.hit & (t.width <= gripper.jaw_max) & (t.width >= gripper.jaw_min)
-        cone = width & (np.einsum("ij,ij->i", t.normal0, y) >= cos_f) & (np.einsum("ij,ij->i", t.normal1, -y) >= cos_f)
-        return width, cone, cone & (np.linalg.norm(0.5 * (t.point0 + t.point1) - obj.com, axis=1) <= lengths["com_max"])
+        both = left & width & (np.einsum("ij,ij->i", t.normal1, -y) >= cos_f)
+        return left, width, both, both & (np.linalg.norm(0.5 * (t.point0 + t.point1) - obj.com, axis=1)
+                                          <= lengths["com_max"])
 
-    again = pregrasp_touches(mesh, _subset(touch, inside), gripper, params.pregrasp_margin, params.finger_clearance,
-                             wanted=lambda t: filters(t)[2])
-    touch = _put_rows(touch, inside, again)
+    def touches(cone: float | None) -> tuple[Touches, np.ndarray]:
+        parts, source = [], []
+        counts["gap"] = 0
+
+        def add_gaps(src, o, a, ang, ref) -> None:  # pads starting inside a hole along the axes through surface points
+            w, win, narrow = gap_windows(mesh, o, a, gripper.jaw_max, params.pregrasp_margin)
+            ref = None if ref is None else ref[w]
+            parts.append(gap_touches(mesh, o[w], a[w], ang, gripper, ref, win, narrow, params.finger_clearance,
+                                     cone, lift, needed(o[w], a[w], ang, ref)))
+            source.append(np.repeat(src[w], len(ang)))
+            counts["gap"] += int(len(w))
+
+        for src, o, a, ang, ref in axis_sets:
+            parts.append(first_touches(mesh, o, a, ang, gripper, ref=ref, cone=cone, need=needed(o, a, ang, ref)))
+            source.append(np.repeat(src, len(ang)))
+            if params.gap_grasps and (src >= 0).all():  # gaps open from a surface sample along its normal
+                add_gaps(src, o, a, ang, ref)
+        if slice_gaps is not None:
+            add_gaps(*slice_gaps)
+        touch, source = _merge(parts), np.concatenate(source)
+        if tips is not None:
+            tip, tip_source = _fingertip_variants(mesh, gripper, tips, touch, source, cone)
+            touch, source = _merge([touch, tip]), np.concatenate([source, tip_source])
+            counts["fingertip"] = int(len(tip))
+        # a pad that started inside a hole: its touches are those closing from the pre-grasp opening about its TCP
+        inside = touch.hit & np.isfinite(touch.window).any(axis=1)
+        again = pregrasp_touches(mesh, _subset(touch, inside), gripper, params.pregrasp_margin,
+                                 params.finger_clearance, wanted=lambda t: filters(t)[3], cone=cone)
+        return _put_rows(touch, inside, again), source
+
+    touch, source = touches(float(cos_f) - 1e-12)
+    left_ok, width_ok, cone_ok, com_ok = filters(touch)
+    if not cone_ok.any():
+        # no grasp passes the cone: searched again in full, so that the message's friction hint (`friction_hint`)
+        # weighs every pair that fits the jaw; the counts are the same
+        touch, source = touches(None)
+        left_ok, width_ok, cone_ok, com_ok = filters(touch)
     timings["pads"] = time.perf_counter() - t0 - timings.get("supports", 0.0)
-    width_ok, cone_ok, com_ok = filters(touch)
     y = touch.poses[:, :3, 1]
-    counts.update(hand_poses=int(len(touch)), pads_width=int(width_ok.sum()), pads_cone=int(cone_ok.sum()),
-                  pads_com=int(com_ok.sum()))
+    counts.update(hand_poses=int(len(touch)), pads_left=int(left_ok.sum()), pads_width=int((left_ok & width_ok).sum()),
+                  pads_cone=int(cone_ok.sum()), pads_com=int(com_ok.sum()))
     sampled = source >= 0
-    pairs = ContactPairs(sample=np.where(sampled, samples.pair_sample[source], -1),
-                         facet0=np.where(sampled, samples.pair_facet[source], _facet_of(facets, touch.tri0, y)),
-                         facet1=_facet_of(facets, touch.tri1, -y), point0=touch.point0, point1=touch.point1,
-                         normal0=touch.normal0, normal1=touch.normal1, width=touch.width, width_ok=width_ok,
-                         com_ok=com_ok, level1_ok=com_ok, axis=y)
     live = np.flatnonzero(com_ok)
+    facet0, facet1 = np.where(sampled, samples.pair_facet[source], -1), np.full(len(touch), -1)
+    found = live[~sampled[live]]  # the facets of the contacts that may become grasps
+    facet0[found] = _facet_of(facets, touch.tri0[found], y[found])
+    facet1[live] = _facet_of(facets, touch.tri1[live], -y[live])
+    pairs = ContactPairs(sample=np.where(sampled, samples.pair_sample[source], -1), facet0=facet0, facet1=facet1,
+                         point0=touch.point0, point1=touch.point1, normal0=touch.normal0, normal1=touch.normal1,
+                         width=touch.width, width_ok=width_ok, com_ok=com_ok, level1_ok=com_ok, axis=y)
     free = _level2(gripper, touch.poses[live], touch.width[live], mesh, params, counts, timings, pads=False)
     kept = touch.poses[live]
     return pairs, kept, live, rotation_about_axis(kept[:, :3, 1], kept[:, :3, 2]), free
 
 
 def gap_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, angles: np.ndarray, gripper: Gripper,
-                ref: np.ndarray | None, windows: np.ndarray, narrow: np.ndarray, clearance: float) -> Touches:
+                ref: np.ndarray | None, windows: np.ndarray, narrow: np.ndarray, clearance: float,
+                cone: float | None = None, lift: float = 0.0, need: np.ndarray | None = None) -> Touches:
     """First touches of pads starting inside a hole (`pads.gap_windows`' windows and narrow windows, per axis).
 
     A pad whose start's plane cuts the part inside its footprint (but for `clearance`) starts inside it and touches
@@ -566,9 +597,16 @@ def gap_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, an
     inside the part, from the full opening through the part: its touches then only place the centre about which
     `pads.pregrasp_touches` searches every hit again from its own pre-grasp opening. A pose blocked at the full
     opening on an axis without a narrow window is a miss, which spares the costliest searches (a pad inside the
-    part meets every triangle crossing its start) on parts whose holes do not take a finger."""
-    touch = first_touches(mesh, origins, axes, angles, gripper, ref=ref, windows=windows, block=clearance)
+    part meets every triangle crossing its start) on parts whose holes do not take a finger.
+
+    `cone`, `lift` and `need` (H,) as in `pads.first_touches`, for the first search; a pose it leaves without its
+    right touch is searched again as every miss is where its axis has a narrow window, so those axes' poses are all
+    needed."""
     axis = np.repeat(np.arange(len(origins)), len(angles))
+    redone = np.isfinite(narrow[axis, 0])
+    need = redone if need is None else np.asarray(need, dtype=bool).ravel() | redone
+    touch = first_touches(mesh, origins, axes, angles, gripper, ref=ref, windows=windows, block=clearance, cone=cone,
+                          need=need, lift=lift)
     for win, block in ((narrow, clearance), (np.where(np.isfinite(narrow), windows, np.nan), None)):
         redo = np.flatnonzero(~touch.hit & np.isfinite(win[axis, 0]))
         if len(redo) == 0:
@@ -697,20 +735,28 @@ def slice_axes(mesh: trimesh.Trimesh, com: np.ndarray, downs: np.ndarray, direct
     return np.concatenate(origins), np.concatenate(axes), np.concatenate(approach), np.concatenate(held)
 
 
-def _fingertip_variants(mesh, gripper, margin, touch: Touches, source: np.ndarray) -> tuple[Touches, np.ndarray]:
+def _fingertip_variants(mesh, gripper, tips: tuple[np.ndarray, float], touch: Touches, source: np.ndarray,
+                        cone: float | None = None) -> tuple[Touches, np.ndarray]:
     """The fingertip variants of `touch`'s hand poses that hit the part within the jaw range (the same jaw axis and
-    approach, the TCP moved back by `pads.fingertip_shifts`), and their sources."""
+    approach, the TCP moved back by `pads.fingertip_shifts` of `tips`: the part's hull points and the margin), and
+    their sources. `cone` as in `pads.first_touches`, for the variants searched from outside the part (those inside
+    a hole are searched again by `pads.pregrasp_touches`)."""
     cand = np.flatnonzero(touch.hit & (touch.width <= gripper.jaw_max))
-    try:
-        extreme = np.asarray(part_hull(mesh).vertices)
-    except QhullError:  # a flat sheet has no hull; its own vertices bound it as well
-        extreme = np.unique(np.asarray(mesh.vertices), axis=0)
-    d = fingertip_shifts(extreme, touch.poses[cand], gripper, margin) if len(cand) else np.zeros(0)
+    d = fingertip_shifts(tips[0], touch.poses[cand], gripper, tips[1]) if len(cand) else np.zeros(0)
     cand, d = cand[np.isfinite(d)], d[np.isfinite(d)]
     poses = touch.poses[cand]
     origins = poses[:, :3, 3] - d[:, None] * poses[:, :3, 2]
     return (first_touches(mesh, origins, poses[:, :3, 1], np.zeros(1), gripper, ref=poses[:, :3, 2],
-                          windows=touch.window[cand], block=None), source[cand])
+                          windows=touch.window[cand], block=None, cone=cone,
+                          need=np.isfinite(touch.window[cand]).any(axis=1)), source[cand])
+
+
+def _hull_points(mesh: trimesh.Trimesh) -> np.ndarray:
+    """Points whose extents along any direction are the part's: its convex hull's vertices."""
+    try:
+        return np.asarray(part_hull(mesh).vertices)
+    except QhullError:  # a flat sheet has no hull; its own vertices bound it as well
+        return np.unique(np.asarray(mesh.vertices), axis=0)
 
 
 def distinct_axes(sample: np.ndarray, normals: np.ndarray, areas: np.ndarray, angle: float) -> np.ndarray:
@@ -977,6 +1023,8 @@ def empty_reason(counts: dict, params: GraspParams, lengths: dict, gripper: Grip
         ("contact_pairs", f"no sample has a parallel facet opposite it (within {np.degrees(params.parallel_angle):.3g} "
                           f"degrees); raise --parallel-deg or use --contact-model pads"),
         ("pairs_width", outside_stroke("facet pair", pairs, gripper)),
+        ("pads_left", f"no hand pose's first pad touches within the friction cone (friction {mu:.2g}, "
+                      f"{np.degrees(np.arctan(mu)):.3g} degrees); {friction_hint(mu, pairs)}"),
         ("pads_width", outside_stroke("contact pair", pairs, gripper)),
         ("pads_cone", f"no pad contact has both normals within the friction cone (friction {mu:.2g}, "
                       f"{np.degrees(np.arctan(mu)):.3g} degrees); {friction_hint(mu, pairs)}"),

@@ -103,19 +103,28 @@ def axis_frames(origins: np.ndarray, axes: np.ndarray, angles: np.ndarray, ref: 
         ref = np.eye(3)[np.argmin(np.abs(y), axis=1)]
     z0 = ref - np.einsum("ij,ij->i", ref, y)[:, None] * y
     z0 /= np.linalg.norm(z0, axis=1, keepdims=True)
-    x0 = np.cross(y, z0)
+    x0 = _cross(y, z0)
     c, s = np.cos(angles)[None, :, None], np.sin(angles)[None, :, None]
     z = c * z0[:, None, :] + s * x0[:, None, :]  # R_y(angle) z0 = cos z0 + sin (y x z0)
     yy = np.broadcast_to(y[:, None, :], z.shape)
     poses = np.zeros((len(y), len(angles), 4, 4))
-    poses[..., :3, 0], poses[..., :3, 1], poses[..., :3, 2] = np.cross(yy, z), yy, z
+    poses[..., :3, 0], poses[..., :3, 1], poses[..., :3, 2] = _cross(yy, z), yy, z
     poses[..., :3, 3] = origins[:, None, :]
     poses[..., 3, 3] = 1.0
     return poses.reshape(-1, 4, 4)
 
 
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """`np.cross` of 3-vectors along the last axis, the same products and differences without its axis handling."""
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
+    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+    return out
+
+
 def fingertip_shifts(vertices: np.ndarray, poses: np.ndarray, gripper: Gripper, margin: float,
-                     min_contact: float = 1e-3) -> np.ndarray:
+                     min_contact: float = 1e-3, slack: float = 0.0) -> np.ndarray:
     """How far to move each TCP back along its approach so the fingertips end `margin` short of the part's far side
     along it (H,), NaN where no shift is needed or possible.
 
@@ -125,27 +134,31 @@ def fingertip_shifts(vertices: np.ndarray, poses: np.ndarray, gripper: Gripper, 
     the far side; it is possible while the pad still covers at least `min_contact` of the part along the approach
     (the pads then close on what lies there: the jaw axis may leave the part, as across a 5 mm washer). `vertices`:
     the part's convex hull vertices (the extent along a direction is a hull vertex's); `poses` (H, 4, 4) TCP poses
-    in the part's frame.
+    in the part's frame. `slack` (m) widens both conditions, for a conservative answer from poses whose TCPs lie
+    elsewhere along their jaw axes (then from matrix products, whose rounding the slack covers).
     """
     _, cz, _, hz = pad_rectangle(gripper)
     tip = cz + hz
     z = poses[:, :3, 2]
     at = np.einsum("hj,hj->h", z, poses[:, :3, 3])
-    far, near = _extents(z, vertices)
+    far, near = _extents(z, vertices, _PAIRS if slack <= 0 else 0)
     extent, near = far - at, near - at  # the far and the near side, from the TCP along the approach
     d = tip - extent + margin
     covered = (extent - margin) - np.maximum(near, tip - 2 * hz - d)  # the part's span along the pad, once moved
-    return np.where((d > 0) & (covered >= min_contact), d, np.nan)
+    return np.where((d > -slack) & (covered >= min_contact - slack), d, np.nan)
 
 
-def _extents(directions: np.ndarray, vertices: np.ndarray, dense: int = 10_000_000) -> tuple[np.ndarray, np.ndarray]:
+_PAIRS = 10_000_000  # direction-vertex pairs in one product of `_extents`
+
+
+def _extents(directions: np.ndarray, vertices: np.ndarray, dense: int = _PAIRS) -> tuple[np.ndarray, np.ndarray]:
     """The largest and smallest extents (H,), (H,) of `vertices` (V, 3) along each direction (H, 3), from one product
-    of the two. Above `dense` direction-vertex pairs (a full-resolution scan's hull) as matrix products in blocks of
-    about `dense` pairs."""
+    of the two. Above `dense` direction-vertex pairs (a full-resolution scan's hull) as matrix products (BLAS: faster,
+    rounded otherwise) in blocks of about `_PAIRS` pairs."""
     if len(directions) * len(vertices) <= dense:
         d = np.einsum("hj,vj->hv", directions, vertices)
         return d.max(axis=1), d.min(axis=1)
-    step = max(1, dense // max(len(vertices), 1))
+    step = max(1, _PAIRS // max(len(vertices), 1))
     hi, lo = np.empty(len(directions)), np.empty(len(directions))
     for i in range(0, len(directions), step):
         d = directions[i:i + step] @ vertices.T
@@ -155,13 +168,17 @@ def _extents(directions: np.ndarray, vertices: np.ndarray, dense: int = 10_000_0
 
 def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, angles: np.ndarray,
                   gripper: Gripper, tie: float = 1e-6, ref: np.ndarray | None = None,
-                  windows: np.ndarray | None = None, block: float | None = 0.0) -> Touches:
+                  windows: np.ndarray | None = None, block: float | None = 0.0, cone: float | None = None,
+                  need: np.ndarray | None = None, lift: float = 0.0) -> Touches:
     """First touches of both pads closing along each axis at each hand rotation (CONVENTIONS.md, Gripper); `ref`
     as in `axis_frames` (rotation 0 approaching along it); `windows` (K, 2), heights along each axis from its origin:
     the right pad starts at the first and touches nothing below it, the left at the second (None: from outside).
     `block` (m): a pad whose start's plane, moved `block` beyond it (the intrusion tolerated), cuts the part inside
     its footprint starts inside it and touches nothing (None: it touches what lies past its start, a candidate for
-    `pregrasp_touches`)."""
+    `pregrasp_touches`). `cone` (the cosine of the friction cone's half-angle; None: off): a pose whose left touch's
+    normal lies outside the cone about +y cannot be a grasp, and its right pad is not searched (a miss, `tri0` kept)
+    unless `need` (H,) names it or the touch lies less than `lift` (m) below the left pad's start (a search from a
+    start up to `lift` higher may find another touch)."""
     origins = np.asarray(origins, dtype=np.float64).reshape(-1, 3)
     axes = np.asarray(axes, dtype=np.float64).reshape(-1, 3)
     axes = axes / np.linalg.norm(axes, axis=1, keepdims=True)
@@ -169,24 +186,31 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
     if windows is None:
         windows = np.tile([-np.inf, np.inf], (len(origins), 1))
     windows = np.asarray(windows, dtype=np.float64).reshape(-1, 2)
+    need = np.zeros((len(origins), len(angles)), dtype=bool) if need is None else \
+        np.asarray(need, dtype=bool).reshape(len(origins), len(angles))
     frames = axis_frames(origins, axes, angles, ref)
     # the reference frames (rotation 0): the kernel turns every triangle into each rotation's pad coordinates from them
     fr0 = axis_frames(origins, axes, np.zeros(1), ref)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block)
+        return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block,
+                        -2.0 if cone is None else float(cone), float(lift), need)
+
+
+PREGRASP_TOL = 1e-6  # m: a pre-grasp search that moves a touch by more is not a hit (`pregrasp_touches`)
 
 
 def pregrasp_touches(mesh: trimesh.Trimesh, touch: Touches, gripper: Gripper, margin: float | None,
-                     clearance: float = 0.0, tol: float = 1e-6,
-                     wanted: Callable[[Touches], np.ndarray] | None = None) -> Touches:
+                     clearance: float = 0.0, tol: float = PREGRASP_TOL,
+                     wanted: Callable[[Touches], np.ndarray] | None = None, cone: float | None = None) -> Touches:
     """The touches of `touch`'s hand poses closing from their own pre-grasp opening (the width plus `margin`, at
     most the stroke; full opening when None) about their TCPs (CONVENTIONS.md, Gripper), with the starts clear of the
     part inside the pads' footprints but for `clearance` (the hand's tolerated intrusion). A pad that started inside
     a hole at full opening may have passed over material that the pad starting at the pre-grasp opening meets: its
     touch moves there. Searched twice; a pose whose second search moves by more than `tol` is not a hit. `wanted`
     (touches -> mask), when given, names the poses of the first search worth the second (those whose contacts pass
-    the later filters); the others keep the first search's touches, which those filters remove."""
-    once = _from_pregrasp(mesh, touch, gripper, margin, clearance, tol)
+    the later filters); the others keep the first search's touches, which those filters remove. `cone` as in
+    `first_touches`, for the first search: a pose outside it is no grasp whatever the second finds."""
+    once = _from_pregrasp(mesh, touch, gripper, margin, clearance, tol, cone)
     # a pose the first search missed stays a miss: only the others are searched again
     live = np.flatnonzero(once.hit & (True if wanted is None else wanted(once)))
     once_live = Touches(**{f: getattr(once, f)[live] for f in Touches.__dataclass_fields__})
@@ -199,12 +223,12 @@ def pregrasp_touches(mesh: trimesh.Trimesh, touch: Touches, gripper: Gripper, ma
 
 
 def _from_pregrasp(mesh, touch: Touches, gripper: Gripper, margin: float | None, clearance: float,
-                   tol: float) -> Touches:
+                   tol: float, cone: float | None = None) -> Touches:
     poses = touch.poses
     width = np.where(touch.hit, touch.width, 0.0)
     half = (np.full(len(poses), gripper.jaw_max) if margin is None else np.minimum(width + margin, gripper.jaw_max)) / 2
     again = first_touches(mesh, poses[:, :3, 3], poses[:, :3, 1], np.zeros(1), gripper, ref=poses[:, :3, 2],
-                          windows=np.column_stack([-half - tol, half + tol]), block=clearance)
+                          windows=np.column_stack([-half - tol, half + tol]), block=clearance, cone=cone)
     return Touches(**{**{f: getattr(again, f) for f in Touches.__dataclass_fields__},
                       "hit": again.hit & touch.hit & (again.width <= gripper.jaw_max)})
 
@@ -301,7 +325,8 @@ def line_surface_points(mesh: trimesh.Trimesh, points: np.ndarray, directions: n
     return ray, start[ray] + along[:, None] * directions[ray], np.sign(facing)[:, None] * directions[ray]
 
 
-def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: float | None) -> Touches:
+def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: float | None, cone: float,
+             lift: float, need: np.ndarray) -> Touches:
     tri = np.ascontiguousarray(mesh.triangles, dtype=np.float64)
     fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
     flip = not mesh.is_watertight
@@ -313,13 +338,15 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: f
     K, A = len(origins), len(angles)
 
     def rows(k: np.ndarray) -> tuple[np.ndarray, ...]:
-        out = first_touch_kernel(*tree, flip, origins[k], basis[k], angles, rect, tie, windows[k], jaw, block)
+        out = first_touch_kernel(*tree, flip, origins[k], basis[k], angles, rect, tie, windows[k], jaw, block, cone,
+                                 lift, need[k])
         return tuple(a.reshape(len(k), A, *a.shape[1:]) for a in out)
 
-    # a jaw axis's rows follow from its origin, basis and window alone: those seen before come from the part's memo
-    constants = np.concatenate([[float(flip), tie, jaw, block], rect, angles]).tobytes()
+    # a jaw axis's rows follow from its origin, basis, window and needed rotations alone: those seen before come
+    # from the part's memo
+    constants = np.concatenate([[float(flip), tie, jaw, block, cone, lift], rect, angles]).tobytes()
     found, height, local, tri_id = (a.reshape(K * A, *a.shape[2:]) for a in remembered(
-        mesh, "first_touches", constants, np.hstack([origins, basis.reshape(K, 9), windows]), rows))
+        mesh, "first_touches", constants, np.hstack([origins, basis.reshape(K, 9), windows, need]), rows))
     hit = found.all(axis=1)
     res = {}
     for si, side in enumerate((1, -1)):
