@@ -11,7 +11,10 @@ from numba import njit
 from workbench.geometry._radix import radix_sort
 
 _EPS = 1e-12
-SLAB_MIN = 32_768  # triangles from which the pads' search bounds nodes by their slabs as well as their boxes
+SLAB_MIN = 32_768
+# triangles up to which the hierarchy's nodes split space (`_split_order`); a full-resolution scan keeps the Morton
+# order, whose build is a third of the split's there while its searches stay short on the scan's small triangles
+SPLIT_MAX = 262_144  # triangles from which the pads' search bounds nodes by their slabs as well as their boxes
 _STACK = 256  # deeper than any tree: the implicit tree of 2^62 leaves has 63 levels, a search holds one child per level
 
 
@@ -698,7 +701,7 @@ def _build(tri, leaf, slots, tri_s, shape):
     n = tri.shape[0]
     N = shape.shape[0]
     P = N // 2
-    order = _split_order(tri, leaf, P)
+    order = _split_order(tri, leaf, P) if n < SPLIT_MAX else _morton_order(tri)
     nsum = np.empty((N, 3))
     c, nn = np.empty(3), np.empty(3)
     for node in range(P, N):

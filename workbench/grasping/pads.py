@@ -190,7 +190,7 @@ def first_touches(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, 
         np.asarray(need, dtype=bool).reshape(len(origins), len(angles))
     frames = axis_frames(origins, axes, angles, ref)
     # the reference frames (rotation 0): the kernel turns every triangle into each rotation's pad coordinates from them
-    fr0 = axis_frames(origins, axes, np.zeros(1), ref)
+    fr0 = frames[::len(angles)] if len(angles) and angles[0] == 0 else axis_frames(origins, axes, np.zeros(1), ref)
     with np.errstate(divide="ignore", invalid="ignore"):
         return _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block,
                         -2.0 if cone is None else float(cone), float(lift), need)
