@@ -41,6 +41,7 @@ import numpy as np
 import trimesh
 
 from workbench.grasping._padkernel import first_touch_kernel, line_crossings, triangle_bvh
+from workbench.geometry.vectors import cross
 from workbench.grasping.memo import remembered
 from workbench.robots.gripper import Gripper
 
@@ -103,24 +104,15 @@ def axis_frames(origins: np.ndarray, axes: np.ndarray, angles: np.ndarray, ref: 
         ref = np.eye(3)[np.argmin(np.abs(y), axis=1)]
     z0 = ref - np.einsum("ij,ij->i", ref, y)[:, None] * y
     z0 /= np.linalg.norm(z0, axis=1, keepdims=True)
-    x0 = _cross(y, z0)
+    x0 = cross(y, z0)
     c, s = np.cos(angles)[None, :, None], np.sin(angles)[None, :, None]
     z = c * z0[:, None, :] + s * x0[:, None, :]  # R_y(angle) z0 = cos z0 + sin (y x z0)
     yy = np.broadcast_to(y[:, None, :], z.shape)
     poses = np.zeros((len(y), len(angles), 4, 4))
-    poses[..., :3, 0], poses[..., :3, 1], poses[..., :3, 2] = _cross(yy, z), yy, z
+    poses[..., :3, 0], poses[..., :3, 1], poses[..., :3, 2] = cross(yy, z), yy, z
     poses[..., :3, 3] = origins[:, None, :]
     poses[..., 3, 3] = 1.0
     return poses.reshape(-1, 4, 4)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """`np.cross` of 3-vectors along the last axis, the same products and differences without its axis handling."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
 
 
 def fingertip_shifts(vertices: np.ndarray, poses: np.ndarray, gripper: Gripper, margin: float,

@@ -30,6 +30,7 @@ import numpy as np
 from scipy.optimize import linprog
 
 from workbench.errors import WorkbenchError
+from workbench.geometry.vectors import cross
 from workbench.params import Params, param
 
 # Directions u with u.v <= SPAN_TOL for all (unit-scale) v are treated as separating.
@@ -87,15 +88,6 @@ def primitive_wrenches(points: np.ndarray, normals: np.ndarray, mu: float, sides
 # Prefilter: positive span of force and of torque components ([5])
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Cross product over the last axis (faster than np.cross for small batches)."""
-    out = np.empty(np.broadcast_shapes(a.shape, b.shape))
-    out[..., 0] = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
-    out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
-    out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
-    return out
-
-
 def _pair_candidates(vectors: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Directions u orthogonal to two vectors of a pair of contacts with u.v <= 0 for all the pair's vectors.
 
@@ -110,7 +102,7 @@ def _pair_candidates(vectors: np.ndarray, pairs: np.ndarray) -> tuple[np.ndarray
     adj = np.arange(m)
     ia = np.concatenate([cross_a.ravel(), adj, adj + m])
     ib = np.concatenate([cross_b.ravel(), (adj + 1) % m, (adj + 1) % m + m])
-    u = _cross(x[:, ia], x[:, ib])                                                      # (P, C0, 3)
+    u = cross(x[:, ia], x[:, ib])                                                      # (P, C0, 3)
     longest = x[np.arange(len(x)), np.argmax((x * x).sum(axis=2), axis=1)]
     e1, e2 = tangent_frames(np.where((longest * longest).sum(axis=1, keepdims=True) > 0, longest, [0.0, 0.0, 1.0]))
     u = np.concatenate([u, -u, e1[:, None], -e1[:, None], e2[:, None], -e2[:, None]], axis=1)
