@@ -11,10 +11,10 @@ from numba import njit
 from workbench.geometry._radix import radix_sort
 
 _EPS = 1e-12
-SLAB_MIN = 32_768
-# triangles up to which the hierarchy's nodes split space (`_split_order`); a full-resolution scan keeps the Morton
-# order, whose build is a third of the split's there while its searches stay short on the scan's small triangles
-SPLIT_MAX = 262_144  # triangles from which the pads' search bounds nodes by their slabs as well as their boxes
+SLAB_MIN = 32_768  # triangles from which the pads' search bounds nodes by their slabs as well as their boxes
+# triangles below which the hierarchy's nodes split space (`_split_order`); a full-resolution scan keeps the Morton
+# order, whose build costs a third of the split's there, more than the split's shorter searches save on a first plan
+SPLIT_MAX = 262_144
 _STACK = 256  # deeper than any tree: the implicit tree of 2^62 leaves has 63 levels, a search holds one child per level
 
 
@@ -693,11 +693,12 @@ def _centre_normal(shape, nsum, node, c, nn):
 
 @njit(cache=True, nogil=True)  # a large part's first plan builds it beside segmentation (grasps._prebuild)
 def _build(tri, leaf, slots, tri_s, shape):
-    """Fill the hierarchy in one pass over the triangles in the order of `_split_order`: `slots` (the triangle of every leaf slot,
-    -1 for none), `tri_s` (the triangles by slot) and `shape`: per node its box (lo, hi; empty: lo > hi), the box
-    centre c, the radius of a sphere about c holding the node's points, the unit mean normal n of its triangles
-    (area-weighted; any unit vector where they cancel) and the least and largest offsets of its points along n. Exact
-    at the leaves; a parent's sphere and offsets hold its children's (their reach along n by `_reach`)."""
+    """Fill the hierarchy in one pass over the triangles in the order of `_split_order` (the Morton order from
+    `SPLIT_MAX` triangles): `slots` (the triangle of every leaf slot, -1 for none), `tri_s` (the triangles by slot)
+    and `shape`: per node its box (lo, hi; empty: lo > hi), the box centre c, the radius of a sphere about c holding
+    the node's points, the unit mean normal n of its triangles (area-weighted; any unit vector where they cancel) and
+    the least and largest offsets of its points along n. Exact at the leaves; a parent's sphere and offsets hold its
+    children's (their reach along n by `_reach`)."""
     n = tri.shape[0]
     N = shape.shape[0]
     P = N // 2
@@ -785,11 +786,12 @@ def _set_shape(shape, node, c, r, n, d0, d1):
 
 def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int | None = None) -> tuple:
     """A bounding-volume hierarchy over triangles (T, 3, 3) for `first_touch_kernel`: the triangles split in space
-    node by node (`_split_order`), `leaf` to a leaf (None: by the count, 4 to 16), and a complete binary tree over the leaves (node 1
-    the root, node i's children 2i and 2i + 1, the leaves P .. 2P - 1). Returns the node shapes (2P, 15): box lo, hi
-    (empty: lo > hi), and the sphere and slab of `_build`; the triangle of every leaf slot (P * leaf, -1 for none);
-    `leaf`; the triangles by slot (T, 3, 3), so that a leaf's triangles lie together in memory; and the triangles'
-    `normals` (T, 3). `leaf` >= T gives one leaf: a scan of every triangle."""
+    node by node (`_split_order`; in Morton order from `SPLIT_MAX`), `leaf` to a leaf (None: by the count, 4 to 16),
+    and a complete binary tree over the leaves (node 1 the root, node i's children 2i and 2i + 1, the leaves P ..
+    2P - 1). Returns the node shapes (2P, 15): box lo, hi (empty: lo > hi), and the sphere and slab of `_build`; the
+    triangle of every leaf slot (P * leaf, -1 for none); `leaf`; the triangles by slot (T, 3, 3), so that a leaf's
+    triangles lie together in memory; and the triangles' `normals` (T, 3). `leaf` >= T gives one leaf: a scan of
+    every triangle."""
     tri = np.ascontiguousarray(tri, dtype=np.float64).reshape(-1, 3, 3)
     n = len(tri)
     if leaf is None:
