@@ -441,11 +441,12 @@ def approach_collides(gripper: Gripper, poses: np.ndarray, openings: np.ndarray,
     body = np.asarray(swept_body(gripper, length).vertices)
     for sel, shape in gripper.width_groups(openings):
         left, right = swept_fingers(shape, length, clearance)
-        side = np.array([0.0] + [1.0] * len(left) + [-1.0] * len(right))
+        side = np.array([1.0] * len(left) + [-1.0] * len(right) + [0.0])
         placed = np.repeat(poses[sel][:, None], len(side), axis=1)
         placed[:, :, :3, 3] += (side[None, :, None] * (openings[sel] / 2)[:, None, None]
                                 * poses[sel][:, None, :3, 1])
-        out[sel] = hand_hits(mesh, [body, *left, *right], placed)
+        # the fingers first: most poses that collide do so with a finger, and the body's sweep is the dearest test
+        out[sel] = hand_hits(mesh, [*left, *right, body], placed)
     return out
 
 
