@@ -55,6 +55,8 @@ from workbench.robots.selfcollision import SelfCollision
 from workbench.robots.solvers import closed_form, describe, nearby_form, wrist_shell
 
 KINDS = ("grasp", "handx", "handxworldz", "worlda", "worldaworldz")
+# each pose after the grasp (index into KINDS) and its neighbour on the way, from which it is solved or referenced
+ON_THE_WAY = ((1, 0), (2, 1), (3, 0), (4, 3))
 HELD = np.array([False, False, False, True, True])  # kinds at which the object moves with the hand
 SOLVERS = ("auto", "numerical")
 BETWEEN_TRIES = 8  # branches of a swept closed form tried as seeds where its samples miss a pose
@@ -474,7 +476,7 @@ class IKSolver:
         q, ok = self._closed(targets[:, 0], place[:, 0], np.broadcast_to(self.robot.home(), (c, n)))
         feas[:, 0], joints[:, 0] = ok, q
         grasp_ref = np.where(ok[:, None], q, 0.0)
-        for k, prev in ((1, 0), (2, 1), (3, 0), (4, 3))[: nk - 1]:
+        for k, prev in ON_THE_WAY[: nk - 1]:
             ref = np.where(feas[:, prev, None], np.nan_to_num(joints[:, prev]), grasp_ref)
             q, ok = self._closed(targets[:, k], place[:, k], ref)
             feas[:, k], joints[:, k] = ok, q
@@ -499,7 +501,7 @@ class IKSolver:
         place = held_placements(targets, placements)
         feas = np.zeros((c, nk), dtype=bool)
         joints = np.full((c, nk, n), np.nan)
-        for k, prev in ((0, -1), (1, 0), (2, 1), (3, 0), (4, 3))[:nk]:
+        for k, prev in ((0, -1), *ON_THE_WAY)[:nk]:
             warm = joints[:, prev] if prev >= 0 else np.full((c, n), np.nan)
             joints[:, k], feas[:, k] = self.solve_from_seeds(targets[:, k], place[:, k], warm)
         return feas, chain_turns(self.robot, joints)
@@ -565,7 +567,7 @@ def chain_turns(robot: Robot, joints: np.ndarray) -> np.ndarray:
     home = robot.home()
     out[:, 0] = whole_turns(out[:, 0], home, robot.lower, robot.upper, revolute)
     grasp = np.where(np.isfinite(out[:, 0]), out[:, 0], home)
-    for k, prev in ((1, 0), (2, 1), (3, 0), (4, 3))[: joints.shape[1] - 1]:
+    for k, prev in ON_THE_WAY[: joints.shape[1] - 1]:
         ref = np.where(np.isfinite(out[:, prev]).all(axis=1, keepdims=True), out[:, prev], grasp)
         out[:, k] = whole_turns(out[:, k], ref, robot.lower, robot.upper, revolute)
     return out

@@ -51,7 +51,7 @@ from workbench.planners.wan_harada.plans import Plan, PlanObstacle, PlanStep
 from workbench.planners.wan_harada.query import PoseQuery
 from workbench.robots.analytic import analytic_ik, solve, spherical_wrist_reason
 from workbench.robots.collider import Scene
-from workbench.robots.ik import WORLDA, IKOptions, IKSolver, held_placements, retract
+from workbench.robots.ik import ON_THE_WAY, WORLDA, IKOptions, IKSolver, held_placements, retract
 from workbench.robots.model import Robot
 from workbench.robots.motion import MotionChecker
 from workbench.robots.selfcollision import allowed_pairs
@@ -154,7 +154,7 @@ class Realiser:
             if not ok[0]:
                 continue
             out = [qg[0]]
-            for k, start in ((1, 0), (2, 1), (3, 0), (4, 3)):  # each from its neighbour on the way
+            for k, start in ON_THE_WAY:  # each from its neighbour on the way
                 q, okk = self.solver.solve(poses[k:k + 1], place[k:k + 1], out[start][None], o.iters_warm)
                 if not okk[0]:
                     break
@@ -474,7 +474,7 @@ def add_motions(plan: Plan, realiser: Realiser, opts: ExecOptions) -> MotionResu
     IK branch the motions use, acceleration limits and speed, time)."""
     robot = realiser.robot
     checker = realiser.motion_checker(opts)
-    vlim = float(opts.speed) * np.asarray(robot.model.velocityLimit, dtype=np.float64)
+    vlim = opts.velocity_limits(robot)
     t0 = time.perf_counter()
     res, lines = plan_motion(checker, plan.steps, vlim, opts.acc, opts.motion.seed, plan.worlda, plan.worldz,
                              plan.start_held, plan.end_held, pregrasp_margin=realiser.pregrasp_margin)

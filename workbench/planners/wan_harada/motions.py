@@ -404,6 +404,10 @@ class ExecOptions:
         if not (isinstance(self.speed, (int, float)) and 0 < self.speed <= 1):
             raise ParameterError(f"motion speed must be a share of the URDF's velocity limits in (0, 1], got {self.speed!r}")
 
+    def velocity_limits(self, robot) -> np.ndarray:
+        """The joint velocity limits (nv,) the motions are timed under: the URDF's, times `speed`."""
+        return float(self.speed) * np.asarray(robot.model.velocityLimit, dtype=np.float64)
+
 
 def motion_checker(planner, allowed: AllowedPairs | None = None, opts: MotionOptions = MotionOptions()) -> MotionChecker:
     """The planner's motion checker (robot, table, object), built once per planner and options and kept on it."""
@@ -452,7 +456,7 @@ def plan_executable(planner, start, goal, opts: ExecOptions = ExecOptions(), all
     allowed = allowed if allowed is not None else getattr(planner, "allowed", None)
     checker = motion_checker(planner, allowed, opts.motion)
     robot = planner.robot
-    vlim = float(opts.speed) * np.asarray(robot.model.velocityLimit, dtype=np.float64)
+    vlim = opts.velocity_limits(robot)
     s_side, g_side = planner.side(start, "start"), planner.side(goal, "goal")
     full = planner.roadmap
     rm, keep = full, np.ones(full.n_nodes, dtype=bool)

@@ -133,9 +133,8 @@ class Planner:
         hi = np.searchsorted(self._ftg_keys, query.idfreetabletopplacement, side="right")
         rows = self._ftg_order[lo:hi]
         if len(rows) == 0:
-            number = self.numbers
-            has = ", ".join(str(number[i]) for i in self.placement_ids(gripped=True)) or "none has"
-            raise _failure("nogrip", f"{label} placement {number[query.idfreetabletopplacement]} of {self.object.name} "
+            has = ", ".join(str(self.numbers[i]) for i in self.placement_ids(gripped=True)) or "none has"
+            raise _failure("nogrip", f"{label} placement {self.numbers[query.idfreetabletopplacement]} of {self.object.name} "
                                 f"(store id {query.idfreetabletopplacement}) has no grasp that clears the table; choose a "
                                 f"placement that has one (numbered within the part: {has})")
         grasp = np.asarray(self.ftg["idfreeairgrip"])[rows].astype(np.int64)
