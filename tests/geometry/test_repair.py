@@ -252,6 +252,23 @@ def test_compiled_face_areas_and_volume_sign_are_trimeshs():
         assert np.sign(s) == np.sign(mesh.volume) and abs(s) > 1e6 * bound and np.isclose(s / 6, mesh.volume, rtol=1e-9)
 
 
+def test_compiled_face_normals_are_trimeshs_and_a_loaded_part_carries_them():
+    """The compiled face normals are trimesh's to the bit, zero where trimesh's are (a face too thin for its
+    tolerance), and a loaded part's mesh holds them: its normals equal those trimesh computes afresh."""
+    from workbench.geometry._repairkernel import unit_normals
+
+    m = blob(seed=5, noise=1e-4)
+    v = np.vstack([m.vertices, [[0.0, 0.0, 0.0], [1e-7, 0.0, 0.0], [0.0, 1e-7, 0.0], [0.0, 1e-6, 0.0]]])
+    n = len(m.vertices)
+    f = np.vstack([m.faces, [[n, n + 1, n + 2], [n, n + 1, n + 3]]])  # cross products 1e-14 and 1e-13
+    mesh = trimesh.Trimesh(v, f, process=False)
+    got = unit_normals(np.ascontiguousarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64))
+    assert np.array_equal(got, mesh.face_normals)
+    assert not got[-2:].any() and np.linalg.norm(got[:-2], axis=1).min() > 1 - 1e-12
+    loaded = _load(blob(seed=5, noise=1e-4), "blob").mesh
+    assert np.array_equal(loaded.face_normals, trimesh.Trimesh(loaded.vertices, loaded.faces, process=False).face_normals)
+
+
 def test_vertex_merging_is_skipped_only_where_trimesh_would_merge_none():
     """Distinct positions at trimesh's merge precision: a clean scan's vertices are, and a vertex repeated 1e-12 m
     away is not, as trimesh's own merge says."""

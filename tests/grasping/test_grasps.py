@@ -336,6 +336,30 @@ def test_boundary_distances_match_a_brute_force_projection():
     assert np.allclose(distance_to_boundary(facets, fid[:5], corner), 0.0, atol=1e-15)
 
 
+def test_facet_boundaries_are_the_edges_a_facet_uses_once_on_open_and_non_manifold_meshes():
+    """Every facet's boundary against a count of its triangles' edges in Python: the edges used once, in ascending
+    order of their vertex pair. On a closed sphere, on the sphere with a hole cut in it (edges of one triangle) and
+    on a box with a fin on one edge (an edge of three triangles)."""
+    from collections import Counter
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.03)
+    box = trimesh.creation.box((0.04, 0.03, 0.02))
+    edge = box.edges_unique[0]
+    fin = np.vstack([box.vertices, box.vertices[edge].mean(0) + [0.0, 0.0, 0.03]])
+    meshes = [sphere, trimesh.Trimesh(sphere.vertices, sphere.faces[sphere.triangles_center[:, 2] < 0.02],
+                                      process=False),
+              trimesh.Trimesh(fin, np.vstack([box.faces, [[edge[0], edge[1], len(box.vertices)]]]), process=False)]
+    for mesh in meshes:
+        for method in ("over", "conventional"):
+            facets = segment(mesh, np.radians(18), method)
+            for f in range(len(facets)):
+                uses = Counter(tuple(sorted(map(int, e))) for t in facets.triangles_of(f)
+                               for e in zip(mesh.faces[t], np.roll(mesh.faces[t], -1)))
+                once = np.array(sorted(e for e, k in uses.items() if k == 1)).reshape(-1, 2)
+                got = facets.edges[facets.edge_ptr[f]:facets.edge_ptr[f + 1]]
+                assert np.array_equal(got, mesh.vertices[once]), (method, f)
+
+
 def test_first_touches_of_one_rotation_match_the_full_set(tube_paper, hand):
     """Closing the pads at a single rotation gives the touches that rotation gets among all eight (the rotations are
     applied to the rotation-0 frame, whatever the first angle asked)."""

@@ -174,3 +174,28 @@ def test_the_hierarchy_splits_space_at_every_node():
         k = int(rng.integers(0, n))
         _select(pc, order, 1, 0, n, k)
         assert sorted(zip(pc[:k, 1], order[:k])) == key[:k]
+
+
+def test_the_partition_of_a_large_node_selects_as_a_sort_does_and_bounds_both_sides():
+    """`_partition`, which splits a large node by a histogram, against a sort: the same triangles before the split
+    (ties by index), the centres moved with them, and each side's bounds those of its centres; on coarse centres with
+    many ties, on centres all equal along the axis, and on a range inside the array."""
+    from workbench.grasping._padkernel import _partition
+
+    rng = np.random.default_rng(3)
+    for n, a, b, levels, ax in ((5_000, 0, 5_000, 7, 0), (3_000, 400, 2_900, 1_000_000, 2), (600, 0, 600, 1, 1)):
+        pc = rng.integers(0, levels, size=(n, 3)).astype(float) * 1e-3
+        order = rng.permutation(n).astype(np.int64)
+        m = int(rng.integers(a + 1, b))
+        rows = {int(o): tuple(c) for o, c in zip(order, pc)}
+        key = sorted(zip(pc[a:b, ax], order[a:b]))
+        before, after = order[:a].copy(), order[b:].copy()
+        left, right = np.empty(6), np.empty(6)
+        box = pc[a:b, ax].min(), pc[a:b, ax].max()
+        _partition(pc, order, ax, a, b, m, box[0], box[1], np.empty(n, dtype=np.int64), np.empty((n, 3)),
+                   np.empty(n, dtype=np.int64), np.empty(1024, dtype=np.int64), left, right)
+        assert sorted(zip(pc[a:m, ax], order[a:m])) == key[:m - a]
+        assert np.array_equal(order[:a], before) and np.array_equal(order[b:], after)
+        assert all(rows[int(o)] == tuple(c) for o, c in zip(order, pc))
+        assert np.array_equal(left, np.r_[pc[a:m].min(0), pc[a:m].max(0)])
+        assert np.array_equal(right, np.r_[pc[m:b].min(0), pc[m:b].max(0)])

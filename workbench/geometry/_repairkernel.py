@@ -29,6 +29,23 @@ def face_areas(vertices, faces):
 
 
 @njit(cache=True)
+def unit_normals(vertices, faces):
+    """(n, 3) each face's unit normal as trimesh's `face_normals` computes it, to the bit: its edges' cross product
+    (`_edge_cross`) times the reciprocal of its norm, zero where that norm is at most trimesh's zero tolerance."""
+    out = np.zeros((faces.shape[0], 3))
+    for t in range(faces.shape[0]):
+        x, y, z = _edge_cross(vertices, faces[t, 0], faces[t, 1], faces[t, 2])
+        norm = np.sqrt((x * x + y * y) + z * z)
+        if norm > _TOL_ZERO:
+            r = 1.0 / norm
+            out[t, 0], out[t, 1], out[t, 2] = x * r, y * r, z * r
+    return out
+
+
+_TOL_ZERO = 1e-13  # trimesh.constants.tol.zero, below which `util.unitize` leaves a vector zero
+
+
+@njit(cache=True)
 def volume_terms(vertices, faces):
     """The sum over the faces of the signed-volume terms trimesh's integration adds (cross x times the corners' x
     sum, six times the volume), and a bound on how far any order of adding those terms can move the sum (twice the

@@ -140,10 +140,20 @@ def _pair_order(lo, hi, n_vertices):
 def edge_groups(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """The mesh's edges: every triangle edge (3 t + j: from corner j to j + 1) sorted by its vertex pair, and where
     each pair's run starts in that order (one run per distinct edge, then the total). A linear sort of the 3n edges."""
-    faces = np.asarray(faces, dtype=np.int64)
-    u, v = faces, np.roll(faces, -1, axis=1)
-    lo, hi = np.minimum(u, v).ravel(), np.maximum(u, v).ravel()
+    lo, hi = _edge_pairs(np.ascontiguousarray(faces, dtype=np.int64))
     return _pair_order(lo, hi, max(int(n_vertices), int(lo.max(initial=-1)) + 1))
+
+
+@njit(cache=True, nogil=True)
+def _edge_pairs(faces):
+    """(lo, hi) (3n,): the lower and higher vertex of every triangle edge, edge 3 t + j from corner j to j + 1."""
+    n = faces.shape[0]
+    lo, hi = np.empty(3 * n, dtype=np.int64), np.empty(3 * n, dtype=np.int64)
+    for t in range(n):
+        for j in range(3):
+            u, v = faces[t, j], faces[t, (j + 1) % 3]
+            lo[3 * t + j], hi[3 * t + j] = min(u, v), max(u, v)
+    return lo, hi
 
 
 @njit(cache=True, nogil=True)
@@ -168,10 +178,7 @@ def facet_boundaries(faces, tri_ptr, tri_index, n_vertices, order, starts, nbr):
     share, `edge_groups` every other edge's triangles). Returns (edge_ptr, edges (E, 2) vertex ids)."""
     m = tri_ptr.shape[0] - 1
     n = faces.shape[0]
-    group = np.empty(3 * n, dtype=np.int64)
-    for g in range(starts.shape[0] - 1):
-        for q in range(starts[g], starts[g + 1]):
-            group[order[q]] = g
+    group = np.empty(0, dtype=np.int64)  # each edge's group, filled at the first edge that is not two triangles'
     stamp = np.full(n, -1, dtype=np.int64)
     edge_ptr = np.zeros(m + 1, dtype=np.int64)
     keys = np.empty(3 * n, dtype=np.int64)
@@ -189,6 +196,11 @@ def facet_boundaries(faces, tri_ptr, tri_index, n_vertices, order, starts, nbr):
                 if c < n:  # an edge of exactly two triangles: used once unless the other is in the facet too
                     uses = 1 if stamp[c] != f else 2
                 else:
+                    if group.shape[0] == 0:
+                        group = np.empty(3 * n, dtype=np.int64)
+                        for g in range(starts.shape[0] - 1):
+                            for r in range(starts[g], starts[g + 1]):
+                                group[order[r]] = g
                     g = group[3 * t + j]
                     uses = 0
                     for r in range(starts[g], starts[g + 1]):

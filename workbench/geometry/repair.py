@@ -21,7 +21,7 @@ import numpy as np
 import trimesh
 
 from workbench.errors import MeshError
-from workbench.geometry._repairkernel import centre_terms, face_areas, volume_terms
+from workbench.geometry._repairkernel import centre_terms, face_areas, unit_normals, volume_terms
 from workbench.geometry._segkernel import connected, edge_groups, neighbour_table
 from workbench.geometry.collision import mesh_distance
 
@@ -104,6 +104,9 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
     out = canonical(mesh)
     # a relabelling: the same edges, used the same ways (trimesh would find them again at a second's cost at 1M faces)
     out._cache["is_watertight"], out._cache["is_winding_consistent"] = watertight, winding
+    # trimesh's normals, to the bit, without its (n, 3, 3) corner array: a tenth of its time on a full-resolution scan
+    out._cache["face_normals"] = unit_normals(np.ascontiguousarray(out.vertices, dtype=np.float64),
+                                              np.ascontiguousarray(out.faces, dtype=np.int64))
     return out, notes
 
 

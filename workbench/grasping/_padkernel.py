@@ -13,7 +13,7 @@ from workbench.geometry._radix import radix_sort
 _EPS = 1e-12
 SLAB_MIN = 32_768  # triangles from which the pads' search bounds nodes by their slabs as well as their boxes
 # triangles below which the hierarchy's nodes split space (`_split_order`); a full-resolution scan keeps the Morton
-# order, whose build costs a third of the split's there, more than the split's shorter searches save on a first plan
+# order: at 1M triangles the split's build costs 0.13 s more CPU than the first plan's shorter searches save
 SPLIT_MAX = 262_144
 _STACK = 256  # deeper than any tree: the implicit tree of 2^62 leaves has 63 levels, a search holds one child per level
 
@@ -556,16 +556,16 @@ def _spread(v):
 
 
 @njit(cache=True)
-def _morton_order(tri):
-    """The triangles' indices (T,) in Morton order of their centres on a 1024^3 grid over the centres' bounds, ties
-    by index: the codes above the indices in one word, sorted by their 30 bits ten at a time (a stable radix sort)."""
-    n = tri.shape[0]
+def _morton_order(points):
+    """The indices (n,) of `points` (n, 3), the triangles' centres, in Morton order on a 1024^3 grid over their
+    bounds, ties by index: the codes above the indices in one word, sorted by their 30 bits ten at a time (a stable
+    radix sort)."""
+    n = points.shape[0]
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for i in range(n):
         for a in range(3):
-            c = (tri[i, 0, a] + tri[i, 1, a] + tri[i, 2, a]) / 3.0
-            lo[a] = min(lo[a], c)
-            hi[a] = max(hi[a], c)
+            lo[a] = min(lo[a], points[i, a])
+            hi[a] = max(hi[a], points[i, a])
     width = np.empty(3)
     for a in range(3):
         width[a] = max(hi[a] - lo[a], 1e-300)
@@ -573,10 +573,19 @@ def _morton_order(tri):
     for i in range(n):
         code = 0
         for a in range(3):
-            c = (tri[i, 0, a] + tri[i, 1, a] + tri[i, 2, a]) / 3.0
-            code |= _spread(min(max(np.int64((c - lo[a]) / width[a] * 1023), 0), 1023)) << a
+            code |= _spread(min(max(np.int64((points[i, a] - lo[a]) / width[a] * 1023), 0), 1023)) << a
         word[i] = (code << 32) | i
     return radix_sort(word, np.empty(n, dtype=np.int64), 32, 62, 10) & 0xFFFFFFFF
+
+
+@njit(cache=True)
+def _centres(tri):
+    """(T, 3) the triangles' centres."""
+    pc = np.empty((tri.shape[0], 3))
+    for i in range(tri.shape[0]):
+        for a in range(3):
+            pc[i, a] = (tri[i, 0, a] + tri[i, 1, a] + tri[i, 2, a]) / 3.0
+    return pc
 
 
 @njit(cache=True, inline="always")
@@ -641,41 +650,123 @@ def _split_order(tri, leaf, P):
     `leaf` slots, filled from the left: a node's triangles, split along the longest side of their centres' bounds
     (ties by index), give its left child the first as many as it holds and its right child the rest. Each node then
     holds the triangles of one box of space, where the Morton order's nodes may straddle a jump of its curve.
-    Started from the Morton order, whose nodes' triangles already lie near each other in memory."""
+    Started from the Morton order, whose nodes' triangles already lie near each other in memory; a large node is
+    split by `_partition`, which keeps that order on either side."""
     n = tri.shape[0]
-    order = _morton_order(tri)
+    centres = _centres(tri)
+    order = _morton_order(centres)
     pc = np.empty((n, 3))
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for i in range(n):
-        f = order[i]
         for a in range(3):
-            pc[i, a] = (tri[f, 0, a] + tri[f, 1, a] + tri[f, 2, a]) / 3.0
-    # (first, end, capacity in slots) of the nodes still to split
-    todo_a, todo_b, todo_c = np.empty(128, dtype=np.int64), np.empty(128, dtype=np.int64), np.empty(128, dtype=np.int64)
-    todo_a[0], todo_b[0], todo_c[0] = 0, n, P * leaf
+            c = centres[order[i], a]
+            pc[i, a] = c
+            lo[a], hi[a] = min(lo[a], c), max(hi[a], c)
+    buf_o, buf_c, bins = np.empty(n, dtype=np.int64), np.empty((n, 3)), np.empty(n, dtype=np.int64)
+    count = np.empty(_BINS, dtype=np.int64)
+    # (first, end, capacity in slots, are its bounds known) of the nodes still to split, and their centres' bounds
+    todo = np.empty((128, 4), dtype=np.int64)
+    todo_box = np.empty((128, 6))
+    todo[0, 0], todo[0, 1], todo[0, 2], todo[0, 3] = 0, n, P * leaf, 1
+    todo_box[0, :3], todo_box[0, 3:] = lo, hi
+    box = np.empty(6)
+    left, right = np.empty(6), np.empty(6)
     top = 1
     while top > 0:
         top -= 1
-        a, b, cap = todo_a[top], todo_b[top], todo_c[top]
+        a, b, cap, known = todo[top, 0], todo[top, 1], todo[top, 2], todo[top, 3]
         if cap <= leaf or b - a <= 1:
             continue
         half = cap // 2
-        if b - a > half:
-            lo0, lo1, lo2, hi0, hi1, hi2 = np.inf, np.inf, np.inf, -np.inf, -np.inf, -np.inf
-            for i in range(a, b):
-                lo0, hi0 = min(lo0, pc[i, 0]), max(hi0, pc[i, 0])
-                lo1, hi1 = min(lo1, pc[i, 1]), max(hi1, pc[i, 1])
-                lo2, hi2 = min(lo2, pc[i, 2]), max(hi2, pc[i, 2])
-            ax = 0
-            if hi1 - lo1 > hi0 - lo0:
-                ax = 1
-            if hi2 - lo2 > max(hi0 - lo0, hi1 - lo1):
-                ax = 2
-            _select(pc, order, ax, a, b, a + half)
         m = min(b, a + half)
-        todo_a[top], todo_b[top], todo_c[top] = m, b, half
-        todo_a[top + 1], todo_b[top + 1], todo_c[top + 1] = a, m, half
+        lk = rk = 0
+        if b - a > half:
+            if known:
+                box[:] = todo_box[top]
+            else:
+                _bounds(pc, a, b, box)
+            ax = 0
+            if box[4] - box[1] > box[3] - box[0]:
+                ax = 1
+            if box[5] - box[2] > max(box[3] - box[0], box[4] - box[1]):
+                ax = 2
+            if b - a > _PARTITION_MIN:
+                _partition(pc, order, ax, a, b, m, box[ax], box[3 + ax], buf_o, buf_c, bins, count, left, right)
+                lk = rk = 1
+            else:
+                _select(pc, order, ax, a, b, m)
+        elif known:
+            left[:] = todo_box[top]  # all of it to the left child
+            lk = 1
+        todo[top, 0], todo[top, 1], todo[top, 2], todo[top, 3] = m, b, half, rk
+        todo_box[top, :] = right
+        todo[top + 1, 0], todo[top + 1, 1], todo[top + 1, 2], todo[top + 1, 3] = a, m, half, lk
+        todo_box[top + 1, :] = left
         top += 2
     return order
+
+
+_BINS = 1024  # the bins of `_partition`'s histogram
+_PARTITION_MIN = 16  # triangles above which a node is split by `_partition`, at or below by `_select` alone
+
+
+@njit(cache=True)
+def _bounds(pc, a, b, box):
+    """The bounds of the centres at positions a..b-1 into box (lo, hi)."""
+    box[:3], box[3:] = np.inf, -np.inf
+    for i in range(a, b):
+        for k in range(3):
+            box[k], box[3 + k] = min(box[k], pc[i, k]), max(box[3 + k], pc[i, k])
+
+
+@njit(cache=True)
+def _partition(pc, order, ax, a, b, m, lo, hi, buf_o, buf_c, bins, count, left, right):
+    """Rearrange positions a..b-1 as `_select(pc, order, ax, a, b, m)` does, and the bounds of the centres at a..m-1
+    into `left` and at m..b-1 into `right`, in two passes: a histogram of the centres along `ax` over lo..hi finds the
+    bin holding the (m - a)-th, then the triangles are moved in a stable partition (those below that bin, that bin's,
+    those above), so that each side keeps its order, and `_select` orders only that bin's few."""
+    nb = min(count.shape[0], max((b - a) >> 2, 1))  # about four to a bin
+    count[:nb] = 0
+    scale = (nb / (hi - lo)) if hi > lo else 0.0
+    for i in range(a, b):
+        q = min(max(np.int64((pc[i, ax] - lo) * scale), 0), nb - 1)  # monotone in the centre: bins keep the order
+        bins[i] = q
+        count[q] += 1
+    k = m - a
+    below, cut = 0, 0
+    while below + count[cut] < k:
+        below += count[cut]
+        cut += 1
+    p0, p1, p2 = 0, below, below + count[cut]  # where the three runs start in the buffer
+    l0, l1, l2, r0, r1, r2 = np.inf, np.inf, np.inf, np.inf, np.inf, np.inf
+    L0, L1, L2, R0, R1, R2 = -np.inf, -np.inf, -np.inf, -np.inf, -np.inf, -np.inf
+    for i in range(a, b):
+        q = bins[i]
+        x, y, z = pc[i, 0], pc[i, 1], pc[i, 2]
+        if q < cut:
+            j = p0
+            p0 += 1
+            l0, l1, l2, L0, L1, L2 = min(l0, x), min(l1, y), min(l2, z), max(L0, x), max(L1, y), max(L2, z)
+        elif q == cut:
+            j = p1
+            p1 += 1
+        else:
+            j = p2
+            p2 += 1
+            r0, r1, r2, R0, R1, R2 = min(r0, x), min(r1, y), min(r2, z), max(R0, x), max(R1, y), max(R2, z)
+        buf_o[j] = order[i]
+        buf_c[j, 0], buf_c[j, 1], buf_c[j, 2] = x, y, z
+    left[0], left[1], left[2], left[3], left[4], left[5] = l0, l1, l2, L0, L1, L2
+    right[0], right[1], right[2], right[3], right[4], right[5] = r0, r1, r2, R0, R1, R2
+    for j in range(b - a):
+        order[a + j] = buf_o[j]
+        pc[a + j, 0], pc[a + j, 1], pc[a + j, 2] = buf_c[j, 0], buf_c[j, 1], buf_c[j, 2]
+    s, e = a + below, a + below + count[cut]
+    _select(pc, order, ax, s, e, m)
+    for i in range(s, e):
+        side = left if i < m else right
+        for t in range(3):
+            side[t], side[3 + t] = min(side[t], pc[i, t]), max(side[3 + t], pc[i, t])
 
 
 @njit(cache=True, inline="always")
@@ -702,7 +793,7 @@ def _build(tri, leaf, slots, tri_s, shape):
     n = tri.shape[0]
     N = shape.shape[0]
     P = N // 2
-    order = _split_order(tri, leaf, P) if n < SPLIT_MAX else _morton_order(tri)
+    order = _split_order(tri, leaf, P) if n < SPLIT_MAX else _morton_order(_centres(tri))
     nsum = np.empty((N, 3))
     c, nn = np.empty(3), np.empty(3)
     for node in range(P, N):
@@ -797,7 +888,7 @@ def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int | None = None) 
     if leaf is None:
         # wide leaves halve the build and shorten the pads' searches at full resolution; on a coarse mesh, whose
         # triangles are large beside the hand, narrow ones spare the hand's separating-axis tests
-        leaf = 4 if n < 8_192 else 8 if n < 262_144 else 16
+        leaf = 4 if n < 8_192 else 8 if n < 131_072 else 16
     leaf = max(int(leaf), 1)
     P = 1 << int(np.ceil(np.log2(max(-(-n // leaf), 1))))
     slots = np.empty(P * leaf, dtype=np.int64)
