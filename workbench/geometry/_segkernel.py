@@ -20,13 +20,18 @@ def _sorted(values, m, bits, tmp):
 
 
 @njit(cache=True, nogil=True)
-def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, areas):
+def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, areas, faces, n_vertices, edges,
+                starts):
     """Grow a facet from every seed in `order` (Wan & Harada, Section III, Fig. 2): across shared edges to every
     triangle whose normal is within tau of the seed's. Conventional: each triangle in one facet; over-segmentation: a
     seed is skipped when a facet holding it has a seed normal within the merge angle of its own. `nbr` (n, k)
-    neighbours padded with n. Returns (tri_ptr, tri_index, seeds, wn, wc, ar): facet f holds the sorted triangles
-    tri_index[tri_ptr[f]:tri_ptr[f + 1]]; per facet the sums over them, in that order, of normal * area, centre *
-    area (`centres` (n, 3)) and area (`areas` (n,)), taken while they are written."""
+    neighbours padded with n (`neighbour_table`; `edges`, `starts`: `edge_groups`, for the edges of one or of three
+    or more triangles). Returns (tri_ptr, tri_index, seeds, wn, wc, ar, edge_ptr, boundary): facet f holds the sorted
+    triangles tri_index[tri_ptr[f]:tri_ptr[f + 1]]; per facet the sums over them, in that order, of normal * area,
+    centre * area (`centres` (n, 3)) and area (`areas` (n,)), taken while they are written; and its boundary, the
+    edges its triangles use once, boundary[edge_ptr[f]:edge_ptr[f + 1]] (vertex ids (E, 2)) in ascending order of
+    their sorted vertex pair. The growth finds the boundary as it goes: an edge to a triangle it does not take is
+    one."""
     n = normals.shape[0]
     k = nbr.shape[1]
     visited = np.zeros(n, dtype=np.bool_)
@@ -34,10 +39,16 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
     covered = np.full(n, -2.0)
     queue = np.empty(n, dtype=np.int64)
     out = np.empty(max(n, 16), dtype=np.int64)
+    keys = np.empty(max(k * n, 16), dtype=np.int64)  # the boundary edges of the facet being grown
+    pending = np.empty(max(k * n, 16), dtype=np.int64)  # its edges that are not two triangles', counted at its end
+    group = np.empty(0, dtype=np.int64)  # each edge's group, filled at the first such edge
+    bound = np.empty((64, 2), dtype=np.int64)
     ptr = [0]
+    eptr = [0]
     seeds = []
     sums = []
     size = 0
+    e = 0
     tmp = np.empty(n, dtype=np.int64)
     bits = 1
     while (1 << bits) < n:
@@ -52,17 +63,43 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
         queue[0] = seed
         visited[seed] = True
         head, tail = 0, 1
+        w, p = 0, 0
         while head < tail:
             t = queue[head]
             head += 1
             for j in range(k):
                 c = nbr[t, j]
-                if c >= n or visited[c] or (conventional and assigned[c]):
+                if c >= n:
+                    pending[p] = k * t + j
+                    p += 1
                     continue
-                if normals[c, 0] * s0 + normals[c, 1] * s1 + normals[c, 2] * s2 >= cos_tau:
+                if visited[c]:
+                    continue
+                if (not (conventional and assigned[c])
+                        and normals[c, 0] * s0 + normals[c, 1] * s1 + normals[c, 2] * s2 >= cos_tau):
                     visited[c] = True
                     queue[tail] = c
                     tail += 1
+                else:
+                    u, v = faces[t, j], faces[t, (j + 1) % 3]
+                    keys[w] = min(u, v) * n_vertices + max(u, v)
+                    w += 1
+        if p > 0 and group.shape[0] == 0:
+            group = np.empty(k * n, dtype=np.int64)
+            for g in range(starts.shape[0] - 1):
+                for r in range(starts[g], starts[g + 1]):
+                    group[edges[r]] = g
+        for i in range(p):
+            q = pending[i]
+            g = group[q]
+            uses = 0
+            for r in range(starts[g], starts[g + 1]):
+                if visited[edges[r] // 3]:
+                    uses += 1
+            if uses == 1:
+                u, v = faces[q // k, q % k], faces[q // k, (q % k + 1) % 3]
+                keys[w] = min(u, v) * n_vertices + max(u, v)
+                w += 1
         region = _sorted(queue, tail, bits, tmp)
         if size + tail > out.shape[0]:
             grown = np.empty(max(2 * out.shape[0], size + tail), dtype=np.int64)
@@ -91,11 +128,22 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
         ptr.append(size)
         seeds.append(seed)
         sums.append((sn0, sn1, sn2, sc0, sc1, sc2, sa))
+        ks = np.sort(keys[:w])
+        if e + w > bound.shape[0]:
+            wider = np.empty((max(2 * bound.shape[0], e + w), 2), dtype=np.int64)
+            wider[:e] = bound[:e]
+            bound = wider
+        for i in range(w):
+            bound[e + i, 0] = ks[i] // n_vertices
+            bound[e + i, 1] = ks[i] % n_vertices
+        e += w
+        eptr.append(e)
     m = len(seeds)
     wn, wc, ar = np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m)
     for f in range(m):
         wn[f, 0], wn[f, 1], wn[f, 2], wc[f, 0], wc[f, 1], wc[f, 2], ar[f] = sums[f]
-    return np.array(ptr, dtype=np.int64), out[:size].copy(), np.array(seeds, dtype=np.int64), wn, wc, ar
+    return (np.array(ptr, dtype=np.int64), out[:size].copy(), np.array(seeds, dtype=np.int64), wn, wc, ar,
+            np.array(eptr, dtype=np.int64), bound[:e].copy())
 
 
 @njit(cache=True, nogil=True)
@@ -169,58 +217,6 @@ def neighbour_table(order, starts, n):
             table[a // 3, a % 3] = b // 3
             table[b // 3, b % 3] = a // 3
     return table
-
-
-@njit(cache=True, nogil=True)
-def facet_boundaries(faces, tri_ptr, tri_index, n_vertices, order, starts, nbr):
-    """Boundary edges of every facet: the edges its triangles use once, in ascending order of their sorted vertex
-    pair per facet; linear in the memberships (`neighbour_table` gives the triangle across an edge two triangles
-    share, `edge_groups` every other edge's triangles). Returns (edge_ptr, edges (E, 2) vertex ids)."""
-    m = tri_ptr.shape[0] - 1
-    n = faces.shape[0]
-    group = np.empty(0, dtype=np.int64)  # each edge's group, filled at the first edge that is not two triangles'
-    stamp = np.full(n, -1, dtype=np.int64)
-    edge_ptr = np.zeros(m + 1, dtype=np.int64)
-    keys = np.empty(3 * n, dtype=np.int64)
-    out = np.empty((64, 2), dtype=np.int64)
-    e = 0
-    for f in range(m):
-        a, b = tri_ptr[f], tri_ptr[f + 1]
-        for q in range(a, b):
-            stamp[tri_index[q]] = f
-        w = 0
-        for q in range(a, b):
-            t = tri_index[q]
-            for j in range(3):
-                c = nbr[t, j]
-                if c < n:  # an edge of exactly two triangles: used once unless the other is in the facet too
-                    uses = 1 if stamp[c] != f else 2
-                else:
-                    if group.shape[0] == 0:
-                        group = np.empty(3 * n, dtype=np.int64)
-                        for g in range(starts.shape[0] - 1):
-                            for r in range(starts[g], starts[g + 1]):
-                                group[order[r]] = g
-                    g = group[3 * t + j]
-                    uses = 0
-                    for r in range(starts[g], starts[g + 1]):
-                        if stamp[order[r] // 3] == f:
-                            uses += 1
-                if uses == 1:
-                    u, v = faces[t, j], faces[t, (j + 1) % 3]
-                    keys[w] = min(u, v) * n_vertices + max(u, v)
-                    w += 1
-        ks = np.sort(keys[:w])
-        if e + w > out.shape[0]:
-            grown = np.empty((max(2 * out.shape[0], e + w), 2), dtype=np.int64)
-            grown[:e] = out[:e]
-            out = grown
-        for i in range(w):
-            out[e + i, 0] = ks[i] // n_vertices
-            out[e + i, 1] = ks[i] % n_vertices
-        e += w
-        edge_ptr[f + 1] = e
-    return edge_ptr, out[:e].copy()
 
 
 @njit(cache=True, nogil=True)

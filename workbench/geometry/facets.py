@@ -23,7 +23,6 @@ from workbench.geometry._segkernel import (
     boundary_distances,
     by_triangle,
     edge_groups,
-    facet_boundaries,
     facets_holding,
     grow_facets,
     neighbour_table,
@@ -102,12 +101,11 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     order, starts = edge_groups(faces, len(mesh.vertices))
     nbr = neighbour_table(order, starts, n_tri)
     seed_order = np.lexsort((np.arange(n_tri), -np.round(areas, 12)))
-    tri_ptr, tri_index, seeds, wn, wc, area = grow_facets(
+    tri_ptr, tri_index, seeds, wn, wc, area, edge_ptr, be = grow_facets(
         np.ascontiguousarray(normals, dtype=np.float64), nbr, seed_order, method == "conventional",
         float(np.cos(tau)), float(np.cos(merge)),
         triangle_centres(np.ascontiguousarray(mesh.vertices, dtype=np.float64), faces),
-        np.ascontiguousarray(areas, dtype=np.float64))
-    edge_ptr, be = facet_boundaries(faces, tri_ptr, tri_index, len(mesh.vertices), order, starts, nbr)
+        np.ascontiguousarray(areas, dtype=np.float64), faces, len(mesh.vertices), order, starts)
     out = Facets(method=method, tau=tau, tri_ptr=tri_ptr, tri_index=tri_index,
                  normals=wn / np.linalg.norm(wn, axis=1, keepdims=True).clip(1e-300),
                  centers=wc / area[:, None].clip(1e-300), areas=area, seeds=seeds, edge_ptr=edge_ptr,
