@@ -308,7 +308,7 @@ def test_size_hints_quote_the_declared_ranges_and_a_scale_that_works(tmp_path, c
     with pytest.raises(MeshError, match="implausible"):
         load_object(dust, scale=SCALE.hi)
     big = _export(box(np.array(BOX) * 12), tmp_path / "big.stl")  # 0.96 m across, read in metres
-    with pytest.raises(MeshError, match=re.escape(f"not a hand-sized part ({HAND_SIZED.describe()})")):
+    with pytest.raises(MeshError, match=re.escape(f"larger than a hand-sized part (at most {HAND_SIZED.hi:g} m)")):
         load_object(big)
     with pytest.raises(MeshError, match=re.escape(SCALE.describe())):
         load_object(big, scale=0.0)

@@ -174,6 +174,36 @@ def test_boxes_sharing_a_face_exactly_are_one_closed_part_with_its_volume_centre
     assert obj.mesh.is_watertight and np.isclose(obj.mesh.volume, 0.04 * 0.03 * 0.02 + 0.02 * 0.03 * 0.04)
 
 
+def test_an_l_bracket_of_boxes_touching_exactly_is_their_union_without_a_crack():
+    """A base, an upright standing on part of it and a gusset touching both, exported as one mesh: the part is
+    their union, 156 cm^2 (the boxes' 172 less both sides of the 4, 2 and 2 cm^2 where they touch) and 60 cm^3,
+    with no wall left between upright and base (a crack of zero width there would add 8 cm^2). Built from their
+    corners the boxes touch exactly; built from sizes and centres the upright stands an ulp off the base
+    (0.04 - 0.03 != 0.01)."""
+    bounds = [((0, 0, 0), (0.08, 0.04, 0.01)), ((0, 0, 0.01), (0.01, 0.04, 0.07)), ((0.01, 0.015, 0.01), (0.03, 0.025, 0.03))]
+    exact = [trimesh.creation.box(bounds=np.array(b, dtype=float)) for b in bounds]
+    centred = [trimesh.creation.box(np.subtract(hi, lo)).apply_translation(np.add(lo, hi) / 2) for lo, hi in bounds]
+    assert centred[1].bounds[0, 2] != 0.01  # an ulp off the base
+    for pieces in (exact, centred):
+        obj = _load(trimesh.util.concatenate(pieces), "bracket")
+        assert any("joined 3 touching bodies" in r for r in obj.repairs), obj.repairs
+        assert obj.mesh.is_watertight and obj.mesh.body_count == 1
+        assert np.isclose(obj.mesh.area, 0.0156, rtol=1e-9) and np.isclose(obj.mesh.volume, 6e-5, rtol=1e-9)
+    # each box's corners moved by the rounding of c + (v - c) about its centre: the union as manifold3d gives it has
+    # the crack, its rim's vertices doubled; the one returned is of the corners snapped back to one grid, without it
+    from workbench.geometry.repair import _union
+
+    rounded = []
+    for p in exact:
+        c = p.vertices.mean(axis=0)
+        rounded.append(trimesh.Trimesh(c + (p.vertices - c) * 1.0, p.faces, process=False))
+    plain = manifold3d.Manifold.batch_boolean([manifold3d.Manifold(manifold3d.Mesh64(
+        vert_properties=p.vertices, tri_verts=p.faces.astype(np.uint64))) for p in rounded], manifold3d.OpType.Add)
+    assert np.isclose(plain.surface_area(), 0.0164)
+    joined = _union(rounded, 1e-4 * 0.08)
+    assert joined.is_watertight and np.isclose(joined.area, 0.0156, rtol=1e-9)
+
+
 def test_pieces_whose_union_has_vertices_closer_than_the_merge_tolerance_are_joined():
     """Two cubes 2 um apart and 1-5 nm askew (convex pieces as a decomposition exports them): their union, grown to
     touch, has vertices nanometres apart; merged, they would pinch its edges into edges of four faces. The union is

@@ -97,9 +97,9 @@ def load_object(path: str | Path, scale: float | None = None, units: str | None 
         v = np.asarray(loaded.vertices)
         extent = float(np.ptp(v[np.bincount(np.asarray(loaded.faces).ravel(), minlength=len(v)) > 0], axis=0).max())
         if TYPICAL[1] < extent <= MAX_EXTENT:  # larger: refused as implausible below, whatever is accepted
-            raise MeshError(f"object file {path} is {extent:.4g} m across read in metres (no --units or --scale), not a "
-                            f"hand-sized part ({HAND_SIZED.describe()}); {_scale_hint(extent)}; or give --accept-size "
-                            f"to plan it in metres")
+            raise MeshError(f"object file {path} is {extent:.4g} m across read in metres (no --units or --scale), larger "
+                            f"than a hand-sized part (at most {HAND_SIZED.hi:g} m); {_scale_hint(extent)}; or give "
+                            f"--accept-size to plan it in metres")
     return from_arrays(loaded.vertices, loaded.faces, scale=resolve_scale(scale, units),
                        name=name or path.stem, source=str(path), pieces=pieces)
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import manifold3d
 import numpy as np
 import trimesh
+from scipy.spatial import cKDTree
 
 from workbench.errors import MeshError
 from workbench.geometry._repairkernel import centre_terms, face_areas, unit_normals, volume_terms
@@ -377,8 +378,11 @@ def _inside(body: trimesh.Trimesh, points: np.ndarray) -> bool:
 
 def _union(pieces: list[trimesh.Trimesh], tol: float) -> trimesh.Trimesh | None:
     """The pieces' boolean union (manifold3d, in double precision) as one closed body, or None when a piece is not a
-    closed manifold. Pieces that meet only within export rounding (faces 1e-9 m apart) give separate solids; they
-    are then grown about their centres by the least of 1e-3, 1e-2, 0.1 and 1 times `tol` that joins them."""
+    closed manifold. Pieces whose touching faces rounding has moved apart (a scene's transforms, an export's
+    precision) give separate solids, or one with the touching walls kept as a crack of zero width; the union is then
+    taken of the vertices snapped to a grid of 1e-9 of the pieces' size, which puts faces within rounding of one
+    plane in that plane, and failing that of the pieces grown about their centres by the least of 1e-3, 1e-2, 0.1
+    and 1 times `tol` that joins them."""
     closed = []
     for p in pieces:
         if not p.is_watertight:
@@ -388,12 +392,18 @@ def _union(pieces: list[trimesh.Trimesh], tol: float) -> trimesh.Trimesh | None:
             q.invert()
         closed.append(q)
 
-    def union(grow: float):
+    size = float(np.ptp(np.vstack([q.vertices for q in closed]), axis=0).max())
+    grid = 2.0 ** np.round(np.log2(max(1e-9 * size, 1e-300)))  # a power of two: the snapped values are exact
+
+    def union(grow: float, snap: bool = False):
         solids = []
         for q in closed:
             c = q.vertices.mean(axis=0)
             r = float(np.linalg.norm(q.vertices - c, axis=1).max())
-            v = c + (q.vertices - c) * (1 + grow / max(r, 1e-12))
+            # ungrown, the vertices as they are (or snapped): the rounding of c + (v - c) would move faces that
+            # meet in exactly one plane apart
+            v = (np.round(q.vertices / grid) * grid if snap else q.vertices) if grow == 0 else \
+                c + (q.vertices - c) * (1 + grow / max(r, 1e-12))
             m = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.ascontiguousarray(v, dtype=np.float64),
                                                       tri_verts=np.ascontiguousarray(q.faces, dtype=np.uint64)))
             if m.status() != manifold3d.Error.NoError or m.is_empty():
@@ -403,14 +413,17 @@ def _union(pieces: list[trimesh.Trimesh], tol: float) -> trimesh.Trimesh | None:
         if u.status() != manifold3d.Error.NoError or u.is_empty() or len(u.decompose()) > 1:
             return None
         out = u.to_mesh64()
+        verts = np.asarray(out.vert_properties)[:, :3]
+        if len(cKDTree(verts).query_pairs(1e-12 * max(float(np.ptp(verts, axis=0).max()), 1e-12))):
+            return None  # two vertices at one point, to rounding: the rim of a crack between touching walls
         # as manifold3d gives it: merging its vertices (trimesh's processing) would pinch apart vertices closer than
         # the merge tolerance into edges of four faces
-        joined = trimesh.Trimesh(np.asarray(out.vert_properties)[:, :3], np.asarray(out.tri_verts, dtype=np.int64),
-                                 process=False)
+        joined = trimesh.Trimesh(verts, np.asarray(out.tri_verts, dtype=np.int64), process=False)
         return joined if joined.is_watertight and joined.body_count == 1 else None
 
-    for grow in (0.0, 1e-3 * tol, 1e-2 * tol, 0.1 * tol, tol):
-        joined = union(grow)
+    for grow, snap in ((0.0, False), (0.0, True), (1e-3 * tol, False), (1e-2 * tol, False), (0.1 * tol, False),
+                       (tol, False)):
+        joined = union(grow, snap)
         if joined is not None:
             return joined
     return None
