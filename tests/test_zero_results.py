@@ -113,8 +113,18 @@ def test_a_card_lying_flat_is_named_too_thin_to_grip(tmp_path):
     con = duckdb.connect(str(tmp_path / "c.duckdb"), read_only=True)
     stored = [json.loads(r[0]) for r in con.execute("SELECT params FROM paramset WHERE stage = 'grasps'").fetchall()]
     handx = [r[0] for r in con.execute("SELECT handx FROM ikret").fetchall()]
+    grasps = [np.array(r[0]).reshape(4, 4) for r in con.execute("SELECT rotmat FROM freeairgrip").fetchall()]
+    places = [np.array(r[0]).reshape(4, 4) for r in con.execute("SELECT rotmat FROM freetabletopplacement").fetchall()]
     con.close()
     assert [p["approach_length"] for p in stored] == [0.08] and handx == [0.08], (stored, handx)
+    # how far the best grasp reaches into the table, and that no --clearance helps, as the hand's mesh placed here
+    # by each stored placement and grasp gives it
+    from workbench.robots.gripper import franka_hand
+
+    hand = franka_hand().collision_mesh()
+    lowest = max(float(hand.copy().apply_transform(p @ g).bounds[0, 2]) for p in places for g in grasps)
+    said = re.search(r"the best grasp puts the hand ([0-9.]+) mm into the table, so no --clearance keeps one", out.stderr)
+    assert said and lowest < 0 and abs(float(said.group(1)) + lowest * 1e3) < 0.01 * abs(lowest * 1e3), out.stderr
 
 
 def test_a_longer_approach_sweep_meets_what_lies_further_back(hand):

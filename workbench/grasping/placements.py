@@ -183,25 +183,41 @@ def stability_hint(obj: ObjectModel, params: PlacementParams = PlacementParams()
 THIN_PART = 0.004  # m: a part lower than this on the table (a card, a foil) is named as too thin to grip
 
 
-def no_grip_hint(obj: ObjectModel, placement_poses: np.ndarray) -> str:
+def no_grip_hint(obj: ObjectModel, placement_poses: np.ndarray, clearance: float,
+                 highest: float | None = None) -> str:
     """Why no grasp clears the table at any of the placements (P, 4, 4), for the zero-grip message: a part lower than
-    THIN_PART is named too thin to grip, with its height."""
+    THIN_PART is named too thin to grip, with its height. `highest`: the greatest height of the hand's lowest point
+    over every grasp and placement (`table_heights`), when the grasps are known: then the hint says whether a lower
+    --clearance would keep one, or how far into the table the best grasp reaches."""
     rows = np.asarray(placement_poses)[:, 2]  # the height of a vertex v in placement p: rows[p, :3] . v + rows[p, 3]
     top = float((np.asarray(obj.mesh.vertices) @ rows[:, :3].T + rows[:, 3]).max()) if len(rows) else 0.0
     thin = (f" ({obj.name} stands at most {top * 1e3:.3g} mm above the table: too thin for the fingers to close "
             f"on its sides from above)") if len(rows) and top < THIN_PART else ""
-    return "every grasp puts the hand into the table at every stable placement" + thin + "; lower --clearance or plan more grasps"
+    if highest is None:
+        what = "lower --clearance or plan more grasps"
+    elif highest >= 0:
+        keep = np.floor(highest * 1e5) / 1e5  # m, rounded down to 0.01 mm
+        what = (f"the best grasp keeps the hand {highest * 1e3:.3g} mm above the table, within --clearance "
+                f"{clearance * 1e3:g} mm: --clearance {keep:g} keeps it")
+    else:
+        what = (f"the best grasp puts the hand {-highest * 1e3:.3g} mm into the table, so no --clearance keeps one; "
+                f"plan more grasps")
+    return "every grasp puts the hand into the table at every stable placement" + thin + "; " + what
 
 
 def empty_placement_stage(obj: ObjectModel, params: PlacementParams, placement_poses: np.ndarray,
-                          n_free_grips: int, grips_hint: Callable[[], str] | None = None) -> str | None:
+                          n_free_grips: int, grips_hint: Callable[[], str] | None = None,
+                          highest: Callable[[], float] | None = None) -> str | None:
     """"placements: why" when no placement is stable, "free tabletop grips: why" when no grasp clears the table at
     any, else None (the stage that kept nothing, for `workbench build` and the catalogue alike). `grips_hint`, when
-    given, adds what a grasp parameter would change to the second (`grasps.table_friction_hint`)."""
+    given, adds what a grasp parameter would change to the second (`grasps.table_friction_hint`); `highest`, the
+    greatest height of the hand's lowest point over the grasps and placements (`table_heights`)."""
     if len(placement_poses) == 0:
         return f"placements: {stability_hint(obj, params)}"
     if n_free_grips == 0:
-        return f"free tabletop grips: {no_grip_hint(obj, placement_poses)}{grips_hint() if grips_hint else ''}"
+        best = highest() if highest is not None else None
+        return (f"free tabletop grips: {no_grip_hint(obj, placement_poses, params.clearance, best)}"
+                f"{grips_hint() if grips_hint else ''}")
     return None
 
 
@@ -217,16 +233,22 @@ def _polygon(points2d: np.ndarray) -> np.ndarray:
     return np.column_stack([points2d, np.zeros(len(points2d))])
 
 
+def table_heights(placement_poses: np.ndarray, grasp_poses: np.ndarray, gripper: Gripper) -> np.ndarray:
+    """(P, G) the height above the table (z = 0) of the lowest point of the hand and both fingers at full opening,
+    for grasp g in placement p (negative: into the table)."""
+    pts = np.asarray(gripper.collision_mesh().convex_hull.vertices)  # lowest point of a mesh is a hull vertex
+    # z of every hull point for every (placement, grasp): row 2 of P @ G applied to the points
+    row = np.einsum("pj,gjk->pgk", np.asarray(placement_poses)[:, 2, :], np.asarray(grasp_poses))  # (P, G, 4)
+    p_n, g_n = row.shape[:2]
+    z = row[..., :3].reshape(-1, 3) @ pts.T                                # (P G, V) through BLAS
+    return (z.min(axis=1, initial=np.inf) + row[..., 3].reshape(-1)).reshape(p_n, g_n)
+
+
 def grips_above_table(placement_poses: np.ndarray, grasp_poses: np.ndarray, gripper: Gripper,
                       clearance: float) -> np.ndarray:
     """(P, G) mask: the hand and both fingers at full opening stay `clearance` above the table (z = 0) for grasp g in
     placement p (Section IV, freetabletopgrip)."""
-    pts = np.asarray(gripper.collision_mesh().convex_hull.vertices)  # lowest point of a mesh is a hull vertex
-    # z of every hull point for every (placement, grasp): row 2 of P @ G applied to the points
-    row = np.einsum("pj,gjk->pgk", placement_poses[:, 2, :], grasp_poses)  # (P, G, 4)
-    p_n, g_n = row.shape[:2]
-    z = row[..., :3].reshape(-1, 3) @ pts.T                                # (P G, V) through BLAS
-    return (z.min(axis=1) + row[..., 3].reshape(-1) >= clearance).reshape(p_n, g_n)
+    return table_heights(placement_poses, grasp_poses, gripper) >= clearance
 
 
 def free_tabletop_grips(placements: Placements, grasp_poses: np.ndarray, gripper: Gripper,
