@@ -184,8 +184,8 @@ def from_arrays(vertices: np.ndarray, faces: np.ndarray, scale: float, name: str
         com, method = centre, "volume"
     else:
         edges, span = open_border(mesh)
-        why = (f"open: {edges} edges border its holes, the widest {span * 1e3:.3g} mm across; holes up to "
-               f"{HOLE_SIZE * 1e3:.3g} mm and {HOLE_EDGES} edges are closed at load" if edges
+        why = (f"open: {edges} edges border its holes, the widest {span * 1e3:.3g} mm across; a hole is closed at "
+               f"load when it is at most {HOLE_SIZE * 1e3:.3g} mm across and has at most {HOLE_EDGES} edges" if edges
                else "its faces do not close a volume")
         warnings.warn(f"{label} is not watertight ({why}): centre of mass weighted by area; a closed export gives "
                       f"the solid's", MeshWarning, stacklevel=3)

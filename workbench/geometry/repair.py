@@ -239,8 +239,9 @@ def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarr
     notes = []
     keep = np.flatnonzero(cluster == big)
     if rest > 0:
-        notes.append(f"kept the largest body ({carea[big] * 1e4:.3g} cm^2) and dropped {n - len(keep)} small "
-                     f"separate bodies ({rest * 1e4:.3g} cm^2 in all)")
+        dropped = n - len(keep)
+        notes.append(f"kept the largest body ({carea[big] * 1e4:.3g} cm^2) and dropped {dropped} small separate "
+                     f"{'body' if dropped == 1 else 'bodies'} ({rest * 1e4:.3g} cm^2 in all)")
     if len(keep) == 1:
         return bodies[int(keep[0])], "; ".join(notes)
     pieces = [bodies[i] for i in keep]
