@@ -12,11 +12,24 @@ from workbench.geometry._radix import radix_sort
 
 
 @njit(cache=True)
-def _sorted(values, m, bits, tmp):
-    """values[:m] (distinct, in [0, 2^bits)) sorted: a radix sort in 11-bit digits above 256 values, linear in m."""
-    if m <= 256:
-        return np.sort(values[:m])
-    return radix_sort(values[:m].copy(), tmp[:m], 0, bits, 11).copy()
+def _sort(values, m, bits, tmp):
+    """values[:m] (non-negative, below 2^bits, or any with `bits` 0) sorted in place: by insertion up to 32 values
+    (a scan's facets are mostly a triangle or a few), numpy's sort up to 256 or where `bits` is 0, else a radix sort
+    in 11-bit digits through `tmp`, linear in m."""
+    if m <= 32:
+        for i in range(1, m):
+            x = values[i]
+            j = i - 1
+            while j >= 0 and values[j] > x:
+                values[j + 1] = values[j]
+                j -= 1
+            values[j + 1] = x
+    elif m <= 256 or bits == 0:
+        values[:m] = np.sort(values[:m])
+    elif (bits + 10) // 11 % 2 == 1:  # an odd number of passes leaves the result in tmp
+        values[:m] = radix_sort(values[:m], tmp[:m], 0, bits, 11)
+    else:
+        radix_sort(values[:m], tmp[:m], 0, bits, 11)
 
 
 @njit(cache=True, nogil=True)
@@ -43,10 +56,12 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
     pending = np.empty(max(k * n, 16), dtype=np.int64)  # its edges that are not two triangles', counted at its end
     group = np.empty(0, dtype=np.int64)  # each edge's group, filled at the first such edge
     bound = np.empty((64, 2), dtype=np.int64)
-    ptr = [0]
-    eptr = [0]
-    seeds = []
-    sums = []
+    # per facet (at most one per triangle, each its seed's): where its triangles and boundary edges start, its seed
+    # and its sums
+    ptr, eptr = np.zeros(n + 1, dtype=np.int64), np.zeros(n + 1, dtype=np.int64)
+    seeds = np.empty(n, dtype=np.int64)
+    sums = np.empty((n, 7))
+    m = 0
     size = 0
     e = 0
     tmp = np.empty(n, dtype=np.int64)
@@ -100,7 +115,8 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
                 u, v = faces[q // k, q % k], faces[q // k, (q % k + 1) % 3]
                 keys[w] = min(u, v) * n_vertices + max(u, v)
                 w += 1
-        region = _sorted(queue, tail, bits, tmp)
+        _sort(queue, tail, bits, tmp)
+        region = queue
         if size + tail > out.shape[0]:
             grown = np.empty(max(2 * out.shape[0], size + tail), dtype=np.int64)
             grown[:size] = out[:size]
@@ -125,10 +141,11 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
                 if d > covered[t]:
                     covered[t] = d
         size += tail
-        ptr.append(size)
-        seeds.append(seed)
-        sums.append((sn0, sn1, sn2, sc0, sc1, sc2, sa))
-        ks = np.sort(keys[:w])
+        seeds[m] = seed
+        sums[m, 0], sums[m, 1], sums[m, 2], sums[m, 3], sums[m, 4], sums[m, 5], sums[m, 6] = \
+            sn0, sn1, sn2, sc0, sc1, sc2, sa
+        _sort(keys, w, 0, tmp)
+        ks = keys
         if e + w > bound.shape[0]:
             wider = np.empty((max(2 * bound.shape[0], e + w), 2), dtype=np.int64)
             wider[:e] = bound[:e]
@@ -137,13 +154,10 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
             bound[e + i, 0] = ks[i] // n_vertices
             bound[e + i, 1] = ks[i] % n_vertices
         e += w
-        eptr.append(e)
-    m = len(seeds)
-    wn, wc, ar = np.zeros((m, 3)), np.zeros((m, 3)), np.zeros(m)
-    for f in range(m):
-        wn[f, 0], wn[f, 1], wn[f, 2], wc[f, 0], wc[f, 1], wc[f, 2], ar[f] = sums[f]
-    return (np.array(ptr, dtype=np.int64), out[:size].copy(), np.array(seeds, dtype=np.int64), wn, wc, ar,
-            np.array(eptr, dtype=np.int64), bound[:e].copy())
+        m += 1
+        ptr[m], eptr[m] = size, e
+    return (ptr[:m + 1].copy(), out[:size].copy(), seeds[:m].copy(), sums[:m, 0:3].copy(), sums[:m, 3:6].copy(),
+            sums[:m, 6].copy(), eptr[:m + 1].copy(), bound[:e].copy())
 
 
 @njit(cache=True, nogil=True)
@@ -217,6 +231,29 @@ def neighbour_table(order, starts, n):
             table[a // 3, a % 3] = b // 3
             table[b // 3, b % 3] = a // 3
     return table
+
+
+@njit(cache=True, nogil=True)
+def vertex_rows(vertices, ids):
+    """(E, k, 3) the points of the vertex ids (E, k): numpy's `vertices[ids]`, several times faster on a scan's
+    millions of triangles or facet boundary edges."""
+    out = np.empty((ids.shape[0], ids.shape[1], 3))
+    for i in range(ids.shape[0]):
+        for j in range(ids.shape[1]):
+            v = ids[i, j]
+            out[i, j, 0], out[i, j, 1], out[i, j, 2] = vertices[v, 0], vertices[v, 1], vertices[v, 2]
+    return out
+
+
+@njit(cache=True)
+def boundary_lengths(edge_ptr, edges):
+    """(F,) the length of each facet's boundary edges (E, 2, 3), summed in their order."""
+    out = np.zeros(edge_ptr.shape[0] - 1)
+    for f in range(out.shape[0]):
+        for i in range(edge_ptr[f], edge_ptr[f + 1]):
+            d0, d1, d2 = edges[i, 1, 0] - edges[i, 0, 0], edges[i, 1, 1] - edges[i, 0, 1], edges[i, 1, 2] - edges[i, 0, 2]
+            out[f] += np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+    return out
 
 
 @njit(cache=True, nogil=True)

@@ -35,7 +35,7 @@ from scipy.spatial import QhullError
 
 from workbench.errors import MeshError, ParameterError
 from workbench.geometry.collision import cylinders_collide, object_collider
-from workbench.geometry.facets import Facets, distance_to_boundary, segment
+from workbench.geometry.facets import Facets, distance_to_boundary, segment, triangles
 from workbench.geometry.hull import mesh_hull, part_hull
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
@@ -271,9 +271,7 @@ def boundary_margin(facets: Facets, dist_min: float) -> np.ndarray:
     keeps each sample well inside its facet, and with the pad model the contact is where the pad first touches, not
     the sample, so the margin only has to keep the jaw axis on the facet.
     """
-    seg = np.linalg.norm(facets.edges[:, 1] - facets.edges[:, 0], axis=1)
-    perimeter = np.bincount(np.repeat(np.arange(len(facets)), np.diff(facets.edge_ptr)), weights=seg,
-                            minlength=len(facets))
+    perimeter = facets.perimeters
     inradius = np.where(perimeter > 0, 2 * facets.areas / np.maximum(perimeter, 1e-300), np.inf)
     return np.minimum(dist_min, 0.5 * inradius)
 
@@ -337,7 +335,7 @@ def _prebuild(mesh: trimesh.Trimesh, params: GraspParams) -> Callable[[], None]:
     todo = {}
     if params.contact_model == "pads" and len(mesh.faces) >= PREBUILD_TRIANGLES:
         if mesh._cache["workbench_pad_bvh"] is None:
-            tri = np.ascontiguousarray(mesh.triangles, dtype=np.float64)
+            tri = triangles(mesh)
             fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
             todo["workbench_pad_bvh"] = lambda: triangle_bvh(tri, fn)
         if params.support_grasps and mesh._cache["workbench_hull"] is None:
@@ -853,7 +851,7 @@ def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: 
     # Embree (embreex) when installed, else trimesh's rtree caster; hits are recomputed in float64 on their triangle
     _, ray, tri = mesh.ray.intersects_location(origin, -na, multiple_hits=True)
     tn = mesh.face_normals[tri]
-    t = np.einsum("ij,ij->i", mesh.triangles[tri, 0] - origin[ray], tn) / np.einsum("ij,ij->i", -na[ray], tn)
+    t = np.einsum("ij,ij->i", triangles(mesh)[tri, 0] - origin[ray], tn) / np.einsum("ij,ij->i", -na[ray], tn)
     locs = origin[ray] - t[:, None] * na[ray]
     depth = np.einsum("ij,ij->i", locs - p[ray], -na[ray])
     # exits only (the ray leaves material there), beyond the origin

@@ -41,6 +41,7 @@ import numpy as np
 import trimesh
 
 from workbench.grasping._padkernel import first_touch_kernel, line_crossings, triangle_bvh
+from workbench.geometry.facets import triangles
 from workbench.geometry.vectors import cross
 from workbench.grasping.memo import remembered
 from workbench.robots.gripper import Gripper
@@ -252,7 +253,7 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     # heights along the axis from the origin, on the crossed triangle's plane
     tn = mesh.face_normals[tri]
     a = axes[ray]
-    t = np.einsum("ij,ij->i", mesh.triangles[tri, 0] - start[ray], tn) / np.einsum("ij,ij->i", -a, tn)
+    t = np.einsum("ij,ij->i", triangles(mesh)[tri, 0] - start[ray], tn) / np.einsum("ij,ij->i", -a, tn)
     h = reach - np.where(np.isfinite(t), t, along)
     down = np.einsum("ij,ij->i", tn, a) < 0 if mesh.is_watertight else np.ones(len(h), dtype=bool)
     # every crossing, grouped by axis and in descending height along it; a line through an edge or a corner crosses
@@ -319,7 +320,7 @@ def line_surface_points(mesh: trimesh.Trimesh, points: np.ndarray, directions: n
 
 def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: float | None, cone: float,
              lift: float, need: np.ndarray) -> Touches:
-    tri = np.ascontiguousarray(mesh.triangles, dtype=np.float64)
+    tri = triangles(mesh)
     fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
     flip = not mesh.is_watertight
     rect = np.array(pad_rectangle(gripper))
@@ -359,7 +360,7 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: f
 def triangle_tree(mesh: trimesh.Trimesh) -> tuple:
     """The triangle hierarchy of `mesh` (`_padkernel.triangle_bvh`), built once per mesh: the pads' first touches and
     the hand's collision checks (`grasps.hand_hits`) share it."""
-    return _tree(mesh, np.ascontiguousarray(mesh.triangles, dtype=np.float64),
+    return _tree(mesh, triangles(mesh),
                  np.ascontiguousarray(mesh.face_normals, dtype=np.float64))
 
 
