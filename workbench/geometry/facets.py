@@ -22,6 +22,7 @@ from workbench.errors import WorkbenchError
 from workbench.geometry._segkernel import (
     boundary_distances,
     boundary_lengths,
+    descending_order,
     by_triangle,
     edge_groups,
     facets_holding,
@@ -121,7 +122,7 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     faces = np.asarray(mesh.faces, dtype=np.int64)
     order, starts = edge_groups(faces, len(mesh.vertices))
     nbr = neighbour_table(order, starts, n_tri)
-    seed_order = np.argsort(-np.round(areas, 12), kind="stable")  # largest first, ties by index
+    seed_order = descending_order(np.round(areas, 12).view(np.int64))  # largest first, ties by index
     tri_ptr, tri_index, seeds, wn, wc, area, edge_ptr, be = grow_facets(
         np.ascontiguousarray(normals, dtype=np.float64), nbr, seed_order, method == "conventional",
         float(np.cos(tau)), float(np.cos(merge)),
