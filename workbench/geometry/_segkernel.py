@@ -114,7 +114,7 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
             for j in range(k):
                 c = nbr[t, j]
                 if c >= n:
-                    pending[p] = k * t + j
+                    pending[p] = 3 * t + j
                     p += 1
                     continue
                 if visited[c]:
@@ -129,7 +129,7 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
                     keys[w] = min(u, v) * n_vertices + max(u, v)
                     w += 1
         if p > 0 and group.shape[0] == 0:
-            group = np.empty(k * n, dtype=np.int64)
+            group = np.empty(3 * n, dtype=np.int64)
             for g in range(starts.shape[0] - 1):
                 for r in range(starts[g], starts[g + 1]):
                     group[edges[r]] = g
@@ -141,18 +141,17 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
                 if visited[edges[r] // 3]:
                     uses += 1
             if uses == 1:
-                u, v = faces[q // k, q % k], faces[q // k, (q % k + 1) % 3]
+                u, v = faces[q // 3, q % 3], faces[q // 3, (q % 3 + 1) % 3]
                 keys[w] = min(u, v) * n_vertices + max(u, v)
                 w += 1
         _sort(queue, tail, bits, tmp)
-        region = queue
         if size + tail > out.shape[0]:
             grown = np.empty(max(2 * out.shape[0], size + tail), dtype=np.int64)
             grown[:size] = out[:size]
             out = grown
         sn0, sn1, sn2, sc0, sc1, sc2, sa = 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
         for i in range(tail):
-            t = region[i]
+            t = queue[i]
             visited[t] = False
             out[size + i] = t
             a = areas[t]
@@ -174,14 +173,13 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
         sums[m, 0], sums[m, 1], sums[m, 2], sums[m, 3], sums[m, 4], sums[m, 5], sums[m, 6] = \
             sn0, sn1, sn2, sc0, sc1, sc2, sa
         _sort(keys, w, 0, tmp)
-        ks = keys
         if e + w > bound.shape[0]:
             wider = np.empty((max(2 * bound.shape[0], e + w), 2), dtype=np.int64)
             wider[:e] = bound[:e]
             bound = wider
         for i in range(w):
-            bound[e + i, 0] = ks[i] // n_vertices
-            bound[e + i, 1] = ks[i] % n_vertices
+            bound[e + i, 0] = keys[i] // n_vertices
+            bound[e + i, 1] = keys[i] % n_vertices
         e += w
         m += 1
         ptr[m], eptr[m] = size, e

@@ -22,8 +22,8 @@ from workbench.errors import WorkbenchError
 from workbench.geometry._segkernel import (
     boundary_distances,
     boundary_lengths,
-    descending_order,
     by_triangle,
+    descending_order,
     edge_groups,
     facets_holding,
     grow_facets,

@@ -193,7 +193,7 @@ def no_grip_hint(obj: ObjectModel, placement_poses: np.ndarray, clearance: float
     top = float((np.asarray(obj.mesh.vertices) @ rows[:, :3].T + rows[:, 3]).max()) if len(rows) else 0.0
     thin = (f" ({obj.name} stands at most {top * 1e3:.3g} mm above the table: too thin for the fingers to close "
             f"on its sides from above)") if len(rows) and top < THIN_PART else ""
-    if highest is None:
+    if highest is None or not np.isfinite(highest):  # no grasp known
         what = "lower --clearance or plan more grasps"
     elif highest >= 0:
         keep = np.floor(highest * 1e5) / 1e5  # m, rounded down to 0.01 mm
