@@ -97,3 +97,32 @@ def test_blocked_extents_equal_the_dense_ones():
         hi, lo = _extents(d, v, dense=dense)
         assert np.allclose(hi, (d @ v.T).max(axis=1), rtol=0, atol=1e-12)
         assert np.allclose(lo, (d @ v.T).min(axis=1), rtol=0, atol=1e-12)
+
+
+def test_the_hull_of_the_possible_hull_vertices_is_the_hull_of_them_all():
+    """Qhull is given only the vertices that can be hull vertices: those inside a flat fan of faces or on a straight
+    crease between two flat sides are left out. The hull is the plain hull of every vertex (the same corners, volume
+    and area), on parts subdivided in place (their sides' and edges' midpoints left out), a concave L whose inner
+    crease is left out, and a curved blob and a pyramid whose vertices all stay."""
+    from scipy.spatial import ConvexHull
+
+    from workbench.benchmarks.organic import blob
+    from workbench.geometry.hull import convex_hull, hull_points
+
+    box = trimesh.creation.box((0.04, 0.03, 0.02)).subdivide().subdivide()
+    prism = trimesh.creation.cylinder(radius=0.02, height=0.05, sections=3).subdivide().subdivide()
+    ell = trimesh.boolean.union([trimesh.creation.box(bounds=[[0, 0, 0], [0.06, 0.03, 0.01]]),
+                                 trimesh.creation.box(bounds=[[0, 0, 0], [0.01, 0.03, 0.05]])], engine="manifold")
+    ell = ell.subdivide().subdivide()
+    pyramid = trimesh.Trimesh([[0, 0, 0], [0.04, 0, 0], [0.04, 0.04, 0], [0, 0.04, 0], [0.02, 0.02, 0.03]],
+                              [[0, 2, 1], [0, 3, 2], [0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    curved = blob(seed=3)
+    # the corners kept: the box's 8, the prism's 6, the L's 12 (its concave ones too), every vertex of the others
+    for mesh, corners in ((box, 8), (prism, 6), (ell, 12), (curved, len(curved.vertices)), (pyramid, 5)):
+        mesh = from_trimesh(mesh, "part").mesh
+        kept = hull_points(mesh.vertices, mesh.faces, mesh.face_normals, mesh.is_watertight)
+        assert len(kept) == corners, (len(kept), corners)
+        plain = ConvexHull(mesh.vertices)
+        hull = convex_hull(kept)
+        assert np.isclose(hull.volume, plain.volume, rtol=1e-9) and np.isclose(hull.area, plain.area, rtol=1e-9)
+        assert {tuple(p) for p in np.round(hull.vertices, 12)} <= {tuple(p) for p in np.round(mesh.vertices[plain.vertices], 12)}

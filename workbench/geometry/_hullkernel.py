@@ -81,13 +81,14 @@ def group_facets(vertices, faces, facet_of, m_ptr, members, normals, order, v_pt
 
 
 @njit(cache=True, nogil=True)
-def flat_vertices(faces, normals, n_vertices, sin2):
-    """(V,) whether every face at a vertex has the unit normal of the first one there to within an angle whose sine
-    squared is `sin2` (cross products: a dot product cannot resolve angles below 1e-8 rad). On a closed mesh such a
-    vertex lies inside the flat fan of its faces, within that angle times their size of its plane, so it is not a
-    vertex of the convex hull. A vertex no face uses is not flat."""
+def inner_vertices(faces, normals, n_vertices, sin2):
+    """(V,) whether the faces at a vertex have at most two unit normals, each to within an angle whose sine squared
+    is `sin2` (cross products: a dot product cannot resolve angles below 1e-8 rad), two that are not parallel. On a
+    closed mesh such a vertex lies inside the flat fan of its faces or on the straight crease where two planes meet,
+    between the crease's ends, so it is not a vertex of the convex hull. A vertex no face uses is not inner."""
     ref = np.full(n_vertices, -1, dtype=np.int64)
-    flat = np.ones(n_vertices, dtype=np.bool_)
+    ref2 = np.full(n_vertices, -1, dtype=np.int64)
+    inner = np.ones(n_vertices, dtype=np.bool_)
     for t in range(faces.shape[0]):
         for k in range(3):
             v = faces[t, k]
@@ -95,14 +96,33 @@ def flat_vertices(faces, normals, n_vertices, sin2):
             if r < 0:
                 ref[v] = t
                 continue
-            if not flat[v]:
+            if not inner[v] or _parallel(normals, t, r, sin2):
                 continue
-            a0, a1, a2 = normals[t, 0], normals[t, 1], normals[t, 2]
-            b0, b1, b2 = normals[r, 0], normals[r, 1], normals[r, 2]
-            c0, c1, c2 = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
-            if a0 * b0 + a1 * b1 + a2 * b2 <= 0.0 or c0 * c0 + c1 * c1 + c2 * c2 > sin2:
-                flat[v] = False
+            q = ref2[v]
+            if q < 0:
+                c0, c1, c2 = _cross(normals, t, r)
+                if c0 * c0 + c1 * c1 + c2 * c2 > sin2:  # not opposite either: the planes meet in a line
+                    ref2[v] = t
+                else:
+                    inner[v] = False
+            elif not _parallel(normals, t, q, sin2):
+                inner[v] = False
     for v in range(n_vertices):
         if ref[v] < 0:
-            flat[v] = False
-    return flat
+            inner[v] = False
+    return inner
+
+
+@njit(cache=True, inline="always")
+def _cross(normals, a, b):
+    return (normals[a, 1] * normals[b, 2] - normals[a, 2] * normals[b, 1],
+            normals[a, 2] * normals[b, 0] - normals[a, 0] * normals[b, 2],
+            normals[a, 0] * normals[b, 1] - normals[a, 1] * normals[b, 0])
+
+
+@njit(cache=True, inline="always")
+def _parallel(normals, a, b, sin2):
+    """Do the unit normals of faces a and b agree to within the angle whose sine squared is `sin2`?"""
+    c0, c1, c2 = _cross(normals, a, b)
+    dot = normals[a, 0] * normals[b, 0] + normals[a, 1] * normals[b, 1] + normals[a, 2] * normals[b, 2]
+    return dot > 0.0 and c0 * c0 + c1 * c1 + c2 * c2 <= sin2

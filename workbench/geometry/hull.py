@@ -13,7 +13,7 @@ import numpy as np
 import trimesh
 from scipy.spatial import ConvexHull
 
-from workbench.geometry._hullkernel import flat_vertices
+from workbench.geometry._hullkernel import inner_vertices
 
 MERGE = 1e-7  # of the part's size: facets this close to one plane are one
 ROUNDING = 5e-7  # of the largest coordinate: several times single precision's rounding (6e-8)
@@ -80,20 +80,21 @@ def _mesh(hull: ConvexHull, planes: tuple[np.ndarray, np.ndarray]) -> trimesh.Tr
     return trimesh.Trimesh(vertices=hull.points[vid], faces=index[faces], process=True, validate=False)
 
 
-FLAT_ANGLE = 1e-9  # rad: a vertex whose faces' normals agree to this is inside a flat side, not a hull vertex
+FLAT_ANGLE = 1e-9  # rad: faces whose normals agree to this lie in one plane, for `hull_points`
 
 
 def hull_points(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, closed: bool) -> np.ndarray:
     """The vertices (N, 3) of a mesh that may be vertices of its convex hull: on a closed mesh, all but those inside
-    a flat fan of faces (`_hullkernel.flat_vertices`: a part subdivided in place, or meshed with points inside its
-    flat sides, has most of its vertices there), so qhull partitions only the rest and gives the same hull sooner.
-    `faces` (F, 3), `normals` (F, 3) their unit normals."""
+    a flat fan of faces or on a straight crease between two flat sides (`_hullkernel.inner_vertices`: a part
+    subdivided in place, or a CAD part meshed with points inside its flat sides and along its edges, has most of its
+    vertices there), so qhull partitions only the rest and gives the same hull sooner. `faces` (F, 3), `normals`
+    (F, 3) their unit normals."""
     vertices = np.asarray(vertices, dtype=np.float64)
     if not closed or len(faces) == 0:
         return vertices
-    flat = flat_vertices(np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(normals, dtype=np.float64),
-                         len(vertices), np.sin(FLAT_ANGLE) ** 2)
-    return vertices[~flat] if flat.any() and not flat.all() else vertices
+    inner = inner_vertices(np.ascontiguousarray(faces, dtype=np.int64), np.ascontiguousarray(normals, dtype=np.float64),
+                           len(vertices), np.sin(FLAT_ANGLE) ** 2)
+    return vertices[~inner] if inner.any() and not inner.all() else vertices
 
 
 def mesh_hull(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, closed: bool) -> trimesh.Trimesh:
