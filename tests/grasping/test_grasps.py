@@ -339,7 +339,7 @@ def test_boundary_distances_match_a_brute_force_projection():
 def test_the_seeds_are_ordered_by_area_as_a_stable_sort_orders_them():
     """Segmentation's seed order (largest area first, ties by index, from the float's bits) against numpy's stable
     argsort of the negated areas: random areas, areas with many ties and zeros, one value, none."""
-    from workbench.geometry._segkernel import descending_order
+    from workbench.geometry._radix import descending_order
 
     rng = np.random.default_rng(2)
     for areas in (rng.random(50_000) * 1e-7, rng.integers(0, 4, 5_000) * 1e-6, np.full(7, 2e-5), np.zeros(0)):

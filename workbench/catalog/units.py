@@ -30,7 +30,6 @@ from workbench.grasping.placements import (
     empty_placement_stage,
     free_tabletop_grips,
     stable_placements,
-    table_heights,
 )
 from workbench.planners.wan_harada.roadmap import build_roadmap
 from workbench.planners.wan_harada.tabletop import (
@@ -116,8 +115,7 @@ def part_stages(obj: ObjectModel, gparams: GraspParams, pparams: PlacementParams
     p_idx, g_idx, poses = free_tabletop_grips(placements, grasps.poses, hand, pparams)
     reason = plan.empty_reason or empty_placement_stage(
         obj, pparams, placements.poses, len(p_idx),
-        lambda: table_friction_hint(obj, hand, gparams, placements.poses, pparams.clearance),
-        lambda: float(table_heights(placements.poses, grasps.poses, hand).max(initial=-np.inf)))
+        lambda: table_friction_hint(obj, hand, gparams, placements.poses, pparams.clearance), grasps.poses, hand)
     t2 = time.perf_counter()
     tt = plan_tabletop(placements.poses, p_idx, g_idx, poses, grasps.poses, tparams)
     t3 = time.perf_counter()

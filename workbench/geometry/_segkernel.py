@@ -32,35 +32,6 @@ def _sort(values, m, bits, tmp):
         radix_sort(values[:m], tmp[:m], 0, bits, 11)
 
 
-@njit(cache=True)
-def descending_order(keys):
-    """The indices (n,) of the non-negative int64 `keys` from the largest, ties by index: numpy's stable argsort of
-    their negatives (the seeds' order of `facets.segment`, by area: a float's bits order as its value), by a radix
-    sort in 16-bit digits, passes whose digit is the same for every key skipped. Linear in n."""
-    n = keys.shape[0]
-    key, idx = np.empty(n, dtype=np.int64), np.arange(n)
-    key2, idx2 = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
-    top = 0
-    for i in range(n):
-        key[i] = 0x7FFFFFFFFFFFFFFF - keys[i]  # ascending in this: descending in the key
-        top |= key[i] ^ key[0]
-    count = np.empty(65537, dtype=np.int64)
-    for shift in range(0, 64, 16):
-        if (top >> shift) & 0xFFFF == 0:
-            continue  # every key has the same digit here
-        count[:] = 0
-        for i in range(n):
-            count[((key[i] >> shift) & 0xFFFF) + 1] += 1
-        for d in range(65536):
-            count[d + 1] += count[d]
-        for i in range(n):
-            d = (key[i] >> shift) & 0xFFFF
-            key2[count[d]], idx2[count[d]] = key[i], idx[i]
-            count[d] += 1
-        key, key2, idx, idx2 = key2, key, idx2, idx
-    return idx
-
-
 @njit(cache=True, nogil=True)
 def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, areas, faces, n_vertices, edges,
                 starts):

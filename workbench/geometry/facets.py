@@ -19,11 +19,11 @@ import numpy as np
 import trimesh
 
 from workbench.errors import WorkbenchError
+from workbench.geometry._radix import descending_order
 from workbench.geometry._segkernel import (
     boundary_distances,
     boundary_lengths,
     by_triangle,
-    descending_order,
     edge_groups,
     facets_holding,
     grow_facets,

@@ -513,7 +513,7 @@ def _pads(obj, gripper, params, lengths, facets, samples, counts, timings):
     # decide every pose at its edge.
     cos_f = np.cos(np.arctan(params.friction_coefficient))
     lift = (gripper.jaw_max if params.pregrasp_margin is None else params.pregrasp_margin) / 2 + PREGRASP_TOL + 1e-9
-    tips = None if params.fingertip_margin is None else (_hull_points(mesh), params.fingertip_margin)
+    tips = None if params.fingertip_margin is None else (_extreme_points(mesh), params.fingertip_margin)
 
     def needed(o, a, ang, ref) -> np.ndarray | None:
         if tips is None:
@@ -750,7 +750,7 @@ def _fingertip_variants(mesh, gripper, tips: tuple[np.ndarray, float], touch: To
                           need=np.isfinite(touch.window[cand]).any(axis=1)), source[cand])
 
 
-def _hull_points(mesh: trimesh.Trimesh) -> np.ndarray:
+def _extreme_points(mesh: trimesh.Trimesh) -> np.ndarray:
     """Points whose extents along any direction are the part's: its convex hull's vertices."""
     try:
         return np.asarray(part_hull(mesh).vertices)

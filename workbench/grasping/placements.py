@@ -207,15 +207,16 @@ def no_grip_hint(obj: ObjectModel, placement_poses: np.ndarray, clearance: float
 
 def empty_placement_stage(obj: ObjectModel, params: PlacementParams, placement_poses: np.ndarray,
                           n_free_grips: int, grips_hint: Callable[[], str] | None = None,
-                          highest: Callable[[], float] | None = None) -> str | None:
+                          grasp_poses: np.ndarray | None = None, gripper: Gripper | None = None) -> str | None:
     """"placements: why" when no placement is stable, "free tabletop grips: why" when no grasp clears the table at
     any, else None (the stage that kept nothing, for `workbench build` and the catalogue alike). `grips_hint`, when
-    given, adds what a grasp parameter would change to the second (`grasps.table_friction_hint`); `highest`, the
-    greatest height of the hand's lowest point over the grasps and placements (`table_heights`)."""
+    given, adds what a grasp parameter would change to the second (`grasps.table_friction_hint`); with the grasps'
+    poses (G, 4, 4) and their `gripper`, it says how near the table the best of them comes (`no_grip_hint`)."""
     if len(placement_poses) == 0:
         return f"placements: {stability_hint(obj, params)}"
     if n_free_grips == 0:
-        best = highest() if highest is not None else None
+        best = None if grasp_poses is None or gripper is None else \
+            float(table_heights(placement_poses, grasp_poses, gripper).max(initial=-np.inf))
         return (f"free tabletop grips: {no_grip_hint(obj, placement_poses, params.clearance, best)}"
                 f"{grips_hint() if grips_hint else ''}")
     return None

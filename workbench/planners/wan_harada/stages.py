@@ -26,7 +26,6 @@ from workbench.grasping.placements import (
     empty_placement_stage,
     free_tabletop_grips,
     stable_placements,
-    table_heights,
 )
 from workbench.planners.wan_harada.planner import Planner
 from workbench.planners.wan_harada.plans import Plan, PlanObstacle, PlanStep, plan_rows
@@ -573,10 +572,8 @@ def empty_stage(store: Store, object_name: str, robot_name: str | None = None,
     pparams, poses = PlacementParams.from_dict(stored), load_placements(store, pl)["rotmat"]
     hint = None if gripper is None else lambda: table_friction_hint(  # noqa: E731 (the grasps' parameters, read only then)
         obj, gripper, GraspParams.from_dict(store.params_of(int(stored.get("grasps", -1)))), poses, pparams.clearance)
-    highest = None if gripper is None or grasps["jawwidth"][0] is None else \
-        lambda: float(table_heights(poses, grasps["rotmat"], gripper).max(initial=-np.inf))  # noqa: E731
     reason = empty_placement_stage(obj, pparams, poses, len(load_free_tabletop_grips(store, pl)["idfreeairgrip"]), hint,
-                                   highest)
+                                   grasps.get("rotmat"), gripper)
     if reason is not None:
         return reason
     if tabletop_counts(store, tt)[1] == 0:
