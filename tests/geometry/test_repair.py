@@ -299,6 +299,47 @@ def test_compiled_face_normals_are_trimeshs_and_a_loaded_part_carries_them():
     assert np.array_equal(loaded.face_normals, trimesh.Trimesh(loaded.vertices, loaded.faces, process=False).face_normals)
 
 
+
+def test_a_loaded_part_carries_its_own_edge_tables_and_segments_as_without_them(tmp_path):
+    """Loading keeps the edge tables it builds for the part's checks (`EDGES_KEY`), and they are those of the part as
+    loaded: on a clean part, a part from a file, a part whose faces a repair changed after they were built (holes
+    filled, winding fixed, pieces joined) and one turned outward, every kept table equals the tables built afresh from
+    the loaded faces, and each part's segmentation equals that of a copy without them."""
+    from workbench.geometry._segkernel import edge_groups, neighbour_table
+    from workbench.geometry.facets import EDGES_KEY, segment
+
+    good = blob(seed=1)
+    flipped = good.faces.copy()
+    flipped[::5] = flipped[::5, ::-1]
+    a, b = trimesh.creation.box((0.03, 0.02, 0.02)), trimesh.creation.box((0.02, 0.02, 0.02))
+    b.apply_translation([0.015, 0.0, 0.019])
+    path = tmp_path / "part.stl"
+    blob(seed=3, noise=1e-4).export(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        parts = {"clean": _load(good, "clean"), "file": load_object(path),
+                 "holed": _load(holed(blob(seed=6, noise=2e-4, rows=26, cols=50), seed=6), "holed"),
+                 "flipped": _load(trimesh.Trimesh(good.vertices, flipped, process=False), "flipped"),
+                 "inside out": _load(trimesh.Trimesh(good.vertices, good.faces[:, ::-1], process=False), "inside out"),
+                 "joined": _load(trimesh.util.concatenate([a, b]), "joined")}
+    assert parts["holed"].repairs and parts["joined"].repairs and parts["flipped"].repairs
+    kept = 0
+    for name, obj in parts.items():
+        mesh = obj.mesh
+        tables = mesh._cache[EDGES_KEY]
+        if tables is not None:
+            kept += 1
+            order, starts = edge_groups(np.asarray(mesh.faces), len(mesh.vertices))
+            fresh = (order, starts, neighbour_table(order, starts, len(mesh.faces)))
+            assert all(np.array_equal(x, y) for x, y in zip(tables, fresh)), name
+        plain = trimesh.Trimesh(mesh.vertices.copy(), mesh.faces.copy(), process=False)
+        assert plain._cache[EDGES_KEY] is None
+        mine, theirs = segment(mesh), segment(plain)
+        for field in ("tri_ptr", "tri_index", "normals", "centers", "areas", "seeds", "edge_ptr", "edges"):
+            assert np.array_equal(getattr(mine, field), getattr(theirs, field)), (name, field)
+    assert parts["clean"].mesh._cache[EDGES_KEY] is not None and parts["file"].mesh._cache[EDGES_KEY] is not None
+    assert kept >= 2
+
 def test_vertex_merging_is_skipped_only_where_trimesh_would_merge_none():
     """Distinct positions at trimesh's merge precision: a clean scan's vertices are, and a vertex repeated 1e-12 m
     away is not, as trimesh's own merge says."""

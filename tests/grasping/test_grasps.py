@@ -11,7 +11,7 @@ import pytest
 import trimesh
 
 from workbench.errors import WorkbenchError
-from workbench.geometry.facets import segment, triangles
+from workbench.geometry.facets import segment
 from workbench.geometry.objects import from_trimesh
 from workbench.grasping.grasps import GraspParams, plan_grasps
 from workbench.planners.wan_harada.stages import ensure_grasps
@@ -371,8 +371,6 @@ def test_facet_boundaries_are_the_edges_a_facet_uses_once_on_open_and_non_manifo
                 assert np.array_equal(got, mesh.vertices[once]), (method, f)
                 length = np.linalg.norm(mesh.vertices[once[:, 1]] - mesh.vertices[once[:, 0]], axis=1).sum()
                 assert np.isclose(facets.perimeters[f], length, rtol=1e-12, atol=0), (method, f)
-        fresh = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
-        assert np.array_equal(triangles(fresh), mesh.triangles) and triangles(fresh) is fresh.triangles
 
 
 def test_first_touches_of_one_rotation_match_the_full_set(tube_paper, hand):

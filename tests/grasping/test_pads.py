@@ -55,7 +55,7 @@ def test_hierarchy_and_scan_give_the_same_touches(hand):
         angles = 2 * np.pi * np.arange(70) / 70
         alone = first_touches(mesh, origins, axes, angles[[3, 67]], hand)
         tree = first_touches(mesh, origins, axes, angles, hand)
-        scan = _padkernel.triangle_bvh(np.asarray(mesh.triangles), np.asarray(mesh.face_normals), leaf=len(mesh.faces))
+        scan = _padkernel.triangle_bvh(mesh.vertices, mesh.faces, mesh.face_normals, leaf=len(mesh.faces))
         assert len(scan[0]) == 2  # one leaf: the root
         mesh._cache["workbench_pad_bvh"] = scan
         brute = first_touches(mesh, origins, axes, angles, hand)
@@ -146,8 +146,9 @@ def test_the_hierarchy_splits_space_at_every_node():
     from workbench.grasping._padkernel import _select
 
     mesh = _bumpy(4)
-    shape, slots, leaf, tri_s, _ = _padkernel.triangle_bvh(np.asarray(mesh.triangles), np.asarray(mesh.face_normals))
+    shape, slots, leaf, tri_s, _ = _padkernel.triangle_bvh(mesh.vertices, mesh.faces, mesh.face_normals)
     assert np.array_equal(np.sort(slots[slots >= 0]), np.arange(len(mesh.faces)))
+    assert np.array_equal(tri_s, mesh.triangles[slots[slots >= 0]])  # each slot's corners, gathered from the mesh
     centre = mesh.triangles_center
     P = len(shape) // 2
 

@@ -51,11 +51,14 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
     assigned = np.zeros(n, dtype=np.bool_)
     covered = np.full(n, -2.0)
     queue = np.empty(n, dtype=np.int64)
-    out = np.empty(max(n, 16), dtype=np.int64)
+    # the memberships and boundary edges, written once in place: room for a scan's over-segmentation (about five
+    # facets to a triangle, two boundary edges to a membership), of which only the pages written are ever mapped; a
+    # buffer grown by doubling and copied out at the end would map each page several times over
+    out = np.empty(max(8 * n, 16), dtype=np.int64)
     keys = np.empty(max(k * n, 16), dtype=np.int64)  # the boundary edges of the facet being grown
     pending = np.empty(max(k * n, 16), dtype=np.int64)  # its edges that are not two triangles', counted at its end
     group = np.empty(0, dtype=np.int64)  # each edge's group, filled at the first such edge
-    bound = np.empty((64, 2), dtype=np.int64)
+    bound = np.empty((max(8 * n, 16), 2), dtype=np.int64)
     # per facet (at most one per triangle, each its seed's): where its triangles and boundary edges start, its seed
     # and its sums
     ptr, eptr = np.zeros(n + 1, dtype=np.int64), np.zeros(n + 1, dtype=np.int64)
@@ -154,8 +157,8 @@ def grow_facets(normals, nbr, order, conventional, cos_tau, cos_merge, centres, 
         e += w
         m += 1
         ptr[m], eptr[m] = size, e
-    return (ptr[:m + 1].copy(), out[:size].copy(), seeds[:m].copy(), sums[:m, 0:3].copy(), sums[:m, 3:6].copy(),
-            sums[:m, 6].copy(), eptr[:m + 1].copy(), bound[:e].copy())
+    return (ptr[:m + 1].copy(), out[:size], seeds[:m].copy(), sums[:m, 0:3].copy(), sums[:m, 3:6].copy(),
+            sums[:m, 6].copy(), eptr[:m + 1].copy(), bound[:e])
 
 
 @njit(cache=True, nogil=True)
@@ -218,9 +221,10 @@ def _edge_pairs(faces):
 
 @njit(cache=True, nogil=True)
 def neighbour_table(order, starts, n):
-    """(n, 3) the triangle across each edge of every triangle, n where none: edges shared by exactly two triangles
-    (as trimesh's face adjacency; an edge of three or more triangles joins none)."""
-    table = np.full((n, 3), n, dtype=np.int64)
+    """(n, 3) int32 the triangle across each edge of every triangle, n where none: edges shared by exactly two
+    triangles (as trimesh's face adjacency; an edge of three or more triangles joins none). Half the bytes of int64,
+    for the region growing's random reads."""
+    table = np.full((n, 3), n, dtype=np.int32)
     for g in range(starts.shape[0] - 1):
         if starts[g + 1] - starts[g] != 2:
             continue

@@ -88,18 +88,8 @@ class Facets:
 
 
 FACETS_KEY = "workbench_facets"  # the mesh cache entry holding its last segmentation (`segment`)
-
-
-def triangles(mesh: trimesh.Trimesh) -> np.ndarray:
-    """(T, 3, 3) the mesh's triangles, as trimesh's `triangles` (the same values, kept in its cache), gathered in
-    compiled code: a fifth of numpy's time on a full-resolution scan."""
-    tri = mesh._cache["triangles"]
-    if tri is None:
-        tri = vertex_rows(np.ascontiguousarray(mesh.vertices, dtype=np.float64),
-                          np.ascontiguousarray(mesh.faces, dtype=np.int64))
-        tri.flags.writeable = False
-        mesh._cache["triangles"] = tri
-    return tri
+# the mesh cache entry holding its edge tables, (`edge_groups`' two arrays, `neighbour_table`), as loading builds them
+EDGES_KEY = "workbench_edges"
 
 
 def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = "over",
@@ -120,8 +110,11 @@ def segment(mesh: trimesh.Trimesh, tau: float = np.radians(18.0), method: str = 
     areas = np.asarray(mesh.area_faces)
     n_tri = len(normals)
     faces = np.asarray(mesh.faces, dtype=np.int64)
-    order, starts = edge_groups(faces, len(mesh.vertices))
-    nbr = neighbour_table(order, starts, n_tri)
+    tables = mesh._cache[EDGES_KEY]
+    if tables is None:
+        order, starts = edge_groups(faces, len(mesh.vertices))
+        tables = mesh._cache[EDGES_KEY] = (order, starts, neighbour_table(order, starts, n_tri))
+    order, starts, nbr = tables
     seed_order = descending_order(np.round(areas, 12).view(np.int64))  # largest first, ties by index
     tri_ptr, tri_index, seeds, wn, wc, area, edge_ptr, be = grow_facets(
         np.ascontiguousarray(normals, dtype=np.float64), nbr, seed_order, method == "conventional",

@@ -25,6 +25,7 @@ from workbench.errors import MeshError
 from workbench.geometry._repairkernel import centre_terms, face_areas, unit_normals, volume_terms
 from workbench.geometry._segkernel import connected, edge_groups, neighbour_table
 from workbench.geometry.collision import mesh_distance
+from workbench.geometry.facets import EDGES_KEY
 
 
 HOLE_EDGES, HOLE_SIZE = 32, 0.01  # the holes closed at load: loops of at most this many edges and metres across
@@ -74,6 +75,10 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
         if len(mesh.faces) < nf:
             notes.append(f"dropped {nf - len(mesh.faces)} duplicate faces")
     mesh.remove_unreferenced_vertices()
+    # in its final labelling from here, unless a repair below changes the faces: the edge tables built next are then
+    # the loaded part's, and its segmentation reuses them
+    mesh = canonical(mesh)
+    edited = False
     groups = edge_groups(mesh.faces, len(mesh.vertices))
     if (np.diff(groups[1]) > 2).any():  # an edge of more than two faces: pieces may meet face to face there
         walls = _coplanar_walls(mesh)
@@ -82,12 +87,14 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
             mesh.remove_unreferenced_vertices()
             notes.append(f"removed {int(walls.sum())} faces of the walls where pieces meet face to face (coplanar "
                          f"faces of opposite normals covering each other)")
-            groups = edge_groups(mesh.faces, len(mesh.vertices))
+            groups, edited = edge_groups(mesh.faces, len(mesh.vertices)), True
     whole = mesh
-    mesh, body_note = _one_body(mesh, label, debris, groups=groups)
+    table = neighbour_table(*groups, len(mesh.faces))
+    mesh, body_note = _one_body(mesh, label, debris, table=table)
     if body_note:
         notes.append(body_note)
-    watertight, winding = edge_flags(mesh.faces, len(mesh.vertices), groups if mesh is whole else None)
+    edited |= mesh is not whole
+    watertight, winding = edge_flags(mesh.faces, len(mesh.vertices), None if edited else groups)
     if not watertight:
         before = len(mesh.faces)
         filled = _fill_loops(mesh, hole_edges, hole_size)
@@ -95,14 +102,19 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
             notes.append(f"filled {filled} small holes (at most {hole_size * 1e3:.3g} mm across) with "
                          f"{len(mesh.faces) - before} faces")
             watertight, winding = edge_flags(mesh.faces, len(mesh.vertices))
+            edited = True
     if not winding:
         trimesh.repair.fix_normals(mesh)  # consistent winding, and outward when closed
         notes.append("faces were not consistently oriented; re-oriented them")
         watertight, winding = edge_flags(mesh.faces, len(mesh.vertices))
+        edited = True
     if watertight and _inside_out(mesh):
         mesh.invert()
         notes.append("turned the normals outward (the mesh was inside out)")
-    out = canonical(mesh)
+        edited = True
+    out = canonical(mesh) if edited else mesh
+    if not edited:
+        out._cache[EDGES_KEY] = (*groups, table)
     # a relabelling: the same edges, used the same ways (trimesh would find them again at a second's cost at 1M faces)
     out._cache["is_watertight"], out._cache["is_winding_consistent"] = watertight, winding
     # trimesh's normals, to the bit, without its (n, 3, 3) corner array: a tenth of its time on a full-resolution scan
@@ -198,20 +210,20 @@ def _coordinate_order(v: np.ndarray) -> np.ndarray:
 
 
 def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarray | None = None,
-              touch: float = 1e-4, groups: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[trimesh.Trimesh, str]:
+              touch: float = 1e-4, table: np.ndarray | None = None) -> tuple[trimesh.Trimesh, str]:
     """One part from the file's bodies: bodies that touch, interpenetrate or lie inside one another (within `touch`
     of the part's largest extent, well above export precision) are pieces of one part and become their union;
     small separate bodies are debris and are dropped; bodies really apart are refused, naming the gap. `pieces`
     (per face) names the file's own pieces (a scene's meshes): each is split into bodies on its own, so that pieces
-    meeting face to face are not glued at their shared corners into one body that is not closed. `groups`: the
-    mesh's `edge_groups`, when known."""
+    meeting face to face are not glued at their shared corners into one body that is not closed. `table`: the
+    mesh's `neighbour_table`, when known."""
     bodies = []
     for p in np.unique(pieces) if pieces is not None else [None]:
         part = mesh if p is None else _submesh(mesh, pieces == p)
         if p is not None:
             part.merge_vertices()
-        table = neighbour_table(*(groups if p is None and groups is not None else
-                                  edge_groups(part.faces, len(part.vertices))), len(part.faces))
+        if p is not None or table is None:
+            table = neighbour_table(*edge_groups(part.faces, len(part.vertices)), len(part.faces))
         if connected(table):  # one body: no labels to build
             bodies.append(part)
             continue

@@ -16,7 +16,8 @@ import trimesh
 from numba import njit
 from scipy.spatial import cKDTree
 
-from workbench.geometry.facets import Facets, distance_to_boundary, triangles
+from workbench.geometry._segkernel import vertex_rows
+from workbench.geometry.facets import Facets, distance_to_boundary
 
 
 @dataclass(frozen=True)
@@ -49,7 +50,7 @@ def sample_surface(mesh: trimesh.Trimesh, count: int, seed: int) -> tuple[np.nda
     rng = np.random.default_rng(seed)
     areas = mesh.area_faces
     faces = np.searchsorted(np.cumsum(areas) / areas.sum(), rng.random(count), side="right").clip(0, len(areas) - 1)
-    tri = triangles(mesh)[faces]
+    tri = vertex_rows(np.ascontiguousarray(mesh.vertices, dtype=np.float64), mesh.faces.view(np.ndarray)[faces])
     u, v = rng.random(count), rng.random(count)
     flip = u + v > 1
     u[flip], v[flip] = 1 - u[flip], 1 - v[flip]

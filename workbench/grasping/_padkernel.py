@@ -9,6 +9,7 @@ import numpy as np
 from numba import njit
 
 from workbench.geometry._radix import radix_sort
+from workbench.geometry._segkernel import triangle_centres
 
 _EPS = 1e-12
 SLAB_MIN = 32_768  # triangles from which the pads' search bounds nodes by their slabs as well as their boxes
@@ -578,16 +579,6 @@ def _morton_order(points):
     return radix_sort(word, np.empty(n, dtype=np.int64), 32, 62, 10) & 0xFFFFFFFF
 
 
-@njit(cache=True)
-def _centres(tri):
-    """(T, 3) the triangles' centres."""
-    pc = np.empty((tri.shape[0], 3))
-    for i in range(tri.shape[0]):
-        for a in range(3):
-            pc[i, a] = (tri[i, 0, a] + tri[i, 1, a] + tri[i, 2, a]) / 3.0
-    return pc
-
-
 @njit(cache=True, inline="always")
 def _before(pc, order, ax, i, j):
     """Does the triangle at position i come before the one at j along axis `ax` (centres `pc` by position, ties by
@@ -645,15 +636,14 @@ def _select(pc, order, ax, a, b, k):
 
 
 @njit(cache=True)
-def _split_order(tri, leaf, P):
+def _split_order(centres, leaf, P):
     """The triangles' indices (T,) in the order of a top-down spatial split matching the implicit tree of P leaves of
     `leaf` slots, filled from the left: a node's triangles, split along the longest side of their centres' bounds
     (ties by index), give its left child the first as many as it holds and its right child the rest. Each node then
     holds the triangles of one box of space, where the Morton order's nodes may straddle a jump of its curve.
     Started from the Morton order, whose nodes' triangles already lie near each other in memory; a large node is
-    split by `_partition`, which keeps that order on either side."""
-    n = tri.shape[0]
-    centres = _centres(tri)
+    split by `_partition`, which keeps that order on either side. `centres` (T, 3): the triangles' centres."""
+    n = centres.shape[0]
     order = _morton_order(centres)
     pc = np.empty((n, 3))
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
@@ -783,17 +773,18 @@ def _centre_normal(shape, nsum, node, c, nn):
 
 
 @njit(cache=True, nogil=True)  # a large part's first plan builds it beside segmentation (grasps._prebuild)
-def _build(tri, leaf, slots, tri_s, shape):
-    """Fill the hierarchy in one pass over the triangles in the order of `_split_order` (the Morton order from
-    `SPLIT_MAX` triangles): `slots` (the triangle of every leaf slot, -1 for none), `tri_s` (the triangles by slot)
-    and `shape`: per node its box (lo, hi; empty: lo > hi), the box centre c, the radius of a sphere about c holding
+def _build(vertices, faces, leaf, slots, tri_s, shape):
+    """Fill the hierarchy in one pass over the triangles (`faces` into `vertices`) in the order of `_split_order` (the
+    Morton order from `SPLIT_MAX` triangles): `slots` (the triangle of every leaf slot, -1 for none), `tri_s` (the
+    triangles' corners by slot, gathered here) and `shape`: per node its box (lo, hi; empty: lo > hi), the box centre c, the radius of a sphere about c holding
     the node's points, the unit mean normal n of its triangles (area-weighted; any unit vector where they cancel) and
     the least and largest offsets of its points along n. Exact at the leaves; a parent's sphere and offsets hold its
     children's (their reach along n by `_reach`)."""
-    n = tri.shape[0]
+    n = faces.shape[0]
     N = shape.shape[0]
     P = N // 2
-    order = _split_order(tri, leaf, P) if n < SPLIT_MAX else _morton_order(_centres(tri))
+    centres = triangle_centres(vertices, faces)
+    order = _split_order(centres, leaf, P) if n < SPLIT_MAX else _morton_order(centres)
     nsum = np.empty((N, 3))
     c, nn = np.empty(3), np.empty(3)
     for node in range(P, N):
@@ -809,8 +800,9 @@ def _build(tri, leaf, slots, tri_s, shape):
             f = order[q]
             slots[q] = f
             for v in range(3):
+                u = faces[f, v]
                 for a in range(3):
-                    x = tri[f, v, a]
+                    x = vertices[u, a]
                     tri_s[q, v, a] = x
                     shape[node, a] = min(shape[node, a], x)
                     shape[node, 3 + a] = max(shape[node, 3 + a], x)
@@ -875,16 +867,17 @@ def _set_shape(shape, node, c, r, n, d0, d1):
     shape[node, 13], shape[node, 14] = d0, d1
 
 
-def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int | None = None) -> tuple:
-    """A bounding-volume hierarchy over triangles (T, 3, 3) for `first_touch_kernel`: the triangles split in space
-    node by node (`_split_order`; in Morton order from `SPLIT_MAX`), `leaf` to a leaf (None: by the count, 4 to 16),
-    and a complete binary tree over the leaves (node 1 the root, node i's children 2i and 2i + 1, the leaves P ..
+def triangle_bvh(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, leaf: int | None = None) -> tuple:
+    """A bounding-volume hierarchy over the triangles `faces` (T, 3) into `vertices` (V, 3) for `first_touch_kernel`:
+    the triangles split in space node by node (`_split_order`; in Morton order from `SPLIT_MAX`), `leaf` to a leaf
+    (None: by the count, 4 to 16), and a complete binary tree over the leaves (node 1 the root, node i's children 2i and 2i + 1, the leaves P ..
     2P - 1). Returns the node shapes (2P, 15): box lo, hi (empty: lo > hi), and the sphere and slab of `_build`; the
     triangle of every leaf slot (P * leaf, -1 for none); `leaf`; the triangles by slot (T, 3, 3), so that a leaf's
     triangles lie together in memory; and the triangles' `normals` (T, 3). `leaf` >= T gives one leaf: a scan of
     every triangle."""
-    tri = np.ascontiguousarray(tri, dtype=np.float64).reshape(-1, 3, 3)
-    n = len(tri)
+    vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    n = len(faces)
     if leaf is None:
         # wide leaves halve the build and shorten the pads' searches at full resolution; on a coarse mesh, whose
         # triangles are large beside the hand, narrow ones spare the hand's separating-axis tests
@@ -895,7 +888,7 @@ def triangle_bvh(tri: np.ndarray, normals: np.ndarray, leaf: int | None = None) 
     tri_s = np.empty((n, 3, 3))
     shape = np.empty((2 * P, 15))
     shape[0] = 0.0  # node 0 is not in the tree
-    _build(tri, leaf, slots, tri_s, shape)
+    _build(vertices, faces, leaf, slots, tri_s, shape)
     return shape, slots, leaf, tri_s, np.ascontiguousarray(normals, dtype=np.float64)
 
 

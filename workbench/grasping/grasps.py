@@ -35,7 +35,7 @@ from scipy.spatial import QhullError
 
 from workbench.errors import MeshError, ParameterError
 from workbench.geometry.collision import cylinders_collide, object_collider
-from workbench.geometry.facets import Facets, distance_to_boundary, segment, triangles
+from workbench.geometry.facets import Facets, distance_to_boundary, segment
 from workbench.geometry.hull import mesh_hull, part_hull
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
@@ -333,14 +333,13 @@ def _prebuild(mesh: trimesh.Trimesh, params: GraspParams) -> Callable[[], None]:
     GIL. Returns the call that waits for them (timed with sampling) and keeps them in the mesh's cache, as building
     them in turn does."""
     todo = {}
+    arrays = (mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray), mesh.face_normals)
     if params.contact_model == "pads" and len(mesh.faces) >= PREBUILD_TRIANGLES:
         if mesh._cache["workbench_pad_bvh"] is None:
-            tri = triangles(mesh)
-            fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
-            todo["workbench_pad_bvh"] = lambda: triangle_bvh(tri, fn)
+            todo["workbench_pad_bvh"] = lambda: triangle_bvh(*arrays)
         if params.support_grasps and mesh._cache["workbench_hull"] is None:
-            arrays = (mesh.vertices.view(np.ndarray), mesh.faces.view(np.ndarray), mesh.face_normals, mesh.is_watertight)
-            todo["workbench_hull"] = lambda: mesh_hull(*arrays)
+            watertight = mesh.is_watertight
+            todo["workbench_hull"] = lambda: mesh_hull(*arrays, watertight)
     if not todo:
         return lambda: None
     built: dict = {}
@@ -851,7 +850,8 @@ def contact_pairs(mesh: trimesh.Trimesh, facets: Facets, samples: Samples, com: 
     # Embree (embreex) when installed, else trimesh's rtree caster; hits are recomputed in float64 on their triangle
     _, ray, tri = mesh.ray.intersects_location(origin, -na, multiple_hits=True)
     tn = mesh.face_normals[tri]
-    t = np.einsum("ij,ij->i", triangles(mesh)[tri, 0] - origin[ray], tn) / np.einsum("ij,ij->i", -na[ray], tn)
+    corner = np.asarray(mesh.vertices)[np.asarray(mesh.faces)[tri, 0]]  # plain arrays: trimesh's would rehash
+    t = np.einsum("ij,ij->i", corner - origin[ray], tn) / np.einsum("ij,ij->i", -na[ray], tn)
     locs = origin[ray] - t[:, None] * na[ray]
     depth = np.einsum("ij,ij->i", locs - p[ray], -na[ray])
     # exits only (the ray leaves material there), beyond the origin

@@ -41,7 +41,6 @@ import numpy as np
 import trimesh
 
 from workbench.grasping._padkernel import first_touch_kernel, line_crossings, triangle_bvh
-from workbench.geometry.facets import triangles
 from workbench.geometry.vectors import cross
 from workbench.grasping.memo import remembered
 from workbench.robots.gripper import Gripper
@@ -253,7 +252,8 @@ def gap_windows(mesh: trimesh.Trimesh, origins: np.ndarray, axes: np.ndarray, ja
     # heights along the axis from the origin, on the crossed triangle's plane
     tn = mesh.face_normals[tri]
     a = axes[ray]
-    t = np.einsum("ij,ij->i", triangles(mesh)[tri, 0] - start[ray], tn) / np.einsum("ij,ij->i", -a, tn)
+    corner = np.asarray(mesh.vertices)[np.asarray(mesh.faces)[tri, 0]]  # plain arrays: trimesh's would rehash
+    t = np.einsum("ij,ij->i", corner - start[ray], tn) / np.einsum("ij,ij->i", -a, tn)
     h = reach - np.where(np.isfinite(t), t, along)
     down = np.einsum("ij,ij->i", tn, a) < 0 if mesh.is_watertight else np.ones(len(h), dtype=bool)
     # every crossing, grouped by axis and in descending height along it; a line through an edge or a corner crosses
@@ -320,11 +320,10 @@ def line_surface_points(mesh: trimesh.Trimesh, points: np.ndarray, directions: n
 
 def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: float | None, cone: float,
              lift: float, need: np.ndarray) -> Touches:
-    tri = triangles(mesh)
     fn = np.ascontiguousarray(mesh.face_normals, dtype=np.float64)
     flip = not mesh.is_watertight
     rect = np.array(pad_rectangle(gripper))
-    tree = _tree(mesh, tri, fn)
+    tree = triangle_tree(mesh)
     basis = np.ascontiguousarray(np.transpose(fr0[:, :3, :3], (0, 2, 1)))  # rows: x0, y, z0
     origins, angles, windows = (np.ascontiguousarray(a) for a in (origins, angles, windows))
     tie, jaw, block = float(tie), float(gripper.jaw_max), -1.0 if block is None else float(block)
@@ -360,13 +359,8 @@ def _touches(mesh, origins, frames, fr0, angles, gripper, tie, windows, block: f
 def triangle_tree(mesh: trimesh.Trimesh) -> tuple:
     """The triangle hierarchy of `mesh` (`_padkernel.triangle_bvh`), built once per mesh: the pads' first touches and
     the hand's collision checks (`grasps.hand_hits`) share it."""
-    return _tree(mesh, triangles(mesh),
-                 np.ascontiguousarray(mesh.face_normals, dtype=np.float64))
-
-
-def _tree(mesh: trimesh.Trimesh, tri: np.ndarray, normals: np.ndarray):
-    """The triangle hierarchy of `mesh` (`_padkernel.triangle_bvh`), built once per mesh."""
     tree = mesh._cache["workbench_pad_bvh"]  # trimesh's cache: dropped when the mesh changes
     if tree is None:
-        tree = mesh._cache["workbench_pad_bvh"] = triangle_bvh(tri, normals)
+        tree = mesh._cache["workbench_pad_bvh"] = triangle_bvh(mesh.vertices.view(np.ndarray),
+                                                               mesh.faces.view(np.ndarray), mesh.face_normals)
     return tree
