@@ -776,10 +776,10 @@ def _centre_normal(shape, nsum, node, c, nn):
 def _build(vertices, faces, leaf, slots, tri_s, shape):
     """Fill the hierarchy in one pass over the triangles (`faces` into `vertices`) in the order of `_split_order` (the
     Morton order from `SPLIT_MAX` triangles): `slots` (the triangle of every leaf slot, -1 for none), `tri_s` (the
-    triangles' corners by slot, gathered here) and `shape`: per node its box (lo, hi; empty: lo > hi), the box centre c, the radius of a sphere about c holding
-    the node's points, the unit mean normal n of its triangles (area-weighted; any unit vector where they cancel) and
-    the least and largest offsets of its points along n. Exact at the leaves; a parent's sphere and offsets hold its
-    children's (their reach along n by `_reach`)."""
+    triangles' corners by slot, gathered here) and `shape`: per node its box (lo, hi; empty: lo > hi), the box centre c,
+    the radius of a sphere about c holding the node's points, the unit mean normal n of its triangles (area-weighted;
+    any unit vector where they cancel) and the least and largest offsets of its points along n. Exact at the leaves; a
+    parent's sphere and offsets hold its children's (their reach along n by `_reach`)."""
     n = faces.shape[0]
     N = shape.shape[0]
     P = N // 2
@@ -870,11 +870,11 @@ def _set_shape(shape, node, c, r, n, d0, d1):
 def triangle_bvh(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, leaf: int | None = None) -> tuple:
     """A bounding-volume hierarchy over the triangles `faces` (T, 3) into `vertices` (V, 3) for `first_touch_kernel`:
     the triangles split in space node by node (`_split_order`; in Morton order from `SPLIT_MAX`), `leaf` to a leaf
-    (None: by the count, 4 to 16), and a complete binary tree over the leaves (node 1 the root, node i's children 2i and 2i + 1, the leaves P ..
-    2P - 1). Returns the node shapes (2P, 15): box lo, hi (empty: lo > hi), and the sphere and slab of `_build`; the
-    triangle of every leaf slot (P * leaf, -1 for none); `leaf`; the triangles by slot (T, 3, 3), so that a leaf's
-    triangles lie together in memory; and the triangles' `normals` (T, 3). `leaf` >= T gives one leaf: a scan of
-    every triangle."""
+    (None: by the count, 4 to 16), and a complete binary tree over the leaves (node 1 the root, node i's children 2i and
+    2i + 1, the leaves P .. 2P - 1). Returns the node shapes (2P, 15): box lo, hi (empty: lo > hi), and the sphere and
+    slab of `_build`; the triangle of every leaf slot (P * leaf, -1 for none); `leaf`; the triangles by slot (T, 3, 3),
+    so that a leaf's triangles lie together in memory; and the triangles' `normals` (T, 3). `leaf` >= T gives one leaf:
+    a scan of every triangle."""
     vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
     faces = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
     n = len(faces)
