@@ -110,3 +110,19 @@ def test_hull_and_hierarchy_built_beside_segmentation_give_the_same_plan(hand, m
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
     for x, y in zip(*(m._cache["workbench_pad_bvh"] for m in meshes)):
         assert np.array_equal(x, y)
+
+
+def test_grasp_counts_hold_as_the_part_is_subdivided(hand):
+    """Time follows the part, not its triangles, and so do the grasps: a 60 mm blob scan at 960 triangles subdivided
+    four-fold per level (the same surface) up to 245,760 triangles, and the bundled wheel up to 16 times its
+    triangles, keep their grasp counts within 20% of the coarsest level's, with the same sampling seed."""
+    from workbench.benchmarks.organic import blob
+
+    for name, mesh, levels in (("blob", blob(seed=1, rows=12, cols=24), 4),
+                               ("wheel", load_object(bundled_objects()["wheel"]).mesh, 2)):
+        counts = []
+        for level in range(levels + 1):
+            counts.append(len(plan_grasps(from_trimesh(mesh, name), hand, GraspParams()).grasps))
+            mesh = mesh.subdivide()
+        assert min(counts) > 1000, (name, counts)
+        assert all(abs(c - counts[0]) <= 0.2 * counts[0] for c in counts), (name, counts)
