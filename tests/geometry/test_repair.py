@@ -268,6 +268,44 @@ def test_edge_groups_match_a_stable_sort_of_the_vertex_pairs():
     assert len(order) == 0 and starts.tolist() == [0]
 
 
+def test_compiled_relabelling_edge_flags_and_face_codes_match_numpy_and_trimesh():
+    """The compiled pieces of loading against an independent computation: each face relabelled and rotated to start
+    at its lowest label as numpy's argmin rotation gives it (ties to the first), its sort key ordering the rows
+    lexicographically; the watertight and winding flags as trimesh finds them; and two faces share a code exactly
+    when they use the same three vertices. On a closed blob, the blob with flipped faces, an open one (a cap cut off)
+    and random faces with repeated corners."""
+    from workbench.geometry._repairkernel import rotated_faces, triple_codes
+    from workbench.geometry.repair import edge_flags
+
+    rng = np.random.default_rng(5)
+    good = blob(seed=2)
+    flipped = good.faces.copy()
+    flipped[::7] = flipped[::7, ::-1]
+    meshes = [good, trimesh.Trimesh(good.vertices, flipped, process=False),
+              trimesh.Trimesh(good.vertices, good.faces[good.triangles_center[:, 2] < 0.01], process=False),
+              trimesh.Trimesh(rng.random((30, 3)), rng.integers(0, 30, (500, 3)), process=False)]
+    for m in meshes:
+        faces = np.asarray(m.faces, dtype=np.int64)
+        n = len(m.vertices)
+        rank = rng.permutation(n).astype(np.int64)
+        got, key = rotated_faces(rank, faces, n)
+        labelled = rank[faces]
+        first = np.argmin(labelled, axis=1)
+        want = labelled[np.arange(len(faces))[:, None], (first[:, None] + np.arange(3)) % 3]
+        assert np.array_equal(got, want)
+        assert np.array_equal(np.argsort(key, kind="stable"), np.lexsort((got[:, 2], got[:, 1], got[:, 0])))
+        plain = trimesh.Trimesh(m.vertices, faces, process=False)
+        assert edge_flags(faces, n) == (plain.is_watertight, plain.is_winding_consistent)
+        # the faces grouped by code are those grouped by their sorted corners
+        codes = np.unique(triple_codes(faces, n), return_inverse=True)[1].ravel()
+        rows = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True)[1].ravel()
+        assert len(np.unique(np.c_[codes, rows], axis=0)) == codes.max() + 1 == rows.max() + 1
+    assert rows.max() + 1 < len(meshes[3].faces)  # the random faces repeat some triples
+    assert edge_flags(meshes[0].faces, len(meshes[0].vertices)) == (True, True)
+    assert edge_flags(meshes[1].faces, len(meshes[1].vertices)) == (True, False)
+    assert edge_flags(meshes[2].faces, len(meshes[2].vertices))[0] is False
+
+
 def test_compiled_face_areas_and_volume_sign_are_trimeshs():
     """The repair's compiled face areas are trimesh's to the bit, and its volume sum has trimesh's volume's sign, with
     an error bound far below it, on a closed scan and the same scan inside out."""

@@ -82,3 +82,57 @@ def centre_terms(vertices, faces):
                 terms[0, t] = cx * f1
             terms[1 + k, t] = (cx if k == 0 else cy if k == 1 else cz) * f2
     return cross, terms
+
+
+@njit(cache=True)
+def rotated_faces(rank, faces, n):
+    """The faces (m, 3) relabelled by `rank` (old vertex -> new) and each rotated to start at its lowest label (the
+    first where two are equal, as argmin takes; the winding kept), and one sort key per face, (f0 * n + f1) * n + f2,
+    whose order is the rows' lexicographic one while n < 2^21 (`repair.canonical`)."""
+    m = faces.shape[0]
+    out = np.empty((m, 3), dtype=np.int64)
+    key = np.empty(m, dtype=np.int64)
+    for t in range(m):
+        a, b, c = rank[faces[t, 0]], rank[faces[t, 1]], rank[faces[t, 2]]
+        if a <= b and a <= c:
+            f0, f1, f2 = a, b, c
+        elif b <= c:
+            f0, f1, f2 = b, c, a
+        else:
+            f0, f1, f2 = c, a, b
+        out[t, 0], out[t, 1], out[t, 2] = f0, f1, f2
+        key[t] = (f0 * n + f1) * n + f2
+    return out, key
+
+
+@njit(cache=True)
+def winding_flags(order, starts, faces):
+    """(watertight, winding consistent) from the faces' edge groups (`_segkernel.edge_groups`): every edge is two
+    faces'; each edge of two faces is used by them in opposite directions (edge q = 3 t + j runs from corner j to
+    corner j + 1 of face t)."""
+    pairs = 0
+    consistent = True
+    for g in range(starts.shape[0] - 1):
+        if starts[g + 1] - starts[g] != 2:
+            continue
+        pairs += 1
+        a, b = order[starts[g]], order[starts[g] + 1]
+        if faces[a // 3, (a % 3 + 1) % 3] != faces[b // 3, b % 3]:
+            consistent = False
+    return 2 * pairs == 3 * faces.shape[0], consistent
+
+
+@njit(cache=True)
+def triple_codes(faces, n):
+    """One int64 code per face (m,) naming its three vertices in any order: (lo * n + mid) * n + hi (n < 2^21)."""
+    out = np.empty(faces.shape[0], dtype=np.int64)
+    for t in range(faces.shape[0]):
+        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+        if a > b:
+            a, b = b, a
+        if b > c:
+            b, c = c, b
+        if a > b:
+            a, b = b, a
+        out[t] = (a * n + b) * n + c
+    return out

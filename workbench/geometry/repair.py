@@ -22,7 +22,8 @@ import trimesh
 from scipy.spatial import cKDTree
 
 from workbench.errors import MeshError
-from workbench.geometry._repairkernel import centre_terms, face_areas, unit_normals, volume_terms
+from workbench.geometry._repairkernel import (centre_terms, face_areas, rotated_faces, triple_codes, unit_normals,
+                                              volume_terms, winding_flags)
 from workbench.geometry._segkernel import connected, edge_groups, neighbour_table
 from workbench.geometry.collision import mesh_distance
 from workbench.geometry.facets import EDGES_KEY
@@ -140,17 +141,11 @@ def edge_flags(faces: np.ndarray, n_vertices: int,
     """(watertight, winding consistent) as trimesh defines them: every edge is shared by exactly two faces; each
     edge shared by two faces is used by them in opposite directions. One sort of the edges (or `groups`, the faces'
     `edge_groups`)."""
-    faces = np.asarray(faces, dtype=np.int64)
+    faces = np.ascontiguousarray(faces, dtype=np.int64)
     if len(faces) == 0:
         return False, True
-    order, starts = edge_groups(faces, n_vertices) if groups is None else groups
-    size = np.diff(starts)
-    pair = starts[:-1][size == 2]
-    a, b = order[pair], order[pair + 1]
-    # directed edge q = 3 t + j runs from corner j to corner j + 1 of face t
-    head_a = faces[a // 3, (a % 3 + 1) % 3]
-    tail_b = faces[b // 3, b % 3]
-    return bool(len(pair) * 2 == 3 * len(faces)), bool((head_a == tail_b).all())
+    watertight, winding = winding_flags(*(edge_groups(faces, n_vertices) if groups is None else groups), faces)
+    return bool(watertight), bool(winding)
 
 
 def volume_centre(mesh: trimesh.Trimesh) -> tuple[float, np.ndarray]:
@@ -181,14 +176,10 @@ def canonical(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     order = _coordinate_order(v)
     rank = np.empty(len(order), dtype=np.int64)
     rank[order] = np.arange(len(order))
-    a, b, c = rank[np.asarray(mesh.faces)].T
-    # each face rotated to start at its lowest index (the first one where two are equal, as argmin takes)
-    s0, s1 = (a <= b) & (a <= c), b <= c
-    f = np.column_stack([np.where(s0, a, np.where(s1, b, c)), np.where(s0, b, np.where(s1, c, a)),
-                         np.where(s0, c, np.where(s1, a, b))])
     n = len(v)
+    f, key = rotated_faces(rank, np.ascontiguousarray(mesh.faces, dtype=np.int64), n)
     if 0 < n < 2**21:  # the three indices as one int64 key: its stable sort is the lexicographic one, 3x faster
-        f = f[np.argsort((f[:, 0] * n + f[:, 1]) * n + f[:, 2], kind="stable")]
+        f = f[np.argsort(key, kind="stable")]
     else:
         f = f[np.lexsort((f[:, 2], f[:, 1], f[:, 0]))]
     return trimesh.Trimesh(v[order], f, process=False, validate=False)
@@ -286,10 +277,9 @@ def _distinct_positions(vertices: np.ndarray) -> bool:
 
 def _repeated_triples(faces: np.ndarray, n_vertices: int) -> bool:
     """Whether two faces use the same three vertices (in any order): one sort of one int64 key per face."""
-    key = np.sort(np.asarray(faces, dtype=np.int64), axis=1)
     if n_vertices >= 2**21:
         return True  # the key would overflow: let the full checks decide
-    code = np.sort((key[:, 0] * n_vertices + key[:, 1]) * n_vertices + key[:, 2])
+    code = np.sort(triple_codes(np.ascontiguousarray(faces, dtype=np.int64), n_vertices))
     return bool((code[1:] == code[:-1]).any())
 
 
