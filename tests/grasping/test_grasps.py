@@ -411,3 +411,17 @@ def test_a_mesh_is_segmented_once_per_parameters_and_again_when_it_changes():
     stretched = segment(trimesh.Trimesh(mesh.vertices, mesh.faces, process=False), np.radians(10))
     assert again is not other and np.array_equal(again.tri_ptr, stretched.tri_ptr)
     assert np.array_equal(again.tri_index, stretched.tri_index) and not np.array_equal(again.tri_ptr, other.tri_ptr)
+
+
+@pytest.mark.parametrize("name", ["tube", "bracket"])
+def test_the_opening_is_the_contacts_distance_along_the_jaw_axis(bundled, hand, name):
+    """The pads stop at their contacts: where several points of a pad's footprint touch within its tie (1 um), the
+    contact is the one nearest the axis and the pad stops at its height, so every grasp's opening is its contacts'
+    distance along the TCP's y axis and the TCP lies midway between them along it, to rounding, on the bundled tube
+    and bracket (curved and faceted sides, where the first touches tie)."""
+    g = plan_grasps(bundled[name], hand, GraspParams()).grasps
+    assert len(g) > 100
+    y = g.poses[:, :3, 1]
+    along = np.einsum("ij,ij->i", g.contact0 - g.contact1, y)
+    assert np.abs(along - g.jawwidth).max() < 1e-12
+    assert np.abs(np.einsum("ij,ij->i", 0.5 * (g.contact0 + g.contact1) - g.poses[:, :3, 3], y)).max() < 1e-12

@@ -311,8 +311,8 @@ def _pad_touch(cb, ca, ly, c, s, side, start, block, wlo, whi, tie, rect, lx3, l
 @njit(cache=True)
 def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max,
                        block, cone, lift, need):
-    """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y,
-    local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
+    """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y (the
+    contact's), local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
     triangles by leaf slot and their unit normals by triangle. `block` (m, negative: off): a pad whose finite start's
     plane, moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing.
     `cone`: the cosine of the friction cone's half-angle (below -1: off); a pose whose left touch's normal lies
@@ -467,7 +467,9 @@ def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angl
                         todo |= np.int64(1) << j
                     hrow = k * A + j0 + j
                     found[hrow, si] = True
-                    height[hrow, si] = side * rs[r]
+                    # the pad stops at its contact, the touch nearest the axis within `tie` of the first: the
+                    # opening is then the contacts' distance along the axis
+                    height[hrow, si] = rp[r, 1]
                     local[hrow, si] = rp[r]
                     tri_id[hrow, si] = rt[r]
         # an axis whose own crossings are farther apart than the jaw opens cannot be grasped at any rotation: none
