@@ -5,6 +5,7 @@ from __future__ import annotations
 import coal
 import numpy as np
 import pytest
+import trimesh
 
 from workbench.benchmarks.graspcheck import hand_intrudes, hand_placements
 from workbench.benchmarks.organic import torus, washer
@@ -28,6 +29,16 @@ def _table_clearance(grip_poses: np.ndarray, openings: np.ndarray) -> np.ndarray
     return out
 
 
+def _square_frame(outer: float, bar: float, thickness: float) -> trimesh.Trimesh:
+    """A square picture frame lying in the xy plane (manifold3d's difference of two boxes)."""
+    import manifold3d
+
+    solid = (manifold3d.Manifold.cube([outer, outer, thickness], True)
+             - manifold3d.Manifold.cube([outer - 2 * bar, outer - 2 * bar, 2 * thickness], True))
+    m = solid.to_mesh()
+    return trimesh.Trimesh(np.asarray(m.vert_properties)[:, :3], np.asarray(m.tri_verts), process=True)
+
+
 @pytest.mark.parametrize("name, mesh, width", [
     ("130 mm ring of a 30 mm tube", torus(major=0.05, minor=0.015, sections=128, minor_sections=24), 0.030),
     # the same ring in other tessellations: 64 and 96 facets round, 24 or 32 about the tube, the jaw axis's phase
@@ -37,6 +48,10 @@ def _table_clearance(grip_poses: np.ndarray, openings: np.ndarray) -> np.ndarray
     ("130 mm ring, 48 x 24 facets", torus(major=0.05, minor=0.015, sections=48, minor_sections=24), 0.030),
     ("132 mm ring of a 28.8 mm tube", torus(major=0.0516, minor=0.0144, sections=64, minor_sections=24), 0.0288),
     ("100 mm ring 10 mm thick", washer(outer=0.05, inner=0.04, thickness=0.01, sections=96), 0.010),
+    # wider than twice the centre-of-mass distance (52 mm here): every grasp lies farther than it from the centre of
+    # mass, which sits in the hole, so the bound is raised to keep the grasps across the material nearest it
+    ("140 mm ring of a 20 mm tube", torus(major=0.06, minor=0.01, sections=128, minor_sections=24), 0.020),
+    ("140 mm square frame of 12 mm bars, 8 mm thick", _square_frame(0.14, 0.012, 0.008), 0.012),
 ])
 def test_ring_lying_flat_is_gripped_across_its_tube_from_above(hand, name, mesh, width):
     obj = from_trimesh(mesh, name)
@@ -57,3 +72,26 @@ def test_ring_lying_flat_is_gripped_across_its_tube_from_above(hand, name, mesh,
     # checked with coal on the hand pinocchio loads: clear of the table, and not into the part
     assert (_table_clearance(poses[k], w) >= 1e-3).all()
     assert not hand_intrudes(obj.mesh, plan.grasps.poses[g[k]], w).any()
+
+
+def test_the_centre_of_mass_bound_is_raised_only_where_the_centre_of_mass_lies_in_a_hole(hand):
+    """`com_bound`: a washer's centre of mass lies in its hole, its inner radius from the part (coal's distance from a
+    tiny sphere there agrees), so the bound becomes that plus half the stroke; a solid box's bound stays
+    the scaled value, as does every bound with fixed lengths."""
+    from workbench.grasping.grasps import com_bound
+
+    ring = from_trimesh(washer(outer=0.07, inner=0.06, thickness=0.01, sections=128), "ring")
+    got = com_bound(ring, hand, GraspParams(), 0.05)
+    model = coal.BVHModelOBBRSS()
+    model.beginModel(len(ring.mesh.faces), len(ring.mesh.vertices))
+    model.addVertices(np.asarray(ring.mesh.vertices, dtype=np.float64))
+    model.addTriangles(np.asarray(ring.mesh.faces, dtype=np.int64))
+    model.endModel()
+    probe = coal.Transform3s(np.eye(3), np.asarray(ring.com, dtype=np.float64))
+    coal_d = coal.distance(coal.Sphere(1e-9), probe, model, coal.Transform3s(), coal.DistanceRequest(),
+                           coal.DistanceResult()) + 1e-9
+    assert abs(got["com_hole"] - coal_d) < 1e-9 and 0.0599 < coal_d <= 0.06
+    assert got["com_max"] == pytest.approx(coal_d + hand.jaw_max / 2, abs=1e-12)
+    assert com_bound(ring, hand, GraspParams(lengths="fixed"), 0.05) == {"com_max": 0.05, "com_hole": 0.0}
+    box = from_trimesh(trimesh.creation.box((0.12, 0.1, 0.08)), "box")  # its centre 40 mm from every side
+    assert com_bound(box, hand, GraspParams(), 0.05) == {"com_max": 0.05, "com_hole": 0.0}

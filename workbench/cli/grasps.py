@@ -130,4 +130,7 @@ def grasp_counts(plan: GraspPlan) -> str:
                 f"{c['grasps']} fingers free")
     lengths = (f"lengths x{L['scale']:.2f}: neighbour radius {L['neighbour_radius'] * 1e3:.3g} mm, boundary distance "
                f"{L['dist_min'] * 1e3:.3g}-{L['dist_max'] * 1e3:.3g} mm, centre-of-mass distance {L['com_max'] * 1e3:.3g} mm")
+    if L.get("com_hole", 0.0) > 0:
+        lengths += (f" (the centre of mass lies in a hole, {L['com_hole'] * 1e3:.3g} mm from the part: grasps across "
+                    f"the material nearest it are kept)")
     return f"{head}\n{body}\n{lengths}"

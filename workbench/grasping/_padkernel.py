@@ -951,3 +951,60 @@ def line_crossings(shape, slots, leaf, tri, starts, dirs):
                 dist[m] = (e20 * qx + e21 * qy + e22 * qz) * inv
                 m += 1
     return ray[:m].copy(), tid[:m].copy(), dist[:m].copy()
+
+
+@njit(cache=True)
+def point_distance(tri, p):
+    """The least distance from the point `p` (3,) to the triangles `tri` (T, 3, 3): each triangle's closest point by
+    its Voronoi regions (Ericson, Real-Time Collision Detection, 5.1.5), a triangle whose box lies farther than the
+    best so far skipped."""
+    best2 = np.inf
+    for t in range(tri.shape[0]):
+        gap2 = 0.0
+        for a in range(3):
+            lo = min(tri[t, 0, a], tri[t, 1, a], tri[t, 2, a])
+            hi = max(tri[t, 0, a], tri[t, 1, a], tri[t, 2, a])
+            g = lo - p[a] if p[a] < lo else (p[a] - hi if p[a] > hi else 0.0)
+            gap2 += g * g
+        if gap2 >= best2:
+            continue
+        ax, ay, az = tri[t, 0, 0], tri[t, 0, 1], tri[t, 0, 2]
+        abx, aby, abz = tri[t, 1, 0] - ax, tri[t, 1, 1] - ay, tri[t, 1, 2] - az
+        acx, acy, acz = tri[t, 2, 0] - ax, tri[t, 2, 1] - ay, tri[t, 2, 2] - az
+        apx, apy, apz = p[0] - ax, p[1] - ay, p[2] - az
+        d1 = abx * apx + aby * apy + abz * apz
+        d2 = acx * apx + acy * apy + acz * apz
+        bpx, bpy, bpz = p[0] - tri[t, 1, 0], p[1] - tri[t, 1, 1], p[2] - tri[t, 1, 2]
+        d3 = abx * bpx + aby * bpy + abz * bpz
+        d4 = acx * bpx + acy * bpy + acz * bpz
+        cpx, cpy, cpz = p[0] - tri[t, 2, 0], p[1] - tri[t, 2, 1], p[2] - tri[t, 2, 2]
+        d5 = abx * cpx + aby * cpy + abz * cpz
+        d6 = acx * cpx + acy * cpy + acz * cpz
+        va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+        if d1 <= 0.0 and d2 <= 0.0:  # vertex a
+            qx, qy, qz = ax, ay, az
+        elif d3 >= 0.0 and d4 <= d3:  # vertex b
+            qx, qy, qz = tri[t, 1, 0], tri[t, 1, 1], tri[t, 1, 2]
+        elif vc <= 0.0 and d1 >= 0.0 and d3 <= 0.0:  # edge ab
+            v = d1 / (d1 - d3)
+            qx, qy, qz = ax + v * abx, ay + v * aby, az + v * abz
+        elif d6 >= 0.0 and d5 <= d6:  # vertex c
+            qx, qy, qz = tri[t, 2, 0], tri[t, 2, 1], tri[t, 2, 2]
+        elif vb <= 0.0 and d2 >= 0.0 and d6 <= 0.0:  # edge ac
+            w = d2 / (d2 - d6)
+            qx, qy, qz = ax + w * acx, ay + w * acy, az + w * acz
+        elif va <= 0.0 and (d4 - d3) >= 0.0 and (d5 - d6) >= 0.0:  # edge bc
+            w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+            bx, by, bz = tri[t, 1, 0], tri[t, 1, 1], tri[t, 1, 2]
+            qx, qy, qz = bx + w * (tri[t, 2, 0] - bx), by + w * (tri[t, 2, 1] - by), bz + w * (tri[t, 2, 2] - bz)
+        else:  # inside the face
+            den = va + vb + vc
+            if den == 0.0:  # degenerate: its vertices stand for it
+                qx, qy, qz = ax, ay, az
+            else:
+                v, w = vb / den, vc / den
+                qx, qy, qz = ax + abx * v + acx * w, ay + aby * v + acy * w, az + abz * v + acz * w
+        d = (p[0] - qx) ** 2 + (p[1] - qy) ** 2 + (p[2] - qz) ** 2
+        if d < best2:
+            best2 = d
+    return np.sqrt(best2)

@@ -17,8 +17,10 @@ model geometry"). The part's size is the side of the cube of the same surface ar
 radius and the boundary distances are their fixed values times size / reference_size (60 mm, between the paper's tube
 and tail, so those parts keep about the fixed values). The centre-of-mass distance, the paper's bound on the gravity
 torque m g d, scales only up: a smaller part is lighter (m grows as size^3), so the fixed distance already bounds its
-torque below the reference part's, and a flat washer or ring, whose centre of mass lies in its hole, keeps its rim
-grasps. `lengths="fixed"` uses the fixed values as given.
+torque below the reference part's. Where the centre of mass lies outside the material (in a ring's or a frame's
+hole), the distance is at least that to the part's surface plus half the jaw's stroke, so the grasps across
+the material nearest the centre of mass, the least torque the part allows, are kept, however wide the hole
+(`com_bound`). `lengths="fixed"` uses the fixed values as given.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from workbench.geometry.hull import mesh_hull, part_hull
 from workbench.geometry.objects import ObjectModel
 from workbench.geometry.sampling import Samples, distribute, sample_count
 from workbench.grasping._handkernel import convex_piece, hull_hits, pack
-from workbench.grasping._padkernel import triangle_bvh
+from workbench.grasping._padkernel import line_crossings, point_distance, triangle_bvh
 from workbench.grasping.pads import (
     PREGRASP_TOL,
     Touches,
@@ -299,6 +301,7 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
     margin = boundary_margin(facets, lengths["dist_min"])
     samples = Samples(**{**samples.__dict__, "pair_ok": samples.pair_ok & (samples.pair_dist >= margin[samples.pair_facet])})
     prebuilt()
+    lengths = {**lengths, **com_bound(obj, gripper, params, lengths["com_max"])}
     timings["sampling"] = time.perf_counter() - t0
     counts = {
         "triangles": int(len(mesh.faces)),
@@ -324,6 +327,31 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
     return GraspPlan(params=params, facets=facets, samples=samples, pairs=pairs, candidate_poses=poses,
                      candidate_pair=cand_pair, candidate_free=free, grasps=grasps, counts=counts, timings=timings,
                      lengths=lengths, empty_reason=empty_reason(counts, params, lengths, gripper, pairs))
+
+
+_GENERIC = np.array([[0.5389, 0.6187, 0.5716], [-0.7071, 0.3149, 0.6332], [0.2673, -0.8017, 0.5345]])
+"""Three directions no part's symmetry aligns with an edge: rays from the centre of mass for `com_bound`'s parity."""
+
+
+def com_bound(obj: ObjectModel, gripper: Gripper, params: GraspParams, com_max: float) -> dict[str, float]:
+    """The centre-of-mass distance bound on `obj` (Section III's torque filter; `com_max`, already scaled): raised,
+    with adaptive lengths on a closed part whose centre of mass lies outside the material (odd crossings of the
+    surface by rays from it, two of three), to the distance from the centre of mass to the part's surface plus half
+    the jaw's stroke, so that a grasp across the material nearest the centre of mass passes. Returns
+    {"com_max": the bound, "com_hole": that nearest distance, 0 where not raised}."""
+    mesh = obj.mesh
+    if params.lengths == "fixed" or not mesh.is_watertight:
+        return {"com_max": com_max, "com_hole": 0.0}
+    com = np.asarray(obj.com, dtype=np.float64)
+    shape, slots, leaf, tri, _ = triangle_tree(mesh)
+    dirs = _GENERIC / np.linalg.norm(_GENERIC, axis=1, keepdims=True)
+    ray, _, along = line_crossings(shape, slots, leaf, tri, np.tile(com, (3, 1)), dirs)
+    odd = np.bincount(ray[along > 0], minlength=3) % 2 == 1
+    if odd.sum() >= 2:  # inside the material
+        return {"com_max": com_max, "com_hole": 0.0}
+    hole = float(point_distance(tri, com))
+    bound = hole + 0.5 * float(gripper.jaw_max)
+    return {"com_max": max(com_max, bound), "com_hole": hole if bound > com_max else 0.0}
 
 
 def _prebuild(mesh: trimesh.Trimesh, params: GraspParams) -> Callable[[], None]:
