@@ -249,6 +249,39 @@ def test_exported_files_glb_scene_obj_materials_ply_colours(tmp_path):
         assert np.isclose(got.mesh.volume, a.volume) and got.mesh.is_watertight, path
 
 
+def test_a_scene_of_rotated_touching_nodes_is_one_part_and_the_cleanup_of_their_join_is_named_as_such(tmp_path):
+    """A GLB of three nodes rotated and placed by the scene graph (a box, a cylinder standing on it, a box against
+    its side face to face) loads as their union, whose volume is manifold3d's union of the placed pieces; the
+    cleanup the union's mesh needs is reported as the join's, not as the file's faults."""
+    from trimesh.transformations import rotation_matrix, translation_matrix
+
+    a, b, c = (trimesh.creation.box((0.08, 0.04, 0.02)), trimesh.creation.cylinder(radius=0.012, height=0.04),
+               trimesh.creation.box((0.02, 0.02, 0.05)))
+    ta = rotation_matrix(np.radians(30), [0, 0, 1])
+    placed = {"base": ta, "post": ta @ translation_matrix([0.02, 0.0, 0.03]),
+              "arm": ta @ translation_matrix([-0.02, 0.045, 0.0]) @ rotation_matrix(np.pi / 2, [1, 0, 0])}
+    scene = trimesh.Scene()
+    for (name, t), m in zip(placed.items(), (a, b, c)):
+        scene.add_geometry(m, node_name=name, geom_name=name, transform=t)
+    glb = tmp_path / "scene.glb"
+    glb.write_bytes(scene.export(file_type="glb"))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        obj = load_object(glb)
+    text = [str(w.message) for w in caught]
+    union = None
+    for (name, t), m in zip(placed.items(), (a, b, c)):
+        m = m.copy().apply_transform(t)
+        piece = manifold3d.Manifold(manifold3d.Mesh(vert_properties=np.asarray(m.vertices, np.float32),
+                                                    tri_verts=np.asarray(m.faces, np.uint32)))
+        union = piece if union is None else union + piece
+    assert obj.mesh.is_watertight and obj.mesh.body_count == 1
+    assert obj.mesh.volume == pytest.approx(union.volume(), rel=1e-4)
+    assert any("joined 3 touching bodies" in t for t in text), text
+    cleanup = [t for t in text if "duplicate vertices" in t or "degenerate faces" in t]
+    assert all(t.endswith("where the pieces were joined") for t in cleanup), cleanup
+
+
 def test_edge_groups_match_a_stable_sort_of_the_vertex_pairs():
     """The linear edge sort that repair and segmentation share gives numpy's stable argsort of the edges' vertex pairs,
     on a fan's apex (a long run of one vertex), repeated and degenerate faces, and no faces."""

@@ -42,9 +42,11 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
     if pieces is not None and len(np.unique(pieces)) > 1:
         # the file's own pieces first: merged together, coincident faces of pieces meeting face to face would be taken
         # for duplicates and their shared corners would glue them into one body that is not closed
-        mesh, body_note = _one_body(mesh, label, debris, np.asarray(pieces))
+        mesh, body_note, built = _one_body(mesh, label, debris, np.asarray(pieces))
         if body_note:
             notes.append(body_note)
+    # the repairs of a mesh the pieces were joined into are the join's, not the file's
+    whose = " where the pieces were joined" if pieces is not None and built else ""
     nv = len(mesh.vertices)
     # an STL stores every face's own corners: merging them is loading, not repairing; an indexed mesh (OBJ, PLY)
     # that repeats vertices has seams, and merging those is a repair worth reporting
@@ -55,7 +57,7 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
     if not (uses.all() and _distinct_positions(mesh.vertices)):  # else merging would change nothing
         mesh.merge_vertices()
     if indexed and len(mesh.vertices) < nv:
-        notes.append(f"merged {nv - len(mesh.vertices)} duplicate vertices")
+        notes.append(f"merged {nv - len(mesh.vertices)} duplicate vertices{whose}")
     faces = mesh.faces
     areas = face_areas(np.ascontiguousarray(mesh.vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64))
     repeated = (faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2]) | (faces[:, 0] == faces[:, 2])
@@ -64,7 +66,7 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
         raise MeshError(f"{label} has only degenerate (zero-area) faces")
     if degenerate.any():
         mesh.update_faces(~degenerate)
-        notes.append(f"removed {int(degenerate.sum())} degenerate faces")
+        notes.append(f"removed {int(degenerate.sum())} degenerate faces{whose}")
     if _repeated_triples(mesh.faces, len(mesh.vertices)):  # else no face covers another: nothing to drop
         walls = _inner_walls(mesh.faces)
         if walls.any():
@@ -91,7 +93,7 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
             groups, edited = edge_groups(mesh.faces, len(mesh.vertices)), True
     whole = mesh
     table = neighbour_table(*groups, len(mesh.faces))
-    mesh, body_note = _one_body(mesh, label, debris, table=table)
+    mesh, body_note, _ = _one_body(mesh, label, debris, table=table)
     if body_note:
         notes.append(body_note)
     edited |= mesh is not whole
@@ -201,13 +203,14 @@ def _coordinate_order(v: np.ndarray) -> np.ndarray:
 
 
 def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarray | None = None,
-              touch: float = 1e-4, table: np.ndarray | None = None) -> tuple[trimesh.Trimesh, str]:
+              touch: float = 1e-4, table: np.ndarray | None = None) -> tuple[trimesh.Trimesh, str, bool]:
     """One part from the file's bodies: bodies that touch, interpenetrate or lie inside one another (within `touch`
     of the part's largest extent, well above export precision) are pieces of one part and become their union;
     small separate bodies are debris and are dropped; bodies really apart are refused, naming the gap. `pieces`
     (per face) names the file's own pieces (a scene's meshes): each is split into bodies on its own, so that pieces
     meeting face to face are not glued at their shared corners into one body that is not closed. `table`: the
-    mesh's `neighbour_table`, when known."""
+    mesh's `neighbour_table`, when known. Returns the part, the note on what was done (empty when nothing was) and
+    whether the part is a mesh built from several bodies (their union, or the pieces kept together)."""
     bodies = []
     for p in np.unique(pieces) if pieces is not None else [None]:
         part = mesh if p is None else _submesh(mesh, pieces == p)
@@ -222,7 +225,7 @@ def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarr
         bodies += [part] if labels.max(initial=0) == 0 else [_submesh(part, labels == i) for i in range(labels.max() + 1)]
     n = len(bodies)
     if n <= 1:
-        return mesh, ""
+        return mesh, "", False
     area = np.array([b.area for b in bodies])
     tol = touch * float(mesh.extents.max())
     gap = _gaps(bodies, tol)
@@ -246,14 +249,14 @@ def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarr
         notes.append(f"kept the largest body ({carea[big] * 1e4:.3g} cm^2) and dropped {dropped} small separate "
                      f"{'body' if dropped == 1 else 'bodies'} ({rest * 1e4:.3g} cm^2 in all)")
     if len(keep) == 1:
-        return bodies[int(keep[0])], "; ".join(notes)
+        return bodies[int(keep[0])], "; ".join(notes), False
     pieces = [bodies[i] for i in keep]
     total = float(sum(p.area for p in pieces))
     joined = _union(pieces, tol)
     if joined is not None:
         notes.append(f"joined {len(keep)} touching bodies into one part (their union: {joined.area * 1e4:.3g} of "
                      f"{total * 1e4:.3g} cm^2 of surface is outside)")
-        return joined, "; ".join(notes)
+        return joined, "; ".join(notes), True
     # no union (a piece is not closed): the pieces stay together, less the faces inside another piece
     outer = _outer_faces(pieces)
     kept = trimesh.util.concatenate(pieces)
@@ -263,7 +266,7 @@ def _one_body(mesh: trimesh.Trimesh, label: str, debris: float, pieces: np.ndarr
            else "manifold3d did not join the closed pieces into one solid")
     notes.append(f"kept {len(keep)} touching bodies together as one part (no union: {why}; "
                  f"{int((~outer).sum())} faces inside another piece dropped)")
-    return kept, "; ".join(notes)
+    return kept, "; ".join(notes), True
 
 
 def _distinct_positions(vertices: np.ndarray) -> bool:
