@@ -312,12 +312,12 @@ def _pad_touch(cb, ca, ly, c, s, side, start, block, wlo, whi, tie, rect, lx3, l
 def first_touch_kernel(shape, slots, leaf, tri, fn, flip, origins, frames0, angles, rect, tie, windows, jaw_max,
                        block, cone, lift, need):
     """Per hand pose (axis-major, rotation-minor) and pad (0: left, +y; 1: right): found, height along y (the
-    contact's), local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`: `triangle_bvh`, the
-    triangles by leaf slot and their unit normals by triangle. `block` (m, negative: off): a pad whose finite start's
-    plane, moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint touches nothing.
-    `cone`: the cosine of the friction cone's half-angle (below -1: off); a pose whose left touch's normal lies
-    outside the cone about +y is not a grasp, so its right pad is not searched (not found), unless `need` (K, A)
-    names it or the touch lies less than `lift` below the left pad's start.
+    contact's), local contact point (TCP frame of that rotation), triangle. `shape, slots, leaf, tri, fn`:
+    `triangle_bvh`, the triangles by leaf slot and their unit normals by triangle. `block` (m, negative: off): a pad
+    whose finite start's plane, moved `block` beyond it (the intrusion tolerated), cuts a triangle inside its footprint
+    touches nothing. `cone`: the cosine of the friction cone's half-angle (below -1: off); a pose whose left touch's
+    normal lies outside the cone about +y is not a grasp, so its right pad is not searched (not found), unless `need`
+    (K, A) names it or the touch lies less than `lift` below the left pad's start.
 
     The rotations about one axis share one best-first search per pad: a node is opened for the rotations whose
     footprint meets it and whose best touch so far it may reach within `tie` of, highest first (lowest for the right
