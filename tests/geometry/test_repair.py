@@ -280,6 +280,12 @@ def test_a_scene_of_rotated_touching_nodes_is_one_part_and_the_cleanup_of_their_
     assert any("joined 3 touching bodies" in t for t in text), text
     cleanup = [t for t in text if "duplicate vertices" in t or "degenerate faces" in t]
     assert all(t.endswith("where the pieces were joined") for t in cleanup), cleanup
+    # a scene of one node is that node's mesh, with nothing joined
+    single = trimesh.Scene()
+    single.add_geometry(a, node_name="base", geom_name="base", transform=ta)
+    glb.write_bytes(single.export(file_type="glb"))
+    alone = load_object(glb)
+    assert alone.repairs == () and alone.mesh.volume == pytest.approx(a.volume, rel=1e-6)  # float32 in the file
 
 
 def test_edge_groups_match_a_stable_sort_of_the_vertex_pairs():

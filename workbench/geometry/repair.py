@@ -39,6 +39,7 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
     which of the file's meshes each face came from (a glTF scene's nodes). `copy=False` lets the repairs change
     `mesh` itself, for a caller that built it only to repair it."""
     notes: list[str] = []
+    built = False
     if pieces is not None and len(np.unique(pieces)) > 1:
         # the file's own pieces first: merged together, coincident faces of pieces meeting face to face would be taken
         # for duplicates and their shared corners would glue them into one body that is not closed
@@ -46,7 +47,7 @@ def repair(mesh: trimesh.Trimesh, label: str, hole_edges: int = HOLE_EDGES, hole
         if body_note:
             notes.append(body_note)
     # the repairs of a mesh the pieces were joined into are the join's, not the file's
-    whose = " where the pieces were joined" if pieces is not None and built else ""
+    whose = " where the pieces were joined" if built else ""
     nv = len(mesh.vertices)
     # an STL stores every face's own corners: merging them is loading, not repairing; an indexed mesh (OBJ, PLY)
     # that repeats vertices has seams, and merging those is a repair worth reporting
