@@ -405,12 +405,16 @@ def _union(pieces: list[trimesh.Trimesh], tol: float) -> trimesh.Trimesh | None:
     def union(grow: float, snap: bool = False):
         solids = []
         for q in closed:
-            c = q.vertices.mean(axis=0)
-            r = float(np.linalg.norm(q.vertices - c, axis=1).max())
             # ungrown, the vertices as they are (or snapped): the rounding of c + (v - c) would move faces that
             # meet in exactly one plane apart
-            v = (np.round(q.vertices / grid) * grid if snap else q.vertices) if grow == 0 else \
-                c + (q.vertices - c) * (1 + grow / max(r, 1e-12))
+            if snap:
+                v = np.round(q.vertices / grid) * grid
+            elif grow == 0:
+                v = q.vertices
+            else:
+                c = q.vertices.mean(axis=0)
+                r = float(np.linalg.norm(q.vertices - c, axis=1).max())
+                v = c + (q.vertices - c) * (1 + grow / max(r, 1e-12))
             m = manifold3d.Manifold(manifold3d.Mesh64(vert_properties=np.ascontiguousarray(v, dtype=np.float64),
                                                       tri_verts=np.ascontiguousarray(q.faces, dtype=np.uint64)))
             if m.status() != manifold3d.Error.NoError or m.is_empty():

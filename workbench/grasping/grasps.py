@@ -330,28 +330,36 @@ def plan_grasps(obj: ObjectModel, gripper: Gripper, params: GraspParams = GraspP
 
 
 _GENERIC = np.array([[0.5389, 0.6187, 0.5716], [-0.7071, 0.3149, 0.6332], [0.2673, -0.8017, 0.5345]])
+_GENERIC /= np.linalg.norm(_GENERIC, axis=1, keepdims=True)
 """Three directions no part's symmetry aligns with an edge: rays from the centre of mass for `com_bound`'s parity."""
 
 
 def com_bound(obj: ObjectModel, gripper: Gripper, params: GraspParams, com_max: float) -> dict[str, float]:
     """The centre-of-mass distance bound on `obj` (Section III's torque filter; `com_max`, already scaled): raised,
-    with adaptive lengths on a closed part whose centre of mass lies outside the material (odd crossings of the
-    surface by rays from it, two of three), to the distance from the centre of mass to the part's surface plus half
-    the jaw's stroke, so that a grasp across the material nearest the centre of mass passes. Returns
-    {"com_max": the bound, "com_hole": that nearest distance, 0 where not raised}."""
-    mesh = obj.mesh
-    if params.lengths == "fixed" or not mesh.is_watertight:
+    with adaptive lengths on a closed part whose centre of mass lies outside the material, to its distance to the
+    part's surface plus half the jaw's stroke (`_com_outside`), so that a grasp across the material nearest the
+    centre of mass passes. Returns {"com_max": the bound, "com_hole": that distance, 0 where not raised}."""
+    if params.lengths == "fixed" or not obj.mesh.is_watertight:
         return {"com_max": com_max, "com_hole": 0.0}
-    com = np.asarray(obj.com, dtype=np.float64)
-    shape, slots, leaf, tri, _ = triangle_tree(mesh)
-    dirs = _GENERIC / np.linalg.norm(_GENERIC, axis=1, keepdims=True)
-    ray, _, along = line_crossings(shape, slots, leaf, tri, np.tile(com, (3, 1)), dirs)
-    odd = np.bincount(ray[along > 0], minlength=3) % 2 == 1
-    if odd.sum() >= 2:  # inside the material
-        return {"com_max": com_max, "com_hole": 0.0}
-    hole = float(point_distance(tri, com))
-    bound = hole + 0.5 * float(gripper.jaw_max)
+    hole = _com_outside(obj)
+    bound = hole + 0.5 * float(gripper.jaw_max) if hole > 0 else 0.0
     return {"com_max": max(com_max, bound), "com_hole": hole if bound > com_max else 0.0}
+
+
+def _com_outside(obj: ObjectModel) -> float:
+    """The distance from a closed part's centre of mass to its surface where the centre lies outside the material
+    (odd crossings of the surface by two of three rays from it), else 0; kept in the mesh's cache with the centre it
+    was found for, so replanning the part finds it again."""
+    mesh, com = obj.mesh, np.asarray(obj.com, dtype=np.float64)
+    kept = mesh._cache["workbench_com_outside"]
+    if kept is not None and np.array_equal(kept[0], com):
+        return kept[1]
+    shape, slots, leaf, tri, _ = triangle_tree(mesh)
+    ray, _, along = line_crossings(shape, slots, leaf, tri, np.tile(com, (3, 1)), _GENERIC)
+    inside = (np.bincount(ray[along > 0], minlength=3) % 2 == 1).sum() >= 2
+    hole = 0.0 if inside else float(point_distance(tri, com))
+    mesh._cache["workbench_com_outside"] = (com.copy(), hole)
+    return hole
 
 
 def _prebuild(mesh: trimesh.Trimesh, params: GraspParams) -> Callable[[], None]:
